@@ -1,0 +1,13 @@
+"""debist: rig logs of bistable dielectric-elastomer actuators to validated dynamic models.
+
+The library behind the ``debist`` command line. Every stage is a pure function in
+one of the sub-packages; file input and output live in :mod:`pipeline.artifacts`
+and the readers of :mod:`pipeline.ingest`.
+
+References
+----------
+Masoud, A. & Maas, J. (2025). Data-driven modeling and identification of a bistable
+soft-robot element based on dielectric elastomer. Front. Robot. AI 12.
+"""
+
+__version__ = "0.1.0"
