@@ -1,0 +1,138 @@
+"""Configuration of the identification stage (the ``[identify]`` workflow section)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+from pipeline.errors import WorkflowError
+from pipeline.identify.terms import INPUT_MAPS, check_terms
+
+
+@dataclass(frozen=True)
+class IdentifyConfig:
+    """Hyper-parameters of the RBF identification (Masoud & Maas 2025, Sec. 4.2).
+
+    Parameters
+    ----------
+    M : int
+        Number of RBF centres per curve (paper: 10).
+    sigma_n : float
+        Normalised width, sigma = sigma_n * delta_xi (paper: 0.5).
+    rbf : tuple of str
+        RBF-weighted curves, a subset of ("c", "d", "g").
+    backbone : tuple of str
+        Physical backbone terms identified in the same least squares: any of
+        "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
+        "input_gain". With "clip" evaluation the model outside the estimation
+        range is the backbone plus the RBF curves held at their edge values.
+    input_map : {"v2", "v"}
+        h(v) = v^2 (DE actuators, default) or v (rigs whose force is linear in v).
+    outside : {"clip", "zero"}
+        RBF evaluation outside the estimation range.
+    T_z : float or "search"
+        Friction time constant [s]; ``"search"`` runs the bounded outer search,
+        0 fixes z = q_dot.
+    T_z_bounds : tuple of float or None
+        Search interval [s]; default [dt, 100 dt] of the estimation data.
+    m_q : float or "identify"
+        Generalised mass [kg]; 1 identifies the curves per unit mass. With
+        "identify", ``input_gain`` must fix the input gains instead.
+    input_gain : tuple of float or None
+        Known gains g_0,i [N/V or N/V^2] when ``m_q = "identify"``.
+    coulomb_velocity : float
+        v_c of the smoothed Coulomb term tanh(z/v_c) [unit of q / s].
+    trim : int
+        Samples dropped at each end of each estimation record (edge effects of
+        the derivatives).
+    q_range : tuple of float or None
+        Operating range of Eq. 39 [unit of q]; default the estimation data range.
+    max_condition : float
+        Largest accepted condition number of the column-scaled regressor.
+    min_support : int
+        Fewest samples within one width of every centre.
+    published : dict
+        Published parameter values to print next to the identified ones.
+    """
+
+    M: int = 10
+    sigma_n: float = 0.5
+    rbf: tuple[str, ...] = ("c", "d", "g")
+    backbone: tuple[str, ...] = ("linear_spring", "cubic_spring", "viscous")
+    input_map: str = "v2"
+    outside: str = "clip"
+    T_z: float | str = "search"
+    T_z_bounds: tuple[float, float] | None = None
+    m_q: float | str = 1.0
+    input_gain: tuple[float, ...] | None = None
+    coulomb_velocity: float = 1e-3
+    trim: int = 0
+    q_range: tuple[float, float] | None = None
+    max_condition: float = 1e8
+    min_support: int = 10
+    published: dict[str, float] | None = None
+
+    @classmethod
+    def from_dict(cls, section: dict[str, Any]) -> IdentifyConfig:
+        """Build and validate the configuration from a workflow section.
+
+        Parameters
+        ----------
+        section : dict
+            The ``[identify]`` table.
+
+        Returns
+        -------
+        IdentifyConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key or an invalid value, naming it.
+        """
+        known = {f.name for f in fields(cls)}
+        for key in section:
+            if key not in known:
+                raise WorkflowError(f"[identify]: unknown key {key!r}; known: {sorted(known)}")
+        kw = dict(section)
+        for key in ("rbf", "backbone", "T_z_bounds", "input_gain", "q_range"):
+            if kw.get(key) is not None:
+                kw[key] = tuple(kw[key])
+        cfg = cls(**kw)
+        cfg._check()
+        return cfg
+
+    def _check(self) -> None:
+        check_terms(self.rbf, self.backbone)
+        if self.input_map not in INPUT_MAPS:
+            raise WorkflowError(
+                f"[identify] input_map must be one of {INPUT_MAPS}, got {self.input_map!r}"
+            )
+        if not (self.T_z == "search" or (isinstance(self.T_z, int | float) and self.T_z >= 0)):
+            raise WorkflowError(
+                f"[identify] T_z must be 'search' or a time >= 0 [s], got {self.T_z!r}"
+            )
+        if self.T_z_bounds is not None and not (0 < self.T_z_bounds[0] < self.T_z_bounds[1]):
+            raise WorkflowError(
+                f"[identify] T_z_bounds must satisfy 0 < lo < hi, got {self.T_z_bounds}"
+            )
+        if self.m_q == "identify":
+            if self.input_gain is None or "g" in self.rbf or "input_gain" in self.backbone:
+                raise WorkflowError(
+                    "[identify] m_q = 'identify' needs fixed `input_gain` values and no 'g' or "
+                    "'input_gain' term (one scale must be known)"
+                )
+        elif not (isinstance(self.m_q, int | float) and self.m_q > 0):
+            raise WorkflowError(
+                f"[identify] m_q must be a mass > 0 [kg] or 'identify', got {self.m_q!r}"
+            )
+        elif "g" not in self.rbf and "input_gain" not in self.backbone:
+            raise WorkflowError(
+                "[identify] the model needs an input term: 'g' in rbf or 'input_gain'"
+            )
+        if self.trim < 0:
+            raise WorkflowError(f"[identify] trim must be >= 0 samples, got {self.trim!r}")
+        if not self.coulomb_velocity > 0:
+            raise WorkflowError(
+                f"[identify] coulomb_velocity must be > 0, got {self.coulomb_velocity!r}"
+            )

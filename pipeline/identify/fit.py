@@ -1,0 +1,330 @@
+"""Least-squares RBF identification with the T_z outer search (Masoud & Maas 2025, Sec. 4.2)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from pipeline.errors import IdentificationError
+from pipeline.identify.basis import RBFBasis
+from pipeline.identify.config import IdentifyConfig
+from pipeline.identify.friction import friction_state
+from pipeline.identify.model import RBFModel
+from pipeline.identify.terms import force_columns, input_columns, input_map
+
+
+@dataclass(frozen=True)
+class Record:
+    """One estimation record: measured position, its derivatives and the inputs.
+
+    Parameters
+    ----------
+    name : str
+        Data set name (for messages).
+    q : ndarray, shape (n,)
+        Position [unit of q].
+    q_dot, q_ddot : ndarray, shape (n,)
+        Velocity [unit/s] and acceleration [unit/s^2] from the differentiation stage.
+    v : ndarray, shape (n, n_inputs)
+        Inputs [V].
+    dt : float
+        Sample time [s].
+    """
+
+    name: str
+    q: np.ndarray
+    q_dot: np.ndarray
+    q_ddot: np.ndarray
+    v: np.ndarray
+    dt: float
+
+
+@dataclass(frozen=True)
+class FitDiagnostics:
+    """Diagnostics of the least-squares problem (Masoud & Maas 2025, Sec. 5.2: rank, condition).
+
+    Attributes
+    ----------
+    n_samples : int
+        Regressor rows.
+    columns : list of str
+        Regressor column names.
+    rank : int
+        Numerical rank of the column-scaled regressor.
+    condition : float
+        Its 2-norm condition number.
+    singular_values : ndarray, shape (p,)
+        Its singular values.
+    residual_rms : float
+        RMS of the equation error [N, or unit/s^2 per unit mass].
+    fit_r2 : float
+        Coefficient of determination of the regression output.
+    support : ndarray of int, shape (M,)
+        Samples within one width of each centre.
+    T_z_trace : ndarray, shape (k, 2)
+        (T_z [s], relative residual) of every outer-loop evaluation.
+    """
+
+    n_samples: int
+    columns: list[str]
+    rank: int
+    condition: float
+    singular_values: np.ndarray
+    residual_rms: float
+    fit_r2: float
+    support: np.ndarray
+    T_z_trace: np.ndarray
+
+
+def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
+    out = []
+    for r in records:
+        if r.q.size <= 2 * trim + 10:
+            raise IdentificationError(
+                f"data set '{r.name}': {r.q.size} samples are too few for trim = {trim}"
+            )
+        s = slice(trim, r.q.size - trim)
+        out.append(Record(r.name, r.q[s], r.q_dot[s], r.q_ddot[s], r.v[s], r.dt))
+    return out
+
+
+def _system(
+    records: Sequence[Record],
+    z_all: Sequence[np.ndarray],
+    basis: RBFBasis,
+    cfg: IdentifyConfig,
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Stack regressor rows Psi and outputs y of all records (Eq. 40)."""
+    rows, ys = [], []
+    names: list[str] = []
+    for r, z in zip(records, z_all, strict=True):
+        phi = basis(r.q)
+        F, f_names = force_columns(r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, phi)
+        hv = input_map(r.v, cfg.input_map)
+        if cfg.m_q == "identify":
+            rows.append(np.hstack([r.q_ddot[:, None], F]))
+            ys.append(hv @ np.asarray(cfg.input_gain, dtype=float))
+            names = ["m_q", *f_names]
+        else:
+            G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, phi)
+            rows.append(np.hstack([-F, G]))
+            ys.append(float(cfg.m_q) * r.q_ddot)
+            names = [*f_names, *g_names]
+    return np.vstack(rows), np.concatenate(ys), names
+
+
+def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig, check: bool):
+    """Least squares on the column-scaled regressor via SVD, with rank and condition checks."""
+    scale = np.linalg.norm(psi, axis=0)
+    if check:
+        dead = [names[j] for j in np.flatnonzero(scale == 0)]
+        if dead:
+            raise IdentificationError(
+                f"regressor columns {dead[:6]} are identically zero: the experiment does not "
+                "excite them (an input never applied, or no motion)"
+            )
+    scale = np.where(scale == 0, 1.0, scale)
+    U, S, Vt = np.linalg.svd(psi / scale, full_matrices=False)
+    tol = S[0] * max(psi.shape) * np.finfo(float).eps
+    rank = int(np.sum(tol < S))
+    cond = float(S[0] / S[-1]) if S[-1] > 0 else np.inf
+    if check and rank < psi.shape[1]:
+        null = np.abs(Vt[-1])
+        culprits = [names[j] for j in np.argsort(null)[::-1][:4]]
+        raise IdentificationError(
+            f"regressor is rank deficient (rank {rank} of {psi.shape[1]} columns); the null "
+            f"direction involves {culprits}: remove a redundant term or excite the system more"
+        )
+    if check and cond > cfg.max_condition:
+        raise IdentificationError(
+            f"regressor condition number {cond:.3g} exceeds "
+            f"max_condition = {cfg.max_condition:.3g}: "
+            f"reduce M (= {cfg.M}) or sigma_n (= {cfg.sigma_n}), or excite the range better"
+        )
+    keep = tol < S
+    theta = (Vt[keep].T @ ((U[:, keep].T @ y) / S[keep])) / scale
+    resid = y - psi @ theta
+    return theta, resid, rank, cond, S
+
+
+def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig) -> np.ndarray:
+    support = basis.support(np.concatenate([r.q for r in records]))
+    thin = np.flatnonzero(support < cfg.min_support)
+    if thin.size and ("c" in cfg.rbf or "d" in cfg.rbf or "g" in cfg.rbf):
+        i = int(thin[0])
+        raise IdentificationError(
+            f"centre xi_{i + 1} = {basis.xi[i]:.6g} has only {int(support[i])} samples within "
+            f"sigma = {basis.sigma:.3g} (min_support = {cfg.min_support}): the experiment does not "
+            "excite that part of the range; reduce M, set q_range, or excite it"
+        )
+    return support
+
+
+def _check_inputs(records: Sequence[Record], cfg: IdentifyConfig) -> None:
+    v = np.vstack([r.v for r in records])
+    for j in range(v.shape[1]):
+        if np.ptp(v[:, j]) == 0:
+            raise IdentificationError(
+                f"input v{j + 1} is constant ({v[0, j]:.6g} V) over all estimation data: "
+                "the experiment is under-excited and g(q) of that input cannot be identified"
+            )
+
+
+def fit_rbf_model(
+    records: Sequence[Record], cfg: IdentifyConfig
+) -> tuple[RBFModel, FitDiagnostics]:
+    """Identify the RBF model of Eq. 37 by least squares, T_z by a bounded outer search.
+
+    For a given T_z the friction state z is computed from q_dot by the exact
+    discretisation of z' = (q_dot - z)/T_z; the weights then follow from the
+    linear regression of Eq. 40 (extended by the backbone terms), solved on the
+    column-scaled regressor by SVD. The outer loop minimises the relative
+    equation error over log T_z with a bounded scalar search (Brent) and also
+    evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        Estimation data (one or several experiments; rows are stacked).
+    cfg : IdentifyConfig
+        Hyper-parameters.
+
+    Returns
+    -------
+    model : RBFModel
+        The identified model.
+    diagnostics : FitDiagnostics
+        Rank, condition number, residuals and the T_z search trace.
+
+    Raises
+    ------
+    IdentificationError
+        If a centre has no data near it, an input is never excited, or the
+        regressor is rank deficient or worse conditioned than ``max_condition``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40 and Sec. 4.2 (LS with T_z outer loop).
+    """
+    records = _trimmed(records, cfg.trim)
+    n_in = records[0].v.shape[1]
+    q_all = np.concatenate([r.q for r in records])
+    q_range = cfg.q_range or (float(q_all.min()), float(q_all.max()))
+    basis = RBFBasis.equidistant(q_range[0], q_range[1], cfg.M, cfg.sigma_n, cfg.outside)
+    support = _check_support(records, basis, cfg)
+    if cfg.m_q != "identify":
+        _check_inputs(records, cfg)
+
+    uses_z = "d" in cfg.rbf or bool({"viscous", "coulomb"} & set(cfg.backbone))
+    if cfg.T_z != "search" or not uses_z:
+        T_z = float(cfg.T_z) if cfg.T_z != "search" else 0.0
+        trace = np.empty((0, 2))
+    else:
+        dt = min(r.dt for r in records)
+        T_z, trace = _search_T_z(records, basis, cfg, cfg.T_z_bounds or (dt, 100.0 * dt))
+
+    z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
+    psi, y, names = _system(records, z_all, basis, cfg)
+    theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
+    model = _assemble(theta, names, basis, cfg, n_in, T_z, q_range)
+    diag = FitDiagnostics(
+        n_samples=int(y.size),
+        columns=names,
+        rank=rank,
+        condition=cond,
+        singular_values=S,
+        residual_rms=float(np.sqrt(np.mean(resid**2))),
+        fit_r2=float(1.0 - np.sum(resid**2) / np.sum((y - y.mean()) ** 2)),
+        support=support,
+        T_z_trace=trace,
+    )
+    return model, diag
+
+
+def _search_T_z(records, basis, cfg, bounds):
+    """Bounded search of T_z by variable projection (Masoud & Maas 2025, Sec. 4.2).
+
+    Only the friction columns (those multiplied by z) depend on T_z: the other
+    columns are factorised once (QR) and projected out, so each evaluation of the
+    relative equation error solves a small least-squares problem.
+    """
+    zero = [np.zeros_like(r.q) for r in records]
+    fixed_cfg = replace(cfg, rbf=tuple(t for t in cfg.rbf if t != "d"))
+    fixed_cfg = replace(fixed_cfg, backbone=tuple(b for b in cfg.backbone if b not in _Z_TERMS))
+    a_fixed, y, _ = _system(records, zero, basis, fixed_cfg)
+    Q, _ = np.linalg.qr(a_fixed)
+    y_perp = y - Q @ (Q.T @ y)
+    z_rbf = ("d",) if "d" in cfg.rbf else ()
+    z_backbone = tuple(b for b in cfg.backbone if b in _Z_TERMS)
+    trace: list[tuple[float, float]] = []
+
+    def cost(T_z: float) -> float:
+        cols = []
+        for r in records:
+            z = friction_state(r.q_dot, r.dt, T_z)
+            F, _ = force_columns(r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity)
+            cols.append(F)
+        B = np.vstack(cols)
+        B_perp = B - Q @ (Q.T @ B)
+        coef, *_ = np.linalg.lstsq(B_perp, y_perp, rcond=None)
+        value = float(np.linalg.norm(y_perp - B_perp @ coef) / np.linalg.norm(y))
+        trace.append((T_z, value))
+        return value
+
+    lo, hi = bounds
+    res = minimize_scalar(
+        lambda s: cost(float(np.exp(s))),
+        bounds=(np.log(lo), np.log(hi)),
+        method="bounded",
+        options={"xatol": 1e-2},
+    )
+    T_z = float(np.exp(res.x))
+    if cost(0.0) <= res.fun:
+        T_z = 0.0
+    return T_z, np.array(trace, dtype=float)
+
+
+_Z_TERMS = ("viscous", "coulomb")
+
+
+def _assemble(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
+    """Map the parameter vector back onto the model's curves and backbone."""
+    value = dict(zip(names, theta, strict=True))
+    M = basis.M
+    vec = lambda prefix: np.array([value.get(f"{prefix}[{i}]", 0.0) for i in range(M)])  # noqa: E731
+    backbone_map = {
+        "linear_spring": "k_1",
+        "cubic_spring": "k_3",
+        "viscous": "d_v",
+        "coulomb": "F_c",
+        "offset": "F_0",
+    }
+    backbone = {sym: float(value[name]) for name, sym in backbone_map.items() if name in value}
+    if cfg.m_q == "identify":
+        m_q = float(value["m_q"])
+        if not m_q > 0:
+            raise IdentificationError(
+                f"identified mass m_q = {m_q:.6g} is not positive: the acceleration is not "
+                "excited or the input gain is wrong"
+            )
+        g_0 = np.asarray(cfg.input_gain, dtype=float)
+    else:
+        m_q = float(cfg.m_q)
+        g_0 = np.array([value.get(f"input_gain{j + 1}", 0.0) for j in range(n_in)])
+    backbone["g_0"] = g_0
+    return RBFModel(
+        basis=basis,
+        input_map=cfg.input_map,
+        n_inputs=n_in,
+        m_q=m_q,
+        T_z=T_z,
+        coulomb_velocity=cfg.coulomb_velocity,
+        theta_c=vec("c"),
+        theta_d=vec("d"),
+        theta_g=np.stack([vec(f"g{j + 1}") for j in range(n_in)]),
+        backbone=backbone,
+        q_range=(float(q_range[0]), float(q_range[1])),
+    )

@@ -1,0 +1,240 @@
+"""The identified physics-informed RBF model (Masoud & Maas 2025, Eq. 37), ready to simulate."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from pipeline.identify.basis import RBFBasis
+from pipeline.identify.terms import input_map
+
+
+@dataclass(frozen=True)
+class RBFModel:
+    """m_q q'' + d(q) z + c(q) q + F_c tanh(z/v_c) + F_0 = sum_i g_i(q) h(v_i), z' = (q' - z)/T_z.
+
+    The fitted form of Eq. 37 with optional physical backbone: the curves are
+    the RBF sums of Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 +
+    k_3 q^2``, ``d = Phi theta_d + d_v``, ``g_i = Phi theta_g,i + g_0,i``).
+
+    Parameters
+    ----------
+    basis : RBFBasis
+        Centres and width; evaluation outside the range per ``basis.outside``.
+    input_map : {"v2", "v"}
+        h(v) = v^2 or v.
+    n_inputs : int
+        Number of inputs v_1..v_N.
+    m_q : float
+        Generalised mass [kg]; 1 when the curves are identified per unit mass.
+    T_z : float
+        Friction time constant [s]; 0 means z = q_dot.
+    coulomb_velocity : float
+        v_c of the smoothed Coulomb term [unit of q / s].
+    theta_c, theta_d : ndarray, shape (M,)
+        RBF weights of c(q) [N/m] and d(q) [N s/m] (zeros when inactive).
+    theta_g : ndarray, shape (n_inputs, M)
+        RBF weights of g_i(q) [N/V^2 or N/V] (zeros when inactive).
+    backbone : dict of str to float or list
+        ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c`` [N], ``F_0`` [N],
+        ``g_0`` (list, one per input); absent terms are 0.
+    q_range : tuple of float
+        Range of q in the estimation data [unit of q].
+
+    Notes
+    -----
+    Eq. 37 carries 1/2 in front of g while Eq. 33 and 40 do not (NOTES item 8):
+    the stored g_i follow Eq. 33 and Eq. 40, g_i = 1/2 dC_i/dq, so dC_i/dq = 2 g_i.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 33, 37-40.
+    """
+
+    basis: RBFBasis
+    input_map: str
+    n_inputs: int
+    m_q: float
+    T_z: float
+    coulomb_velocity: float
+    theta_c: np.ndarray
+    theta_d: np.ndarray
+    theta_g: np.ndarray
+    backbone: dict[str, Any] = field(default_factory=dict)
+    q_range: tuple[float, float] = (0.0, 0.0)
+
+    n_states = 3
+
+    def curves(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Evaluate the identified characteristic curves.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+
+        Returns
+        -------
+        dict
+            ``c`` (n,) [N/m], ``d`` (n,) [N s/m], ``g`` (n, n_inputs), ``cq``
+            = c(q) q (n,) [N] and ``dC_dq`` = 2 g (n, n_inputs) [F/m when h = v^2].
+        """
+        q = np.asarray(q, dtype=float)
+        phi = self.basis(q)
+        bb = self.backbone
+        c = phi @ self.theta_c + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q**2
+        d = phi @ self.theta_d + bb.get("d_v", 0.0)
+        g = phi @ self.theta_g.T + np.asarray(bb.get("g_0", np.zeros(self.n_inputs)))
+        return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
+
+    @cached_property
+    def _weights(self) -> np.ndarray:
+        """Stacked RBF weights, shape (M, 2 + n_inputs): columns c, d, g_1..g_N."""
+        return np.column_stack([self.theta_c, self.theta_d, self.theta_g.T])
+
+    def accel(self, q: np.ndarray, z: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Acceleration of Eq. 37 solved for q''.
+
+        Parameters
+        ----------
+        q : ndarray, shape (B,)
+            Positions [unit of q].
+        z : ndarray, shape (B,)
+            Friction states [unit of q / s].
+        v : ndarray, shape (B, n_inputs)
+            Inputs [V].
+
+        Returns
+        -------
+        ndarray, shape (B,)
+            q'' [unit of q / s^2].
+        """
+        bb = self.backbone
+        w = self.basis(q) @ self._weights
+        c = w[:, 0] + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q * q
+        d = w[:, 1] + bb.get("d_v", 0.0)
+        g = w[:, 2:] + bb["g_0"] if "g_0" in bb else w[:, 2:]
+        force = (g * input_map(v, self.input_map)).sum(axis=1) - c * q - d * z
+        if bb.get("F_0", 0.0):
+            force = force - bb["F_0"]
+        if bb.get("F_c", 0.0):
+            force = force - bb["F_c"] * np.tanh(z / self.coulomb_velocity)
+        return force / self.m_q
+
+    def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
+        """State ``[q, q_dot, z]`` at rest relative to the friction filter (z = q_dot).
+
+        Parameters
+        ----------
+        q0, q_dot0 : ndarray, shape (B,)
+            Initial position [unit of q] and velocity [unit of q / s].
+
+        Returns
+        -------
+        ndarray, shape (B, 3)
+        """
+        q0 = np.asarray(q0, dtype=float)
+        q_dot0 = np.asarray(q_dot0, dtype=float)
+        return np.stack([q0, q_dot0, q_dot0], axis=-1)
+
+    def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """State derivative for the free-run simulator.
+
+        Parameters
+        ----------
+        x : ndarray, shape (B, 3)
+            States ``[q, q_dot, z]``.
+        v : ndarray, shape (B, n_inputs)
+            Inputs [V].
+
+        Returns
+        -------
+        x_dot : ndarray, shape (B, 3)
+        q_ddot : ndarray, shape (B,)
+            The acceleration (second column of ``x_dot``).
+        """
+        q, q_dot, z = x[:, 0], x[:, 1], x[:, 2]
+        if self.T_z == 0:
+            z_dot = np.zeros_like(z)
+            z = q_dot
+        else:
+            z_dot = (q_dot - z) / self.T_z
+        a = self.accel(q, z, v)
+        return np.stack([q_dot, a, z_dot], axis=1), a
+
+    def max_step(self) -> float:
+        """Largest stable RK4 step for the friction filter [s] (inf when T_z = 0)."""
+        return np.inf if self.T_z == 0 else 1.5 * self.T_z
+
+    @property
+    def n_params(self) -> int:
+        """Number of nonzero parameters."""
+        vals = [self.theta_c, self.theta_d, self.theta_g.ravel()]
+        vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
+        return int(sum(np.count_nonzero(v) for v in vals))
+
+    def to_tree(self) -> dict[str, Any]:
+        """Return the model as a nested mapping for an HDF5 artifact.
+
+        Returns
+        -------
+        dict
+            Arrays and attributes; :meth:`from_tree` restores the model.
+        """
+        g0 = np.asarray(self.backbone.get("g_0", np.zeros(self.n_inputs)), dtype=float)
+        scalars = {k: float(v) for k, v in self.backbone.items() if k != "g_0"}
+        return {
+            "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
+            "model": {
+                "attrs": {
+                    "input_map": self.input_map,
+                    "n_inputs": self.n_inputs,
+                    "m_q": self.m_q,
+                    "T_z": self.T_z,
+                    "coulomb_velocity": self.coulomb_velocity,
+                    "sigma": self.basis.sigma,
+                    "outside": self.basis.outside,
+                    "q_min": self.q_range[0],
+                    "q_max": self.q_range[1],
+                },
+                "xi": self.basis.xi,
+                "theta_c": self.theta_c,
+                "theta_d": self.theta_d,
+                "theta_g": self.theta_g,
+                "backbone": {"attrs": scalars, "g_0": g0},
+            },
+        }
+
+    @classmethod
+    def from_tree(cls, tree: dict[str, Any]) -> RBFModel:
+        """Rebuild a model from :meth:`to_tree` output (or its HDF5 round trip).
+
+        Parameters
+        ----------
+        tree : dict
+            As returned by :meth:`to_tree` or :func:`pipeline.artifacts.read_h5`.
+
+        Returns
+        -------
+        RBFModel
+        """
+        m = tree["model"]
+        a = m["attrs"]
+        backbone: dict[str, Any] = dict(m["backbone"]["attrs"])
+        backbone["g_0"] = np.asarray(m["backbone"]["g_0"], dtype=float)
+        return cls(
+            basis=RBFBasis(np.asarray(m["xi"], float), float(a["sigma"]), str(a["outside"])),
+            input_map=str(a["input_map"]),
+            n_inputs=int(a["n_inputs"]),
+            m_q=float(a["m_q"]),
+            T_z=float(a["T_z"]),
+            coulomb_velocity=float(a["coulomb_velocity"]),
+            theta_c=np.asarray(m["theta_c"], float),
+            theta_d=np.asarray(m["theta_d"], float),
+            theta_g=np.asarray(m["theta_g"], float),
+            backbone=backbone,
+            q_range=(float(a["q_min"]), float(a["q_max"])),
+        )

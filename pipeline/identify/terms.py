@@ -1,0 +1,188 @@
+"""Regressor of the physics-informed RBF model (Masoud & Maas 2025, Eq. 37-40) with a backbone.
+
+The model is written as a force balance,
+
+    m_q q'' + F(q, z) theta_F = G(q, v) theta_G,
+
+with the *force terms* F (restoring force c(q) q, friction d(q) z and the
+backbone) on the left and the *input terms* G (g_i(q) h(v_i)) on the right.
+Eq. 40 is this balance with only the RBF terms. One function builds both the
+regressor rows for least squares and the right-hand side of the simulator, so
+that the identified and the simulated model cannot disagree.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from pipeline.errors import WorkflowError
+from pipeline.identify.basis import RBFBasis
+
+#: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
+RBF_TERMS = ("c", "d", "g")
+#: Backbone force terms: name -> (description, unit of the coefficient per unit of q).
+BACKBONE_TERMS = {
+    "linear_spring": "k_1 q",
+    "cubic_spring": "k_3 q^3",
+    "viscous": "d_v z",
+    "coulomb": "F_c tanh(z / v_c)",
+    "offset": "F_0",
+    "input_gain": "g_0,i h(v_i)",
+}
+#: Input maps h(v): "v2" for DE actuators (electrostatic force ~ v^2), "v" for linear rigs.
+INPUT_MAPS = ("v2", "v")
+
+
+def input_map(v: np.ndarray, kind: str) -> np.ndarray:
+    """Apply the input map h(v) of the model.
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., n_inputs)
+        Input voltages [V].
+    kind : {"v2", "v"}
+        ``"v2"``: h(v) = v^2 [V^2] (DE actuators, Eq. 37); ``"v"``: h(v) = v [V].
+
+    Returns
+    -------
+    ndarray, same shape as ``v``
+
+    Raises
+    ------
+    WorkflowError
+        If ``kind`` is unknown.
+    """
+    if kind == "v2":
+        return np.square(v)
+    if kind == "v":
+        return np.asarray(v, dtype=float)
+    raise WorkflowError(f"`input_map` must be one of {INPUT_MAPS}, got {kind!r}")
+
+
+def check_terms(rbf: Sequence[str], backbone: Sequence[str]) -> None:
+    """Validate term names.
+
+    Parameters
+    ----------
+    rbf : sequence of str
+        Subset of :data:`RBF_TERMS`.
+    backbone : sequence of str
+        Subset of :data:`BACKBONE_TERMS`.
+
+    Raises
+    ------
+    WorkflowError
+        Naming the unknown or duplicated term.
+    """
+    for name in rbf:
+        if name not in RBF_TERMS:
+            raise WorkflowError(f"unknown RBF term {name!r}; choose from {RBF_TERMS}")
+    for name in backbone:
+        if name not in BACKBONE_TERMS:
+            raise WorkflowError(
+                f"unknown backbone term {name!r}; choose from {tuple(BACKBONE_TERMS)}"
+            )
+    for seq in (rbf, backbone):
+        if len(set(seq)) != len(seq):
+            raise WorkflowError(f"duplicated term in {list(seq)}")
+
+
+def force_columns(
+    q: np.ndarray,
+    z: np.ndarray,
+    basis: RBFBasis,
+    rbf: Sequence[str],
+    backbone: Sequence[str],
+    coulomb_velocity: float,
+    phi: np.ndarray | None = None,
+) -> tuple[np.ndarray, list[str]]:
+    """Columns of the force terms F(q, z) (left-hand side of the balance).
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Position [unit of q].
+    z : ndarray, shape (n,)
+        Friction state [unit of q / s].
+    basis : RBFBasis
+        The RBF basis (Eq. 38).
+    rbf, backbone : sequence of str
+        Active terms.
+    coulomb_velocity : float
+        v_c of the smoothed Coulomb term [unit of q / s].
+    phi : ndarray, shape (n, M), optional
+        Precomputed ``basis(q)``.
+
+    Returns
+    -------
+    columns : ndarray, shape (n, p_F)
+        ``[Phi q, Phi z, q, q^3, z, tanh(z/v_c), 1]`` restricted to active terms.
+    names : list of str
+        One name per column, e.g. ``"c[3]"``, ``"linear_spring"``.
+    """
+    if phi is None and ("c" in rbf or "d" in rbf):
+        phi = basis(q)
+    cols, names = [], []
+    if "c" in rbf:
+        cols.append(phi * q[:, None])
+        names += [f"c[{i}]" for i in range(basis.M)]
+    if "d" in rbf:
+        cols.append(phi * z[:, None])
+        names += [f"d[{i}]" for i in range(basis.M)]
+    scalar = {
+        "linear_spring": lambda: q,
+        "cubic_spring": lambda: q**3,
+        "viscous": lambda: z,
+        "coulomb": lambda: np.tanh(z / coulomb_velocity),
+        "offset": lambda: np.ones_like(q),
+    }
+    for name in backbone:
+        if name in scalar:
+            cols.append(scalar[name]()[:, None])
+            names.append(name)
+    return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
+
+
+def input_columns(
+    q: np.ndarray,
+    hv: np.ndarray,
+    basis: RBFBasis,
+    rbf: Sequence[str],
+    backbone: Sequence[str],
+    phi: np.ndarray | None = None,
+) -> tuple[np.ndarray, list[str]]:
+    """Columns of the input terms G(q, v) (right-hand side of the balance).
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Position [unit of q].
+    hv : ndarray, shape (n, n_inputs)
+        Mapped inputs h(v_i) [V^2 or V].
+    basis : RBFBasis
+        The RBF basis.
+    rbf, backbone : sequence of str
+        Active terms (``"g"`` and ``"input_gain"`` matter here).
+    phi : ndarray, shape (n, M), optional
+        Precomputed ``basis(q)``.
+
+    Returns
+    -------
+    columns : ndarray, shape (n, p_G)
+        ``[Phi h(v_1), ..., Phi h(v_N), h(v_1), ..., h(v_N)]`` for the active terms.
+    names : list of str
+        ``"g1[i]"`` and ``"input_gain1"`` style names.
+    """
+    cols, names = [], []
+    n_in = hv.shape[1]
+    if "g" in rbf:
+        phi = basis(q) if phi is None else phi
+        for j in range(n_in):
+            cols.append(phi * hv[:, j : j + 1])
+            names += [f"g{j + 1}[{i}]" for i in range(basis.M)]
+    if "input_gain" in backbone:
+        cols.append(hv)
+        names += [f"input_gain{j + 1}" for j in range(n_in)]
+    return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
