@@ -43,7 +43,7 @@ class RigLogError(DebistError, ValueError):
 
 
 class IdentificationError(DebistError, ValueError):
-    """The identification problem is ill-posed (rank deficient, badly conditioned, under-excited)."""
+    """The identification problem is ill-posed (rank deficient, ill-conditioned, under-excited)."""
 
 
 class ArtifactError(DebistError, RuntimeError):

@@ -18,6 +18,8 @@ from scipy.signal import resample_poly
 from pipeline.errors import WorkflowError
 
 INTERPOLATIONS = ("bandlimited", "linear")
+#: Samples of odd-reflected extension at each end before band-limited interpolation.
+_EDGE_PAD = 32
 
 
 class FreeRunModel(Protocol):
@@ -101,8 +103,12 @@ def upsample_inputs(v: np.ndarray, factor: int, method: str) -> np.ndarray:
         grid = np.arange(m) / factor
         return np.stack([np.interp(grid, np.arange(n), col) for col in v.T], axis=1)
     if method == "bandlimited":
-        up = resample_poly(v, factor, 1, axis=0, window=("kaiser", 8.0), padtype="line")
-        return up[:m]
+        # Odd reflection about both end points keeps value and slope continuous, so the
+        # FIR filter sees no step at the record's ends; the extension is cut off again.
+        pad = min(_EDGE_PAD, n - 1)
+        ext = np.concatenate([2 * v[:1] - v[pad:0:-1], v, 2 * v[-1:] - v[-2 : -pad - 2 : -1]])
+        up = resample_poly(ext, factor, 1, axis=0, window=("kaiser", 8.0))
+        return up[pad * factor : pad * factor + m]
     raise WorkflowError(f"`input_interpolation` must be one of {INTERPOLATIONS}, got {method!r}")
 
 
@@ -161,15 +167,19 @@ def simulate(
     lengths = [v.shape[0] for v in inputs]
     n = max(lengths)
     B = len(inputs)
-    # Pad shorter records with their last input; their results are cut back.
+    # Each record is interpolated on its own, then padded with its last value to the
+    # batch length (results past a record's end are cut back).
+    m = (n - 1) * 2 * ns + 1
     fine = np.stack(
         [
-            upsample_inputs(
-                np.vstack([v, np.repeat(v[-1:], n - v.shape[0], axis=0)]), 2 * ns, interpolation
+            np.pad(
+                upsample_inputs(v, 2 * ns, interpolation),
+                ((0, m - 1 - (v.shape[0] - 1) * 2 * ns), (0, 0)),
+                mode="edge",
             )
             for v in inputs
         ]
-    )  # (B, (n-1)*2ns+1, n_inputs)
+    )  # (B, m, n_inputs)
     x = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
     states = np.full((B, n, model.n_states), np.nan)
     acc = np.full((B, n), np.nan)

@@ -1,0 +1,148 @@
+"""The ``debist`` command line: a thin Typer adapter over :mod:`pipeline`.
+
+Parses arguments, loads the workflow, calls the runner, prints with rich, and
+maps debist's exception classes to exit codes (1: a stage failed on its data;
+2: bad workflow or arguments; 3: artifacts failed verification).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from pipeline.errors import ArtifactError, DebistError, WorkflowError
+
+app = typer.Typer(
+    help="Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025).",
+    no_args_is_help=True,
+    add_completion=False,
+)
+console = Console()
+err = Console(stderr=True)
+
+WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
+
+
+def _runner(workflow: Path, out: Path | None):
+    from pipeline.runner import Runner
+    from pipeline.workflow import load_workflow
+
+    return Runner(load_workflow(workflow, out))
+
+
+def _event(stage: str, what: str, detail: str) -> None:
+    if what == "skip":
+        console.print(f"[dim]Stage '{stage}' is up to date, skipping[/dim]")
+    elif what == "start":
+        console.print(f"Running stage '{stage}' ...")
+    else:
+        console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
+
+
+def _report(runner, manifests) -> None:
+    from pipeline import report
+
+    if "identify" in manifests:
+        console.print(report.identify_table(manifests["identify"].summary))
+    if "validate" in manifests:
+        summary = manifests["validate"].summary
+        console.print(report.nrmse_table(summary["table"]))
+        table = report.published_table(summary["table"], summary.get("published", []))
+        if table is not None:
+            console.print(table)
+    console.print(f"[dim]artifacts: {runner.wf.output_dir}[/dim]")
+
+
+def _run(workflow: Path, stages: list[str] | None, force: bool, out: Path | None) -> None:
+    try:
+        runner = _runner(workflow, out)
+        manifests = runner.run(stages, force=force, on_event=_event)
+        _report(runner, manifests)
+    except WorkflowError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    except DebistError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(1) from None
+
+
+@app.command()
+def run(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Run every stage of WORKFLOW, skipping those that are up to date."""
+    _run(workflow, None, force, out)
+
+
+@app.command()
+def ingest(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Read the rig logs into canonical tables (t [s], q, v1..vN [V])."""
+    _run(workflow, ["ingest"], force, out)
+
+
+@app.command()
+def differentiate(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Compute q_dot and q_ddot (TVRegDiff or the configured differentiator)."""
+    _run(workflow, ["differentiate"], force, out)
+
+
+@app.command()
+def identify(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Identify the RBF model of Eq. 37-40 by least squares with the T_z search."""
+    _run(workflow, ["identify"], force, out)
+
+
+@app.command()
+def validate(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Free-run the identified model on every data set; NRMSE table and plots."""
+    _run(workflow, ["validate"], force, out)
+
+
+@app.command()
+def status(
+    workflow: WorkflowArg,
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+    out: OutOpt = None,
+) -> None:
+    """Say per stage whether it is up to date, stale (and why) or missing."""
+    try:
+        states = _runner(workflow, out).status()
+    except DebistError as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    if as_json:
+        typer.echo(json.dumps([s.__dict__ for s in states], indent=2))
+        return
+    for s in states:
+        color = {"up to date": "green", "stale": "yellow", "missing": "red"}[s.state]
+        console.print(
+            f"{s.stage:14s} [{color}]{s.state}[/{color}]" + (f"  ({s.reason})" if s.reason else "")
+        )
+
+
+@app.command()
+def verify(workflow: WorkflowArg, out: OutOpt = None) -> None:
+    """Re-hash every artifact; exit 3 naming any file that changed."""
+    try:
+        problems = _runner(workflow, out).verify()
+    except (WorkflowError, ArtifactError) as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    if problems:
+        for p in problems:
+            err.print(f"[red]changed:[/red] {p}")
+        raise typer.Exit(3)
+    console.print("[green]all artifacts match their manifests[/green]")
+
+
+def main() -> None:
+    """Entry point of the ``debist`` console script."""
+    app()
+
+
+if __name__ == "__main__":
+    main()

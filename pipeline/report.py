@@ -1,0 +1,129 @@
+"""Terminal reports of a workflow's results (rich tables built from stage manifests)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rich.table import Table
+
+#: How identified quantities are labelled in reports (summary key -> label, unit note).
+PARAMETER_LABELS = {
+    "m_q": "mass m_q",
+    "d_v": "viscous friction d_v",
+    "F_c": "Coulomb friction F_c",
+    "F_0": "offset force F_0",
+    "k_1": "linear spring k_1",
+    "k_3": "cubic spring k_3",
+}
+
+
+def _fmt(value: Any, digits: int = 4) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float) and math.isnan(value):
+        return "diverged"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def identify_table(summary: dict[str, Any]) -> Table:
+    """Tabulate the identified model, with published values where the workflow gives them.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary.
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    table = Table(title="Identified model (Eq. 37-40)")
+    published = summary.get("published") or {}
+    table.add_column("quantity")
+    table.add_column("identified", justify="right")
+    if published:
+        table.add_column("published", justify="right")
+    scalars = {"T_z [s]": summary["T_z"], "m_q": summary["m_q"]}
+    scalars.update({k: v for k, v in summary["backbone"].items() if not isinstance(v, list)})
+    rows = [("T_z [s]", summary["T_z"])]
+    rows += [(PARAMETER_LABELS.get(k, k), v, k) for k, v in scalars.items() if k != "T_z [s]"]
+    for row in rows:
+        label, value = row[0], row[1]
+        key = row[2] if len(row) > 2 else None
+        cells = [label, _fmt(value)]
+        if published:
+            cells.append(_fmt(published.get(key)) if key else "")
+        table.add_row(*cells)
+    for label, key in [
+        ("condition number", "condition"),
+        ("rank / columns", None),
+        ("nonzero parameters", "n_params"),
+        ("R^2 of Eq. 40", "fit_r2"),
+    ]:
+        value = f"{summary['rank']} / {summary['n_columns']}" if key is None else _fmt(summary[key])
+        table.add_row(label, value, *([""] if published else []))
+    return table
+
+
+def nrmse_table(rows: list[dict[str, Any]]) -> Table:
+    """Tabulate NRMSE (Eq. 41, Table 2 of the paper) per data set and model.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of ``nrmse.parquet``.
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    table = Table(title="Free-run validation (NRMSE, Eq. 41)")
+    for col in ("data set", "role", "model", "NRMSE(q)", "NRMSE(q_dot)", "NRMSE(q_ddot)", "RMS(q)"):
+        table.add_column(col, justify="left" if col in ("data set", "role", "model") else "right")
+    for r in rows:
+        pct = [
+            ("diverged" if math.isnan(r[k]) else f"{100 * r[k]:.2f} %")
+            for k in ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot")
+        ]
+        table.add_row(
+            r["dataset"], r["role"], r["model"], *pct, f"{_fmt(r['rms_q'])} {r['rms_unit']}"
+        )
+    return table
+
+
+def published_table(rows: list[dict[str, Any]], published: list[dict[str, Any]]) -> Table | None:
+    """Our free-run RMS beside the published results on the same data sets.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of ``nrmse.parquet``.
+    published : list of dict
+        ``{model = "...", rms = {dataset = value}}`` entries of ``[validate]``.
+
+    Returns
+    -------
+    rich.table.Table or None
+        None when nothing is published.
+    """
+    if not published:
+        return None
+    sets = list(published[0]["rms"])
+    unit = rows[0]["rms_unit"] if rows else ""
+    table = Table(title=f"Free-run RMS error [{unit}] against published results")
+    table.add_column("model")
+    for s in sets:
+        table.add_column(s, justify="right")
+    ours = {r["dataset"]: r["rms_q"] for r in rows}
+    by_model: dict[str, dict[str, float]] = {}
+    for r in rows:
+        by_model.setdefault(r["model"], {})[r["dataset"]] = r["rms_q"]
+    for model, values in by_model.items():
+        table.add_row(f"debist {model} (this run)", *[_fmt(values.get(s), 3) for s in sets])
+    del ours
+    for entry in published:
+        table.add_row(entry["model"], *[_fmt(entry["rms"].get(s), 3) for s in sets])
+    return table

@@ -1,0 +1,331 @@
+"""The pipeline's stages as pure functions: arrays and configuration in, results out.
+
+No stage writes files or prints: :mod:`pipeline.runner` loads their inputs and
+hands their results to :mod:`pipeline.artifacts`. Only ingest reads, because
+reading rig logs is what it is for.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import RigLogError, WorkflowError
+from pipeline.identify import FitDiagnostics, IdentifyConfig, RBFModel, Record, fit_rbf_model
+from pipeline.validate import DataSet, ValidateConfig, validate_model
+from pipeline.workflow import DatasetSpec
+
+#: Largest relative deviation of a time step from the median accepted as uniform sampling.
+UNIFORM_TOL = 0.05
+
+
+def input_columns(frame: pd.DataFrame) -> list[str]:
+    """Input channel names v1..vN of a canonical rig-log table, in order."""
+    names, k = [], 1
+    while f"v{k}" in frame.columns:
+        names.append(f"v{k}")
+        k += 1
+    return names
+
+
+def run_ingest(datasets: Sequence[DatasetSpec]) -> dict[str, pd.DataFrame]:
+    """Read every data set into a canonical rig-log table.
+
+    Parameters
+    ----------
+    datasets : sequence of DatasetSpec
+        Data sets with their merged ingest sections.
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        Table name to table (``t [s], q, v1..vN [V], ...``). A data set split at
+        logging gaps gives ``<name>.seg<k>`` tables, each with the same role.
+
+    Raises
+    ------
+    RigLogError
+        For a file or channel that cannot be used (names file and channel).
+    WorkflowError
+        For an invalid ingest section.
+    """
+    from pipeline.ingest import IngestSpec, load_rig_log
+
+    tables: dict[str, pd.DataFrame] = {}
+    for ds in datasets:
+        spec = IngestSpec.from_dict(ds.ingest)
+        segments = load_rig_log(ds.source, spec)
+        for k, frame in enumerate(segments):
+            name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
+            frame.attrs["role"] = ds.role
+            frame.attrs["dataset"] = ds.name
+            tables[name] = frame
+    return tables
+
+
+def sample_time(frame: pd.DataFrame, name: str) -> float:
+    """Uniform sample time of a table [s].
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Table with a ``t`` column [s].
+    name : str
+        Table name for messages.
+
+    Returns
+    -------
+    float
+        Median time step [s].
+
+    Raises
+    ------
+    RigLogError
+        If a step deviates from the median by more than :data:`UNIFORM_TOL`.
+    """
+    steps = np.diff(frame["t"].to_numpy())
+    dt = float(np.median(steps))
+    worst = int(np.argmax(np.abs(steps - dt)))
+    if abs(steps[worst] - dt) > UNIFORM_TOL * dt:
+        raise RigLogError(
+            f"non-uniform sampling in data set '{name}': step {steps[worst]:.6g} s at "
+            f"t = {frame['t'].iloc[worst]:.6g} s against the median {dt:.6g} s; "
+            "set [ingest] resample = {{ sample_time = ... }}",
+            path=frame.attrs.get("source"),
+            channel="t",
+        )
+    return dt
+
+
+def run_differentiate(
+    tables: Mapping[str, pd.DataFrame], section: Mapping[str, Any]
+) -> dict[str, pd.DataFrame]:
+    """Differentiate q of every table twice (TVRegDiff by default).
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical rig-log tables.
+    section : mapping
+        The ``[differentiate]`` section: ``method`` plus that method's parameters.
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        Per table: ``t [s], q, q_hat, q_dot [unit/s], q_ddot [unit/s^2]``.
+
+    Raises
+    ------
+    WorkflowError
+        For an unknown method or parameter.
+    RigLogError
+        For non-uniform sampling.
+    """
+    from pipeline.differentiate import differentiate
+
+    params = dict(section)
+    method = params.pop("method", "tvregdiff")
+    out = {}
+    for name, frame in tables.items():
+        dt = sample_time(frame, name)
+        q = frame["q"].to_numpy()
+        res = differentiate(q, dt, method=method, params=params)
+        deriv = pd.DataFrame(
+            {
+                "t": frame["t"].to_numpy(),
+                "q": q,
+                "q_hat": res.x_hat,
+                "q_dot": res.x_dot,
+                "q_ddot": res.x_ddot,
+            }
+        )
+        deriv.attrs.update({"method": method, "converged": bool(res.converged), "dt": dt})
+        out[name] = deriv
+    return out
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    """Output of the identification stage.
+
+    Attributes
+    ----------
+    model : RBFModel
+        The identified model.
+    diagnostics : FitDiagnostics
+        Rank, condition number, residuals, T_z trace.
+    curves : pandas.DataFrame
+        Characteristic curves on a grid: ``q, c, d, cq, g1..gN, dC1_dq..dCN_dq``.
+    summary : dict
+        Scalars for reports.
+    """
+
+    model: RBFModel
+    diagnostics: FitDiagnostics
+    curves: pd.DataFrame
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def estimation_records(tables, derivs) -> list[Record]:
+    """Build identification records from the estimation tables and their derivatives."""
+    records = []
+    for name, frame in tables.items():
+        if frame.attrs.get("role") != "estimation":
+            continue
+        d = derivs[name]
+        v = frame[input_columns(frame)].to_numpy()
+        records.append(
+            Record(
+                name,
+                frame["q"].to_numpy(),
+                d["q_dot"].to_numpy(),
+                d["q_ddot"].to_numpy(),
+                v,
+                float(d.attrs["dt"]),
+            )
+        )
+    if not records:
+        raise WorkflowError("no estimation data set: mark one with role = 'estimation'")
+    return records
+
+
+def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
+    """Identify the RBF model (Eq. 37-40) on the estimation data sets.
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical tables (``attrs['role']`` tells estimation data).
+    derivs : mapping of str to pandas.DataFrame
+        Their derivatives.
+    section : mapping
+        The ``[identify]`` section (see :class:`IdentifyConfig`).
+
+    Returns
+    -------
+    IdentifyResult
+
+    Raises
+    ------
+    IdentificationError
+        If the problem is under-excited, rank deficient or badly conditioned.
+    WorkflowError
+        For an invalid section.
+    """
+    cfg = IdentifyConfig.from_dict(dict(section))
+    model, diag = fit_rbf_model(estimation_records(tables, derivs), cfg)
+    grid = np.linspace(model.q_range[0], model.q_range[1], 201)
+    cur = model.curves(grid)
+    curves = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
+    for j in range(model.n_inputs):
+        curves[f"g{j + 1}"] = cur["g"][:, j]
+        curves[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    summary = {
+        "T_z": model.T_z,
+        "m_q": model.m_q,
+        "condition": diag.condition,
+        "rank": diag.rank,
+        "n_columns": len(diag.columns),
+        "n_params": model.n_params,
+        "n_samples": diag.n_samples,
+        "fit_r2": diag.fit_r2,
+        "residual_rms": diag.residual_rms,
+        "backbone": {k: (np.asarray(v).tolist()) for k, v in model.backbone.items()},
+        "published": dict(cfg.published or {}),
+    }
+    return IdentifyResult(model, diag, pd.DataFrame(curves), summary)
+
+
+def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
+    """HDF5 layout of the fit diagnostics."""
+    return {
+        "attrs": {
+            "rank": diag.rank,
+            "condition": diag.condition,
+            "n_samples": diag.n_samples,
+            "residual_rms": diag.residual_rms,
+            "fit_r2": diag.fit_r2,
+        },
+        "columns": np.array(diag.columns),
+        "singular_values": diag.singular_values,
+        "support": diag.support,
+        "T_z_trace": diag.T_z_trace,
+    }
+
+
+@dataclass(frozen=True)
+class ValidateResult:
+    """Output of the validation stage.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        NRMSE and RMS per data set and model.
+    simulated : dict of str to pandas.DataFrame
+        Measured and simulated trajectories per data set.
+    figures : dict of str to matplotlib.figure.Figure
+        Measured vs simulated q per data set.
+    """
+
+    table: pd.DataFrame
+    simulated: dict[str, pd.DataFrame]
+    figures: dict[str, Any]
+
+
+def validation_datasets(tables, derivs) -> list[DataSet]:
+    """Assemble the measured data of every table for validation."""
+    out = []
+    for name, frame in tables.items():
+        d = derivs[name]
+        out.append(
+            DataSet(
+                name=name,
+                role=frame.attrs.get("role", "validation"),
+                t=frame["t"].to_numpy(),
+                q=frame["q"].to_numpy(),
+                q_dot=d["q_dot"].to_numpy(),
+                q_ddot=d["q_ddot"].to_numpy(),
+                v=frame[input_columns(frame)].to_numpy(),
+                q_unit=frame.attrs.get("units", {}).get("q", "m"),
+            )
+        )
+    return out
+
+
+def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) -> ValidateResult:
+    """Free-run the identified model on every data set and score it (Sec. 5, Eq. 41).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    tables, derivs : mapping of str to pandas.DataFrame
+        Measured data and derivatives of every data set.
+    section : mapping
+        The ``[validate]`` section (see :class:`ValidateConfig`).
+
+    Returns
+    -------
+    ValidateResult
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section.
+    """
+    from pipeline.plots import free_run_figure
+
+    cfg = ValidateConfig.from_dict(section)
+    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
+    q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
+    datasets = validation_datasets(tables, derivs)
+    table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit)
+    figures = {
+        name: free_run_figure(sim, name, table[table.dataset == name].iloc[0], cfg.init_samples)
+        for name, sim in simulated.items()
+    }
+    return ValidateResult(table, simulated, figures)

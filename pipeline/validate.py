@@ -1,0 +1,342 @@
+"""Validation of identified models by free-run simulation (Masoud & Maas 2025, Sec. 5, Eq. 41)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import WorkflowError
+from pipeline.ingest.units import lookup_unit
+from pipeline.simulate import INTERPOLATIONS, FreeRunModel, SimulationResult, simulate
+
+
+def nrmse(y_meas: np.ndarray, y_calc: np.ndarray) -> float:
+    """Normalised root-mean-square error of Eq. 41.
+
+    Parameters
+    ----------
+    y_meas : ndarray, shape (N,)
+        Measured signal.
+    y_calc : ndarray, shape (N,)
+        Calculated (simulated) signal, same unit.
+
+    Returns
+    -------
+    float
+        ``sqrt(mean((y_meas - y_calc)^2)) / (max(y_meas) - min(y_meas))``
+        [dimensionless]; NaN when ``y_calc`` has non-finite values (a diverged
+        simulation is reported as such, not as a number).
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ or the measured signal is constant.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 41.
+
+    Examples
+    --------
+    >>> nrmse(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]))
+    0.0
+    >>> round(nrmse(np.array([0.0, 2.0]), np.array([1.0, 1.0])), 3)
+    0.5
+    """
+    y_meas = np.asarray(y_meas, dtype=float)
+    y_calc = np.asarray(y_calc, dtype=float)
+    if y_meas.shape != y_calc.shape:
+        raise ValueError(f"shapes differ: {y_meas.shape} and {y_calc.shape}")
+    span = float(np.max(y_meas) - np.min(y_meas))
+    if span == 0:
+        raise ValueError("measured signal is constant: NRMSE is undefined")
+    if not np.all(np.isfinite(y_calc)):
+        return float("nan")
+    return float(np.sqrt(np.mean((y_meas - y_calc) ** 2)) / span)
+
+
+def rms(error: np.ndarray) -> float:
+    """Root-mean-square of an error signal (NaN if any value is not finite).
+
+    Parameters
+    ----------
+    error : ndarray, shape (N,)
+        Error samples.
+
+    Returns
+    -------
+    float
+        sqrt(mean(error^2)), same unit as ``error``.
+    """
+    error = np.asarray(error, dtype=float)
+    return float(np.sqrt(np.mean(error**2))) if np.all(np.isfinite(error)) else float("nan")
+
+
+def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
+    """Estimate position and velocity at the first sample from the first samples only.
+
+    A cubic is fitted by least squares to ``q[:window]``; its value and slope at
+    the first instant are returned. Used where a benchmark protocol allows only
+    the first samples of the output to initialise a free-run simulation.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Measured position [unit of q].
+    dt : float
+        Sample time [s].
+    window : int
+        Samples used, at least 4.
+
+    Returns
+    -------
+    q0 : float
+        Position [unit of q].
+    q_dot0 : float
+        Velocity [unit/s].
+
+    Raises
+    ------
+    ValueError
+        If fewer than 4 samples are available.
+    """
+    window = min(int(window), q.size)
+    if window < 4:
+        raise ValueError(f"need at least 4 samples to estimate the initial state, got {window}")
+    t = np.arange(window) * dt
+    coef = np.polynomial.polynomial.polyfit(t, q[:window], 3)
+    return float(coef[0]), float(coef[1])
+
+
+@dataclass(frozen=True)
+class ValidateConfig:
+    """The ``[validate]`` workflow section.
+
+    Parameters
+    ----------
+    substeps : int
+        RK4 steps per sample interval.
+    input_interpolation : {"bandlimited", "linear"}
+        Input interpolation between samples.
+    init_samples : int
+        Samples of measured output a protocol allows for initialisation; the
+        initial state is estimated from them only and the metrics are computed
+        over the remaining samples. 0: start from the differentiated signals at
+        the first sample and score every sample.
+    report_unit : str or None
+        Unit for the RMS column (e.g. "mV", "mm"); default the unit of q.
+    q_limit : float or None
+        |q| beyond which a run counts as diverged [unit of q]; default 100 times
+        the largest |q| of the estimation range.
+    published : list of dict
+        Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``.
+    """
+
+    substeps: int = 2
+    input_interpolation: str = "bandlimited"
+    init_samples: int = 0
+    report_unit: str | None = None
+    q_limit: float | None = None
+    published: tuple[dict[str, Any], ...] = ()
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any]) -> ValidateConfig:
+        """Build and validate from a workflow section.
+
+        Parameters
+        ----------
+        section : mapping
+            The ``[validate]`` table.
+
+        Returns
+        -------
+        ValidateConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key or invalid value.
+        """
+        known = {f.name for f in fields(cls)}
+        unknown = set(section) - known
+        if unknown:
+            raise WorkflowError(
+                f"[validate]: unknown key(s) {sorted(unknown)}; known: {sorted(known)}"
+            )
+        kw = dict(section)
+        kw["published"] = tuple(kw.get("published", ()))
+        cfg = cls(**kw)
+        if cfg.input_interpolation not in INTERPOLATIONS:
+            raise WorkflowError(
+                f"[validate] input_interpolation must be one of {INTERPOLATIONS}, "
+                f"got {cfg.input_interpolation!r}"
+            )
+        if cfg.substeps < 1 or cfg.init_samples < 0:
+            raise WorkflowError("[validate] substeps must be >= 1 and init_samples >= 0")
+        return cfg
+
+
+@dataclass(frozen=True)
+class DataSet:
+    """Measured data of one record for validation.
+
+    Parameters
+    ----------
+    name : str
+        Data set name.
+    role : {"estimation", "validation"}
+        Whether it was used for identification.
+    t : ndarray, shape (n,)
+        Time [s].
+    q, q_dot, q_ddot : ndarray, shape (n,)
+        Measured position and its derivatives (differentiation stage).
+    v : ndarray, shape (n, n_inputs)
+        Inputs [V].
+    q_unit : str
+        SI unit of q (e.g. "m", or "V" for the Silverbox circuit).
+    """
+
+    name: str
+    role: str
+    t: np.ndarray
+    q: np.ndarray
+    q_dot: np.ndarray
+    q_ddot: np.ndarray
+    v: np.ndarray
+    q_unit: str
+
+    @property
+    def dt(self) -> float:
+        """Sample time [s] (median step)."""
+        return float(np.median(np.diff(self.t)))
+
+
+def report_factor(q_unit: str, report_unit: str | None) -> tuple[float, str]:
+    """Factor converting q from its SI unit to the report unit.
+
+    Parameters
+    ----------
+    q_unit : str
+        SI unit of q.
+    report_unit : str or None
+        Wanted unit; None keeps ``q_unit``.
+
+    Returns
+    -------
+    factor : float
+        Multiply a value in ``q_unit`` by it.
+    unit : str
+        The report unit.
+
+    Raises
+    ------
+    WorkflowError
+        If the report unit is unknown or of another quantity.
+    """
+    if report_unit is None:
+        return 1.0, q_unit
+    unit = lookup_unit(report_unit)
+    if unit is None or unit.si != q_unit:
+        raise WorkflowError(
+            f"[validate] report_unit {report_unit!r} cannot express q in {q_unit!r}"
+        )
+    return 1.0 / unit.factor, report_unit
+
+
+def validate_model(
+    model: FreeRunModel,
+    model_name: str,
+    datasets: Sequence[DataSet],
+    cfg: ValidateConfig,
+    q_limit: float,
+) -> tuple[pd.DataFrame, dict[str, pd.DataFrame]]:
+    """Free-run a model on every data set and score it (Eq. 41).
+
+    Parameters
+    ----------
+    model : FreeRunModel
+        The model to simulate.
+    model_name : str
+        Its row label ("rbf", "sindy", "analytical").
+    datasets : sequence of DataSet
+        Estimation and validation data; records with the same sample time are
+        simulated as one batch.
+    cfg : ValidateConfig
+        Simulation and scoring options.
+    q_limit : float
+        Divergence bound on |q| [unit of q].
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per data set: ``dataset, role, model, n_samples, nrmse_q,
+        nrmse_q_dot, nrmse_q_ddot, rms_q`` (report unit), ``diverged``.
+    simulated : dict of str to pandas.DataFrame
+        Per data set: ``t, q, q_sim, q_dot_sim, q_ddot_sim``.
+
+    Raises
+    ------
+    WorkflowError
+        If the report unit does not fit q.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
+    """
+    by_dt: dict[float, list[DataSet]] = {}
+    for ds in datasets:
+        by_dt.setdefault(round(ds.dt, 12), []).append(ds)
+    results: dict[str, SimulationResult] = {}
+    for dt, group in by_dt.items():
+        q0, qd0 = [], []
+        for ds in group:
+            if cfg.init_samples > 0:
+                a, b = initial_state(ds.q, dt, min(cfg.init_samples, 16))
+            else:
+                a, b = float(ds.q[0]), float(ds.q_dot[0])
+            q0.append(a)
+            qd0.append(b)
+        sims = simulate(
+            model,
+            [ds.v for ds in group],
+            dt,
+            np.array(q0),
+            np.array(qd0),
+            substeps=cfg.substeps,
+            interpolation=cfg.input_interpolation,
+            q_limit=q_limit,
+        )
+        results.update({ds.name: sim for ds, sim in zip(group, sims, strict=True)})
+    rows, simulated = [], {}
+    for ds in datasets:
+        sim = results[ds.name]
+        factor, unit = report_factor(ds.q_unit, cfg.report_unit)
+        s = slice(cfg.init_samples, None)
+        rows.append(
+            {
+                "dataset": ds.name,
+                "role": ds.role,
+                "model": model_name,
+                "n_samples": int(ds.q[s].size),
+                "nrmse_q": nrmse(ds.q[s], sim.q[s]),
+                "nrmse_q_dot": nrmse(ds.q_dot[s], sim.q_dot[s]),
+                "nrmse_q_ddot": nrmse(ds.q_ddot[s], sim.q_ddot[s]),
+                "rms_q": rms(ds.q[s] - sim.q[s]) * factor,
+                "rms_unit": unit,
+                "diverged": sim.diverged,
+            }
+        )
+        simulated[ds.name] = pd.DataFrame(
+            {
+                "t": ds.t,
+                "q": ds.q,
+                "q_sim": sim.q,
+                "q_dot_sim": sim.q_dot,
+                "q_ddot_sim": sim.q_ddot,
+            }
+        )
+    return pd.DataFrame(rows), simulated

@@ -1,0 +1,69 @@
+"""Shared fixtures: synthetic data from a known model, integrated independently of debist."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def shared_data(*parts: str) -> Path:
+    """Path under ../shared/data, or skip the test when the folder is absent (a user's clone)."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"{path} is absent: ../shared is only beside CI and developer checkouts")
+    return path
+
+
+def bistable_truth(q: np.ndarray) -> dict[str, np.ndarray]:
+    """A double-well actuator in the paper's form (Eq. 37): curves as functions of q [m]."""
+    k1, k3 = -40.0, 4.0e5  # [N/m], [N/m^3] per unit mass: wells at +-10 mm
+    return {
+        "c": k1 + k3 * q**2,
+        "d": 3.0 + 200.0 * q**2,
+        "g1": 2.0e-7 * (1.0 + 30.0 * q),
+        "g2": -2.0e-7 * (1.0 - 30.0 * q),
+    }
+
+
+def excitation(t: np.ndarray) -> np.ndarray:
+    """Two smooth voltage profiles [V]: switching pulses plus sub-threshold multisine."""
+    rng = np.random.default_rng(7)
+    f = rng.uniform(0.3, 6.0, size=(2, 6))
+    ph = rng.uniform(0, 2 * np.pi, size=(2, 6))
+    base = np.stack(
+        [np.sum(np.sin(2 * np.pi * f[i] * t[:, None] + ph[i]), axis=1) for i in range(2)], axis=1
+    )
+    pulse = lambda t0: 0.5 * (np.tanh((t - t0) / 0.05) - np.tanh((t - t0 - 1.0) / 0.05))  # noqa: E731
+    v1 = 2500.0 * (pulse(1.0) + pulse(7.0)) + 250.0 * base[:, 0]
+    v2 = 2500.0 * (pulse(4.0) + pulse(10.0)) + 250.0 * base[:, 1]
+    return np.abs(np.stack([v1, v2], axis=1))
+
+
+@pytest.fixture(scope="session")
+def bistable_record():
+    """Noise-free trajectory of the truth with z = q_dot, integrated by solve_ivp (DOP853)."""
+    dt = 0.002
+    t = np.arange(0, 13.0, dt)
+
+    def rhs(tt, x):
+        q, qd = x
+        v = excitation(np.array([tt]))[0]
+        cur = bistable_truth(np.array([q]))
+        qdd = (
+            cur["g1"][0] * v[0] ** 2 + cur["g2"][0] * v[1] ** 2 - cur["c"][0] * q - cur["d"][0] * qd
+        )
+        return [qd, qdd]
+
+    sol = solve_ivp(
+        rhs, (t[0], t[-1]), [-0.01, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13
+    )
+    q, q_dot = sol.y
+    v = excitation(t)
+    cur = bistable_truth(q)
+    q_ddot = cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2 - cur["c"] * q - cur["d"] * q_dot
+    return {"t": t, "dt": dt, "q": q, "q_dot": q_dot, "q_ddot": q_ddot, "v": v}

@@ -1,0 +1,221 @@
+import numpy as np
+import pytest
+from conftest import bistable_truth
+
+from pipeline.errors import IdentificationError, WorkflowError
+from pipeline.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
+from pipeline.identify.friction import friction_state
+from pipeline.identify.terms import force_columns, input_columns, input_map
+
+
+def test_basis_is_eq38_with_equidistant_centres():
+    b = RBFBasis.equidistant(-0.012, 0.012, M=10, sigma_n=0.5, outside="zero")
+    delta = 0.024 / 9
+    assert b.sigma == pytest.approx(0.5 * delta)
+    phi = b(np.array([b.xi[3], b.xi[3] + b.sigma]))
+    assert phi[0, 3] == pytest.approx(1.0)
+    assert phi[1, 3] == pytest.approx(np.exp(-0.5))
+    assert phi[0, 4] == pytest.approx(np.exp(-(delta**2) / (2 * b.sigma**2)))
+    # clipping holds the basis at the edge; "zero" lets it decay
+    clip = RBFBasis(b.xi, b.sigma, "clip")
+    assert np.allclose(clip(np.array([1.0])), clip(np.array([b.xi[-1]])))
+    assert b(np.array([1.0])).max() < 1e-100
+
+
+def test_friction_state_exact_for_piecewise_linear_velocity():
+    # reference: the continuous filter integrated with a fine step on the linear interpolant
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(3)
+    dt, T_z = 0.01, 0.037
+    qd = rng.standard_normal(60)
+    t = np.arange(qd.size) * dt
+    sol = solve_ivp(
+        lambda tt, z: (np.interp(tt, t, qd) - z) / T_z,
+        (0, t[-1]),
+        [qd[0]],
+        t_eval=t,
+        rtol=1e-11,
+        atol=1e-12,
+        max_step=dt / 20,
+    )
+    assert np.allclose(friction_state(qd, dt, T_z), sol.y[0], atol=1e-8)
+    assert np.array_equal(friction_state(qd, dt, 0.0), qd)
+
+
+def _fit(rec, **kw):
+    cfg = IdentifyConfig.from_dict({"M": 10, "sigma_n": 0.5, "T_z": 0.0, **kw})
+    records = [Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])]
+    return fit_rbf_model(records, cfg)
+
+
+def test_rbf_fit_approximates_smooth_curves(bistable_record):
+    """Truth outside the model class (polynomial curves): c(q) q within 1 % of its range."""
+    model, diag = _fit(
+        bistable_record, backbone=["linear_spring", "cubic_spring", "viscous"], max_condition=1e10
+    )
+    assert diag.rank == len(diag.columns)
+    assert diag.fit_r2 > 0.9999
+    q = np.linspace(*model.q_range, 101)[5:-5]
+    truth = bistable_truth(q)
+    assert np.max(np.abs(model.curves(q)["cq"] - truth["c"] * q)) < 1e-2 * np.ptp(truth["c"] * q)
+
+
+def _truth_model(rng):
+    basis = RBFBasis.equidistant(-0.03, 0.03, 8, 0.5)
+    return RBFModel(
+        basis=basis,
+        input_map="v2",
+        n_inputs=2,
+        m_q=1.0,
+        T_z=0.0,
+        coulomb_velocity=1e-3,
+        theta_c=rng.uniform(-20, 20, 8),
+        theta_d=rng.uniform(1, 3, 8),
+        theta_g=rng.uniform(1e-7, 3e-7, (2, 8)) * np.array([[1.0], [-1.0]]),
+        backbone={"k_1": -40.0, "k_3": 4e5, "d_v": 2.0, "g_0": np.zeros(2)},
+        q_range=(-0.03, 0.03),
+    )
+
+
+def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
+    """Data from a model inside the class (solve_ivp, exact q''): weights recovered to 1e-6."""
+    from conftest import excitation
+    from scipy.integrate import solve_ivp
+
+    truth = _truth_model(np.random.default_rng(2))
+    t = bistable_record["t"]
+
+    def rhs(tt, x):
+        return [
+            x[1],
+            truth.accel(np.array([x[0]]), np.array([x[1]]), excitation(np.array([tt])))[0],
+        ]
+
+    sol = solve_ivp(
+        rhs, (t[0], t[-1]), [-0.01, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12
+    )
+    q, q_dot = sol.y
+    v = excitation(t)
+    rec = {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
+    model, diag = _fit(
+        rec,
+        M=8,
+        q_range=[-0.03, 0.03],
+        backbone=["linear_spring", "cubic_spring", "viscous"],
+        max_condition=1e10,
+        min_support=0,
+    )
+    assert diag.rank == len(diag.columns)
+    assert diag.fit_r2 > 1 - 1e-12
+    grid = np.linspace(q.min(), q.max(), 50)
+    for key in ("cq", "d", "g"):
+        want, got = truth.curves(grid)[key], model.curves(grid)[key]
+        assert np.max(np.abs(got - want)) < 1e-6 * np.max(np.abs(want)), key
+
+
+def test_T_z_search_recovers_the_time_constant(bistable_record):
+    """Friction acting on z (Eq. 37), model inside the class: the outer search finds T_z."""
+    truth = _truth_model(np.random.default_rng(4))
+    T_true = 0.03
+    q, q_dot, v, dt = (bistable_record[k] for k in ("q", "q_dot", "v", "dt"))
+    z = friction_state(q_dot, dt, T_true)
+    rec = {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, z, v), "v": v, "dt": dt}
+    model, diag = _fit(
+        rec,
+        M=8,
+        q_range=[-0.03, 0.03],
+        min_support=0,
+        backbone=["linear_spring", "cubic_spring", "viscous"],
+        T_z="search",
+        T_z_bounds=[0.002, 1.0],
+        max_condition=1e10,
+    )
+    assert model.T_z == pytest.approx(T_true, rel=0.02)
+    assert diag.T_z_trace.shape[1] == 2 and diag.T_z_trace.shape[0] > 5
+    assert diag.T_z_trace[:, 1].min() < 1e-4
+
+
+def test_model_accel_equals_regressor_row(bistable_record):
+    """The simulator's fast path and the regression matrix are independent codes of Eq. 37."""
+    model, _ = _fit(
+        bistable_record,
+        backbone=["linear_spring", "cubic_spring", "viscous", "offset", "input_gain"],
+    )
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-0.015, 0.015, 50)
+    z = rng.standard_normal(50) * 0.05
+    v = rng.uniform(0, 3000, (50, 2))
+    F, _ = force_columns(
+        q, z, model.basis, ("c", "d"), ("linear_spring", "cubic_spring", "viscous", "offset"), 1e-3
+    )
+    G, _ = input_columns(q, input_map(v, "v2"), model.basis, ("g",), ("input_gain",))
+    bb = model.backbone
+    theta_F = np.concatenate(
+        [model.theta_c, model.theta_d, [bb["k_1"], bb["k_3"], bb["d_v"], bb["F_0"]]]
+    )
+    theta_G = np.concatenate([model.theta_g.ravel(), bb["g_0"]])
+    assert np.allclose(model.accel(q, z, v), G @ theta_G - F @ theta_F, rtol=1e-10, atol=1e-12)
+
+
+def test_model_roundtrips_through_its_tree(bistable_record):
+    model, _ = _fit(bistable_record)
+    again = RBFModel.from_tree(model.to_tree())
+    q = np.linspace(-0.02, 0.02, 7)
+    assert np.allclose(again.curves(q)["cq"], model.curves(q)["cq"])
+    assert again.T_z == model.T_z and again.n_params == model.n_params
+
+
+def test_centre_without_data_is_an_error_naming_it(bistable_record):
+    with pytest.raises(
+        IdentificationError, match=r"centre xi_\d+ = 0\.0\d+ has only 0 samples within sigma"
+    ):
+        _fit(bistable_record, q_range=[-0.012, 0.05])
+
+
+def test_unexcited_input_is_an_error_naming_the_channel(bistable_record):
+    rec = dict(bistable_record)
+    rec["v"] = rec["v"].copy()
+    rec["v"][:, 1] = 0.0
+    with pytest.raises(IdentificationError, match="input v2 is constant"):
+        _fit(rec)
+
+
+def test_bad_conditioning_is_reported_with_the_number(bistable_record):
+    with pytest.raises(IdentificationError, match=r"condition number .* exceeds max_condition"):
+        _fit(bistable_record, max_condition=10.0)
+
+
+def test_config_rejects_unknown_keys_and_terms():
+    with pytest.raises(WorkflowError, match="unknown key 'sigma'"):
+        IdentifyConfig.from_dict({"sigma": 0.5})
+    with pytest.raises(WorkflowError, match="unknown backbone term 'quartic'"):
+        IdentifyConfig.from_dict({"backbone": ["quartic"]})
+    with pytest.raises(WorkflowError, match="needs fixed `input_gain`"):
+        IdentifyConfig.from_dict({"m_q": "identify"})
+
+
+def test_mass_identified_with_known_input_gain():
+    """IDIM-like structure: m q'' + Fv q' + Fc tanh(q'/vc) + F0 = gain * v, recovered exactly."""
+    rng = np.random.default_rng(11)
+    n, dt = 4000, 1e-3
+    q_dot = np.convolve(rng.standard_normal(n), np.ones(50) / 50, mode="same") * 0.2
+    q = np.cumsum(q_dot) * dt
+    q_ddot = np.gradient(q_dot, dt)
+    m, fv, fc, f0, gain = 95.0, 200.0, 20.0, -3.0, 35.0
+    v = (m * q_ddot + fv * q_dot + fc * np.tanh(q_dot / 1e-3) + f0) / gain
+    cfg = IdentifyConfig.from_dict(
+        {
+            "rbf": [],
+            "backbone": ["viscous", "coulomb", "offset"],
+            "m_q": "identify",
+            "input_gain": [gain],
+            "T_z": 0.0,
+            "input_map": "v",
+        }
+    )
+    model, _ = fit_rbf_model([Record("s", q, q_dot, q_ddot, v[:, None], dt)], cfg)
+    assert model.m_q == pytest.approx(m, rel=1e-9)
+    assert model.backbone["d_v"] == pytest.approx(fv, rel=1e-9)
+    assert model.backbone["F_c"] == pytest.approx(fc, rel=1e-9)
+    assert model.backbone["F_0"] == pytest.approx(f0, rel=1e-9)
