@@ -1,0 +1,309 @@
+"""Tests of the differentiate stage: one contract, error-bound table, exactness, registry."""
+
+from __future__ import annotations
+
+import dataclasses
+import doctest
+import importlib
+import inspect
+import pkgutil
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.differentiate import (
+    CONFIGS,
+    DIFFERENTIATORS,
+    Derivatives,
+    SavGolConfig,
+    SpectralConfig,
+    TVRegDiffConfig,
+    differentiate,
+    savgol_derivatives,
+    spectral_derivatives,
+    tvregdiff_derivatives,
+)
+from pipeline.differentiate.spectral import lowpass_gain
+from pipeline.errors import ConvergenceWarning, WorkflowError
+
+DT, N = 0.01, 1000
+T = np.arange(N) * DT
+W1, W2 = 2 * np.pi * 0.5, 2 * np.pi * 1.3
+X = np.sin(W1 * T) + 0.5 * np.sin(W2 * T)
+X_DOT = W1 * np.cos(W1 * T) + 0.5 * W2 * np.cos(W2 * T)
+X_DDOT = -(W1**2) * np.sin(W1 * T) - 0.5 * W2**2 * np.sin(W2 * T)
+INNER = slice(50, -50)
+
+
+def nrmse(estimate: np.ndarray, exact: np.ndarray, part: slice) -> float:
+    """Root-mean-square error over ``part``, relative to the RMS of ``exact``."""
+    return float(np.sqrt(np.mean((estimate - exact)[part] ** 2) / np.mean(exact[part] ** 2)))
+
+
+TVR_LARGE = {"alpha": 1e-4, "ep": 1e-6, "iterations": 20, "alpha2": 1e-3}
+TVR_SMALL = TVR_LARGE | {"scale": "small"}
+
+# method, params, noise sigma, part, bounds on the relative RMS errors of (x_hat, x_dot, x_ddot).
+# Measured values are about 2/3 of each bound (seed 42).
+ERROR_BOUNDS = [
+    ("tvregdiff", TVR_LARGE, 0.0, INNER, (1.6e-3, 1.2e-2, 0.11)),
+    ("tvregdiff", TVR_LARGE, 1e-3, INNER, (2.0e-3, 2.6e-2, 0.14)),
+    ("tvregdiff", TVR_LARGE, 1e-2, INNER, (1.0e-2, 0.12, 0.9)),
+    ("tvregdiff", TVR_SMALL, 1e-3, INNER, (1.6e-3, 4.4e-2, 0.2)),
+    ("spectral", {"cutoff_hz": 3.0}, 0.0, slice(None), (6e-4, 3.1e-3, 1.3e-2)),
+    ("spectral", {"cutoff_hz": 3.0}, 1e-3, INNER, (5e-4, 1.4e-3, 3.1e-3)),
+    ("spectral", {"cutoff_hz": 3.0}, 1e-2, INNER, (4.5e-3, 1.1e-2, 2.1e-2)),
+    ("savgol", {"window": 51, "polyorder": 4}, 0.0, slice(None), (1.7e-3, 3.9e-2, 4.0e-2)),
+    ("savgol", {"window": 51, "polyorder": 4}, 1e-3, INNER, (1.6e-3, 3.9e-2, 3.1e-2)),
+    ("savgol", {"window": 51, "polyorder": 4}, 1e-2, INNER, (5.6e-3, 4.2e-2, 4.8e-2)),
+]
+
+
+@pytest.mark.filterwarnings("ignore::pipeline.errors.ConvergenceWarning")
+@pytest.mark.parametrize(("method", "params", "sigma", "part", "bounds"), ERROR_BOUNDS)
+def test_error_bounds_on_noisy_sines(method, params, sigma, part, bounds):
+    x = X + sigma * np.random.default_rng(42).standard_normal(N)
+    d = differentiate(x, DT, method=method, params=params)
+    errors = (nrmse(d.x_hat, X, part), nrmse(d.x_dot, X_DOT, part), nrmse(d.x_ddot, X_DDOT, part))
+    assert np.all(np.less_equal(errors, bounds)), f"{method} {params} sigma={sigma}: {errors}"
+
+
+@pytest.mark.filterwarnings("ignore::pipeline.errors.ConvergenceWarning")
+@pytest.mark.parametrize("method", sorted(DIFFERENTIATORS))
+def test_every_method_honours_the_contract(method):
+    f = DIFFERENTIATORS[method]
+    sig = inspect.signature(f)
+    assert list(sig.parameters)[:2] == ["x", "dt"]
+    assert sig.parameters["config"].kind is inspect.Parameter.KEYWORD_ONLY
+    d = f(list(X[:200]), DT, config=CONFIGS[method]())
+    assert isinstance(d, Derivatives) and d.method == method
+    for a in (d.x_hat, d.x_dot, d.x_ddot):
+        assert isinstance(a, np.ndarray) and a.shape == (200,) and a.dtype == np.float64
+    assert isinstance(d.converged, bool) and isinstance(d.info, dict)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        d.method = "other"  # type: ignore[misc]
+
+
+# ---------------------------------------------------------------- exactness
+
+
+def test_spectral_periodic_is_exact_for_band_limited_periodic_signal():
+    n, dt = 256, 0.01
+    period = n * dt
+    t = np.arange(n) * dt
+    ks, amps, phases = [1, 3, 7, 12], [1.0, 0.5, 0.2, 0.05], [0.3, 1.1, -0.4, 2.0]
+    w = [2 * np.pi * k / period for k in ks]
+    x = 0.7 + sum(a * np.sin(wk * t + p) for a, wk, p in zip(amps, w, phases, strict=True))
+    x_dot = sum(a * wk * np.cos(wk * t + p) for a, wk, p in zip(amps, w, phases, strict=True))
+    x_ddot = sum(-a * wk**2 * np.sin(wk * t + p) for a, wk, p in zip(amps, w, phases, strict=True))
+    cfg = SpectralConfig(cutoff_hz=10.0, taper=0.2, extension="periodic")  # pass band to 8 Hz
+    d = spectral_derivatives(x, dt, config=cfg)
+    np.testing.assert_allclose(d.x_hat, x, atol=1e-12)
+    np.testing.assert_allclose(d.x_dot, x_dot, atol=1e-9 * np.abs(x_dot).max())
+    np.testing.assert_allclose(d.x_ddot, x_ddot, atol=1e-9 * np.abs(x_ddot).max())
+    assert d.info["n_fft"] == n
+
+
+def test_spectral_odd_is_exact_for_line_plus_half_range_sines():
+    n, dt = 301, 0.01
+    span = (n - 1) * dt
+    t = np.arange(n) * dt
+    x = -0.2 + 1.5 * t + np.sin(np.pi * 2 * t / span) + 0.3 * np.sin(np.pi * 9 * t / span)
+    x_dot = 1.5 + (2 * np.pi / span) * np.cos(2 * np.pi * t / span)
+    x_dot += 0.3 * (9 * np.pi / span) * np.cos(9 * np.pi * t / span)
+    x_ddot = -((2 * np.pi / span) ** 2) * np.sin(2 * np.pi * t / span)
+    x_ddot -= 0.3 * (9 * np.pi / span) ** 2 * np.sin(9 * np.pi * t / span)
+    d = spectral_derivatives(x, dt, config=SpectralConfig(cutoff_hz=20.0))
+    np.testing.assert_allclose(d.x_hat, x, atol=1e-12)
+    np.testing.assert_allclose(d.x_dot, x_dot, atol=1e-9 * np.abs(x_dot).max())
+    np.testing.assert_allclose(d.x_ddot, x_ddot, atol=1e-9 * np.abs(x_ddot).max())
+
+
+def test_spectral_odd_does_not_ring_at_the_ends_of_a_ramp():
+    t = np.arange(500) * 0.01
+    x = 3.0 * t + 0.1 * t**2
+    d = spectral_derivatives(x, 0.01, config=SpectralConfig(cutoff_hz=5.0))
+    periodic = spectral_derivatives(x, 0.01, config=SpectralConfig(5.0, extension="periodic"))
+    # The odd extension of a ramp minus its chord is smooth to first order.
+    assert np.max(np.abs(d.x_dot - (3.0 + 0.2 * t))) < 0.02
+    assert np.max(np.abs(periodic.x_dot - (3.0 + 0.2 * t))) > 10.0
+
+
+def test_lowpass_gain_shape():
+    f = np.linspace(0, 10, 1001)
+    g = lowpass_gain(f, 5.0, 0.2)
+    assert np.all(g[f <= 4.0] == 1.0) and np.all(g[f >= 5.0] == 0.0)
+    assert np.all(np.diff(g) <= 0) and g[f == 4.5] == pytest.approx(0.5)
+    np.testing.assert_array_equal(lowpass_gain(f, None, 0.2), np.ones_like(f))
+    np.testing.assert_array_equal(lowpass_gain(f, 5.0, 0.0), (f < 5.0).astype(float))
+
+
+@pytest.mark.parametrize(("window", "polyorder"), [(5, 3), (21, 3), (31, 5)])
+def test_savgol_is_exact_for_a_cubic(window, polyorder):
+    t = np.arange(120) * 0.05 - 2.0
+    x = 0.3 - 1.2 * t + 0.8 * t**2 - 0.25 * t**3
+    d = savgol_derivatives(x, 0.05, config=SavGolConfig(window=window, polyorder=polyorder))
+    np.testing.assert_allclose(d.x_hat, x, atol=1e-10 * np.abs(x).max())
+    np.testing.assert_allclose(d.x_dot, -1.2 + 1.6 * t - 0.75 * t**2, atol=1e-9)
+    np.testing.assert_allclose(d.x_ddot, 1.6 - 1.5 * t, atol=1e-8)
+    assert d.info == {"window": window, "polyorder": polyorder, "window_s": window * 0.05}
+
+
+# ---------------------------------------------------------------- tvregdiff method
+
+
+def test_tvregdiff_method_matches_two_passes_and_reports():
+    from pipeline.differentiate import tvregdiff
+
+    x = X + 1e-3 * np.random.default_rng(1).standard_normal(N)
+    cfg = TVRegDiffConfig(alpha=1e-4, ep=1e-6, iterations=5, alpha2=1e-3, iterations2=3)
+    with pytest.warns(ConvergenceWarning) as record:
+        d = tvregdiff_derivatives(x, DT, config=cfg)
+    assert len(record) == 2  # one per pass
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        first = tvregdiff(x, 5, 1e-4, scale="large", ep=1e-6, dx=DT)
+        second = tvregdiff(first.derivative, 3, 1e-3, scale="large", ep=1e-6, dx=DT)
+    np.testing.assert_array_equal(d.x_dot, first.derivative)
+    np.testing.assert_array_equal(d.x_ddot, second.derivative)
+    assert not d.converged
+    assert d.info["n_iter"] == 5 and d.info["n_iter2"] == 3
+    assert d.info["alpha2"] == 1e-3 and d.info["ep2"] == 1e-6
+    # x_hat is the integral of x_dot with the least-squares constant.
+    np.testing.assert_allclose(np.diff(d.x_hat), DT * 0.5 * (d.x_dot[1:] + d.x_dot[:-1]))
+    assert np.mean(d.x_hat - x) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_tvregdiff_config_defaults_are_the_papers_in_metres():
+    cfg = TVRegDiffConfig()
+    # Paper: alpha = 0.01, ep = 1e-6 with q in mm; data * c -> alpha * c, ep * c**2.
+    assert cfg.alpha == pytest.approx(0.01 * 1e-3) and cfg.ep == pytest.approx(1e-6 * 1e-6)
+    assert (cfg.iterations, cfg.scale, cfg.alpha2, cfg.iterations2) == (10, "large", None, None)
+
+
+# ---------------------------------------------------------------- registry and configs
+
+
+def test_registry_and_configs_agree():
+    assert set(DIFFERENTIATORS) == set(CONFIGS) == {"tvregdiff", "spectral", "savgol"}
+    with pytest.raises(TypeError):
+        DIFFERENTIATORS["mine"] = savgol_derivatives  # type: ignore[index]
+
+
+@pytest.mark.parametrize("method", sorted(CONFIGS))
+def test_unknown_key_names_key_and_method(method):
+    with pytest.raises(WorkflowError, match=rf"method '{method}': unknown parameter 'alpah'"):
+        differentiate(X, DT, method=method, params={"alpah": 1.0})
+
+
+def test_unknown_method_is_a_workflow_error():
+    with pytest.raises(WorkflowError, match=r"unknown method 'kalman'; known methods: tvregdiff"):
+        differentiate(X, DT, method="kalman", params={})
+
+
+@pytest.mark.parametrize(
+    ("method", "params", "match"),
+    [
+        ("tvregdiff", {"alpha": -1.0}, r"'tvregdiff': `alpha` must be positive and finite, got -1"),
+        ("tvregdiff", {"iterations": 0}, r"`iterations` must be >= 1, got 0"),
+        ("tvregdiff", {"scale": "huge"}, r"`scale` must be 'small' or 'large', got 'huge'"),
+        ("tvregdiff", {"alpha2": 0}, r"`alpha2` must be positive and finite, got 0"),
+        ("spectral", {"cutoff_hz": 0.0}, r"'spectral': `cutoff_hz` must be positive"),
+        ("spectral", {"taper": 1.5}, r"`taper` must be in \[0, 1\], got 1.5"),
+        ("spectral", {"extension": "even"}, r"`extension` must be 'odd' or 'periodic'"),
+        ("savgol", {"window": 20}, r"'savgol': `window` must be odd, got 20"),
+        ("savgol", {"window": 5, "polyorder": 5}, r"`polyorder` must be less than `window`=5"),
+        ("savgol", {"polyorder": 1}, r"`polyorder` must be >= 2, got 1"),
+        ("savgol", {"window": "21"}, r"`window` must be an integer >= 3, got '21'"),
+    ],
+)
+def test_invalid_values_are_workflow_errors(method, params, match):
+    with pytest.raises(WorkflowError, match=match):
+        differentiate(X, DT, method=method, params=params)
+
+
+def test_params_default_to_config_defaults():
+    d = differentiate(X, DT, method="savgol")
+    assert d.info["window"] == SavGolConfig().window
+    assert SpectralConfig.from_dict({}) == SpectralConfig()
+    assert TVRegDiffConfig.from_dict({"alpha": 2e-5}) == TVRegDiffConfig(alpha=2e-5)
+    with pytest.raises(WorkflowError, match="parameters must be a table, got list"):
+        SavGolConfig.from_dict([("window", 5)])  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("method", sorted(DIFFERENTIATORS))
+@pytest.mark.parametrize(
+    ("x", "dt", "match"),
+    [
+        (np.array([0.0, np.nan, 1.0, 2.0] * 10), DT, r"`x` must be finite, got nan at index 1"),
+        (np.zeros(2), DT, r"`x` must have at least 3 samples, got 2"),
+        (np.zeros((4, 4)), DT, r"`x` must be 1-D"),
+        (X, 0.0, r"`dt` must be positive and finite, got 0.0"),
+        (X, np.nan, r"`dt` must be positive and finite, got nan"),
+    ],
+)
+def test_invalid_signal_raises(method, x, dt, match):
+    with pytest.raises(ValueError, match=match):
+        DIFFERENTIATORS[method](x, dt, config=CONFIGS[method]())
+
+
+def test_savgol_window_longer_than_record():
+    with pytest.raises(ValueError, match=r"`x` must have at least `window`=21 samples, got 10"):
+        savgol_derivatives(np.zeros(10), DT)
+
+
+# ---------------------------------------------------------------- properties
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    a=st.floats(-1e3, 1e3),
+    b=st.floats(-1e3, 1e3),
+    method=st.sampled_from(["spectral", "savgol"]),
+)
+def test_linear_methods_are_linear(a, b, method):
+    rng = np.random.default_rng(5)
+    x, y = rng.standard_normal(64), rng.standard_normal(64)
+    cfg = CONFIGS[method](**({"window": 9} if method == "savgol" else {}))
+    f = DIFFERENTIATORS[method]
+    dx, dy, dz = f(x, DT, config=cfg), f(y, DT, config=cfg), f(a * x + b * y, DT, config=cfg)
+    scale = (abs(a) + abs(b) + 1.0) * 1e-9
+    for name in ("x_hat", "x_dot", "x_ddot"):
+        combo = a * getattr(dx, name) + b * getattr(dy, name)
+        got = getattr(dz, name)
+        assert np.max(np.abs(got - combo)) <= scale * (1 + np.max(np.abs(combo)))
+
+
+@settings(max_examples=10, deadline=None)
+@given(c=st.floats(1e-3, 1e3))
+def test_tvregdiff_method_unit_scaling(c):
+    x = X[:300] + 1e-3 * np.random.default_rng(2).standard_normal(300)
+    base = TVRegDiffConfig(alpha=1e-4, ep=1e-6, iterations=3)
+    scaled = TVRegDiffConfig(alpha=c * 1e-4, ep=c**2 * 1e-6, iterations=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        d0 = tvregdiff_derivatives(x, DT, config=base)
+        d1 = tvregdiff_derivatives(c * x, DT, config=scaled)
+    np.testing.assert_allclose(d1.x_dot, c * d0.x_dot, rtol=1e-6, atol=1e-9 * c)
+    np.testing.assert_allclose(d1.x_ddot, c * d0.x_ddot, rtol=1e-6, atol=1e-9 * c)
+
+
+# ---------------------------------------------------------------- docstrings
+
+
+@pytest.mark.parametrize(
+    "module",
+    sorted(
+        m.name
+        for m in pkgutil.iter_modules(importlib.import_module("pipeline.differentiate").__path__)
+    ),
+)
+def test_docstring_examples_run(module):
+    mod = importlib.import_module(f"pipeline.differentiate.{module}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0
