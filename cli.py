@@ -48,12 +48,28 @@ def _event(stage: str, what: str, detail: str) -> None:
 def _report(runner, manifests) -> None:
     from pipeline import report
 
+    stopped = (
+        [
+            n
+            for n, ok in manifests.get("differentiate").summary.get("converged", {}).items()
+            if not ok
+        ]
+        if "differentiate" in manifests
+        else []
+    )
+    if stopped:
+        console.print(
+            f"[dim]differentiate: the iterative method stopped at its iteration limit on {len(stopped)} "
+            "data set(s), as configured (converged = false in the stage manifest)[/dim]"
+        )
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
     if "validate" in manifests:
         summary = manifests["validate"].summary
         console.print(report.nrmse_table(summary["table"]))
-        table = report.published_table(summary["table"], summary.get("published", []))
+        table = report.published_table(
+            summary["table"], summary.get("published", []), summary.get("order")
+        )
         if table is not None:
             console.print(table)
     console.print(f"[dim]artifacts: {runner.wf.output_dir}[/dim]")

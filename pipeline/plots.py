@@ -39,8 +39,7 @@ def free_run_figure(sim: pd.DataFrame, name: str, row: Any, init_samples: int = 
     ax1.legend(loc="upper right", fontsize=8)
     ax1.set_title(
         f"{name}: NRMSE(q) = {100 * row['nrmse_q']:.2f} %, "
-        f"RMS = {row['rms_q']:.4g} {row['rms_unit']}"
-        + ("  (diverged)" if row["diverged"] else ""),
+        f"RMS = {row['rms_q']:.4g} {row['rms_unit']}" + ("  (diverged)" if row["diverged"] else ""),
         fontsize=10,
     )
     ax2.plot(t, sim["q"] - sim["q_sim"], color="tab:blue", lw=0.6)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from rich.markup import escape
 from rich.table import Table
 
 #: How identified quantities are labelled in reports (summary key -> label, unit note).
@@ -48,7 +49,7 @@ def identify_table(summary: dict[str, Any]) -> Table:
         table.add_column("published", justify="right")
     scalars = {"T_z [s]": summary["T_z"], "m_q": summary["m_q"]}
     scalars.update({k: v for k, v in summary["backbone"].items() if not isinstance(v, list)})
-    rows = [("T_z [s]", summary["T_z"])]
+    rows = [(escape("T_z [s]"), summary["T_z"])]
     rows += [(PARAMETER_LABELS.get(k, k), v, k) for k, v in scalars.items() if k != "T_z [s]"]
     for row in rows:
         label, value = row[0], row[1]
@@ -94,7 +95,9 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     return table
 
 
-def published_table(rows: list[dict[str, Any]], published: list[dict[str, Any]]) -> Table | None:
+def published_table(
+    rows: list[dict[str, Any]], published: list[dict[str, Any]], order: list[str] | None = None
+) -> Table | None:
     """Our free-run RMS beside the published results on the same data sets.
 
     Parameters
@@ -103,6 +106,8 @@ def published_table(rows: list[dict[str, Any]], published: list[dict[str, Any]])
         Rows of ``nrmse.parquet``.
     published : list of dict
         ``{model = "...", rms = {dataset = value}}`` entries of ``[validate]``.
+    order : list of str, optional
+        Data set order of the workflow (default: as in the first entry).
 
     Returns
     -------
@@ -112,18 +117,18 @@ def published_table(rows: list[dict[str, Any]], published: list[dict[str, Any]])
     if not published:
         return None
     sets = list(published[0]["rms"])
+    if order:
+        sets = sorted(sets, key=lambda s: order.index(s) if s in order else len(order))
     unit = rows[0]["rms_unit"] if rows else ""
-    table = Table(title=f"Free-run RMS error [{unit}] against published results")
+    table = Table(title=escape(f"Free-run RMS error [{unit}] against published results"))
     table.add_column("model")
     for s in sets:
         table.add_column(s, justify="right")
-    ours = {r["dataset"]: r["rms_q"] for r in rows}
     by_model: dict[str, dict[str, float]] = {}
     for r in rows:
         by_model.setdefault(r["model"], {})[r["dataset"]] = r["rms_q"]
     for model, values in by_model.items():
         table.add_row(f"debist {model} (this run)", *[_fmt(values.get(s), 3) for s in sets])
-    del ours
     for entry in published:
         table.add_row(entry["model"], *[_fmt(entry["rms"].get(s), 3) for s in sets])
     return table

@@ -276,6 +276,7 @@ class Runner:
         summary = {
             "table": res.table.to_dict(orient="records"),
             "published": list(self.wf.section("validate").get("published", [])),
+            "order": [d.name for d in self.wf.datasets],
         }
         return outputs, summary
 

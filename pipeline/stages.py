@@ -7,6 +7,7 @@ reading rig logs is what it is for.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RigLogError, WorkflowError
+from pipeline.errors import ConvergenceWarning, RigLogError, WorkflowError
 from pipeline.identify import FitDiagnostics, IdentifyConfig, RBFModel, Record, fit_rbf_model
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 from pipeline.workflow import DatasetSpec
@@ -133,7 +134,10 @@ def run_differentiate(
     for name, frame in tables.items():
         dt = sample_time(frame, name)
         q = frame["q"].to_numpy()
-        res = differentiate(q, dt, method=method, params=params)
+        with warnings.catch_warnings():
+            # Stopping at the configured iteration count is recorded as data (attrs).
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            res = differentiate(q, dt, method=method, params=params)
         deriv = pd.DataFrame(
             {
                 "t": frame["t"].to_numpy(),

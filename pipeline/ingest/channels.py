@@ -1,0 +1,329 @@
+"""Mapping of a rig log's channels to the canonical columns, with unit conversion to SI.
+
+Pure functions of a :class:`~pipeline.ingest.raw.RawLog` and an
+:class:`~pipeline.ingest.spec.IngestSpec`: select each channel (by exact name, regex
+or column index), convert it to float64 and to SI (``x * factor(unit) * scale``),
+and attach it to its time base.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import RigLogError
+from pipeline.ingest.raw import RawChannel, RawLog
+from pipeline.ingest.spec import ChannelSpec, IngestSpec
+from pipeline.ingest.units import UNITS, canonical_unit, lookup_unit
+
+__all__ = ["Column", "Mapped", "map_channels", "select_channel", "to_float"]
+
+_MAX_LISTED = 20
+
+
+@dataclass(frozen=True)
+class Column:
+    """One canonical column before assembly.
+
+    Parameters
+    ----------
+    role : str
+        Canonical column name (``"t"``, ``"q"``, ``"v1"``, ...).
+    source : str
+        Name of the channel it was read from.
+    values : ndarray, shape (n_samples,)
+        float64 values in SI units.
+    unit : str
+        The SI unit of ``values``.
+    base : int or None
+        Index of its time base in :attr:`Mapped.bases` (dSPACE raster), or None when
+        every channel shares the file's single sample index.
+    """
+
+    role: str
+    source: str
+    values: np.ndarray
+    unit: str
+    base: int | None = None
+
+
+@dataclass(frozen=True)
+class Mapped:
+    """The selected channels of a rig log, in SI units.
+
+    Parameters
+    ----------
+    columns : tuple of Column
+        ``q, v1, ..., vN, <extras>`` in canonical order.
+    time : Column or None
+        The time channel [s] of a file with a single sample index; None when the time is
+        ``k * sample_time`` or comes from dSPACE time bases.
+    bases : dict of int to Column
+        dSPACE recordings: the time bases [s] used by the columns, by raster index.
+    """
+
+    columns: tuple[Column, ...]
+    time: Column | None = None
+    bases: dict[int, Column] | None = None
+
+
+def _listing(names: list[str]) -> str:
+    shown = ", ".join(f"'{n}'" for n in names[:_MAX_LISTED])
+    more = len(names) - _MAX_LISTED
+    return shown + (f", ... ({more} more)" if more > 0 else "") if names else "none"
+
+
+def select_channel(
+    candidates: tuple[RawChannel, ...], spec: ChannelSpec, log: RawLog, what: str = "channel"
+) -> RawChannel:
+    """Find the one channel a channel spec selects.
+
+    Parameters
+    ----------
+    candidates : tuple of RawChannel
+        Where to look (the channels, or the dSPACE time bases).
+    spec : ChannelSpec
+        The selector (``name``, ``regex`` or ``column``).
+    log : RawLog
+        The rig log, for its path and capabilities in messages.
+    what : str
+        ``"channel"`` or ``"time base"``, for messages.
+
+    Returns
+    -------
+    RawChannel
+        The selected channel.
+
+    Raises
+    ------
+    RigLogError
+        Naming the file and the selector: no such name (with the available names,
+        truncated), a regex matching none or several channels (named), a column index
+        out of range or a column selection on a MAT file.
+    """
+    key = "time" if spec.role == "t" else spec.role
+    names = [c.name for c in candidates]
+    if spec.column is not None:
+        if not log.by_column:
+            raise RigLogError(
+                f"`{key}` selects column {spec.column}, but {log.format} {what}s are selected "
+                f"by `name` or `regex`; available: {_listing(names)}",
+                path=log.path,
+                channel=f"column {spec.column}",
+            )
+        if spec.column >= len(candidates):
+            raise RigLogError(
+                f"`{key}` selects column {spec.column}, but the file has {len(candidates)} "
+                f"columns (0 ... {len(candidates) - 1})",
+                path=log.path,
+                channel=f"column {spec.column}",
+            )
+        return candidates[spec.column]
+    if spec.name is not None:
+        hits = [c for c in candidates if c.name == spec.name]
+        if not hits:
+            hint = (
+                "the file has no header line; select with `column = i`"
+                if not log.has_names
+                else f"available {what}s: {_listing(names)}"
+            )
+            raise RigLogError(
+                f"`{key}`: no {what} named '{spec.name}'; {hint}",
+                path=log.path,
+                channel=spec.name,
+            )
+        if len(hits) > 1:
+            raise RigLogError(
+                f"`{key}`: {len(hits)} {what}s are named '{spec.name}'; select with `regex` "
+                "on a longer name or with `column`",
+                path=log.path,
+                channel=spec.name,
+            )
+        return hits[0]
+    pattern = re.compile(str(spec.regex))
+    hits = [c for c in candidates if pattern.search(c.name)]
+    if len(hits) != 1:
+        found = (
+            f"matches {len(hits)} {what}s: {_listing([c.name for c in hits])}"
+            if hits
+            else f"matches no {what}; available: {_listing(names)}"
+        )
+        raise RigLogError(
+            f"`{key}` = regex '{spec.regex}' {found}; it must match exactly one",
+            path=log.path,
+            channel=spec.regex,
+        )
+    return hits[0]
+
+
+def to_float(channel: RawChannel, log: RawLog) -> np.ndarray:
+    """Convert a raw channel to a float64 vector.
+
+    Parameters
+    ----------
+    channel : RawChannel
+        The channel; numeric, boolean or text that parses as numbers.
+    log : RawLog
+        For its path in messages.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        The values as float64 (a copy).
+
+    Raises
+    ------
+    RigLogError
+        Not a vector, or a value that is not a number (first offending sample and value).
+    """
+    data = np.asarray(channel.data)
+    if data.ndim == 0:
+        data = data.reshape(1)
+    if data.ndim != 1:
+        raise RigLogError(
+            f"data of shape {data.shape} is not a vector", path=log.path, channel=channel.name
+        )
+    if data.dtype.kind in "biuf":
+        return data.astype(np.float64)
+    numbers = pd.to_numeric(pd.Series(data), errors="coerce").to_numpy(dtype=np.float64)
+    present = ~pd.isna(pd.Series(data)).to_numpy()
+    bad = np.flatnonzero(np.isnan(numbers) & present)
+    bad = [i for i in bad if str(data[i]).strip().lower() not in ("nan", "")]
+    if bad:
+        raise RigLogError(
+            f"value {data[bad[0]]!r} at sample {bad[0]} is not a number",
+            path=log.path,
+            channel=channel.name,
+        )
+    return numbers
+
+
+def _convert(channel: RawChannel, spec: ChannelSpec, log: RawLog) -> tuple[np.ndarray, str]:
+    key = "time" if spec.role == "t" else spec.role
+    declared = canonical_unit(channel.unit) if channel.unit and channel.unit.strip() else None
+    if spec.unit is not None and declared is not None and declared != spec.unit:
+        raise RigLogError(
+            f"wrong units for `{key}`: the file declares '{channel.unit}', the ingest spec "
+            f"says '{spec.unit}'; fix `{key}.unit` (or `{key}.scale`)",
+            path=log.path,
+            channel=channel.name,
+        )
+    unit = spec.unit if spec.unit is not None else declared
+    if unit is None and spec.role == "t" and log.rasters:
+        unit = "s"  # a dSPACE time base without a declared unit is in seconds
+    if unit is None:
+        if spec.scale is None or spec.si_unit is None:
+            raise RigLogError(
+                f"no unit for `{key}`: the file declares none; add `unit = ...` "
+                f"(one of {', '.join(UNITS)}) to `{key}`",
+                path=log.path,
+                channel=channel.name,
+            )
+        factor, si = 1.0, spec.si_unit
+    elif (entry := lookup_unit(unit)) is not None:
+        factor, si = entry.factor, spec.si_unit or entry.si
+    elif spec.scale is not None and spec.si_unit is not None:
+        factor, si = 1.0, spec.si_unit  # explicit calibration of a unit outside the table
+    else:
+        raise RigLogError(
+            f"unknown unit '{unit}' declared by the file for `{key}`; known units are "
+            f"{', '.join(UNITS)}; give `{key}.scale` (factor to SI) and `{key}.si_unit`",
+            path=log.path,
+            channel=channel.name,
+        )
+    values = to_float(channel, log) * (factor * (1.0 if spec.scale is None else spec.scale))
+    return values, si
+
+
+def _dspace_bases(log: RawLog, spec: IngestSpec, columns: list[Column]) -> dict[int, Column]:
+    used = sorted({c.base for c in columns if c.base is not None})
+    time_spec = spec.time or ChannelSpec("t")
+    if spec.time is not None:
+        chosen = select_channel(log.rasters, spec.time, log, what="time base")
+        if spec.resample is None:
+            for c in columns:
+                if c.base != chosen.raster:
+                    raise RigLogError(
+                        f"`{c.role}` is on time base '{log.rasters[c.base].name}', but "
+                        f"`time` selects '{chosen.name}'; set `resample` to combine rasters",
+                        path=log.path,
+                        channel=c.source,
+                    )
+    bases = {}
+    for k in used:
+        raster = log.rasters[k]
+        values, unit = _convert(raster, time_spec, log)
+        bases[k] = Column("t", raster.name, values, unit, k)
+    return bases
+
+
+def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
+    """Select, convert and align the channels an ingest spec asks for.
+
+    Parameters
+    ----------
+    log : RawLog
+        What a reader found in the file.
+    spec : IngestSpec
+        The configuration.
+
+    Returns
+    -------
+    Mapped
+        The canonical columns in SI units with their time base(s).
+
+    Raises
+    ------
+    RigLogError
+        Naming the file and the channel: a channel not found or ambiguous, wrong or
+        unknown units, non-numeric data, channels of different lengths, a dSPACE channel
+        whose time base is unknown or of another length, no time channel and no
+        ``sample_time``.
+    """
+    columns = []
+    for cspec in spec.channels:
+        raw = select_channel(log.channels, cspec, log)
+        values, unit = _convert(raw, cspec, log)
+        if log.rasters:
+            if raw.raster is None:
+                raise RigLogError(
+                    f"`{cspec.role}`: the recording has {len(log.rasters)} time bases X and "
+                    "the channel names none (no XIndex, no matching Raster)",
+                    path=log.path,
+                    channel=raw.name,
+                )
+            n_time = np.size(log.rasters[raw.raster].data)
+            if values.size != n_time:
+                raise RigLogError(
+                    f"`{cspec.role}` has {values.size} samples but its time base "
+                    f"'{log.rasters[raw.raster].name}' has {n_time}",
+                    path=log.path,
+                    channel=raw.name,
+                )
+        columns.append(Column(cspec.role, raw.name, values, unit, raw.raster))
+    if log.rasters:
+        return Mapped(tuple(columns), bases=_dspace_bases(log, spec, columns))
+    time = None
+    if spec.time is not None:
+        raw = select_channel(log.channels, spec.time, log)
+        values, unit = _convert(raw, spec.time, log)
+        time = Column("t", raw.name, values, unit)
+    elif spec.sample_time is None:
+        raise RigLogError(
+            "no time channel is mapped and `sample_time` is not set; add "
+            '`time = { name = "...", unit = "s" }` or `sample_time = <s>`',
+            path=log.path,
+        )
+    reference = time or columns[0]
+    for c in columns:
+        if c.values.size != reference.values.size:
+            raise RigLogError(
+                f"`{c.role}` has {c.values.size} samples but `{reference.role}` "
+                f"('{reference.source}') has {reference.values.size}",
+                path=log.path,
+                channel=c.source,
+            )
+    return Mapped(tuple(columns), time=time)

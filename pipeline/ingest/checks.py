@@ -1,0 +1,343 @@
+"""Validation of a selected rig-log table: selection size, finiteness, time base, gaps.
+
+Pure functions on arrays. Each check raises :class:`~pipeline.errors.RigLogError` naming
+the file, the channel and the offending value; sample indices in messages are 0-based
+indices into the file (before slicing), times are in seconds as recorded.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import RigLogError
+
+__all__ = [
+    "GAP_RTOL",
+    "MIN_SAMPLES",
+    "check_enough",
+    "check_finite",
+    "check_sample_time",
+    "check_time",
+    "find_gaps",
+    "gap_error",
+    "slice_range",
+    "split_segments",
+    "window_range",
+]
+
+#: Fewest samples a selection or segment may keep.
+MIN_SAMPLES = 3
+#: Relative margin above ``gap_tolerance * median(dt)`` (rounding of converted units).
+GAP_RTOL = 1e-9
+#: Relative tolerance between ``sample_time`` and the median step of a time channel.
+SAMPLE_TIME_RTOL = 0.01
+
+
+def _t(value: float) -> str:
+    # 13 significant digits: exact for recorded times, free of float rounding noise
+    return f"{value:.13g} s"
+
+
+def slice_range(n: int, sample_slice: tuple[int, int] | None, *, path: Path) -> tuple[int, int]:
+    """Clip a 0-based end-exclusive sample slice to a log of ``n`` samples.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples in the file.
+    sample_slice : tuple of int or None
+        ``(start, stop)`` from the ``slice`` key; None keeps everything.
+    path : Path
+        For messages.
+
+    Returns
+    -------
+    tuple of int
+        ``(start, stop)`` with ``0 <= start < stop <= n``.
+
+    Raises
+    ------
+    RigLogError
+        The slice keeps fewer than :data:`MIN_SAMPLES` samples.
+    """
+    if sample_slice is None:
+        start, stop = 0, n
+    else:
+        start, stop = min(sample_slice[0], n), min(sample_slice[1], n)
+    check_enough(
+        stop - start, n, what=f"slice = [{start}, {stop}]" if sample_slice else "the log", path=path
+    )
+    return start, stop
+
+
+def window_range(t: np.ndarray, window: tuple[float, float] | None) -> tuple[int, int]:
+    """Index range of the samples inside a time window.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time (finite).
+    window : tuple of float or None
+        ``(start, stop)`` [s]; samples with ``start <= t < stop`` are kept.
+
+    Returns
+    -------
+    tuple of int
+        ``(a, b)``: from the first to one past the last sample inside the window
+        (``a == b`` when none is). A time base going backwards inside that range is
+        caught later by :func:`check_time`.
+
+    Examples
+    --------
+    >>> window_range(np.arange(10.0), (2.0, 5.0))
+    (2, 5)
+    """
+    if window is None:
+        return 0, t.size
+    inside = np.flatnonzero((t >= window[0]) & (t < window[1]))
+    if inside.size == 0:
+        return 0, 0
+    return int(inside[0]), int(inside[-1]) + 1
+
+
+def check_enough(count: int, total: int, *, what: str, path: Path) -> None:
+    """Raise when a selection keeps fewer than :data:`MIN_SAMPLES` samples.
+
+    Parameters
+    ----------
+    count : int
+        Samples kept.
+    total : int
+        Samples available before the selection.
+    what : str
+        The selection, e.g. ``"slice = [0, 2]"``.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        ``count < MIN_SAMPLES``.
+    """
+    if count < MIN_SAMPLES:
+        raise RigLogError(
+            f"empty selection: {what} keeps {max(count, 0)} of {total} samples "
+            f"(at least {MIN_SAMPLES} are needed)",
+            path=path,
+        )
+
+
+def check_finite(
+    values: np.ndarray, t: np.ndarray, index: np.ndarray, *, role: str, channel: str, path: Path
+) -> None:
+    """Raise on the first NaN or infinite value of a channel.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_samples,)
+        The channel (SI units).
+    t : ndarray, shape (n_samples,) [s]
+        Its time, for the message.
+    index : ndarray of int, shape (n_samples,)
+        File sample index of each value.
+    role, channel : str
+        Canonical column and source channel name.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        With the first bad sample's file index, time and value, and the count.
+    """
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        i = int(bad[0])
+        when = f"t = {_t(t[i])}" if np.isfinite(t[i]) else "time unknown"
+        raise RigLogError(
+            f"`{role}` is {values[i]} at sample {index[i]} ({when}); {bad.size} non-finite "
+            "sample(s) in the selection",
+            path=path,
+            channel=channel,
+        )
+
+
+def check_time(t: np.ndarray, index: np.ndarray, *, channel: str, path: Path) -> None:
+    """Raise unless the time is finite and strictly increasing.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time as recorded.
+    index : ndarray of int, shape (n_samples,)
+        File sample index of each value.
+    channel : str
+        Source name of the time channel.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        A non-finite time (index and the previous time) or a step that is not positive
+        (index and the two times; repeated or going back), with the count of such steps.
+    """
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        i = int(bad[0])
+        before = f"previous t = {_t(t[i - 1])}" if i > 0 else "first sample"
+        raise RigLogError(
+            f"time is {t[i]} at sample {index[i]} ({before})", path=path, channel=channel
+        )
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0.0)
+    if bad.size:
+        i = int(bad[0])
+        kind = "repeated" if steps[i] == 0.0 else f"goes back by {_t(-steps[i])}"
+        raise RigLogError(
+            f"time is not strictly increasing at sample {index[i + 1]}: t[{index[i]}] = "
+            f"{_t(t[i])}, t[{index[i + 1]}] = {_t(t[i + 1])} ({kind}); {bad.size} such step(s)",
+            path=path,
+            channel=channel,
+        )
+
+
+def check_sample_time(t: np.ndarray, sample_time: float, *, channel: str, path: Path) -> None:
+    """Raise when ``sample_time`` disagrees with the median step of the time channel.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time, strictly increasing.
+    sample_time : float
+        The ``sample_time`` key [s].
+    channel : str
+        Source name of the time channel.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        Relative difference above :data:`SAMPLE_TIME_RTOL`.
+    """
+    median = float(np.median(np.diff(t)))
+    if abs(median - sample_time) > SAMPLE_TIME_RTOL * sample_time:
+        raise RigLogError(
+            f"`sample_time` = {sample_time:g} s but the median step of the time channel is "
+            f"{median:.6g} s; remove `sample_time` or fix the time unit",
+            path=path,
+            channel=channel,
+        )
+
+
+def find_gaps(t: np.ndarray, tolerance: float) -> tuple[np.ndarray, float]:
+    """Locate the gaps of a time base.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time, strictly increasing, at least 2 samples.
+    tolerance : float
+        A step larger than ``tolerance * median(dt)`` is a gap.
+
+    Returns
+    -------
+    gaps : ndarray of int, shape (n_gaps,)
+        Positions ``i`` such that the step ``t[i + 1] - t[i]`` is a gap.
+    median_step : float
+        ``median(dt)`` [s].
+
+    Examples
+    --------
+    >>> gaps, dt = find_gaps(np.array([0.0, 1.0, 2.0, 10.0, 11.0]), 1.5)
+    >>> gaps.tolist(), dt
+    ([2], 1.0)
+    """
+    steps = np.diff(t)
+    median = float(np.median(steps))
+    # the relative margin keeps the decision independent of the recorded time unit
+    return np.flatnonzero(steps > tolerance * median * (1.0 + GAP_RTOL)), median
+
+
+def gap_error(
+    t: np.ndarray,
+    index: np.ndarray,
+    gaps: np.ndarray,
+    median_step: float,
+    tolerance: float,
+    *,
+    channel: str,
+    path: Path,
+    hint: str = 'set gaps = "split" to read the gap-free segments separately, or raise '
+    "`gap_tolerance`",
+) -> RigLogError:
+    """Build the error for a log with gaps under ``gaps = "error"``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time.
+    index : ndarray of int, shape (n_samples,)
+        File sample index of each sample.
+    gaps : ndarray of int
+        From :func:`find_gaps`, non-empty.
+    median_step : float
+        From :func:`find_gaps` [s].
+    tolerance : float
+        The ``gap_tolerance`` key.
+    channel : str
+        Source name of the time channel.
+    path : Path
+        For messages.
+    hint : str
+        The advice that ends the message.
+
+    Returns
+    -------
+    RigLogError
+        Naming the first gap's start time, sample index and length and the gap count,
+        ending with ``hint`` (by default: suggesting ``gaps = "split"``).
+    """
+    i = int(gaps[0])
+    return RigLogError(
+        f"{gaps.size} gap(s) in time longer than gap_tolerance = {tolerance:g} x the median "
+        f"step {_t(median_step)}; the first starts at t = {_t(t[i])} (sample {index[i]}) "
+        f"and lasts {_t(t[i + 1] - t[i])}; {hint}",
+        path=path,
+        channel=channel,
+    )
+
+
+def split_segments(
+    n: int, gaps: np.ndarray, min_segment: int
+) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """Cut ``range(n)`` at the gaps into kept and dropped segments.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    gaps : ndarray of int
+        Positions from :func:`find_gaps` (a gap lies between ``i`` and ``i + 1``).
+    min_segment : int
+        Segments with fewer samples are dropped.
+
+    Returns
+    -------
+    kept, dropped : list of tuple of int
+        ``(start, stop)`` end-exclusive ranges, in order.
+
+    Examples
+    --------
+    >>> split_segments(10, np.array([0, 6]), 4)
+    ([(1, 7)], [(0, 1), (7, 10)])
+    """
+    bounds = [0, *(int(g) + 1 for g in gaps), n]
+    kept, dropped = [], []
+    for start, stop in itertools.pairwise(bounds):
+        (kept if stop - start >= min_segment else dropped).append((start, stop))
+    return kept, dropped

@@ -1,0 +1,206 @@
+"""Reader of MATLAB MAT files: dSPACE ControlDesk recordings and plain variables.
+
+Two layouts are understood, in MAT v5/v7 (via :func:`scipy.io.loadmat`) and v7.3 (via
+h5py, :mod:`pipeline.ingest.mat73`) alike:
+
+dSPACE ControlDesk recording
+    One top-level struct with the fields ``X`` and ``Y``. ``X(1..k)`` are the time bases
+    ("rasters"): structs with ``Name``, ``Data`` (1 x n), ``Unit`` and usually ``Raster``
+    (the raster's name, e.g. ``"Periodic Task 1"``). ``Y(1..m)`` are the channels: structs
+    with ``Name`` (the full block path, e.g. ``"Model Root/Sensors/Laser/q"``), ``Data``,
+    ``Unit`` and either ``XIndex`` (1-based index into ``X``) or ``Raster`` (a raster name
+    matching ``X(k).Raster`` or ``X(k).Name``) telling which time base it belongs to; with
+    a single ``X`` neither is needed. Channels are named by ``Y(i).Name``; the time base
+    is named by ``X(k).Raster`` (else ``X(k).Name``).
+Plain variables
+    Any other file: every numeric vector or scalar variable is a channel named by the
+    variable, e.g. the EMPS benchmark's ``t``, ``qm``, ``vir`` (n x 1) and ``gtau`` (1 x 1).
+
+References
+----------
+dSPACE GmbH, "ControlDesk Measurement and Recording", MAT-file export of recordings
+(struct with fields ``X``, ``Y``, ``Description``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.io
+
+from pipeline.errors import RigLogError
+from pipeline.ingest.mat73 import load_mat73
+from pipeline.ingest.raw import RawChannel, RawLog
+
+__all__ = ["interpret_mat", "read_mat"]
+
+
+def _as_list(value: Any) -> list[Any]:
+    if isinstance(value, list | tuple):
+        return list(value)
+    if isinstance(value, np.ndarray) and value.dtype == object:
+        return list(value.ravel())
+    return [value]
+
+
+def _text(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return value.strip()
+    if isinstance(value, list | tuple):
+        return " ".join(_text(v) for v in value).strip()
+    if isinstance(value, np.ndarray):
+        if value.size == 0:
+            return ""
+        if value.dtype.kind in "US":
+            return "".join(str(v) for v in value.ravel()).strip()
+        if value.size == 1:
+            return _text(value.item())
+    return str(value).strip()
+
+
+def _array(value: Any) -> np.ndarray:
+    return np.asarray(value).squeeze()
+
+
+def _is_recording(value: Any) -> bool:
+    return isinstance(value, Mapping) and "X" in value and "Y" in value
+
+
+def _raster_of(y: Mapping[str, Any], i: int, x_list: list[Any], path: Path) -> int | None:
+    name = _text(y.get("Name")) or f"Y({i + 1})"
+    if "XIndex" in y and np.size(y["XIndex"]) == 1:
+        k = int(np.asarray(y["XIndex"]).item()) - 1
+        if not 0 <= k < len(x_list):
+            raise RigLogError(
+                f"XIndex = {k + 1} but the recording has {len(x_list)} time base(s) X",
+                path=path,
+                channel=name,
+            )
+        return k
+    raster = _text(y.get("Raster"))
+    if raster:
+        for field in ("Raster", "Name"):
+            hits = [k for k, x in enumerate(x_list) if _text(x.get(field)) == raster]
+            if len(hits) == 1:
+                return hits[0]
+    if len(x_list) == 1:
+        return 0
+    return None
+
+
+def _dspace(path: Path, fmt: str, var: str, rec: Mapping[str, Any]) -> RawLog:
+    x_list = _as_list(rec["X"])
+    y_list = _as_list(rec["Y"])
+    rasters = []
+    for k, x in enumerate(x_list):
+        if not isinstance(x, Mapping) or "Data" not in x:
+            raise RigLogError(
+                f"dSPACE recording '{var}': X({k + 1}) is not a struct with a field Data",
+                path=path,
+            )
+        label = _text(x.get("Raster")) or _text(x.get("Name")) or f"X({k + 1})"
+        if label in (r.name for r in rasters):
+            label = f"{label} (X({k + 1}))"
+        rasters.append(RawChannel(label, _array(x["Data"]), _text(x.get("Unit")) or None, k))
+    channels = []
+    for i, y in enumerate(y_list):
+        if not isinstance(y, Mapping) or "Data" not in y:
+            raise RigLogError(
+                f"dSPACE recording '{var}': Y({i + 1}) is not a struct with a field Data",
+                path=path,
+            )
+        name = _text(y.get("Name")) or f"Y({i + 1})"
+        raster = _raster_of(y, i, x_list, path)
+        channels.append(RawChannel(name, _array(y["Data"]), _text(y.get("Unit")) or None, raster))
+    return RawLog(path, fmt, tuple(channels), rasters=tuple(rasters))
+
+
+def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
+    """Turn the variables of a MAT file into a :class:`~pipeline.ingest.raw.RawLog`.
+
+    Parameters
+    ----------
+    path : Path
+        The file, for messages.
+    fmt : str
+        ``"mat-v5"``, ``"mat-v7.3"`` or ``"mat-v4"``.
+    variables : dict
+        Variable name -> value as given by ``loadmat(..., simplify_cells=True)`` or
+        :func:`~pipeline.ingest.mat73.load_mat73`.
+
+    Returns
+    -------
+    RawLog
+        The channels of the single dSPACE recording if there is one, else one channel
+        per numeric vector or scalar variable.
+
+    Raises
+    ------
+    RigLogError
+        Several dSPACE recordings in one file, a malformed recording, or no numeric
+        variable at all.
+    """
+    recordings = [k for k, v in variables.items() if _is_recording(v)]
+    if len(recordings) > 1:
+        raise RigLogError(
+            "several dSPACE recordings in one file (" + ", ".join(recordings) + "); "
+            "export one recording per file",
+            path=path,
+        )
+    if recordings:
+        return _dspace(path, fmt, recordings[0], variables[recordings[0]])
+    channels = []
+    for name, value in variables.items():
+        if name.startswith("__") or isinstance(value, Mapping | list | str):
+            continue
+        arr = _array(value)
+        if arr.dtype.kind in "biuf" and arr.ndim <= 1:
+            channels.append(RawChannel(name, arr))
+    if not channels:
+        raise RigLogError(
+            "no numeric vector variable in the MAT file (variables: "
+            + (", ".join(k for k in variables if not k.startswith("__")) or "none")
+            + ")",
+            path=path,
+        )
+    return RawLog(path, fmt, tuple(channels))
+
+
+def read_mat(path: Path, fmt: str) -> RawLog:
+    """Read a MAT file (v4/v5/v7 with scipy, v7.3 with h5py).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    fmt : str
+        ``"mat-v5"``, ``"mat-v4"`` or ``"mat-v7.3"`` as found by
+        :func:`~pipeline.ingest.detect.detect_format`.
+
+    Returns
+    -------
+    RawLog
+        See :func:`interpret_mat`.
+
+    Raises
+    ------
+    RigLogError
+        The file is truncated or corrupt (the scipy / h5py exception is chained and
+        quoted), or see :func:`interpret_mat`.
+    """
+    try:
+        if fmt == "mat-v7.3":
+            variables = load_mat73(path)
+        else:
+            variables = scipy.io.loadmat(path, simplify_cells=True)
+    except Exception as exc:
+        raise RigLogError(
+            f"cannot read {fmt} file, it is truncated or corrupt ({type(exc).__name__}: {exc})",
+            path=path,
+        ) from exc
+    return interpret_mat(path, fmt, variables)
