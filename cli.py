@@ -48,19 +48,12 @@ def _event(stage: str, what: str, detail: str) -> None:
 def _report(runner, manifests) -> None:
     from pipeline import report
 
-    stopped = (
-        [
-            n
-            for n, ok in manifests.get("differentiate").summary.get("converged", {}).items()
-            if not ok
-        ]
-        if "differentiate" in manifests
-        else []
-    )
+    diff = manifests.get("differentiate")
+    stopped = [n for n, ok in (diff.summary.get("converged", {}) if diff else {}).items() if not ok]
     if stopped:
         console.print(
-            f"[dim]differentiate: the iterative method stopped at its iteration limit on {len(stopped)} "
-            "data set(s), as configured (converged = false in the stage manifest)[/dim]"
+            "[dim]differentiate: the iterative method stopped at its iteration limit on "
+            f"{len(stopped)} data set(s), as configured (converged = false in the manifest)[/dim]"
         )
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
