@@ -22,7 +22,7 @@ app = typer.Typer(
     add_completion=False,
 )
 console = Console()
-err = Console(stderr=True)
+err = Console(stderr=True, soft_wrap=True)
 
 WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]

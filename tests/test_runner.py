@@ -1,0 +1,167 @@
+"""The CLI and runner on a small synthetic DE workflow: caching, status, verify, atomic failures."""
+
+import json
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from cli import app
+from pipeline import artifacts
+
+WORKFLOW = """
+[workflow]
+name = "synthetic"
+output_dir = "out"
+
+[ingest]
+time = {{ name = "time_ms", unit = "ms" }}
+q = {{ name = "laser", unit = "mm" }}
+v1 = {{ name = "v_left", unit = "kV" }}
+v2 = {{ name = "v_right", unit = "kV" }}
+
+[datasets.estimation]
+source = "rig.csv"
+role = "estimation"
+slice = [0, 5000]
+
+[datasets.check]
+source = "rig.csv"
+slice = [5000, 6500]
+
+[differentiate]
+method = "tvregdiff"
+alpha = {alpha}
+iterations = 10
+
+[identify]
+M = 8
+sigma_n = 0.5
+T_z = 0.0
+trim = 50
+max_condition = 1e10
+
+[validate]
+substeps = 2
+"""
+
+
+@pytest.fixture
+def project(tmp_path, bistable_record):
+    rec = bistable_record
+    rng = np.random.default_rng(0)
+    frame = pd.DataFrame(
+        {
+            "time_ms": rec["t"] * 1e3,
+            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
+            "v_left": rec["v"][:, 0] * 1e-3,
+            "v_right": rec["v"][:, 1] * 1e-3,
+        }
+    )
+    frame.to_csv(tmp_path / "rig.csv", index=False)
+    (tmp_path / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6))
+    return tmp_path
+
+
+def invoke(*args):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, result.output
+
+
+def stage_hashes(root):
+    return {
+        p.relative_to(root).as_posix(): artifacts.sha256_file(p)
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def test_run_skip_status_and_downstream_only_rerun(project):
+    wf = project / "wf.toml"
+    code, out = invoke("run", wf)
+    assert code == 0, out
+    assert out.count("done") == 4
+    table = pd.read_parquet(project / "out/validate/nrmse.parquet")
+    assert set(table.dataset) == {"estimation", "check"}
+    assert (table.nrmse_q < 0.05).all()  # free run of the identified model within 5 % of the range
+    ingest = pd.read_parquet(project / "out/ingest/estimation.parquet")
+    assert list(ingest.columns) == ["t", "q", "v1", "v2"]
+    assert ingest.v1.max() == pytest.approx(2500.0 + 250 * 6, rel=0.5)  # kV -> V
+    assert abs(ingest.q).max() < 0.05  # mm -> m
+
+    code, out = invoke("run", wf)
+    assert code == 0 and out.count("up to date, skipping") == 4
+
+    code, out = invoke("status", wf, "--json")
+    assert {s["state"] for s in json.loads(out)} == {"up to date"}
+
+    # changing the differentiation parameter reruns it and everything after it, not ingest
+    before = stage_hashes(project / "out/ingest")
+    (project / "wf.toml").write_text(WORKFLOW.format(alpha=2e-6))
+    code, out = invoke("status", wf, "--json")
+    states = {s["stage"]: (s["state"], s["reason"]) for s in json.loads(out)}
+    assert states["ingest"][0] == "up to date"
+    assert states["differentiate"] == ("stale", "config changed (alpha)")
+    assert states["validate"][0] == "stale"
+    code, out = invoke("run", wf)
+    assert code == 0
+    assert "Stage 'ingest' is up to date" in out and "Stage 'differentiate' done" in out
+    assert stage_hashes(project / "out/ingest") == before
+
+
+def test_verify_names_the_modified_file(project):
+    wf = project / "wf.toml"
+    assert invoke("run", wf)[0] == 0
+    assert invoke("verify", wf)[0] == 0
+    target = project / "out/differentiate/check.parquet"
+    target.write_bytes(target.read_bytes() + b"\0")
+    code, out = invoke("verify", wf)
+    assert code == 3
+    assert "check.parquet (modified)" in out
+
+
+def test_outputs_are_byte_identical_across_runs(project):
+    wf = project / "wf.toml"
+    assert invoke("run", wf)[0] == 0
+    first = stage_hashes(project / "out")
+    shutil.rmtree(project / "out")
+    assert invoke("run", wf)[0] == 0
+    second = stage_hashes(project / "out")
+    data = [k for k in first if k.endswith((".parquet", ".h5"))]
+    assert len(data) >= 8
+    assert {k: first[k] for k in data} == {k: second[k] for k in data}
+
+
+def test_corrupt_input_fails_naming_file_and_keeps_previous_artifacts(project):
+    wf = project / "wf.toml"
+    assert invoke("run", wf)[0] == 0
+    before = stage_hashes(project / "out")
+    text = (project / "rig.csv").read_text().splitlines()
+    text[100] = text[100].replace(text[100].split(",")[1], "nan", 1)
+    (project / "rig.csv").write_text("\n".join(text) + "\n")
+    code, out = invoke("run", wf)
+    assert code == 1
+    assert "rig.csv" in out and "laser" in out
+    assert stage_hashes(project / "out") == before
+    assert not [p for p in (project / "out").iterdir() if p.name.startswith(".")]
+
+
+def test_missing_channel_fails_and_writes_nothing(project):
+    (project / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6).replace('"v_right"', '"v_r"'))
+    code, out = invoke("ingest", project / "wf.toml")
+    assert code == 1
+    assert "rig.csv" in out and "v_r" in out
+    assert not (project / "out").exists() or not any((project / "out").iterdir())
+
+
+def test_stage_without_upstream_artifacts_is_refused(project):
+    code, out = invoke("identify", project / "wf.toml")
+    assert code == 1 and "run those first" in out
+
+
+def test_bad_workflow_key_is_a_usage_error(project):
+    (project / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6) + "\n[identfy]\nM = 3\n")
+    code, out = invoke("run", project / "wf.toml")
+    assert code == 2 and "identfy" in out
