@@ -328,8 +328,11 @@ def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) ->
     q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
     datasets = validation_datasets(tables, derivs)
     table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit)
+    units = {ds.name: ds.q_unit for ds in datasets}
     figures = {
-        name: free_run_figure(sim, name, table[table.dataset == name].iloc[0], cfg.init_samples)
+        name: free_run_figure(
+            sim, name, table[table.dataset == name].iloc[0], cfg.init_samples, units[name]
+        )
         for name, sim in simulated.items()
     }
     return ValidateResult(table, simulated, figures)
