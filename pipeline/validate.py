@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from pipeline.config import config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.ingest.units import lookup_unit
 from pipeline.simulate import INTERPOLATIONS, FreeRunModel, SimulationResult, simulate
@@ -161,15 +162,9 @@ class ValidateConfig:
         WorkflowError
             On an unknown key or invalid value.
         """
-        known = {f.name for f in fields(cls)}
-        unknown = set(section) - known
-        if unknown:
-            raise WorkflowError(
-                f"[validate]: unknown key(s) {sorted(unknown)}; known: {sorted(known)}"
-            )
         kw = dict(section)
         kw["published"] = tuple(kw.get("published", ()))
-        cfg = cls(**kw)
+        cfg = config_from_section(cls, kw, "[validate]")
         if cfg.input_interpolation not in INTERPOLATIONS:
             raise WorkflowError(
                 f"[validate] input_interpolation must be one of {INTERPOLATIONS}, "

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -10,7 +9,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.errors import WorkflowError
+from pipeline.config import config_from_section
 
 __all__ = ["Derivatives", "check_int", "check_positive", "check_signal", "config_from_dict"]
 
@@ -100,12 +99,12 @@ def check_signal(x: ArrayLike, dt: float) -> tuple[NDArray[np.float64], float]:
 
 
 def config_from_dict(cls: type[_C], params: Mapping[str, Any], method: str) -> _C:
-    """Build the frozen config dataclass ``cls`` from a workflow section.
+    """Build a differentiator's config dataclass from its workflow parameters.
 
     Parameters
     ----------
     cls : type
-        A dataclass whose ``__post_init__`` checks its values (raising ``ValueError``).
+        The method's config dataclass.
     params : mapping of str to value
         The parameters given in the workflow.
     method : str
@@ -121,22 +120,7 @@ def config_from_dict(cls: type[_C], params: Mapping[str, Any], method: str) -> _
     WorkflowError
         On an unknown key (named, with the known keys) or an invalid value.
     """
-    if not isinstance(params, Mapping):
-        raise WorkflowError(
-            f"differentiate method '{method}': parameters must be a table, "
-            f"got {type(params).__name__}"
-        )
-    known = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
-    unknown = [key for key in params if key not in known]
-    if unknown:
-        raise WorkflowError(
-            f"differentiate method '{method}': unknown parameter '{unknown[0]}'; "
-            f"known parameters: {', '.join(known)}"
-        )
-    try:
-        return cls(**params)
-    except (TypeError, ValueError) as exc:
-        raise WorkflowError(f"differentiate method '{method}': {exc}") from exc
+    return config_from_section(cls, params, f"differentiate method '{method}'")
 
 
 def check_positive(name: str, value: float) -> float:

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
+from pipeline.config import config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.identify.terms import INPUT_MAPS, check_terms
 
@@ -90,15 +91,11 @@ class IdentifyConfig:
         WorkflowError
             On an unknown key or an invalid value, naming it.
         """
-        known = {f.name for f in fields(cls)}
-        for key in section:
-            if key not in known:
-                raise WorkflowError(f"[identify]: unknown key {key!r}; known: {sorted(known)}")
         kw = dict(section)
         for key in ("rbf", "backbone", "T_z_bounds", "input_gain", "q_range"):
-            if kw.get(key) is not None:
+            if isinstance(kw.get(key), list):
                 kw[key] = tuple(kw[key])
-        cfg = cls(**kw)
+        cfg = config_from_section(cls, kw, "[identify]")
         cfg._check()
         return cfg
 
