@@ -57,8 +57,12 @@ def _report(runner, manifests) -> None:
         )
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
-    if "validate" in manifests:
-        summary = manifests["validate"].summary
+    last = "compare" if "compare" in manifests else "validate"
+    if "compare" in manifests:
+        s = manifests["compare"].summary
+        console.print(f"SINDy ({s['n_params']} terms): {s['equations']}", soft_wrap=True)
+    if last in manifests:
+        summary = manifests[last].summary
         console.print(report.nrmse_table(summary["table"]))
         table = report.published_table(
             summary["table"], summary.get("published", []), summary.get("order")
@@ -109,6 +113,12 @@ def identify(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None)
 def validate(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
     """Free-run the identified model on every data set; NRMSE table and plots."""
     _run(workflow, ["validate"], force, out)
+
+
+@app.command()
+def compare(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Fit SINDy on the same data and derivatives; free-run it with the same simulator."""
+    _run(workflow, ["compare"], force, out)
 
 
 @app.command()

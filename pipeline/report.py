@@ -82,16 +82,18 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     rich.table.Table
     """
     table = Table(title="Free-run validation (NRMSE, Eq. 41)")
-    for col in ("data set", "role", "model", "NRMSE(q)", "NRMSE(q_dot)", "NRMSE(q_ddot)", "RMS(q)"):
+    params = bool(rows) and "n_params" in rows[0]
+    cols = ["data set", "role", "model", "NRMSE(q)", "NRMSE(q_dot)", "NRMSE(q_ddot)", "RMS(q)"]
+    for col in cols + (["params"] if params else []):
         table.add_column(col, justify="left" if col in ("data set", "role", "model") else "right")
     for r in rows:
         pct = [
             ("diverged" if math.isnan(r[k]) else f"{100 * r[k]:.2f} %")
             for k in ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot")
         ]
-        table.add_row(
-            r["dataset"], r["role"], r["model"], *pct, f"{_fmt(r['rms_q'])} {r['rms_unit']}"
-        )
+        extra = [str(r["n_params"])] if params else []
+        rms_cell = f"{_fmt(r['rms_q'])} {r['rms_unit']}"
+        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra)
     return table
 
 

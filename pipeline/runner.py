@@ -20,12 +20,13 @@ from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.workflow import Workflow
 
 #: Stages in execution order and the stages each reads from.
-STAGES = ("ingest", "differentiate", "identify", "validate")
+STAGES = ("ingest", "differentiate", "identify", "validate", "compare")
 UPSTREAM = {
     "ingest": (),
     "differentiate": ("ingest",),
     "identify": ("ingest", "differentiate"),
     "validate": ("ingest", "differentiate", "identify"),
+    "compare": ("ingest", "differentiate", "validate"),
 }
 
 
@@ -63,6 +64,10 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
                 for d in wf.datasets
             }
         }
+    if stage == "compare":
+        sindy = wf.section("compare")
+        sindy.setdefault("input_map", wf.section("identify").get("input_map", "v2"))
+        return {"sindy": sindy, "validate": wf.section("validate")}
     return wf.section(stage)
 
 
@@ -266,6 +271,21 @@ class Runner:
             res = st.run_identify(tables, derivs, self.wf.section("identify"))
             tree = {**res.model.to_tree(), "diagnostics": st.diagnostics_tree(res.diagnostics)}
             return {"model.h5": artifacts.H5Tree(tree), "curves.parquet": res.curves}, res.summary
+        if stage == "compare":
+            rbf = artifacts.read_parquet(self.wf.stage_dir("validate") / "nrmse.parquet")
+            res = st.run_compare(tables, derivs, rbf, _stage_config(self.wf, "compare"))
+            outputs = {
+                "sindy.h5": artifacts.H5Tree(res.model.to_tree()),
+                "nrmse.parquet": res.table,
+            }
+            outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
+            summary = {
+                **res.summary,
+                "table": res.table.to_dict(orient="records"),
+                "published": list(self.wf.section("validate").get("published", [])),
+                "order": [d.name for d in self.wf.datasets],
+            }
+            return outputs, summary
         from pipeline.identify import RBFModel
 
         model = RBFModel.from_tree(artifacts.read_h5(self.wf.stage_dir("identify") / "model.h5"))
@@ -277,6 +297,7 @@ class Runner:
             "table": res.table.to_dict(orient="records"),
             "published": list(self.wf.section("validate").get("published", [])),
             "order": [d.name for d in self.wf.datasets],
+            "sim_time": res.sim_time,
         }
         return outputs, summary
 

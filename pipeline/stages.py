@@ -220,8 +220,12 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
     WorkflowError
         For an invalid section.
     """
+    import time
+
     cfg = IdentifyConfig.from_dict(dict(section))
+    t0 = time.perf_counter()
     model, diag = fit_rbf_model(estimation_records(tables, derivs), cfg)
+    fit_time = time.perf_counter() - t0
     grid = np.linspace(model.q_range[0], model.q_range[1], 201)
     cur = model.curves(grid)
     curves = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
@@ -240,6 +244,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
         "residual_rms": diag.residual_rms,
         "backbone": {k: (np.asarray(v).tolist()) for k, v in model.backbone.items()},
         "published": dict(cfg.published or {}),
+        "fit_time": fit_time,
     }
     return IdentifyResult(model, diag, pd.DataFrame(curves), summary)
 
@@ -273,11 +278,14 @@ class ValidateResult:
         Measured and simulated trajectories per data set.
     figures : dict of str to matplotlib.figure.Figure
         Measured vs simulated q per data set.
+    sim_time : float
+        Wall time of the free runs [s].
     """
 
     table: pd.DataFrame
     simulated: dict[str, pd.DataFrame]
     figures: dict[str, Any]
+    sim_time: float = 0.0
 
 
 def validation_datasets(tables, derivs) -> list[DataSet]:
@@ -321,13 +329,18 @@ def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) ->
     WorkflowError
         For an invalid section.
     """
+    import time
+
     from pipeline.plots import free_run_figure
 
     cfg = ValidateConfig.from_dict(section)
     span = max(abs(model.q_range[0]), abs(model.q_range[1]))
     q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
     datasets = validation_datasets(tables, derivs)
+    t0 = time.perf_counter()
     table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit)
+    sim_time = time.perf_counter() - t0
+    table["n_params"] = model.n_params
     units = {ds.name: ds.q_unit for ds in datasets}
     figures = {
         name: free_run_figure(
@@ -335,4 +348,90 @@ def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) ->
         )
         for name, sim in simulated.items()
     }
-    return ValidateResult(table, simulated, figures)
+    return ValidateResult(table, simulated, figures, sim_time)
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Output of the comparison stage: the SINDy model beside the RBF model.
+
+    Attributes
+    ----------
+    model : SindyModel
+        The identified SINDy model.
+    table : pandas.DataFrame
+        The RBF rows of the validation stage and the SINDy rows, per data set:
+        NRMSE of q, q_dot, q_ddot, RMS, divergence and ``n_params``.
+    simulated : dict of str to pandas.DataFrame
+        SINDy free runs per data set.
+    summary : dict
+        Equations, fit and simulation times [s] (not reproducible, hence not in
+        the Parquet/HDF5 artifacts).
+    """
+
+    model: Any
+    table: pd.DataFrame
+    simulated: dict[str, pd.DataFrame]
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def run_compare(
+    tables, derivs, rbf_table: pd.DataFrame, section: Mapping[str, Any]
+) -> CompareResult:
+    """Fit SINDy on the RBF model's data and derivatives; free-run it with the same simulator.
+
+    Parameters
+    ----------
+    tables, derivs : mapping of str to pandas.DataFrame
+        Measured data and derivatives of every data set (the stages' outputs).
+    rbf_table : pandas.DataFrame
+        The validation stage's NRMSE table of the RBF model (with ``n_params``).
+    section : mapping
+        ``{"sindy": [compare] section, "validate": [validate] section}``.
+
+    Returns
+    -------
+    CompareResult
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section.
+    IdentificationError
+        If the SINDy regression cannot be formed.
+
+    References
+    ----------
+    Brunton, Proctor & Kutz 2016 (SINDy); Masoud & Maas 2025, Eq. 41.
+    """
+    import time
+
+    from pipeline.sindy import SindyConfig, fit_sindy
+
+    cfg = SindyConfig.from_dict(dict(section["sindy"]))
+    vcfg = ValidateConfig.from_dict(section["validate"])
+    records = estimation_records(tables, derivs)
+    model = fit_sindy(
+        [r.q for r in records],
+        [r.q_dot for r in records],
+        [r.q_ddot for r in records],
+        [r.v for r in records],
+        records[0].dt,
+        cfg,
+    )
+    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
+    q_limit = vcfg.q_limit if vcfg.q_limit is not None else 100.0 * span
+    t0 = time.perf_counter()
+    table, simulated = validate_model(
+        model, "sindy", validation_datasets(tables, derivs), vcfg, q_limit
+    )
+    sim_time = time.perf_counter() - t0
+    table["n_params"] = model.n_params
+    combined = pd.concat([rbf_table, table], ignore_index=True)
+    summary = {
+        "equations": model.equations,
+        "fit_time": model.fit_time,
+        "sim_time": sim_time,
+        "n_params": model.n_params,
+    }
+    return CompareResult(model, combined, simulated, summary)

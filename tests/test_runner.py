@@ -82,17 +82,21 @@ def test_run_skip_status_and_downstream_only_rerun(project):
     wf = project / "wf.toml"
     code, out = invoke("run", wf)
     assert code == 0, out
-    assert out.count("done") == 4
+    assert out.count("done") == 5
     table = pd.read_parquet(project / "out/validate/nrmse.parquet")
     assert set(table.dataset) == {"estimation", "check"}
     assert (table.nrmse_q < 0.05).all()  # free run of the identified model within 5 % of the range
+    both = pd.read_parquet(project / "out/compare/nrmse.parquet")
+    assert sorted(both.model.unique()) == ["rbf", "sindy"] and len(both) == 4
+    assert (both.n_params > 0).all()
+    assert "SINDy (" in out and "q_ddot =" in out
     ingest = pd.read_parquet(project / "out/ingest/estimation.parquet")
     assert list(ingest.columns) == ["t", "q", "v1", "v2"]
     assert ingest.v1.max() == pytest.approx(2500.0 + 250 * 6, rel=0.5)  # kV -> V
     assert abs(ingest.q).max() < 0.05  # mm -> m
 
     code, out = invoke("run", wf)
-    assert code == 0 and out.count("up to date, skipping") == 4
+    assert code == 0 and out.count("up to date, skipping") == 5
 
     code, out = invoke("status", wf, "--json")
     assert {s["state"] for s in json.loads(out)} == {"up to date"}
@@ -130,7 +134,7 @@ def test_outputs_are_byte_identical_across_runs(project):
     assert invoke("run", wf)[0] == 0
     second = stage_hashes(project / "out")
     data = [k for k in first if k.endswith((".parquet", ".h5"))]
-    assert len(data) >= 8
+    assert len(data) >= 12 and "compare/sindy.h5" in data
     assert {k: first[k] for k in data} == {k: second[k] for k in data}
 
 
