@@ -66,6 +66,33 @@ def identify_table(summary: dict[str, Any]) -> Table:
     ]:
         value = f"{summary['rank']} / {summary['n_columns']}" if key is None else _fmt(summary[key])
         table.add_row(label, value, *([""] if published else []))
+    refine = summary.get("refine")
+    if refine:
+        pad = [""] if published else []
+        verdict = "accepted" if refine["accepted"] else "rejected (not better on the full records)"
+        table.add_row(
+            "free-run RMS, windows: equation error", _fmt(refine["window_rms_equation_error"]), *pad
+        )
+        table.add_row(
+            "free-run RMS, windows: simulation error",
+            _fmt(refine["window_rms_simulation_error"]),
+            *pad,
+        )
+        table.add_row(
+            "free-run RMS, estimation: equation error",
+            _fmt(refine["full_rms_equation_error"]),
+            *pad,
+        )
+        table.add_row(
+            "free-run RMS, estimation: simulation error",
+            _fmt(refine["full_rms_simulation_error"]),
+            *pad,
+        )
+        table.add_row(
+            "refinement",
+            f"{verdict}, {refine['nfev']} evaluations, {refine['seconds']:.0f} s",
+            *pad,
+        )
     return table
 
 

@@ -270,6 +270,8 @@ class Runner:
         if stage == "identify":
             res = st.run_identify(tables, derivs, self.wf.section("identify"))
             tree = {**res.model.to_tree(), "diagnostics": st.diagnostics_tree(res.diagnostics)}
+            if res.equation_error_model is not None and res.equation_error_model is not res.model:
+                tree["equation_error"] = res.equation_error_model.to_tree()["model"]
             return {"model.h5": artifacts.H5Tree(tree), "curves.parquet": res.curves}, res.summary
         if stage == "compare":
             rbf = artifacts.read_parquet(self.wf.stage_dir("validate") / "nrmse.parquet")
@@ -288,8 +290,11 @@ class Runner:
             return outputs, summary
         from pipeline.identify import RBFModel
 
-        model = RBFModel.from_tree(artifacts.read_h5(self.wf.stage_dir("identify") / "model.h5"))
-        res = st.run_validate(model, tables, derivs, self.wf.section("validate"))
+        tree = artifacts.read_h5(self.wf.stage_dir("identify") / "model.h5")
+        model = RBFModel.from_tree(tree)
+        ls = tree.get("equation_error")
+        baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
+        res = st.run_validate(model, tables, derivs, self.wf.section("validate"), baseline)
         outputs: dict[str, Any] = {"nrmse.parquet": res.table}
         outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
         outputs.update({f"plots/{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})

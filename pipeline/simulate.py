@@ -112,9 +112,71 @@ def upsample_inputs(v: np.ndarray, factor: int, method: str) -> np.ndarray:
     raise WorkflowError(f"`input_interpolation` must be one of {INTERPOLATIONS}, got {method!r}")
 
 
+@dataclass(frozen=True)
+class FineInputs:
+    """Inputs of a batch interpolated once onto the RK4 grid, for repeated simulations.
+
+    Attributes
+    ----------
+    values : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
+        Inputs at every RK4 stage instant [V]; shorter records padded with their
+        last value.
+    lengths : list of int
+        Samples of each record.
+    substeps : int
+        RK4 steps per sample interval the grid was made for.
+    """
+
+    values: np.ndarray
+    lengths: list[int]
+    substeps: int
+
+    def tile(self, reps: int) -> FineInputs:
+        """Repeat the batch ``reps`` times (record order: the whole batch, then again)."""
+        return FineInputs(np.tile(self.values, (reps, 1, 1)), self.lengths * reps, self.substeps)
+
+
+def prepare_inputs(inputs: Sequence[np.ndarray], substeps: int, interpolation: str) -> FineInputs:
+    """Interpolate input records onto the RK4 grid once.
+
+    Parameters
+    ----------
+    inputs : sequence of ndarray, each shape (n_k, n_inputs)
+        Input records [V].
+    substeps : int
+        RK4 steps per sample interval.
+    interpolation : {"bandlimited", "linear"}
+        See :func:`upsample_inputs`.
+
+    Returns
+    -------
+    FineInputs
+
+    Raises
+    ------
+    WorkflowError
+        If the batch is empty or the interpolation unknown.
+    """
+    if not inputs:
+        raise WorkflowError("nothing to simulate: no input records")
+    lengths = [v.shape[0] for v in inputs]
+    m = (max(lengths) - 1) * 2 * substeps + 1
+    values = np.stack(
+        [
+            np.pad(
+                upsample_inputs(v, 2 * substeps, interpolation),
+                ((0, m - 1 - (v.shape[0] - 1) * 2 * substeps), (0, 0)),
+                mode="edge",
+            )
+            for v in inputs
+        ]
+    )
+    return FineInputs(values, lengths, int(substeps))
+
+
 def simulate(
     model: FreeRunModel,
-    inputs: Sequence[np.ndarray],
+    inputs: Sequence[np.ndarray] | FineInputs,
     dt: float,
     q0: np.ndarray,
     q_dot0: np.ndarray,
@@ -129,8 +191,9 @@ def simulate(
     ----------
     model : FreeRunModel
         The model (e.g. :class:`pipeline.identify.model.RBFModel`).
-    inputs : sequence of ndarray, each shape (n_k, n_inputs)
-        Input records [V], all with sample time ``dt``.
+    inputs : sequence of ndarray, each shape (n_k, n_inputs), or FineInputs
+        Input records [V], all with sample time ``dt``, or the same already
+        interpolated by :func:`prepare_inputs` (for repeated simulations).
     dt : float
         Sample time [s].
     q0, q_dot0 : ndarray, shape (B,)
@@ -160,26 +223,19 @@ def simulate(
     """
     if not dt > 0 or substeps < 1:
         raise WorkflowError(f"need dt > 0 and substeps >= 1, got dt={dt!r}, substeps={substeps!r}")
-    if not inputs:
-        raise WorkflowError("nothing to simulate: no input records")
     ns = max(int(substeps), int(np.ceil(dt / model.max_step())))
-    h = dt / ns
-    lengths = [v.shape[0] for v in inputs]
-    n = max(lengths)
-    B = len(inputs)
-    # Each record is interpolated on its own, then padded with its last value to the
-    # batch length (results past a record's end are cut back).
-    m = (n - 1) * 2 * ns + 1
-    fine = np.stack(
-        [
-            np.pad(
-                upsample_inputs(v, 2 * ns, interpolation),
-                ((0, m - 1 - (v.shape[0] - 1) * 2 * ns), (0, 0)),
-                mode="edge",
+    if isinstance(inputs, FineInputs):
+        if inputs.substeps < ns:
+            raise WorkflowError(
+                f"prepared inputs have {inputs.substeps} sub-steps, the model needs {ns}"
             )
-            for v in inputs
-        ]
-    )  # (B, m, n_inputs)
+        prepared = inputs
+    else:
+        prepared = prepare_inputs(inputs, ns, interpolation)
+    ns = prepared.substeps
+    h = dt / ns
+    fine, lengths = prepared.values, prepared.lengths
+    B, n = fine.shape[0], max(lengths)
     x = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
     states = np.full((B, n, model.n_states), np.nan)
     acc = np.full((B, n), np.nan)

@@ -166,12 +166,15 @@ class IdentifyResult:
         Characteristic curves on a grid: ``q, c, d, cq, g1..gN, dC1_dq..dCN_dq``.
     summary : dict
         Scalars for reports.
+    equation_error_model : RBFModel or None
+        The least-squares model before simulation-error refinement.
     """
 
     model: RBFModel
     diagnostics: FitDiagnostics
     curves: pd.DataFrame
     summary: dict[str, Any] = field(default_factory=dict)
+    equation_error_model: RBFModel | None = None
 
 
 def estimation_records(tables, derivs) -> list[Record]:
@@ -222,10 +225,28 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
     """
     import time
 
+    from pipeline.identify.refine import refine_config, refine_model
+
     cfg = IdentifyConfig.from_dict(dict(section))
     t0 = time.perf_counter()
-    model, diag = fit_rbf_model(estimation_records(tables, derivs), cfg)
+    records = estimation_records(tables, derivs)
+    model, diag = fit_rbf_model(records, cfg)
     fit_time = time.perf_counter() - t0
+    ls_model, refine = model, None
+    rcfg = refine_config(cfg.refine)
+    if rcfg is not None:
+        res = refine_model(model, diag, records, cfg, rcfg)
+        model = res.model
+        refine = {
+            "accepted": res.accepted,
+            "window_rms_equation_error": res.window_rms_ls,
+            "window_rms_simulation_error": res.window_rms_refined,
+            "full_rms_equation_error": res.full_rms_ls,
+            "full_rms_simulation_error": res.full_rms_refined,
+            "nfev": res.nfev,
+            "message": res.message,
+            "seconds": res.seconds,
+        }
     grid = np.linspace(model.q_range[0], model.q_range[1], 201)
     cur = model.curves(grid)
     curves = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
@@ -245,8 +266,9 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
         "backbone": {k: (np.asarray(v).tolist()) for k, v in model.backbone.items()},
         "published": dict(cfg.published or {}),
         "fit_time": fit_time,
+        "refine": refine,
     }
-    return IdentifyResult(model, diag, pd.DataFrame(curves), summary)
+    return IdentifyResult(model, diag, pd.DataFrame(curves), summary, ls_model)
 
 
 def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
@@ -308,7 +330,9 @@ def validation_datasets(tables, derivs) -> list[DataSet]:
     return out
 
 
-def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) -> ValidateResult:
+def run_validate(
+    model: RBFModel, tables, derivs, section: Mapping[str, Any], baseline: RBFModel | None = None
+) -> ValidateResult:
     """Free-run the identified model on every data set and score it (Sec. 5, Eq. 41).
 
     Parameters
@@ -319,6 +343,10 @@ def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) ->
         Measured data and derivatives of every data set.
     section : mapping
         The ``[validate]`` section (see :class:`ValidateConfig`).
+    baseline : RBFModel, optional
+        The equation-error (least-squares) model when ``model`` was refined by
+        simulation error; scored too, as model ``"rbf-ls"``, so both fits stand
+        side by side.
 
     Returns
     -------
@@ -341,10 +369,18 @@ def run_validate(model: RBFModel, tables, derivs, section: Mapping[str, Any]) ->
     table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit)
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
+    if baseline is not None:
+        extra, _ = validate_model(baseline, "rbf-ls", datasets, cfg, q_limit)
+        extra["n_params"] = baseline.n_params
+        table = pd.concat([table, extra], ignore_index=True)
     units = {ds.name: ds.q_unit for ds in datasets}
     figures = {
         name: free_run_figure(
-            sim, name, table[table.dataset == name].iloc[0], cfg.init_samples, units[name]
+            sim,
+            name,
+            table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
+            cfg.init_samples,
+            units[name],
         )
         for name, sim in simulated.items()
     }

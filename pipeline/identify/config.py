@@ -54,6 +54,10 @@ class IdentifyConfig:
         Fewest samples within one width of every centre.
     published : dict
         Published parameter values to print next to the identified ones.
+    refine : dict, bool or None
+        ``[identify.refine]``: refine the least-squares parameters by minimising the
+        windowed free-run error on the estimation data (see
+        :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
     """
 
     M: int = 10
@@ -72,6 +76,7 @@ class IdentifyConfig:
     max_condition: float = 1e8
     min_support: int = 10
     published: dict[str, float] | None = None
+    refine: dict[str, Any] | bool | None = None
 
     @classmethod
     def from_dict(cls, section: dict[str, Any]) -> IdentifyConfig:
@@ -129,6 +134,10 @@ class IdentifyConfig:
             )
         if self.trim < 0:
             raise WorkflowError(f"[identify] trim must be >= 0 samples, got {self.trim!r}")
+        if self.refine:
+            from pipeline.identify.refine import refine_config
+
+            refine_config(self.refine)
         if not self.coulomb_velocity > 0:
             raise WorkflowError(
                 f"[identify] coulomb_velocity must be > 0, got {self.coulomb_velocity!r}"

@@ -66,6 +66,12 @@ class FitDiagnostics:
         Samples within one width of each centre.
     T_z_trace : ndarray, shape (k, 2)
         (T_z [s], relative residual) of every outer-loop evaluation.
+    theta : ndarray, shape (p,)
+        The least-squares parameters, in the order of ``columns``.
+    column_norms : ndarray, shape (p,)
+        2-norms of the regressor columns.
+    y_norm : float
+        2-norm of the regression output.
     """
 
     n_samples: int
@@ -77,6 +83,9 @@ class FitDiagnostics:
     fit_r2: float
     support: np.ndarray
     T_z_trace: np.ndarray
+    theta: np.ndarray
+    column_norms: np.ndarray
+    y_norm: float
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -229,7 +238,7 @@ def fit_rbf_model(
     z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
     psi, y, names = _system(records, z_all, basis, cfg)
     theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
-    model = _assemble(theta, names, basis, cfg, n_in, T_z, q_range)
+    model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range)
     diag = FitDiagnostics(
         n_samples=int(y.size),
         columns=names,
@@ -240,6 +249,9 @@ def fit_rbf_model(
         fit_r2=float(1.0 - np.sum(resid**2) / np.sum((y - y.mean()) ** 2)),
         support=support,
         T_z_trace=trace,
+        theta=theta,
+        column_norms=np.linalg.norm(psi, axis=0),
+        y_norm=float(np.linalg.norm(y)),
     )
     return model, diag
 
@@ -290,7 +302,7 @@ def _search_T_z(records, basis, cfg, bounds):
 _Z_TERMS = ("viscous", "coulomb")
 
 
-def _assemble(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
+def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
     """Map the parameter vector back onto the model's curves and backbone."""
     value = dict(zip(names, theta, strict=True))
     M = basis.M

@@ -1,0 +1,632 @@
+"""Hyper-parameter studies of Sec. 5.2: RBF grid (M, sigma_n) and TVRegDiff alpha (Fig. 11b/11c).
+
+Both studies are pure functions over the stages' tables: canonical rig-log tables and
+their derivatives in, a result table and a matplotlib figure out. They call the
+pipeline's own differentiator, identification and free-run validation, so a study
+scores exactly what a workflow run with those settings would produce, except that at
+most ``max_samples`` samples of each record are fitted and simulated (for speed; the
+table's ``attrs`` say so).
+
+References
+----------
+Masoud, A. & Maas, J. (2025). Front. Robot. AI 12, Sec. 5.1-5.2 and Fig. 11b
+(M and sigma_n versus model error) and Fig. 11c (TVRegDiff alpha study).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.colors import LogNorm
+
+from pipeline.config import config_from_section
+from pipeline.differentiate import TVRegDiffConfig, differentiate
+from pipeline.errors import ConvergenceWarning, IdentificationError, WorkflowError
+from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
+from pipeline.stages import estimation_records, sample_time, validation_datasets
+from pipeline.validate import DataSet, ValidateConfig, validate_model
+
+__all__ = ["StudyConfig", "alpha_study", "derivative_roughness", "rbf_grid_study"]
+
+#: Samples of the estimation record shown in the alpha-study figure (Fig. 11c).
+WINDOW_SAMPLES = 400
+
+#: Longest status message kept in the result tables [characters].
+STATUS_CHARS = 90
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """The ``[study]`` workflow section: grids of the hyper-parameter studies.
+
+    Parameters
+    ----------
+    M : sequence of int
+        Numbers of RBF centres per curve (Fig. 11b), each ``>= 2``.
+    sigma_n : sequence of float
+        Normalised widths ``sigma = sigma_n * delta_xi`` (Fig. 11b), each ``> 0``.
+    alpha : sequence of float
+        TVRegDiff regularisation weights of the first derivative (Fig. 11c), each
+        ``> 0``, in the units of the data: ``alpha`` scales with the unit of q
+        (q in m needs 1e-3 times the value for q in mm, see
+        :class:`~pipeline.differentiate.TVRegDiffConfig`). The defaults span the
+        project's default ``1e-5`` for q in metres (the paper's 0.01 for mm)
+        by two decades below and one above.
+    free_run : bool
+        True: score every model by the free-run NRMSE(q) (Eq. 41) on the
+        estimation data (and the validation data). False: equation-error MSE
+        only, much faster.
+    max_samples : int
+        At most this many samples (the first ones) of each record are fitted
+        and simulated, ``>= 100``.
+
+    Raises
+    ------
+    ValueError
+        If a list is empty or a value is out of range (as ``WorkflowError`` via
+        :meth:`from_dict`).
+
+    Examples
+    --------
+    >>> StudyConfig.from_dict({"M": [4, 8], "free_run": False}).M
+    (4, 8)
+    """
+
+    M: tuple[int, ...] = (4, 6, 8, 10, 12, 16)
+    sigma_n: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5)
+    alpha: tuple[float, ...] = (1e-7, 1e-6, 1e-5, 1e-4)
+    free_run: bool = True
+    max_samples: int = 20000
+
+    def __post_init__(self) -> None:
+        for name in ("M", "sigma_n", "alpha"):
+            values = getattr(self, name)
+            if isinstance(values, int | float):
+                values = (values,)
+            values = tuple(values)
+            if not values:
+                raise ValueError(f"`{name}` must list at least one value, got {values!r}")
+            object.__setattr__(self, name, values)
+        for m in self.M:
+            if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 2:
+                raise ValueError(f"`M` values must be integers >= 2, got {m!r}")
+        for name in ("sigma_n", "alpha"):
+            for x in getattr(self, name):
+                if isinstance(x, bool) or not isinstance(x, int | float) or not x > 0:
+                    raise ValueError(f"`{name}` values must be numbers > 0, got {x!r}")
+        if not isinstance(self.free_run, bool):
+            raise ValueError(f"`free_run` must be true or false, got {self.free_run!r}")
+        if isinstance(self.max_samples, bool) or not isinstance(self.max_samples, int):
+            raise ValueError(f"`max_samples` must be an integer, got {self.max_samples!r}")
+        if self.max_samples < 100:
+            raise ValueError(f"`max_samples` must be >= 100, got {self.max_samples!r}")
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any]) -> StudyConfig:
+        """Build and check the configuration from a workflow section.
+
+        Parameters
+        ----------
+        section : mapping
+            The ``[study]`` table.
+
+        Returns
+        -------
+        StudyConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key or an invalid value, naming it.
+        """
+        return config_from_section(cls, dict(section), "[study]")
+
+
+def derivative_roughness(x_dot: np.ndarray) -> float:
+    """Roughness of a derivative: RMS of its second difference.
+
+    Parameters
+    ----------
+    x_dot : ndarray, shape (n,) [unit/s]
+        A derivative signal, ``n >= 3``.
+
+    Returns
+    -------
+    float
+        ``sqrt(mean(diff(x_dot, 2)**2))`` [unit/s]; large for noisy (under-
+        regularised) derivatives, small for over-smoothed ones.
+
+    Examples
+    --------
+    >>> derivative_roughness(np.arange(10.0))
+    0.0
+    >>> derivative_roughness(np.array([0.0, 1.0, 0.0]))
+    2.0
+    """
+    x_dot = np.asarray(x_dot, dtype=float)
+    return float(np.sqrt(np.mean(np.diff(x_dot, 2) ** 2)))
+
+
+# ---------------------------------------------------------------------------------------------
+# shared scoring of one fit
+# ---------------------------------------------------------------------------------------------
+
+
+def _short(message: str) -> str:
+    message = " ".join(str(message).split())
+    return message if len(message) <= STATUS_CHARS else message[: STATUS_CHARS - 3] + "..."
+
+
+def _cut_record(r: Record, n: int) -> Record:
+    return Record(r.name, r.q[:n], r.q_dot[:n], r.q_ddot[:n], r.v[:n], r.dt)
+
+
+def _cut_dataset(ds: DataSet, n: int) -> DataSet:
+    return dataclasses.replace(
+        ds, t=ds.t[:n], q=ds.q[:n], q_dot=ds.q_dot[:n], q_ddot=ds.q_ddot[:n], v=ds.v[:n]
+    )
+
+
+def _study_data(tables, derivs, max_samples: int) -> tuple[list[Record], list[DataSet]]:
+    records = [_cut_record(r, max_samples) for r in estimation_records(tables, derivs)]
+    datasets = [_cut_dataset(ds, max_samples) for ds in validation_datasets(tables, derivs)]
+    return records, datasets
+
+
+def _fit_and_score(
+    records: Sequence[Record],
+    datasets: Sequence[DataSet],
+    identify: IdentifyConfig,
+    vcfg: ValidateConfig,
+    free_run: bool,
+) -> dict[str, Any]:
+    """Fit one model and score it; an ill-posed fit is a row with its status, not an error."""
+    row: dict[str, Any] = {
+        "condition": math.nan,
+        "rank": -1,
+        "n_columns": 0,
+        "eq_mse": math.nan,
+        "nrmse_q_est": math.nan,
+        "nrmse_q_val": math.nan,
+        "status": "ok",
+    }
+    # The condition limit is applied here, after the fit, so that a rejected cell
+    # still reports its condition number and equation error.
+    unchecked = dataclasses.replace(identify, max_condition=math.inf)
+    try:
+        model, diag = fit_rbf_model(records, unchecked)
+    except IdentificationError as exc:
+        row["status"] = _short(str(exc))
+        return row
+    row.update(
+        condition=float(diag.condition),
+        rank=int(diag.rank),
+        n_columns=len(diag.columns),
+        eq_mse=float(diag.residual_rms**2),
+    )
+    if diag.condition > identify.max_condition:
+        row["status"] = _short(
+            f"regressor condition number {diag.condition:.3g} exceeds "
+            f"max_condition = {identify.max_condition:.3g}"
+        )
+        return row
+    if free_run:
+        row.update(_free_run_scores(model, datasets, vcfg))
+    return row
+
+
+def _free_run_scores(
+    model: RBFModel, datasets: Sequence[DataSet], vcfg: ValidateConfig
+) -> dict[str, float]:
+    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
+    q_limit = vcfg.q_limit if vcfg.q_limit is not None else 100.0 * span
+    table, _ = validate_model(model, "rbf", datasets, vcfg, q_limit)
+    score = table["nrmse_q"].where(~table["diverged"].astype(bool))
+    est = score[table["role"] == "estimation"]
+    val = score[table["role"] != "estimation"]
+    return {
+        "nrmse_q_est": float(est.mean(skipna=False)) if est.size else math.nan,
+        "nrmse_q_val": float(val.mean(skipna=False)) if val.size else math.nan,
+    }
+
+
+def _attrs(cfg: StudyConfig, records: Sequence[Record]) -> dict[str, Any]:
+    return {
+        "max_samples": cfg.max_samples,
+        "n_samples": {r.name: int(r.q.size) for r in records},
+        "free_run": cfg.free_run,
+        "note": (
+            f"at most the first {cfg.max_samples} samples of each record are fitted and "
+            "free-run; eq_mse is the mean squared equation error of the fit "
+            "[(unit of q/s^2)^2 per unit mass]; nrmse_q_* is the free-run NRMSE(q) of Eq. 41 "
+            "(NaN when diverged, not run, or the fit failed)"
+        ),
+    }
+
+
+def _status_label(status: str) -> str:
+    s = status.lower()
+    for key, label in (
+        ("condition", "cond."),
+        ("rank", "rank"),
+        ("centre", "support"),
+        ("constant", "input"),
+    ):
+        if key in s:
+            return label
+    return "failed"
+
+
+# ---------------------------------------------------------------------------------------------
+# Fig. 11b: M and sigma_n
+# ---------------------------------------------------------------------------------------------
+
+
+def rbf_grid_study(
+    tables: Mapping[str, pd.DataFrame],
+    derivs: Mapping[str, pd.DataFrame],
+    identify_section: Mapping[str, Any],
+    validate_section: Mapping[str, Any],
+    cfg: StudyConfig,
+) -> tuple[pd.DataFrame, Any]:
+    """Identify the RBF model for every (M, sigma_n) of the grid and score it (Fig. 11b).
+
+    Every cell is fitted with the workflow's ``[identify]`` section with ``M`` and
+    ``sigma_n`` replaced. A fit that the identification rejects (a centre without
+    data, rank deficiency, a condition number above ``max_condition``) is a row
+    with that status, not an exception; its condition number and equation error
+    are still reported when the least squares could be solved.
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical tables ``t [s], q [m], v1..vN [V]`` with ``attrs['role']``
+        ("estimation" or "validation").
+    derivs : mapping of str to pandas.DataFrame
+        Their derivatives ``t, q, q_hat, q_dot [m/s], q_ddot [m/s^2]`` with
+        ``attrs['dt']`` [s] (the differentiation stage's output).
+    identify_section : mapping
+        The ``[identify]`` section (see :class:`~pipeline.identify.IdentifyConfig`).
+    validate_section : mapping
+        The ``[validate]`` section (see :class:`~pipeline.validate.ValidateConfig`).
+    cfg : StudyConfig
+        The grids, ``free_run`` and ``max_samples``.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per cell, M-major: ``M, sigma_n, condition, rank, n_columns,
+        eq_mse`` [(m/s^2)^2 per unit mass], ``nrmse_q_est, nrmse_q_val``
+        [dimensionless], ``status`` ("ok" or the shortened reason). ``attrs``
+        hold ``max_samples``, the samples used per record and a note.
+    figure : matplotlib.figure.Figure
+        Two annotated heat maps over (sigma_n, M): the model error (free-run
+        NRMSE(q) [%] on the estimation data, or the equation-error MSE when
+        ``free_run`` is False) and log10 of the condition number; rejected cells
+        are hatched and labelled. Four axes (two panels, two colour bars).
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section or no estimation data set.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.2 and Fig. 11b (paper's choice M = 10, sigma_n = 0.5).
+    """
+    base = dict(identify_section)
+    IdentifyConfig.from_dict(base)  # report an invalid section once, before the loop
+    vcfg = ValidateConfig.from_dict(validate_section)
+    records, datasets = _study_data(tables, derivs, cfg.max_samples)
+    rows = []
+    for M in cfg.M:
+        for sigma_n in cfg.sigma_n:
+            icfg = IdentifyConfig.from_dict({**base, "M": int(M), "sigma_n": float(sigma_n)})
+            row = {"M": int(M), "sigma_n": float(sigma_n)}
+            row.update(_fit_and_score(records, datasets, icfg, vcfg, cfg.free_run))
+            rows.append(row)
+    table = pd.DataFrame(rows)
+    table.attrs.update(_attrs(cfg, records))
+    return table, grid_figure(table, cfg.free_run)
+
+
+def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> Any:
+    """Heat maps of the grid study: model error and log10 condition over (sigma_n, M).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The table of :func:`rbf_grid_study`.
+    free_run : bool, optional
+        Whether ``nrmse_q_est`` was computed (else ``eq_mse`` is mapped).
+    unit : str, optional
+        Unit of q, for the labels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two panels with their colour bars (four axes).
+    """
+    Ms = sorted(table["M"].unique())
+    sigmas = sorted(table["sigma_n"].unique())
+    shape = (len(Ms), len(sigmas))
+    err = np.full(shape, np.nan)
+    cond = np.full(shape, np.nan)
+    status = np.full(shape, "ok", dtype=object)
+    for _, r in table.iterrows():
+        i, j = Ms.index(r["M"]), sigmas.index(r["sigma_n"])
+        err[i, j] = 100.0 * r["nrmse_q_est"] if free_run else r["eq_mse"]
+        cond[i, j] = r["condition"]
+        status[i, j] = r["status"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 0.55 * len(Ms) + 2.6), constrained_layout=True)
+    err_title = (
+        "free-run NRMSE(q) on estimation data [%]"
+        if free_run
+        else f"equation-error MSE [({unit}/s^2)^2 per unit mass]"
+    )
+    panels = (
+        (axes[0], err, err_title, "viridis", True),
+        (axes[1], np.log10(cond), "log10 condition number of the regressor", "magma", False),
+    )
+    for ax, values, title, cmap, log in panels:
+        finite = values[np.isfinite(values) & (values > 0 if log else True)]
+        norm = None
+        if log and finite.size and finite.max() > finite.min():
+            norm = LogNorm(finite.min(), finite.max())
+        masked = np.ma.masked_invalid(values)
+        im = ax.imshow(masked, cmap=cmap, norm=norm, aspect="auto", origin="lower")
+        fig.colorbar(im, ax=ax, shrink=0.9)
+        ax.set_xticks(range(len(sigmas)), [f"{s:g}" for s in sigmas])
+        ax.set_yticks(range(len(Ms)), [str(m) for m in Ms])
+        ax.set_xlabel("normalised width sigma_n")
+        ax.set_ylabel("number of centres M")
+        ax.set_title(title, fontsize=10)
+        lo, hi = (np.nanmin(finite), np.nanmax(finite)) if finite.size else (0.0, 1.0)
+        for i in range(shape[0]):
+            for j in range(shape[1]):
+                failed = status[i, j] != "ok"
+                if failed:
+                    ax.add_patch(
+                        plt.Rectangle(
+                            (j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///", ec="0.45", lw=0
+                        )
+                    )
+                v = values[i, j]
+                if np.isfinite(v):
+                    text = f"{v:.3g}"
+                    if log and norm is not None:
+                        frac = (np.log(v) - np.log(lo)) / (np.log(hi) - np.log(lo))
+                    else:
+                        frac = (v - lo) / (hi - lo) if hi > lo else 0.5
+                    color = "white" if frac < 0.5 else "black"
+                else:
+                    text, color = ("diverged" if not failed and free_run else ""), "black"
+                if failed:
+                    text = (text + "\n" if text else "") + _status_label(status[i, j])
+                    color = "black" if not np.isfinite(v) else color
+                ax.text(j, i, text, ha="center", va="center", fontsize=7, color=color)
+    fig.suptitle(
+        "RBF hyper-parameters (cf. Fig. 11b); hatched: fit rejected by the identification",
+        fontsize=10,
+    )
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------
+# Fig. 11c: TVRegDiff alpha
+# ---------------------------------------------------------------------------------------------
+
+
+def _scaled_section(section: Mapping[str, Any], alpha: float) -> dict[str, Any]:
+    params = dict(section)
+    method = params.pop("method", "tvregdiff")
+    if method != "tvregdiff":
+        raise WorkflowError(
+            f"[differentiate] the alpha study needs method = 'tvregdiff', got {method!r}"
+        )
+    alpha0 = float(params.get("alpha", TVRegDiffConfig.alpha))
+    params["alpha"] = float(alpha)
+    if params.get("alpha2") is not None:
+        params["alpha2"] = float(params["alpha2"]) * alpha / alpha0
+    return params
+
+
+def alpha_study(
+    tables: Mapping[str, pd.DataFrame],
+    identify_section: Mapping[str, Any],
+    validate_section: Mapping[str, Any],
+    diff_section: Mapping[str, Any],
+    cfg: StudyConfig,
+) -> tuple[pd.DataFrame, Any]:
+    """Differentiate, identify and score for every TVRegDiff ``alpha`` (Fig. 11c).
+
+    For each ``alpha`` every table is differentiated with the workflow's
+    ``[differentiate]`` section with ``alpha`` replaced (and ``alpha2``, when given,
+    scaled by the same factor), then the model is fitted with the ``[identify]``
+    section and scored as in :func:`rbf_grid_study`. The equation error is measured
+    against the derivatives of that ``alpha`` itself, so it keeps falling as
+    smoothing removes noise; the free-run NRMSE(q) against the measured position
+    is the score that penalises over-smoothing too.
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical tables ``t [s], q [m], v1..vN [V]`` with ``attrs['role']``.
+    identify_section : mapping
+        The ``[identify]`` section.
+    validate_section : mapping
+        The ``[validate]`` section.
+    diff_section : mapping
+        The ``[differentiate]`` section; its ``method`` must be "tvregdiff" (the
+        default when absent).
+    cfg : StudyConfig
+        ``alpha`` values [unit of q * s], ``free_run``, ``max_samples``.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per ``alpha``, in the order given: ``alpha, eq_mse, nrmse_q_est,
+        nrmse_q_val, condition, status, roughness`` (RMS of the second difference
+        of q_dot over the studied samples of the estimation records [m/s]) and
+        ``converged`` (both TVRegDiff passes met their tolerance on every table).
+    figure : matplotlib.figure.Figure
+        Left column: measured q, then q_dot and q_ddot for every ``alpha``
+        overlaid, over a window of :data:`WINDOW_SAMPLES` samples of the first
+        estimation record around its fastest motion; right column: free-run
+        NRMSE(q), equation-error MSE and roughness versus ``alpha`` (log axes).
+        Six axes.
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section, a method other than TVRegDiff or no estimation data.
+    RigLogError
+        For non-uniform sampling.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1 and Fig. 11c (alpha = 0.01 for q in mm, i.e. 1e-5 in m);
+    Chartrand 2011 (TVRegDiff).
+    """
+    icfg = IdentifyConfig.from_dict(dict(identify_section))
+    vcfg = ValidateConfig.from_dict(validate_section)
+    rows, curves = [], []
+    for alpha in cfg.alpha:
+        params = _scaled_section(diff_section, float(alpha))
+        derivs, converged = {}, True
+        for name, frame in tables.items():
+            dt = sample_time(frame, name)
+            q = frame["q"].to_numpy()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in `converged`
+                res = differentiate(q, dt, method="tvregdiff", params=params)
+            converged &= bool(res.converged)
+            d = pd.DataFrame(
+                {
+                    "t": frame["t"].to_numpy(),
+                    "q": q,
+                    "q_hat": res.x_hat,
+                    "q_dot": res.x_dot,
+                    "q_ddot": res.x_ddot,
+                }
+            )
+            d.attrs["dt"] = dt
+            derivs[name] = d
+        records, datasets = _study_data(tables, derivs, cfg.max_samples)
+        score = _fit_and_score(records, datasets, icfg, vcfg, cfg.free_run)
+        rough = float(np.mean([derivative_roughness(r.q_dot) for r in records]))
+        rows.append(
+            {
+                "alpha": float(alpha),
+                "eq_mse": score["eq_mse"],
+                "nrmse_q_est": score["nrmse_q_est"],
+                "nrmse_q_val": score["nrmse_q_val"],
+                "condition": score["condition"],
+                "status": score["status"],
+                "roughness": rough,
+                "converged": converged,
+            }
+        )
+        first = derivs[records[0].name]
+        curves.append((float(alpha), first))
+    table = pd.DataFrame(rows)
+    table.attrs.update(_attrs(cfg, records))
+    return table, alpha_figure(table, curves, records[0].name, cfg.free_run)
+
+
+def alpha_figure(
+    table: pd.DataFrame,
+    curves: Sequence[tuple[float, pd.DataFrame]],
+    name: str,
+    free_run: bool = True,
+    unit: str = "m",
+) -> Any:
+    """Derivatives for several ``alpha`` overlaid and the scores versus ``alpha`` (Fig. 11c).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The table of :func:`alpha_study`.
+    curves : sequence of (float, pandas.DataFrame)
+        Per ``alpha``, the derivatives table ``t [s], q, q_dot, q_ddot`` of one record.
+    name : str
+        That record's name (title).
+    free_run : bool, optional
+        Whether ``nrmse_q_est`` was computed.
+    unit : str, optional
+        Unit of q for the axis labels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Six axes: q, q_dot, q_ddot over the window (left); NRMSE(q), equation-error
+        MSE and roughness versus ``alpha`` (right).
+    """
+    fig, axes = plt.subplots(
+        3, 2, figsize=(12, 8), width_ratios=(2.2, 1), constrained_layout=True
+    )
+    # window around the fastest motion of the most regularised derivative
+    smooth = curves[int(np.argmax([a for a, _ in curves]))][1]
+    n = len(smooth)
+    half = min(WINDOW_SAMPLES, n) // 2
+    centre = int(np.argmax(np.abs(smooth["q_dot"].to_numpy())))
+    start = min(max(centre - half, 0), max(n - 2 * half, 0))
+    w = slice(start, start + 2 * half)
+    t = smooth["t"].to_numpy()[w]
+    ax_q, ax_v, ax_a = axes[:, 0]
+    ax_q.plot(t, smooth["q"].to_numpy()[w], color="0.2", lw=1.0, label="measured q")
+    colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(curves)))
+    for (alpha, d), c in zip(curves, colors, strict=True):
+        label = f"alpha = {alpha:.3g}"
+        ax_v.plot(t, d["q_dot"].to_numpy()[w], color=c, lw=0.9, label=label)
+        ax_a.plot(t, d["q_ddot"].to_numpy()[w], color=c, lw=0.9, label=label)
+    ax_q.set_ylabel(f"q [{unit}]")
+    ax_q.legend(loc="best", fontsize=8)
+    ax_q.set_title(f"{name}: TVRegDiff derivatives for several alpha (cf. Fig. 11c)", fontsize=10)
+    ax_v.set_ylabel(f"q_dot [{unit}/s]")
+    ax_a.set_ylabel(f"q_ddot [{unit}/s^2]")
+    ax_a.set_xlabel("t [s]")
+    ax_v.legend(loc="best", fontsize=7, ncol=2)
+    # q_ddot of a tiny alpha can be pure noise: scale the axis to the smoother curves
+    ref = np.concatenate([d["q_ddot"].to_numpy()[w] for _, d in curves[len(curves) // 2 :]])
+    if ref.size and np.all(np.isfinite(ref)) and np.ptp(ref) > 0:
+        pad = 0.6 * np.ptp(ref)
+        ax_a.set_ylim(ref.min() - pad, ref.max() + pad)
+    alpha = table["alpha"].to_numpy()
+    ax_n, ax_e, ax_r = axes[:, 1]
+    if free_run:
+        ax_n.plot(alpha, 100 * table["nrmse_q_est"], "o-", label="estimation")
+        if table["nrmse_q_val"].notna().any():
+            ax_n.plot(alpha, 100 * table["nrmse_q_val"], "s--", label="validation")
+        ax_n.legend(fontsize=8)
+    else:
+        ax_n.text(0.5, 0.5, "free_run = false", ha="center", va="center", transform=ax_n.transAxes)
+    ax_n.set_ylabel("free-run NRMSE(q) [%]")
+    ax_e.plot(alpha, table["eq_mse"], "o-", color="tab:red")
+    ax_e.set_ylabel(f"equation-error MSE [({unit}/s^2)^2]")
+    ax_r.plot(alpha, table["roughness"], "o-", color="tab:green")
+    ax_r.set_ylabel(f"roughness of q_dot [{unit}/s]")
+    ax_r.set_xlabel("alpha")
+    for ax in (ax_n, ax_e, ax_r):
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax, col in ((ax_e, "eq_mse"), (ax_r, "roughness")):
+        if np.all(table[col].dropna() > 0):
+            ax.set_yscale("log")
+    bad = table["status"] != "ok"
+    for a in alpha[bad.to_numpy()]:
+        for ax in (ax_n, ax_e, ax_r):
+            ax.axvline(a, color="0.6", ls=":", lw=1)
+    return fig
