@@ -1,0 +1,97 @@
+"""Simulation-error refinement: never worse on estimation data, better with noisy derivatives."""
+
+import numpy as np
+import pytest
+
+from pipeline.errors import WorkflowError
+from pipeline.identify import IdentifyConfig, Record, fit_rbf_model
+from pipeline.identify.refine import RefineConfig, refine_config, refine_model
+from pipeline.simulate import simulate
+
+
+def _noisy_records(rec, level, seed):
+    """Derivatives corrupted by seeded, correlated noise (the source of equation-error bias)."""
+    rng = np.random.default_rng(seed)
+    kernel = np.ones(15) / 15
+    noise = np.convolve(rng.standard_normal(rec["q"].size), kernel, mode="same")
+    q_dot = rec["q_dot"] + level * np.std(rec["q_dot"]) * noise
+    q_ddot = rec["q_ddot"] + level * np.std(rec["q_ddot"]) * np.gradient(noise) * 15
+    return [Record("sim", rec["q"], q_dot, q_ddot, rec["v"], rec["dt"])]
+
+
+def _duffing_record():
+    """Hardening Duffing oscillator q'' = -k1 q - k3 q^3 - d q' + v (Silverbox-like), solve_ivp."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(21)
+    dt = 1e-3
+    t = np.arange(0, 6.0, dt)
+    f, ph = rng.uniform(2, 40, 8), rng.uniform(0, 2 * np.pi, 8)
+
+    def u(tt):
+        return 1500.0 * np.sum(np.sin(2 * np.pi * f * np.asarray(tt)[..., None] + ph), axis=-1)
+
+    k1, k3, d = (2 * np.pi * 15) ** 2, 2e8, 40.0
+
+    def rhs(tt, x):
+        return [x[1], u(tt) - k1 * x[0] - k3 * x[0] ** 3 - d * x[1]]
+
+    sol = solve_ivp(rhs, (0, t[-1]), [0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-13)
+    q, q_dot = sol.y
+    v = u(t)
+    q_ddot = v - k1 * q - k3 * q**3 - d * q_dot
+    return {"q": q, "q_dot": q_dot, "q_ddot": q_ddot, "v": v[:, None], "dt": dt}
+
+
+def _refined(rec, level, **kw):
+    cfg = IdentifyConfig.from_dict(
+        {"M": 6, "T_z": 0.0, "trim": 20, "max_condition": 1e10, "input_map": "v", **kw}
+    )
+    records = _noisy_records(rec, level, seed=5)
+    model, diag = fit_rbf_model(records, cfg)
+    res = refine_model(model, diag, records, cfg, RefineConfig(windows=20, length=300, max_nfev=10))
+    return model, records, res
+
+
+@pytest.fixture(scope="module")
+def duffing():
+    return _refined(
+        _duffing_record(), 0.1, backbone=["linear_spring", "cubic_spring", "viscous", "input_gain"]
+    )
+
+
+@pytest.fixture(scope="module")
+def bistable(bistable_record):
+    return _refined(bistable_record, 0.3, input_map="v2")
+
+
+@pytest.mark.parametrize("case", ["duffing", "bistable"])
+def test_refinement_never_increases_the_estimation_free_run_error(case, request):
+    model, records, res = request.getfixturevalue(case)
+    if res.accepted:
+        assert res.full_rms_refined <= res.full_rms_ls
+    else:
+        assert res.model is model
+    # an independent free run of the kept model over the whole record gives the reported error
+    (sim,) = simulate(
+        res.model, [records[0].v], records[0].dt, records[0].q[:1], records[0].q_dot[:1]
+    )
+    rms = np.sqrt(np.mean((sim.q - records[0].q) ** 2))
+    reported = res.full_rms_refined if res.accepted else res.full_rms_ls
+    assert rms == pytest.approx(reported, rel=1e-9)
+
+
+def test_refinement_removes_most_of_the_equation_error_bias(duffing):
+    _, _, res = duffing
+    assert res.accepted
+    # measured: windows 1.00 -> 0.24 mm, whole record 1.74 -> 0.37 mm
+    assert res.window_rms_refined < 0.4 * res.window_rms_ls
+    assert res.full_rms_refined < 0.4 * res.full_rms_ls
+
+
+def test_refine_config_parsing():
+    assert refine_config(None) is None and refine_config(False) is None
+    assert refine_config(True) == RefineConfig()
+    assert refine_config({"windows": 5}).windows == 5
+    with pytest.raises(WorkflowError, match=r"\[identify.refine\]: unknown key 'window'"):
+        refine_config({"window": 5})
