@@ -119,7 +119,7 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
             for k in ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot")
         ]
         extra = [str(r["n_params"])] if params else []
-        rms_cell = f"{_fmt(r['rms_q'])} {r['rms_unit']}"
+        rms_cell = "diverged" if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
         table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra)
     return table
 
