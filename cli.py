@@ -122,6 +122,12 @@ def compare(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) 
 
 
 @app.command()
+def study(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Sensitivity studies: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha (Fig. 11c)."""
+    _run(workflow, ["study"], force, out)
+
+
+@app.command()
 def status(
     workflow: WorkflowArg,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,

@@ -20,13 +20,16 @@ from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.workflow import Workflow
 
 #: Stages in execution order and the stages each reads from.
-STAGES = ("ingest", "differentiate", "identify", "validate", "compare")
+STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study")
+#: Stages that run only when the workflow has their section.
+OPTIONAL = ("study",)
 UPSTREAM = {
     "ingest": (),
     "differentiate": ("ingest",),
     "identify": ("ingest", "differentiate"),
     "validate": ("ingest", "differentiate", "identify"),
     "compare": ("ingest", "differentiate", "validate"),
+    "study": ("ingest", "differentiate"),
 }
 
 
@@ -64,6 +67,9 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
                 for d in wf.datasets
             }
         }
+    if stage == "study":
+        names = ("study", "identify", "validate", "differentiate")
+        return {name: wf.section(name) for name in names}
     if stage == "compare":
         sindy = wf.section("compare")
         sindy.setdefault("input_map", wf.section("identify").get("input_map", "v2"))
@@ -83,6 +89,10 @@ class Runner:
     def __init__(self, workflow: Workflow):
         self.wf = workflow
         self._source_hashes: dict[Path, str] = {}
+
+    def stages(self) -> list[str]:
+        """List the stages of this workflow: all, less optional ones without a section."""
+        return [s for s in STAGES if s not in OPTIONAL or s in self.wf.sections]
 
     # ------------------------------------------------------------------ keys
     def _inputs(self, stage: str) -> dict[str, str] | None:
@@ -119,7 +129,7 @@ class Runner:
         """
         result: list[StageStatus] = []
         rerun: set[str] = set()
-        for stage in STAGES:
+        for stage in self.stages():
             manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
             if manifest is None:
                 result.append(StageStatus(stage, "missing", "never run"))
@@ -197,7 +207,7 @@ class Runner:
             Whatever a stage raises; that stage's previous artifacts stay.
         """
         on_event = on_event or (lambda *a: None)
-        selected = list(stages or STAGES)
+        selected = list(stages or self.stages())
         for s in selected:
             if s not in STAGES:
                 raise WorkflowError(f"unknown stage {s!r}; stages: {STAGES}")
@@ -273,6 +283,15 @@ class Runner:
             if res.equation_error_model is not None and res.equation_error_model is not res.model:
                 tree["equation_error"] = res.equation_error_model.to_tree()["model"]
             return {"model.h5": artifacts.H5Tree(tree), "curves.parquet": res.curves}, res.summary
+        if stage == "study":
+            results = st.run_study(tables, derivs, _stage_config(self.wf, "study"))
+            outputs = {}
+            for name, (table, figure) in results.items():
+                outputs[f"{name}.parquet"] = table
+                outputs[f"{name}.png"] = artifacts.Figure(figure)
+            return outputs, {
+                name: table.to_dict(orient="records") for name, (table, _) in results.items()
+            }
         if stage == "compare":
             rbf = artifacts.read_parquet(self.wf.stage_dir("validate") / "nrmse.parquet")
             res = st.run_compare(tables, derivs, rbf, _stage_config(self.wf, "compare"))

@@ -232,6 +232,12 @@ def simulate(
         prepared = inputs
     else:
         prepared = prepare_inputs(inputs, ns, interpolation)
+    with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected and reported below
+        return _integrate(model, prepared, dt, q0, q_dot0, q_limit)
+
+
+def _integrate(model, prepared: FineInputs, dt, q0, q_dot0, q_limit) -> list[SimulationResult]:
+    """RK4 over the prepared input grid (see :func:`simulate`)."""
     ns = prepared.substeps
     h = dt / ns
     fine, lengths = prepared.values, prepared.lengths

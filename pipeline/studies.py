@@ -38,7 +38,14 @@ from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from pipeline.stages import estimation_records, sample_time, validation_datasets
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 
-__all__ = ["StudyConfig", "alpha_study", "derivative_roughness", "rbf_grid_study"]
+__all__ = [
+    "StudyConfig",
+    "alpha_figure",
+    "alpha_study",
+    "derivative_roughness",
+    "grid_figure",
+    "rbf_grid_study",
+]
 
 #: Samples of the estimation record shown in the alpha-study figure (Fig. 11c).
 WINDOW_SAMPLES = 400
@@ -315,7 +322,8 @@ def rbf_grid_study(
         Two annotated heat maps over (sigma_n, M): the model error (free-run
         NRMSE(q) [%] on the estimation data, or the equation-error MSE when
         ``free_run`` is False) and log10 of the condition number; rejected cells
-        are hatched and labelled. Four axes (two panels, two colour bars).
+        are hatched and labelled, the lowest error is boxed. Four axes (two
+        panels, two colour bars).
 
     Raises
     ------
@@ -339,7 +347,7 @@ def rbf_grid_study(
             rows.append(row)
     table = pd.DataFrame(rows)
     table.attrs.update(_attrs(cfg, records))
-    return table, grid_figure(table, cfg.free_run)
+    return table, grid_figure(table, cfg.free_run, datasets[0].q_unit)
 
 
 def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> Any:
@@ -416,9 +424,19 @@ def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> 
                 if failed:
                     text = (text + "\n" if text else "") + _status_label(status[i, j])
                     color = "black" if not np.isfinite(v) else color
-                ax.text(j, i, text, ha="center", va="center", fontsize=7, color=color)
+                box = {"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1} if failed else None
+                ax.text(j, i, text, ha="center", va="center", fontsize=7, color=color, bbox=box)
+        if np.isfinite(values).any():
+            i, j = np.unravel_index(
+                np.nanargmin(np.where(np.isfinite(values), values, np.nan)), shape
+            )
+            if ax is axes[0]:
+                ax.add_patch(
+                    plt.Rectangle((j - 0.48, i - 0.48), 0.96, 0.96, fill=False, ec="red", lw=2)
+                )
     fig.suptitle(
-        "RBF hyper-parameters (cf. Fig. 11b); hatched: fit rejected by the identification",
+        "RBF hyper-parameters (cf. Fig. 11b); red box: lowest error; "
+        "hatched: fit rejected by the identification",
         fontsize=10,
     )
     return fig
@@ -481,12 +499,16 @@ def alpha_study(
         nrmse_q_val, condition, status, roughness`` (RMS of the second difference
         of q_dot over the studied samples of the estimation records [m/s]) and
         ``converged`` (both TVRegDiff passes met their tolerance on every table).
+        ``attrs`` as in :func:`rbf_grid_study` plus ``workflow_alpha``. The
+        roughness falls with ``alpha`` while noise dominates, then levels off
+        and can rise again: TV regularisation makes q_dot piecewise constant
+        (staircasing) for large ``alpha``.
     figure : matplotlib.figure.Figure
         Left column: measured q, then q_dot and q_ddot for every ``alpha``
         overlaid, over a window of :data:`WINDOW_SAMPLES` samples of the first
-        estimation record around its fastest motion; right column: free-run
-        NRMSE(q), equation-error MSE and roughness versus ``alpha`` (log axes).
-        Six axes.
+        estimation record around its fastest motion within the studied
+        samples; right column: free-run NRMSE(q), equation-error MSE and
+        roughness versus ``alpha`` (log axes). Six axes.
 
     Raises
     ------
@@ -543,7 +565,9 @@ def alpha_study(
         curves.append((float(alpha), first))
     table = pd.DataFrame(rows)
     table.attrs.update(_attrs(cfg, records))
-    return table, alpha_figure(table, curves, records[0].name, cfg.free_run)
+    table.attrs["workflow_alpha"] = float(diff_section.get("alpha", TVRegDiffConfig.alpha))
+    unit = tables[records[0].name].attrs.get("units", {}).get("q", "m")
+    return table, alpha_figure(table, curves, records[0].name, cfg.free_run, unit)
 
 
 def alpha_figure(
@@ -553,7 +577,9 @@ def alpha_figure(
     free_run: bool = True,
     unit: str = "m",
 ) -> Any:
-    """Derivatives for several ``alpha`` overlaid and the scores versus ``alpha`` (Fig. 11c).
+    """Plot the derivatives for several ``alpha`` overlaid and the scores versus ``alpha``.
+
+    The layout follows Fig. 11c of Masoud & Maas 2025, with the scores beside it.
 
     Parameters
     ----------
@@ -574,12 +600,10 @@ def alpha_figure(
         Six axes: q, q_dot, q_ddot over the window (left); NRMSE(q), equation-error
         MSE and roughness versus ``alpha`` (right).
     """
-    fig, axes = plt.subplots(
-        3, 2, figsize=(12, 8), width_ratios=(2.2, 1), constrained_layout=True
-    )
+    fig, axes = plt.subplots(3, 2, figsize=(12, 8), width_ratios=(2.2, 1), constrained_layout=True)
     # window around the fastest motion of the most regularised derivative
     smooth = curves[int(np.argmax([a for a, _ in curves]))][1]
-    n = len(smooth)
+    n = min(len(smooth), int(table.attrs.get("max_samples", len(smooth))))
     half = min(WINDOW_SAMPLES, n) // 2
     centre = int(np.argmax(np.abs(smooth["q_dot"].to_numpy())))
     start = min(max(centre - half, 0), max(n - 2 * half, 0))
@@ -623,8 +647,13 @@ def alpha_figure(
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
     for ax, col in ((ax_e, "eq_mse"), (ax_r, "roughness")):
-        if np.all(table[col].dropna() > 0):
+        values = table[col].dropna()
+        if values.size and np.all(values > 0):  # an all-failed study has nothing to log-scale
             ax.set_yscale("log")
+    ax_n.set_title("scores vs alpha (dashed: workflow's)", fontsize=10)
+    if "workflow_alpha" in table.attrs:
+        for ax in (ax_n, ax_e, ax_r):
+            ax.axvline(table.attrs["workflow_alpha"], color="0.3", ls="--", lw=1)
     bad = table["status"] != "ok"
     for a in alpha[bad.to_numpy()]:
         for ax in (ax_n, ax_e, ax_r):

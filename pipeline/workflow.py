@@ -42,7 +42,16 @@ from typing import Any
 from pipeline.errors import WorkflowError
 
 ROLES = ("estimation", "validation")
-SECTIONS = ("workflow", "ingest", "datasets", "differentiate", "identify", "validate", "compare")
+SECTIONS = (
+    "workflow",
+    "ingest",
+    "datasets",
+    "differentiate",
+    "identify",
+    "validate",
+    "compare",
+    "study",
+)
 
 
 @dataclass(frozen=True)

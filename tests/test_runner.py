@@ -169,3 +169,25 @@ def test_bad_workflow_key_is_a_usage_error(project):
     (project / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6) + "\n[identfy]\nM = 3\n")
     code, out = invoke("run", project / "wf.toml")
     assert code == 2 and "identfy" in out
+
+
+def test_study_stage_runs_only_when_configured(project):
+    wf = project / "wf.toml"
+    code, out = invoke("status", wf, "--json")
+    assert "study" not in {s["stage"] for s in json.loads(out)}
+    text = (
+        WORKFLOW.format(alpha=1e-6)
+        + "\n[study]\nM = [4, 6]\nsigma_n = [0.5, 1.0]\nalpha = [1e-7, 1e-6]\n"
+    )
+    text += "max_samples = 1500\n"
+    wf.write_text(text)
+    code, out = invoke("run", wf)
+    assert code == 0, out
+    grid = pd.read_parquet(project / "out/study/rbf_grid.parquet")
+    assert len(grid) == 4 and {"condition", "nrmse_q_est", "status"} <= set(grid.columns)
+    ok = grid[grid.status == "ok"]
+    # Gaussian overlap: the condition number grows with sigma_n at fixed M
+    for _, g in ok.groupby("M"):
+        assert g.sort_values("sigma_n").condition.is_monotonic_increasing
+    assert len(pd.read_parquet(project / "out/study/alpha.parquet")) == 2
+    assert (project / "out/study/rbf_grid.png").stat().st_size > 10_000
