@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -32,10 +31,10 @@ import pandas as pd
 from matplotlib.colors import LogNorm
 
 from pipeline.config import config_from_section
-from pipeline.differentiate import TVRegDiffConfig, differentiate
-from pipeline.errors import ConvergenceWarning, IdentificationError, WorkflowError
+from pipeline.differentiate import TVRegDiffConfig
+from pipeline.errors import IdentificationError, WorkflowError
 from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
-from pipeline.stages import estimation_records, sample_time, validation_datasets
+from pipeline.stages import estimation_records, run_differentiate, validation_datasets
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 
 __all__ = [
@@ -527,25 +526,8 @@ def alpha_study(
     rows, curves = [], []
     for alpha in cfg.alpha:
         params = _scaled_section(diff_section, float(alpha))
-        derivs, converged = {}, True
-        for name, frame in tables.items():
-            dt = sample_time(frame, name)
-            q = frame["q"].to_numpy()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in `converged`
-                res = differentiate(q, dt, method="tvregdiff", params=params)
-            converged &= bool(res.converged)
-            d = pd.DataFrame(
-                {
-                    "t": frame["t"].to_numpy(),
-                    "q": q,
-                    "q_hat": res.x_hat,
-                    "q_dot": res.x_dot,
-                    "q_ddot": res.x_ddot,
-                }
-            )
-            d.attrs["dt"] = dt
-            derivs[name] = d
+        derivs = run_differentiate(tables, {"method": "tvregdiff", **params})
+        converged = all(d.attrs["converged"] for d in derivs.values())
         records, datasets = _study_data(tables, derivs, cfg.max_samples)
         score = _fit_and_score(records, datasets, icfg, vcfg, cfg.free_run)
         rough = float(np.mean([derivative_roughness(r.q_dot) for r in records]))
