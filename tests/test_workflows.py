@@ -44,7 +44,7 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
     t0 = time.perf_counter()
     again = run("silverbox.toml", tmp_path)
     assert time.perf_counter() - t0 < 3.0
-    assert again.count("up to date, skipping") == 5
+    assert again.count("up to date, skipping") == out.count("done") == 6
     both = pd.read_parquet(tmp_path / "compare/nrmse.parquet")
     assert set(both.model) == {"rbf", "rbf-ls", "sindy"}
 
