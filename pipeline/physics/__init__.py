@@ -1,1 +1,22 @@
-"""Section 3 of Masoud & Maas 2025: the physics-based model of the bistable DE actuator."""
+"""Section 3 of Masoud & Maas 2025: the physics-based model of the bistable DE actuator.
+
+Modules
+-------
+params
+    :class:`~pipeline.physics.params.PrototypeParams`, Table 1 and the geometry in SI units.
+kinematics
+    Ritz approximation (Eq. 13), tip displacement, pitch angle, DE lengths (Eq. 1-6).
+energy
+    Potential energy (Eq. 9-11) with exact gradient and Hessian; capacitances.
+statics
+    Equilibria (Eq. 15), pre-strain sweep and bifurcations (Fig. 3), F(q) (Fig. 4), C(q) (Fig. 5).
+dynamics
+    Full state-space model (Eq. 19-23), simulation, SVD mode analysis (Fig. 6a).
+reduced
+    Reduced one-coordinate model (Eq. 24-26), its curves, full vs reduced (Fig. 7).
+plots
+    Matplotlib figures of the above (imports matplotlib; not imported here).
+
+The interpretations of the printed equations follow ``/work/shared/paper/NOTES.md`` and are
+documented where they are used.
+"""

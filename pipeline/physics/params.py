@@ -1,0 +1,256 @@
+"""Parameters of the bistable DE prototype (Table 1 and the geometry of Fig. 1) in SI units.
+
+Interpretation of the printed values (see ``/work/shared/paper/NOTES.md``):
+
+* **E** is in GPa, not MPa (NOTES item 2). The bending energy carries the textbook factor 1/2
+  (NOTES item 3) and E = 2.1 GPa, the top of the PETG range quoted in the text; this is
+  equivalent to the printed Eq. 9 without the 1/2 and E = 1.05 GPa. With Table 1's 1.62 GPa
+  (and the 1/2) b = 23 mm is not switchable: E is the calibration knob together with b.
+* **beta** = 1 and **V_DE** = n d_0 A_0 = 530.4 mm^3; neither is listed in Table 1 (NOTES item 4).
+* **Damping**: Table 1 values Y_MW = 0.31 MPa, eta_MW = 83.5 kPa s, eta_v = 0.3 kPa s and
+  eta = 3.64 MPa s (the text of Section 3.3 quotes eta_MW = 0.19 kPa s and Y_MW = 0.11 MPa
+  as the initial values of the optimisation; Table 1 holds the optimised ones).
+* **rho** = 1.2 g/cm^3 from Table 1 (the text quotes 1.27 g/cm^3 for raw PETG).
+* The geometry follows NOTES item 1 (corrected Eq. 5); see :mod:`pipeline.physics.kinematics`.
+
+References
+----------
+Masoud, A. & Maas, J. (2025). Data-driven modeling and identification of a bistable soft-robot
+element based on dielectric elastomer. Front. Robot. AI 12. Table 1, Eq. 9, Eq. 11.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from pipeline.config import config_from_section
+from pipeline.errors import WorkflowError
+
+__all__ = ["V_MAX", "PrototypeParams"]
+
+V_MAX = 3.0e3
+"""Maximum DE voltage of the prototype [V] (60 V/um on 50 um films, Section 2)."""
+
+# Parameters that may be zero (everything else must be strictly positive).
+_NON_NEGATIVE = frozenset({"eta", "eta_v", "eta_MW", "Y_MW", "g", "e_x", "e_z", "a_0", "m"})
+
+
+@dataclass(frozen=True)
+class PrototypeParams:
+    """Geometry and material parameters of the bistable DE actuator, SI units.
+
+    Parameters
+    ----------
+    epsilon_0 : float
+        Vacuum permittivity [F/m].
+    epsilon_r : float
+        Relative permittivity of the elastomer [-].
+    n : float
+        Number of DE layers per actuator [-].
+    d_0 : float
+        Thickness of one layer, undeformed [m].
+    l_0 : float
+        Length of a DE strip, undeformed [m].
+    A_0 : float
+        Area of one layer, undeformed [m^2].
+    Y : float
+        Neo-Hookean modulus of the DE (Eq. 11) [Pa].
+    Y_MW : float
+        Modulus of the Maxwell element (Eq. 12) [Pa].
+    eta_MW : float
+        Viscosity of the Maxwell element (Eq. 12) [Pa s].
+    eta_v : float
+        Kelvin-Voigt viscosity of the DE (Eq. 12) [Pa s].
+    beta : float
+        Electrode area / DE area (Eq. 11) [-]; 1 by default (NOTES item 4).
+    V_DE : float or None
+        Volume of one DE actuator [m^3]; ``None`` means ``n * d_0 * A_0`` (NOTES item 4).
+    l : float
+        Beam length [m].
+    A : float
+        Beam cross-section [m^2].
+    I : float
+        Second moment of area of the beam cross-section [m^4].
+    E : float
+        Young's modulus of the beam [Pa]; 2.1 GPa with the 1/2 on the bending term
+        (NOTES items 2 and 3).
+    rho : float
+        Density of the beam [kg/m^3].
+    eta : float
+        Viscosity of the beam (Eq. 12) [Pa s].
+    a : float
+        Half width of the upper frame: horizontal offset of the DE upper ends from the beam
+        tip [m].
+    b : float
+        Pre-strain screw position (Eq. 4); the DE upper ends sit ``b - a_0`` below the tip [m].
+    b_max : float
+        Reference screw position of Eq. 17, ``z_b = b_max - b`` [m].
+    e_x : float
+        Height of the fixed DE ends above the beam clamp [m].
+    e_z : float
+        Horizontal offset of the fixed DE ends from the beam axis [m].
+    a_0 : float
+        Vertical offset of the frame joint in Eq. 5 [m].
+    m : float
+        Moving mass of the upper frame, lumped at the beam tip [kg].
+    g : float
+        Gravitational acceleration [m/s^2].
+
+    Raises
+    ------
+    WorkflowError
+        If a value is not a finite number or is negative (zero where it must be positive).
+
+    References
+    ----------
+    Masoud & Maas 2025, Table 1, Eq. 4, 5, 9, 11, 12; NOTES items 1-4.
+
+    Examples
+    --------
+    >>> p = PrototypeParams.paper()
+    >>> round(p.V_DE * 1e9, 1)  # [mm^3]
+    530.4
+    >>> round(p.C_0 * 1e9, 2)  # [nF]
+    5.26
+    """
+
+    epsilon_0: float = 8.854e-12
+    epsilon_r: float = 2.8
+    n: float = 8.0
+    d_0: float = 50e-6
+    l_0: float = 51e-3
+    A_0: float = 1326e-6
+    Y: float = 1.2e6
+    Y_MW: float = 0.31e6
+    eta_MW: float = 83.5e3
+    eta_v: float = 0.3e3
+    beta: float = 1.0
+    V_DE: float | None = None
+    l: float = 90e-3  # noqa: E741
+    A: float = 11e-6
+    I: float = 1.1e-12  # noqa: E741
+    E: float = 2.1e9
+    rho: float = 1.2e3
+    eta: float = 3.64e6
+    a: float = 32e-3
+    b: float = 23e-3
+    b_max: float = 30e-3
+    e_x: float = 7e-3
+    e_z: float = 16e-3
+    a_0: float = 11e-3
+    m: float = 40e-3
+    g: float = 9.81
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise WorkflowError(f"physics parameter `{f.name}` must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise WorkflowError(f"physics parameter `{f.name}` must be finite, got {value!r}")
+            if value < 0 or (value == 0 and f.name not in _NON_NEGATIVE):
+                raise WorkflowError(
+                    f"physics parameter `{f.name}` must be "
+                    f"{'non-negative' if f.name in _NON_NEGATIVE else 'positive'}, got {value!r}"
+                )
+            object.__setattr__(self, f.name, float(value))
+        if self.V_DE is None:
+            object.__setattr__(self, "V_DE", self.n * self.d_0 * self.A_0)
+
+    @classmethod
+    def paper(cls) -> PrototypeParams:
+        """Return the prototype of the paper, with the interpretations of NOTES items 1-4.
+
+        Returns
+        -------
+        PrototypeParams
+            Table 1 in SI units with E = 2.1 GPa (1/2 on the bending term), beta = 1,
+            V_DE = n d_0 A_0 and b = 23 mm.
+
+        References
+        ----------
+        Masoud & Maas 2025, Table 1; NOTES items 2-4.
+        """
+        return cls()
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, object]) -> PrototypeParams:
+        """Build parameters from a workflow section (e.g. the ``[physics]`` table of a TOML file).
+
+        Keys are the field names of this class, values are in SI units. Keys that are not
+        given keep their :meth:`paper` value.
+
+        Parameters
+        ----------
+        section : Mapping[str, object]
+            Parameter name -> value [SI].
+
+        Returns
+        -------
+        PrototypeParams
+            The parameters.
+
+        Raises
+        ------
+        WorkflowError
+            If a key is not a parameter name, or a value is not a finite (positive) number.
+
+        References
+        ----------
+        Masoud & Maas 2025, Table 1.
+
+        Examples
+        --------
+        >>> PrototypeParams.from_dict({"b": 0.024}).b
+        0.024
+        """
+        return config_from_section(cls, section, "[physics]")
+
+    def to_dict(self) -> dict[str, float]:
+        """Return the parameters as a flat dict [SI], the inverse of :meth:`from_dict`.
+
+        Returns
+        -------
+        dict[str, float]
+            Field name -> value [SI].
+        """
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def replace(self, **changes: float) -> PrototypeParams:
+        """Return a copy with some parameters changed.
+
+        Parameters
+        ----------
+        **changes : float
+            Field name -> new value [SI].
+
+        Returns
+        -------
+        PrototypeParams
+            The modified copy. A ``V_DE`` derived as ``n d_0 A_0`` is derived again from the
+            new values; an explicit ``V_DE`` is kept unless changed.
+
+        Raises
+        ------
+        WorkflowError
+            If a name is unknown or a value invalid.
+        """
+        base = self.to_dict()
+        if "V_DE" not in changes and self.n * self.d_0 * self.A_0 == self.V_DE:
+            base["V_DE"] = None  # type: ignore[assignment]
+        return PrototypeParams.from_dict({**base, **changes})
+
+    @property
+    def C_0(self) -> float:
+        """Capacitance of an undeformed DE, ``n eps_0 eps_r beta A_0 / d_0`` [F] (Eq. 11)."""
+        return self.n * self.epsilon_0 * self.epsilon_r * self.beta * self.A_0 / self.d_0
+
+    @property
+    def z_b(self) -> float:
+        """Displacement parameter ``z_b = b_max - b`` [m] (Eq. 17)."""
+        return self.b_max - self.b

@@ -1,0 +1,91 @@
+"""Parameters of the physics model: Table 1 in SI, TOML loading, validation, docs."""
+
+import dataclasses
+import doctest
+import importlib
+import inspect
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from pipeline.errors import WorkflowError
+from pipeline.physics.params import V_MAX, PrototypeParams
+
+ROOT = Path(__file__).resolve().parents[1]
+MODULES = ["params", "kinematics", "energy", "statics", "dynamics", "reduced", "plots"]
+
+
+def test_paper_values_in_si():
+    p = PrototypeParams.paper()
+    assert pytest.approx(530.4e-9, rel=1e-12) == p.V_DE  # n d_0 A_0 (NOTES item 4)
+    assert pytest.approx(8 * 8.854e-12 * 2.8 * 1326e-6 / 50e-6, rel=1e-12) == p.C_0
+    assert pytest.approx(5.2597e-9, rel=1e-4) == p.C_0
+    assert p.E == 2.1e9  # GPa, with the 1/2 (NOTES items 2, 3)
+    assert p.z_b == pytest.approx(7e-3)
+    assert V_MAX == 3e3
+
+
+def test_workflow_physics_section_loads_to_the_paper_prototype():
+    raw = tomllib.loads((ROOT / "workflows" / "paper-analysis.toml").read_text())
+    p = PrototypeParams.from_dict(raw["physics"])
+    ref = PrototypeParams.paper()
+    for f in dataclasses.fields(p):
+        assert getattr(p, f.name) == pytest.approx(getattr(ref, f.name), rel=1e-12), f.name
+    assert set(raw["physics"]) == {f.name for f in dataclasses.fields(p)}  # every key listed
+
+
+def test_unknown_key_is_named():
+    with pytest.raises(WorkflowError, match=r"\[physics\]: unknown key 'Young'"):
+        PrototypeParams.from_dict({"E": 2e9, "Young": 1.0})
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("E", "2.1 GPa", "`E` must be a number"),
+        ("l", -0.09, "`l` must be positive"),
+        ("b", float("nan"), "`b` must be finite"),
+        ("eta", -1.0, "`eta` must be non-negative"),
+        ("beta", True, "`beta` must be a number"),
+    ],
+)
+def test_invalid_values_raise(key, value, match):
+    with pytest.raises(WorkflowError, match=match):
+        PrototypeParams.from_dict({key: value})
+
+
+def test_zero_damping_is_allowed_and_replace_rederives_volume():
+    p = PrototypeParams.paper().replace(eta=0.0, A_0=1000e-6)
+    assert p.eta == 0.0
+    assert pytest.approx(8 * 50e-6 * 1000e-6) == p.V_DE
+    q = PrototypeParams(V_DE=1e-6).replace(A_0=1000e-6)
+    assert q.V_DE == 1e-6  # an explicit volume is kept
+    assert PrototypeParams.from_dict(p.to_dict()) == p
+
+
+def test_not_a_table():
+    with pytest.raises(WorkflowError, match="must be a table"):
+        PrototypeParams.from_dict([("E", 1.0)])
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples_run(name):
+    mod = importlib.import_module(f"pipeline.physics.{name}")
+    result = doctest.testmod(mod, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_public_api_has_numpydoc_sections(name):
+    mod = importlib.import_module(f"pipeline.physics.{name}")
+    for item in mod.__all__:
+        obj = getattr(mod, item)
+        doc = inspect.getdoc(obj) or ""
+        assert doc, f"{name}.{item} has no docstring"
+        if inspect.isfunction(obj):
+            assert "Parameters\n----------" in doc, f"{name}.{item}"
+            assert "Returns\n-------" in doc, f"{name}.{item}"
+            assert "References\n----------" in doc or name == "plots" or "Masoud" in doc, item
+        elif inspect.isclass(obj) and dataclasses.is_dataclass(obj):
+            assert "Attributes\n----------" in doc or "Parameters\n----------" in doc, item
