@@ -13,7 +13,7 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.params import V_MAX, PrototypeParams
 
 ROOT = Path(__file__).resolve().parents[1]
-MODULES = ["params", "kinematics", "energy", "statics", "dynamics", "reduced", "plots"]
+MODULES = ["params", "kinematics", "energy", "statics", "prestrain", "dynamics", "reduced", "plots"]
 
 
 def test_paper_values_in_si():

@@ -7,8 +7,9 @@ from matplotlib.figure import Figure
 from pipeline.physics import plots
 from pipeline.physics.dynamics import mode_analysis
 from pipeline.physics.params import PrototypeParams
+from pipeline.physics.prestrain import prestrain_sweep
 from pipeline.physics.reduced import compare_full_reduced, fit_reduced, switching_profile
-from pipeline.physics.statics import FORCE_STATES, force_displacement, prestrain_sweep
+from pipeline.physics.statics import FORCE_STATES, force_displacement
 
 P = PrototypeParams.paper()
 

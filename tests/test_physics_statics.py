@@ -6,16 +6,18 @@ import pytest
 from pipeline.physics.energy import potential
 from pipeline.physics.kinematics import ritz_basis
 from pipeline.physics.params import V_MAX, PrototypeParams
+from pipeline.physics.prestrain import (
+    equilibrium_branches,
+    pitchfork_zb,
+    prestrain_sweep,
+    switching_limit_zb,
+)
 from pipeline.physics.statics import (
     FORCE_STATES,
     StaticsError,
     equilibria,
-    equilibrium_branches,
     force_displacement,
-    pitchfork_zb,
-    prestrain_sweep,
     solve_equilibrium,
-    switching_limit_zb,
 )
 
 P = PrototypeParams.paper()

@@ -9,7 +9,9 @@ kinematics
 energy
     Potential energy (Eq. 9-11) with exact gradient and Hessian; capacitances.
 statics
-    Equilibria (Eq. 15), pre-strain sweep and bifurcations (Fig. 3), F(q) (Fig. 4), C(q) (Fig. 5).
+    Equilibria (Eq. 15), F(q) by continuation (Fig. 4), C(q) and dC/dq (Fig. 5).
+prestrain
+    Equilibria versus pre-strain, z_b,min and z_b,max (Fig. 3).
 dynamics
     Full state-space model (Eq. 19-23), simulation, SVD mode analysis (Fig. 6a).
 reduced

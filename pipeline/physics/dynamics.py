@@ -262,7 +262,9 @@ class SimulationResult:
         return self.x[:, :4]
 
 
-def well_state(params: PrototypeParams, side: int = -1, *, b: float | None = None):
+def well_state(
+    params: PrototypeParams, side: int = -1, *, b: float | None = None
+) -> NDArray[np.float64]:
     """State vector at rest in the left (``side=-1``) or right (``side=+1``) well, v = 0.
 
     Parameters

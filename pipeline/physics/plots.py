@@ -17,8 +17,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from pipeline.physics.dynamics import ModeAnalysis
+from pipeline.physics.prestrain import PrestrainSweep, equilibrium_branches
 from pipeline.physics.reduced import Comparison, ReducedCurves
-from pipeline.physics.statics import ForceCurve, PrestrainSweep, equilibrium_branches
+from pipeline.physics.statics import ForceCurve
 
 __all__ = [
     "plot_capacitance",
@@ -56,7 +57,7 @@ def plot_prestrain_sweep(sweep: PrestrainSweep) -> Figure:
     Parameters
     ----------
     sweep : PrestrainSweep
-        Result of :func:`pipeline.physics.statics.prestrain_sweep`.
+        Result of :func:`pipeline.physics.prestrain.prestrain_sweep`.
 
     Returns
     -------
