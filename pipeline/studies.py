@@ -25,16 +25,15 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.colors import LogNorm
 
 from pipeline.config import config_from_section
 from pipeline.differentiate import TVRegDiffConfig
 from pipeline.errors import IdentificationError, WorkflowError
 from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from pipeline.stages import estimation_records, run_differentiate, validation_datasets
+from pipeline.study_plots import alpha_figure, grid_figure
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 
 __all__ = [
@@ -45,9 +44,6 @@ __all__ = [
     "grid_figure",
     "rbf_grid_study",
 ]
-
-#: Samples of the estimation record shown in the alpha-study figure (Fig. 11c).
-WINDOW_SAMPLES = 400
 
 #: Longest status message kept in the result tables [characters].
 STATUS_CHARS = 90
@@ -262,24 +258,6 @@ def _attrs(cfg: StudyConfig, records: Sequence[Record]) -> dict[str, Any]:
     }
 
 
-def _status_label(status: str) -> str:
-    s = status.lower()
-    for key, label in (
-        ("condition", "cond."),
-        ("rank", "rank"),
-        ("centre", "support"),
-        ("constant", "input"),
-    ):
-        if key in s:
-            return label
-    return "failed"
-
-
-# ---------------------------------------------------------------------------------------------
-# Fig. 11b: M and sigma_n
-# ---------------------------------------------------------------------------------------------
-
-
 def rbf_grid_study(
     tables: Mapping[str, pd.DataFrame],
     derivs: Mapping[str, pd.DataFrame],
@@ -347,103 +325,6 @@ def rbf_grid_study(
     table = pd.DataFrame(rows)
     table.attrs.update(_attrs(cfg, records))
     return table, grid_figure(table, cfg.free_run, datasets[0].q_unit)
-
-
-def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> Any:
-    """Heat maps of the grid study: model error and log10 condition over (sigma_n, M).
-
-    Parameters
-    ----------
-    table : pandas.DataFrame
-        The table of :func:`rbf_grid_study`.
-    free_run : bool, optional
-        Whether ``nrmse_q_est`` was computed (else ``eq_mse`` is mapped).
-    unit : str, optional
-        Unit of q, for the labels.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        Two panels with their colour bars (four axes).
-    """
-    Ms = sorted(table["M"].unique())
-    sigmas = sorted(table["sigma_n"].unique())
-    shape = (len(Ms), len(sigmas))
-    err = np.full(shape, np.nan)
-    cond = np.full(shape, np.nan)
-    status = np.full(shape, "ok", dtype=object)
-    for _, r in table.iterrows():
-        i, j = Ms.index(r["M"]), sigmas.index(r["sigma_n"])
-        err[i, j] = 100.0 * r["nrmse_q_est"] if free_run else r["eq_mse"]
-        cond[i, j] = r["condition"]
-        status[i, j] = r["status"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 0.55 * len(Ms) + 2.6), constrained_layout=True)
-    err_title = (
-        "free-run NRMSE(q) on estimation data [%]"
-        if free_run
-        else f"equation-error MSE [({unit}/s^2)^2 per unit mass]"
-    )
-    panels = (
-        (axes[0], err, err_title, "viridis", True),
-        (axes[1], np.log10(cond), "log10 condition number of the regressor", "magma", False),
-    )
-    for ax, values, title, cmap, log in panels:
-        finite = values[np.isfinite(values) & (values > 0 if log else True)]
-        norm = None
-        if log and finite.size and finite.max() > finite.min():
-            norm = LogNorm(finite.min(), finite.max())
-        masked = np.ma.masked_invalid(values)
-        im = ax.imshow(masked, cmap=cmap, norm=norm, aspect="auto", origin="lower")
-        fig.colorbar(im, ax=ax, shrink=0.9)
-        ax.set_xticks(range(len(sigmas)), [f"{s:g}" for s in sigmas])
-        ax.set_yticks(range(len(Ms)), [str(m) for m in Ms])
-        ax.set_xlabel("normalised width sigma_n")
-        ax.set_ylabel("number of centres M")
-        ax.set_title(title, fontsize=10)
-        lo, hi = (np.nanmin(finite), np.nanmax(finite)) if finite.size else (0.0, 1.0)
-        for i in range(shape[0]):
-            for j in range(shape[1]):
-                failed = status[i, j] != "ok"
-                if failed:
-                    ax.add_patch(
-                        plt.Rectangle(
-                            (j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///", ec="0.45", lw=0
-                        )
-                    )
-                v = values[i, j]
-                if np.isfinite(v):
-                    text = f"{v:.3g}"
-                    if log and norm is not None:
-                        frac = (np.log(v) - np.log(lo)) / (np.log(hi) - np.log(lo))
-                    else:
-                        frac = (v - lo) / (hi - lo) if hi > lo else 0.5
-                    color = "white" if frac < 0.5 else "black"
-                else:
-                    text, color = ("diverged" if not failed and free_run else ""), "black"
-                if failed:
-                    text = (text + "\n" if text else "") + _status_label(status[i, j])
-                    color = "black" if not np.isfinite(v) else color
-                box = {"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1} if failed else None
-                ax.text(j, i, text, ha="center", va="center", fontsize=7, color=color, bbox=box)
-        if np.isfinite(values).any():
-            i, j = np.unravel_index(
-                np.nanargmin(np.where(np.isfinite(values), values, np.nan)), shape
-            )
-            if ax is axes[0]:
-                ax.add_patch(
-                    plt.Rectangle((j - 0.48, i - 0.48), 0.96, 0.96, fill=False, ec="red", lw=2)
-                )
-    fig.suptitle(
-        "RBF hyper-parameters (cf. Fig. 11b); red box: lowest error; "
-        "hatched: fit rejected by the identification",
-        fontsize=10,
-    )
-    return fig
-
-
-# ---------------------------------------------------------------------------------------------
-# Fig. 11c: TVRegDiff alpha
-# ---------------------------------------------------------------------------------------------
 
 
 def _scaled_section(section: Mapping[str, Any], alpha: float) -> dict[str, Any]:
@@ -550,94 +431,3 @@ def alpha_study(
     table.attrs["workflow_alpha"] = float(diff_section.get("alpha", TVRegDiffConfig.alpha))
     unit = tables[records[0].name].attrs.get("units", {}).get("q", "m")
     return table, alpha_figure(table, curves, records[0].name, cfg.free_run, unit)
-
-
-def alpha_figure(
-    table: pd.DataFrame,
-    curves: Sequence[tuple[float, pd.DataFrame]],
-    name: str,
-    free_run: bool = True,
-    unit: str = "m",
-) -> Any:
-    """Plot the derivatives for several ``alpha`` overlaid and the scores versus ``alpha``.
-
-    The layout follows Fig. 11c of Masoud & Maas 2025, with the scores beside it.
-
-    Parameters
-    ----------
-    table : pandas.DataFrame
-        The table of :func:`alpha_study`.
-    curves : sequence of (float, pandas.DataFrame)
-        Per ``alpha``, the derivatives table ``t [s], q, q_dot, q_ddot`` of one record.
-    name : str
-        That record's name (title).
-    free_run : bool, optional
-        Whether ``nrmse_q_est`` was computed.
-    unit : str, optional
-        Unit of q for the axis labels.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        Six axes: q, q_dot, q_ddot over the window (left); NRMSE(q), equation-error
-        MSE and roughness versus ``alpha`` (right).
-    """
-    fig, axes = plt.subplots(3, 2, figsize=(12, 8), width_ratios=(2.2, 1), constrained_layout=True)
-    # window around the fastest motion of the most regularised derivative
-    smooth = curves[int(np.argmax([a for a, _ in curves]))][1]
-    n = min(len(smooth), int(table.attrs.get("max_samples", len(smooth))))
-    half = min(WINDOW_SAMPLES, n) // 2
-    centre = int(np.argmax(np.abs(smooth["q_dot"].to_numpy())))
-    start = min(max(centre - half, 0), max(n - 2 * half, 0))
-    w = slice(start, start + 2 * half)
-    t = smooth["t"].to_numpy()[w]
-    ax_q, ax_v, ax_a = axes[:, 0]
-    ax_q.plot(t, smooth["q"].to_numpy()[w], color="0.2", lw=1.0, label="measured q")
-    colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(curves)))
-    for (alpha, d), c in zip(curves, colors, strict=True):
-        label = f"alpha = {alpha:.3g}"
-        ax_v.plot(t, d["q_dot"].to_numpy()[w], color=c, lw=0.9, label=label)
-        ax_a.plot(t, d["q_ddot"].to_numpy()[w], color=c, lw=0.9, label=label)
-    ax_q.set_ylabel(f"q [{unit}]")
-    ax_q.legend(loc="best", fontsize=8)
-    ax_q.set_title(f"{name}: TVRegDiff derivatives for several alpha (cf. Fig. 11c)", fontsize=10)
-    ax_v.set_ylabel(f"q_dot [{unit}/s]")
-    ax_a.set_ylabel(f"q_ddot [{unit}/s^2]")
-    ax_a.set_xlabel("t [s]")
-    ax_v.legend(loc="best", fontsize=7, ncol=2)
-    # q_ddot of a tiny alpha can be pure noise: scale the axis to the smoother curves
-    ref = np.concatenate([d["q_ddot"].to_numpy()[w] for _, d in curves[len(curves) // 2 :]])
-    if ref.size and np.all(np.isfinite(ref)) and np.ptp(ref) > 0:
-        pad = 0.6 * np.ptp(ref)
-        ax_a.set_ylim(ref.min() - pad, ref.max() + pad)
-    alpha = table["alpha"].to_numpy()
-    ax_n, ax_e, ax_r = axes[:, 1]
-    if free_run:
-        ax_n.plot(alpha, 100 * table["nrmse_q_est"], "o-", label="estimation")
-        if table["nrmse_q_val"].notna().any():
-            ax_n.plot(alpha, 100 * table["nrmse_q_val"], "s--", label="validation")
-        ax_n.legend(fontsize=8)
-    else:
-        ax_n.text(0.5, 0.5, "free_run = false", ha="center", va="center", transform=ax_n.transAxes)
-    ax_n.set_ylabel("free-run NRMSE(q) [%]")
-    ax_e.plot(alpha, table["eq_mse"], "o-", color="tab:red")
-    ax_e.set_ylabel(f"equation-error MSE [({unit}/s^2)^2]")
-    ax_r.plot(alpha, table["roughness"], "o-", color="tab:green")
-    ax_r.set_ylabel(f"roughness of q_dot [{unit}/s]")
-    ax_r.set_xlabel("alpha")
-    for ax in (ax_n, ax_e, ax_r):
-        ax.set_xscale("log")
-        ax.grid(True, which="both", alpha=0.3)
-    for ax, col in ((ax_e, "eq_mse"), (ax_r, "roughness")):
-        values = table[col].dropna()
-        if values.size and np.all(values > 0):  # an all-failed study has nothing to log-scale
-            ax.set_yscale("log")
-    ax_n.set_title("scores vs alpha (dashed: workflow's)", fontsize=10)
-    if "workflow_alpha" in table.attrs:
-        for ax in (ax_n, ax_e, ax_r):
-            ax.axvline(table.attrs["workflow_alpha"], color="0.3", ls="--", lw=1)
-    bad = table["status"] != "ok"
-    for a in alpha[bad.to_numpy()]:
-        for ax in (ax_n, ax_e, ax_r):
-            ax.axvline(a, color="0.6", ls=":", lw=1)
-    return fig
