@@ -13,6 +13,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from pipeline.errors import ArtifactError, DebistError, WorkflowError
 
@@ -55,6 +56,8 @@ def _report(runner, manifests) -> None:
             "[dim]differentiate: the iterative method stopped at its iteration limit on "
             f"{len(stopped)} data set(s), as configured (converged = false in the manifest)[/dim]"
         )
+    if "analyze" in manifests:
+        console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
     last = "compare" if "compare" in manifests else "validate"
@@ -78,10 +81,10 @@ def _run(workflow: Path, stages: list[str] | None, force: bool, out: Path | None
         manifests = runner.run(stages, force=force, on_event=_event)
         _report(runner, manifests)
     except WorkflowError as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from None
     except DebistError as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(1) from None
 
 
@@ -128,6 +131,12 @@ def study(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) ->
 
 
 @app.command()
+def analyze(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Design analysis of [physics] (Section 3): statics.h5 and Fig. 3, 4, 5, 6a, 7 as PNG."""
+    _run(workflow, ["analyze"], force, out)
+
+
+@app.command()
 def status(
     workflow: WorkflowArg,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
@@ -137,7 +146,7 @@ def status(
     try:
         states = _runner(workflow, out).status()
     except DebistError as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from None
     if as_json:
         typer.echo(json.dumps([s.__dict__ for s in states], indent=2))
@@ -155,11 +164,11 @@ def verify(workflow: WorkflowArg, out: OutOpt = None) -> None:
     try:
         problems = _runner(workflow, out).verify()
     except (WorkflowError, ArtifactError) as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from None
     if problems:
         for p in problems:
-            err.print(f"[red]changed:[/red] {p}")
+            err.print(f"[red]changed:[/red] {escape(p)}")
         raise typer.Exit(3)
     console.print("[green]all artifacts match their manifests[/green]")
 

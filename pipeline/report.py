@@ -161,3 +161,37 @@ def published_table(
     for entry in published:
         table.add_row(entry["model"], *[_fmt(entry["rms"].get(s), 3) for s in sets])
     return table
+
+
+def analyze_table(summary: dict[str, Any]) -> Table:
+    """Tabulate the design analysis: equilibria, bifurcation points, full vs reduced model.
+
+    Parameters
+    ----------
+    summary : dict
+        Summary of the analyze stage's manifest (lengths in [m], reported in [mm]).
+
+    Returns
+    -------
+    rich.table.Table
+
+    References
+    ----------
+    Masoud & Maas 2025, Section 3.3, Fig. 3, 4, 7.
+    """
+    table = Table(title=f"Design analysis at b = {1e3 * summary['b']:.2f} mm (Section 3)")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for state, points in summary["operating_points"].items():
+        cells = [
+            f"{round(1e3 * p['q'], 3) + 0.0:+.3f}" + ("" if p["stable"] else " (unstable)")
+            for p in points
+        ]
+        v1, v2 = state.removeprefix("v1_").removesuffix("kV").split("kV_v2_")
+        label = escape(f"equilibria q [mm], (v1, v2) ({v1}, {v2}) kV")
+        table.add_row(label, ", ".join(cells) or "none")
+    table.add_row(escape("pitchfork z_b,min [mm]"), _fmt(1e3 * summary["z_b_min"]))
+    table.add_row(escape("switching limit z_b,max [mm]"), _fmt(1e3 * summary["z_b_max"]))
+    table.add_row("full vs reduced NRMSE(q), Fig. 7", f"{100 * summary['nrmse_q']:.2f} %")
+    table.add_row("full vs reduced NRMSE(phi), Fig. 7", f"{100 * summary['nrmse_phi']:.2f} %")
+    return table

@@ -20,9 +20,11 @@ from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.workflow import Workflow
 
 #: Stages in execution order and the stages each reads from.
-STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study")
+STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study", "analyze")
 #: Stages that run only when the workflow has their section.
-OPTIONAL = ("study",)
+OPTIONAL = ("study", "analyze")
+#: Stages that read measured data sets.
+DATA_STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study")
 UPSTREAM = {
     "ingest": (),
     "differentiate": ("ingest",),
@@ -30,6 +32,7 @@ UPSTREAM = {
     "validate": ("ingest", "differentiate", "identify"),
     "compare": ("ingest", "differentiate", "validate"),
     "study": ("ingest", "differentiate"),
+    "analyze": (),
 }
 
 
@@ -55,6 +58,29 @@ class StageStatus:
 Event = Callable[[str, str, str], None]
 
 
+def physics_params(wf: Workflow):
+    """Return the prototype of the workflow's ``[physics]`` section (Table 1 where absent).
+
+    Parameters
+    ----------
+    wf : Workflow
+        The workflow.
+
+    Returns
+    -------
+    pipeline.physics.params.PrototypeParams
+        Table 1 updated by the section's keys [SI].
+
+    Raises
+    ------
+    WorkflowError
+        On an unknown key or an invalid value.
+    """
+    from pipeline.physics.params import PrototypeParams
+
+    return PrototypeParams.from_dict(wf.section("physics"))
+
+
 def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
     if stage == "ingest":
         return {
@@ -70,6 +96,8 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
     if stage == "study":
         names = ("study", "identify", "validate", "differentiate")
         return {name: wf.section(name) for name in names}
+    if stage == "analyze":
+        return {"physics": physics_params(wf).to_dict(), "analyze": wf.section("analyze")}
     if stage == "compare":
         sindy = wf.section("compare")
         sindy.setdefault("input_map", wf.section("identify").get("input_map", "v2"))
@@ -91,8 +119,23 @@ class Runner:
         self._source_hashes: dict[Path, str] = {}
 
     def stages(self) -> list[str]:
-        """List the stages of this workflow: all, less optional ones without a section."""
-        return [s for s in STAGES if s not in OPTIONAL or s in self.wf.sections]
+        """List the stages of this workflow.
+
+        The data stages when it has data sets, ``study`` with a ``[study]`` section, and
+        ``analyze`` with an ``[analyze]`` section or when ``[physics]`` is all there is.
+        """
+        out = []
+        for s in STAGES:
+            if s in DATA_STAGES and not self.wf.datasets:
+                continue
+            if s == "analyze":
+                if "analyze" in self.wf.sections or (
+                    "physics" in self.wf.sections and not self.wf.datasets
+                ):
+                    out.append(s)
+            elif s not in OPTIONAL or s in self.wf.sections:
+                out.append(s)
+        return out
 
     # ------------------------------------------------------------------ keys
     def _inputs(self, stage: str) -> dict[str, str] | None:
@@ -266,6 +309,11 @@ class Runner:
     def _execute(self, stage: str) -> tuple[dict[str, Any], dict[str, Any]]:
         from pipeline import stages as st
 
+        if stage == "analyze":
+            res = st.run_analyze(physics_params(self.wf), self.wf.section("analyze"))
+            outputs: dict[str, Any] = {"statics.h5": artifacts.H5Tree(res.tree)}
+            outputs.update({f"{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})
+            return outputs, res.summary
         if stage == "ingest":
             tables = st.run_ingest(self.wf.datasets)
             return {f"{n}.parquet": f for n, f in tables.items()}, {

@@ -51,7 +51,11 @@ SECTIONS = (
     "validate",
     "compare",
     "study",
+    "physics",
+    "analyze",
 )
+#: Sections that make a workflow meaningful without data sets (a design analysis).
+DATALESS = ("physics",)
 
 
 @dataclass(frozen=True)
@@ -89,7 +93,7 @@ class Workflow:
     output_dir : pathlib.Path
         Root of the stage directories.
     datasets : tuple of DatasetSpec
-        Data sets in file order.
+        Data sets in file order; empty for a design analysis (``[physics]`` only).
     sections : dict
         The stage sections (``differentiate``, ``identify``, ``validate``, ...).
     """
@@ -127,7 +131,8 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     ------
     WorkflowError
         If the file is missing or not valid TOML, a section or key is unknown, a
-        data set lacks ``source`` or has a bad ``role``, or a source file is missing.
+        data set lacks ``source`` or has a bad ``role``, a source file is missing, there
+        are neither data sets nor a ``[physics]`` section, or a physics parameter is invalid.
     """
     path = Path(path).resolve()
     try:
@@ -139,6 +144,13 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     unknown = set(raw) - set(SECTIONS)
     if unknown:
         raise WorkflowError(f"'{path}': unknown section(s) {sorted(unknown)}; known: {SECTIONS}")
+    if "physics" in raw:
+        from pipeline.physics.params import PrototypeParams
+
+        try:
+            PrototypeParams.from_dict(raw["physics"])
+        except WorkflowError as exc:
+            raise WorkflowError(f"'{path}' {exc}") from None
     head = raw.get("workflow", {})
     name = head.get("name", path.stem)
     for key in set(head) - {"name", "description", "output_dir"}:
@@ -162,9 +174,11 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
             )
         overrides = {k: v for k, v in table.items() if k not in ("source", "role")}
         datasets.append(DatasetSpec(ds_name, source, role, {**default_ingest, **overrides}))
-    if not datasets:
-        raise WorkflowError(f"'{path}': no [datasets.<name>] section")
-    if not any(d.role == "estimation" for d in datasets):
+    if not datasets and not any(name in raw for name in DATALESS):
+        raise WorkflowError(
+            f"'{path}': no [datasets.<name>] section (and no [physics] section to analyze)"
+        )
+    if datasets and not any(d.role == "estimation" for d in datasets):
         raise WorkflowError(f"'{path}': no data set has role = 'estimation'")
     sections = {k: v for k, v in raw.items() if k not in ("workflow", "ingest", "datasets")}
     return Workflow(path, name, out.resolve(), tuple(datasets), sections)
