@@ -154,7 +154,7 @@ def test_mirror_symmetry():
 
 
 def test_generated_code_equals_the_vectorised_chain_rule():
-    consts = (P.l, P.E * P.I, P.E * P.A, P.m * P.g, P.a, P.a_0, P.e_x, P.e_z, P.l_0,
+    consts = (P.l, P.E * P.I, P.E * P.A, P.m * P.g, P.a, P.a_0, P.e_x, -P.e_z, P.e_z, P.l_0,
               P.V_DE * P.Y / 6, P.C_0 / 2)  # fmt: skip
     for x in random_states(5, seed=8):
         args = (*x, 22e-3, 9e6, 0.25e6, *consts)
@@ -175,3 +175,74 @@ def test_generated_code_equals_the_vectorised_chain_rule():
 def test_order_is_checked():
     with pytest.raises(ValueError, match="`order` must be 0, 1 or 2"):
         potential(np.zeros(4), P, order=3)
+
+
+# --- geometric asymmetry: signed offsets dz_1, dz_2 of the fixed DE ends ---
+P_BEARING = P.replace(dz_1=1e-3, dz_2=1e-3)  # a beam clamp 1 mm left of nominal
+
+
+def generated_args(p, x, b, v1, v2):
+    consts = (p.l, p.E * p.I, p.E * p.A, p.m * p.g, p.a, p.a_0, p.e_x, -p.e_z + p.dz_1,
+              p.e_z + p.dz_2, p.l_0, p.V_DE * p.Y / 6, p.C_0 / 2)  # fmt: skip
+    return (*x, b, v1**2, v2**2, *consts)
+
+
+def test_asymmetry_offsets_are_signed_and_move_one_anchor_each():
+    assert PrototypeParams.from_dict({"dz_1": -0.3e-3}).dz_1 == -0.3e-3
+    assert P.dz_1 == 0.0 and P.dz_2 == 0.0
+    x = random_states(3, seed=11)
+    base = de_lengths(x, P)[0]
+    h = 1e-3
+    lp = de_lengths(x, P.replace(dz_1=h))[0]
+    lm = de_lengths(x, P.replace(dz_1=-h))[0]
+    assert lp[:, 1] == pytest.approx(base[:, 1], rel=1e-15)  # DE 2 untouched
+    # the anchor of DE 1 moves along x: |d + dz e_x|^2 = |d|^2 + 2 dz d_x + dz^2
+    assert 0.5 * (lp[:, 0] ** 2 + lm[:, 0] ** 2) - base[:, 0] ** 2 == pytest.approx(
+        np.full(3, h**2), rel=1e-6
+    )
+    lr = de_lengths(x, P.replace(dz_2=h))[0]
+    assert lr[:, 0] == pytest.approx(base[:, 0], rel=1e-15)  # DE 1 untouched
+    assert np.all(np.abs(lr[:, 1] - base[:, 1]) > 1e-5)
+
+
+def test_asymmetric_generated_gradient_equals_vectorised_and_differences():
+    b, v1, v2 = 22.5e-3, 2e3, 0.7e3
+    for x in random_states(4, seed=12):
+        grad, length, dlen = _generated.grad_terms(*generated_args(P_BEARING, x, b, v1, v2))
+        hu = _generated.hess_terms(*generated_args(P_BEARING, x, b, v1, v2))
+        ev = potential(x, P_BEARING, b=b, v1=v1, v2=v2)
+        # the offset matters: the symmetric gradient differs by far more than the tolerance
+        ev0 = potential(x, P, b=b, v1=v1, v2=v2)
+        gs = np.max(np.abs(ev.grad * SCALE))
+        assert np.max(np.abs((ev.grad - ev0.grad) * SCALE)) > 1e-3 * gs
+        assert np.array(grad) * SCALE == pytest.approx(ev.grad * SCALE, rel=1e-6, abs=1e-6 * gs)
+        L, dL = de_lengths(x, P_BEARING, b=b, order=1)
+        assert np.array(length) == pytest.approx(L, rel=1e-14)
+        assert np.array(dlen).reshape(2, 4) == pytest.approx(dL, rel=1e-11, abs=1e-14)
+        iu = np.triu_indices(4)
+        Hs = ev.hess * np.outer(SCALE, SCALE)
+        assert np.array(hu) * np.outer(SCALE, SCALE)[iu] == pytest.approx(
+            Hs[iu], rel=1e-6, abs=1e-6 * np.abs(Hs).max()
+        )
+
+        def U(y):
+            return potential(y, P_BEARING, b=b, v1=v1, v2=v2, order=0).U
+
+        for k in range(4):
+            g_fd = central(U, x, k, 1e-6 / SCALE[k])
+            assert abs(g_fd - grad[k]) * SCALE[k] <= 1e-6 * gs
+
+
+def test_mirror_symmetry_with_mirrored_offsets():
+    # mirroring x -> -x maps the anchors -e_z + dz_1, e_z + dz_2 to e_z - dz_1, -e_z - dz_2:
+    # the prototype with offsets (dz_1, dz_2) mirrors into the one with (-dz_2, -dz_1)
+    x = random_states(3, seed=13)
+    mirrored = x * np.array([-1, -1, -1, 1])
+    pa = P.replace(dz_1=0.4e-3, dz_2=-0.1e-3)
+    pb = P.replace(dz_1=0.1e-3, dz_2=-0.4e-3)
+    a = potential(x, pa, v1=3e3, v2=0.5e3)
+    b = potential(mirrored, pb, v1=0.5e3, v2=3e3)
+    assert pytest.approx(b.U, rel=1e-12) == a.U
+    assert a.lambda_1 == pytest.approx(b.lambda_1[:, ::-1], rel=1e-13)
+    c = potential(mirrored, pa, v1=0.5e3, v2=3e3)
+    assert np.all(np.abs(c.U - a.U) > 1e-6 * np.abs(a.U))  # pa alone is not mirror-symmetric

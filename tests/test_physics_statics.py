@@ -158,3 +158,33 @@ def test_prestrain_sweep_fig3():
     assert np.any(st & (q < 0))
     branches = equilibrium_branches(sweep, 0)
     assert any(not s for *_, s in branches) and any(s for *_, s in branches)
+
+
+def stable_wells(p):
+    eqs = [e for e in equilibria(p) if e.stable]
+    assert len(eqs) == 2 and eqs[0].q < 0 < eqs[1].q, summary(eqs)
+    return eqs[0].q, eqs[1].q
+
+
+def test_symmetric_prototype_has_mirror_image_wells():
+    q_left, q_right = stable_wells(P)
+    assert q_left == pytest.approx(-q_right, rel=1e-9)
+
+
+@pytest.mark.parametrize(("dz_1", "dz_2"), [(0.2e-3, 0.2e-3), (0.3e-3, 0.0), (0.0, -0.3e-3)])
+def test_asymmetric_anchors_make_the_wells_unequal(dz_1, dz_2):
+    # a bearing offset (dz_1 = dz_2) or one displaced anchor breaks the mirror symmetry. The
+    # antisymmetric part dz_1 + dz_2 decides the side: the DE upper ends sit outside the
+    # anchors (a > e_z), so an anchor moved right stretches DE 1 more / DE 2 less, and both
+    # pull the tip more to the right: the right well moves out, the left one in
+    q_left, q_right = stable_wells(P.replace(dz_1=dz_1, dz_2=dz_2))
+    assert abs(abs(q_right) - abs(q_left)) > 0.5e-3
+    assert np.sign(abs(q_right) - abs(q_left)) == np.sign(dz_1 + dz_2)
+
+
+def test_opposite_offsets_keep_the_wells_mirrored():
+    # dz_1 = -dz_2 moves both anchors inwards by the same amount: still mirror-symmetric
+    # (mirroring maps offsets (dz_1, dz_2) to (-dz_2, -dz_1)), only the pre-stretch changes
+    q_left, q_right = stable_wells(P.replace(dz_1=0.5e-3, dz_2=-0.5e-3))
+    assert q_left == pytest.approx(-q_right, rel=1e-9)
+    assert abs(q_right) > 10.5e-3  # anchors inwards stretch the DEs more (a > e_z): wider wells

@@ -8,14 +8,16 @@ Geometry (NOTES items 1 and 6): the beam is clamped at the origin, ``x`` points 
 undeformed beam, the horizontal coordinate points right. The upper frame is a rigid inverted U
 fixed to the beam tip ``(q, l + u_y)`` and rotated clockwise by the pitch angle ``phi``; the
 upper end of DE ``i`` sits at the frame offset ``o_i = (-+a, -(b - a_0))`` from the tip (left DE
-1 at ``-a``, right DE 2 at ``+a``), the fixed lower ends at ``p_i = (-+e_z, e_x)``. This is the
-printed Eq. 5 with the signs of ``x_i, y_i`` and of ``a_0 cos(phi)`` reversed (NOTES item 1):
+1 at ``-a``, right DE 2 at ``+a``), the fixed lower ends at ``p_i = (-+e_z + dz_i, e_x)``, where
+``dz_1, dz_2`` are the (signed) anchor offsets of an asymmetric prototype, 0 in the paper. This is
+the printed Eq. 5 with the signs of ``x_i, y_i`` and of ``a_0 cos(phi)`` reversed (NOTES item 1):
 
     l_DE1 = sqrt((-e_z - q - a_0 sin(phi) + x_1)^2 + (e_x - l - u_y - a_0 cos(phi) + y_1)^2)
     l_DE2 = sqrt(( e_z - q - a_0 sin(phi) - x_2)^2 + (e_x - l - u_y - a_0 cos(phi) + y_2)^2)
 
-with ``x_i, y_i`` of Eq. 4. All derivatives are exact (closed form); integrals of polynomials are
-computed exactly (closed form or Gauss-Legendre quadrature of sufficient order).
+(``-e_z + dz_1`` and ``e_z + dz_2`` in place of ``-+e_z`` when asymmetric) with ``x_i, y_i`` of
+Eq. 4. All derivatives are exact (closed form); integrals of polynomials are computed exactly
+(closed form or Gauss-Legendre quadrature of sufficient order).
 
 References
 ----------
@@ -266,7 +268,7 @@ def _frame_terms(
     Ry = -ox * s2 + oy * c2
     dRx = -ox * s2 + oy * c2
     dRy = -ox * c2 - oy * s2
-    px = np.array([-p.e_z, p.e_z])
+    px = np.array([-p.e_z + p.dz_1, p.e_z + p.dz_2])  # signed anchor offsets (asymmetry)
     dx = px - q[..., None] - Rx
     dy = p.e_x - p.l - uy[..., None] - Ry
     d = np.stack([dx, dy], axis=-1)  # (..., 2 DE, 2 comp)

@@ -36,6 +36,8 @@ V_MAX = 3.0e3
 
 # Parameters that may be zero (everything else must be strictly positive).
 _NON_NEGATIVE = frozenset({"eta", "eta_v", "eta_MW", "Y_MW", "g", "e_x", "e_z", "a_0", "m"})
+# Parameters of either sign (offsets from a nominal position).
+_SIGNED = frozenset({"dz_1", "dz_2"})
 
 
 @dataclass(frozen=True)
@@ -98,11 +100,24 @@ class PrototypeParams:
         Moving mass of the upper frame, lumped at the beam tip [kg].
     g : float
         Gravitational acceleration [m/s^2].
+    dz_1, dz_2 : float
+        Geometric asymmetry: horizontal offsets of the fixed (lower) ends of DE 1 (left) and
+        DE 2 (right) from their nominal positions ``-e_z`` and ``+e_z``, positive to the
+        right [m]; signed, 0 by default (the symmetric prototype of the paper). A bearing
+        (beam clamp) mounted ``delta`` to the right of its nominal position is equivalent to
+        ``dz_1 = dz_2 = -delta`` (only relative positions enter the energy; the tip
+        displacement ``q`` is then measured from the clamp). The mirror image of offsets
+        ``(dz_1, dz_2)`` is ``(-dz_2, -dz_1)``: the symmetric part ``dz_1 - dz_2`` only changes
+        the pre-stretch (the DE upper ends sit outside the anchors, ``a > e_z``, so anchors
+        moved inwards stretch both DEs more), the antisymmetric part ``dz_1 + dz_2 > 0``
+        favours the right well (its ``|q|`` grows, the left one's shrinks); at b = 23 mm a
+        bearing offset of about 0.4 mm already removes one well.
 
     Raises
     ------
     WorkflowError
-        If a value is not a finite number or is negative (zero where it must be positive).
+        If a value is not a finite number or is negative (zero where it must be positive);
+        ``dz_1`` and ``dz_2`` may have either sign.
 
     References
     ----------
@@ -143,6 +158,8 @@ class PrototypeParams:
     a_0: float = 11e-3
     m: float = 40e-3
     g: float = 9.81
+    dz_1: float = 0.0
+    dz_2: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -153,7 +170,9 @@ class PrototypeParams:
                 raise WorkflowError(f"physics parameter `{f.name}` must be a number, got {value!r}")
             if not math.isfinite(value):
                 raise WorkflowError(f"physics parameter `{f.name}` must be finite, got {value!r}")
-            if value < 0 or (value == 0 and f.name not in _NON_NEGATIVE):
+            if f.name in _SIGNED:
+                pass
+            elif value < 0 or (value == 0 and f.name not in _NON_NEGATIVE):
                 raise WorkflowError(
                     f"physics parameter `{f.name}` must be "
                     f"{'non-negative' if f.name in _NON_NEGATIVE else 'positive'}, got {value!r}"
