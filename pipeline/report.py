@@ -16,6 +16,8 @@ PARAMETER_LABELS = {
     "F_0": "offset force F_0",
     "k_1": "linear spring k_1",
     "k_3": "cubic spring k_3",
+    "s_c": "scale of the analytical c(q) q, s_c",
+    "s_d": "scale of the analytical d(q), s_d",
 }
 
 
@@ -110,14 +112,14 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     """
     table = Table(title="Free-run validation (NRMSE, Eq. 41)")
     params = bool(rows) and "n_params" in rows[0]
-    cols = ["data set", "role", "model", "NRMSE(q)", "NRMSE(q_dot)", "NRMSE(q_ddot)", "RMS(q)"]
+    keys = ["nrmse_q", "nrmse_phi", "nrmse_q_dot", "nrmse_q_ddot"]
+    keys = [k for k in keys if rows and k in rows[0]]
+    cols = ["data set", "role", "model"]
+    cols += [f"NRMSE({k.removeprefix('nrmse_')})" for k in keys] + ["RMS(q)"]
     for col in cols + (["params"] if params else []):
         table.add_column(col, justify="left" if col in ("data set", "role", "model") else "right")
     for r in rows:
-        pct = [
-            ("diverged" if math.isnan(r[k]) else f"{100 * r[k]:.2f} %")
-            for k in ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot")
-        ]
+        pct = [("diverged" if math.isnan(r[k]) else f"{100 * r[k]:.2f} %") for k in keys]
         extra = [str(r["n_params"])] if params else []
         rms_cell = "diverged" if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
         table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra)

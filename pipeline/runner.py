@@ -98,10 +98,13 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
         return {name: wf.section(name) for name in names}
     if stage == "analyze":
         return {"physics": physics_params(wf).to_dict(), "analyze": wf.section("analyze")}
+    physics = {"physics": physics_params(wf).to_dict()} if "physics" in wf.sections else {}
     if stage == "compare":
         sindy = wf.section("compare")
         sindy.setdefault("input_map", wf.section("identify").get("input_map", "v2"))
-        return {"sindy": sindy, "validate": wf.section("validate")}
+        return {"sindy": sindy, "validate": wf.section("validate"), **physics}
+    if stage in ("identify", "validate") and physics:
+        return {**wf.section(stage), **physics}
     return wf.section(stage)
 
 
@@ -306,6 +309,9 @@ class Runner:
             if rel.endswith(".parquet") and "/" not in rel
         }
 
+    def _physics(self):
+        return physics_params(self.wf) if "physics" in self.wf.sections else None
+
     def _execute(self, stage: str) -> tuple[dict[str, Any], dict[str, Any]]:
         from pipeline import stages as st
 
@@ -326,7 +332,7 @@ class Runner:
             return {f"{n}.parquet": d for n, d in derivs.items()}, {"converged": converged}
         derivs = self.tables("differentiate")
         if stage == "identify":
-            res = st.run_identify(tables, derivs, self.wf.section("identify"))
+            res = st.run_identify(tables, derivs, self.wf.section("identify"), self._physics())
             tree = {**res.model.to_tree(), "diagnostics": st.diagnostics_tree(res.diagnostics)}
             if res.equation_error_model is not None and res.equation_error_model is not res.model:
                 tree["equation_error"] = res.equation_error_model.to_tree()["model"]
@@ -342,7 +348,9 @@ class Runner:
             }
         if stage == "compare":
             rbf = artifacts.read_parquet(self.wf.stage_dir("validate") / "nrmse.parquet")
-            res = st.run_compare(tables, derivs, rbf, _stage_config(self.wf, "compare"))
+            res = st.run_compare(
+                tables, derivs, rbf, _stage_config(self.wf, "compare"), self._physics()
+            )
             outputs = {
                 "sindy.h5": artifacts.H5Tree(res.model.to_tree()),
                 "nrmse.parquet": res.table,
@@ -361,7 +369,9 @@ class Runner:
         model = RBFModel.from_tree(tree)
         ls = tree.get("equation_error")
         baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
-        res = st.run_validate(model, tables, derivs, self.wf.section("validate"), baseline)
+        res = st.run_validate(
+            model, tables, derivs, self.wf.section("validate"), baseline, self._physics()
+        )
         outputs: dict[str, Any] = {"nrmse.parquet": res.table}
         outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
         outputs.update({f"plots/{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})

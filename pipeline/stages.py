@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -200,7 +200,47 @@ def estimation_records(tables, derivs) -> list[Record]:
     return records
 
 
-def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
+def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
+    """Tabulate the analytical model's curves as the backbone of the RBF model.
+
+    Parameters
+    ----------
+    physics : PrototypeParams
+        The workflow's ``[physics]`` prototype.
+    records : sequence of Record
+        Estimation data (``q`` [m]); the grid covers them and at least +-25 mm.
+    n_grid : int
+        Grid points.
+
+    Returns
+    -------
+    pipeline.identify.terms.PhysicsPrior
+
+    Raises
+    ------
+    WorkflowError
+        If there is no ``[physics]`` section or the data have other than two inputs.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 24-26, 33.
+    """
+    from pipeline.identify.terms import PHYSICS_TERMS, PhysicsPrior
+    from pipeline.physics.reduced import reduced_curves
+
+    if physics is None:
+        raise WorkflowError(
+            f"[identify] backbone terms {PHYSICS_TERMS} need a [physics] section (the prototype)"
+        )
+    if any(r.v.shape[1] != 2 for r in records):
+        raise WorkflowError("[identify] physics_* terms need the two DE voltages v1, v2")
+    q_max = max(25e-3, 1.2 * max(float(np.max(np.abs(r.q))) for r in records))
+    grid = np.linspace(-q_max, q_max, n_grid)
+    cur = reduced_curves(physics, grid)
+    return PhysicsPrior(q=grid, c=cur.c, d=cur.d, g=np.stack([cur.g1, cur.g2], axis=1))
+
+
+def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
     """Identify the RBF model (Eq. 37-40) on the estimation data sets.
 
     Parameters
@@ -211,6 +251,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
         Their derivatives.
     section : mapping
         The ``[identify]`` section (see :class:`IdentifyConfig`).
+    physics : PrototypeParams, optional
+        The ``[physics]`` prototype, whose curves the ``physics_*`` backbone terms use.
 
     Returns
     -------
@@ -226,10 +268,13 @@ def run_identify(tables, derivs, section: Mapping[str, Any]) -> IdentifyResult:
     import time
 
     from pipeline.identify.refine import refine_config, refine_model
+    from pipeline.identify.terms import PHYSICS_TERMS
 
     cfg = IdentifyConfig.from_dict(dict(section))
     t0 = time.perf_counter()
     records = estimation_records(tables, derivs)
+    if set(PHYSICS_TERMS) & set(cfg.backbone):
+        cfg = replace(cfg, prior=physics_prior(physics, records))
     model, diag = fit_rbf_model(records, cfg)
     fit_time = time.perf_counter() - t0
     ls_model, refine = model, None
@@ -330,8 +375,55 @@ def validation_datasets(tables, derivs) -> list[DataSet]:
     return out
 
 
+def analytical_for(physics, datasets: Sequence[DataSet], cfg: ValidateConfig):
+    """Build the prototype's analytical reduced model, for ``phi(q)`` and its own row.
+
+    Parameters
+    ----------
+    physics : PrototypeParams or None
+        The ``[physics]`` parameters; None when the workflow has none.
+    datasets : sequence of DataSet
+        The data to validate on (``q`` must be in metres, two DE voltages).
+    cfg : ValidateConfig
+        ``analytical`` asks for the model's own row.
+
+    Returns
+    -------
+    pipeline.physics.freerun.AnalyticalModel or None
+        None without ``[physics]``.
+
+    Raises
+    ------
+    WorkflowError
+        If ``analytical = true`` without ``[physics]``, or the data are not a DE rig's
+        (``q`` not in metres or not two inputs).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 24-26, Table 2.
+    """
+    if physics is None:
+        if cfg.analytical:
+            raise WorkflowError("[validate] analytical = true needs a [physics] section")
+        return None
+    for ds in datasets:
+        if ds.q_unit != "m" or ds.v.shape[1] != 2:
+            raise WorkflowError(
+                f"[physics] describes a DE prototype (q [m], inputs v1, v2 [V]); data set "
+                f"'{ds.name}' has q in {ds.q_unit!r} and {ds.v.shape[1]} input(s)"
+            )
+    from pipeline.physics.freerun import analytical_model
+
+    return analytical_model(physics)
+
+
 def run_validate(
-    model: RBFModel, tables, derivs, section: Mapping[str, Any], baseline: RBFModel | None = None
+    model: RBFModel,
+    tables,
+    derivs,
+    section: Mapping[str, Any],
+    baseline: RBFModel | None = None,
+    physics=None,
 ) -> ValidateResult:
     """Free-run the identified model on every data set and score it (Sec. 5, Eq. 41).
 
@@ -347,6 +439,10 @@ def run_validate(
         The equation-error (least-squares) model when ``model`` was refined by
         simulation error; scored too, as model ``"rbf-ls"``, so both fits stand
         side by side.
+    physics : PrototypeParams, optional
+        The prototype of the ``[physics]`` section: every row gets ``nrmse_phi`` through its
+        ``phi(q)`` map, and with ``analytical = true`` the analytical model (nominal
+        parameters, Eq. 26) is scored as model ``"analytical"``.
 
     Returns
     -------
@@ -355,7 +451,7 @@ def run_validate(
     Raises
     ------
     WorkflowError
-        For an invalid section.
+        For an invalid section, or physics that does not fit the data.
     """
     import time
 
@@ -365,13 +461,18 @@ def run_validate(
     span = max(abs(model.q_range[0]), abs(model.q_range[1]))
     q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
     datasets = validation_datasets(tables, derivs)
+    analytical = analytical_for(physics, datasets, cfg)
+    phi = analytical.phi if analytical is not None else None
     t0 = time.perf_counter()
-    table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit)
+    table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit, phi)
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
-    if baseline is not None:
-        extra, _ = validate_model(baseline, "rbf-ls", datasets, cfg, q_limit)
-        extra["n_params"] = baseline.n_params
+    others = [(baseline, "rbf-ls")] if baseline is not None else []
+    if cfg.analytical:
+        others.append((analytical, "analytical"))
+    for other, name in others:
+        extra, _ = validate_model(other, name, datasets, cfg, q_limit, phi)
+        extra["n_params"] = getattr(other, "n_params", 0)
         table = pd.concat([table, extra], ignore_index=True)
     units = {ds.name: ds.q_unit for ds in datasets}
     figures = {
@@ -412,7 +513,7 @@ class CompareResult:
 
 
 def run_compare(
-    tables, derivs, rbf_table: pd.DataFrame, section: Mapping[str, Any]
+    tables, derivs, rbf_table: pd.DataFrame, section: Mapping[str, Any], physics=None
 ) -> CompareResult:
     """Fit SINDy on the RBF model's data and derivatives; free-run it with the same simulator.
 
@@ -424,6 +525,8 @@ def run_compare(
         The validation stage's NRMSE table of the RBF model (with ``n_params``).
     section : mapping
         ``{"sindy": [compare] section, "validate": [validate] section}``.
+    physics : PrototypeParams, optional
+        The ``[physics]`` prototype; its ``phi(q)`` map gives the SINDy rows ``nrmse_phi``.
 
     Returns
     -------
@@ -457,9 +560,11 @@ def run_compare(
     )
     span = max(abs(model.q_range[0]), abs(model.q_range[1]))
     q_limit = vcfg.q_limit if vcfg.q_limit is not None else 100.0 * span
+    datasets = validation_datasets(tables, derivs)
+    analytical = analytical_for(physics, datasets, replace(vcfg, analytical=False))
     t0 = time.perf_counter()
     table, simulated = validate_model(
-        model, "sindy", validation_datasets(tables, derivs), vcfg, q_limit
+        model, "sindy", datasets, vcfg, q_limit, analytical.phi if analytical else None
     )
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -135,6 +135,10 @@ class ValidateConfig:
         the largest |q| of the estimation range.
     published : list of dict
         Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``.
+    analytical : bool
+        Also free-run the analytical reduced model (Eq. 26) with the nominal parameters of
+        the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
+        in metres and the two DE voltages as inputs.
     """
 
     substeps: int = 2
@@ -143,6 +147,7 @@ class ValidateConfig:
     report_unit: str | None = None
     q_limit: float | None = None
     published: tuple[dict[str, Any], ...] = ()
+    analytical: bool = False
 
     @classmethod
     def from_dict(cls, section: Mapping[str, Any]) -> ValidateConfig:
@@ -248,6 +253,7 @@ def validate_model(
     datasets: Sequence[DataSet],
     cfg: ValidateConfig,
     q_limit: float,
+    phi: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[pd.DataFrame, dict[str, pd.DataFrame]]:
     """Free-run a model on every data set and score it (Eq. 41).
 
@@ -264,12 +270,15 @@ def validate_model(
         Simulation and scoring options.
     q_limit : float
         Divergence bound on |q| [unit of q].
+    phi : callable, optional
+        The prototype's map ``phi(q)`` [rad] of ``q`` [m] (Eq. 1 through ``q_m(q)``); when
+        given, ``nrmse_phi`` compares ``phi`` of the measured and the simulated ``q``.
 
     Returns
     -------
     table : pandas.DataFrame
         One row per data set: ``dataset, role, model, n_samples, nrmse_q,
-        nrmse_q_dot, nrmse_q_ddot, rms_q`` (report unit), ``diverged``.
+        [nrmse_phi,] nrmse_q_dot, nrmse_q_ddot, rms_q`` (report unit), ``diverged``.
     simulated : dict of str to pandas.DataFrame
         Per data set: ``t, q, q_sim, q_dot_sim, q_ddot_sim``.
 
@@ -318,6 +327,7 @@ def validate_model(
                 "model": model_name,
                 "n_samples": int(ds.q[s].size),
                 "nrmse_q": nrmse(ds.q[s], sim.q[s]),
+                **({"nrmse_phi": nrmse(phi(ds.q[s]), phi(sim.q[s]))} if phi else {}),
                 "nrmse_q_dot": nrmse(ds.q_dot[s], sim.q_dot[s]),
                 "nrmse_q_ddot": nrmse(ds.q_ddot[s], sim.q_ddot[s]),
                 "rms_q": rms(ds.q[s] - sim.q[s]) * factor,

@@ -25,8 +25,11 @@ class IdentifyConfig:
     backbone : tuple of str
         Physical backbone terms identified in the same least squares: any of
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
-        "input_gain". With "clip" evaluation the model outside the estimation
-        range is the backbone plus the RBF curves held at their edge values.
+        "input_gain", and with a ``[physics]`` section the analytical model's curves
+        "physics_spring", "physics_damping", "physics_gain" (scaled; see
+        :class:`pipeline.identify.terms.PhysicsPrior`). With "clip" evaluation the
+        model outside the estimation range is the backbone plus the RBF curves held at
+        their edge values.
     input_map : {"v2", "v"}
         h(v) = v^2 (DE actuators, default) or v (rigs whose force is linear in v).
     outside : {"clip", "zero"}
@@ -58,6 +61,9 @@ class IdentifyConfig:
         ``[identify.refine]``: refine the least-squares parameters by minimising the
         windowed free-run error on the estimation data (see
         :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
+    prior : PhysicsPrior or None
+        The analytical model's curves for the ``physics_*`` terms; set by the identify
+        stage from the workflow's ``[physics]`` section, not a workflow key.
     """
 
     M: int = 10
@@ -77,6 +83,7 @@ class IdentifyConfig:
     min_support: int = 10
     published: dict[str, float] | None = None
     refine: dict[str, Any] | bool | None = None
+    prior: Any = None
 
     @classmethod
     def from_dict(cls, section: dict[str, Any]) -> IdentifyConfig:
@@ -97,6 +104,10 @@ class IdentifyConfig:
             On an unknown key or an invalid value, naming it.
         """
         kw = dict(section)
+        if "prior" in kw:
+            raise WorkflowError(
+                "[identify]: unknown key 'prior' (the analytical backbone comes from [physics])"
+            )
         for key in ("rbf", "backbone", "T_z_bounds", "input_gain", "q_range"):
             if isinstance(kw.get(key), list):
                 kw[key] = tuple(kw[key])
@@ -119,7 +130,8 @@ class IdentifyConfig:
                 f"[identify] T_z_bounds must satisfy 0 < lo < hi, got {self.T_z_bounds}"
             )
         if self.m_q == "identify":
-            if self.input_gain is None or "g" in self.rbf or "input_gain" in self.backbone:
+            gains = {"input_gain", "physics_gain"} & set(self.backbone)
+            if self.input_gain is None or "g" in self.rbf or gains:
                 raise WorkflowError(
                     "[identify] m_q = 'identify' needs fixed `input_gain` values and no 'g' or "
                     "'input_gain' term (one scale must be known)"
@@ -128,7 +140,7 @@ class IdentifyConfig:
             raise WorkflowError(
                 f"[identify] m_q must be a mass > 0 [kg] or 'identify', got {self.m_q!r}"
             )
-        elif "g" not in self.rbf and "input_gain" not in self.backbone:
+        elif "g" not in self.rbf and not {"input_gain", "physics_gain"} & set(self.backbone):
             raise WorkflowError(
                 "[identify] the model needs an input term: 'g' in rbf or 'input_gain'"
             )

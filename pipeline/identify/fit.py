@@ -13,7 +13,7 @@ from pipeline.identify.basis import RBFBasis
 from pipeline.identify.config import IdentifyConfig
 from pipeline.identify.friction import friction_state
 from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import force_columns, input_columns, input_map
+from pipeline.identify.terms import PHYSICS_TERMS, force_columns, input_columns, input_map
 
 
 @dataclass(frozen=True)
@@ -111,14 +111,16 @@ def _system(
     names: list[str] = []
     for r, z in zip(records, z_all, strict=True):
         phi = basis(r.q)
-        F, f_names = force_columns(r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, phi)
+        F, f_names = force_columns(
+            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, phi, cfg.prior
+        )
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
             rows.append(np.hstack([r.q_ddot[:, None], F]))
             ys.append(hv @ np.asarray(cfg.input_gain, dtype=float))
             names = ["m_q", *f_names]
         else:
-            G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, phi)
+            G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, phi, cfg.prior)
             rows.append(np.hstack([-F, G]))
             ys.append(float(cfg.m_q) * r.q_ddot)
             names = [*f_names, *g_names]
@@ -227,7 +229,7 @@ def fit_rbf_model(
     if cfg.m_q != "identify":
         _check_inputs(records, cfg)
 
-    uses_z = "d" in cfg.rbf or bool({"viscous", "coulomb"} & set(cfg.backbone))
+    uses_z = "d" in cfg.rbf or bool(set(_Z_TERMS) & set(cfg.backbone))
     if cfg.T_z != "search" or not uses_z:
         T_z = float(cfg.T_z) if cfg.T_z != "search" else 0.0
         trace = np.empty((0, 2))
@@ -277,7 +279,9 @@ def _search_T_z(records, basis, cfg, bounds):
         cols = []
         for r in records:
             z = friction_state(r.q_dot, r.dt, T_z)
-            F, _ = force_columns(r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity)
+            F, _ = force_columns(
+                r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity, prior=cfg.prior
+            )
             cols.append(F)
         B = np.vstack(cols)
         B_perp = B - Q @ (Q.T @ B)
@@ -299,7 +303,7 @@ def _search_T_z(records, basis, cfg, bounds):
     return T_z, np.array(trace, dtype=float)
 
 
-_Z_TERMS = ("viscous", "coulomb")
+_Z_TERMS = ("viscous", "coulomb", "physics_damping")
 
 
 def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
@@ -313,6 +317,8 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
         "viscous": "d_v",
         "coulomb": "F_c",
         "offset": "F_0",
+        "physics_spring": "s_c",
+        "physics_damping": "s_d",
     }
     backbone = {sym: float(value[name]) for name, sym in backbone_map.items() if name in value}
     if cfg.m_q == "identify":
@@ -327,6 +333,9 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
         m_q = float(cfg.m_q)
         g_0 = np.array([value.get(f"input_gain{j + 1}", 0.0) for j in range(n_in)])
     backbone["g_0"] = g_0
+    uses_prior = bool(set(PHYSICS_TERMS) & set(cfg.backbone))
+    if uses_prior:
+        backbone["s_g"] = np.array([value.get(f"physics_gain{j + 1}", 0.0) for j in range(n_in)])
     return RBFModel(
         basis=basis,
         input_map=cfg.input_map,
@@ -339,4 +348,5 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
         theta_g=np.stack([vec(f"g{j + 1}") for j in range(n_in)]),
         backbone=backbone,
         q_range=(float(q_range[0]), float(q_range[1])),
+        prior=cfg.prior if uses_prior else None,
     )

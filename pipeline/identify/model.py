@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 
 from pipeline.identify.basis import RBFBasis
-from pipeline.identify.terms import input_map
+from pipeline.identify.terms import PhysicsPrior, input_map
+
+#: Backbone entries stored as vectors (one value per input).
+_VECTORS = ("g_0", "s_g")
 
 
 @dataclass(frozen=True)
@@ -18,7 +21,8 @@ class RBFModel:
 
     The fitted form of Eq. 37 with optional physical backbone: the curves are
     the RBF sums of Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 +
-    k_3 q^2``, ``d = Phi theta_d + d_v``, ``g_i = Phi theta_g,i + g_0,i``).
+    k_3 q^2 + s_c c_phys``, ``d = Phi theta_d + d_v + s_d d_phys``,
+    ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``).
 
     Parameters
     ----------
@@ -40,9 +44,12 @@ class RBFModel:
         RBF weights of g_i(q) [N/V^2 or N/V] (zeros when inactive).
     backbone : dict of str to float or list
         ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c`` [N], ``F_0`` [N],
-        ``g_0`` (list, one per input); absent terms are 0.
+        ``g_0`` (list, one per input), and the scales ``s_c``, ``s_d`` [-] and ``s_g``
+        (one per input) of the analytical curves; absent terms are 0.
     q_range : tuple of float
         Range of q in the estimation data [unit of q].
+    prior : PhysicsPrior or None
+        The analytical model's curves ``c_phys, d_phys, g_phys`` when the backbone uses them.
 
     Notes
     -----
@@ -65,6 +72,7 @@ class RBFModel:
     theta_g: np.ndarray
     backbone: dict[str, Any] = field(default_factory=dict)
     q_range: tuple[float, float] = (0.0, 0.0)
+    prior: PhysicsPrior | None = None
 
     n_states = 3
 
@@ -88,6 +96,10 @@ class RBFModel:
         c = phi @ self.theta_c + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q**2
         d = phi @ self.theta_d + bb.get("d_v", 0.0)
         g = phi @ self.theta_g.T + np.asarray(bb.get("g_0", np.zeros(self.n_inputs)))
+        if self.prior is not None:
+            c_p, d_p, g_p = self.prior(q)
+            c, d = c + bb.get("s_c", 0.0) * c_p, d + bb.get("s_d", 0.0) * d_p
+            g = g + g_p * bb["s_g"]
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
     @cached_property
@@ -117,6 +129,10 @@ class RBFModel:
         c = w[:, 0] + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q * q
         d = w[:, 1] + bb.get("d_v", 0.0)
         g = w[:, 2:] + bb["g_0"] if "g_0" in bb else w[:, 2:]
+        if self.prior is not None:
+            c_p, d_p, g_p = self.prior(q)
+            c, d = c + bb.get("s_c", 0.0) * c_p, d + bb.get("s_d", 0.0) * d_p
+            g = g + g_p * bb["s_g"]
         force = (g * input_map(v, self.input_map)).sum(axis=1) - c * q - d * z
         if bb.get("F_0", 0.0):
             force = force - bb["F_0"]
@@ -174,6 +190,7 @@ class RBFModel:
         """Number of nonzero parameters."""
         vals = [self.theta_c, self.theta_d, self.theta_g.ravel()]
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
+        # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
 
     def to_tree(self) -> dict[str, Any]:
@@ -185,7 +202,12 @@ class RBFModel:
             Arrays and attributes; :meth:`from_tree` restores the model.
         """
         g0 = np.asarray(self.backbone.get("g_0", np.zeros(self.n_inputs)), dtype=float)
-        scalars = {k: float(v) for k, v in self.backbone.items() if k != "g_0"}
+        scalars = {k: float(v) for k, v in self.backbone.items() if k not in _VECTORS}
+        backbone: dict[str, Any] = {"attrs": scalars, "g_0": g0}
+        if "s_g" in self.backbone:
+            backbone["s_g"] = np.asarray(self.backbone["s_g"], dtype=float)
+        if self.prior is not None:
+            backbone["prior"] = self.prior.to_tree()
         return {
             "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
             "model": {
@@ -204,7 +226,7 @@ class RBFModel:
                 "theta_c": self.theta_c,
                 "theta_d": self.theta_d,
                 "theta_g": self.theta_g,
-                "backbone": {"attrs": scalars, "g_0": g0},
+                "backbone": backbone,
             },
         }
 
@@ -225,6 +247,9 @@ class RBFModel:
         a = m["attrs"]
         backbone: dict[str, Any] = dict(m["backbone"]["attrs"])
         backbone["g_0"] = np.asarray(m["backbone"]["g_0"], dtype=float)
+        if "s_g" in m["backbone"]:
+            backbone["s_g"] = np.asarray(m["backbone"]["s_g"], dtype=float)
+        prior = m["backbone"].get("prior")
         return cls(
             basis=RBFBasis(np.asarray(m["xi"], float), float(a["sigma"]), str(a["outside"])),
             input_map=str(a["input_map"]),
@@ -237,4 +262,7 @@ class RBFModel:
             theta_g=np.asarray(m["theta_g"], float),
             backbone=backbone,
             q_range=(float(a["q_min"]), float(a["q_max"])),
+            prior=None if prior is None else PhysicsPrior(
+                **{k: np.asarray(prior[k], dtype=float) for k in ("q", "c", "d", "g")}
+            ),
         )

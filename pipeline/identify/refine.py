@@ -123,13 +123,15 @@ class _ThetaBatch:
         q, q_dot, z = x[:, 0], x[:, 1], x[:, 2]
         lag = self.T_z > 0
         z = np.where(lag, z, q_dot)
-        F, _ = force_columns(q, z, self.basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity)
+        F, _ = force_columns(
+            q, z, self.basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, prior=cfg.prior
+        )
         hv = input_map(v, cfg.input_map)
         if cfg.m_q == "identify":
             force = hv @ np.asarray(cfg.input_gain) - np.einsum("bj,bj->b", F, self.theta[:, 1:])
             acc = force / self.theta[:, 0]
         else:
-            G, _ = input_columns(q, hv, self.basis, cfg.rbf, cfg.backbone)
+            G, _ = input_columns(q, hv, self.basis, cfg.rbf, cfg.backbone, prior=cfg.prior)
             acc = (np.einsum("bj,bj->b", np.hstack([-F, G]), self.theta)) / float(cfg.m_q)
         z_dot = np.where(lag, (q_dot - z) / np.where(lag, self.T_z, 1.0), 0.0)
         return np.stack([q_dot, acc, z_dot], axis=1), acc

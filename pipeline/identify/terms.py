@@ -14,6 +14,7 @@ that the identified and the simulated model cannot disagree.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,9 +31,65 @@ BACKBONE_TERMS = {
     "coulomb": "F_c tanh(z / v_c)",
     "offset": "F_0",
     "input_gain": "g_0,i h(v_i)",
+    "physics_spring": "s_c c_phys(q) q",
+    "physics_damping": "s_d d_phys(q) z",
+    "physics_gain": "s_g,i g_phys,i(q) h(v_i)",
 }
+#: Backbone terms that take the analytical model's curves (a [physics] section).
+PHYSICS_TERMS = ("physics_spring", "physics_damping", "physics_gain")
 #: Input maps h(v): "v2" for DE actuators (electrostatic force ~ v^2), "v" for linear rigs.
 INPUT_MAPS = ("v2", "v")
+
+
+@dataclass(frozen=True)
+class PhysicsPrior:
+    """Characteristic curves of the analytical model used as the RBF model's backbone.
+
+    The backbone terms ``physics_spring``, ``physics_damping`` and ``physics_gain`` are these
+    curves times scale factors ``s_c``, ``s_d``, ``s_g,i`` identified in the same least
+    squares; the RBF sums then model only the difference between prototype and analytical
+    model. With ``m_q = 1`` (curves per unit mass) the scales come out near ``1 / m_q,phys``.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Ascending grid [m].
+    c : ndarray, shape (n,)
+        Stiffness of ``f(q) = c(q) q`` at ``v = 0`` [N/m] (Eq. 26 in the form of Eq. 33).
+    d : ndarray, shape (n,)
+        Damping ``d(q)`` [N s/m].
+    g : ndarray, shape (n, n_inputs)
+        Input gains ``g_i(q) = 1/2 dC_i/dq`` [N/V^2].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26, 33, 37.
+    """
+
+    q: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    g: np.ndarray
+
+    def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolate ``c, d`` (n,) and ``g`` (n, n_inputs) at ``q`` [m] (held outside)."""
+        q = np.asarray(q, dtype=float)
+        c = np.interp(q, self.q, self.c)
+        d = np.interp(q, self.q, self.d)
+        g = np.stack([np.interp(q, self.q, col) for col in self.g.T], axis=-1)
+        return c, d, g
+
+    def to_tree(self) -> dict[str, np.ndarray]:
+        """Return the arrays for an HDF5 group (inverse: ``PhysicsPrior(**tree)``)."""
+        return {"q": self.q, "c": self.c, "d": self.d, "g": self.g}
+
+
+def _prior(prior: PhysicsPrior | None) -> PhysicsPrior:
+    if prior is None:
+        raise WorkflowError(
+            f"backbone terms {PHYSICS_TERMS} need the analytical model: add a [physics] section"
+        )
+    return prior
 
 
 def input_map(v: np.ndarray, kind: str) -> np.ndarray:
@@ -97,6 +154,7 @@ def force_columns(
     backbone: Sequence[str],
     coulomb_velocity: float,
     phi: np.ndarray | None = None,
+    prior: PhysicsPrior | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
 
@@ -114,13 +172,21 @@ def force_columns(
         v_c of the smoothed Coulomb term [unit of q / s].
     phi : ndarray, shape (n, M), optional
         Precomputed ``basis(q)``.
+    prior : PhysicsPrior, optional
+        The analytical model's curves (needed by the ``physics_*`` terms).
 
     Returns
     -------
     columns : ndarray, shape (n, p_F)
-        ``[Phi q, Phi z, q, q^3, z, tanh(z/v_c), 1]`` restricted to active terms.
+        ``[Phi q, Phi z, q, q^3, z, tanh(z/v_c), 1, c_phys q, d_phys z]`` restricted to
+        active terms.
     names : list of str
         One name per column, e.g. ``"c[3]"``, ``"linear_spring"``.
+
+    Raises
+    ------
+    WorkflowError
+        If a ``physics_*`` term is active without ``prior``.
     """
     if phi is None and ("c" in rbf or "d" in rbf):
         phi = basis(q)
@@ -137,6 +203,8 @@ def force_columns(
         "viscous": lambda: z,
         "coulomb": lambda: np.tanh(z / coulomb_velocity),
         "offset": lambda: np.ones_like(q),
+        "physics_spring": lambda: _prior(prior)(q)[0] * q,
+        "physics_damping": lambda: _prior(prior)(q)[1] * z,
     }
     for name in backbone:
         if name in scalar:
@@ -152,6 +220,7 @@ def input_columns(
     rbf: Sequence[str],
     backbone: Sequence[str],
     phi: np.ndarray | None = None,
+    prior: PhysicsPrior | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the input terms G(q, v) (right-hand side of the balance).
 
@@ -167,13 +236,21 @@ def input_columns(
         Active terms (``"g"`` and ``"input_gain"`` matter here).
     phi : ndarray, shape (n, M), optional
         Precomputed ``basis(q)``.
+    prior : PhysicsPrior, optional
+        The analytical model's curves (needed by ``physics_gain``).
 
     Returns
     -------
     columns : ndarray, shape (n, p_G)
-        ``[Phi h(v_1), ..., Phi h(v_N), h(v_1), ..., h(v_N)]`` for the active terms.
+        ``[Phi h(v_1), ..., Phi h(v_N), h(v_1), ..., h(v_N), g_phys,i h(v_i)]`` for the
+        active terms.
     names : list of str
-        ``"g1[i]"`` and ``"input_gain1"`` style names.
+        ``"g1[i]"``, ``"input_gain1"`` and ``"physics_gain1"`` style names.
+
+    Raises
+    ------
+    WorkflowError
+        If ``physics_gain`` is active without ``prior``.
     """
     cols, names = [], []
     n_in = hv.shape[1]
@@ -185,4 +262,7 @@ def input_columns(
     if "input_gain" in backbone:
         cols.append(hv)
         names += [f"input_gain{j + 1}" for j in range(n_in)]
+    if "physics_gain" in backbone:
+        cols.append(_prior(prior)(q)[2] * hv)
+        names += [f"physics_gain{j + 1}" for j in range(n_in)]
     return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
