@@ -184,6 +184,21 @@ def test_tvregdiff_config_defaults_are_the_papers_in_metres():
     assert (cfg.iterations, cfg.scale, cfg.alpha2, cfg.iterations2) == (10, "large", None, None)
 
 
+def test_tvregdiff_unit_mm_takes_the_papers_values_as_printed():
+    x = X[:300] + 1e-5 * np.random.default_rng(4).standard_normal(300)  # q [m]
+    in_mm = TVRegDiffConfig(alpha=0.01, ep=1e-6, unit="mm", iterations=4)
+    in_m = TVRegDiffConfig(alpha=0.01 * 1e-3, ep=1e-6 * 1e-6, iterations=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        a = tvregdiff_derivatives(x, DT, config=in_mm)
+        b = tvregdiff_derivatives(x, DT, config=in_m)
+    np.testing.assert_allclose(a.x_dot, b.x_dot, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(a.x_ddot, b.x_ddot, rtol=1e-6, atol=1e-10)
+    assert a.info["unit"] == "mm"
+    with pytest.raises(WorkflowError, match="unit"):
+        TVRegDiffConfig.from_dict({"unit": "furlong"})
+
+
 # ---------------------------------------------------------------- registry and configs
 
 

@@ -18,6 +18,14 @@ from pipeline.differentiate.result import (
     config_from_dict,
 )
 from pipeline.differentiate.tvregdiff import tvregdiff
+from pipeline.ingest.units import lookup_unit
+
+
+def unit_factor(symbol: str) -> float | None:
+    """SI value of one ``symbol`` (e.g. 1e-3 for "mm"), or None for an unknown unit."""
+    unit = lookup_unit(symbol)
+    return None if unit is None else unit.factor
+
 
 __all__ = ["TVRegDiffConfig", "tvregdiff_derivatives"]
 
@@ -51,6 +59,11 @@ class TVRegDiffConfig:
         TV smoothing of the second pass, default ``ep``.
     tol : float, optional
         Relative-change tolerance of both passes.
+    unit : str, optional
+        Unit of ``x`` in which ``alpha``, ``ep`` (and the second-pass values) are stated,
+        e.g. ``"mm"`` to use the paper's ``alpha = 0.01``, ``ep = 1e-6`` as printed: the SI
+        signal is expressed in that unit for the computation and the derivatives are
+        converted back, which is exactly the rescaling above. Default: the SI unit of ``x``.
 
     Raises
     ------
@@ -71,6 +84,7 @@ class TVRegDiffConfig:
     iterations2: int | None = None
     ep2: float | None = None
     tol: float = 1e-6
+    unit: str | None = None
 
     def __post_init__(self) -> None:
         check_positive("alpha", self.alpha)
@@ -85,6 +99,8 @@ class TVRegDiffConfig:
         if self.ep2 is not None:
             check_positive("ep2", self.ep2)
         check_positive("tol", self.tol)
+        if self.unit is not None and unit_factor(self.unit) is None:
+            raise ValueError(f"`unit` {self.unit!r} is not a known unit (e.g. 'mm', 'm', 'V')")
 
     @classmethod
     def from_dict(cls, params: Mapping[str, Any]) -> Self:
@@ -165,6 +181,8 @@ def tvregdiff_derivatives(
     """
     x, dt = check_signal(x, dt)
     c = config
+    s = 1.0 if c.unit is None else float(unit_factor(c.unit))
+    x = x / s
     alpha2 = c.alpha if c.alpha2 is None else c.alpha2
     iterations2 = c.iterations if c.iterations2 is None else c.iterations2
     ep2 = c.ep if c.ep2 is None else c.ep2
@@ -186,10 +204,11 @@ def tvregdiff_derivatives(
         "ep": c.ep,
         "ep2": ep2,
     }
+    info["unit"] = c.unit
     return Derivatives(
-        x_hat=x_hat,
-        x_dot=x_dot,
-        x_ddot=second.derivative,
+        x_hat=s * x_hat,
+        x_dot=s * x_dot,
+        x_ddot=s * second.derivative,
         method="tvregdiff",
         converged=first.converged and second.converged,
         info=info,
