@@ -1,0 +1,299 @@
+"""Batch runs on Dask: serial and parallel give the same bytes, failures stay per item, caching."""
+
+import gzip
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline import artifacts
+from pipeline.batch import BatchResult, expand_workflows, run_batch, summary_table
+from pipeline.errors import WorkflowError
+
+ROOT = Path(__file__).resolve().parents[1]
+STAGES = ["ingest", "differentiate", "identify", "validate"]
+NAMES = ["proto-a", "proto-b", "proto-c"]
+
+WORKFLOW = """
+[workflow]
+name = "{name}"
+output_dir = "runs/{name}"
+
+[ingest]
+format = "csv"
+sample_time = 1.6384e-3
+q = {{ column = {q_column}, unit = "V" }}
+v1 = {{ column = 0, unit = "V" }}
+
+[datasets.estimation]
+source = "{source}"
+role = "estimation"
+slice = [{start}, {stop}]
+
+[datasets.check]
+source = "{source}"
+slice = [7000, 8000]
+
+[differentiate]
+method = "spectral"
+cutoff_hz = 290.0
+taper = 0.1
+
+[identify]
+M = {M}
+sigma_n = 0.5
+input_map = "v"
+rbf = ["c"]
+backbone = ["linear_spring", "cubic_spring", "viscous", "offset", "input_gain"]
+T_z = 0.0
+trim = 100
+
+[validate]
+substeps = 1
+input_interpolation = "linear"
+init_samples = 50
+report_unit = "mV"
+"""
+
+
+def write_workflow(folder, name, *, start=0, stop=3000, M=4, q_column=1, source="rig.csv"):
+    path = folder / f"{name}.toml"
+    path.write_text(
+        WORKFLOW.format(name=name, start=start, stop=stop, M=M, q_column=q_column, source=source)
+    )
+    return path
+
+
+@pytest.fixture
+def protos(tmp_path):
+    """Three prototypes: overlapping 3000-sample slices of the Silverbox estimation record."""
+    with gzip.open(ROOT / "data/silverbox/SNLS80mV.csv.gz", "rt") as fh:
+        lines = fh.read().splitlines()
+    (tmp_path / "rig.csv").write_text("\n".join(lines[40650:48650]) + "\n")
+    return [
+        write_workflow(tmp_path, name, start=start, stop=start + 3000, M=M)
+        for name, start, M in zip(NAMES, (0, 2000, 4000), (4, 5, 6), strict=True)
+    ]
+
+
+def file_hashes(root):
+    """sha256 of every artifact but the manifests (their summaries hold timings)."""
+    return {
+        p.relative_to(root).as_posix(): artifacts.sha256_file(p)
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != artifacts.MANIFEST
+    }
+
+
+def test_processes_write_the_bytes_of_a_serial_run_and_a_rerun_skips_everything(protos):
+    runs = protos[0].parent / "runs"
+    serial = run_batch(protos, stages=STAGES, scheduler="synchronous")
+    assert [r.name for r in serial] == NAMES and all(r.ok for r in serial), serial
+    assert all(r.ran == tuple(STAGES) for r in serial)
+    assert all(r.worker == f"{os.uname().nodename}:{os.getpid()}" for r in serial)
+    serial_files = file_hashes(runs)
+    assert len(serial_files) == 3 * 11  # ingest 2, differentiate 2, identify 2, validate 1 + 2 + 2
+    # the manifests' output hashes are those of the files on disk
+    for r in serial:
+        for stage, outputs in r.outputs.items():
+            for rel, digest in outputs.items():
+                assert serial_files[f"{r.name}/{stage}/{rel}"] == digest
+    # different prototypes, different models
+    assert len({r.outputs["identify"]["model.h5"] for r in serial}) == 3
+    rows = {row["dataset"]: row for row in serial[0].summary["nrmse"]}
+    assert set(rows) == {"estimation", "check"}
+    assert 0 < rows["check"]["nrmse_q"] < 0.1 and rows["check"]["rms_unit"] == "mV"
+
+    shutil.rmtree(runs)
+    done = []
+    parallel = run_batch(
+        protos, stages=STAGES, scheduler="processes", workers=2, on_done=done.append
+    )
+    assert [r.name for r in parallel] == NAMES and all(r.ok for r in parallel), parallel
+    assert all(r.ran == tuple(STAGES) for r in parallel)  # really ran again
+    assert sorted(r.name for r in done) == NAMES  # one callback per workflow
+    assert not {r.worker for r in parallel} & {serial[0].worker}  # in worker processes
+    assert [r.outputs for r in parallel] == [r.outputs for r in serial]
+    assert file_hashes(runs) == serial_files
+
+    again = run_batch(protos, stages=STAGES, scheduler="threads", workers=2)
+    assert all(r.ok and r.ran == () and r.skipped == tuple(STAGES) for r in again)
+    assert [r.outputs for r in again] == [r.outputs for r in serial]
+    assert again[0].summary == parallel[0].summary
+    table = summary_table(again)
+    assert list(table.name) == NAMES
+    assert (table.ran == 0).all() and (table.skipped == 4).all() and (table.status == "done").all()
+
+
+def test_broken_workflows_fail_alone_naming_their_files(protos):
+    folder = protos[0].parent
+    bad_channel = write_workflow(folder, "bad-channel", q_column=5)
+    no_source = write_workflow(folder, "no-source", source="missing.csv")
+    paths = [protos[0], bad_channel, protos[1], no_source]
+    results = run_batch(paths, stages=["ingest", "differentiate"], workers=2)
+    assert [r.status for r in results] == ["done", "failed", "done", "failed"]
+    by_name = {r.name: r for r in results}
+
+    channel = by_name["bad-channel"]
+    assert channel.error.startswith("RigLogError: ") and "rig.csv" in channel.error
+    assert "channel 'column 5'" in channel.error
+    assert channel.failed_stage == "ingest" and channel.traceback == ""
+    assert channel.outputs == {} and not (folder / "runs/bad-channel/ingest").exists()
+
+    source = by_name["no-source"]
+    assert source.error.startswith("WorkflowError: ")
+    assert "no-source.toml" in source.error and "missing.csv" in source.error
+    assert source.failed_stage == "" and source.events == () and source.output_dir is None
+
+    for good in (results[0], results[2]):
+        assert good.ran == ("ingest", "differentiate")
+        assert (good.output_dir / "differentiate/check.parquet").is_file()
+
+    table = summary_table(results)
+    assert list(table.status) == ["done", "failed", "done", "failed"]
+    assert list(table.failed_stage) == ["", "ingest", "", ""]
+    assert table.error[1] == channel.error and table.path[3] == str(no_source)
+
+
+def test_unexpected_exception_is_a_failed_item_with_its_traceback(protos, monkeypatch):
+    from pipeline.runner import Runner
+
+    execute = Runner._execute
+
+    def flaky(self, stage):
+        if self.wf.name == "proto-b" and stage == "differentiate":
+            raise ZeroDivisionError("synthetic fault")
+        return execute(self, stage)
+
+    monkeypatch.setattr(Runner, "_execute", flaky)
+    results = run_batch(protos, stages=["ingest", "differentiate"], scheduler="synchronous")
+    assert [r.status for r in results] == ["done", "failed", "done"]
+    failed = results[1]
+    assert failed.error == "ZeroDivisionError: synthetic fault"
+    assert "Traceback" in failed.traceback and "flaky" in failed.traceback
+    assert [(e.stage, e.action) for e in failed.events] == [
+        ("ingest", "ran"),
+        ("differentiate", "failed"),
+    ]
+
+
+def test_dask_progress_bar_and_callbacks(protos, capsys):
+    seen = []
+    results = run_batch(
+        protos[:2], stages=["ingest"], scheduler="synchronous", on_done=seen.append, progress=True
+    )
+    assert sorted(seen, key=lambda r: r.name) == results  # dask picks the order of execution
+    out = capsys.readouterr().out
+    assert "100% Completed" in out  # dask.diagnostics.ProgressBar
+
+
+def test_arguments_are_checked_before_anything_runs(protos):
+    folder = protos[0].parent
+    with pytest.raises(WorkflowError, match="unknown scheduler 'cluster'"):
+        run_batch(protos, scheduler="cluster")
+    with pytest.raises(WorkflowError, match="unknown stage 'identfy'"):
+        run_batch(protos, stages=["ingest", "identfy"])
+    with pytest.raises(WorkflowError, match="needs scheduler 'distributed'"):
+        run_batch(protos, scheduler="threads", address="tcp://127.0.0.1:8786")
+    with pytest.raises(WorkflowError, match="workers must be at least 1"):
+        run_batch(protos, workers=0)
+    twin = folder / "twin.toml"
+    twin.write_text(protos[1].read_text())  # same name, same output_dir
+    with pytest.raises(WorkflowError, match="same output directory") as err:
+        run_batch([protos[0], protos[1], twin], scheduler="synchronous")
+    assert "proto-b.toml" in str(err.value) and "twin.toml" in str(err.value)
+    assert not (folder / "runs").exists()
+    assert run_batch([]) == []
+
+
+def test_distributed_without_the_package_says_how_to_install_it(protos, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    with pytest.raises(WorkflowError, match=r'pip install "debist\[cluster\]"'):
+        run_batch(protos, scheduler="distributed")
+    assert not (protos[0].parent / "runs").exists()
+
+
+def test_expand_workflows_files_directories_and_patterns(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a/sub").mkdir()
+    (tmp_path / "empty").mkdir()
+    for rel in ("a/2.toml", "a/1.toml", "a/notes.txt", "a/sub/3.toml", "top.toml"):
+        (tmp_path / rel).write_text("")
+    a = tmp_path / "a"
+    assert expand_workflows(a) == [a / "1.toml", a / "2.toml"]  # sorted, *.toml only
+    assert expand_workflows([str(tmp_path / "top.toml"), a, a / "2.toml"]) == [
+        tmp_path / "top.toml",
+        a / "1.toml",
+        a / "2.toml",
+    ]  # argument order, duplicates dropped
+    assert expand_workflows([str(tmp_path / "**/*.toml")]) == [
+        a / "1.toml",
+        a / "2.toml",
+        a / "sub/3.toml",
+        tmp_path / "top.toml",
+    ]
+    assert expand_workflows([str(tmp_path / "a/s*")]) == [a / "sub/3.toml"]  # a matched directory
+    cwd = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        assert expand_workflows("a/1.toml") == [a / "1.toml"]  # relative -> absolute
+    finally:
+        os.chdir(cwd)
+    with pytest.raises(WorkflowError, match=r"pattern .*nothing.*matches no workflow file"):
+        expand_workflows([str(a), str(tmp_path / "nothing*.toml")])
+    with pytest.raises(WorkflowError, match=r"'.*missing\.toml' does not exist"):
+        expand_workflows([str(tmp_path / "missing.toml")])
+    with pytest.raises(WorkflowError, match=r"holds no \*\.toml"):
+        expand_workflows([tmp_path / "empty"])
+    with pytest.raises(WorkflowError, match="no workflow files given"):
+        expand_workflows([])
+
+
+@pytest.mark.slow
+def test_local_dask_cluster_gives_the_serial_bytes(protos):
+    distributed = pytest.importorskip(
+        "distributed", reason='dask.distributed is optional: pip install "debist[cluster]"'
+    )
+    runs = protos[0].parent / "runs"
+    serial = run_batch(protos, stages=STAGES, scheduler="synchronous")
+    serial_files = file_hashes(runs)
+    shutil.rmtree(runs)
+    # threads_per_worker=1: the validate stage draws with pyplot, which is not thread-safe
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        done = []
+        results = run_batch(
+            protos, stages=STAGES, address=cluster.scheduler_address, on_done=done.append
+        )
+    assert [r.name for r in results] == NAMES and all(r.ok for r in results), results
+    assert all(isinstance(r, BatchResult) and r.ran == tuple(STAGES) for r in results)
+    assert sorted(r.name for r in done) == NAMES
+    assert [r.outputs for r in results] == [r.outputs for r in serial]
+    assert file_hashes(runs) == serial_files
+
+
+@pytest.mark.slow
+def test_a_task_lost_on_the_cluster_is_a_failed_item(protos, monkeypatch):
+    distributed = pytest.importorskip(
+        "distributed", reason='dask.distributed is optional: pip install "debist[cluster]"'
+    )
+    import pipeline.batch as batch
+
+    item = batch.run_workflow_item
+
+    def lost(path, stages=None, force=False):
+        if Path(path).stem == "proto-b":  # fails outside the item's own error capture
+            raise MemoryError("worker out of memory")
+        return item(path, stages, force)
+
+    monkeypatch.setattr(batch, "run_workflow_item", lost)
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        results = run_batch(protos, stages=["ingest"], address=cluster.scheduler_address)
+    assert [r.status for r in results] == ["done", "failed", "done"]
+    assert results[1].error == "MemoryError: worker out of memory"
+    assert results[1].name == "proto-b" and results[1].path == protos[1]
