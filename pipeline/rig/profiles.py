@@ -1,0 +1,562 @@
+"""Excitation profiles of the virtual rig: reference voltages of DE 1 (left) and DE 2 (right).
+
+A profile is a pair of reference voltages ``r1``, ``r2`` sampled on the uniform grid of the
+rig's DAC (zero-order hold, interval ``hold``). Two profiles are defined, both built as a
+sequence of episodes "sub-threshold block -> 3 kV switching pulse -> free ring-down", with
+the pulses alternating between DE 1 (the beam moves to the right well) and DE 2 (back to the
+left well); the beam starts in the left well (the paper's experiment starts at q = -10 mm):
+
+``identification``
+    The broad-band training profile of Fig. 11a: band-limited random voltages on both DEs
+    between the pulses, rectangular pulses of three lengths.
+``validation``
+    Unseen data for the cross-validation of Fig. 15: chirps, staircases, triangles and a
+    multisine between trapezoidal, rectangular and shorter pulses, at other times.
+
+The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV). The
+electrostatic force is ``g_i(q) v_i^2`` (Eq. 37), so every block has a non-zero offset:
+``v = v0 + u`` gives ``v^2 = v0^2 + 2 v0 u + u^2``, a force linear in the excitation ``u``
+around a shifted operating point. The static switching threshold of the Table 1 prototype
+(reduced model of Sec. 3.4) is about 1.45 kV on one DE (1.4 kV does not switch it from the
+left well, 1.5 kV does), so 1 kV leaves a margin for the dynamic overshoot of the resonance
+near 3 Hz (damping ratio about 0.5).
+
+References
+----------
+Masoud & Maas 2025, Sec. 5.1 (3 kV converters, 37.5 s identification experiment logged at
+10 ms, start in the left well at q = -10 mm), Fig. 11a (identification profile: broad
+frequency spectrum, both wells covered), Sec. 5.2 and Fig. 15 (validation on unseen data).
+"""
+
+from __future__ import annotations
+
+import inspect
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import signal
+
+from pipeline.errors import WorkflowError
+
+__all__ = [
+    "PROFILES",
+    "V_LIMIT",
+    "Excitation",
+    "identification_profile",
+    "make_profile",
+    "validation_profile",
+]
+
+#: Largest voltage the rig's high-voltage converters deliver [V] (Sec. 5.1).
+V_LIMIT = 3000.0
+
+#: Band of the identification profile's random excitation [Hz].
+_ID_BAND = (0.5, 20.0)
+#: Per noise block: peak of (r1, r2) as fractions of ``v_sub``. In the left well DE 1
+#: pushes towards the barrier and DE 2 deeper into the well; in the right well the reverse.
+_ID_LEVELS = ((1.0, 0.5), (1.0, 0.5), (0.5, 1.0), (0.5, 1.0), (0.8, 0.8), (0.8, 0.8))
+#: Rectangular pulse lengths of the identification profile, cycled [s].
+_ID_PULSES = (0.6, 0.8, 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Excitation:
+    """Reference voltages of both DEs on the DAC grid (zero-order hold).
+
+    Sample ``k`` holds from ``t[k]`` to ``t[k] + hold``; the profile lasts ``n * hold``.
+    The arrays are read-only.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times ``k * hold`` [s].
+    r1, r2 : ndarray, shape (n,)
+        Reference voltages of DE 1 (left) and DE 2 (right) [V], within ``[0, 3000]``.
+    hold : float
+        DAC interval [s].
+    name : str
+        Profile name (a key of :data:`PROFILES`).
+    switch_times : tuple of float
+        Onsets of the switching pulses [s] (grid times), for plots and integrator
+        breakpoints; the pulse ends are in ``segments``.
+    switch_sides : tuple of int
+        The DE (1 or 2) each pulse drives: 1 moves the beam to the right well, 2 back to
+        the left.
+    segments : tuple of (str, float, float)
+        The episodes ``(label, start, stop)`` [s] in time order, covering the profile:
+        ``"rest"`` (both 0 V), ``"pulse-DE1"``, ``"pulse-DE2"``, and the sub-threshold
+        blocks ``"noise"``, ``"chirp"``, ``"staircase"``, ``"multisine"``, ``"triangle"``.
+
+    Raises
+    ------
+    ValueError
+        Arrays not 1-D of equal length, ``t`` not ``k * hold``, non-finite values or
+        voltages outside ``[0, 3000]`` V, mismatched ``switch_times`` / ``switch_sides``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1 and Fig. 11a.
+    """
+
+    t: NDArray[np.float64]
+    r1: NDArray[np.float64]
+    r2: NDArray[np.float64]
+    hold: float
+    name: str
+    switch_times: tuple[float, ...] = ()
+    switch_sides: tuple[int, ...] = ()
+    segments: tuple[tuple[str, float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        arrays = {}
+        for key in ("t", "r1", "r2"):
+            arr = np.array(getattr(self, key), dtype=np.float64)
+            if arr.ndim != 1:
+                raise ValueError(f"`{key}` must be 1-D, got shape {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"`{key}` must be finite")
+            arr.setflags(write=False)
+            arrays[key] = arr
+        n = arrays["t"].size
+        if n == 0 or arrays["r1"].size != n or arrays["r2"].size != n:
+            raise ValueError(
+                f"`t`, `r1`, `r2` must be non-empty and of equal length, got "
+                f"{n}, {arrays['r1'].size}, {arrays['r2'].size}"
+            )
+        hold = _positive("hold", self.hold)
+        if not np.allclose(arrays["t"], np.arange(n) * hold, rtol=0.0, atol=1e-9 * max(1, n)):
+            raise ValueError("`t` must be the DAC grid k * hold")
+        for key in ("r1", "r2"):
+            lo, hi = float(arrays[key].min()), float(arrays[key].max())
+            if lo < 0.0 or hi > V_LIMIT:
+                raise ValueError(f"`{key}` must be within [0, {V_LIMIT:g}] V, got [{lo}, {hi}]")
+        if len(self.switch_times) != len(self.switch_sides):
+            raise ValueError("`switch_times` and `switch_sides` must have equal lengths")
+        if any(s not in (1, 2) for s in self.switch_sides):
+            raise ValueError(f"`switch_sides` must hold 1 or 2, got {self.switch_sides}")
+        for key, arr in arrays.items():
+            object.__setattr__(self, key, arr)
+        object.__setattr__(self, "hold", hold)
+        object.__setattr__(self, "switch_times", tuple(float(x) for x in self.switch_times))
+        object.__setattr__(self, "switch_sides", tuple(int(s) for s in self.switch_sides))
+        object.__setattr__(self, "segments", tuple(tuple(s) for s in self.segments))
+
+    @property
+    def duration(self) -> float:
+        """Length of the profile ``n * hold`` [s] (the last sample holds until then)."""
+        return self.t.size * self.hold
+
+    def at(self, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Evaluate the zero-order hold at arbitrary times.
+
+        Parameters
+        ----------
+        t : array_like, shape (m,) or scalar
+            Times [s]; before 0 the first sample, after the end the last one is held.
+
+        Returns
+        -------
+        r1, r2 : ndarray, shape like ``t``
+            Reference voltages [V] of the sample holding at ``t``.
+        """
+        k = np.searchsorted(self.t, np.asarray(t, dtype=np.float64), side="right") - 1
+        k = np.clip(k, 0, self.t.size - 1)
+        return self.r1[k], self.r2[k]
+
+
+# ------------------------------------------------------------------------------ helpers
+def _positive(key: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ValueError(f"`{key}` must be a number, got {value!r}")
+    x = float(value)
+    if not (np.isfinite(x) and x > 0.0):
+        raise ValueError(f"`{key}` must be positive and finite, got {value!r}")
+    return x
+
+
+def _grid(duration: float, hold: float, v_max: float, v_sub: float) -> int:
+    """Check the common arguments; return the number of DAC samples."""
+    duration = _positive("duration", duration)
+    hold = _positive("hold", hold)
+    v_max = _positive("v_max", v_max)
+    v_sub = _positive("v_sub", v_sub)
+    if hold > 0.01:
+        raise ValueError(f"`hold` must be <= 0.01 s (DAC faster than the 10 ms log), got {hold}")
+    if v_max > V_LIMIT:
+        raise ValueError(f"`v_max` must be <= {V_LIMIT:g} V (converter limit), got {v_max}")
+    if v_sub >= v_max:
+        raise ValueError(f"`v_sub` must be below `v_max` = {v_max}, got {v_sub}")
+    n = round(duration / hold)
+    if abs(n * hold - duration) > 1e-9 * max(1.0, duration):
+        raise ValueError(f"`duration` = {duration} s is not a multiple of `hold` = {hold} s")
+    return n
+
+
+class _Builder:
+    """Lays episodes end to end on the DAC grid, alternating the switching side."""
+
+    def __init__(self, n: int, hold: float):
+        self.hold = hold
+        self.t = np.arange(n) * hold
+        self.r = np.zeros((2, n))
+        self.k = 0  # next free sample
+        self.side = 1  # beam starts in the left well: the first pulse is on DE 1
+        self.switch_times: list[float] = []
+        self.switch_sides: list[int] = []
+        self.segments: list[tuple[str, float, float]] = []
+
+    @property
+    def n(self) -> int:
+        return self.t.size
+
+    def samples(self, seconds: float) -> int:
+        return round(seconds / self.hold)
+
+    def fits(self, seconds: float) -> bool:
+        return self.k + self.samples(seconds) <= self.n
+
+    def add(self, label: str, seconds: float, fill: Callable | None = None) -> slice:
+        """Append an episode; ``fill(tau)`` gives (r1, r2) at local times ``tau`` [s]."""
+        m = min(self.samples(seconds), self.n - self.k)
+        sl = slice(self.k, self.k + m)
+        if fill is not None and m:
+            r1, r2 = fill(np.arange(m) * self.hold)
+            self.r[0, sl], self.r[1, sl] = r1, r2
+        self.segments.append((label, self.k * self.hold, (self.k + m) * self.hold))
+        self.k += m
+        return sl
+
+    def pulse(self, v_max: float, flat: float, ramp: float = 0.0) -> None:
+        """Append a (trapezoidal) switching pulse on the current side, then swap sides."""
+        side = self.side
+        start = self.k * self.hold
+        total = flat + 2.0 * ramp
+
+        def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            if ramp > 0.0:
+                shape = np.clip(np.minimum(tau, total - tau) / ramp, 0.0, 1.0)
+            else:
+                shape = np.ones_like(tau)
+            v = v_max * shape
+            zero = np.zeros_like(tau)
+            return (v, zero) if side == 1 else (zero, v)
+
+        self.add(f"pulse-DE{side}", total, fill)
+        self.switch_times.append(start)
+        self.switch_sides.append(side)
+        self.side = 3 - side
+
+    def finish(self, name: str) -> Excitation:
+        if self.k < self.n:
+            self.add("rest", (self.n - self.k) * self.hold)
+        # Clip rounding below 0 V; the fills never exceed their peaks by construction.
+        r = np.clip(self.r, 0.0, None)
+        return Excitation(
+            t=self.t,
+            r1=r[0],
+            r2=r[1],
+            hold=self.hold,
+            name=name,
+            switch_times=tuple(self.switch_times),
+            switch_sides=tuple(self.switch_sides),
+            segments=tuple(self.segments),
+        )
+
+
+def _unit(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Scale a zero-mean signal to peak 1, then map it to [0, 1]: ``(1 + x / max|x|) / 2``."""
+    peak = float(np.max(np.abs(x))) if x.size else 0.0
+    return 0.5 * (1.0 + (x / peak if peak > 0.0 else x))
+
+
+def _unit_gauss(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Map zero-mean Gaussian noise to [0, 1]: ``+-3`` standard deviations, clipped beyond."""
+    sigma = float(np.std(x)) if x.size else 0.0
+    z = np.clip(x / (3.0 * sigma), -1.0, 1.0) if sigma > 0.0 else x
+    return 0.5 * (1.0 + z)
+
+
+def _triangle(tau: NDArray[np.float64], period: float) -> NDArray[np.float64]:
+    """Triangle wave in [0, 1] starting at 0 [-]."""
+    return 0.5 * (1.0 + signal.sawtooth(2.0 * np.pi * tau / period - np.pi, width=0.5))
+
+
+# ---------------------------------------------------------------------------- profiles
+def identification_profile(
+    *,
+    duration: float = 37.5,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = 1000.0,
+    seed: int = 0,
+) -> Excitation:
+    """Broad-band identification profile of Fig. 11a: switching both ways plus random noise.
+
+    Timing with the defaults (37.5 s, 37 500 DAC samples of 1 ms): 0.5 s rest at 0 V,
+    then six cycles of
+
+    1. a 4 s noise block on both DEs (``"noise"``),
+    2. 0.2 s rest,
+    3. a rectangular ``v_max`` pulse on one DE, 0.6, 0.8 or 1.0 s long (cycled), DE 1
+       first (left -> right well), then DE 2 (right -> left), alternating
+       (``"pulse-DE1"`` / ``"pulse-DE2"``, onsets at 4.7, 10.5, 16.5, 22.7, 28.5, 34.5 s),
+    4. 1 s rest: the free ring-down in the new well,
+
+    and a last 1 s noise block in the left well. A longer ``duration`` repeats the cycle;
+    the time left after the last full cycle is noise (when at least 1 s) or rest.
+
+    A noise block is white Gaussian noise (``numpy.random.default_rng(seed)``, one
+    independent stream per DE, so that ``g1`` and ``g2`` are separable) filtered by a
+    4th-order Butterworth band-pass 0.5-20 Hz (zero-phase, :func:`scipy.signal.sosfiltfilt`),
+    mapped per block to ``[0, peak]``: offset ``peak / 2``, +-3 standard deviations to
+    ``+-peak / 2`` and the 0.3 % of samples beyond clipped (a crest factor of 3 instead of
+    the 4-4.5 of a 4 s Gaussian record: 40 % more RMS for the same peak).
+    The peaks of (DE 1, DE 2) cycle through (1, 0.5), (1, 0.5), (0.5, 1), (0.5, 1),
+    (0.8, 0.8), (0.8, 0.8) times ``v_sub``, so each well is excited with the beam pushed
+    towards the barrier, deeper into the well and balanced.
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least one cycle (6.3 s).
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Height of the switching pulses [V], at most 3000.
+    v_sub : float
+        Peak of the sub-threshold noise [V], below ``v_max`` and, for the profile to mean
+        what it says, below the prototype's switching threshold (about 1.45 kV for Table 1).
+    seed : int
+        Seed of :func:`numpy.random.default_rng`; the same seed gives identical arrays.
+
+    Returns
+    -------
+    Excitation
+        ``name = "identification"``; ``r1``, ``r2`` of shape ``(round(duration / hold),)``
+        [V].
+
+    Raises
+    ------
+    ValueError
+        Non-positive or non-finite arguments, ``v_max > 3000``, ``v_sub >= v_max``,
+        ``hold > 0.01``, ``duration`` not a multiple of ``hold`` or shorter than a cycle.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1, Fig. 11a (identification data: 37.5 s, 3750 samples at
+    10 ms, broad frequency spectrum, the whole measurement range covered).
+    """
+    n = _grid(duration, hold, v_max, v_sub)
+    b = _Builder(n, float(hold))
+    lead, block, gap, ring = 0.5, 4.0, 0.2, 1.0
+    if not b.fits(lead + block + gap + _ID_PULSES[0] + ring):
+        raise ValueError(
+            f"`duration` = {duration} s is shorter than one identification cycle "
+            f"({lead + block + gap + _ID_PULSES[0] + ring:g} s)"
+        )
+    rng = np.random.default_rng(seed)
+    sos = signal.butter(4, _ID_BAND, btype="bandpass", fs=1.0 / b.hold, output="sos")
+    noise = signal.sosfiltfilt(sos, rng.standard_normal((2, n)), axis=1)
+
+    def noise_block(levels: tuple[float, float], seconds: float) -> None:
+        k0 = b.k
+
+        def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            sl = slice(k0, k0 + tau.size)
+            return (
+                v_sub * levels[0] * _unit_gauss(noise[0, sl]),
+                v_sub * levels[1] * _unit_gauss(noise[1, sl]),
+            )
+
+        b.add("noise", seconds, fill)
+
+    b.add("rest", lead)
+    i = 0
+    while b.fits(block + gap + _ID_PULSES[i % len(_ID_PULSES)] + ring):
+        noise_block(_ID_LEVELS[i % len(_ID_LEVELS)], block)
+        b.add("rest", gap)
+        b.pulse(v_max, _ID_PULSES[i % len(_ID_PULSES)])
+        b.add("rest", ring)
+        i += 1
+    left = (b.n - b.k) * b.hold
+    if left >= 1.0 - 1e-9:
+        noise_block(_ID_LEVELS[i % len(_ID_LEVELS)], left)
+    return b.finish("identification")
+
+
+def validation_profile(
+    *,
+    duration: float = 37.5,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = 1000.0,
+    seed: int = 1,
+) -> Excitation:
+    """Build the validation profile: chirps, staircase, multisine, triangles, ramped pulses.
+
+    Timing with the defaults (37.5 s): 1 s rest, then five episodes "block, pulse, rest"
+    whose four pulses alternate DE 1, DE 2, DE 1, DE 2 (onsets 6.0, 13.2, 21.2, 28.2 s), so
+    the beam ends in the left well where it started:
+
+    ============  ============================================  ==========================
+    time [s]      sub-threshold block                           switching pulse
+    ============  ============================================  ==========================
+    1.0-6.0       DE 1 log chirp 0.5 -> 15 Hz in [0, 0.9 v_sub], trapezoid on DE 1:
+                  DE 2 triangle 0 -> 0.6 v_sub (period 2.5 s)   0.2 s ramps, 0.6 s flat
+    8.2-13.2      DE 2 staircase of 0.2 ... 1.0 v_sub, 1 s per  rectangle on DE 2, 0.5 s
+                  step in a seeded order; DE 1 at 0.2 v_sub
+    15.2-21.2     both DEs: random-phase multisine, 8 tones     rectangle on DE 1, 1.0 s
+                  0.3-12 Hz, in [0, 0.9 v_sub]
+    23.2-28.2     DE 2 log chirp 15 -> 0.5 Hz in [0, 0.9 v_sub], trapezoid on DE 2:
+                  DE 1 triangle 0 -> 0.6 v_sub (period 2.5 s)   0.1 s ramps, 0.7 s flat
+    30.1-35.1     DE 1 triangle 0 -> v_sub (period 2.5 s)       (none; rest to the end)
+    ============  ============================================  ==========================
+
+    with 1.2, 1.5, 1.0, 1.0 and 2.4 s rest after the episodes. The blocks differ from the
+    identification data in kind (deterministic sweeps, steps and ramps instead of band-limited
+    noise), amplitude and timing, and the pulses in length and shape. A longer ``duration``
+    repeats the five episodes; what does not fit entirely is left at 0 V.
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least the rest and first episode (8 s).
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Height of the switching pulses [V], at most 3000.
+    v_sub : float
+        Peak of the sub-threshold blocks [V], below ``v_max``.
+    seed : int
+        Seed of :func:`numpy.random.default_rng` (multisine phases, staircase order).
+
+    Returns
+    -------
+    Excitation
+        ``name = "validation"``; ``r1``, ``r2`` of shape ``(round(duration / hold),)`` [V].
+
+    Raises
+    ------
+    ValueError
+        As :func:`identification_profile`.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.2 and Fig. 15 (cross-validation on measurement data not
+    used in the identification).
+    """
+    n = _grid(duration, hold, v_max, v_sub)
+    b = _Builder(n, float(hold))
+    rng = np.random.default_rng(seed)
+    lead = 1.0
+    if not b.fits(lead + 7.0):
+        raise ValueError(f"`duration` = {duration} s is shorter than one validation episode (8 s)")
+
+    def chirp(tau, f0, f1, seconds):
+        return _unit(signal.chirp(tau, f0, seconds, f1, method="logarithmic", phi=-90.0))
+
+    def block_chirp_up(tau):
+        return 0.9 * v_sub * chirp(tau, 0.5, 15.0, 5.0), 0.6 * v_sub * _triangle(tau, 2.5)
+
+    def block_staircase(tau):
+        levels = rng.permutation(np.array([0.2, 0.4, 0.6, 0.8, 1.0]))
+        step = np.minimum((tau // 1.0).astype(int), levels.size - 1)
+        return np.full_like(tau, 0.2 * v_sub), v_sub * levels[step]
+
+    def block_multisine(tau):
+        freqs = np.geomspace(0.3, 12.0, 8)
+        out = []
+        for _ in range(2):
+            phases = rng.uniform(0.0, 2.0 * np.pi, freqs.size)
+            x = np.sin(2.0 * np.pi * freqs[:, None] * tau[None, :] + phases[:, None]).sum(axis=0)
+            out.append(0.9 * v_sub * _unit(x - x.mean()))
+        return out[0], out[1]
+
+    def block_chirp_down(tau):
+        return 0.6 * v_sub * _triangle(tau, 2.5), 0.9 * v_sub * chirp(tau, 15.0, 0.5, 5.0)
+
+    def block_triangle(tau):
+        return v_sub * _triangle(tau, 2.5), np.zeros_like(tau)
+
+    episodes = (  # label, block [s], fill, pulse (flat, ramp) [s] or None, rest after [s]
+        ("chirp", 5.0, block_chirp_up, (0.6, 0.2), 1.2),
+        ("staircase", 5.0, block_staircase, (0.5, 0.0), 1.5),
+        ("multisine", 6.0, block_multisine, (1.0, 0.0), 1.0),
+        ("chirp", 5.0, block_chirp_down, (0.7, 0.1), 1.0),
+        ("triangle", 5.0, block_triangle, None, 2.4),
+    )
+    b.add("rest", lead)
+    for i in itertools.count():
+        label, seconds, fill, pulse, ring = episodes[i % len(episodes)]
+        flat, ramp = pulse if pulse is not None else (0.0, 0.0)
+        if not b.fits(seconds + flat + 2.0 * ramp + ring):
+            break
+        b.add(label, seconds, fill)
+        if pulse is not None:
+            b.pulse(v_max, flat, ramp)
+        b.add("rest", ring)
+    return b.finish("validation")
+
+
+#: Profile name -> builder; every builder takes keyword arguments only.
+PROFILES: dict[str, Callable[..., Excitation]] = {
+    "identification": identification_profile,
+    "validation": validation_profile,
+}
+
+
+def make_profile(name: str, **kwargs: Any) -> Excitation:
+    """Build a profile of :data:`PROFILES` by name (the workflow's way to choose one).
+
+    Parameters
+    ----------
+    name : str
+        ``"identification"`` or ``"validation"``.
+    **kwargs
+        Keyword arguments of the builder (``duration``, ``hold``, ``v_max``, ``v_sub``,
+        ``seed``).
+
+    Returns
+    -------
+    Excitation
+        The profile.
+
+    Raises
+    ------
+    WorkflowError
+        Unknown profile name (the message lists the known ones), unknown keyword, or a
+        value the builder rejects (the builder's message, prefixed with the profile).
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 11a (identification) and Fig. 15 (validation).
+
+    Examples
+    --------
+    >>> make_profile("identification", seed=3).r1.shape
+    (37500,)
+    >>> make_profile("sweep")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    pipeline.errors.WorkflowError: unknown excitation profile 'sweep'; known profiles: ...
+    """
+    if name not in PROFILES:
+        raise WorkflowError(
+            f"unknown excitation profile {name!r}; known profiles: {', '.join(PROFILES)}"
+        )
+    builder = PROFILES[name]
+    known = list(inspect.signature(builder).parameters)
+    unknown = sorted(set(kwargs) - set(known))
+    if unknown:
+        raise WorkflowError(
+            f"excitation profile {name!r}: unknown parameter {unknown[0]!r}; "
+            f"known parameters: {', '.join(known)}"
+        )
+    try:
+        return builder(**kwargs)
+    except ValueError as exc:
+        raise WorkflowError(f"excitation profile {name!r}: {exc}") from exc
