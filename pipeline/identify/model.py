@@ -262,7 +262,9 @@ class RBFModel:
             theta_g=np.asarray(m["theta_g"], float),
             backbone=backbone,
             q_range=(float(a["q_min"]), float(a["q_max"])),
-            prior=None if prior is None else PhysicsPrior(
+            prior=None
+            if prior is None
+            else PhysicsPrior(
                 **{k: np.asarray(prior[k], dtype=float) for k in ("q", "c", "d", "g")}
             ),
         )
