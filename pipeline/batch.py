@@ -53,6 +53,10 @@ SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
 #: Characters that make an argument of :func:`expand_workflows` a glob pattern.
 _GLOB_CHARS = frozenset("*?[")
 _CLUSTER_HINT = 'pip install "debist[cluster]"'
+#: One BLAS/OpenMP thread per worker process, as dask.distributed's nanny sets for its
+#: workers (config ``distributed.nanny.pre-spawn-environ``): n processes x n BLAS threads
+#: would oversubscribe the cores.
+_WORKER_ENVIRON = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
 
 @dataclass(frozen=True)
@@ -366,7 +370,13 @@ def run_batch(
         Before anything runs: an unknown scheduler or stage, ``workers < 1``,
         ``address`` with a local scheduler, two workflows writing to the same output
         directory, or ``"distributed"`` without the ``distributed`` package (the message
-        says ``pip install "debist[cluster]"``).
+        says ``pip install "debist[cluster]"``), or a cluster that cannot be reached.
+    concurrent.futures.process.BrokenProcessPool
+        When a worker process of the ``"processes"`` scheduler dies (a crash in native
+        code, the out-of-memory killer): Dask's local process pool cannot recover, so the
+        batch stops. Workflows that finished keep their artifacts and a rerun skips
+        them. ``"distributed"`` isolates such crashes: its nanny restarts the worker and
+        only that workflow fails (``KilledWorker``).
 
     References
     ----------
@@ -401,6 +411,16 @@ def run_batch(
     return _run_local(args, scheduler, n_workers, on_done, progress)
 
 
+def _init_worker_process() -> None:
+    """Make BLAS single-threaded in a local worker process, unless the user set it.
+
+    It runs before the first task, so before the worker imports NumPy (unless the main
+    module of the calling program imports it at the top: then the setting comes too late).
+    """
+    for name, value in _WORKER_ENVIRON.items():
+        os.environ.setdefault(name, value)
+
+
 def _run_local(
     args: list[tuple[str, tuple[str, ...] | None, bool]],
     scheduler: str,
@@ -428,6 +448,7 @@ def _run_local(
         # The default chunksize (6) would send several workflows to one worker process
         # together; each workflow is a long task, so hand them out one at a time.
         options["chunksize"] = 1
+        options["initializer"] = _init_worker_process
     with contextlib.ExitStack() as stack:
         stack.enter_context(Callback(posttask=posttask))
         if progress:

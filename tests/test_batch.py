@@ -251,6 +251,15 @@ def test_expand_workflows_files_directories_and_patterns(tmp_path):
         expand_workflows([])
 
 
+def test_local_worker_processes_get_single_threaded_blas_unless_set(monkeypatch):
+    from pipeline.batch import _init_worker_process
+
+    environ = {"OMP_NUM_THREADS": "3"}  # the user's own setting is kept
+    monkeypatch.setattr(os, "environ", environ)  # nothing leaks into this test process
+    _init_worker_process()
+    assert environ == {"OMP_NUM_THREADS": "3", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
 @pytest.mark.slow
 def test_local_dask_cluster_gives_the_serial_bytes(protos):
     distributed = pytest.importorskip(
