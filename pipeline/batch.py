@@ -213,7 +213,7 @@ def _check_output_dirs(paths: Sequence[Path]) -> None:
     for path in paths:
         try:
             out = load_workflow(path).output_dir
-        except DebistError:
+        except Exception:  # reported by the workflow's own task, as its failure
             continue
         for other, other_out in owners:
             if out == other_out or out.is_relative_to(other_out) or other_out.is_relative_to(out):
@@ -340,9 +340,10 @@ def run_batch(
         ``"synchronous"`` runs in the calling thread (debugging); ``"threads"`` shares
         one process (the validate and study stages draw with matplotlib's pyplot, which
         is not thread-safe: prefer processes for those); ``"processes"`` spawns
-        ``workers`` processes (call from under ``if __name__ == "__main__":``);
-        ``"distributed"`` connects to ``address``, or starts a ``LocalCluster`` of
-        ``workers`` single-threaded worker processes when there is none.
+        ``workers`` processes; ``"distributed"`` connects to ``address``, or starts a
+        ``LocalCluster`` of ``workers`` single-threaded worker processes when there is
+        none. Spawned workers re-import the calling script: call from under
+        ``if __name__ == "__main__":``.
     workers : int, optional
         Worker processes or threads of a local scheduler or local cluster (default:
         ``min(number of workflows, CPU count)``). Ignored by ``"synchronous"`` and
