@@ -56,6 +56,8 @@ def _report(runner, manifests) -> None:
             "[dim]differentiate: the iterative method stopped at its iteration limit on "
             f"{len(stopped)} data set(s), as configured (converged = false in the manifest)[/dim]"
         )
+    if "rig" in manifests:
+        console.print(report.rig_table(manifests["rig"].summary))
     if "analyze" in manifests:
         console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
@@ -130,6 +132,12 @@ def study(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) ->
     _run(workflow, ["study"], force, out)
 
 
+@app.command("simulate-rig")
+def simulate_rig(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
+    """Run the virtual rig of [rig]: dSPACE MAT logs and truth files per experiment."""
+    _run(workflow, ["rig"], force, out)
+
+
 @app.command()
 def analyze(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
     """Design analysis of [physics] (Section 3): statics.h5 and Fig. 3, 4, 5, 6a, 7 as PNG."""
@@ -171,6 +179,96 @@ def verify(workflow: WorkflowArg, out: OutOpt = None) -> None:
             err.print(f"[red]changed:[/red] {escape(p)}")
         raise typer.Exit(3)
     console.print("[green]all artifacts match their manifests[/green]")
+
+
+StagesOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--stages", help="Comma-separated stages, e.g. 'ingest,differentiate' (default: all)."
+    ),
+]
+SchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="synchronous | threads | processes | distributed "
+        "(default: processes, or distributed with --address).",
+    ),
+]
+WorkersOpt = Annotated[
+    int | None,
+    typer.Option("--workers", min=1, help="Local worker processes (default: one per core)."),
+]
+AddressOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--address", help='Dask scheduler, e.g. tcp://host:8786 (pip install "debist\\[cluster]").'
+    ),
+]
+
+
+@app.command()
+def batch(
+    paths: Annotated[
+        list[str],
+        typer.Argument(help="Workflow files, directories (their *.toml) or glob patterns."),
+    ],
+    stages: StagesOpt = None,
+    force: ForceOpt = False,
+    scheduler: SchedulerOpt = None,
+    workers: WorkersOpt = None,
+    address: AddressOpt = None,
+) -> None:
+    """Run many workflows (one per prototype) on Dask; exit 1 if any of them failed."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+    from rich.table import Table
+
+    from pipeline.batch import expand_workflows, run_batch, summary_table
+
+    selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    try:
+        files = expand_workflows(paths)
+        columns = (TextColumn("batch"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+        with Progress(*columns, console=console, transient=True) as bar:
+            task = bar.add_task("batch", total=len(files))
+            results = run_batch(
+                files,
+                stages=selected,
+                force=force,
+                scheduler=scheduler,
+                workers=workers,
+                address=address,
+                on_done=lambda _result: bar.advance(task),
+            )
+    except WorkflowError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(2) from None
+    frame = summary_table(results)
+    failed = int((frame.status == "failed").sum())
+    table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
+    for column in ("workflow", "status", "seconds", "ran", "skipped", "error"):
+        justify = "right" if column == "seconds" else "left"
+        table.add_column(column, overflow="fold", justify=justify)
+    for row in frame.itertuples(index=False):
+        style = "red" if row.status == "failed" else "green"
+        where = f"{row.failed_stage}: " if row.failed_stage else ""
+        table.add_row(
+            escape(row.name),
+            f"[{style}]{row.status}[/{style}]",
+            f"{row.seconds:.1f}",
+            str(row.ran),
+            str(row.skipped),
+            escape(where + row.error),
+        )
+    console.print(table)
+    if failed:
+        raise typer.Exit(1)
 
 
 def main() -> None:

@@ -230,10 +230,33 @@ class Figure:
     dpi: int = 110
 
 
+@dataclass(frozen=True)
+class MatRecording:
+    """A dSPACE ControlDesk recording to be written as a MAT file (the virtual rig's log).
+
+    Parameters
+    ----------
+    recording : mapping
+        The value of :func:`pipeline.rig.dspace.recording`.
+    version : {"5", "7.3"}
+        MAT file version.
+    created : str
+        Fixed header timestamp (the file must be a function of its inputs).
+    """
+
+    recording: Mapping[str, Any]
+    version: str
+    created: str
+
+
 def _write_output(value: Any, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     if isinstance(value, H5Tree):
         _write_h5(value.tree, path)
+    elif isinstance(value, MatRecording):
+        from pipeline.rig.dspace import write_recording
+
+        write_recording(path, value.recording, version=value.version, created=value.created)
     elif isinstance(value, Figure):
         import matplotlib.pyplot as plt
 

@@ -197,3 +197,30 @@ def analyze_table(summary: dict[str, Any]) -> Table:
     table.add_row("full vs reduced NRMSE(q), Fig. 7", f"{100 * summary['nrmse_q']:.2f} %")
     table.add_row("full vs reduced NRMSE(phi), Fig. 7", f"{100 * summary['nrmse_phi']:.2f} %")
     return table
+
+
+def rig_table(summary: dict[str, Any]) -> Table:
+    """Tabulate the virtual rig's experiments.
+
+    Parameters
+    ----------
+    summary : dict
+        Summary of the rig stage's manifest (per experiment; lengths in [m]).
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    table = Table(title="Virtual rig")
+    for col in ("experiment", "samples", "q range [mm]", "well changes", "saturated", "time"):
+        table.add_column(escape(col), justify="left" if col == "experiment" else "right")
+    for name, s in summary.items():
+        table.add_row(
+            name,
+            str(s["samples"]),
+            f"{1e3 * s['q_min']:+.2f} ... {1e3 * s['q_max']:+.2f}",
+            str(s["well_changes"]),
+            str(s["saturated"]),
+            f"{s['seconds']:.1f} s",
+        )
+    return table

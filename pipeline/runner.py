@@ -20,13 +20,14 @@ from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.workflow import Workflow
 
 #: Stages in execution order and the stages each reads from.
-STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study", "analyze")
+STAGES = ("rig", "ingest", "differentiate", "identify", "validate", "compare", "study", "analyze")
 #: Stages that run only when the workflow has their section.
-OPTIONAL = ("study", "analyze")
+OPTIONAL = ("rig", "study", "analyze")
 #: Stages that read measured data sets.
 DATA_STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study")
 UPSTREAM = {
-    "ingest": (),
+    "rig": (),
+    "ingest": (),  # plus "rig" when a data set is a virtual-rig log (Runner._upstream)
     "differentiate": ("ingest",),
     "identify": ("ingest", "differentiate"),
     "validate": ("ingest", "differentiate", "identify"),
@@ -86,13 +87,17 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
         return {
             "datasets": {
                 d.name: {
-                    "source": os.path.relpath(d.source, wf.path.parent),
+                    "source": f"rig:{d.rig}"
+                    if d.rig
+                    else os.path.relpath(d.source, wf.path.parent),
                     "role": d.role,
                     "ingest": d.ingest,
                 }
                 for d in wf.datasets
             }
         }
+    if stage == "rig":
+        return {"rig": wf.section("rig"), "physics": physics_params(wf).to_dict()}
     if stage == "study":
         names = ("study", "identify", "validate", "differentiate")
         return {name: wf.section(name) for name in names}
@@ -141,17 +146,29 @@ class Runner:
         return out
 
     # ------------------------------------------------------------------ keys
+    def _upstream(self, stage: str) -> tuple[str, ...]:
+        """Stages whose artifacts ``stage`` reads."""
+        if stage == "ingest" and any(d.rig for d in self.wf.datasets):
+            return ("rig",)
+        return UPSTREAM[stage]
+
     def _inputs(self, stage: str) -> dict[str, str] | None:
         """Input hashes of a stage, or None when an upstream stage has no manifest."""
         if stage == "ingest":
             out = {}
+            rig = artifacts.read_manifest(self.wf.stage_dir("rig"))
             for d in self.wf.datasets:
+                if d.rig:
+                    if rig is None or f"{d.rig}.mat" not in rig.outputs:
+                        return None
+                    out[f"{d.name}:source"] = rig.outputs[f"{d.rig}.mat"]
+                    continue
                 if d.source not in self._source_hashes:
                     self._source_hashes[d.source] = artifacts.sha256_file(d.source)
                 out[f"{d.name}:source"] = self._source_hashes[d.source]
             return out
         inputs = {}
-        for up in UPSTREAM[stage]:
+        for up in self._upstream(stage):
             manifest = artifacts.read_manifest(self.wf.stage_dir(up))
             if manifest is None:
                 return None
@@ -181,7 +198,7 @@ class Runner:
                 result.append(StageStatus(stage, "missing", "never run"))
                 rerun.add(stage)
                 continue
-            ups = [u for u in UPSTREAM[stage] if u in rerun]
+            ups = [u for u in self._upstream(stage) if u in rerun]
             if ups:
                 result.append(StageStatus(stage, "stale", f"upstream '{ups[-1]}' will rerun"))
                 rerun.add(stage)
@@ -265,7 +282,7 @@ class Runner:
             if key is None:
                 missing = [
                     u
-                    for u in UPSTREAM[stage]
+                    for u in self._upstream(stage)
                     if artifacts.read_manifest(self.wf.stage_dir(u)) is None
                 ]
                 raise ArtifactError(
@@ -315,6 +332,9 @@ class Runner:
     def _execute(self, stage: str) -> tuple[dict[str, Any], dict[str, Any]]:
         from pipeline import stages as st
 
+        if stage == "rig":
+            res = st.run_rig(self.wf.section("physics"), self.wf.section("rig"))
+            return res.outputs, res.summary
         if stage == "analyze":
             res = st.run_analyze(physics_params(self.wf), self.wf.section("analyze"))
             outputs: dict[str, Any] = {"statics.h5": artifacts.H5Tree(res.tree)}
@@ -401,7 +421,7 @@ class Runner:
             if manifest is None:
                 continue
             problems += [f"{sdir / c}" for c in artifacts.changed_outputs(sdir, manifest)]
-            if stage != "ingest":
+            if stage not in ("ingest", "rig") or self._upstream(stage):
                 inputs = self._inputs(stage)
                 if inputs is not None and inputs != manifest.inputs:
                     problems.append(

@@ -691,3 +691,80 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
         },
     }
     return AnalyzeResult(analysis_tree(res), analysis_figures(res), summary)
+
+
+@dataclass(frozen=True)
+class RigResult:
+    """Result of the rig stage (the virtual rig's experiments).
+
+    Attributes
+    ----------
+    outputs : dict
+        ``<experiment>.mat`` (:class:`pipeline.artifacts.MatRecording`) and
+        ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment.
+    summary : dict
+        Per experiment: samples, q range [m], 3 kV switchings, saturated samples,
+        integration statistics and wall time [s].
+    """
+
+    outputs: dict[str, Any]
+    summary: dict[str, Any]
+
+
+def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult:
+    """Simulate the virtual rig's experiments (``debist simulate-rig``).
+
+    Parameters
+    ----------
+    physics : mapping
+        The ``[physics]`` section (nominal prototype).
+    section : mapping
+        The ``[rig]`` section (:class:`pipeline.rig.experiment.RigConfig`).
+
+    Returns
+    -------
+    RigResult
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section.
+    DebistError
+        If an integration fails (named by experiment).
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1, Fig. 11a.
+    """
+    from pipeline.artifacts import H5Tree, MatRecording
+    from pipeline.errors import DebistError
+    from pipeline.rig.experiment import (
+        CREATED,
+        RigConfig,
+        rig_recording,
+        run_experiment,
+        truth_tree,
+    )
+
+    cfg = RigConfig.from_dict(section, physics)
+    grid = np.linspace(-20e-3, 20e-3, 401)
+    outputs: dict[str, Any] = {}
+    summary: dict[str, Any] = {}
+    for name, exp in cfg.experiments.items():
+        run = run_experiment(cfg, name)
+        if not run.success:
+            raise DebistError(f"[rig.experiments.{name}]: the plant integration failed: "
+                              f"{run.message}")  # fmt: skip
+        outputs[f"{name}.mat"] = MatRecording(rig_recording(run, name, cfg), exp.format, CREATED)
+        outputs[f"{name}_truth.h5"] = H5Tree(truth_tree(run, cfg, grid))
+        sign = np.sign(run.q_true)
+        summary[name] = {
+            "samples": int(run.t.size),
+            "q_min": float(run.q_true.min()),
+            "q_max": float(run.q_true.max()),
+            "well_changes": int(np.count_nonzero(np.diff(sign[np.abs(run.q_true) > 5e-3]))),
+            "saturated": int(np.count_nonzero(run.saturated)),
+            "nfev": run.nfev,
+            "seconds": run.wall_time,
+        }
+    return RigResult(outputs, summary)

@@ -53,6 +53,7 @@ SECTIONS = (
     "study",
     "physics",
     "analyze",
+    "rig",
 )
 #: Sections that make a workflow meaningful without data sets (a design analysis).
 DATALESS = ("physics",)
@@ -72,12 +73,16 @@ class DatasetSpec:
         Used for identification, or only for validation.
     ingest : dict
         The workflow's ``[ingest]`` section updated by this data set's own keys.
+    rig : str or None
+        Name of the virtual-rig experiment (``[rig.experiments.<name>]``) whose log this
+        data set is; its ``source`` is then that log in the rig stage's folder.
     """
 
     name: str
     source: Path
     role: str
     ingest: dict[str, Any]
+    rig: str | None = None
 
 
 @dataclass(frozen=True)
@@ -159,21 +164,31 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     out = Path(output_dir) if output_dir else base / head.get("output_dir", f"runs/{name}")
     datasets = []
     default_ingest = raw.get("ingest", {})
+    experiments = raw.get("rig", {}).get("experiments", {})
     for ds_name, table in raw.get("datasets", {}).items():
-        if not isinstance(table, dict) or "source" not in table:
-            raise WorkflowError(f"'{path}' [datasets.{ds_name}]: needs a `source` file")
+        where = f"'{path}' [datasets.{ds_name}]"
+        if not isinstance(table, dict) or ("source" in table) == ("rig" in table):
+            raise WorkflowError(
+                f"{where}: needs a `source` file or a virtual-rig experiment `rig` (one of them)"
+            )
         role = table.get("role", "validation")
         if role not in ROLES:
-            raise WorkflowError(
-                f"'{path}' [datasets.{ds_name}]: role must be one of {ROLES}, got {role!r}"
-            )
-        source = (base / table["source"]).resolve()
-        if not source.is_file():
-            raise WorkflowError(
-                f"'{path}' [datasets.{ds_name}]: source file '{source}' does not exist"
-            )
-        overrides = {k: v for k, v in table.items() if k not in ("source", "role")}
-        datasets.append(DatasetSpec(ds_name, source, role, {**default_ingest, **overrides}))
+            raise WorkflowError(f"{where}: role must be one of {ROLES}, got {role!r}")
+        rig = table.get("rig")
+        if rig is not None:
+            if rig not in experiments:
+                raise WorkflowError(
+                    f"{where}: rig experiment {rig!r} is not in [rig.experiments] "
+                    f"(known: {sorted(experiments)})"
+                )
+            source = (out / "rig" / f"{rig}.mat").resolve()
+        else:
+            source = (base / table["source"]).resolve()
+            if not source.is_file():
+                raise WorkflowError(f"{where}: source file '{source}' does not exist")
+        keys = ("source", "role", "rig")
+        overrides = {k: v for k, v in table.items() if k not in keys}
+        datasets.append(DatasetSpec(ds_name, source, role, {**default_ingest, **overrides}, rig))
     if not datasets and not any(name in raw for name in DATALESS):
         raise WorkflowError(
             f"'{path}': no [datasets.<name>] section (and no [physics] section to analyze)"
