@@ -240,6 +240,35 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
     return PhysicsPrior(q=grid, c=cur.c, d=cur.d, g=np.stack([cur.g1, cur.g2], axis=1))
 
 
+def physics_mass(physics) -> float:
+    """Generalised mass ``m_q`` of the analytical reduced model at ``q = 0`` [kg] (Eq. 26).
+
+    Parameters
+    ----------
+    physics : PrototypeParams or None
+        The workflow's ``[physics]`` prototype.
+
+    Returns
+    -------
+    float
+        ``Phi^T M Phi`` at ``q = 0`` [kg] (0.0402 kg for Table 1).
+
+    Raises
+    ------
+    WorkflowError
+        Without a ``[physics]`` section.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26 (a constant m_q).
+    """
+    from pipeline.physics.reduced import reduced_curves
+
+    if physics is None:
+        raise WorkflowError("[identify] m_q = 'physics' needs a [physics] section")
+    return float(reduced_curves(physics, np.array([0.0])).m_q[0])
+
+
 def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
     """Identify the RBF model (Eq. 37-40) on the estimation data sets.
 
@@ -252,7 +281,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     section : mapping
         The ``[identify]`` section (see :class:`IdentifyConfig`).
     physics : PrototypeParams, optional
-        The ``[physics]`` prototype, whose curves the ``physics_*`` backbone terms use.
+        The ``[physics]`` prototype, whose curves the ``physics_*`` backbone terms use and
+        whose ``m_q`` at ``q = 0`` ``m_q = "physics"`` takes (:func:`physics_mass`).
 
     Returns
     -------
@@ -270,7 +300,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
-    cfg = IdentifyConfig.from_dict(dict(section))
+    section = dict(section)
+    if section.get("m_q") == "physics":
+        section["m_q"] = physics_mass(physics)
+    cfg = IdentifyConfig.from_dict(section)
     t0 = time.perf_counter()
     records = estimation_records(tables, derivs)
     if set(PHYSICS_TERMS) & set(cfg.backbone):

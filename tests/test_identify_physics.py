@@ -81,3 +81,13 @@ def test_physics_terms_need_physics(record):
         fit_rbf_model([rec], cfg)
     with pytest.raises(WorkflowError, match="unknown key 'prior'"):
         IdentifyConfig.from_dict({"prior": {}})
+
+
+def test_m_q_physics_is_the_analytical_mass_at_zero():
+    from pipeline.physics.reduced import reduced_curves
+    from pipeline.stages import physics_mass
+
+    assert physics_mass(P) == pytest.approx(float(reduced_curves(P, np.array([0.0])).m_q[0]))
+    assert 0.040 < physics_mass(P) < 0.041  # tip mass 40 g plus the beam's share
+    with pytest.raises(WorkflowError, match="m_q = 'physics' needs a \\[physics\\]"):
+        physics_mass(None)

@@ -41,7 +41,9 @@ class IdentifyConfig:
         Search interval [s]; default [dt, 100 dt] of the estimation data.
     m_q : float or "identify"
         Generalised mass [kg]; 1 identifies the curves per unit mass. With
-        "identify", ``input_gain`` must fix the input gains instead.
+        "identify", ``input_gain`` must fix the input gains instead. In a workflow,
+        ``"physics"`` takes the analytical model's ``m_q`` at ``q = 0`` (the identify
+        stage resolves it from ``[physics]``).
     input_gain : tuple of float or None
         Known gains g_0,i [N/V or N/V^2] when ``m_q = "identify"``.
     coulomb_velocity : float
