@@ -1,0 +1,884 @@
+"""The virtual rig's plant: the full model of Section 3 plus what the analytical model misses.
+
+The "real" prototype that the virtual rig measures is the full dynamic model of
+:mod:`pipeline.physics.dynamics` (Eq. 19-23) with
+
+* **geometric asymmetry**: the anchor offsets ``dz_1``, ``dz_2`` of
+  :class:`~pipeline.physics.params.PrototypeParams` (a bearing offset, an anchor off its
+  nominal position); the default rig has ``dz_1 = 0.15 mm``, ``dz_2 = 0.05 mm``, wells at
+  -9.50 and +10.99 mm instead of +-10.21 mm;
+* **friction at the beam tip**: a generalised Maxwell-slip (GMS) model with a few elements
+  (Al-Bender, Lampaert & Swevers 2005), hysteretic pre-sliding and a breakaway force;
+* **high-voltage drivers**: the voltage applied to a DE follows the DAC reference with a
+  first-order lag and a slew-rate limit (:class:`DriverOutput`);
+* **sensors**: a laser triangulation sensor with white noise, quantisation and a finite
+  range, sampled ``oversample`` times faster than the log and decimated by a zero-phase FIR
+  (the rig's anti-aliasing); noisy voltage monitors.
+
+The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: the state of
+:class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
+elements. :func:`simulate_rig` integrates it with :func:`scipy.integrate.solve_ivp` (BDF with
+an approximate Jacobian) and returns the logged channels with the truth (:class:`RigRun`);
+:func:`true_curves` gives the characteristic curves an identification should recover.
+
+References
+----------
+Masoud & Maas 2025, Eq. 19-23, 33, 37, Sec. 5.1 (3 kV converters, laser sensor, 10 ms log).
+Al-Bender, F., Lampaert, V. & Swevers, J. (2005). The generalized Maxwell-slip model: a novel
+model for friction simulation and compensation. IEEE Trans. Autom. Control 50(11), 1883-1887.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import solve_ivp
+from scipy.signal import decimate, lfilter
+
+from pipeline.errors import DebistWarning, WorkflowError
+from pipeline.physics.dynamics import FullModel, well_state
+from pipeline.physics.kinematics import pitch_angle, ritz_basis
+from pipeline.physics.params import V_MAX, PrototypeParams
+from pipeline.physics.reduced import reduced_curves
+
+__all__ = [
+    "DriverOutput",
+    "RigParams",
+    "RigPlant",
+    "RigRun",
+    "simulate_rig",
+    "true_curves",
+]
+
+#: Log samples simulated beyond each end of the record so that the zero-phase FIR of the
+#: decimation (half length 10 log samples, :func:`scipy.signal.decimate`) has no edge effect.
+_PAD_LOG = 11
+
+
+def _default_prototype() -> PrototypeParams:
+    return PrototypeParams.paper().replace(dz_1=0.15e-3, dz_2=0.05e-3)
+
+
+@dataclass(frozen=True)
+class RigParams:
+    """The simulated prototype and the rig around it, SI units.
+
+    Parameters
+    ----------
+    prototype : PrototypeParams
+        The physics of the prototype (Table 1 with NOTES items 1-6) including its asymmetry;
+        default the paper's prototype at b = 23 mm with ``dz_1 = 0.15 mm``,
+        ``dz_2 = 0.05 mm`` (assembly tolerance of a 3D-printed frame; wells at -9.50 and
+        +10.99 mm, still switchable by 3 kV on either DE).
+    friction_k : tuple of float
+        Stiffnesses ``k_i`` of the Maxwell-slip elements at the beam tip [N/m]; default
+        (40, 12, 4) N/m: pre-sliding distances ``F_i / k_i`` of 10, 50 and 250 um, a tangent
+        stiffness after a reversal of 56 N/m against the 13 N/m of the wells.
+    friction_F : tuple of float
+        Slip forces ``F_i`` of the elements [N]; default (0.4, 0.6, 1.0) mN, a breakaway
+        force of 2 mN: 2 % of the +-80 mN force span over +-15 mm of Fig. 4 and 6 % of the
+        36 mN barrier, so friction perturbs the model without changing its switching. The
+        paper does not quantify friction; these are plausible values for a rubbing frame.
+    friction_c : float
+        Viscous part of the tip friction [N s/m]; 0 by default (the model's own damping,
+        Eq. 12, is in the prototype).
+    friction_exponent : float
+        Sharpness ``p`` of the regularised stick-slip transition (>= 1; large = ideal
+        elasto-plastic elements, see :class:`RigPlant`).
+    driver_tau : float
+        Time constant of the first-order lag of each HV driver [s]; default 5 ms.
+    driver_slew : float
+        Slew-rate limit of each HV driver [V/s]; default 100 kV/s (30 ms for 0 -> 3 kV).
+    sensor_range : float
+        Measuring range of the laser sensor, ``+-sensor_range`` about q = 0 [m]; default
+        25 mm.
+    sensor_resolution : float
+        Quantisation step of the laser sensor [m]; default 0.3 um; 0 disables quantisation.
+    sensor_noise : float
+        RMS of the white noise of one internal laser sample [m]; default 1 um. The FIR of
+        the decimation removes the part above the log's Nyquist frequency, so the logged
+        noise is about ``sensor_noise / sqrt(oversample)``.
+    monitor_noise : float
+        RMS of the white noise of one internal sample of the voltage monitors [V]; default
+        2 V (0.07 % of 3 kV).
+    oversample : int
+        Internal samples per log sample (sensors and plant output on the grid
+        ``sample_time / oversample``); default 10.
+
+    Raises
+    ------
+    WorkflowError
+        If a value is of the wrong type, not finite or out of range, or the friction tuples
+        differ in length.
+
+    References
+    ----------
+    Masoud & Maas 2025, Table 1, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005 (GMS).
+
+    Examples
+    --------
+    >>> rig = RigParams()
+    >>> round(rig.breakaway_force * 1e3, 3)  # [mN]
+    2.0
+    >>> RigParams.from_dict(rig.to_dict()) == rig
+    True
+    """
+
+    prototype: PrototypeParams = field(default_factory=_default_prototype)
+    friction_k: tuple[float, ...] = (40.0, 12.0, 4.0)
+    friction_F: tuple[float, ...] = (0.4e-3, 0.6e-3, 1.0e-3)
+    friction_c: float = 0.0
+    friction_exponent: float = 4.0
+    driver_tau: float = 5e-3
+    driver_slew: float = 100e3
+    sensor_range: float = 25e-3
+    sensor_resolution: float = 0.3e-6
+    sensor_noise: float = 1e-6
+    monitor_noise: float = 2.0
+    oversample: int = 10
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.prototype, PrototypeParams):
+            raise WorkflowError(
+                f"rig parameter `prototype` must be a PrototypeParams, got {self.prototype!r}"
+            )
+        for name in ("friction_k", "friction_F"):
+            value = getattr(self, name)
+            if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
+                raise WorkflowError(f"rig parameter `{name}` must be a sequence, got {value!r}")
+            items = tuple(_number(f"{name}[{i}]", v, positive=True) for i, v in enumerate(value))
+            object.__setattr__(self, name, items)
+        if len(self.friction_k) != len(self.friction_F):
+            raise WorkflowError(
+                f"rig parameters `friction_k` and `friction_F` must have equal lengths, got "
+                f"{len(self.friction_k)} and {len(self.friction_F)}"
+            )
+        for name in ("driver_tau", "driver_slew", "sensor_range"):
+            object.__setattr__(self, name, _number(name, getattr(self, name), positive=True))
+        for name in ("friction_c", "sensor_resolution", "sensor_noise", "monitor_noise"):
+            object.__setattr__(self, name, _number(name, getattr(self, name), positive=False))
+        p = _number("friction_exponent", self.friction_exponent, positive=True)
+        if p < 1.0:
+            raise WorkflowError(f"rig parameter `friction_exponent` must be >= 1, got {p!r}")
+        object.__setattr__(self, "friction_exponent", p)
+        n = self.oversample
+        if isinstance(n, bool) or not isinstance(n, int | float) or n != int(n) or n < 1:
+            raise WorkflowError(f"rig parameter `oversample` must be an integer >= 1, got {n!r}")
+        object.__setattr__(self, "oversample", int(n))
+
+    @property
+    def n_friction(self) -> int:
+        """Number of Maxwell-slip elements."""
+        return len(self.friction_k)
+
+    @property
+    def breakaway_force(self) -> float:
+        """Total slip force ``sum F_i`` [N] (the Coulomb level of gross sliding)."""
+        return float(sum(self.friction_F))
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, object]) -> RigParams:
+        """Build rig parameters from a workflow section (e.g. a ``[rig]`` table).
+
+        Parameters
+        ----------
+        section : Mapping[str, object]
+            Field name -> value [SI]; ``prototype`` is a nested table of
+            :class:`PrototypeParams` keys (missing keys keep the paper's values, a missing
+            table the default asymmetric prototype); friction tuples may be lists.
+
+        Returns
+        -------
+        RigParams
+            The parameters; keys not given keep their defaults.
+
+        Raises
+        ------
+        WorkflowError
+            If a key is unknown (named) or a value invalid.
+        """
+        if not isinstance(section, Mapping):
+            raise WorkflowError(f"[rig]: must be a table, got {type(section).__name__}")
+        known = [f.name for f in dataclasses.fields(cls)]
+        unknown = [key for key in section if key not in known]
+        if unknown:
+            raise WorkflowError(
+                f"[rig]: unknown key '{unknown[0]}'; known keys: {', '.join(known)}"
+            )
+        kwargs = dict(section)
+        if "prototype" in kwargs:
+            proto = kwargs["prototype"]
+            if not isinstance(proto, PrototypeParams):
+                kwargs["prototype"] = PrototypeParams.from_dict(proto)  # type: ignore[arg-type]
+        try:
+            return cls(**kwargs)  # type: ignore[arg-type]
+        except WorkflowError:
+            raise
+        except (TypeError, ValueError) as exc:
+            raise WorkflowError(f"[rig]: {exc}") from exc
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the parameters as nested plain data [SI], the inverse of :meth:`from_dict`.
+
+        Returns
+        -------
+        dict[str, object]
+            Field name -> value; ``prototype`` as a dict, the friction tuples as lists.
+        """
+        out: dict[str, object] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "prototype":
+                value = value.to_dict()
+            elif isinstance(value, tuple):
+                value = list(value)
+            out[f.name] = value
+        return out
+
+    def replace(self, **changes: object) -> RigParams:
+        """Return a copy with some fields changed (validated like the constructor).
+
+        Parameters
+        ----------
+        **changes : object
+            Field name -> new value.
+
+        Returns
+        -------
+        RigParams
+            The modified copy.
+
+        Raises
+        ------
+        WorkflowError
+            If a name is unknown or a value invalid.
+        """
+        unknown = [k for k in changes if k not in {f.name for f in dataclasses.fields(self)}]
+        if unknown:
+            raise WorkflowError(f"[rig]: unknown key '{unknown[0]}'")
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+
+def _number(name: str, value: object, *, positive: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise WorkflowError(f"rig parameter `{name}` must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise WorkflowError(f"rig parameter `{name}` must be finite, got {value!r}")
+    if value < 0 or (positive and value == 0):
+        kind = "positive" if positive else "non-negative"
+        raise WorkflowError(f"rig parameter `{name}` must be {kind}, got {value!r}")
+    return value
+
+
+def _uniform_grid(t_ref: ArrayLike, name: str = "t_ref") -> tuple[NDArray[np.float64], float]:
+    t_ref = np.asarray(t_ref, dtype=float)
+    if t_ref.ndim != 1 or t_ref.size < 2 or not np.all(np.isfinite(t_ref)):
+        raise ValueError(f"`{name}` must be a finite 1-D array of at least 2 times [s]")
+    hold = (t_ref[-1] - t_ref[0]) / (t_ref.size - 1)
+    if hold <= 0 or np.max(np.abs(np.diff(t_ref) - hold)) > 1e-6 * hold:
+        raise ValueError(f"`{name}` must be uniform and increasing (hold interval {hold!r} s)")
+    return t_ref, float(hold)
+
+
+class DriverOutput:
+    """Output voltage of one HV driver for a zero-order-hold reference.
+
+    The driver follows its reference ``r`` with a first-order lag and a slew-rate limit,
+
+        dv/dt = clip((r(t) - v) / tau, -slew, slew),
+
+    ``r`` clipped to ``[0, v_max]``, so ``v`` stays in ``[0, v_max]``. Within a hold
+    interval that starts with ``|r - v| <= slew tau`` the limit is never reached and the
+    solution is the exact ZOH discretisation of the lag, ``v_{k+1} = a v_k + (1 - a) r_k``
+    with ``a = exp(-hold / tau)`` (run as a recursive filter, :func:`scipy.signal.lfilter`);
+    every interval that starts slew-limited is integrated by :func:`scipy.integrate.solve_ivp`
+    (RK45, ``max_step`` = the hold interval, dense output). Splitting at the hold intervals
+    keeps the discontinuities of ``r`` out of the integrator's steps: one ``solve_ivp`` over
+    a 1 ms staircase costs minutes of rejected steps.
+
+    Parameters
+    ----------
+    t_ref : array_like, shape (n,)
+        Uniform sample times of the reference [s]; sample ``k`` holds on
+        ``[t_ref[k], t_ref[k] + hold)``, the last one until ``t_ref[-1] + hold``.
+    r : array_like, shape (n,)
+        Reference voltage [V].
+    tau : float
+        Lag time constant [s].
+    slew : float
+        Slew-rate limit [V/s].
+    v0 : float
+        Output at ``t_ref[0]`` [V] (also returned before it).
+    v_max : float
+        Largest output [V]; the reference is clipped to ``[0, v_max]``.
+
+    Attributes
+    ----------
+    knots : ndarray, shape (n + 1,)
+        Output at ``t_ref[0] + k hold``, ``k = 0..n`` [V].
+    n_slew : int
+        Number of slew-limited hold intervals.
+
+    Raises
+    ------
+    ValueError
+        If ``t_ref`` is not uniform, the shapes differ or ``tau``, ``slew`` are not positive.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1 (3 kV high-voltage converters).
+    """
+
+    def __init__(
+        self,
+        t_ref: ArrayLike,
+        r: ArrayLike,
+        *,
+        tau: float,
+        slew: float,
+        v0: float = 0.0,
+        v_max: float = V_MAX,
+    ):
+        t_ref, hold = _uniform_grid(t_ref)
+        r = np.clip(np.asarray(r, dtype=float), 0.0, v_max)
+        if r.shape != t_ref.shape:
+            raise ValueError(f"`r` must have the shape of `t_ref`, got {r.shape}")
+        if not (tau > 0 and slew > 0):
+            raise ValueError(f"`tau` and `slew` must be positive, got {tau!r}, {slew!r}")
+        self.t0, self.hold, self.tau, self.slew = float(t_ref[0]), hold, float(tau), float(slew)
+        self._r = r
+        n = r.size
+        a = math.exp(-hold / tau)
+        lim = slew * tau
+        v = np.empty(n + 1)
+        v[0] = min(max(float(v0), 0.0), v_max)
+        pieces: dict[int, object] = {}
+        k = 0
+        block = 4096
+        while k < n:
+            if abs(r[k] - v[k]) > lim:
+                sol = solve_ivp(
+                    self._slew_rhs,
+                    (self.t0 + k * hold, self.t0 + (k + 1) * hold),
+                    [v[k]],
+                    method="RK45",
+                    max_step=hold,
+                    rtol=1e-9,
+                    atol=1e-6,
+                    dense_output=True,
+                    args=(r[k],),
+                )
+                v[k + 1] = sol.y[0, -1]
+                pieces[k] = sol.sol
+                k += 1
+                continue
+            m = min(n - k, block)
+            y = lfilter([1.0 - a], [1.0, -a], r[k : k + m], zi=[a * v[k]])[0]
+            # interval k + j (j >= 1) starts at v_{k+j} = y[j - 1]
+            bad = np.flatnonzero(np.abs(r[k + 1 : k + m] - y[: m - 1]) > lim)
+            j = int(bad[0]) + 1 if bad.size else m
+            v[k + 1 : k + j + 1] = y[:j]
+            k += j
+        self.knots = np.clip(v, 0.0, v_max)
+        self._pieces = pieces
+        self._knots_list = self.knots.tolist()
+        self._r_list = r.tolist()
+        self.n_slew = len(pieces)
+
+    def _slew_rhs(self, t: float, v: NDArray[np.float64], rk: float) -> NDArray[np.float64]:
+        return np.clip((rk - v) / self.tau, -self.slew, self.slew)
+
+    def __call__(self, t: float) -> float:
+        """Output voltage at one time ``t`` [s] (fast scalar path for the plant) [V].
+
+        Parameters
+        ----------
+        t : float
+            Time [s]; before ``t_ref[0]`` the initial value, after the end the last
+            interval's solution continues (reference held).
+
+        Returns
+        -------
+        float
+            ``v(t)`` [V].
+        """
+        s = (t - self.t0) / self.hold
+        if s <= 0.0:
+            return self._knots_list[0]
+        k = min(int(s), len(self._r_list) - 1)
+        piece = self._pieces.get(k)
+        if piece is not None and s < k + 1:
+            return float(piece(t)[0])
+        rk = self._r_list[k]
+        return rk + (self._knots_list[k] - rk) * math.exp(-(s - k) * self.hold / self.tau)
+
+    def values(self, t: ArrayLike) -> NDArray[np.float64]:
+        """Output voltage at many times (vectorised :meth:`__call__`).
+
+        Parameters
+        ----------
+        t : array_like, shape (m,)
+            Times [s].
+
+        Returns
+        -------
+        ndarray, shape (m,)
+            ``v(t)`` [V].
+        """
+        t = np.asarray(t, dtype=float)
+        s = (t - self.t0) / self.hold
+        k = np.clip(np.floor(s).astype(int), 0, self._r.size - 1)
+        rk = self._r[k]
+        out = rk + (self.knots[k] - rk) * np.exp(-(s - k) * self.hold / self.tau)
+        out = np.where(s <= 0.0, self.knots[0], out)
+        for i, piece in self._pieces.items():
+            sel = (s >= i) & (s < i + 1)
+            if np.any(sel):
+                out[sel] = piece(t[sel])[0]
+        return out
+
+
+class RigPlant:
+    """Right-hand side and Jacobian of the plant: full model plus tip friction.
+
+    State ``x = [x_full (10), z (n_friction)]``. The friction force on the tip,
+
+        F_fr = -sum_i k_i z_i - c q_dot,
+
+    enters :class:`~pipeline.physics.dynamics.FullModel` as the external horizontal tip force
+    (mapped onto the Ritz coordinates by ``dq/dq_m = L``, Eq. 15, 22). Each Maxwell-slip
+    element (a spring ``k_i`` in series with a block of slip force ``F_i``) evolves as the
+    regularised elasto-plastic element
+
+        dz_i/dt = q_dot (1 - s_i |k_i z_i / F_i|^p),  s_i = 1 if q_dot z_i > 0 else 0,
+
+    i.e. it sticks (``dz_i/dt = q_dot``) while unloading or lightly loaded and approaches
+    slipping at ``|k_i z_i| = F_i`` smoothly (a Bouc-Wen-type smoothing of the GMS element;
+    ``p -> infinity`` is the ideal Maxwell-slip element). The right-hand side is continuous
+    (where ``s_i`` switches either ``z_i = 0`` or ``q_dot = 0``), which a stiff solver needs.
+
+    Parameters
+    ----------
+    rig : RigParams
+        Rig parameters.
+    v1, v2 : callable
+        Applied voltages ``v_i(t)`` [V] (e.g. :class:`DriverOutput`).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 19-23; Al-Bender, Lampaert & Swevers 2005 (GMS model).
+    """
+
+    def __init__(self, rig: RigParams, v1, v2):
+        self.rig = rig
+        self.model = FullModel(rig.prototype, v1, v2)
+        self.n_friction = rig.n_friction
+        self.n_states = 10 + self.n_friction
+        self._L = ritz_basis(rig.prototype.l).L
+        self._k = np.array(rig.friction_k)
+        self._kF = self._k / np.array(rig.friction_F)
+        self._p = rig.friction_exponent
+        self._c = rig.friction_c
+
+    def friction_force(self, x: ArrayLike) -> NDArray[np.float64]:
+        """Friction force on the tip, ``-sum k_i z_i - c q_dot`` [N].
+
+        Parameters
+        ----------
+        x : array_like, shape (..., n_states)
+            Plant states.
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``F_fr`` [N].
+        """
+        x = np.asarray(x, dtype=float)
+        return -(x[..., 10:] @ self._k) - self._c * (x[..., 4:8] @ self._L)
+
+    def rhs(self, t: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """State derivative of the plant.
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+        x : ndarray, shape (n_states,)
+            State ``[q_m, q_m_dot, q_eps, z]``.
+
+        Returns
+        -------
+        ndarray, shape (n_states,)
+            ``x_dot``.
+        """
+        z = x[10:]
+        qd = float(self._L @ x[4:8])
+        F_fr = -float(self._k @ z) - self._c * qd
+        out = np.empty(self.n_states)
+        out[:10] = self.model.rhs(t, x[:10], F_extra=F_fr)
+        u = np.abs(z * self._kF)
+        out[10:] = qd * (1.0 - np.where(qd * z > 0.0, u**self._p, 0.0))
+        return out
+
+    def jac(self, t: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Approximate Jacobian of :meth:`rhs` (that of :meth:`FullModel.jac` plus friction).
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+        x : ndarray, shape (n_states,)
+            State.
+
+        Returns
+        -------
+        ndarray, shape (n_states, n_states)
+            ``d x_dot / d x`` without the derivatives of M, D and K along ``q_m``.
+        """
+        n = self.n_states
+        J = np.zeros((n, n))
+        J[:10, :10] = self.model.jac(t, x[:10])
+        MinvL = np.linalg.solve(self.model.mass_matrix(x[:4]), self._L)
+        J[4:8, 10:] = -np.outer(MinvL, self._k)
+        J[4:8, 4:8] -= self._c * np.outer(MinvL, self._L)
+        z = x[10:]
+        qd = float(self._L @ x[4:8])
+        slip = qd * z > 0.0
+        u = np.abs(z * self._kF)
+        p = self._p
+        J[10:, 4:8] = np.outer(1.0 - np.where(slip, u**p, 0.0), self._L)
+        dz = np.where(slip, -qd * p * u ** (p - 1.0) * np.sign(z) * self._kF, 0.0)
+        J[10:, 10:] = np.diag(dz)
+        return J
+
+
+@dataclass(frozen=True)
+class RigRun:
+    """One rig experiment: the logged channels and the truth behind them.
+
+    Logged channels (what the rig's recorder holds), at the log instants:
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Log instants ``t_ref[0] + k sample_time`` [s].
+    q : ndarray, shape (n,)
+        Laser reading of the tip displacement [m]: noise, quantisation, range clipping,
+        anti-aliasing FIR and decimation; saturates at ``+-sensor_range``.
+    v1, v2 : ndarray, shape (n,)
+        Voltage monitors of DE 1 and DE 2 [V] (applied voltage plus noise, decimated).
+    r1, r2 : ndarray, shape (n,)
+        Reference voltages at the log instants [V] (the DAC sample holding there).
+    q_true : ndarray, shape (n,)
+        Noise-free tip displacement [m] (Eq. 16).
+    q_dot_true : ndarray, shape (n,)
+        Tip velocity [m/s].
+    phi_true : ndarray, shape (n,)
+        Pitch angle of the upper frame [rad] (Eq. 1).
+    x_true : ndarray, shape (n, 10 + n_friction)
+        Plant states ``[q_m, q_m_dot, q_eps, z]``.
+    F_friction : ndarray, shape (n,)
+        Friction force on the tip [N].
+    v1_applied, v2_applied : ndarray, shape (n,)
+        Voltages at the DEs, the drivers' outputs [V].
+    saturated : ndarray of bool, shape (n,)
+        ``|q_true|`` beyond the sensor range.
+    sample_time : float
+        Log interval [s].
+    seed : int
+        Seed of the sensor noise.
+    nfev : int
+        Right-hand-side evaluations of the plant integration.
+    njev : int
+        Jacobian evaluations.
+    success : bool
+        Whether every integration segment succeeded.
+    message : str
+        Messages of the integrator.
+    wall_time : float
+        Wall-clock time of :func:`simulate_rig` [s].
+    """
+
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    v1: NDArray[np.float64]
+    v2: NDArray[np.float64]
+    r1: NDArray[np.float64]
+    r2: NDArray[np.float64]
+    q_true: NDArray[np.float64]
+    q_dot_true: NDArray[np.float64]
+    phi_true: NDArray[np.float64]
+    x_true: NDArray[np.float64]
+    F_friction: NDArray[np.float64]
+    v1_applied: NDArray[np.float64]
+    v2_applied: NDArray[np.float64]
+    saturated: NDArray[np.bool_]
+    sample_time: float
+    seed: int
+    nfev: int
+    njev: int
+    success: bool
+    message: str
+    wall_time: float
+
+
+def _decimate(y: NDArray[np.float64], factor: int) -> NDArray[np.float64]:
+    """Zero-phase FIR decimation (Hamming-window sinc, 20 factor + 1 taps)."""
+    return y if factor == 1 else decimate(y, factor, ftype="fir", zero_phase=True)
+
+
+def simulate_rig(
+    rig: RigParams,
+    t_ref: ArrayLike,
+    r1: ArrayLike,
+    r2: ArrayLike,
+    *,
+    sample_time: float,
+    seed: int,
+    side: int = -1,
+    method: str = "Radau",
+    rtol: float = 1e-4,
+    atol: float = 1e-8,
+    step_threshold: float = 0.1 * V_MAX,
+) -> RigRun:
+    """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
+
+    1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
+       voltages (:class:`DriverOutput`; they do not depend on the mechanics).
+    2. The plant (:class:`RigPlant`) starts at rest in the well ``side`` (equilibrium at
+       v = 0, :func:`~pipeline.physics.dynamics.well_state`; relaxed creep, unloaded friction)
+       and is integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
+       split at the reference steps larger than ``step_threshold``, with output on the
+       internal grid ``sample_time / oversample``.
+    3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
+       ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
+       noise. Every channel is decimated to ``sample_time`` by a zero-phase FIR
+       (:func:`scipy.signal.decimate`); the record is simulated ``11 sample_time`` beyond
+       both ends (at rest before, reference held after) so the filter sees no edge. The
+       laser reading is clipped again after the filter: when the true ``q`` leaves the
+       range the logged value saturates at ``+-sensor_range`` (flagged in ``saturated``).
+
+    Parameters
+    ----------
+    rig : RigParams
+        Prototype and rig.
+    t_ref : array_like, shape (n_ref,)
+        Uniform DAC sample times [s]; sample ``k`` holds until ``t_ref[k] + hold``.
+    r1, r2 : array_like, shape (n_ref,)
+        Reference voltages of DE 1 (left) and DE 2 (right) [V].
+    sample_time : float
+        Log interval [s]; the log covers ``[t_ref[0], t_ref[0] + n_ref hold)``.
+    seed : int
+        Seed of the sensor and monitor noise.
+    side : {-1, +1}
+        Initial well: -1 left (the paper's experiments start at q = -10 mm), +1 right.
+    method : {"Radau", "BDF"}
+        Implicit :func:`solve_ivp` method; both use :meth:`RigPlant.jac`.
+    rtol, atol : float
+        Integrator tolerances. ``atol`` [m] applies to the bending coordinates scaled to
+        metres (``q_m * [l^2, l^3, l^4]``) and to the friction deflections; the axial
+        coordinate ``u_0`` gets ``100 atol``, the velocities ``1e4 atol`` per second and the
+        creep strains ``100 atol`` [-]. The looser axial and velocity tolerances spare the
+        integrator the nanometre ringing of the stiff axial mode (about 400 Hz, undamped by
+        the beam) that every 1 ms voltage kink excites; it does not show in ``q``. With
+        the defaults the noise-free ``q`` stays within about 0.2 um of a solution with
+        ``rtol = 1e-8, atol = 1e-12`` on broad-band experiments with 3 kV switching; the
+        integrator takes about one step per DAC interval (the kinks of the driver output
+        limit the steps). Near a barrier crossing errors grow (the motion is unstable
+        there), so no tolerance bounds them in general.
+    step_threshold : float
+        Reference jumps larger than this [V] become integration breakpoints.
+
+    Returns
+    -------
+    RigRun
+        The logged channels, the truth and the integration statistics.
+
+    Raises
+    ------
+    ValueError
+        If ``t_ref`` is not uniform, the shapes differ, ``sample_time`` is not positive or
+        longer than the record, ``side`` is not -1 or +1 or ``method`` unknown; from
+        :func:`~pipeline.physics.dynamics.well_state` if that well does not exist.
+
+    Warns
+    -----
+    DebistWarning
+        If a reference leaves ``[0, 3000]`` V and is clipped.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 1, 16, 19-23, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
+    """
+    start = time.perf_counter()
+    t_ref, hold = _uniform_grid(t_ref)
+    r = np.stack([np.asarray(r1, dtype=float), np.asarray(r2, dtype=float)])
+    if r.shape != (2, t_ref.size):
+        raise ValueError(f"`r1`, `r2` must have the shape of `t_ref` {t_ref.shape}")
+    if not np.all(np.isfinite(r)):
+        raise ValueError("`r1`, `r2` must be finite")
+    if np.any(r < 0.0) or np.any(r > V_MAX):
+        warnings.warn(
+            f"simulate_rig: references within [{r.min():.6g}, {r.max():.6g}] V are clipped to "
+            f"[0, {V_MAX:g}] V",
+            DebistWarning,
+            stacklevel=2,
+        )
+        r = np.clip(r, 0.0, V_MAX)
+    if side not in (-1, 1):
+        raise ValueError(f"`side` must be -1 or +1, got {side!r}")
+    duration = t_ref.size * hold
+    if not (sample_time > 0 and sample_time <= duration):
+        raise ValueError(f"`sample_time` must be in (0, {duration}] s, got {sample_time!r}")
+    n_log = math.floor(duration / sample_time + 1e-9)
+    os_ = rig.oversample
+    dt = sample_time / os_
+    pad = _PAD_LOG * os_
+    t0 = float(t_ref[0])
+    j = np.arange(-pad, n_log * os_ + pad)
+    t_fine = t0 + j * dt
+    # reference held beyond its end for the padding
+    t_end = float(t_fine[-1])
+    n_ext = max(t_ref.size, math.ceil((t_end - t0) / hold) + 1)
+    t_ext = t0 + hold * np.arange(n_ext)
+    r_ext = np.concatenate([r, np.repeat(r[:, -1:], n_ext - t_ref.size, axis=1)], axis=1)
+    drivers = [
+        DriverOutput(t_ext, r_ext[i], tau=rig.driver_tau, slew=rig.driver_slew) for i in range(2)
+    ]
+    plant = RigPlant(rig, drivers[0], drivers[1])
+    p = rig.prototype
+    x_rest = np.concatenate([well_state(p, side), np.zeros(rig.n_friction)])
+    x = x_rest
+    if method not in ("Radau", "BDF"):
+        raise ValueError(f"`method` must be 'Radau' or 'BDF', got {method!r}")
+    scale = ritz_basis(p.l).scale
+    tol_x = np.array([atol, atol, atol, 100.0 * atol])
+    atol_v = np.concatenate(
+        [tol_x / scale, 1e4 * atol / scale, np.full(2, 100.0 * atol), np.full(rig.n_friction, atol)]
+    )
+    jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
+    breaks = [t0 + (k + 1) * hold for k in jumps]
+    edges = [t0, *(b for b in breaks if t0 < b < t_end), t_end]
+    run = t_fine >= t0
+    t_run = t_fine[run]
+    X = np.empty((t_run.size, plant.n_states))
+    filled, nfev, njev, ok, msgs = 0, 0, 0, True, []
+    for a, c in itertools.pairwise(edges):
+        last = c == edges[-1]
+        sel = (t_run >= a) & ((t_run <= c) if last else (t_run < c))
+        te = t_run[sel]
+        te_ext = te if te.size and te[-1] == c else np.append(te, c)
+        sol = solve_ivp(
+            plant.rhs,
+            (a, c),
+            x,
+            method=method,
+            jac=plant.jac,
+            t_eval=te_ext,
+            rtol=rtol,
+            atol=atol_v,
+        )
+        nfev += sol.nfev
+        njev += sol.njev
+        ok &= bool(sol.success)
+        msgs.append(sol.message)
+        if not sol.success:
+            break
+        X[filled : filled + te.size] = sol.y.T[: te.size]
+        filled += te.size
+        x = sol.y[:, -1]
+    if filled < t_run.size:  # failed: keep the shape, NaN beyond the failure
+        X[filled:] = np.nan
+    X_all = np.concatenate([np.repeat(x_rest[None, :], pad, axis=0), X])  # at rest before
+    L = ritz_basis(p.l).L
+    q_fine = X_all[:, :4] @ L
+    v_fine = np.stack([d.values(t_fine) for d in drivers])
+    rng = np.random.default_rng(seed)
+    y = q_fine + rng.normal(0.0, rig.sensor_noise, q_fine.size)
+    if rig.sensor_resolution > 0:
+        y = np.round(y / rig.sensor_resolution) * rig.sensor_resolution
+    y = np.clip(y, -rig.sensor_range, rig.sensor_range)
+    mon = v_fine + rng.normal(0.0, rig.monitor_noise, v_fine.shape)
+    log = slice(_PAD_LOG, _PAD_LOG + n_log)
+    q_log = np.clip(_decimate(y, os_)[log], -rig.sensor_range, rig.sensor_range)
+    mon_log = np.stack([_decimate(m, os_)[log] for m in mon])
+    idx = pad + os_ * np.arange(n_log)  # log instants on the internal grid
+    t_log = t_fine[idx]
+    X_log = X_all[idx]
+    k_ref = np.clip(np.floor((t_log - t0) / hold + 1e-9).astype(int), 0, t_ref.size - 1)
+    q_true = q_fine[idx]
+    return RigRun(
+        t=t_log,
+        q=q_log,
+        v1=mon_log[0],
+        v2=mon_log[1],
+        r1=r[0, k_ref],
+        r2=r[1, k_ref],
+        q_true=q_true,
+        q_dot_true=X_log[:, 4:8] @ L,
+        phi_true=pitch_angle(X_log[:, :4], p),
+        x_true=X_log,
+        F_friction=plant.friction_force(X_log),
+        v1_applied=v_fine[0, idx],
+        v2_applied=v_fine[1, idx],
+        saturated=np.abs(q_true) > rig.sensor_range,
+        sample_time=float(sample_time),
+        seed=int(seed),
+        nfev=int(nfev),
+        njev=int(njev),
+        success=bool(ok),
+        message="; ".join(dict.fromkeys(msgs)),
+        wall_time=time.perf_counter() - start,
+    )
+
+
+def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float64]]:
+    """Return the prototype's true characteristic curves in the identified model's convention.
+
+    From the reduced model of the rig's prototype (:func:`pipeline.physics.reduced.
+    reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
+    ``dz_1``, ``dz_2`` is included). Friction, the drivers and the sensors are not part of
+    these curves: they are what an identification of Eq. 37 cannot represent.
+
+    Parameters
+    ----------
+    rig : RigParams
+        Rig parameters (uses ``prototype``).
+    q_grid : array_like, shape (n,)
+        Tip displacements [m].
+
+    Returns
+    -------
+    dict[str, ndarray]
+        Each of shape (n,): ``"q"`` [m]; ``"f"`` restoring force at v = 0 [N] with
+        ``m_q q_ddot + d q_dot + f(q) = g_1 v_1^2 + g_2 v_2^2`` (Eq. 26, 37); ``"c"``
+        ``= f / q`` [N/m] (Eq. 33; for an asymmetric prototype ``f(0) != 0`` and ``c`` has a
+        pole at q = 0, use ``f``); ``"k"`` ``= df/dq`` [N/m]; ``"g1"``, ``"g2"``
+        ``= 1/2 dC_i/dq`` [F/m] (NOTES item 8); ``"m_q"`` [kg]; ``"d"`` [N s/m];
+        ``"phi"`` pitch angle along the static path [rad].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37; NOTES item 8.
+    """
+    c = reduced_curves(rig.prototype, q_grid)
+    return {
+        "q": c.q,
+        "f": c.f,
+        "c": c.c,
+        "k": c.k,
+        "g1": c.g1,
+        "g2": c.g2,
+        "m_q": c.m_q,
+        "d": c.d,
+        "phi": c.phi,
+    }
