@@ -8,6 +8,7 @@ maps debist's exception classes to exit codes (1: a stage failed on its data;
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -22,7 +23,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
-console = Console()
+#: Reports written to a file or pipe are not squeezed to 80 columns (rich's default there).
+console = Console(width=None if sys.stdout.isatty() else 140)
 err = Console(stderr=True, soft_wrap=True)
 
 WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
@@ -139,6 +141,34 @@ def simulate_rig(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = N
 
 
 @app.command()
+def fleet(
+    template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
+    size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
+    folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
+        "fleet"
+    ),
+) -> None:
+    """Write one workflow per prototype of a seeded fleet around TEMPLATE's rig (for batch)."""
+    import tomllib
+
+    from pipeline import artifacts
+    from pipeline.rig.fleet_workflows import fleet_workflows
+
+    try:
+        raw = tomllib.loads(template.read_text(encoding="utf-8"))
+        files = fleet_workflows(raw, template.resolve().parent, folder, size, seed=seed)
+        paths = artifacts.write_text_files(folder, files)
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(2) from None
+    except DebistError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(2 if isinstance(exc, WorkflowError | ArtifactError) else 1) from None
+    console.print(f"wrote {len(paths)} workflows to {folder}; run them with: debist batch {folder}")
+
+
+@app.command()
 def analyze(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
     """Design analysis of [physics] (Section 3): statics.h5 and Fig. 3, 4, 5, 6a, 7 as PNG."""
     _run(workflow, ["analyze"], force, out)
@@ -252,7 +282,7 @@ def batch(
     frame = summary_table(results)
     failed = int((frame.status == "failed").sum())
     table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
-    for column in ("workflow", "status", "seconds", "ran", "skipped", "error"):
+    for column in ("workflow", "status", "seconds", "ran", "skipped", "RBF NRMSE(q)", "error"):
         justify = "right" if column == "seconds" else "left"
         table.add_column(column, overflow="fold", justify=justify)
     for row in frame.itertuples(index=False):
@@ -264,6 +294,7 @@ def batch(
             f"{row.seconds:.1f}",
             str(row.ran),
             str(row.skipped),
+            escape(row.rbf_nrmse_q),
             escape(where + row.error),
         )
     console.print(table)

@@ -449,6 +449,52 @@ def _swap_into_place(tmp: Path, final: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> list[Path]:
+    """Write new text files (e.g. generated workflows) into a folder, all or none.
+
+    Parameters
+    ----------
+    folder : path-like
+        Target folder (created if missing).
+    files : mapping of str to str
+        File name -> UTF-8 text.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written, in the order given.
+
+    Raises
+    ------
+    ArtifactError
+        If a file of that name exists already: nothing a user has is overwritten, and
+        nothing is written.
+    """
+    final = Path(folder)
+    final.mkdir(parents=True, exist_ok=True)
+    existing = [name for name in files if (final / name).exists()]
+    if existing:
+        raise ArtifactError(
+            f"'{final / existing[0]}' exists ({len(existing)} file(s) in all): choose another "
+            "folder or remove them"
+        )
+    tmp = Path(tempfile.mkdtemp(prefix=".files.tmp-", dir=final))
+    moved: list[Path] = []
+    try:
+        for name, text in files.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+        for name in files:
+            os.replace(tmp / name, final / name)
+            moved.append(final / name)
+    except BaseException:
+        for path in moved:  # all new files (checked above): take them back
+            path.unlink(missing_ok=True)
+        raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return [final / name for name in files]
+
+
 # --------------------------------------------------------------------------- readers
 
 

@@ -529,11 +529,14 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
     -------
     pandas.DataFrame
         Columns ``name``, ``status``, ``seconds`` [s], ``ran`` and ``skipped`` (numbers
-        of stages), ``failed_stage``, ``error`` and ``path``, in the order of ``results``.
+        of stages), ``failed_stage``, ``error``, ``path`` and ``rbf_nrmse_q``: the free-run
+        NRMSE(q) of the identified model per data set (``"name: value"``, empty without a
+        validation table), in the order of ``results``.
     """
     import pandas as pd
 
     columns = ["name", "status", "seconds", "ran", "skipped", "failed_stage", "error", "path"]
+    columns.append("rbf_nrmse_q")
     rows = [
         {
             "name": r.name,
@@ -544,6 +547,11 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
             "failed_stage": r.failed_stage,
             "error": r.error,
             "path": str(r.path),
+            "rbf_nrmse_q": ", ".join(
+                f"{row['dataset']}: {100 * row['nrmse_q']:.2f} %"
+                for row in (r.summary or {}).get("nrmse", [])
+                if row.get("model") == "rbf"
+            ),
         }
         for r in results
     ]
