@@ -10,7 +10,7 @@ The "real" prototype that the virtual rig measures is the full dynamic model of
 * **friction at the beam tip**: a generalised Maxwell-slip (GMS) model with a few elements
   (Al-Bender, Lampaert & Swevers 2005), hysteretic pre-sliding and a breakaway force;
 * **high-voltage drivers**: the voltage applied to a DE follows the DAC reference with a
-  first-order lag and a slew-rate limit (:class:`DriverOutput`);
+  first-order lag and a slew-rate limit (:class:`pipeline.rig.drivers.DriverOutput`);
 * **sensors**: a laser triangulation sensor with white noise, quantisation and a finite
   range, sampled ``oversample`` times faster than the log and decimated by a zero-phase FIR
   (the rig's anti-aliasing); noisy voltage monitors.
@@ -41,16 +41,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import solve_ivp
-from scipy.signal import decimate, lfilter
+from scipy.signal import decimate
 
 from pipeline.errors import DebistWarning, WorkflowError
 from pipeline.physics.dynamics import FullModel, well_state
 from pipeline.physics.kinematics import pitch_angle, ritz_basis
 from pipeline.physics.params import V_MAX, PrototypeParams
 from pipeline.physics.reduced import reduced_curves
+from pipeline.rig.drivers import DriverOutput, uniform_grid
 
 __all__ = [
-    "DriverOutput",
     "RigParams",
     "RigPlant",
     "RigRun",
@@ -279,174 +279,6 @@ def _number(name: str, value: object, *, positive: bool) -> float:
     return value
 
 
-def _uniform_grid(t_ref: ArrayLike, name: str = "t_ref") -> tuple[NDArray[np.float64], float]:
-    t_ref = np.asarray(t_ref, dtype=float)
-    if t_ref.ndim != 1 or t_ref.size < 2 or not np.all(np.isfinite(t_ref)):
-        raise ValueError(f"`{name}` must be a finite 1-D array of at least 2 times [s]")
-    hold = (t_ref[-1] - t_ref[0]) / (t_ref.size - 1)
-    if hold <= 0 or np.max(np.abs(np.diff(t_ref) - hold)) > 1e-6 * hold:
-        raise ValueError(f"`{name}` must be uniform and increasing (hold interval {hold!r} s)")
-    return t_ref, float(hold)
-
-
-class DriverOutput:
-    """Output voltage of one HV driver for a zero-order-hold reference.
-
-    The driver follows its reference ``r`` with a first-order lag and a slew-rate limit,
-
-        dv/dt = clip((r(t) - v) / tau, -slew, slew),
-
-    ``r`` clipped to ``[0, v_max]``, so ``v`` stays in ``[0, v_max]``. Within a hold
-    interval that starts with ``|r - v| <= slew tau`` the limit is never reached and the
-    solution is the exact ZOH discretisation of the lag, ``v_{k+1} = a v_k + (1 - a) r_k``
-    with ``a = exp(-hold / tau)`` (run as a recursive filter, :func:`scipy.signal.lfilter`);
-    every interval that starts slew-limited is integrated by :func:`scipy.integrate.solve_ivp`
-    (RK45, ``max_step`` = the hold interval, dense output). Splitting at the hold intervals
-    keeps the discontinuities of ``r`` out of the integrator's steps: one ``solve_ivp`` over
-    a 1 ms staircase costs minutes of rejected steps.
-
-    Parameters
-    ----------
-    t_ref : array_like, shape (n,)
-        Uniform sample times of the reference [s]; sample ``k`` holds on
-        ``[t_ref[k], t_ref[k] + hold)``, the last one until ``t_ref[-1] + hold``.
-    r : array_like, shape (n,)
-        Reference voltage [V].
-    tau : float
-        Lag time constant [s].
-    slew : float
-        Slew-rate limit [V/s].
-    v0 : float
-        Output at ``t_ref[0]`` [V] (also returned before it).
-    v_max : float
-        Largest output [V]; the reference is clipped to ``[0, v_max]``.
-
-    Attributes
-    ----------
-    knots : ndarray, shape (n + 1,)
-        Output at ``t_ref[0] + k hold``, ``k = 0..n`` [V].
-    n_slew : int
-        Number of slew-limited hold intervals.
-
-    Raises
-    ------
-    ValueError
-        If ``t_ref`` is not uniform, the shapes differ or ``tau``, ``slew`` are not positive.
-
-    References
-    ----------
-    Masoud & Maas 2025, Sec. 5.1 (3 kV high-voltage converters).
-    """
-
-    def __init__(
-        self,
-        t_ref: ArrayLike,
-        r: ArrayLike,
-        *,
-        tau: float,
-        slew: float,
-        v0: float = 0.0,
-        v_max: float = V_MAX,
-    ):
-        t_ref, hold = _uniform_grid(t_ref)
-        r = np.clip(np.asarray(r, dtype=float), 0.0, v_max)
-        if r.shape != t_ref.shape:
-            raise ValueError(f"`r` must have the shape of `t_ref`, got {r.shape}")
-        if not (tau > 0 and slew > 0):
-            raise ValueError(f"`tau` and `slew` must be positive, got {tau!r}, {slew!r}")
-        self.t0, self.hold, self.tau, self.slew = float(t_ref[0]), hold, float(tau), float(slew)
-        self._r = r
-        n = r.size
-        a = math.exp(-hold / tau)
-        lim = slew * tau
-        v = np.empty(n + 1)
-        v[0] = min(max(float(v0), 0.0), v_max)
-        pieces: dict[int, object] = {}
-        k = 0
-        block = 4096
-        while k < n:
-            if abs(r[k] - v[k]) > lim:
-                sol = solve_ivp(
-                    self._slew_rhs,
-                    (self.t0 + k * hold, self.t0 + (k + 1) * hold),
-                    [v[k]],
-                    method="RK45",
-                    max_step=hold,
-                    rtol=1e-9,
-                    atol=1e-6,
-                    dense_output=True,
-                    args=(r[k],),
-                )
-                v[k + 1] = sol.y[0, -1]
-                pieces[k] = sol.sol
-                k += 1
-                continue
-            m = min(n - k, block)
-            y = lfilter([1.0 - a], [1.0, -a], r[k : k + m], zi=[a * v[k]])[0]
-            # interval k + j (j >= 1) starts at v_{k+j} = y[j - 1]
-            bad = np.flatnonzero(np.abs(r[k + 1 : k + m] - y[: m - 1]) > lim)
-            j = int(bad[0]) + 1 if bad.size else m
-            v[k + 1 : k + j + 1] = y[:j]
-            k += j
-        self.knots = np.clip(v, 0.0, v_max)
-        self._pieces = pieces
-        self._knots_list = self.knots.tolist()
-        self._r_list = r.tolist()
-        self.n_slew = len(pieces)
-
-    def _slew_rhs(self, t: float, v: NDArray[np.float64], rk: float) -> NDArray[np.float64]:
-        return np.clip((rk - v) / self.tau, -self.slew, self.slew)
-
-    def __call__(self, t: float) -> float:
-        """Output voltage at one time ``t`` [s] (fast scalar path for the plant) [V].
-
-        Parameters
-        ----------
-        t : float
-            Time [s]; before ``t_ref[0]`` the initial value, after the end the last
-            interval's solution continues (reference held).
-
-        Returns
-        -------
-        float
-            ``v(t)`` [V].
-        """
-        s = (t - self.t0) / self.hold
-        if s <= 0.0:
-            return self._knots_list[0]
-        k = min(int(s), len(self._r_list) - 1)
-        piece = self._pieces.get(k)
-        if piece is not None and s < k + 1:
-            return float(piece(t)[0])
-        rk = self._r_list[k]
-        return rk + (self._knots_list[k] - rk) * math.exp(-(s - k) * self.hold / self.tau)
-
-    def values(self, t: ArrayLike) -> NDArray[np.float64]:
-        """Output voltage at many times (vectorised :meth:`__call__`).
-
-        Parameters
-        ----------
-        t : array_like, shape (m,)
-            Times [s].
-
-        Returns
-        -------
-        ndarray, shape (m,)
-            ``v(t)`` [V].
-        """
-        t = np.asarray(t, dtype=float)
-        s = (t - self.t0) / self.hold
-        k = np.clip(np.floor(s).astype(int), 0, self._r.size - 1)
-        rk = self._r[k]
-        out = rk + (self.knots[k] - rk) * np.exp(-(s - k) * self.hold / self.tau)
-        out = np.where(s <= 0.0, self.knots[0], out)
-        for i, piece in self._pieces.items():
-            sel = (s >= i) & (s < i + 1)
-            if np.any(sel):
-                out[sel] = piece(t[sel])[0]
-        return out
-
-
 class RigPlant:
     """Right-hand side and Jacobian of the plant: full model plus tip friction.
 
@@ -471,7 +303,7 @@ class RigPlant:
     rig : RigParams
         Rig parameters.
     v1, v2 : callable
-        Applied voltages ``v_i(t)`` [V] (e.g. :class:`DriverOutput`).
+        Applied voltages ``v_i(t)`` [V] (e.g. :class:`~pipeline.rig.drivers.DriverOutput`).
 
     References
     ----------
@@ -653,7 +485,7 @@ def simulate_rig(
     """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
 
     1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
-       voltages (:class:`DriverOutput`; they do not depend on the mechanics).
+       voltages (:class:`~pipeline.rig.drivers.DriverOutput`; they do not depend on the mechanics).
     2. The plant (:class:`RigPlant`) starts at rest in the well ``side`` (equilibrium at
        v = 0, :func:`~pipeline.physics.dynamics.well_state`; relaxed creep, unloaded friction)
        and is integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
@@ -720,7 +552,7 @@ def simulate_rig(
     Masoud & Maas 2025, Eq. 1, 16, 19-23, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
     """
     start = time.perf_counter()
-    t_ref, hold = _uniform_grid(t_ref)
+    t_ref, hold = uniform_grid(t_ref)
     r = np.stack([np.asarray(r1, dtype=float), np.asarray(r2, dtype=float)])
     if r.shape != (2, t_ref.size):
         raise ValueError(f"`r1`, `r2` must have the shape of `t_ref` {t_ref.shape}")
