@@ -62,3 +62,40 @@ def test_emps_identifies_mass_and_friction_near_idim(tmp_path):
     assert table.loc["validation", "rms_unit"] == "mm"
     assert 0 < table.loc["validation", "rms_q"] < 50
     assert "Free-run validation" in out
+
+
+# Table 2 of Masoud & Maas 2025, the RBF model on its identification data (NRMSE, Eq. 41)
+PAPER_TABLE2_RBF = {
+    "nrmse_q": 0.021,
+    "nrmse_phi": 0.020,
+    "nrmse_q_dot": 0.041,
+    "nrmse_q_ddot": 0.050,
+}
+
+
+def test_paper_experiment_on_the_virtual_rig_meets_table_2(tmp_path):
+    out = run("paper-experiment.toml", tmp_path)
+    assert "Free-run validation" in out and "analytical" in out
+    table = pd.read_parquet(tmp_path / "compare/nrmse.parquet").set_index(["model", "dataset"])
+    rbf_id, rbf_val = table.loc[("rbf", "identification")], table.loc[("rbf", "validation")]
+    for key, bound in PAPER_TABLE2_RBF.items():
+        assert rbf_id[key] <= bound, key
+    assert rbf_val.nrmse_q <= 0.041
+    for ds in ("identification", "validation"):
+        assert table.loc[("rbf", ds)].nrmse_q < table.loc[("analytical", ds)].nrmse_q
+    # the identified restoring force c(q) q + F_0 against the truth, over the q bins (2 mm)
+    # the identification data visit (>= 20 samples)
+    from pipeline import artifacts
+    from pipeline.identify import RBFModel
+
+    model = RBFModel.from_tree(artifacts.read_h5(tmp_path / "identify/model.h5"))
+    truth = artifacts.read_h5(tmp_path / "rig/identification_truth.h5")["curves"]
+    q = pd.read_parquet(tmp_path / "ingest/identification.parquet").q.to_numpy()
+    edges = np.arange(-0.02, 0.0201, 0.002)
+    counts, _ = np.histogram(q, edges)
+    bins = np.digitize(truth["q"], edges) - 1
+    sel = (bins >= 0) & (bins < counts.size)
+    sel[sel] &= counts[bins[sel]] >= 20
+    f_id = model.curves(truth["q"][sel])["cq"] + model.backbone["F_0"]
+    f_true = truth["f"][sel]
+    assert np.max(np.abs(f_id - f_true)) <= 0.10 * np.ptp(f_true)

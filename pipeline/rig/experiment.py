@@ -1,0 +1,285 @@
+"""Experiments on the virtual rig: the ``[rig]`` workflow section, the recording and the truth.
+
+A workflow's ``[rig]`` section describes the simulated prototype (the ``[physics]`` prototype
+with the deviations of ``[rig.prototype]``, e.g. an assembly asymmetry), the rig around it
+(``[rig.plant]``: friction, HV drivers, laser sensor) and its experiments
+(``[rig.experiments.<name>]``: an excitation profile, seeds, the MAT version). Each experiment
+becomes a dSPACE ControlDesk recording with the laser position in mm, the monitored voltages
+and the references in kV, under full block paths, which the ingest stage reads like a lab's
+file, and a truth record (noise-free states, the true characteristic curves) for tests.
+
+Examples
+--------
+::
+
+    [rig]
+    sample_time = 0.01                    # log interval [s] (paper: 10 ms)
+
+    [rig.prototype]                       # deviations of the built prototype from [physics]
+    dz_1 = 0.15e-3                        # [m]
+
+    [rig.plant]                           # pipeline.rig.plant.RigParams keys
+    sensor_noise = 1e-6                   # [m]
+
+    [rig.experiments.identification]
+    profile = "identification"            # pipeline.rig.profiles.PROFILES
+    seed = 1                              # sensor noise
+    format = "7.3"                        # MAT version: "5" or "7.3"
+
+References
+----------
+Masoud & Maas 2025, Sec. 5.1 (rig), Fig. 11a (identification profile).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline.config import config_from_section
+from pipeline.errors import WorkflowError
+from pipeline.physics.params import PrototypeParams
+from pipeline.rig.dspace import MAT_VERSIONS, Channel, recording
+from pipeline.rig.plant import RigParams, RigRun, simulate_rig, true_curves
+from pipeline.rig.profiles import make_profile
+
+__all__ = [
+    "CHANNELS",
+    "ExperimentConfig",
+    "RigConfig",
+    "rig_recording",
+    "run_experiment",
+    "truth_tree",
+]
+
+#: Block paths and units of the recorded channels (what a lab's ControlDesk layout shows).
+CHANNELS = {
+    "q": ("Model Root/Sensors/Laser/q", "mm", 1e3),
+    "v1": ("Model Root/HV Amplifier/DE1/v_mon", "kV", 1e-3),
+    "v2": ("Model Root/HV Amplifier/DE2/v_mon", "kV", 1e-3),
+    "r1": ("Model Root/Reference/DE1/v_ref", "kV", 1e-3),
+    "r2": ("Model Root/Reference/DE2/v_ref", "kV", 1e-3),
+}
+RASTER = "Periodic Task 1"
+#: Fixed "created" stamp of the recordings: a rig log is a function of its inputs only.
+CREATED = "Sat Jan 01 00:00:00 2000"
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """One experiment of the virtual rig (a ``[rig.experiments.<name>]`` table).
+
+    Parameters
+    ----------
+    profile : str
+        Excitation profile, a key of :data:`pipeline.rig.profiles.PROFILES`.
+    seed : int
+        Seed of the sensor and monitor noise.
+    profile_seed : int or None
+        Seed of the profile's random parts; default the profile's own.
+    duration : float
+        Length [s] (paper: 37.5 s).
+    hold : float
+        DAC interval of the references [s].
+    v_sub : float or None
+        Peak of the sub-threshold excitation [V]; default the profile's.
+    format : {"5", "7.3"}
+        MAT file version of the recording.
+    side : {-1, 1}
+        Initial well (-1: left, as the paper's experiments).
+
+    Raises
+    ------
+    ValueError
+        On an invalid format or side.
+    """
+
+    profile: str = "identification"
+    seed: int = 0
+    profile_seed: int | None = None
+    duration: float = 37.5
+    hold: float = 1e-3
+    v_sub: float | None = None
+    format: str = "7.3"
+    side: int = -1
+
+    def __post_init__(self) -> None:
+        if str(self.format) not in MAT_VERSIONS:
+            raise ValueError(f"`format` must be one of {MAT_VERSIONS}, got {self.format!r}")
+        object.__setattr__(self, "format", str(self.format))
+        if self.side not in (-1, 1):
+            raise ValueError(f"`side` must be -1 (left well) or 1 (right well), got {self.side!r}")
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """The ``[rig]`` section: the simulated prototype, the rig and its experiments.
+
+    Parameters
+    ----------
+    rig : RigParams
+        Prototype (``[physics]`` updated by ``[rig.prototype]``) and plant (``[rig.plant]``).
+    sample_time : float
+        Log interval [s].
+    experiments : dict of str to ExperimentConfig
+        The experiments by name, in file order.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.1.
+    """
+
+    rig: RigParams
+    sample_time: float = 0.01
+    experiments: dict[str, ExperimentConfig] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any], physics: Mapping[str, Any]) -> RigConfig:
+        """Build from the ``[rig]`` and ``[physics]`` sections.
+
+        Parameters
+        ----------
+        section : mapping
+            The ``[rig]`` table.
+        physics : mapping
+            The ``[physics]`` table (the nominal prototype; empty: Table 1).
+
+        Returns
+        -------
+        RigConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key or invalid value (named), or no experiments.
+        """
+        known = {"sample_time", "prototype", "plant", "experiments"}
+        unknown = sorted(set(section) - known)
+        if unknown:
+            raise WorkflowError(f"[rig]: unknown key '{unknown[0]}'; known keys: {sorted(known)}")
+        prototype = PrototypeParams.from_dict({**physics, **section.get("prototype", {})})
+        plant = dict(section.get("plant", {}))
+        if "prototype" in plant:
+            raise WorkflowError("[rig.plant]: the prototype goes in [rig.prototype]")
+        rig = RigParams.from_dict({**plant, "prototype": prototype})
+        experiments = {
+            name: config_from_section(ExperimentConfig, table, f"[rig.experiments.{name}]")
+            for name, table in section.get("experiments", {}).items()
+        }
+        if not experiments:
+            raise WorkflowError("[rig]: no [rig.experiments.<name>] table")
+        sample_time = section.get("sample_time", 0.01)
+        if not isinstance(sample_time, int | float) or not sample_time > 0:
+            raise WorkflowError(f"[rig] sample_time must be > 0 [s], got {sample_time!r}")
+        return cls(rig, float(sample_time), experiments)
+
+
+def run_experiment(cfg: RigConfig, name: str) -> RigRun:
+    """Simulate one experiment of the rig (profile -> drivers -> plant -> sensors -> log).
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        The rig.
+    name : str
+        Key of ``cfg.experiments``.
+
+    Returns
+    -------
+    RigRun
+        Logged channels and truth.
+
+    Raises
+    ------
+    WorkflowError
+        For an unknown profile or invalid profile settings.
+    ValueError
+        From :func:`pipeline.rig.plant.simulate_rig` (e.g. no well on the start side).
+    """
+    exp = cfg.experiments[name]
+    kwargs: dict[str, Any] = {"duration": exp.duration, "hold": exp.hold}
+    if exp.profile_seed is not None:
+        kwargs["seed"] = exp.profile_seed
+    if exp.v_sub is not None:
+        kwargs["v_sub"] = exp.v_sub
+    prof = make_profile(exp.profile, **kwargs)
+    return simulate_rig(
+        cfg.rig, prof.t, prof.r1, prof.r2, sample_time=cfg.sample_time, seed=exp.seed,
+        side=exp.side,
+    )  # fmt: skip
+
+
+def rig_recording(run: RigRun, name: str, cfg: RigConfig) -> dict[str, Any]:
+    """Build the ControlDesk recording of a run: laser q [mm], monitors, references [kV].
+
+    Parameters
+    ----------
+    run : RigRun
+        From :func:`run_experiment`.
+    name : str
+        Experiment name (in the description).
+    cfg : RigConfig
+        The rig (its settings go into the description).
+
+    Returns
+    -------
+    dict
+        For :func:`pipeline.rig.dspace.write_recording`.
+    """
+    exp = cfg.experiments[name]
+    channels = [
+        Channel(path, getattr(run, key) * scale, unit, RASTER)
+        for key, (path, unit, scale) in CHANNELS.items()
+    ]
+    description = {
+        "General": {"DateTime": CREATED, "Device": "debist virtual rig"},
+        "Experiment": {"Name": name, "Profile": exp.profile, "Seed": float(exp.seed)},
+    }
+    return recording(channels, {RASTER: run.t}, description)
+
+
+def truth_tree(run: RigRun, cfg: RigConfig, q_grid: np.ndarray) -> dict[str, Any]:
+    """Collect the truth behind a run, for ``<experiment>_truth.h5``.
+
+    Parameters
+    ----------
+    run : RigRun
+        From :func:`run_experiment`.
+    cfg : RigConfig
+        The rig.
+    q_grid : ndarray, shape (n,)
+        Grid of the true curves [m].
+
+    Returns
+    -------
+    dict
+        ``prototype`` and ``plant`` parameters [SI], ``states`` (noise-free ``q``,
+        ``q_dot``, ``phi``, the friction force and the applied voltages at the log
+        instants) and ``curves`` (:func:`pipeline.rig.plant.true_curves`).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26, 33, 37.
+    """
+    plant = cfg.rig.to_dict()
+    prototype = plant.pop("prototype")
+    return {
+        "attrs": {"units": "SI", "sample_time": run.sample_time, "seed": run.seed},
+        "prototype": {"attrs": prototype},
+        "plant": {k: np.asarray(v, dtype=float) for k, v in plant.items()},
+        "states": {
+            "t": run.t,
+            "q": run.q_true,
+            "q_dot": run.q_dot_true,
+            "phi": run.phi_true,
+            "F_friction": run.F_friction,
+            "v1": run.v1_applied,
+            "v2": run.v2_applied,
+            "x": run.x_true,
+            "saturated": run.saturated,
+        },
+        "curves": true_curves(cfg.rig, q_grid),
+    }
