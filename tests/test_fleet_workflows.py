@@ -40,7 +40,7 @@ def test_members_are_seeded_distinct_and_loadable(tmp_path):
 def test_existing_files_are_never_overwritten(tmp_path):
     files = render(tmp_path, n=2)
     (tmp_path / "paper-experiment-001.toml").write_text("mine", encoding="utf-8")
-    with pytest.raises(ArtifactError, match="paper-experiment-001.toml' exists"):
+    with pytest.raises(ArtifactError, match=r"paper-experiment-001\.toml' exists"):
         write_text_files(tmp_path, files)
     assert not (tmp_path / "paper-experiment-000.toml").exists()
     assert (tmp_path / "paper-experiment-001.toml").read_text() == "mine"

@@ -101,7 +101,7 @@ def test_rerun_skips_and_ingest_follows_the_rig(rig_run, tmp_path):
     assert states["rig"] == "up to date" and states["ingest"] == "up to date"
     assert manifests["ingest"].inputs["a73:source"] == manifests["rig"].outputs["a73.mat"]
     changed = Path(tmp_path / "changed.toml")
-    changed.write_text(WORKFLOW.replace("seed = 5\nformat = \"5\"", "seed = 6\nformat = \"5\""))
+    changed.write_text(WORKFLOW.replace('seed = 5\nformat = "5"', 'seed = 6\nformat = "5"'))
     status = Runner(load_workflow(changed, wf.output_dir)).status()
     reasons = {s.stage: (s.state, s.reason) for s in status}
     assert reasons["rig"][0] == "stale" and "rig" in reasons["rig"][1]
