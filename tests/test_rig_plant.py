@@ -274,6 +274,8 @@ def test_start_in_the_right_well_and_argument_checks():
         simulate_rig(RIG, t, r[0], r[1], sample_time=0.01, seed=0, side=0)
     with pytest.raises(ValueError, match="`sample_time` must be in"):
         simulate_rig(RIG, t, r[0], r[1], sample_time=1.0, seed=0)
+    with pytest.raises(ValueError, match="`method` must be 'Radau' or 'BDF'"):
+        simulate_rig(RIG, t, r[0], r[1], sample_time=0.01, seed=0, method="RK45")
     with pytest.warns(DebistWarning, match="clipped"):
         simulate_rig(RIG, t, r[0] + 3500.0, r[1], sample_time=0.1, seed=0)
 

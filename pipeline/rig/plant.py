@@ -17,8 +17,8 @@ The "real" prototype that the virtual rig measures is the full dynamic model of
 
 The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: the state of
 :class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
-elements. :func:`simulate_rig` integrates it with :func:`scipy.integrate.solve_ivp` (BDF with
-an approximate Jacobian) and returns the logged channels with the truth (:class:`RigRun`);
+elements. :func:`simulate_rig` integrates it with :func:`scipy.integrate.solve_ivp` (Radau
+with an approximate Jacobian) and returns the logged channels with the truth (:class:`RigRun`);
 :func:`true_curves` gives the characteristic curves an identification should recover.
 
 References
@@ -568,6 +568,8 @@ def simulate_rig(
         r = np.clip(r, 0.0, V_MAX)
     if side not in (-1, 1):
         raise ValueError(f"`side` must be -1 or +1, got {side!r}")
+    if method not in ("Radau", "BDF"):
+        raise ValueError(f"`method` must be 'Radau' or 'BDF', got {method!r}")
     duration = t_ref.size * hold
     if not (sample_time > 0 and sample_time <= duration):
         raise ValueError(f"`sample_time` must be in (0, {duration}] s, got {sample_time!r}")
@@ -590,8 +592,6 @@ def simulate_rig(
     p = rig.prototype
     x_rest = np.concatenate([well_state(p, side), np.zeros(rig.n_friction)])
     x = x_rest
-    if method not in ("Radau", "BDF"):
-        raise ValueError(f"`method` must be 'Radau' or 'BDF', got {method!r}")
     scale = ritz_basis(p.l).scale
     tol_x = np.array([atol, atol, atol, 100.0 * atol])
     atol_v = np.concatenate(
