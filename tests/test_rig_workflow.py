@@ -117,3 +117,21 @@ def test_rig_workflow_errors(tmp_path):
     with pytest.raises(WorkflowError, match="format"):
         Runner(load_workflow(path)).run(["rig"])
     assert not (tmp_path / "runs" / "rig").exists()
+
+
+@pytest.mark.parametrize(
+    ("section", "match"),
+    [
+        ({"experiments": {"a": {"profile": "sweep"}}}, r"\[rig.experiments.a\] profile 'sweep'"),
+        ({"plant": {"friction_q": 1}, "experiments": {"a": {}}}, r"\[rig.plant\]: unknown key"),
+        ({"experiments": {"a": {"seeed": 1}}}, r"\[rig.experiments.a\]: unknown key 'seeed'"),
+        ({"experiments": {"a": {"format": "6"}}}, "format"),
+        ({"experiments": {}}, "no \\[rig.experiments"),
+        ({"sample_time": -1, "experiments": {"a": {}}}, "sample_time"),
+    ],
+)
+def test_rig_section_errors_name_the_table(section, match):
+    from pipeline.rig.experiment import RigConfig
+
+    with pytest.raises(WorkflowError, match=match):
+        RigConfig.from_dict(section, {})

@@ -44,7 +44,7 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.dspace import MAT_VERSIONS, Channel, recording
 from pipeline.rig.plant import RigParams, RigRun, simulate_rig, true_curves
-from pipeline.rig.profiles import make_profile
+from pipeline.rig.profiles import PROFILES, make_profile
 
 __all__ = [
     "CHANNELS",
@@ -164,11 +164,20 @@ class RigConfig:
         plant = dict(section.get("plant", {}))
         if "prototype" in plant:
             raise WorkflowError("[rig.plant]: the prototype goes in [rig.prototype]")
-        rig = RigParams.from_dict({**plant, "prototype": prototype})
+        try:
+            rig = RigParams.from_dict({**plant, "prototype": prototype})
+        except WorkflowError as exc:
+            raise WorkflowError(str(exc).replace("[rig]", "[rig.plant]", 1)) from None
         experiments = {
             name: config_from_section(ExperimentConfig, table, f"[rig.experiments.{name}]")
             for name, table in section.get("experiments", {}).items()
         }
+        for name, exp in experiments.items():
+            if exp.profile not in PROFILES:
+                raise WorkflowError(
+                    f"[rig.experiments.{name}] profile {exp.profile!r} is unknown; known: "
+                    f"{', '.join(PROFILES)}"
+                )
         if not experiments:
             raise WorkflowError("[rig]: no [rig.experiments.<name>] table")
         sample_time = section.get("sample_time", 0.01)
