@@ -22,17 +22,16 @@ Masoud & Maas 2025, Eq. 8, 12, 19-23, Fig. 6a; NOTES items 3, 6.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from pipeline.physics import _generated
 from pipeline.physics.kinematics import de_lengths, deflection, pitch_angle, ritz_basis
 from pipeline.physics.params import PrototypeParams
+from pipeline.physics.segments import solve_segments
 from pipeline.physics.statics import equilibria
 
 __all__ = [
@@ -387,28 +386,11 @@ def simulate(
     t_eval = np.arange(t0, t1 + 5e-4, 1e-3) if t_eval is None else np.asarray(t_eval, float)
     s = ritz_basis(params.l).scale
     atol_v = np.concatenate([atol / s, atol / s, [atol, atol]])
-    edges = [t0, *sorted(b_ for b_ in breakpoints if t0 < b_ < t1), t1]
-    x = np.asarray(x0, dtype=float)
-    ts, xs, msgs, ok, nfev = [], [], [], True, 0
-    for a, c in itertools.pairwise(edges):
-        last = c == edges[-1]
-        sel = (t_eval >= a) & ((t_eval <= c) if last else (t_eval < c))
-        te = t_eval[sel]
-        te_ext = te if te.size and te[-1] == c else np.append(te, c)
-        kw = {"jac": model.jac} if method in ("Radau", "BDF") else {}
-        sol = solve_ivp(
-            model.rhs, (a, c), x, method=method, t_eval=te_ext, rtol=rtol, atol=atol_v, **kw
-        )
-        nfev += sol.nfev
-        ok &= bool(sol.success)
-        msgs.append(sol.message)
-        if not sol.success:
-            break
-        ts.append(sol.t[: te.size])
-        xs.append(sol.y.T[: te.size])
-        x = sol.y[:, -1]
-    t = np.concatenate(ts) if ts else np.empty(0)
-    X = np.concatenate(xs) if xs else np.empty((0, 10))
+    kw = {"jac": model.jac} if method in ("Radau", "BDF") else {}
+    sol = solve_segments(
+        model.rhs, (t0, t1), x0, t_eval, breakpoints, method=method, rtol=rtol, atol=atol_v, **kw
+    )
+    t, X = sol.t, sol.y
     return SimulationResult(
         t=t,
         x=X,
@@ -416,9 +398,9 @@ def simulate(
         phi=pitch_angle(X[:, :4], params),
         v1=np.array([v1(tt) for tt in t]),
         v2=np.array([v2(tt) for tt in t]),
-        success=bool(ok),
-        message="; ".join(dict.fromkeys(msgs)),
-        nfev=nfev,
+        success=sol.success,
+        message=sol.message,
+        nfev=sol.nfev,
     )
 
 

@@ -22,19 +22,18 @@ Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, 41, Fig. 6b, 7.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.polynomial import Chebyshev
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from pipeline.physics.dynamics import FullModel, SimulationResult, simulate, well_state
 from pipeline.physics.energy import potential
 from pipeline.physics.kinematics import ritz_basis
 from pipeline.physics.params import V_MAX, PrototypeParams
+from pipeline.physics.segments import solve_segments
 from pipeline.physics.statics import force_displacement
 
 __all__ = [
@@ -424,26 +423,11 @@ def simulate_reduced(
     """
     t0, t1 = map(float, t_span)
     t_eval = np.arange(t0, t1 + 5e-4, 1e-3) if t_eval is None else np.asarray(t_eval, float)
-    edges = [t0, *sorted(b_ for b_ in breakpoints if t0 < b_ < t1), t1]
-    x = np.asarray(x0, dtype=float)
-    ts, xs, ok, nfev = [], [], True, 0
-    for a, c in itertools.pairwise(edges):
-        sel = (t_eval >= a) & ((t_eval <= c) if c == t1 else (t_eval < c))
-        te = t_eval[sel]
-        te_ext = te if te.size and te[-1] == c else np.append(te, c)
-        sol = solve_ivp(
-            model.rhs, (a, c), x, method=method, t_eval=te_ext, rtol=rtol, atol=atol,
-            args=(v1, v2, F),
-        )  # fmt: skip
-        nfev += sol.nfev
-        ok &= bool(sol.success)
-        if not sol.success:
-            break
-        ts.append(sol.t[: te.size])
-        xs.append(sol.y.T[: te.size])
-        x = sol.y[:, -1]
-    t = np.concatenate(ts) if ts else np.empty(0)
-    X = np.concatenate(xs) if xs else np.empty((0, 4))
+    sol = solve_segments(
+        model.rhs, (t0, t1), x0, t_eval, breakpoints, method=method, rtol=rtol, atol=atol,
+        args=(v1, v2, F),
+    )  # fmt: skip
+    t, X, ok, nfev = sol.t, sol.y, sol.success, sol.nfev
     return ReducedResult(t=t, x=X, q=X[:, 0], phi=model.phi(X[:, 0]), success=ok, nfev=nfev)
 
 

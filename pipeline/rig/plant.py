@@ -31,7 +31,6 @@ model for friction simulation and compensation. IEEE Trans. Autom. Control 50(11
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import time
 import warnings
@@ -40,7 +39,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 from scipy.signal import decimate
 
 from pipeline.errors import DebistWarning, WorkflowError
@@ -48,6 +46,7 @@ from pipeline.physics.dynamics import FullModel, well_state
 from pipeline.physics.kinematics import pitch_angle, ritz_basis
 from pipeline.physics.params import V_MAX, PrototypeParams
 from pipeline.physics.reduced import reduced_curves
+from pipeline.physics.segments import solve_segments
 from pipeline.rig.drivers import DriverOutput, uniform_grid
 
 __all__ = [
@@ -354,9 +353,8 @@ class RigPlant:
         """
         z = x[10:]
         qd = float(self._L @ x[4:8])
-        F_fr = -float(self._k @ z) - self._c * qd
         out = np.empty(self.n_states)
-        out[:10] = self.model.rhs(t, x[:10], F_extra=F_fr)
+        out[:10] = self.model.rhs(t, x[:10], F_extra=float(self.friction_force(x)))
         u = np.abs(z * self._kF)
         out[10:] = qd * (1.0 - np.where(qd * z > 0.0, u**self._p, 0.0))
         return out
@@ -591,7 +589,6 @@ def simulate_rig(
     plant = RigPlant(rig, drivers[0], drivers[1])
     p = rig.prototype
     x_rest = np.concatenate([well_state(p, side), np.zeros(rig.n_friction)])
-    x = x_rest
     scale = ritz_basis(p.l).scale
     tol_x = np.array([atol, atol, atol, 100.0 * atol])
     atol_v = np.concatenate(
@@ -599,37 +596,13 @@ def simulate_rig(
     )
     jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
     breaks = [t0 + (k + 1) * hold for k in jumps]
-    edges = [t0, *(b for b in breaks if t0 < b < t_end), t_end]
-    run = t_fine >= t0
-    t_run = t_fine[run]
-    X = np.empty((t_run.size, plant.n_states))
-    filled, nfev, njev, ok, msgs = 0, 0, 0, True, []
-    for a, c in itertools.pairwise(edges):
-        last = c == edges[-1]
-        sel = (t_run >= a) & ((t_run <= c) if last else (t_run < c))
-        te = t_run[sel]
-        te_ext = te if te.size and te[-1] == c else np.append(te, c)
-        sol = solve_ivp(
-            plant.rhs,
-            (a, c),
-            x,
-            method=method,
-            jac=plant.jac,
-            t_eval=te_ext,
-            rtol=rtol,
-            atol=atol_v,
-        )
-        nfev += sol.nfev
-        njev += sol.njev
-        ok &= bool(sol.success)
-        msgs.append(sol.message)
-        if not sol.success:
-            break
-        X[filled : filled + te.size] = sol.y.T[: te.size]
-        filled += te.size
-        x = sol.y[:, -1]
-    if filled < t_run.size:  # failed: keep the shape, NaN beyond the failure
-        X[filled:] = np.nan
+    t_run = t_fine[t_fine >= t0]
+    sol = solve_segments(
+        plant.rhs, (t0, t_end), x_rest, t_run, breaks,
+        method=method, jac=plant.jac, rtol=rtol, atol=atol_v,
+    )  # fmt: skip
+    X = np.full((t_run.size, plant.n_states), np.nan)  # NaN beyond a failure
+    X[: sol.t.size] = sol.y
     X_all = np.concatenate([np.repeat(x_rest[None, :], pad, axis=0), X])  # at rest before
     L = ritz_basis(p.l).L
     q_fine = X_all[:, :4] @ L
@@ -665,10 +638,10 @@ def simulate_rig(
         saturated=np.abs(q_true) > rig.sensor_range,
         sample_time=float(sample_time),
         seed=int(seed),
-        nfev=int(nfev),
-        njev=int(njev),
-        success=bool(ok),
-        message="; ".join(dict.fromkeys(msgs)),
+        nfev=sol.nfev,
+        njev=sol.njev,
+        success=sol.success,
+        message=sol.message,
         wall_time=time.perf_counter() - start,
     )
 
