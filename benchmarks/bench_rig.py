@@ -19,7 +19,8 @@ import time
 
 import numpy as np
 
-from pipeline.rig.plant import RigParams, simulate_rig
+from pipeline.rig.params import RigParams
+from pipeline.rig.plant import simulate_rig
 from pipeline.rig.profiles import identification_profile
 
 PEERS = (

@@ -7,7 +7,7 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.params import V_MAX, PrototypeParams
 from pipeline.physics.statics import equilibria
 from pipeline.rig.fleet import FleetError, is_bistable_and_switchable, make_fleet
-from pipeline.rig.plant import RigParams
+from pipeline.rig.params import RigParams
 
 
 @pytest.fixture(scope="module")

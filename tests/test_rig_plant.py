@@ -12,7 +12,8 @@ from pipeline.physics.kinematics import ritz_basis
 from pipeline.physics.params import PrototypeParams
 from pipeline.physics.statics import equilibria, force_displacement
 from pipeline.rig.drivers import DriverOutput
-from pipeline.rig.plant import RigParams, RigPlant, simulate_rig, true_curves
+from pipeline.rig.params import RigParams
+from pipeline.rig.plant import RigPlant, simulate_rig, true_curves
 
 RIG = RigParams()
 L = ritz_basis(RIG.prototype.l).L

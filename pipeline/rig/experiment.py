@@ -18,7 +18,7 @@ Examples
     [rig.prototype]                       # deviations of the built prototype from [physics]
     dz_1 = 0.15e-3                        # [m]
 
-    [rig.plant]                           # pipeline.rig.plant.RigParams keys
+    [rig.plant]                           # pipeline.rig.params.RigParams keys
     sensor_noise = 1e-6                   # [m]
 
     [rig.experiments.identification]
@@ -43,7 +43,8 @@ from pipeline.config import config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.dspace import MAT_VERSIONS, Channel, recording
-from pipeline.rig.plant import RigParams, RigRun, simulate_rig, true_curves
+from pipeline.rig.params import RigParams
+from pipeline.rig.plant import RigRun, simulate_rig, true_curves
 from pipeline.rig.profiles import PROFILES, make_profile
 
 __all__ = [

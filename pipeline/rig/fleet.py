@@ -23,7 +23,7 @@ import numpy as np
 from pipeline.errors import DebistError, WorkflowError
 from pipeline.physics.params import V_MAX, PrototypeParams
 from pipeline.physics.statics import equilibria
-from pipeline.rig.plant import RigParams
+from pipeline.rig.params import RigParams
 
 __all__ = ["DEFAULT_SCATTER", "FleetError", "is_bistable_and_switchable", "make_fleet"]
 

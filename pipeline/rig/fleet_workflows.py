@@ -25,7 +25,7 @@ import tomli_w
 from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.fleet import make_fleet
-from pipeline.rig.plant import RigParams
+from pipeline.rig.params import RigParams
 
 __all__ = ["fleet_workflows"]
 

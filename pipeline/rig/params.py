@@ -1,0 +1,221 @@
+"""Parameters of the virtual rig: the simulated prototype, its friction, drivers and sensors.
+
+References
+----------
+Masoud & Maas 2025, Table 1, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005 (GMS friction).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from pipeline.config import config_from_section
+from pipeline.errors import WorkflowError
+from pipeline.physics.params import PrototypeParams
+
+__all__ = ["RigParams"]
+
+
+def _default_prototype() -> PrototypeParams:
+    return PrototypeParams.paper().replace(dz_1=0.15e-3, dz_2=0.05e-3)
+
+
+@dataclass(frozen=True)
+class RigParams:
+    """The simulated prototype and the rig around it, SI units.
+
+    Parameters
+    ----------
+    prototype : PrototypeParams
+        The physics of the prototype (Table 1 with NOTES items 1-6) including its asymmetry;
+        default the paper's prototype at b = 23 mm with ``dz_1 = 0.15 mm``,
+        ``dz_2 = 0.05 mm`` (assembly tolerance of a 3D-printed frame; wells at -9.50 and
+        +10.99 mm, still switchable by 3 kV on either DE).
+    friction_k : tuple of float
+        Stiffnesses ``k_i`` of the Maxwell-slip elements at the beam tip [N/m]; default
+        (40, 12, 4) N/m: pre-sliding distances ``F_i / k_i`` of 10, 50 and 250 um, a tangent
+        stiffness after a reversal of 56 N/m against the 13 N/m of the wells.
+    friction_F : tuple of float
+        Slip forces ``F_i`` of the elements [N]; default (0.4, 0.6, 1.0) mN, a breakaway
+        force of 2 mN: 2 % of the +-80 mN force span over +-15 mm of Fig. 4 and 6 % of the
+        36 mN barrier, so friction perturbs the model without changing its switching. The
+        paper does not quantify friction; these are plausible values for a rubbing frame.
+    friction_c : float
+        Viscous part of the tip friction [N s/m]; 0 by default (the model's own damping,
+        Eq. 12, is in the prototype).
+    friction_exponent : float
+        Sharpness ``p`` of the regularised stick-slip transition (>= 1; large = ideal
+        elasto-plastic elements, see :class:`RigPlant`).
+    driver_tau : float
+        Time constant of the first-order lag of each HV driver [s]; default 5 ms.
+    driver_slew : float
+        Slew-rate limit of each HV driver [V/s]; default 100 kV/s (30 ms for 0 -> 3 kV).
+    sensor_range : float
+        Measuring range of the laser sensor, ``+-sensor_range`` about q = 0 [m]; default
+        25 mm.
+    sensor_resolution : float
+        Quantisation step of the laser sensor [m]; default 0.3 um; 0 disables quantisation.
+    sensor_noise : float
+        RMS of the white noise of one internal laser sample [m]; default 1 um. The FIR of
+        the decimation removes the part above the log's Nyquist frequency, so the logged
+        noise is about ``sensor_noise / sqrt(oversample)``.
+    monitor_noise : float
+        RMS of the white noise of one internal sample of the voltage monitors [V]; default
+        2 V (0.07 % of 3 kV).
+    oversample : int
+        Internal samples per log sample (sensors and plant output on the grid
+        ``sample_time / oversample``); default 10.
+
+    Raises
+    ------
+    WorkflowError
+        If a value is of the wrong type, not finite or out of range, or the friction tuples
+        differ in length.
+
+    References
+    ----------
+    Masoud & Maas 2025, Table 1, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005 (GMS).
+
+    Examples
+    --------
+    >>> rig = RigParams()
+    >>> round(rig.breakaway_force * 1e3, 3)  # [mN]
+    2.0
+    >>> RigParams.from_dict(rig.to_dict()) == rig
+    True
+    """
+
+    prototype: PrototypeParams = field(default_factory=_default_prototype)
+    friction_k: tuple[float, ...] = (40.0, 12.0, 4.0)
+    friction_F: tuple[float, ...] = (0.4e-3, 0.6e-3, 1.0e-3)
+    friction_c: float = 0.0
+    friction_exponent: float = 4.0
+    driver_tau: float = 5e-3
+    driver_slew: float = 100e3
+    sensor_range: float = 25e-3
+    sensor_resolution: float = 0.3e-6
+    sensor_noise: float = 1e-6
+    monitor_noise: float = 2.0
+    oversample: int = 10
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.prototype, PrototypeParams):
+            raise WorkflowError(
+                f"rig parameter `prototype` must be a PrototypeParams, got {self.prototype!r}"
+            )
+        for name in ("friction_k", "friction_F"):
+            value = getattr(self, name)
+            if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
+                raise WorkflowError(f"rig parameter `{name}` must be a sequence, got {value!r}")
+            items = tuple(_number(f"{name}[{i}]", v, positive=True) for i, v in enumerate(value))
+            object.__setattr__(self, name, items)
+        if len(self.friction_k) != len(self.friction_F):
+            raise WorkflowError(
+                f"rig parameters `friction_k` and `friction_F` must have equal lengths, got "
+                f"{len(self.friction_k)} and {len(self.friction_F)}"
+            )
+        for name in ("driver_tau", "driver_slew", "sensor_range"):
+            object.__setattr__(self, name, _number(name, getattr(self, name), positive=True))
+        for name in ("friction_c", "sensor_resolution", "sensor_noise", "monitor_noise"):
+            object.__setattr__(self, name, _number(name, getattr(self, name), positive=False))
+        p = _number("friction_exponent", self.friction_exponent, positive=True)
+        if p < 1.0:
+            raise WorkflowError(f"rig parameter `friction_exponent` must be >= 1, got {p!r}")
+        object.__setattr__(self, "friction_exponent", p)
+        n = self.oversample
+        if isinstance(n, bool) or not isinstance(n, int | float) or n != int(n) or n < 1:
+            raise WorkflowError(f"rig parameter `oversample` must be an integer >= 1, got {n!r}")
+        object.__setattr__(self, "oversample", int(n))
+
+    @property
+    def n_friction(self) -> int:
+        """Number of Maxwell-slip elements."""
+        return len(self.friction_k)
+
+    @property
+    def breakaway_force(self) -> float:
+        """Total slip force ``sum F_i`` [N] (the Coulomb level of gross sliding)."""
+        return float(sum(self.friction_F))
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, object]) -> RigParams:
+        """Build rig parameters from a workflow section (e.g. a ``[rig]`` table).
+
+        Parameters
+        ----------
+        section : Mapping[str, object]
+            Field name -> value [SI]; ``prototype`` is a nested table of
+            :class:`PrototypeParams` keys (missing keys keep the paper's values, a missing
+            table the default asymmetric prototype); friction tuples may be lists.
+
+        Returns
+        -------
+        RigParams
+            The parameters; keys not given keep their defaults.
+
+        Raises
+        ------
+        WorkflowError
+            If a key is unknown (named) or a value invalid.
+        """
+        kwargs = dict(section) if isinstance(section, Mapping) else section
+        proto = kwargs.get("prototype") if isinstance(kwargs, Mapping) else None
+        if proto is not None and not isinstance(proto, PrototypeParams):
+            kwargs["prototype"] = PrototypeParams.from_dict(proto)  # type: ignore[arg-type]
+        return config_from_section(cls, kwargs, "[rig]")  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the parameters as nested plain data [SI], the inverse of :meth:`from_dict`.
+
+        Returns
+        -------
+        dict[str, object]
+            Field name -> value; ``prototype`` as a dict, the friction tuples as lists.
+        """
+        out: dict[str, object] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "prototype":
+                value = value.to_dict()
+            elif isinstance(value, tuple):
+                value = list(value)
+            out[f.name] = value
+        return out
+
+    def replace(self, **changes: object) -> RigParams:
+        """Return a copy with some fields changed (validated like the constructor).
+
+        Parameters
+        ----------
+        **changes : object
+            Field name -> new value.
+
+        Returns
+        -------
+        RigParams
+            The modified copy.
+
+        Raises
+        ------
+        WorkflowError
+            If a name is unknown or a value invalid.
+        """
+        unknown = [k for k in changes if k not in {f.name for f in dataclasses.fields(self)}]
+        if unknown:
+            raise WorkflowError(f"[rig]: unknown key '{unknown[0]}'")
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+
+def _number(name: str, value: object, *, positive: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise WorkflowError(f"rig parameter `{name}` must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise WorkflowError(f"rig parameter `{name}` must be finite, got {value!r}")
+    if value < 0 or (positive and value == 0):
+        kind = "positive" if positive else "non-negative"
+        raise WorkflowError(f"rig parameter `{name}` must be {kind}, got {value!r}")
+    return value
