@@ -22,7 +22,7 @@ A script that runs every prototype of a folder on two local processes (the
 
     if __name__ == "__main__":
         results = run_batch(expand_workflows(["workflows/protos/"]), workers=2)
-        print(summary_table(results))
+        summary_table(results).to_csv("batch-summary.csv", index=False)
 
 References
 ----------

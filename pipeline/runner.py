@@ -330,13 +330,14 @@ class Runner:
         return physics_params(self.wf) if "physics" in self.wf.sections else None
 
     def _execute(self, stage: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        from pipeline import physics_stages as ps
         from pipeline import stages as st
 
         if stage == "rig":
-            res = st.run_rig(self.wf.section("physics"), self.wf.section("rig"))
+            res = ps.run_rig(self.wf.section("physics"), self.wf.section("rig"))
             return res.outputs, res.summary
         if stage == "analyze":
-            res = st.run_analyze(physics_params(self.wf), self.wf.section("analyze"))
+            res = ps.run_analyze(physics_params(self.wf), self.wf.section("analyze"))
             outputs: dict[str, Any] = {"statics.h5": artifacts.H5Tree(res.tree)}
             outputs.update({f"{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})
             return outputs, res.summary

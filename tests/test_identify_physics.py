@@ -11,8 +11,8 @@ from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from pipeline.physics.freerun import AnalyticalModel
 from pipeline.physics.params import PrototypeParams
 from pipeline.physics.reduced import fit_reduced
+from pipeline.physics_stages import physics_prior
 from pipeline.simulate import simulate
-from pipeline.stages import physics_prior
 
 P = PrototypeParams.paper()
 PHYSICS = ["physics_spring", "physics_damping", "physics_gain"]
@@ -85,7 +85,7 @@ def test_physics_terms_need_physics(record):
 
 def test_m_q_physics_is_the_analytical_mass_at_zero():
     from pipeline.physics.reduced import reduced_curves
-    from pipeline.stages import physics_mass
+    from pipeline.physics_stages import physics_mass
 
     assert physics_mass(P) == pytest.approx(float(reduced_curves(P, np.array([0.0])).m_q[0]))
     assert 0.040 < physics_mass(P) < 0.041  # tip mass 40 g plus the beam's share

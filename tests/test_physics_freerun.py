@@ -7,8 +7,8 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.freerun import AnalyticalModel
 from pipeline.physics.params import PrototypeParams
 from pipeline.physics.reduced import fit_reduced, simulate_reduced
+from pipeline.physics_stages import analytical_for
 from pipeline.simulate import simulate
-from pipeline.stages import analytical_for
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 
 P = PrototypeParams.paper()

@@ -22,6 +22,7 @@ Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, 41, Fig. 6b, 7.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -268,6 +269,7 @@ class ReducedModel:
                          k[1] * qd - self._relax * qe[1]])  # fmt: skip
 
 
+@functools.lru_cache(maxsize=16)
 def fit_reduced(
     params: PrototypeParams,
     *,
@@ -298,7 +300,9 @@ def fit_reduced(
     Returns
     -------
     ReducedModel
-        The fitted model (``fit_residual`` reports the fit quality).
+        The fitted model (``fit_residual`` reports the fit quality). Results are cached per
+        argument set (the parameters are immutable), so the stages of one run that need the
+        same prototype's model fit it once.
 
     References
     ----------
