@@ -14,6 +14,8 @@ Masoud & Maas 2025, Eq. 26, Table 2 ("analytical" row).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
@@ -116,6 +118,7 @@ class AnalyticalModel:
         return 2.5 / max(self._omega, self._rate)
 
 
+@functools.lru_cache(maxsize=8)
 def analytical_model(params: PrototypeParams, *, q_max: float = 25e-3) -> AnalyticalModel:
     """Build the analytical model of a prototype with nominal parameters.
 
@@ -129,6 +132,7 @@ def analytical_model(params: PrototypeParams, *, q_max: float = 25e-3) -> Analyt
     Returns
     -------
     AnalyticalModel
+        Cached per prototype: the validate and compare stages of one run share it.
 
     Raises
     ------
