@@ -73,8 +73,29 @@ PAPER_TABLE2_RBF = {
 }
 
 
-def test_paper_experiment_on_the_virtual_rig_meets_table_2(tmp_path):
-    out = run("paper-experiment.toml", tmp_path)
+@pytest.fixture(scope="module")
+def paper_experiment(tmp_path_factory):
+    """One run of workflows/paper-experiment.toml: output, folder and the curves vs truth."""
+    from pipeline import artifacts
+    from pipeline.identify import RBFModel
+
+    out_dir = tmp_path_factory.mktemp("paper-experiment")
+    out = run("paper-experiment.toml", out_dir)
+    model = RBFModel.from_tree(artifacts.read_h5(out_dir / "identify/model.h5"))
+    truth = artifacts.read_h5(out_dir / "rig/identification_truth.h5")["curves"]
+    # the q bins (2 mm) the identification data visit (>= 20 samples)
+    q = pd.read_parquet(out_dir / "ingest/identification.parquet").q.to_numpy()
+    edges = np.arange(-0.02, 0.0201, 0.002)
+    counts, _ = np.histogram(q, edges)
+    bins = np.digitize(truth["q"], edges) - 1
+    sel = (bins >= 0) & (bins < counts.size)
+    sel[sel] &= counts[bins[sel]] >= 20
+    identified = model.curves(truth["q"][sel])
+    return out, out_dir, identified, model, {k: v[sel] for k, v in truth.items() if k != "attrs"}
+
+
+def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
+    out, tmp_path, identified, model, truth = paper_experiment
     assert "Free-run validation" in out and "analytical" in out
     table = pd.read_parquet(tmp_path / "compare/nrmse.parquet").set_index(["model", "dataset"])
     rbf_id, rbf_val = table.loc[("rbf", "identification")], table.loc[("rbf", "validation")]
@@ -83,19 +104,20 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(tmp_path):
     assert rbf_val.nrmse_q <= 0.041
     for ds in ("identification", "validation"):
         assert table.loc[("rbf", ds)].nrmse_q < table.loc[("analytical", ds)].nrmse_q
-    # the identified restoring force c(q) q + F_0 against the truth, over the q bins (2 mm)
-    # the identification data visit (>= 20 samples)
-    from pipeline import artifacts
-    from pipeline.identify import RBFModel
-
-    model = RBFModel.from_tree(artifacts.read_h5(tmp_path / "identify/model.h5"))
-    truth = artifacts.read_h5(tmp_path / "rig/identification_truth.h5")["curves"]
-    q = pd.read_parquet(tmp_path / "ingest/identification.parquet").q.to_numpy()
-    edges = np.arange(-0.02, 0.0201, 0.002)
-    counts, _ = np.histogram(q, edges)
-    bins = np.digitize(truth["q"], edges) - 1
-    sel = (bins >= 0) & (bins < counts.size)
-    sel[sel] &= counts[bins[sel]] >= 20
-    f_id = model.curves(truth["q"][sel])["cq"] + model.backbone["F_0"]
-    f_true = truth["f"][sel]
+    # the identified restoring force c(q) q + F_0 against the truth over the visited bins
+    f_id = identified["cq"] + model.backbone["F_0"]
+    f_true = truth["f"]
     assert np.max(np.abs(f_id - f_true)) <= 0.10 * np.ptp(f_true)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="open in issue 5: g_i come out 40-66 % low at the wells (27-37 % even from exact rig "
+    "signals); see README, 'The paper's experiment on the virtual rig'",
+)
+def test_paper_experiment_input_gains_match_the_truth(paper_experiment):
+    _, _, identified, _, truth = paper_experiment
+    for i, name in enumerate(("g1", "g2")):
+        g_true = truth[name]
+        assert np.max(np.abs(identified["g"][:, i] - g_true)) <= 0.10 * np.ptp(g_true), name
