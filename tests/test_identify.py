@@ -78,13 +78,10 @@ def _truth_model(rng):
     )
 
 
-def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
-    """Data from a model inside the class (solve_ivp, exact q''): weights recovered to 1e-6."""
+def _inside_class_record(truth, t):
+    """Noise-free data of a model inside the class (solve_ivp DOP853, exact q'')."""
     from conftest import excitation
     from scipy.integrate import solve_ivp
-
-    truth = _truth_model(np.random.default_rng(2))
-    t = bistable_record["t"]
 
     def rhs(tt, x):
         return [
@@ -97,21 +94,66 @@ def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
     )
     q, q_dot = sol.y
     v = excitation(t)
-    rec = {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
-    model, diag = _fit(
-        rec,
-        M=8,
-        q_range=[-0.03, 0.03],
-        backbone=["linear_spring", "cubic_spring", "viscous"],
-        max_condition=1e10,
-        min_support=0,
-    )
+    return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
+
+
+_INSIDE = {
+    "M": 8,
+    "q_range": [-0.03, 0.03],
+    "backbone": ["linear_spring", "cubic_spring", "viscous"],
+    "max_condition": 1e10,
+    "min_support": 0,
+}
+
+
+def _curve_errors(truth, model, q):
+    grid = np.linspace(q.min(), q.max(), 50)
+    want, got = truth.curves(grid), model.curves(grid)
+    return {k: np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "d", "g")}
+
+
+def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
+    """Data from a model inside the class (solve_ivp, exact q''): weights recovered to 1e-6."""
+    truth = _truth_model(np.random.default_rng(2))
+    rec = _inside_class_record(truth, bistable_record["t"])
+    model, diag = _fit(rec, **_INSIDE)
     assert diag.rank == len(diag.columns)
     assert diag.fit_r2 > 1 - 1e-12
-    grid = np.linspace(q.min(), q.max(), 50)
-    for key in ("cq", "d", "g"):
-        want, got = truth.curves(grid)[key], model.curves(grid)[key]
-        assert np.max(np.abs(got - want)) < 1e-6 * np.max(np.abs(want)), key
+    for key, err in _curve_errors(truth, model, rec["q"]).items():
+        assert err < 1e-6, key
+
+
+def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(bistable_record):
+    """Filtered equation error: the filter is linear, so exact data still give the exact
+    weights. Then an actuator force that is 40 % weaker above 30 Hz (a second mode the
+    one-coordinate model cannot represent) biases the unfiltered fit; a 10 Hz low-pass
+    keeps only the band where Eq. 37 holds and recovers the curves."""
+    from scipy import signal
+
+    truth = _truth_model(np.random.default_rng(2))
+    rec = _inside_class_record(truth, bistable_record["t"])
+    model, _ = _fit(rec, lowpass=10.0, **_INSIDE)
+    for key, err in _curve_errors(truth, model, rec["q"]).items():
+        assert err < 1e-5, key
+    # Eq. 40 is algebraic per sample: broadband inputs with the exact accelerations
+    rng = np.random.default_rng(11)
+    v = np.abs(rec["v"] + 150.0 * rng.standard_normal(rec["v"].shape))
+    q_ddot = truth.accel(rec["q"], rec["q_dot"], v)
+    force = truth.curves(rec["q"])["g"] * v**2
+    sos = signal.butter(8, 30.0, btype="highpass", fs=1.0 / rec["dt"], output="sos")
+    weak = -0.4 * signal.sosfiltfilt(sos, force.sum(axis=1))
+    disturbed = {**rec, "v": v, "q_ddot": q_ddot + weak}
+    raw = _curve_errors(truth, _fit(disturbed, **_INSIDE)[0], rec["q"])
+    filtered = _curve_errors(truth, _fit(disturbed, lowpass=10.0, **_INSIDE)[0], rec["q"])
+    assert max(filtered.values()) < 1e-3  # measured 3e-5
+    assert raw["g"] > 0.1  # measured 0.20: the gain absorbs the weak band
+
+
+def test_lowpass_at_or_above_nyquist_is_an_error_naming_the_data_set(bistable_record):
+    with pytest.raises(IdentificationError, match=r"'sim'.*lowpass = 250 Hz.*Nyquist"):
+        _fit(bistable_record, lowpass=250.0)
+    with pytest.raises(WorkflowError, match="lowpass must be a frequency > 0"):
+        IdentifyConfig.from_dict({"lowpass": -1.0})
 
 
 def test_T_z_search_recovers_the_time_constant(bistable_record):

@@ -51,6 +51,13 @@ class IdentifyConfig:
     trim : int
         Samples dropped at each end of each estimation record (edge effects of
         the derivatives).
+    lowpass : float or None
+        Corner frequency [Hz] of a zero-phase low-pass (4th-order Butterworth, applied
+        forwards and backwards) on both sides of Eq. 40 per record: the filtered
+        equation error. The model is linear in its parameters, so filtering every
+        regressor column and the output keeps the parameters; it only weights the
+        frequency band where the one-coordinate model holds. ``None``: no filter.
+        Below the Nyquist frequency of every record.
     q_range : tuple of float or None
         Operating range of Eq. 39 [unit of q]; default the estimation data range.
     max_condition : float
@@ -80,6 +87,7 @@ class IdentifyConfig:
     input_gain: tuple[float, ...] | None = None
     coulomb_velocity: float = 1e-3
     trim: int = 0
+    lowpass: float | None = None
     q_range: tuple[float, float] | None = None
     max_condition: float = 1e8
     min_support: int = 10
@@ -148,6 +156,12 @@ class IdentifyConfig:
             )
         if self.trim < 0:
             raise WorkflowError(f"[identify] trim must be >= 0 samples, got {self.trim!r}")
+        if self.lowpass is not None and not (
+            isinstance(self.lowpass, int | float) and self.lowpass > 0
+        ):
+            raise WorkflowError(
+                f"[identify] lowpass must be a frequency > 0 [Hz], got {self.lowpass!r}"
+            )
         if self.refine:
             from pipeline.identify.refine import refine_config
 

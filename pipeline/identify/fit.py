@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import signal
 from scipy.optimize import minimize_scalar
 
 from pipeline.errors import IdentificationError
@@ -100,6 +101,26 @@ def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
     return out
 
 
+def _prefilter(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
+    """Zero-phase low-pass of regressor columns or output along time (filtered equation error).
+
+    Raises
+    ------
+    IdentificationError
+        If the corner frequency is not below the record's Nyquist frequency.
+    """
+    if cfg.lowpass is None:
+        return a
+    nyquist = 0.5 / r.dt
+    if not cfg.lowpass < nyquist:
+        raise IdentificationError(
+            f"data set '{r.name}': [identify] lowpass = {cfg.lowpass:g} Hz is not below the "
+            f"Nyquist frequency {nyquist:g} Hz of its sample time {r.dt:g} s"
+        )
+    sos = signal.butter(4, cfg.lowpass, fs=1.0 / r.dt, output="sos")
+    return signal.sosfiltfilt(sos, a, axis=0)
+
+
 def _system(
     records: Sequence[Record],
     z_all: Sequence[np.ndarray],
@@ -116,13 +137,13 @@ def _system(
         )
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
-            rows.append(np.hstack([r.q_ddot[:, None], F]))
-            ys.append(hv @ np.asarray(cfg.input_gain, dtype=float))
+            rows.append(_prefilter(np.hstack([r.q_ddot[:, None], F]), r, cfg))
+            ys.append(_prefilter(hv @ np.asarray(cfg.input_gain, dtype=float), r, cfg))
             names = ["m_q", *f_names]
         else:
             G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, phi, cfg.prior)
-            rows.append(np.hstack([-F, G]))
-            ys.append(float(cfg.m_q) * r.q_ddot)
+            rows.append(_prefilter(np.hstack([-F, G]), r, cfg))
+            ys.append(_prefilter(float(cfg.m_q) * r.q_ddot, r, cfg))
             names = [*f_names, *g_names]
     return np.vstack(rows), np.concatenate(ys), names
 
@@ -192,7 +213,9 @@ def fit_rbf_model(
     For a given T_z the friction state z is computed from q_dot by the exact
     discretisation of z' = (q_dot - z)/T_z; the weights then follow from the
     linear regression of Eq. 40 (extended by the backbone terms), solved on the
-    column-scaled regressor by SVD. The outer loop minimises the relative
+    column-scaled regressor by SVD. With ``cfg.lowpass`` every column and the output
+    are low-passed per record first (zero-phase Butterworth; the filtered equation error,
+    Ljung, System Identification, 2nd ed., Sec. 7.3 and 14.4). The outer loop minimises the relative
     equation error over log T_z with a bounded scalar search (Brent) and also
     evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
 
@@ -213,8 +236,9 @@ def fit_rbf_model(
     Raises
     ------
     IdentificationError
-        If a centre has no data near it, an input is never excited, or the
-        regressor is rank deficient or worse conditioned than ``max_condition``.
+        If a centre has no data near it, an input is never excited, the
+        regressor is rank deficient or worse conditioned than ``max_condition``, or
+        ``lowpass`` is not below a record's Nyquist frequency.
 
     References
     ----------
@@ -282,7 +306,7 @@ def _search_T_z(records, basis, cfg, bounds):
             F, _ = force_columns(
                 r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity, prior=cfg.prior
             )
-            cols.append(F)
+            cols.append(_prefilter(F, r, cfg))
         B = np.vstack(cols)
         B_perp = B - Q @ (Q.T @ B)
         coef, *_ = np.linalg.lstsq(B_perp, y_perp, rcond=None)
