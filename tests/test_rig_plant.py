@@ -317,3 +317,22 @@ def test_true_curves_include_the_asymmetry():
     )
     assert np.all(cur["m_q"] > RIG.prototype.m) and np.all(cur["d"] > 0)
     assert math.isclose(cur["phi"][-1], -cur["phi"][0], rel_tol=0.2)
+
+
+def test_small_signal_gain_is_half_dC_dq_and_the_3_kV_secant_is_smaller_off_the_wells():
+    """Two independent codes: the reduced model's 1/2 dC_i/dq (Eq. 26) and the full model's
+    static holding force with a DE energised (Fig. 4). At 100 V they agree; at 3 kV the DE
+    pull bends the beam off the v = 0 path and the force is no longer g_i(q) v_i^2."""
+    q = np.linspace(-12e-3, 12e-3, 49)
+    cur = true_curves(RIG, q)
+    F0 = force_displacement(RIG.prototype, q).F
+    for i in (1, 2):
+        small = (F0 - force_displacement(RIG.prototype, q, **{f"v{i}": 100.0}).F) / 100.0**2
+        assert small == pytest.approx(cur[f"g{i}"], rel=2e-3)
+        ratio = cur[f"g{i}_vmax"] / cur[f"g{i}"]
+        assert 0.65 < ratio[q == 0][0] < 0.8  # measured 0.72
+        assert np.all(ratio > 0.65) and np.all(ratio < 1.1)
+    # the wells: DE 1 pushes from the left well, DE 2 from the right one; there the two agree
+    left, right = np.abs(q + 10e-3) < 0.6e-3, np.abs(q - 10e-3) < 0.6e-3
+    assert cur["g1_vmax"][left] == pytest.approx(cur["g1"][left], rel=0.05)
+    assert cur["g2_vmax"][right] == pytest.approx(cur["g2"][right], rel=0.05)

@@ -45,6 +45,7 @@ from pipeline.physics.kinematics import pitch_angle, ritz_basis
 from pipeline.physics.params import V_MAX
 from pipeline.physics.reduced import reduced_curves
 from pipeline.physics.segments import solve_segments
+from pipeline.physics.statics import force_displacement
 from pipeline.rig.drivers import DriverOutput, uniform_grid
 from pipeline.rig.params import RigParams
 
@@ -433,15 +434,24 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
 
     From the reduced model of the rig's prototype (:func:`pipeline.physics.reduced.
     reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
-    ``dz_1``, ``dz_2`` is included). Friction, the drivers and the sensors are not part of
-    these curves: they are what an identification of Eq. 37 cannot represent.
+    ``dz_1``, ``dz_2`` is included), and the actuation force at the switching voltage from
+    the full model's static force-displacement curves (Fig. 4). Friction, the drivers and
+    the sensors are not part of these curves: they are what an identification of Eq. 37
+    cannot represent.
+
+    The two gains differ because the DE force is not of the separable form
+    ``g_i(q) v_i^2`` of Eq. 26/37 for the full model: the DEs' pull bends the beam off the
+    v = 0 path, so at ``V_MAX`` = 3 kV the holding-force change is 72 % of
+    ``1/2 dC_i/dq V_MAX^2`` near q = 0 and 95-100 % in the wells (Table 1 prototype).
+    ``g1``, ``g2`` are the small-signal gains (sub-threshold excitation), ``g1_vmax``,
+    ``g2_vmax`` the secants the switching pulses see.
 
     Parameters
     ----------
     rig : RigParams
         Rig parameters (uses ``prototype``).
     q_grid : array_like, shape (n,)
-        Tip displacements [m].
+        Tip displacements [m], increasing, spacing at most ~0.5 mm (continuation).
 
     Returns
     -------
@@ -450,14 +460,21 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
         ``m_q q_ddot + d q_dot + f(q) = g_1 v_1^2 + g_2 v_2^2`` (Eq. 26, 37); ``"c"``
         ``= f / q`` [N/m] (Eq. 33; for an asymmetric prototype ``f(0) != 0`` and ``c`` has a
         pole at q = 0, use ``f``); ``"k"`` ``= df/dq`` [N/m]; ``"g1"``, ``"g2"``
-        ``= 1/2 dC_i/dq`` [F/m] (NOTES item 8); ``"m_q"`` [kg]; ``"d"`` [N s/m];
-        ``"phi"`` pitch angle along the static path [rad].
+        ``= 1/2 dC_i/dq`` [N/V^2] (NOTES item 8); ``"g1_vmax"``, ``"g2_vmax"``
+        ``= (F(q; 0) - F(q; v_i = V_MAX)) / V_MAX^2`` [N/V^2] with ``F`` the static holding
+        force of the full model (Fig. 4); ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch
+        angle along the static path [rad].
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37; NOTES item 8.
+    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; NOTES item 8.
     """
     c = reduced_curves(rig.prototype, q_grid)
+    F0 = force_displacement(rig.prototype, c.q).F
+    secant = [
+        (F0 - force_displacement(rig.prototype, c.q, **{f"v{i}": V_MAX}).F) / V_MAX**2
+        for i in (1, 2)
+    ]
     return {
         "q": c.q,
         "f": c.f,
@@ -465,6 +482,8 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
         "k": c.k,
         "g1": c.g1,
         "g2": c.g2,
+        "g1_vmax": secant[0],
+        "g2_vmax": secant[1],
         "m_q": c.m_q,
         "d": c.d,
         "phi": c.phi,
