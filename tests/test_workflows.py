@@ -113,11 +113,27 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
 @pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
-    reason="open in issue 5: g_i come out 40-66 % low at the wells (27-37 % even from exact rig "
-    "signals); see README, 'The paper's experiment on the virtual rig'",
+    reason="open in issue 5 (blocked): Eq. 37's g_i(q) v_i^2 is not separable from c(q) q "
+    "where the profile only ever applies v_i = 3 kV (transit, beam pushed past the well), and "
+    "the full model's force is not linear in v_i^2; see README, 'What the identified g_i are'",
 )
 def test_paper_experiment_input_gains_match_the_truth(paper_experiment):
-    _, _, identified, _, truth = paper_experiment
-    for i, name in enumerate(("g1", "g2")):
-        g_true = truth[name]
-        assert np.max(np.abs(identified["g"][:, i] - g_true)) <= 0.10 * np.ptp(g_true), name
+    """g_i against the 3 kV secant of Fig. 4 (what the switching pulses see) over the bins
+    where v_i is applied (above 10 % of its peak, >= 20 samples)."""
+    _, out_dir, _, model, _ = paper_experiment
+    from pipeline import artifacts
+
+    truth = artifacts.read_h5(out_dir / "rig/identification_truth.h5")["curves"]
+    data = pd.read_parquet(out_dir / "ingest/identification.parquet")
+    edges = np.arange(-0.02, 0.0201, 0.002)
+    bins = np.digitize(truth["q"], edges) - 1
+    inside = (bins >= 0) & (bins < edges.size - 1)
+    identified = model.curves(truth["q"])["g"]
+    for i in (1, 2):
+        v = data[f"v{i}"].to_numpy()
+        counts, _ = np.histogram(data.q.to_numpy()[v > 0.1 * v.max()], edges)
+        sel = inside.copy()
+        sel[inside] = counts[bins[inside]] >= 20
+        g_true = truth[f"g{i}_vmax"][sel]
+        error = np.max(np.abs(identified[sel, i - 1] - g_true))
+        assert error <= 0.10 * np.ptp(g_true), f"g{i}: {error / np.ptp(g_true):.2f} of range"
