@@ -273,9 +273,10 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
         run_experiment,
         truth_tree,
     )
+    from pipeline.rig.plant import true_curves
 
     cfg = RigConfig.from_dict(section, physics)
-    grid = np.linspace(-20e-3, 20e-3, 401)
+    curves = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 401))
     outputs: dict[str, Any] = {}
     summary: dict[str, Any] = {}
     for name, exp in cfg.experiments.items():
@@ -284,7 +285,7 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
             raise DebistError(f"[rig.experiments.{name}]: the plant integration failed: "
                               f"{run.message}")  # fmt: skip
         outputs[f"{name}.mat"] = MatRecording(rig_recording(run, name, cfg), exp.format, CREATED)
-        outputs[f"{name}_truth.h5"] = H5Tree(truth_tree(run, cfg, grid))
+        outputs[f"{name}_truth.h5"] = H5Tree(truth_tree(run, cfg, curves))
         sign = np.sign(run.q_true)
         summary[name] = {
             "samples": int(run.t.size),

@@ -126,13 +126,17 @@ class FullModel:
             out.append(np.array(_generated.hess_terms(*args))[self._sym])
         return out
 
-    def _mats(self, qm, length, dlen):
-        p = self.params
+    def _g_uy_and_mass(self, qm):
+        """``d u_y / d q_m`` (Eq. 8) and the mass matrix it implies (Eq. 19)."""
         g_uy = np.ones(4)
         g_uy[:3] = -self._P1 @ qm[:3]
+        return g_uy, self._M0 + self.params.m * np.outer(g_uy, g_uy)
+
+    def _mats(self, qm, length, dlen):
+        p = self.params
+        g_uy, M = self._g_uy_and_mass(qm)
         lam = length / p.l_0
         K = (-0.5 * lam**-1.5 / p.l_0)[:, None] * dlen  # (2, 4): d lambda_3,i / d q_m
-        M = self._M0 + p.m * np.outer(g_uy, g_uy)
         D = self._D0 + p.V_DE * p.eta_v * K.T @ K
         return M, D, K.T, g_uy
 
@@ -187,9 +191,7 @@ class FullModel:
         ----------
         Masoud & Maas 2025, Eq. 8, 19.
         """
-        qm = np.asarray(qm, dtype=float)
-        g_uy = np.append(-self._P1 @ qm[:3], 1.0)
-        return self._M0 + self.params.m * np.outer(g_uy, g_uy)
+        return self._g_uy_and_mass(np.asarray(qm, dtype=float))[1]
 
     def rhs(self, t: float, x: NDArray[np.float64], F_extra: float = 0.0) -> NDArray[np.float64]:
         """State derivative ``x_dot = f(x, u)`` (Eq. 22).

@@ -44,7 +44,7 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.dspace import MAT_VERSIONS, Channel, recording
 from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigRun, simulate_rig, true_curves
+from pipeline.rig.plant import RigRun, simulate_rig
 from pipeline.rig.profiles import PROFILES, make_profile
 
 __all__ = [
@@ -251,7 +251,7 @@ def rig_recording(run: RigRun, name: str, cfg: RigConfig) -> dict[str, Any]:
     return recording(channels, {RASTER: run.t}, description)
 
 
-def truth_tree(run: RigRun, cfg: RigConfig, q_grid: np.ndarray) -> dict[str, Any]:
+def truth_tree(run: RigRun, cfg: RigConfig, curves: dict[str, np.ndarray]) -> dict[str, Any]:
     """Collect the truth behind a run, for ``<experiment>_truth.h5``.
 
     Parameters
@@ -260,15 +260,16 @@ def truth_tree(run: RigRun, cfg: RigConfig, q_grid: np.ndarray) -> dict[str, Any
         From :func:`run_experiment`.
     cfg : RigConfig
         The rig.
-    q_grid : ndarray, shape (n,)
-        Grid of the true curves [m].
+    curves : dict of str to ndarray
+        The prototype's true curves, :func:`pipeline.rig.plant.true_curves` (the same for
+        every experiment of the rig, so computed once by the caller).
 
     Returns
     -------
     dict
         ``prototype`` and ``plant`` parameters [SI], ``states`` (noise-free ``q``,
         ``q_dot``, ``phi``, the friction force and the applied voltages at the log
-        instants) and ``curves`` (:func:`pipeline.rig.plant.true_curves`).
+        instants) and ``curves``.
 
     References
     ----------
@@ -291,5 +292,5 @@ def truth_tree(run: RigRun, cfg: RigConfig, q_grid: np.ndarray) -> dict[str, Any
             "x": run.x_true,
             "saturated": run.saturated,
         },
-        "curves": true_curves(cfg.rig, q_grid),
+        "curves": curves,
     }
