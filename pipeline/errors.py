@@ -17,6 +17,21 @@ class WorkflowError(DebistError, ValueError):
     """A workflow file or one of its sections is invalid (unknown key, wrong type, bad value)."""
 
 
+class ResourceError(WorkflowError):
+    """A setting would make a stage allocate more memory than the budget allows.
+
+    Raised before the allocation, naming the workflow key and the estimate.
+    """
+
+
+class OutputDirError(WorkflowError):
+    """debist refuses to write into an output directory (not its own, or a user's folder)."""
+
+
+class RunLockedError(WorkflowError):
+    """Another debist process holds the lock of the output directory."""
+
+
 class RigLogError(DebistError, ValueError):
     """A rig log cannot be used: unreadable, truncated, a channel missing or invalid.
 
@@ -48,6 +63,83 @@ class IdentificationError(DebistError, ValueError):
 
 class ArtifactError(DebistError, RuntimeError):
     """A stage artifact is missing, modified or inconsistent with its manifest."""
+
+
+class VerificationError(ArtifactError):
+    """``debist verify`` found artifacts, manifests or their chain not as recorded.
+
+    Parameters
+    ----------
+    problems : list of str
+        One line per problem, each naming the file.
+    """
+
+    def __init__(self, problems: list[str]):
+        self.problems = list(problems)
+        super().__init__("; ".join(self.problems))
+
+
+#: Exit codes of the ``debist`` command, the one place they are defined. The first class
+#: in this order that an exception is an instance of gives its code.
+EXIT_CODES: tuple[tuple[type[BaseException], int], ...] = (
+    (VerificationError, 3),
+    (WorkflowError, 2),
+    (DebistError, 1),
+)
+#: Exit code after SIGINT (Ctrl-C): 128 + 2, the shell convention.
+EXIT_SIGINT = 130
+#: Exit code after SIGTERM: 128 + 15.
+EXIT_SIGTERM = 143
+
+
+def exit_code(exc: BaseException) -> int:
+    """Return the exit code of the ``debist`` command for an exception.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception that ended the command.
+
+    Returns
+    -------
+    int
+        3 when verification failed, 2 for a bad workflow, bad arguments or a refused
+        output directory, lock or memory budget, 1 when a stage failed on its data, 130
+        after SIGINT and 143 after SIGTERM (see :class:`Interrupted`); 1 for anything else.
+
+    Examples
+    --------
+    >>> exit_code(WorkflowError("x")), exit_code(RigLogError("y")), exit_code(KeyboardInterrupt())
+    (2, 1, 130)
+    """
+    if isinstance(exc, Interrupted):
+        return exc.code
+    if isinstance(exc, KeyboardInterrupt):
+        return EXIT_SIGINT
+    for cls, code in EXIT_CODES:
+        if isinstance(exc, cls):
+            return code
+    return 1
+
+
+class Interrupted(KeyboardInterrupt):
+    """The process received SIGTERM (or SIGINT) and stops cleanly.
+
+    A subclass of ``KeyboardInterrupt`` so that every ``except BaseException`` clean-up
+    (temporary stage folders, locks) runs as it does for Ctrl-C.
+
+    Parameters
+    ----------
+    signum : int
+        The signal number.
+    """
+
+    def __init__(self, signum: int):
+        import signal
+
+        self.signum = int(signum)
+        self.code = 128 + self.signum
+        super().__init__(f"interrupted by {signal.Signals(self.signum).name}")
 
 
 class DebistWarning(UserWarning):
