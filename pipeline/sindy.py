@@ -27,21 +27,24 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+import pydantic
+from pydantic import NonNegativeFloat, PositiveInt
 
+from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ConvergenceWarning, IdentificationError, WorkflowError
-from pipeline.identify.terms import INPUT_MAPS, input_map
+from pipeline.identify.terms import input_map
 
 OPTIMIZERS = ("STLSQ", "SR3")
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class SindyConfig:
-    """Hyper-parameters of the SINDy baseline (workflow section ``sindy``).
+    """Hyper-parameters of the SINDy baseline (the workflow's ``[compare]`` section).
 
     Parameters
     ----------
@@ -72,48 +75,35 @@ class SindyConfig:
         Scale each library column to unit 2-norm before the sparse regression; needed
         in SI units, where the columns differ by many orders of magnitude.
 
+    Raises
+    ------
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
+
     References
     ----------
     Brunton, Proctor & Kutz 2016, PNAS, Sec. "Sparse regression" (STLSQ).
     """
 
-    degree: int = 3
+    degree: PositiveInt = 3
     input_terms: bool = True
-    optimizer: str = "STLSQ"
-    threshold: float = 1e-3
-    alpha: float = 1e-10
-    input_map: str = "v2"
+    optimizer: Literal["STLSQ", "SR3"] = "STLSQ"
+    threshold: NonNegativeFloat = 1e-3
+    alpha: NonNegativeFloat = 1e-10
+    input_map: Literal["v2", "v"] = "v2"
     normalize_columns: bool = True
 
-    def __post_init__(self):
-        if isinstance(self.degree, bool) or not isinstance(self.degree, int) or self.degree < 1:
-            raise WorkflowError(f"`sindy.degree` must be an integer >= 1, got {self.degree!r}")
-        for name in ("input_terms", "normalize_columns"):
-            if not isinstance(getattr(self, name), bool):
-                raise WorkflowError(
-                    f"`sindy.{name}` must be true or false, got {getattr(self, name)!r}"
-                )
-        if self.optimizer not in OPTIMIZERS:
-            raise WorkflowError(
-                f"`sindy.optimizer` must be one of {OPTIMIZERS}, got {self.optimizer!r}"
-            )
-        for name in ("threshold", "alpha"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
-                raise WorkflowError(f"`sindy.{name}` must be a number >= 0, got {value!r}")
-        if self.input_map not in INPUT_MAPS:
-            raise WorkflowError(
-                f"`sindy.input_map` must be one of {INPUT_MAPS}, got {self.input_map!r}"
-            )
-
     @classmethod
-    def from_dict(cls, section: Mapping[str, Any] | None) -> SindyConfig:
+    def from_dict(cls, section: Mapping[str, Any] | None, where: str = "[compare]") -> SindyConfig:
         """Build the configuration from a workflow section.
 
         Parameters
         ----------
         section : mapping or None
             Keys are the field names; missing keys take the defaults.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -122,14 +112,17 @@ class SindyConfig:
         Raises
         ------
         WorkflowError
-            Naming an unknown key, or a field with a wrong type or value.
+            Naming an unknown key (with a suggestion), or a field with a wrong type or
+            value: ``[compare] key: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> SindyConfig.from_dict({"degre": 2})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
         """
-        section = dict(section or {})
-        known = {f.name for f in fields(cls)}
-        for key in section:
-            if key not in known:
-                raise WorkflowError(f"unknown key `sindy.{key}`; known keys: {sorted(known)}")
-        return cls(**section)
+        return config_from_section(cls, {} if section is None else section, where)
 
 
 @dataclass(frozen=True)
@@ -401,6 +394,8 @@ def fit_sindy(
         or have fewer samples than library terms.
     WorkflowError
         If ``dt`` is not positive.
+    ResourceError
+        If the library would exceed the memory budget (before pysindy builds it).
 
     Warns
     -----
@@ -462,6 +457,14 @@ def fit_sindy(
             f"{x.shape[0]} samples for {n_features_expected} SINDy library terms "
             f"(degree {cfg.degree})"
         )
+    from pipeline.preflight import check_memory, sindy_bytes
+
+    check_memory(
+        sindy_bytes(x.shape[0], n_features_expected),
+        f"[compare] degree = {cfg.degree}",
+        f"the SINDy library of {x.shape[0]} samples x {n_features_expected} terms",
+        "pysindy's copies",
+    )
     # Relative threshold: normalised coefficients are xi_j ||theta_j||_2; compare them with
     # threshold ||q_ddot||_2 (see SindyConfig.threshold).
     scale = float(np.linalg.norm(x_dot[:, 1])) if cfg.normalize_columns else 1.0

@@ -18,21 +18,22 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
-
-import matplotlib
-
-matplotlib.use("Agg")
+from typing import Annotated, Any, TypeVar
 
 import numpy as np
 import pandas as pd
+import pydantic
+from pydantic import BeforeValidator, Field, PositiveFloat
 
-from pipeline.config import config_from_section
+from pipeline import preflight
+from pipeline.config import CONFIG, config_from_section
+from pipeline.datasets import validation_datasets
 from pipeline.differentiate import TVRegDiffConfig
 from pipeline.errors import IdentificationError, WorkflowError
 from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
-from pipeline.stages import estimation_records, run_differentiate, validation_datasets
+from pipeline.records import estimation_records
+from pipeline.stages.differentiate import run_differentiate
+from pipeline.stages.tables import input_columns
 from pipeline.study_plots import alpha_figure, grid_figure
 from pipeline.validate import DataSet, ValidateConfig, validate_model
 
@@ -49,7 +50,19 @@ __all__ = [
 STATUS_CHARS = 90
 
 
-@dataclass(frozen=True)
+def _as_list(value: object) -> object:
+    """Let a study grid be one number or an array (TOML arrays are lists)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return (value,)
+    return tuple(value) if isinstance(value, list) else value
+
+
+_T = TypeVar("_T")
+#: A study grid: one value or a non-empty array of values.
+_Grid = Annotated[tuple[_T, ...], BeforeValidator(_as_list), Field(min_length=1)]
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class StudyConfig:
     """The ``[study]`` workflow section: grids of the hyper-parameter studies.
 
@@ -76,9 +89,9 @@ class StudyConfig:
 
     Raises
     ------
-    ValueError
-        If a list is empty or a value is out of range (as ``WorkflowError`` via
-        :meth:`from_dict`).
+    pydantic.ValidationError
+        If a list is empty or a value has the wrong type or is out of range (a
+        ``ValueError``; :meth:`from_dict` raises a ``WorkflowError`` naming the key).
 
     Examples
     --------
@@ -86,43 +99,23 @@ class StudyConfig:
     (4, 8)
     """
 
-    M: tuple[int, ...] = (4, 6, 8, 10, 12, 16)
-    sigma_n: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5)
-    alpha: tuple[float, ...] = (1e-7, 1e-6, 1e-5, 1e-4)
+    M: _Grid[Annotated[int, Field(ge=2)]] = (4, 6, 8, 10, 12, 16)
+    sigma_n: _Grid[PositiveFloat] = (0.25, 0.5, 0.75, 1.0, 1.5)
+    alpha: _Grid[PositiveFloat] = (1e-7, 1e-6, 1e-5, 1e-4)
     free_run: bool = True
-    max_samples: int = 20000
-
-    def __post_init__(self) -> None:
-        for name in ("M", "sigma_n", "alpha"):
-            values = getattr(self, name)
-            if isinstance(values, int | float):
-                values = (values,)
-            values = tuple(values)
-            if not values:
-                raise ValueError(f"`{name}` must list at least one value, got {values!r}")
-            object.__setattr__(self, name, values)
-        for m in self.M:
-            if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 2:
-                raise ValueError(f"`M` values must be integers >= 2, got {m!r}")
-        for name in ("sigma_n", "alpha"):
-            for x in getattr(self, name):
-                if isinstance(x, bool) or not isinstance(x, int | float) or not x > 0:
-                    raise ValueError(f"`{name}` values must be numbers > 0, got {x!r}")
-        if not isinstance(self.free_run, bool):
-            raise ValueError(f"`free_run` must be true or false, got {self.free_run!r}")
-        if isinstance(self.max_samples, bool) or not isinstance(self.max_samples, int):
-            raise ValueError(f"`max_samples` must be an integer, got {self.max_samples!r}")
-        if self.max_samples < 100:
-            raise ValueError(f"`max_samples` must be >= 100, got {self.max_samples!r}")
+    max_samples: Annotated[int, Field(ge=100)] = 20000
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, Any]) -> StudyConfig:
+    def from_dict(cls, section: Mapping[str, Any], where: str = "[study]") -> StudyConfig:
         """Build and check the configuration from a workflow section.
 
         Parameters
         ----------
         section : mapping
-            The ``[study]`` table.
+            The ``[study]`` table without its ``identify`` and ``differentiate``
+            sub-tables.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -131,9 +124,10 @@ class StudyConfig:
         Raises
         ------
         WorkflowError
-            On an unknown key or an invalid value, naming it.
+            On an unknown key (with a suggestion) or an invalid value:
+            ``[study] key: expected ..., got ...``.
         """
-        return config_from_section(cls, dict(section), "[study]")
+        return config_from_section(cls, section, where)
 
 
 def derivative_roughness(x_dot: np.ndarray) -> float:
@@ -306,15 +300,26 @@ def rbf_grid_study(
     ------
     WorkflowError
         For an invalid section or no estimation data set.
+    ResourceError
+        If the largest ``M`` of the grid would make the least squares exceed the memory
+        budget (checked once, before the first fit).
 
     References
     ----------
     Masoud & Maas 2025, Sec. 5.2 and Fig. 11b (paper's choice M = 10, sigma_n = 0.5).
     """
     base = dict(identify_section)
-    IdentifyConfig.from_dict(base)  # report an invalid section once, before the loop
+    icfg = IdentifyConfig.from_dict(base)  # report an invalid section once, before the loop
     vcfg = ValidateConfig.from_dict(validate_section)
     records, datasets = _study_data(tables, derivs, cfg.max_samples)
+    sizes = [max(r.q.size - 2 * icfg.trim, 0) for r in records]
+    preflight.check_identify(
+        dataclasses.replace(icfg, M=max(cfg.M)),
+        records[0].v.shape[1],
+        sum(sizes),
+        max(sizes),
+        f"[study] M = {max(cfg.M)}",
+    )
     rows = []
     for M in cfg.M:
         for sigma_n in cfg.sigma_n:
@@ -394,6 +399,8 @@ def alpha_study(
     ------
     WorkflowError
         For an invalid section, a method other than TVRegDiff or no estimation data.
+    ResourceError
+        If the least squares would exceed the memory budget (before differentiating).
     RigLogError
         For non-uniform sampling.
 
@@ -404,6 +411,10 @@ def alpha_study(
     """
     icfg = IdentifyConfig.from_dict(dict(identify_section))
     vcfg = ValidateConfig.from_dict(validate_section)
+    est = [f for f in tables.values() if f.attrs.get("role") == "estimation"]
+    sizes = [max(min(len(f), cfg.max_samples) - 2 * icfg.trim, 0) for f in est]
+    if est:  # without estimation data the first fit says so
+        preflight.check_identify(icfg, len(input_columns(est[0])), sum(sizes), max(sizes))
     rows, curves = [], []
     for alpha in cfg.alpha:
         params = _scaled_section(diff_section, float(alpha))

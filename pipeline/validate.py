@@ -4,15 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import pandas as pd
+import pydantic
+from pydantic import FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
+from typing_extensions import TypedDict
 
-from pipeline.config import config_from_section
+from pipeline.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.ingest.units import lookup_unit
-from pipeline.simulate import INTERPOLATIONS, FreeRunModel, SimulationResult, simulate
+from pipeline.simulate import FreeRunModel, SimulationResult, simulate
 
 
 def nrmse(y_meas: np.ndarray, y_calc: np.ndarray) -> float:
@@ -113,14 +116,31 @@ def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
     return float(coef[0]), float(coef[1])
 
 
-@dataclass(frozen=True)
+class PublishedResult(TypedDict):
+    """One published result of ``[[validate.published]]``: ``{model = "...", rms = {...}}``.
+
+    Attributes
+    ----------
+    model : str
+        Name of the published model (with its reference).
+    rms : dict of str to float
+        Its RMS error per data set name [report unit].
+    """
+
+    __pydantic_config__ = CONFIG  # type: ignore[misc]
+
+    model: str
+    rms: dict[str, FiniteFloat]
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class ValidateConfig:
     """The ``[validate]`` workflow section.
 
     Parameters
     ----------
     substeps : int
-        RK4 steps per sample interval.
+        RK4 steps per sample interval, ``>= 1``.
     input_interpolation : {"bandlimited", "linear"}
         Input interpolation between samples.
     init_samples : int
@@ -133,30 +153,45 @@ class ValidateConfig:
     q_limit : float or None
         |q| beyond which a run counts as diverged [unit of q]; default 100 times
         the largest |q| of the estimation range.
-    published : list of dict
-        Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``.
+    published : tuple of dict
+        Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``
+        (:class:`PublishedResult`).
     analytical : bool
         Also free-run the analytical reduced model (Eq. 26) with the nominal parameters of
         the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
         in metres and the two DE voltages as inputs.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
     """
 
-    substeps: int = 2
-    input_interpolation: str = "bandlimited"
-    init_samples: int = 0
+    substeps: PositiveInt = 2
+    input_interpolation: Literal["bandlimited", "linear"] = "bandlimited"
+    init_samples: NonNegativeInt = 0
     report_unit: str | None = None
-    q_limit: float | None = None
-    published: tuple[dict[str, Any], ...] = ()
+    q_limit: PositiveFloat | None = None
+    published: Annotated[tuple[PublishedResult, ...], AsTuple] = ()
     analytical: bool = False
 
+    def __post_init__(self) -> None:
+        if self.report_unit is not None and lookup_unit(self.report_unit) is None:
+            raise ConfigValueError(
+                "report_unit", "a known unit (e.g. 'mm', 'mV')", self.report_unit
+            )
+
     @classmethod
-    def from_dict(cls, section: Mapping[str, Any]) -> ValidateConfig:
+    def from_dict(cls, section: Mapping[str, Any], where: str = "[validate]") -> ValidateConfig:
         """Build and validate from a workflow section.
 
         Parameters
         ----------
         section : mapping
             The ``[validate]`` table.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -165,19 +200,10 @@ class ValidateConfig:
         Raises
         ------
         WorkflowError
-            On an unknown key or invalid value.
+            On an unknown key (with a suggestion) or an invalid value:
+            ``[validate] key: expected ..., got ...``.
         """
-        kw = dict(section)
-        kw["published"] = tuple(kw.get("published", ()))
-        cfg = config_from_section(cls, kw, "[validate]")
-        if cfg.input_interpolation not in INTERPOLATIONS:
-            raise WorkflowError(
-                f"[validate] input_interpolation must be one of {INTERPOLATIONS}, "
-                f"got {cfg.input_interpolation!r}"
-            )
-        if cfg.substeps < 1 or cfg.init_samples < 0:
-            raise WorkflowError("[validate] substeps must be >= 1 and init_samples >= 0")
-        return cfg
+        return config_from_section(cls, section, where)
 
 
 @dataclass(frozen=True)
@@ -285,15 +311,38 @@ def validate_model(
     Raises
     ------
     WorkflowError
-        If the report unit does not fit q.
+        If the report unit does not fit q, or ``init_samples`` is 1 to 3 (the initial-
+        state fit needs 4) or leaves fewer than 4 samples of a data set to score.
+    ResourceError
+        If a batch's free run would exceed the memory budget (naming ``[validate]
+        substeps``), before it is allocated.
 
     References
     ----------
     Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
     """
+    from pipeline.simulate import check_free_run
+
+    fit_min = 4  # samples the cubic of initial_state needs; as many must remain to score
     by_dt: dict[float, list[DataSet]] = {}
     for ds in datasets:
         by_dt.setdefault(round(ds.dt, 12), []).append(ds)
+        k = cfg.init_samples
+        if 0 < k < fit_min or k > ds.q.size - fit_min:
+            raise WorkflowError(
+                f"[validate] init_samples = {k}: data set '{ds.name}' has {ds.q.size} samples; "
+                f"the initial-state estimate needs at least {fit_min} of them and at least "
+                f"{fit_min} must remain to score the free run (0 starts from the first sample)"
+            )
+    for dt, group in by_dt.items():
+        check_free_run(
+            model,
+            [ds.v.shape[0] for ds in group],
+            group[0].v.shape[1],
+            dt,
+            cfg.substeps,
+            f"[validate] substeps = {cfg.substeps}",
+        )
     results: dict[str, SimulationResult] = {}
     for dt, group in by_dt.items():
         q0, qd0 = [], []

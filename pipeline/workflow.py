@@ -34,29 +34,16 @@ A minimal workflow::
 
 from __future__ import annotations
 
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from pipeline.errors import WorkflowError
+from pipeline.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
-ROLES = ("estimation", "validation")
-SECTIONS = (
-    "workflow",
-    "ingest",
-    "datasets",
-    "differentiate",
-    "identify",
-    "validate",
-    "compare",
-    "study",
-    "physics",
-    "analyze",
-    "rig",
-)
-#: Sections that make a workflow meaningful without data sets (a design analysis).
-DATALESS = ("physics",)
+__all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
 
 
 @dataclass(frozen=True)
@@ -118,8 +105,50 @@ class Workflow:
         return self.output_dir / stage
 
 
+def _resolve(path: Path, what: str) -> Path:
+    """Return the absolute path with symbolic links resolved, or say why it cannot be."""
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop (RuntimeError before 3.13)
+        raise WorkflowError(f"{what} '{path}' cannot be resolved: {exc}") from None
+
+
+def _read(path: Path) -> dict[str, Any]:
+    """Read and parse the workflow file, one line per way it can fail."""
+    where = f"workflow file '{path}'"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise WorkflowError(f"{where} does not exist") from None
+    except IsADirectoryError:
+        raise WorkflowError(f"{where} is a directory, not a TOML file") from None
+    except UnicodeDecodeError as exc:
+        raise WorkflowError(
+            f"{where} is not UTF-8 text (byte {exc.start}: {exc.reason}); TOML files are UTF-8"
+        ) from None
+    except OSError as exc:
+        raise WorkflowError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
+
+
+def _output_dir(path: Path, what: str) -> Path:
+    """Resolve an output folder and refuse one that is (or lies inside) a file."""
+    out = _resolve(path, what)
+    for parent in (out, *out.parents):
+        if os.path.lexists(parent):
+            if not parent.is_dir():
+                raise WorkflowError(
+                    f"{what} '{out}' cannot be a folder: '{parent}' is a file, not a directory"
+                )
+            break
+    return out
+
+
 def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Workflow:
-    """Read and check a workflow file.
+    """Read a workflow file and check every section before any stage runs.
 
     Parameters
     ----------
@@ -135,65 +164,39 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     Raises
     ------
     WorkflowError
-        If the file is missing or not valid TOML, a section or key is unknown, a
-        data set lacks ``source`` or has a bad ``role``, a source file is missing, there
-        are neither data sets nor a ``[physics]`` section, or a physics parameter is invalid.
+        In one line: the file is missing, a directory, not UTF-8, not valid TOML or a
+        symlink loop; a section or key is unknown or a value invalid
+        (:func:`pipeline.schema.check_workflow`: ``[section] key: expected ..., got ...``);
+        a source file is missing, a directory or a symlink loop; the output folder is a
+        file (or lies inside one) or a symlink loop.
     """
-    path = Path(path).resolve()
+    path = _resolve(Path(path), "workflow file")
+    raw = _read(path)
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise WorkflowError(f"workflow file '{path}' does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise WorkflowError(f"workflow file '{path}' is not valid TOML: {exc}") from None
-    unknown = set(raw) - set(SECTIONS)
-    if unknown:
-        raise WorkflowError(f"'{path}': unknown section(s) {sorted(unknown)}; known: {SECTIONS}")
-    if "physics" in raw:
-        from pipeline.physics.params import PrototypeParams
-
-        try:
-            PrototypeParams.from_dict(raw["physics"])
-        except WorkflowError as exc:
-            raise WorkflowError(f"'{path}' {exc}") from None
-    head = raw.get("workflow", {})
-    name = head.get("name", path.stem)
-    for key in set(head) - {"name", "description", "output_dir"}:
-        raise WorkflowError(f"'{path}' [workflow]: unknown key {key!r}")
+        checked = check_workflow(raw)
+    except WorkflowError as exc:  # keep the class (a ResourceError stays one)
+        raise type(exc)(f"{path}: {exc}") from None
+    head = checked.head
+    name = head.name if head.name is not None else path.stem
     base = path.parent
-    out = Path(output_dir) if output_dir else base / head.get("output_dir", f"runs/{name}")
+    if output_dir:
+        out = _output_dir(Path(output_dir), "output folder (--out)")
+    else:
+        out = _output_dir(base / (head.output_dir or f"runs/{name}"), "[workflow] output_dir")
     datasets = []
-    default_ingest = raw.get("ingest", {})
-    experiments = raw.get("rig", {}).get("experiments", {})
-    for ds_name, table in raw.get("datasets", {}).items():
-        where = f"'{path}' [datasets.{ds_name}]"
-        if not isinstance(table, dict) or ("source" in table) == ("rig" in table):
-            raise WorkflowError(
-                f"{where}: needs a `source` file or a virtual-rig experiment `rig` (one of them)"
-            )
-        role = table.get("role", "validation")
-        if role not in ROLES:
-            raise WorkflowError(f"{where}: role must be one of {ROLES}, got {role!r}")
-        rig = table.get("rig")
-        if rig is not None:
-            if rig not in experiments:
-                raise WorkflowError(
-                    f"{where}: rig experiment {rig!r} is not in [rig.experiments] "
-                    f"(known: {sorted(experiments)})"
-                )
-            source = (out / "rig" / f"{rig}.mat").resolve()
+    for ds_name, (entry, _) in checked.datasets.items():
+        table = raw["datasets"][ds_name]
+        where = f"{path}: [datasets.{ds_name}] source:"
+        if entry.rig is not None:
+            source = out / "rig" / f"{entry.rig}.mat"
         else:
-            source = (base / table["source"]).resolve()
+            source = _resolve(base / entry.source, f"{where} file")
+            if source.is_dir():
+                raise WorkflowError(f"{where} '{source}' is a directory, not a rig-log file")
             if not source.is_file():
-                raise WorkflowError(f"{where}: source file '{source}' does not exist")
-        keys = ("source", "role", "rig")
-        overrides = {k: v for k, v in table.items() if k not in keys}
-        datasets.append(DatasetSpec(ds_name, source, role, {**default_ingest, **overrides}, rig))
-    if not datasets and not any(name in raw for name in DATALESS):
-        raise WorkflowError(
-            f"'{path}': no [datasets.<name>] section (and no [physics] section to analyze)"
-        )
-    if datasets and not any(d.role == "estimation" for d in datasets):
-        raise WorkflowError(f"'{path}': no data set has role = 'estimation'")
+                raise WorkflowError(f"{where} file '{source}' does not exist")
+        overrides = {k: v for k, v in table.items() if k not in ("source", "role", "rig")}
+        ingest = {**raw.get("ingest", {}), **overrides}
+        datasets.append(DatasetSpec(ds_name, source, entry.role, ingest, entry.rig))
     sections = {k: v for k, v in raw.items() if k not in ("workflow", "ingest", "datasets")}
-    return Workflow(path, name, out.resolve(), tuple(datasets), sections)
+    return Workflow(path, name, out, tuple(datasets), sections)

@@ -152,7 +152,7 @@ def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(bistable_recor
 def test_lowpass_at_or_above_nyquist_is_an_error_naming_the_data_set(bistable_record):
     with pytest.raises(IdentificationError, match=r"'sim'.*lowpass = 250 Hz.*Nyquist"):
         _fit(bistable_record, lowpass=250.0)
-    with pytest.raises(WorkflowError, match="lowpass must be a frequency > 0"):
+    with pytest.raises(WorkflowError, match=r"\[identify\] lowpass: expected a frequency > 0"):
         IdentifyConfig.from_dict({"lowpass": -1.0})
 
 
@@ -229,11 +229,15 @@ def test_bad_conditioning_is_reported_with_the_number(bistable_record):
 
 
 def test_config_rejects_unknown_keys_and_terms():
-    with pytest.raises(WorkflowError, match="unknown key 'sigma'"):
+    with pytest.raises(WorkflowError, match=r"\[identify\] unknown key 'sigma'; did you mean"):
         IdentifyConfig.from_dict({"sigma": 0.5})
-    with pytest.raises(WorkflowError, match="unknown backbone term 'quartic'"):
+    with pytest.raises(
+        WorkflowError, match=r"\[identify\] backbone: unknown backbone term 'quartic'"
+    ):
         IdentifyConfig.from_dict({"backbone": ["quartic"]})
-    with pytest.raises(WorkflowError, match="needs fixed `input_gain`"):
+    with pytest.raises(
+        WorkflowError, match=r"\[identify\] m_q: 'identify' needs fixed `input_gain`"
+    ):
         IdentifyConfig.from_dict({"m_q": "identify"})
 
 

@@ -18,10 +18,10 @@ MODULES = ["params", "kinematics", "energy", "statics", "prestrain", "dynamics",
 
 def test_paper_values_in_si():
     p = PrototypeParams.paper()
-    assert pytest.approx(530.4e-9, rel=1e-12) == p.V_DE  # n d_0 A_0 (NOTES item 4)
+    assert pytest.approx(530.4e-9, rel=1e-12) == p.V_DE  # n d_0 A_0 (docs/interpretation.md item 4)
     assert pytest.approx(8 * 8.854e-12 * 2.8 * 1326e-6 / 50e-6, rel=1e-12) == p.C_0
     assert pytest.approx(5.2597e-9, rel=1e-4) == p.C_0
-    assert p.E == 2.1e9  # GPa, with the 1/2 (NOTES items 2, 3)
+    assert p.E == 2.1e9  # GPa, with the 1/2 (docs/interpretation.md items 2, 3)
     assert p.z_b == pytest.approx(7e-3)
     assert V_MAX == 3e3
 
@@ -36,18 +36,20 @@ def test_workflow_physics_section_loads_to_the_paper_prototype():
 
 
 def test_unknown_key_is_named():
-    with pytest.raises(WorkflowError, match=r"\[physics\]: unknown key 'Young'"):
+    with pytest.raises(
+        WorkflowError, match=r"\[physics\] unknown key 'Young' \(known keys: epsilon_0, "
+    ):
         PrototypeParams.from_dict({"E": 2e9, "Young": 1.0})
 
 
 @pytest.mark.parametrize(
     ("key", "value", "match"),
     [
-        ("E", "2.1 GPa", "`E` must be a number"),
-        ("l", -0.09, "`l` must be positive"),
-        ("b", float("nan"), "`b` must be finite"),
-        ("eta", -1.0, "`eta` must be non-negative"),
-        ("beta", True, "`beta` must be a number"),
+        ("E", "2.1 GPa", r"^\[physics\] E: expected a number, got '2.1 GPa'$"),
+        ("l", -0.09, r"^\[physics\] l: expected a number > 0, got -0.09$"),
+        ("b", float("nan"), r"^\[physics\] b: expected a finite number, got nan$"),
+        ("eta", -1.0, r"^\[physics\] eta: expected a number >= 0, got -1.0$"),
+        ("beta", True, r"^\[physics\] beta: expected a number, got True$"),
     ],
 )
 def test_invalid_values_raise(key, value, match):
@@ -65,7 +67,9 @@ def test_zero_damping_is_allowed_and_replace_rederives_volume():
 
 
 def test_not_a_table():
-    with pytest.raises(WorkflowError, match="must be a table"):
+    with pytest.raises(
+        WorkflowError, match=r"^\[physics\] expected a table, got \[\('E', 1.0\)\]$"
+    ):
         PrototypeParams.from_dict([("E", 1.0)])
 
 

@@ -93,5 +93,5 @@ def test_refine_config_parsing():
     assert refine_config(None) is None and refine_config(False) is None
     assert refine_config(True) == RefineConfig()
     assert refine_config({"windows": 5}).windows == 5
-    with pytest.raises(WorkflowError, match=r"\[identify.refine\]: unknown key 'window'"):
+    with pytest.raises(WorkflowError, match=r"\[identify.refine\] unknown key 'window'; did you"):
         refine_config({"window": 5})

@@ -64,16 +64,19 @@ def test_from_dict_round_trip_and_nested_prototype():
 @pytest.mark.parametrize(
     ("section", "match"),
     [
-        ({"laser_noise": 1e-6}, r"\[rig\]: unknown key 'laser_noise'"),
-        ({"prototype": {"Young": 1.0}}, r"\[physics\]: unknown key 'Young'"),
-        ({"friction_k": [1.0], "friction_F": [1e-3, 2e-3]}, "equal lengths"),
-        ({"friction_F": [1e-3, -1e-3, 1e-3]}, r"`friction_F\[1\]` must be positive"),
-        ({"driver_tau": 0.0}, "`driver_tau` must be positive"),
-        ({"sensor_noise": float("nan")}, "`sensor_noise` must be finite"),
-        ({"oversample": 2.5}, "`oversample` must be an integer"),
-        ({"oversample": True}, "`oversample` must be an integer"),
-        ({"friction_exponent": 0.5}, "`friction_exponent` must be >= 1"),
-        ({"friction_k": "40"}, "`friction_k` must be a sequence"),
+        ({"laser_noise": 1e-6}, r"\[rig.plant\] unknown key 'laser_noise'"),
+        ({"prototype": {"Young": 1.0}}, r"\[rig.plant.prototype\] unknown key 'Young'"),
+        ({"friction_k": [1.0], "friction_F": [1e-3, 2e-3]}, r"friction_F: .*as many values as"),
+        (
+            {"friction_F": [1e-3, -1e-3, 1e-3]},
+            r"friction_F\[1\]: expected a number > 0, got -0.001",
+        ),
+        ({"driver_tau": 0.0}, r"\[rig.plant\] driver_tau: expected a number > 0, got 0.0"),
+        ({"sensor_noise": float("nan")}, r"sensor_noise: expected a finite number, got nan"),
+        ({"oversample": 2.5}, r"\[rig.plant\] oversample: expected an integer, got 2.5"),
+        ({"oversample": True}, r"\[rig.plant\] oversample: expected an integer, got True"),
+        ({"friction_exponent": 0.5}, r"friction_exponent: expected a number >= 1, got 0.5"),
+        ({"friction_k": "40"}, r"\[rig.plant\] friction_k: expected an array, got '40'"),
     ],
 )
 def test_invalid_sections_raise_workflow_errors(section, match):

@@ -122,11 +122,15 @@ def test_tree_round_trip(model):
 def test_config_rejects_unknown_and_bad_values():
     assert SindyConfig.from_dict(None) == SindyConfig()
     assert SindyConfig.from_dict({"degree": 2, "optimizer": "SR3"}).degree == 2
-    with pytest.raises(WorkflowError, match=r"sindy\.treshold"):
+    with pytest.raises(
+        WorkflowError, match=r"\[compare\] unknown key 'treshold'; did you mean 'threshold'"
+    ):
         SindyConfig.from_dict({"treshold": 0.1})
-    with pytest.raises(WorkflowError, match=r"sindy\.optimizer"):
+    with pytest.raises(
+        WorkflowError, match=r"\[compare\] optimizer: expected 'STLSQ' or 'SR3', got 'lasso'"
+    ):
         SindyConfig.from_dict({"optimizer": "lasso"})
-    with pytest.raises(WorkflowError, match=r"sindy\.degree"):
+    with pytest.raises(WorkflowError, match=r"\[compare\] degree: expected an integer >= 1, got 0"):
         SindyConfig.from_dict({"degree": 0})
 
 

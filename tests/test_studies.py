@@ -171,13 +171,17 @@ def test_alpha_study_needs_tvregdiff(bistable_record):
 def test_config_is_checked():
     cfg = StudyConfig.from_dict({})
     assert cfg.M == (4, 6, 8, 10, 12, 16) and cfg.free_run is True
-    with pytest.raises(WorkflowError, match=r"\[study\]: unknown key 'sigma'"):
+    with pytest.raises(
+        WorkflowError, match=r"\[study\] unknown key 'sigma'; did you mean 'sigma_n'"
+    ):
         StudyConfig.from_dict({"sigma": [0.5]})
-    with pytest.raises(WorkflowError, match="`M` values must be integers >= 2, got 1"):
+    with pytest.raises(WorkflowError, match=r"\[study\] M\[0\]: expected an integer >= 2, got 1"):
         StudyConfig.from_dict({"M": [1, 4]})
-    with pytest.raises(WorkflowError, match="`alpha` values must be numbers > 0"):
+    with pytest.raises(
+        WorkflowError, match=r"\[study\] alpha\[0\]: expected a number > 0, got 0.0"
+    ):
         StudyConfig.from_dict({"alpha": [0.0]})
-    with pytest.raises(WorkflowError, match="`sigma_n` must list at least one value"):
+    with pytest.raises(WorkflowError, match=r"\[study\] sigma_n: expected at least 1 value"):
         StudyConfig.from_dict({"sigma_n": []})
 
 

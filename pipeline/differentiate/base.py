@@ -86,11 +86,12 @@ def differentiate(
     >>> differentiate(t, 0.01, method="savgol", params={"windw": 11})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    pipeline.errors.WorkflowError: differentiate method 'savgol': unknown key 'windw'; ...
+    pipeline.errors.WorkflowError: [differentiate] unknown key 'windw'; did you mean 'window'? ...
     """
     if method not in DIFFERENTIATORS:
         raise WorkflowError(
-            f"differentiate: unknown method {method!r}; known methods: {', '.join(DIFFERENTIATORS)}"
+            f"[differentiate] method: unknown method {method!r}; known methods: "
+            + ", ".join(DIFFERENTIATORS)
         )
     config = CONFIGS[method].from_dict({} if params is None else params)
     return DIFFERENTIATORS[method](x, dt, config=config)

@@ -98,17 +98,21 @@ def check_signal(x: ArrayLike, dt: float) -> tuple[NDArray[np.float64], float]:
     return x, dt
 
 
-def config_from_dict(cls: type[_C], params: Mapping[str, Any], method: str) -> _C:
+def config_from_dict(
+    cls: type[_C], params: Mapping[str, Any], method: str, where: str = "[differentiate]"
+) -> _C:
     """Build a differentiator's config dataclass from its workflow parameters.
 
     Parameters
     ----------
     cls : type
-        The method's config dataclass.
+        The method's config dataclass (a pydantic dataclass, see :mod:`pipeline.config`).
     params : mapping of str to value
-        The parameters given in the workflow.
+        The parameters given in the workflow (without ``method``).
     method : str
         Method name, for the messages.
+    where : str, optional
+        The workflow table the parameters come from, for the messages.
 
     Returns
     -------
@@ -118,9 +122,10 @@ def config_from_dict(cls: type[_C], params: Mapping[str, Any], method: str) -> _
     Raises
     ------
     WorkflowError
-        On an unknown key (named, with the known keys) or an invalid value.
+        On an unknown key (named, with the method's known keys and a suggestion) or an
+        invalid value: ``[differentiate] key: expected ..., got ...``.
     """
-    return config_from_section(cls, params, f"differentiate method '{method}'")
+    return config_from_section(cls, params, where, known_label=f"known keys of method '{method}'")
 
 
 def check_positive(name: str, value: float) -> float:

@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, Self
+from typing import Annotated, Any, Self
 
+import pydantic
 from numpy.typing import ArrayLike
-from scipy.signal import savgol_filter
+from pydantic import Field
 
-from pipeline.differentiate.result import Derivatives, check_int, check_signal, config_from_dict
+from pipeline.config import CONFIG, ConfigValueError
+from pipeline.differentiate.result import Derivatives, check_signal, config_from_dict
 
 __all__ = ["SavGolConfig", "savgol_derivatives"]
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class SavGolConfig:
     """Settings of the ``"savgol"`` differentiator.
 
@@ -27,8 +28,9 @@ class SavGolConfig:
 
     Raises
     ------
-    ValueError
-        If a value is out of range.
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
 
     Examples
     --------
@@ -36,27 +38,27 @@ class SavGolConfig:
     3
     """
 
-    window: int = 21
-    polyorder: int = 3
+    window: Annotated[int, Field(ge=3)] = 21
+    polyorder: Annotated[int, Field(ge=2)] = 3
 
     def __post_init__(self) -> None:
-        check_int("window", self.window, 3)
-        check_int("polyorder", self.polyorder, 2)
         if self.window % 2 == 0:
-            raise ValueError(f"`window` must be odd, got {self.window}")
+            raise ConfigValueError("window", "an odd integer", self.window)
         if self.polyorder >= self.window:
-            raise ValueError(
-                f"`polyorder` must be less than `window`={self.window}, got {self.polyorder}"
+            raise ConfigValueError(
+                "polyorder", f"an integer < window = {self.window}", self.polyorder
             )
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> Self:
+    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
         """Build from a workflow section.
 
         Parameters
         ----------
         params : mapping of str to value
             Keys among the attribute names.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -68,12 +70,13 @@ class SavGolConfig:
         WorkflowError
             On an unknown key or an invalid value.
         """
-        return config_from_dict(cls, params, "savgol")
+        return config_from_dict(cls, params, "savgol", where)
 
 
-def savgol_derivatives(
-    x: ArrayLike, dt: float, *, config: SavGolConfig = SavGolConfig()
-) -> Derivatives:
+_DEFAULT = SavGolConfig()
+
+
+def savgol_derivatives(x: ArrayLike, dt: float, *, config: SavGolConfig = _DEFAULT) -> Derivatives:
     """Smoothed signal and two derivatives by Savitzky-Golay filtering.
 
     Each output sample is the value, first or second derivative at that sample of the
@@ -122,6 +125,8 @@ def savgol_derivatives(
     w, p = config.window, config.polyorder
     if x.size < w:
         raise ValueError(f"`x` must have at least `window`={w} samples, got {x.size}")
+    from scipy.signal import savgol_filter
+
     x_hat = savgol_filter(x, w, p, deriv=0, mode="interp")
     x_dot = savgol_filter(x, w, p, deriv=1, delta=dt, mode="interp")
     x_ddot = savgol_filter(x, w, p, deriv=2, delta=dt, mode="interp")

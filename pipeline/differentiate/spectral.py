@@ -3,25 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, Self
+from typing import Annotated, Any, Literal, Self
 
 import numpy as np
+import pydantic
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field, PositiveFloat
 
-from pipeline.differentiate.result import (
-    Derivatives,
-    check_positive,
-    check_signal,
-    config_from_dict,
-)
+from pipeline.config import CONFIG
+from pipeline.differentiate.result import Derivatives, check_signal, config_from_dict
 
 __all__ = ["SpectralConfig", "lowpass_gain", "spectral_derivatives"]
 
-_EXTENSIONS = ("odd", "periodic")
 
-
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class SpectralConfig:
     """Settings of the ``"spectral"`` differentiator.
 
@@ -43,8 +38,9 @@ class SpectralConfig:
 
     Raises
     ------
-    ValueError
-        If a value is out of range.
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
 
     Examples
     --------
@@ -52,28 +48,20 @@ class SpectralConfig:
     0.2
     """
 
-    cutoff_hz: float | None = 10.0
-    taper: float = 0.2
-    extension: str = "odd"
-
-    def __post_init__(self) -> None:
-        if self.cutoff_hz is not None:
-            check_positive("cutoff_hz", self.cutoff_hz)
-        if isinstance(self.taper, bool) or not isinstance(self.taper, int | float):
-            raise ValueError(f"`taper` must be a number in [0, 1], got {self.taper!r}")
-        if not 0.0 <= self.taper <= 1.0:
-            raise ValueError(f"`taper` must be in [0, 1], got {self.taper!r}")
-        if self.extension not in _EXTENSIONS:
-            raise ValueError(f"`extension` must be 'odd' or 'periodic', got {self.extension!r}")
+    cutoff_hz: PositiveFloat | None = 10.0
+    taper: Annotated[float, Field(ge=0, le=1, description="a number in [0, 1]")] = 0.2
+    extension: Literal["odd", "periodic"] = "odd"
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> Self:
+    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
         """Build from a workflow section.
 
         Parameters
         ----------
         params : mapping of str to value
             Keys among the attribute names.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -85,7 +73,7 @@ class SpectralConfig:
         WorkflowError
             On an unknown key or an invalid value.
         """
-        return config_from_dict(cls, params, "spectral")
+        return config_from_dict(cls, params, "spectral", where)
 
 
 def lowpass_gain(freq: ArrayLike, cutoff_hz: float | None, taper: float) -> NDArray[np.float64]:
@@ -123,8 +111,11 @@ def lowpass_gain(freq: ArrayLike, cutoff_hz: float | None, taper: float) -> NDAr
     return gain
 
 
+_DEFAULT = SpectralConfig()
+
+
 def spectral_derivatives(
-    x: ArrayLike, dt: float, *, config: SpectralConfig = SpectralConfig()
+    x: ArrayLike, dt: float, *, config: SpectralConfig = _DEFAULT
 ) -> Derivatives:
     """Smoothed signal and two derivatives by low-pass spectral differentiation.
 

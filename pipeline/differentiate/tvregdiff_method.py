@@ -3,20 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, Self
+from typing import Annotated, Any, Literal, Self
 
 import numpy as np
+import pydantic
 from numpy.typing import ArrayLike
-from scipy.integrate import cumulative_trapezoid
+from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
-from pipeline.differentiate.result import (
-    Derivatives,
-    check_int,
-    check_positive,
-    check_signal,
-    config_from_dict,
-)
+from pipeline.config import CONFIG, ConfigValueError
+from pipeline.differentiate.result import Derivatives, check_signal, config_from_dict
 from pipeline.differentiate.tvregdiff import tvregdiff
 from pipeline.ingest.units import lookup_unit
 
@@ -30,7 +25,11 @@ def unit_factor(symbol: str) -> float | None:
 __all__ = ["TVRegDiffConfig", "tvregdiff_derivatives"]
 
 
-@dataclass(frozen=True)
+def _lower(value: object) -> object:
+    return value.lower() if isinstance(value, str) else value
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class TVRegDiffConfig:
     """Settings of the ``"tvregdiff"`` differentiator.
 
@@ -67,8 +66,9 @@ class TVRegDiffConfig:
 
     Raises
     ------
-    ValueError
-        If a value is out of range.
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
 
     Examples
     --------
@@ -76,40 +76,30 @@ class TVRegDiffConfig:
     20
     """
 
-    alpha: float = 1e-5
-    iterations: int = 10
-    scale: str = "large"
-    ep: float = 1e-12
-    alpha2: float | None = None
-    iterations2: int | None = None
-    ep2: float | None = None
-    tol: float = 1e-6
+    alpha: PositiveFloat = 1e-5
+    iterations: PositiveInt = 10
+    scale: Annotated[Literal["large", "small"], BeforeValidator(_lower)] = "large"
+    ep: PositiveFloat = 1e-12
+    alpha2: PositiveFloat | None = None
+    iterations2: PositiveInt | None = None
+    ep2: PositiveFloat | None = None
+    tol: PositiveFloat = 1e-6
     unit: str | None = None
 
     def __post_init__(self) -> None:
-        check_positive("alpha", self.alpha)
-        check_int("iterations", self.iterations, 1)
-        if not isinstance(self.scale, str) or self.scale.lower() not in ("small", "large"):
-            raise ValueError(f"`scale` must be 'small' or 'large', got {self.scale!r}")
-        check_positive("ep", self.ep)
-        if self.alpha2 is not None:
-            check_positive("alpha2", self.alpha2)
-        if self.iterations2 is not None:
-            check_int("iterations2", self.iterations2, 1)
-        if self.ep2 is not None:
-            check_positive("ep2", self.ep2)
-        check_positive("tol", self.tol)
         if self.unit is not None and unit_factor(self.unit) is None:
-            raise ValueError(f"`unit` {self.unit!r} is not a known unit (e.g. 'mm', 'm', 'V')")
+            raise ConfigValueError("unit", "a known unit (e.g. 'mm', 'm', 'V')", self.unit)
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> Self:
+    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
         """Build from a workflow section.
 
         Parameters
         ----------
         params : mapping of str to value
             Keys among the attribute names.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -121,11 +111,14 @@ class TVRegDiffConfig:
         WorkflowError
             On an unknown key or an invalid value.
         """
-        return config_from_dict(cls, params, "tvregdiff")
+        return config_from_dict(cls, params, "tvregdiff", where)
+
+
+_DEFAULT = TVRegDiffConfig()
 
 
 def tvregdiff_derivatives(
-    x: ArrayLike, dt: float, *, config: TVRegDiffConfig = TVRegDiffConfig()
+    x: ArrayLike, dt: float, *, config: TVRegDiffConfig = _DEFAULT
 ) -> Derivatives:
     """Smoothed signal and two derivatives by TVRegDiff, applied twice.
 
@@ -189,6 +182,8 @@ def tvregdiff_derivatives(
     first = tvregdiff(x, c.iterations, c.alpha, scale=c.scale, ep=c.ep, dx=dt, tol=c.tol)
     x_dot = first.derivative
     second = tvregdiff(x_dot, iterations2, alpha2, scale=c.scale, ep=ep2, dx=dt, tol=c.tol)
+    from scipy.integrate import cumulative_trapezoid
+
     integral = cumulative_trapezoid(x_dot, dx=dt, initial=0.0)
     x_hat = integral + np.mean(x - integral)
     info = {

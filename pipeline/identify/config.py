@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Annotated, Any, Literal
 
-from pipeline.config import config_from_section
+import pydantic
+from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat
+
+from pipeline.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
 from pipeline.errors import WorkflowError
-from pipeline.identify.terms import INPUT_MAPS, check_terms
+from pipeline.identify.terms import check_terms
+
+#: Workflow-facing description of ``T_z`` (its type is a union).
+_T_Z = 'a time >= 0 [s] or "search"'
+#: Workflow-facing description of ``m_q``; ``"physics"`` is resolved by the identify stage.
+_M_Q = 'a mass > 0 [kg], "identify", or "physics" (with a [physics] section)'
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class IdentifyConfig:
     """Hyper-parameters of the RBF identification (Masoud & Maas 2025, Sec. 4.2).
 
@@ -73,36 +81,81 @@ class IdentifyConfig:
     prior : PhysicsPrior or None
         The analytical model's curves for the ``physics_*`` terms; set by the identify
         stage from the workflow's ``[physics]`` section, not a workflow key.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        If a value has the wrong type, is out of range or the terms do not make a model
+        (a ``ValueError``; :meth:`from_dict` raises a ``WorkflowError`` naming the key).
     """
 
-    M: int = 10
-    sigma_n: float = 0.5
-    rbf: tuple[str, ...] = ("c", "d", "g")
-    backbone: tuple[str, ...] = ("linear_spring", "cubic_spring", "viscous")
-    input_map: str = "v2"
-    outside: str = "clip"
-    T_z: float | str = "search"
-    T_z_bounds: tuple[float, float] | None = None
-    m_q: float | str = 1.0
-    input_gain: tuple[float, ...] | None = None
-    coulomb_velocity: float = 1e-3
-    trim: int = 0
-    lowpass: float | None = None
-    q_range: tuple[float, float] | None = None
-    max_condition: float = 1e8
-    min_support: int = 10
-    published: dict[str, float] | None = None
-    refine: dict[str, Any] | bool | None = None
+    M: Annotated[int, Field(ge=2)] = 10
+    sigma_n: PositiveFloat = 0.5
+    rbf: Annotated[tuple[str, ...], AsTuple] = ("c", "d", "g")
+    backbone: Annotated[tuple[str, ...], AsTuple] = ("linear_spring", "cubic_spring", "viscous")
+    input_map: Literal["v2", "v"] = "v2"
+    outside: Literal["clip", "zero"] = "clip"
+    T_z: Annotated[Annotated[float, Field(ge=0)] | Literal["search"], Field(description=_T_Z)] = (
+        "search"
+    )
+    T_z_bounds: Annotated[
+        tuple[PositiveFloat, PositiveFloat] | None,
+        AsTuple,
+        Field(description="[lo, hi] [s] with 0 < lo < hi"),
+    ] = None
+    m_q: Annotated[PositiveFloat | Literal["identify"], Field(description=_M_Q)] = 1.0
+    input_gain: Annotated[tuple[FiniteFloat, ...] | None, AsTuple] = None
+    coulomb_velocity: PositiveFloat = 1e-3
+    trim: NonNegativeInt = 0
+    lowpass: Annotated[PositiveFloat | None, Field(description="a frequency > 0 [Hz]")] = None
+    q_range: Interval | None = None
+    max_condition: Annotated[float, Field(gt=0, allow_inf_nan=True)] = 1e8
+    min_support: NonNegativeInt = 10
+    published: dict[str, FiniteFloat] | None = None
+    refine: Annotated[
+        dict[str, Any] | bool | None,
+        Field(description="a table of [identify.refine] settings, true or false"),
+    ] = None
     prior: Any = None
 
+    def __post_init__(self) -> None:
+        for key, terms in (("rbf", (self.rbf, ())), ("backbone", ((), self.backbone))):
+            try:
+                check_terms(*terms)
+            except WorkflowError as exc:
+                raise ConfigValueError(key, message=str(exc)) from None
+        bounds = self.T_z_bounds
+        if bounds is not None and not bounds[0] < bounds[1]:
+            raise ConfigValueError("T_z_bounds", "[lo, hi] [s] with 0 < lo < hi", list(bounds))
+        gains = {"input_gain", "physics_gain"} & set(self.backbone)
+        if self.m_q == "identify":
+            if self.input_gain is None or "g" in self.rbf or gains:
+                raise ConfigValueError(
+                    "m_q",
+                    message="'identify' needs fixed `input_gain` values and no 'g' or "
+                    "'input_gain' term (one scale must be known)",
+                )
+        elif "g" not in self.rbf and not gains:
+            raise ConfigValueError(
+                "rbf", message="the model needs an input term: 'g' in rbf or 'input_gain'"
+            )
+        if self.refine:
+            from pipeline.identify.refine import refine_config
+
+            refine_config(self.refine)
+
     @classmethod
-    def from_dict(cls, section: dict[str, Any]) -> IdentifyConfig:
+    def from_dict(
+        cls, section: Mapping[str, Any], where: str | Callable[[str], str] = "[identify]"
+    ) -> IdentifyConfig:
         """Build and validate the configuration from a workflow section.
 
         Parameters
         ----------
         section : dict
             The ``[identify]`` table.
+        where : str or callable, optional
+            The workflow table (or a function of the key giving it), for the messages.
 
         Returns
         -------
@@ -111,62 +164,19 @@ class IdentifyConfig:
         Raises
         ------
         WorkflowError
-            On an unknown key or an invalid value, naming it.
+            On an unknown key (with a suggestion) or an invalid value:
+            ``[identify] key: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> IdentifyConfig.from_dict({"M": "ten"})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
         """
-        kw = dict(section)
-        if "prior" in kw:
+        if isinstance(section, Mapping) and "prior" in section:
+            label = where("prior") if callable(where) else where
             raise WorkflowError(
-                "[identify]: unknown key 'prior' (the analytical backbone comes from [physics])"
+                f"{label} unknown key 'prior' (the analytical backbone comes from [physics])"
             )
-        for key in ("rbf", "backbone", "T_z_bounds", "input_gain", "q_range"):
-            if isinstance(kw.get(key), list):
-                kw[key] = tuple(kw[key])
-        cfg = config_from_section(cls, kw, "[identify]")
-        cfg._check()
-        return cfg
-
-    def _check(self) -> None:
-        check_terms(self.rbf, self.backbone)
-        if self.input_map not in INPUT_MAPS:
-            raise WorkflowError(
-                f"[identify] input_map must be one of {INPUT_MAPS}, got {self.input_map!r}"
-            )
-        if not (self.T_z == "search" or (isinstance(self.T_z, int | float) and self.T_z >= 0)):
-            raise WorkflowError(
-                f"[identify] T_z must be 'search' or a time >= 0 [s], got {self.T_z!r}"
-            )
-        if self.T_z_bounds is not None and not (0 < self.T_z_bounds[0] < self.T_z_bounds[1]):
-            raise WorkflowError(
-                f"[identify] T_z_bounds must satisfy 0 < lo < hi, got {self.T_z_bounds}"
-            )
-        if self.m_q == "identify":
-            gains = {"input_gain", "physics_gain"} & set(self.backbone)
-            if self.input_gain is None or "g" in self.rbf or gains:
-                raise WorkflowError(
-                    "[identify] m_q = 'identify' needs fixed `input_gain` values and no 'g' or "
-                    "'input_gain' term (one scale must be known)"
-                )
-        elif not (isinstance(self.m_q, int | float) and self.m_q > 0):
-            raise WorkflowError(
-                f"[identify] m_q must be a mass > 0 [kg] or 'identify', got {self.m_q!r}"
-            )
-        elif "g" not in self.rbf and not {"input_gain", "physics_gain"} & set(self.backbone):
-            raise WorkflowError(
-                "[identify] the model needs an input term: 'g' in rbf or 'input_gain'"
-            )
-        if self.trim < 0:
-            raise WorkflowError(f"[identify] trim must be >= 0 samples, got {self.trim!r}")
-        if self.lowpass is not None and not (
-            isinstance(self.lowpass, int | float) and self.lowpass > 0
-        ):
-            raise WorkflowError(
-                f"[identify] lowpass must be a frequency > 0 [Hz], got {self.lowpass!r}"
-            )
-        if self.refine:
-            from pipeline.identify.refine import refine_config
-
-            refine_config(self.refine)
-        if not self.coulomb_velocity > 0:
-            raise WorkflowError(
-                f"[identify] coulomb_velocity must be > 0, got {self.coulomb_velocity!r}"
-            )
+        return config_from_section(cls, section, where, internal=("prior",))

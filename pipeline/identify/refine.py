@@ -18,22 +18,27 @@ fitting.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
+import pydantic
+from pydantic import Field, PositiveFloat, PositiveInt
 from scipy.optimize import least_squares
 
-from pipeline.config import config_from_section
+from pipeline import preflight
+from pipeline.config import CONFIG, config_from_section
 from pipeline.identify.config import IdentifyConfig
 from pipeline.identify.fit import FitDiagnostics, Record, assemble_model
 from pipeline.identify.model import RBFModel
 from pipeline.identify.terms import force_columns, input_columns, input_map
-from pipeline.simulate import FineInputs, prepare_inputs, simulate
+from pipeline.simulate import FineInputs, check_free_run, prepare_inputs, simulate
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class RefineConfig:
     """The ``[identify.refine]`` section.
 
@@ -53,19 +58,21 @@ class RefineConfig:
         Also refine T_z (when the model has a friction lag, T_z > 0).
     ftol : float
         Relative cost decrease below which the optimiser stops.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :func:`refine_config` raises a ``WorkflowError`` naming the key instead).
     """
 
-    windows: int = 40
-    length: int = 300
-    max_nfev: int = 30
-    substeps: int = 2
-    interpolation: str = "bandlimited"
+    windows: PositiveInt = 40
+    length: Annotated[int, Field(ge=10)] = 300
+    max_nfev: PositiveInt = 30
+    substeps: PositiveInt = 2
+    interpolation: Literal["bandlimited", "linear"] = "bandlimited"
     refine_T_z: bool = True
-    ftol: float = 1e-6
-
-    def __post_init__(self) -> None:
-        if self.windows < 1 or self.length < 10 or self.max_nfev < 1 or self.substeps < 1:
-            raise ValueError("windows, max_nfev, substeps must be >= 1 and length >= 10")
+    ftol: PositiveFloat = 1e-6
 
 
 @dataclass(frozen=True)
@@ -186,7 +193,10 @@ def refine_model(
     comparable variables. The Jacobian is a forward difference computed in one
     batched simulation of all windows for all perturbed parameter vectors.
     Residuals are q_sim - q over each window, with diverged windows penalised.
+    Before anything is allocated, settings whose batched simulations exceed the memory
+    budget are refused (``ResourceError``, :mod:`pipeline.preflight`).
     """
+    _check_memory(model, diag, records, rcfg)
     t_start = time.perf_counter()
     dt = records[0].dt
     picks = _windows(records, rcfg)
@@ -291,13 +301,72 @@ def _rejected(model, records, rcfg, message, t_start) -> RefineResult:
     return RefineResult(model, False, nan, nan, nan, nan, 0, message, time.perf_counter() - t_start)
 
 
-def refine_config(section: dict | None) -> RefineConfig | None:
+def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Record], rcfg) -> None:
+    """Refuse a simulation-error refinement whose batched free runs exceed the budget.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The least-squares model (``T_z``, ``n_inputs``, ``basis``).
+    diag : FitDiagnostics
+        Its diagnostics (``theta``, ``columns``).
+    records : sequence of Record
+        The estimation records (their lengths and sample time).
+    rcfg : RefineConfig
+        ``windows``, ``length``, ``substeps``, ``refine_T_z``.
+
+    Raises
+    ------
+    ResourceError
+        If :func:`pipeline.preflight.refine_bytes` for the window runs, or
+        :func:`pipeline.preflight.free_run_bytes` for the free runs over the whole records,
+        exceeds the budget, naming the ``[identify.refine]`` keys.
+
+    Notes
+    -----
+    The sub-steps follow :func:`refine_model`: at least
+    ``substeps`` and ``dt / (1.5 T_z)``, doubled when T_z is refined.
+
+    References
+    ----------
+    Ljung, System Identification (1999), Sec. 7.3 (output-error methods).
+    """
+    dt = records[0].dt
+    lengths = [r.q.size for r in records]
+    check_free_run(
+        model,
+        lengths,
+        model.n_inputs,
+        dt,
+        rcfg.substeps,
+        f"[identify.refine] substeps = {rcfg.substeps}",
+    )
+    log_tz = bool(rcfg.refine_T_z and model.T_z > 0)
+    ns = int(rcfg.substeps)
+    if model.T_z > 0:
+        ns = max(ns, math.ceil(dt / (1.5 * model.T_z)))
+    ns *= 2 if log_tz else 1
+    P = len(diag.theta) + log_tz
+    W, L = int(rcfg.windows), int(rcfg.length)
+    preflight.check_memory(
+        preflight.refine_bytes(W, L, P, model.n_inputs, ns, len(diag.columns), model.basis.M),
+        f"[identify.refine] windows = {W}, length = {L}",
+        f"the Jacobian's batched free run of {(P + 1) * W} window trajectories "
+        f"({W} windows x {P + 1} parameter vectors) of {L} samples x {ns} sub-steps",
+    )
+
+
+def refine_config(
+    section: dict | bool | None, where: str = "[identify.refine]"
+) -> RefineConfig | None:
     """Parse ``[identify.refine]`` (None or ``false`` when absent: no refinement).
 
     Parameters
     ----------
     section : dict, bool or None
         The table, ``true`` for defaults, or nothing.
+    where : str, optional
+        The workflow table, for the messages.
 
     Returns
     -------
@@ -306,13 +375,12 @@ def refine_config(section: dict | None) -> RefineConfig | None:
     Raises
     ------
     WorkflowError
-        On an unknown key or invalid value.
+        On an unknown key (with a suggestion) or an invalid value:
+        ``[identify.refine] key: expected ..., got ...``.
     """
     if not section:
         return None
-    return config_from_section(
-        RefineConfig, {} if section is True else section, "[identify.refine]"
-    )
+    return config_from_section(RefineConfig, {} if section is True else section, where)
 
 
 __all__ = ["RefineConfig", "RefineResult", "refine_config", "refine_model"]

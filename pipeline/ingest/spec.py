@@ -1,8 +1,9 @@
 """Configuration of the ingest stage: which file format, which channels, which checks.
 
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
-parsed from TOML) into frozen dataclasses and rejects anything it does not understand
-with a :class:`~pipeline.errors.WorkflowError` naming the key and echoing the value.
+parsed from TOML) into frozen pydantic dataclasses (:mod:`pipeline.config`) and rejects
+anything it does not understand with a one-line :class:`~pipeline.errors.WorkflowError`
+naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'furlong'``).
 
 Schema (every key optional unless marked required)::
 
@@ -31,12 +32,28 @@ unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibratio
 
 from __future__ import annotations
 
-import math
+import difflib
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Annotated, Any, Literal
 
+import pydantic
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    Field,
+    FiniteFloat,
+    NonNegativeInt,
+    PositiveFloat,
+)
+
+from pipeline.config import (
+    CONFIG,
+    AsTuple,
+    ConfigValueError,
+    config_from_section,
+    unknown_key_message,
+)
 from pipeline.errors import WorkflowError
 from pipeline.ingest.units import SI_UNITS, UNITS, canonical_unit
 
@@ -71,47 +88,76 @@ OPTION_KEYS = (
     "header",
 )
 _CHANNEL_KEYS = ("name", "regex", "column", "unit", "scale", "si_unit")
+_SELECTORS = ("name", "regex", "column")
 _INPUT = re.compile(r"v(\d+)")
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DELIMITER_ALIASES = {"tab": "\t", "space": "whitespace", "\\s+": "whitespace"}
+_UNIT_TEXT = "a known unit (" + ", ".join(UNITS) + ")"
+_SI_TEXT = "one of " + ", ".join(sorted(SI_UNITS))
+_DELIMITER_TEXT = '"auto", "whitespace", "tab" or a single non-alphanumeric character'
+
+#: ``where`` of the messages: a section label, or a function of the top-level key giving it.
+Where = str | Callable[[str], str]
 
 
-def _fail(key: str, value: object, expected: str) -> WorkflowError:
-    return WorkflowError(f"ingest `{key}` = {value!r}: {expected}")
+def _label(where: Where, key: str) -> str:
+    return where(key) if callable(where) else where
 
 
-def _number(key: str, value: object, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _fail(key, value, "expected a number")
-    x = float(value)
-    if not math.isfinite(x):
-        raise _fail(key, value, "expected a finite number")
-    if positive and x <= 0.0:
-        raise _fail(key, value, "expected a number > 0")
-    return x
+def _canonical(value: object) -> object:
+    return canonical_unit(value) if isinstance(value, str) else value
 
 
-def _integer(key: str, value: object, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise _fail(key, value, "expected an integer")
-    if value < minimum:
-        raise _fail(key, value, f"expected an integer >= {minimum}")
-    return int(value)
+def _known_unit(unit: str) -> str:
+    if unit not in UNITS:
+        raise ConfigValueError(None, _UNIT_TEXT)
+    return unit
 
 
-def _choice(key: str, value: object, choices: tuple[str, ...]) -> str:
-    if not isinstance(value, str) or value not in choices:
-        raise _fail(key, value, "expected one of " + ", ".join(f'"{c}"' for c in choices))
+def _si_unit(unit: str) -> str:
+    if unit not in SI_UNITS:
+        raise ConfigValueError(None, _SI_TEXT)
+    return unit
+
+
+def _regex(pattern: str) -> str:
+    try:
+        re.compile(pattern)
+    except re.error as exc:
+        raise ConfigValueError(None, f"a valid regular expression ({exc})") from None
+    return pattern
+
+
+def _nonzero(value: float) -> float:
+    if value == 0.0:
+        raise ConfigValueError(None, "a non-zero factor")
     return value
 
 
-def _pair(key: str, value: object) -> tuple[object, object]:
-    if not isinstance(value, list | tuple) or len(value) != 2:
-        raise _fail(key, value, "expected a list of two values [start, stop]")
-    return value[0], value[1]
+def _delimiter(value: object) -> object:
+    return _DELIMITER_ALIASES.get(value, value) if isinstance(value, str) else value
 
 
-@dataclass(frozen=True)
+def _check_delimiter(value: str) -> str:
+    if not (value in ("auto", "whitespace") or (len(value) == 1 and not value.isalnum())):
+        raise ConfigValueError(None, _DELIMITER_TEXT)
+    return value
+
+
+def _header(value: object) -> object:
+    return None if value == "auto" else value
+
+
+def _ordered(pair: tuple[Any, Any]) -> tuple[Any, Any]:
+    if not pair[0] < pair[1]:
+        raise ConfigValueError(None, "[start, stop] with start < stop")
+    return pair
+
+
+_Unit = Annotated[str, BeforeValidator(_canonical), AfterValidator(_known_unit)]
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class ChannelSpec:
     """Where one canonical column comes from and in which unit it is recorded.
 
@@ -134,16 +180,38 @@ class ChannelSpec:
         SI unit of the result, needed only when ``scale`` changes the quantity (a sensor
         calibration, e.g. ``unit = "V", scale = 2e-3, si_unit = "m"`` for 2 mm/V).
 
-    Exactly one of ``name``, ``regex``, ``column`` is set (checked by :meth:`from_dict`).
+    At most one of ``name``, ``regex``, ``column`` is set; a channel table of a workflow
+    gives exactly one (checked by :meth:`from_dict`; only the default time channel of a
+    dSPACE recording, ``ChannelSpec("t")``, has none).
+
+    Raises
+    ------
+    pydantic.ValidationError
+        On a value of the wrong type or out of range, several selectors, or a time channel
+        in a unit that is not a time (a ``ValueError``; :meth:`from_dict` raises a
+        ``WorkflowError`` naming the key).
     """
 
     role: str
-    name: str | None = None
-    regex: str | None = None
-    column: int | None = None
-    unit: str | None = None
-    scale: float | None = None
-    si_unit: str | None = None
+    name: Annotated[str, Field(min_length=1)] | None = None
+    regex: Annotated[str, Field(min_length=1), AfterValidator(_regex)] | None = None
+    column: NonNegativeInt | None = None
+    unit: Annotated[_Unit | None, Field(description=_UNIT_TEXT)] = None
+    scale: Annotated[FiniteFloat, AfterValidator(_nonzero)] | None = None
+    si_unit: Annotated[str | None, AfterValidator(lambda u: u and _si_unit(u))] = None
+
+    def __post_init__(self) -> None:
+        given = [k for k in _SELECTORS if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise ConfigValueError(
+                "", message="give exactly one of `name`, `regex`, `column`, got " + ", ".join(given)
+            )
+        if self.role == "t":
+            for key, si in (("unit", self.unit and UNITS[self.unit].si), ("si_unit", self.si_unit)):
+                if si is not None and si != "s":
+                    raise ConfigValueError(
+                        key, "a time unit (the time channel)", getattr(self, key)
+                    )
 
     @property
     def selector(self) -> str:
@@ -155,7 +223,7 @@ class ChannelSpec:
         return f"column {self.column}"
 
     @classmethod
-    def from_dict(cls, role: str, table: object) -> ChannelSpec:
+    def from_dict(cls, role: str, table: object, where: Where = "[ingest]") -> ChannelSpec:
         """Parse one channel table.
 
         Parameters
@@ -164,6 +232,9 @@ class ChannelSpec:
             The key of the table in the section (``"time"`` is stored as role ``"t"``).
         table : dict
             ``{name|regex|column = ..., unit = ..., scale = ..., si_unit = ...}``.
+        where : str or callable, optional
+            The workflow table holding the channel (or a function of its key giving it),
+            for the messages.
 
         Returns
         -------
@@ -173,67 +244,25 @@ class ChannelSpec:
         Raises
         ------
         WorkflowError
-            Unknown key, not exactly one selector, bad regex, unknown unit, zero scale.
+            Unknown key, not exactly one selector, bad regex, unknown unit, zero scale:
+            ``[ingest] q.unit: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "furlong"})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [ingest] q.unit: expected a known unit (...), got 'furlong'
         """
         key = "time" if role == "t" else role
-        if not isinstance(table, Mapping):
-            raise _fail(key, table, "expected a table {name|regex|column = ..., unit = ...}")
-        unknown = sorted(set(table) - set(_CHANNEL_KEYS))
-        if unknown:
-            raise _fail(
-                f"{key}.{unknown[0]}",
-                table[unknown[0]],
-                "unknown key in a channel table; known keys are "
-                + ", ".join(_CHANNEL_KEYS)
-                + (
-                    f" (if `{key}` is meant as an option, known options are "
-                    + ", ".join(OPTION_KEYS)
-                    + ")"
-                    if role not in ("t", "q")
-                    else ""
-                ),
+        label = _label(where, key)
+        if isinstance(table, Mapping) and not any(k in table for k in _SELECTORS):
+            raise WorkflowError(
+                f"{label} {key}: give exactly one of `name`, `regex`, `column`, got {dict(table)!r}"
             )
-        selectors = [k for k in ("name", "regex", "column") if k in table]
-        if len(selectors) != 1:
-            raise _fail(key, dict(table), "give exactly one of `name`, `regex`, `column`")
-        name = regex = column = None
-        if "name" in table:
-            name = table["name"]
-            if not isinstance(name, str) or not name:
-                raise _fail(f"{key}.name", name, "expected a non-empty string")
-        if "regex" in table:
-            regex = table["regex"]
-            if not isinstance(regex, str) or not regex:
-                raise _fail(f"{key}.regex", regex, "expected a non-empty regular expression")
-            try:
-                re.compile(regex)
-            except re.error as exc:
-                raise _fail(f"{key}.regex", regex, f"invalid regular expression ({exc})") from None
-        if "column" in table:
-            column = _integer(f"{key}.column", table["column"], minimum=0)
-        unit = None
-        if "unit" in table:
-            raw = table["unit"]
-            unit = canonical_unit(raw) if isinstance(raw, str) else raw
-            if not isinstance(unit, str) or unit not in UNITS:
-                raise _fail(f"{key}.unit", raw, "unknown unit; known units are " + ", ".join(UNITS))
-        scale = None
-        if "scale" in table:
-            scale = _number(f"{key}.scale", table["scale"])
-            if scale == 0.0:
-                raise _fail(f"{key}.scale", table["scale"], "expected a non-zero factor")
-        si_unit = None
-        if "si_unit" in table:
-            si_unit = table["si_unit"]
-            if not isinstance(si_unit, str) or si_unit not in SI_UNITS:
-                raise _fail(
-                    f"{key}.si_unit", si_unit, "expected one of " + ", ".join(sorted(SI_UNITS))
-                )
-        if role == "t":
-            for k, si in (("unit", unit and UNITS[unit].si), ("si_unit", si_unit)):
-                if si is not None and si != "s":
-                    raise _fail(f"time.{k}", table[k], "the time channel needs a time unit")
-        return cls(role, name, regex, column, unit, scale, si_unit)
+        return config_from_section(
+            cls, table, label, prefix=f"{key}.", internal=("role",), extra={"role": role}
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """Return the channel table this spec was parsed from (normalised).
@@ -251,31 +280,39 @@ class ChannelSpec:
         return out
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class ResampleSpec:
     """Resampling of every gap-free segment onto a uniform grid.
 
     Parameters
     ----------
     sample_time : float
-        Target sample time [s].
+        Target sample time [s], ``> 0``.
     method : {"polyphase", "linear"}
         ``"polyphase"``: :func:`scipy.signal.resample_poly` (anti-aliasing FIR, rational
         ratio up/down with down <= 100, uniformly sampled input); ``"linear"``: linear
         interpolation (:func:`numpy.interp`, no anti-aliasing; for jittery time bases).
+
+    Raises
+    ------
+    pydantic.ValidationError
+        On a value of the wrong type or out of range (a ``ValueError``; :meth:`from_dict`
+        raises a ``WorkflowError`` naming the key).
     """
 
-    sample_time: float
-    method: str = "polyphase"
+    sample_time: PositiveFloat
+    method: Literal["polyphase", "linear"] = "polyphase"
 
     @classmethod
-    def from_dict(cls, table: object) -> ResampleSpec:
+    def from_dict(cls, table: object, where: Where = "[ingest]") -> ResampleSpec:
         """Parse the ``resample`` table.
 
         Parameters
         ----------
         table : dict
             ``{sample_time = <s>, method = "polyphase" | "linear"}``.
+        where : str or callable, optional
+            The workflow table holding ``resample``, for the messages.
 
         Returns
         -------
@@ -285,21 +322,31 @@ class ResampleSpec:
         Raises
         ------
         WorkflowError
-            Not a table, unknown key, missing or non-positive ``sample_time``, bad method.
+            Not a table, unknown key, missing or non-positive ``sample_time``, bad method:
+            ``[ingest] resample.method: expected ..., got ...``.
         """
-        if not isinstance(table, Mapping):
-            raise _fail("resample", table, "expected a table {sample_time = ..., method = ...}")
-        unknown = sorted(set(table) - {"sample_time", "method"})
-        if unknown:
-            raise _fail(f"resample.{unknown[0]}", table[unknown[0]], "unknown key")
-        if "sample_time" not in table:
-            raise _fail("resample", dict(table), "missing `sample_time` [s]")
-        dt = _number("resample.sample_time", table["sample_time"], positive=True)
-        method = _choice("resample.method", table.get("method", "polyphase"), RESAMPLE_METHODS)
-        return cls(dt, method)
+        return config_from_section(cls, table, _label(where, "resample"), prefix="resample.")
 
 
-@dataclass(frozen=True)
+def _channel(key: str, table: object, where: Where, extra: bool) -> ChannelSpec:
+    """Parse a channel table; an extra channel that fails and resembles an option is a typo."""
+    try:
+        return ChannelSpec.from_dict(key, table, where)
+    except WorkflowError:
+        if extra and difflib.get_close_matches(key, OPTION_KEYS, n=1):
+            message = unknown_key_message(
+                _label(where, key), key, OPTION_KEYS, known_label="known options"
+            )
+            raise WorkflowError(message) from None
+        raise
+
+
+#: pydantic configuration of :class:`IngestSpec`: as :data:`~pipeline.config.CONFIG`, and
+#: ``sample_slice`` may be given by its workflow key ``slice`` or by its name.
+_INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=_INGEST_CONFIG)
 class IngestSpec:
     """Frozen configuration of :func:`pipeline.ingest.load_rig_log`.
 
@@ -332,20 +379,48 @@ class IngestSpec:
         Text files: ``"auto"``, ``"whitespace"`` or a single character.
     header : bool or None
         Text files: whether the first line holds the channel names; None = detect.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        On a value of the wrong type or out of range, or a text or Parquet format
+        without a time channel nor ``sample_time`` (a ``ValueError``; :meth:`from_dict`
+        raises a ``WorkflowError`` naming the key).
     """
 
     channels: tuple[ChannelSpec, ...]
-    format: str = "auto"
-    sample_time: float | None = None
+    format: Literal["auto", "mat", "csv", "parquet"] = "auto"
+    sample_time: PositiveFloat | None = None
     time: ChannelSpec | None = None
-    sample_slice: tuple[int, int] | None = None
-    time_window: tuple[float, float] | None = None
-    gap_tolerance: float = 1.5
-    gaps: str = "error"
-    min_segment: int = 100
+    sample_slice: Annotated[
+        Annotated[tuple[NonNegativeInt, NonNegativeInt], AsTuple, AfterValidator(_ordered)] | None,
+        Field(alias="slice", description="[start, stop] [samples] with 0 <= start < stop"),
+    ] = None
+    time_window: Annotated[
+        Annotated[tuple[float, float], AsTuple, AfterValidator(_ordered)] | None,
+        Field(description="[start, stop] [s] with start < stop"),
+    ] = None
+    gap_tolerance: Annotated[float, Field(gt=1)] = 1.5
+    gaps: Literal["error", "split"] = "error"
+    min_segment: Annotated[int, Field(ge=3)] = 100
     resample: ResampleSpec | None = None
-    delimiter: str = "auto"
-    header: bool | None = None
+    delimiter: Annotated[
+        str,
+        BeforeValidator(_delimiter),
+        AfterValidator(_check_delimiter),
+        Field(description=_DELIMITER_TEXT),
+    ] = "auto"
+    header: Annotated[
+        bool | None, BeforeValidator(_header), Field(description='"auto", true or false')
+    ] = None
+
+    def __post_init__(self) -> None:
+        if self.time is None and self.sample_time is None and self.format in ("csv", "parquet"):
+            raise ConfigValueError(
+                "format",
+                message=f"{self.format!r} needs a time channel (`time = {{ ... }}`) "
+                "or `sample_time` [s]",
+            )
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -358,7 +433,7 @@ class IngestSpec:
         return sum(1 for c in self.channels if _INPUT.fullmatch(c.role))
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, Any]) -> IngestSpec:
+    def from_dict(cls, section: Mapping[str, Any], where: Where = "[ingest]") -> IngestSpec:
         """Parse the ingest section of a workflow file.
 
         Parameters
@@ -367,6 +442,10 @@ class IngestSpec:
             The TOML-derived section; see the module docstring for the schema. Keys that
             are not options and hold a table are channels; ``q`` and ``v1`` are required,
             ``v2 ... vN`` must be contiguous, other names become extra columns.
+        where : str or callable, optional
+            The workflow table (or a function of the top-level key giving it, for a data
+            set's ingest merged from ``[ingest]`` and ``[datasets.<name>]``), for the
+            messages.
 
         Returns
         -------
@@ -376,9 +455,10 @@ class IngestSpec:
         Raises
         ------
         WorkflowError
-            Naming the bad key and value: unknown key, wrong type, value out of range,
-            missing ``q`` / ``v1``, a hole in ``v1 ... vN``, ``csv``/``parquet`` format
-            without time channel nor ``sample_time``.
+            Naming the bad key and value (``[ingest] key: expected ..., got ...``):
+            unknown key (with a suggestion), wrong type, value out of range, missing
+            ``q`` / ``v1``, a hole in ``v1 ... vN``, ``csv``/``parquet`` format without
+            time channel nor ``sample_time``.
 
         Examples
         --------
@@ -386,109 +466,57 @@ class IngestSpec:
         ...     "q": {"column": 1, "unit": "V"}, "v1": {"column": 0, "unit": "V"}})
         >>> spec.columns
         ('t', 'q', 'v1')
+        >>> IngestSpec.from_dict({"smaple_time": 1e-3})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
         """
         if not isinstance(section, Mapping):
-            raise WorkflowError(f"ingest section: expected a table, got {section!r}")
+            raise WorkflowError(f"{_label(where, '')} expected a table, got {section!r}")
         for key, value in section.items():
-            if not isinstance(key, str):
-                raise _fail(str(key), value, "keys must be strings")
             if key not in OPTION_KEYS and not isinstance(value, Mapping):
-                raise _fail(
-                    key,
-                    value,
-                    "unknown option; known options are "
-                    + ", ".join(OPTION_KEYS)
-                    + " (a channel is a table {name|regex|column = ..., unit = ...})",
+                raise WorkflowError(
+                    unknown_key_message(
+                        _label(where, key), str(key), OPTION_KEYS, known_label="known options"
+                    )
+                    + "; a channel is a table {name|regex|column = ..., unit = ...}"
                 )
         channel_keys = [k for k in section if k not in OPTION_KEYS]
         for key in channel_keys:
+            fail = f"{_label(where, key)} {key}:"
             if key == "t":
-                raise _fail(key, section[key], "map the time channel with `time = {...}`")
+                raise WorkflowError(f"{fail} map the time channel with `time = {{ ... }}`")
             if not _IDENTIFIER.fullmatch(key):
-                raise _fail(key, section[key], "a channel key must be an identifier")
+                raise WorkflowError(f"{fail} a channel key must be an identifier")
         inputs = sorted((int(m.group(1)), k) for k in channel_keys if (m := _INPUT.fullmatch(k)))
         for number, key in inputs:
             if key != f"v{number}" or number == 0:
-                raise _fail(key, section[key], "inputs are named v1, v2, ... (no v0, no zeros)")
+                raise WorkflowError(
+                    f"{_label(where, key)} {key}: inputs are named v1, v2, ... (no v0, no zeros)"
+                )
         for required in ("q", "v1"):
             if required not in section:
                 raise WorkflowError(
-                    f"ingest: missing required channel `{required}` "
+                    f"{_label(where, required)} {required}: missing required channel "
                     f'(e.g. {required} = {{ name = "...", unit = "..." }})'
                 )
         numbers = [n for n, _ in inputs]
         if numbers != list(range(1, len(numbers) + 1)):
             missing = min(set(range(1, max(numbers) + 1)) - set(numbers))
             raise WorkflowError(
-                f"ingest: inputs must be contiguous v1 ... vN; `v{missing}` is missing "
-                f"but `v{max(numbers)}` is given"
+                f"{_label(where, f'v{max(numbers)}')} v{max(numbers)}: inputs must be "
+                f"contiguous v1 ... vN; `v{missing}` is missing"
             )
         extras = sorted(k for k in channel_keys if k != "q" and not _INPUT.fullmatch(k))
         order = ["q", *(k for _, k in inputs), *extras]
-        channels = tuple(ChannelSpec.from_dict(k, section[k]) for k in order)
-
-        fmt = _choice("format", section.get("format", "auto"), FORMATS)
-        sample_time = None
-        if "sample_time" in section:
-            sample_time = _number("sample_time", section["sample_time"], positive=True)
-        time = ChannelSpec.from_dict("t", section["time"]) if "time" in section else None
-        if time is None and sample_time is None and fmt in ("csv", "parquet"):
-            raise WorkflowError(
-                f"ingest: format = {fmt!r} needs a time channel (`time = {{ ... }}`) "
-                "or `sample_time` [s]"
-            )
-        sample_slice = None
-        if "slice" in section:
-            a, b = _pair("slice", section["slice"])
-            start = _integer("slice", a, minimum=0)
-            stop = _integer("slice", b, minimum=0)
-            if stop <= start:
-                raise _fail("slice", section["slice"], "expected [start, stop] with start < stop")
-            sample_slice = (start, stop)
-        time_window = None
-        if "time_window" in section:
-            a, b = _pair("time_window", section["time_window"])
-            t0, t1 = _number("time_window", a), _number("time_window", b)
-            if t1 <= t0:
-                raise _fail("time_window", section["time_window"], "expected start < stop [s]")
-            time_window = (t0, t1)
-        gap_tolerance = _number("gap_tolerance", section.get("gap_tolerance", 1.5))
-        if gap_tolerance <= 1.0:
-            raise _fail("gap_tolerance", section["gap_tolerance"], "expected a number > 1")
-        gaps = _choice("gaps", section.get("gaps", "error"), GAP_POLICIES)
-        min_segment = _integer("min_segment", section.get("min_segment", 100), minimum=3)
-        resample = ResampleSpec.from_dict(section["resample"]) if "resample" in section else None
-        delimiter = section.get("delimiter", "auto")
-        if isinstance(delimiter, str):
-            delimiter = _DELIMITER_ALIASES.get(delimiter, delimiter)
-        if not isinstance(delimiter, str) or not (
-            delimiter in ("auto", "whitespace") or (len(delimiter) == 1 and not delimiter.isalnum())
-        ):
-            raise _fail(
-                "delimiter",
-                section.get("delimiter"),
-                'expected "auto", "whitespace", "tab" or a single non-alphanumeric character',
-            )
-        header_value = section.get("header", "auto")
-        if header_value == "auto" or header_value is None:
-            header = None
-        elif isinstance(header_value, bool):
-            header = header_value
-        else:
-            raise _fail("header", header_value, 'expected "auto", true or false')
-        return cls(
-            channels=channels,
-            format=fmt,
-            sample_time=sample_time,
-            time=time,
-            sample_slice=sample_slice,
-            time_window=time_window,
-            gap_tolerance=gap_tolerance,
-            gaps=gaps,
-            min_segment=min_segment,
-            resample=resample,
-            delimiter=delimiter,
-            header=header,
+        channels = tuple(_channel(k, section[k], where, k in extras) for k in order)
+        options = {k: section[k] for k in OPTION_KEYS if k in section}
+        if "time" in options:
+            options["time"] = ChannelSpec.from_dict("t", options["time"], where)
+        if "resample" in options:
+            options["resample"] = ResampleSpec.from_dict(options["resample"], where)
+        return config_from_section(
+            cls, options, where, internal=("channels",), extra={"channels": channels}
         )
 
     def to_dict(self) -> dict[str, Any]:

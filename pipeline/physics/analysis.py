@@ -13,11 +13,15 @@ Masoud & Maas 2025, Section 3, Fig. 3-7.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+import pydantic
+from pydantic import Field, PositiveFloat
 
+from pipeline.config import CONFIG, ConfigValueError, Interval, config_from_section
 from pipeline.physics.dynamics import ModeAnalysis, mode_analysis
 from pipeline.physics.params import PrototypeParams
 from pipeline.physics.prestrain import PrestrainSweep, prestrain_sweep
@@ -33,7 +37,7 @@ from pipeline.physics.statics import FORCE_STATES, ForceCurve, equilibria, force
 __all__ = ["Analysis", "AnalyzeConfig", "analysis_figures", "analysis_tree", "run_analysis"]
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class AnalyzeConfig:
     """Settings of the design analysis (the workflow's ``[analyze]`` section).
 
@@ -44,53 +48,74 @@ class AnalyzeConfig:
         (``None``). The paper plots [20, 30] mm; the default extends it so that both
         bifurcation points (``z_b,min``, ``z_b,max``) fall inside.
     n_b : int
-        Screw positions in the sweep.
+        Screw positions in the sweep, ``>= 2``.
     q_max : float
         Half width of the force-displacement and capacitance curves (Fig. 4, 5) [m].
     n_q : int
-        Points of those curves.
+        Points of those curves, ``>= 2``.
     t_end : float
         Duration of the full vs reduced simulation (Fig. 7) [s].
     left, right : tuple of float
         On/off times of the 3 kV steps on DE 1 and DE 2 in that simulation [s].
     degree : int
-        Polynomial degree of ``q_m(q)`` of the reduced model (Eq. 24).
+        Polynomial degree of ``q_m(q)`` of the reduced model (Eq. 24), ``>= 2``.
 
     Raises
     ------
-    ValueError
-        On a range that is empty or not increasing, or a non-positive count or duration.
+    pydantic.ValidationError
+        On a range that is empty or not increasing, a non-positive count or duration, a
+        step after ``t_end`` or a value of the wrong type (a ``ValueError``;
+        :meth:`from_dict` raises a ``WorkflowError`` naming the key).
 
     References
     ----------
     Masoud & Maas 2025, Fig. 3-7.
     """
 
-    b_range: tuple[float, float] | None = None
-    n_b: int = 101
-    q_max: float = 15e-3
-    n_q: int = 121
-    t_end: float = 5.0
-    left: tuple[float, float] = (0.5, 1.5)
-    right: tuple[float, float] = (2.5, 3.5)
-    degree: int = 30
+    b_range: Interval | None = None
+    n_b: Annotated[int, Field(ge=2)] = 101
+    q_max: PositiveFloat = 15e-3
+    n_q: Annotated[int, Field(ge=2)] = 121
+    t_end: PositiveFloat = 5.0
+    left: Interval = (0.5, 1.5)
+    right: Interval = (2.5, 3.5)
+    degree: Annotated[int, Field(ge=2)] = 30
 
     def __post_init__(self) -> None:
-        for name in ("b_range", "left", "right"):
-            value = getattr(self, name)
-            if value is None:
-                continue
-            if len(value) != 2 or not float(value[0]) < float(value[1]):
-                raise ValueError(f"`{name}` must be [start, end] with start < end, got {value!r}")
-            object.__setattr__(self, name, (float(value[0]), float(value[1])))
-        for name in ("n_b", "n_q", "degree"):
-            if int(getattr(self, name)) < 2:
-                raise ValueError(f"`{name}` must be an integer >= 2, got {getattr(self, name)!r}")
-        for name in ("q_max", "t_end"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"`{name}` must be positive, got {getattr(self, name)!r}")
         if self.right[1] > self.t_end:
-            raise ValueError(f"`right` ends after `t_end` = {self.t_end} s")
+            raise ConfigValueError(
+                "right", f"steps that end by t_end = {self.t_end} [s]", list(self.right)
+            )
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any], where: str = "[analyze]") -> AnalyzeConfig:
+        """Build from the workflow's ``[analyze]`` section.
+
+        Parameters
+        ----------
+        section : mapping
+            The table; missing keys take the defaults.
+        where : str, optional
+            The workflow table, for the messages.
+
+        Returns
+        -------
+        AnalyzeConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key (with a suggestion) or an invalid value:
+            ``[analyze] key: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> AnalyzeConfig.from_dict({"n_b": 1})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [analyze] n_b: expected an integer >= 2, got 1
+        """
+        return config_from_section(cls, section, where)
 
 
 @dataclass(frozen=True)

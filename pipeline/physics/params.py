@@ -1,17 +1,17 @@
 """Parameters of the bistable DE prototype (Table 1 and the geometry of Fig. 1) in SI units.
 
-Interpretation of the printed values (see ``/work/shared/paper/NOTES.md``):
+Interpretation of the printed values (see ``docs/interpretation.md``):
 
-* **E** is in GPa, not MPa (NOTES item 2). The bending energy carries the textbook factor 1/2
-  (NOTES item 3) and E = 2.1 GPa, the top of the PETG range quoted in the text; this is
-  equivalent to the printed Eq. 9 without the 1/2 and E = 1.05 GPa. With Table 1's 1.62 GPa
+* **E** is in GPa, not MPa (docs/interpretation.md item 2). The bending energy carries the
+  textbook factor 1/2 (item 3) and E = 2.1 GPa, the top of the PETG range quoted in the text;
+  this is equivalent to the printed Eq. 9 without the 1/2 and E = 1.05 GPa. With Table 1's 1.62 GPa
   (and the 1/2) b = 23 mm is not switchable: E is the calibration knob together with b.
-* **beta** = 1 and **V_DE** = n d_0 A_0 = 530.4 mm^3; neither is listed in Table 1 (NOTES item 4).
+* **beta** = 1 and **V_DE** = n d_0 A_0 = 530.4 mm^3; neither is listed in Table 1 (item 4).
 * **Damping**: Table 1 values Y_MW = 0.31 MPa, eta_MW = 83.5 kPa s, eta_v = 0.3 kPa s and
   eta = 3.64 MPa s (the text of Section 3.3 quotes eta_MW = 0.19 kPa s and Y_MW = 0.11 MPa
   as the initial values of the optimisation; Table 1 holds the optimised ones).
 * **rho** = 1.2 g/cm^3 from Table 1 (the text quotes 1.27 g/cm^3 for raw PETG).
-* The geometry follows NOTES item 1 (corrected Eq. 5); see :mod:`pipeline.physics.kinematics`.
+* The geometry follows item 1 (corrected Eq. 5); see :mod:`pipeline.physics.kinematics`.
 
 References
 ----------
@@ -22,25 +22,20 @@ element based on dielectric elastomer. Front. Robot. AI 12. Table 1, Eq. 9, Eq. 
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 
-from pipeline.config import config_from_section
-from pipeline.errors import WorkflowError
+import pydantic
+from pydantic import FiniteFloat, NonNegativeFloat, PositiveFloat
+
+from pipeline.config import CONFIG, config_from_section
 
 __all__ = ["V_MAX", "PrototypeParams"]
 
 V_MAX = 3.0e3
 """Maximum DE voltage of the prototype [V] (60 V/um on 50 um films, Section 2)."""
 
-# Parameters that may be zero (everything else must be strictly positive).
-_NON_NEGATIVE = frozenset({"eta", "eta_v", "eta_MW", "Y_MW", "g", "e_x", "e_z", "a_0", "m"})
-# Parameters of either sign (offsets from a nominal position).
-_SIGNED = frozenset({"dz_1", "dz_2"})
 
-
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class PrototypeParams:
     """Geometry and material parameters of the bistable DE actuator, SI units.
 
@@ -67,9 +62,10 @@ class PrototypeParams:
     eta_v : float
         Kelvin-Voigt viscosity of the DE (Eq. 12) [Pa s].
     beta : float
-        Electrode area / DE area (Eq. 11) [-]; 1 by default (NOTES item 4).
+        Electrode area / DE area (Eq. 11) [-]; 1 by default (docs/interpretation.md item 4).
     V_DE : float or None
-        Volume of one DE actuator [m^3]; ``None`` means ``n * d_0 * A_0`` (NOTES item 4).
+        Volume of one DE actuator [m^3]; ``None`` means ``n * d_0 * A_0``
+        (docs/interpretation.md item 4).
     l : float
         Beam length [m].
     A : float
@@ -78,7 +74,7 @@ class PrototypeParams:
         Second moment of area of the beam cross-section [m^4].
     E : float
         Young's modulus of the beam [Pa]; 2.1 GPa with the 1/2 on the bending term
-        (NOTES items 2 and 3).
+        (docs/interpretation.md items 2 and 3).
     rho : float
         Density of the beam [kg/m^3].
     eta : float
@@ -115,13 +111,15 @@ class PrototypeParams:
 
     Raises
     ------
-    WorkflowError
-        If a value is not a finite number or is negative (zero where it must be positive);
-        ``dz_1`` and ``dz_2`` may have either sign.
+    pydantic.ValidationError
+        If a value is not a finite number or is negative (zero where it must be positive;
+        ``eta``, ``eta_v``, ``eta_MW``, ``Y_MW``, ``g``, ``e_x``, ``e_z``, ``a_0`` and
+        ``m`` may be zero); ``dz_1`` and ``dz_2`` may have either sign. A ``ValueError``;
+        :meth:`from_dict` and :meth:`replace` raise a ``WorkflowError`` naming the key.
 
     References
     ----------
-    Masoud & Maas 2025, Table 1, Eq. 4, 5, 9, 11, 12; NOTES items 1-4.
+    Masoud & Maas 2025, Table 1, Eq. 4, 5, 9, 11, 12; docs/interpretation.md items 1-4.
 
     Examples
     --------
@@ -132,58 +130,42 @@ class PrototypeParams:
     5.26
     """
 
-    epsilon_0: float = 8.854e-12
-    epsilon_r: float = 2.8
-    n: float = 8.0
-    d_0: float = 50e-6
-    l_0: float = 51e-3
-    A_0: float = 1326e-6
-    Y: float = 1.2e6
-    Y_MW: float = 0.31e6
-    eta_MW: float = 83.5e3
-    eta_v: float = 0.3e3
-    beta: float = 1.0
-    V_DE: float | None = None
-    l: float = 90e-3  # noqa: E741
-    A: float = 11e-6
-    I: float = 1.1e-12  # noqa: E741
-    E: float = 2.1e9
-    rho: float = 1.2e3
-    eta: float = 3.64e6
-    a: float = 32e-3
-    b: float = 23e-3
-    b_max: float = 30e-3
-    e_x: float = 7e-3
-    e_z: float = 16e-3
-    a_0: float = 11e-3
-    m: float = 40e-3
-    g: float = 9.81
-    dz_1: float = 0.0
-    dz_2: float = 0.0
+    epsilon_0: PositiveFloat = 8.854e-12
+    epsilon_r: PositiveFloat = 2.8
+    n: PositiveFloat = 8.0
+    d_0: PositiveFloat = 50e-6
+    l_0: PositiveFloat = 51e-3
+    A_0: PositiveFloat = 1326e-6
+    Y: PositiveFloat = 1.2e6
+    Y_MW: NonNegativeFloat = 0.31e6
+    eta_MW: NonNegativeFloat = 83.5e3
+    eta_v: NonNegativeFloat = 0.3e3
+    beta: PositiveFloat = 1.0
+    V_DE: PositiveFloat | None = None
+    l: PositiveFloat = 90e-3  # noqa: E741
+    A: PositiveFloat = 11e-6
+    I: PositiveFloat = 1.1e-12  # noqa: E741
+    E: PositiveFloat = 2.1e9
+    rho: PositiveFloat = 1.2e3
+    eta: NonNegativeFloat = 3.64e6
+    a: PositiveFloat = 32e-3
+    b: PositiveFloat = 23e-3
+    b_max: PositiveFloat = 30e-3
+    e_x: NonNegativeFloat = 7e-3
+    e_z: NonNegativeFloat = 16e-3
+    a_0: NonNegativeFloat = 11e-3
+    m: NonNegativeFloat = 40e-3
+    g: NonNegativeFloat = 9.81
+    dz_1: FiniteFloat = 0.0
+    dz_2: FiniteFloat = 0.0
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise WorkflowError(f"physics parameter `{f.name}` must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise WorkflowError(f"physics parameter `{f.name}` must be finite, got {value!r}")
-            if f.name in _SIGNED:
-                pass
-            elif value < 0 or (value == 0 and f.name not in _NON_NEGATIVE):
-                raise WorkflowError(
-                    f"physics parameter `{f.name}` must be "
-                    f"{'non-negative' if f.name in _NON_NEGATIVE else 'positive'}, got {value!r}"
-                )
-            object.__setattr__(self, f.name, float(value))
         if self.V_DE is None:
             object.__setattr__(self, "V_DE", self.n * self.d_0 * self.A_0)
 
     @classmethod
     def paper(cls) -> PrototypeParams:
-        """Return the prototype of the paper, with the interpretations of NOTES items 1-4.
+        """Return the prototype of the paper, read as docs/interpretation.md items 1-4.
 
         Returns
         -------
@@ -193,12 +175,14 @@ class PrototypeParams:
 
         References
         ----------
-        Masoud & Maas 2025, Table 1; NOTES items 2-4.
+        Masoud & Maas 2025, Table 1; docs/interpretation.md items 2-4.
         """
         return cls()
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, object]) -> PrototypeParams:
+    def from_dict(
+        cls, section: Mapping[str, object], where: str | Callable[[str], str] = "[physics]"
+    ) -> PrototypeParams:
         """Build parameters from a workflow section (e.g. the ``[physics]`` table of a TOML file).
 
         Keys are the field names of this class, values are in SI units. Keys that are not
@@ -208,6 +192,8 @@ class PrototypeParams:
         ----------
         section : Mapping[str, object]
             Parameter name -> value [SI].
+        where : str or callable, optional
+            The workflow table (or a function of the key giving it), for the messages.
 
         Returns
         -------
@@ -217,7 +203,8 @@ class PrototypeParams:
         Raises
         ------
         WorkflowError
-            If a key is not a parameter name, or a value is not a finite (positive) number.
+            If a key is not a parameter name (with a suggestion), or a value is not a
+            finite (positive) number: ``[physics] key: expected ..., got ...``.
 
         References
         ----------
@@ -227,8 +214,12 @@ class PrototypeParams:
         --------
         >>> PrototypeParams.from_dict({"b": 0.024}).b
         0.024
+        >>> PrototypeParams.from_dict({"b": -0.024})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [physics] b: expected a number > 0, got -0.024
         """
-        return config_from_section(cls, section, "[physics]")
+        return config_from_section(cls, section, where)
 
     def to_dict(self) -> dict[str, float]:
         """Return the parameters as a flat dict [SI], the inverse of :meth:`from_dict`.

@@ -34,15 +34,23 @@ Masoud & Maas 2025, Sec. 5.1 (rig), Fig. 11a (identification profile).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import field
+from typing import Annotated, Any, Literal
 
 import numpy as np
+import pydantic
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    NonNegativeFloat,
+    NonNegativeInt,
+    PositiveFloat,
+)
 
-from pipeline.config import config_from_section
+from pipeline.config import CONFIG, ConfigValueError, config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
-from pipeline.rig.dspace import MAT_VERSIONS, Channel, recording
+from pipeline.rig.dspace import Channel, recording
 from pipeline.rig.params import RigParams
 from pipeline.rig.plant import RigRun, simulate_rig
 from pipeline.rig.profiles import PROFILES, make_profile
@@ -69,7 +77,20 @@ RASTER = "Periodic Task 1"
 CREATED = "Sat Jan 01 00:00:00 2000"
 
 
-@dataclass(frozen=True)
+def _format_str(value: object) -> object:
+    """Let ``format = 5`` or ``7.3`` (TOML numbers) mean the MAT versions "5" and "7.3"."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return str(value)
+    return value
+
+
+def _side(value: int) -> int:
+    if value not in (-1, 1):
+        raise ConfigValueError(None, "-1 (left well) or 1 (right well)")
+    return value
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class ExperimentConfig:
     """One experiment of the virtual rig (a ``[rig.experiments.<name>]`` table).
 
@@ -78,9 +99,9 @@ class ExperimentConfig:
     profile : str
         Excitation profile, a key of :data:`pipeline.rig.profiles.PROFILES`.
     seed : int
-        Seed of the sensor and monitor noise.
+        Seed of the sensor and monitor noise, ``>= 0``.
     profile_seed : int or None
-        Seed of the profile's random parts; default the profile's own.
+        Seed of the profile's random parts, ``>= 0``; default the profile's own.
     duration : float
         Length [s] (paper: 37.5 s).
     hold : float
@@ -94,28 +115,51 @@ class ExperimentConfig:
 
     Raises
     ------
-    ValueError
-        On an invalid format or side.
+    pydantic.ValidationError
+        On an unknown profile, an invalid format or side, or a value of the wrong type
+        (a ``ValueError``; :meth:`RigConfig.from_dict` raises a ``WorkflowError``).
     """
 
     profile: str = "identification"
-    seed: int = 0
-    profile_seed: int | None = None
-    duration: float = 37.5
-    hold: float = 1e-3
-    v_sub: float | None = None
-    format: str = "7.3"
-    side: int = -1
+    seed: NonNegativeInt = 0
+    profile_seed: NonNegativeInt | None = None
+    duration: PositiveFloat = 37.5
+    hold: PositiveFloat = 1e-3
+    v_sub: NonNegativeFloat | None = None
+    format: Annotated[Literal["5", "7.3"], BeforeValidator(_format_str)] = "7.3"
+    side: Annotated[int, AfterValidator(_side)] = -1
 
     def __post_init__(self) -> None:
-        if str(self.format) not in MAT_VERSIONS:
-            raise ValueError(f"`format` must be one of {MAT_VERSIONS}, got {self.format!r}")
-        object.__setattr__(self, "format", str(self.format))
-        if self.side not in (-1, 1):
-            raise ValueError(f"`side` must be -1 (left well) or 1 (right well), got {self.side!r}")
+        if self.profile not in PROFILES:
+            raise ConfigValueError("profile", "one of " + ", ".join(PROFILES), self.profile)
+
+    def profile_kwargs(self) -> dict[str, Any]:
+        """Return the keyword arguments of :func:`pipeline.rig.profiles.make_profile`.
+
+        Returns
+        -------
+        dict
+            ``duration`` and ``hold`` [s], and ``seed`` and ``v_sub`` [V] when given.
+        """
+        kwargs: dict[str, Any] = {"duration": self.duration, "hold": self.hold}
+        if self.profile_seed is not None:
+            kwargs["seed"] = self.profile_seed
+        if self.v_sub is not None:
+            kwargs["v_sub"] = self.v_sub
+        return kwargs
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
+class _RigSection:
+    """The keys of the ``[rig]`` table (its sub-tables are checked by their own classes)."""
+
+    sample_time: PositiveFloat = 0.01
+    prototype: dict[str, Any] = field(default_factory=dict)
+    plant: dict[str, Any] = field(default_factory=dict)
+    experiments: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class RigConfig:
     """The ``[rig]`` section: the simulated prototype, the rig and its experiments.
 
@@ -134,7 +178,7 @@ class RigConfig:
     """
 
     rig: RigParams
-    sample_time: float = 0.01
+    sample_time: PositiveFloat = 0.01
     experiments: dict[str, ExperimentConfig] = field(default_factory=dict)
 
     @classmethod
@@ -155,36 +199,34 @@ class RigConfig:
         Raises
         ------
         WorkflowError
-            On an unknown key or invalid value (named), or no experiments.
+            On an unknown key (with a suggestion) or an invalid value, naming its table
+            (``[rig]``, ``[rig.prototype]``, ``[rig.plant]``, ``[rig.experiments.<name>]``),
+            or no experiments.
+
+        Examples
+        --------
+        >>> RigConfig.from_dict({"experiments": {"a": {"seed": "1"}}}, {})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
         """
-        known = {"sample_time", "prototype", "plant", "experiments"}
-        unknown = sorted(set(section) - known)
-        if unknown:
-            raise WorkflowError(f"[rig]: unknown key '{unknown[0]}'; known keys: {sorted(known)}")
-        prototype = PrototypeParams.from_dict({**physics, **section.get("prototype", {})})
-        plant = dict(section.get("plant", {}))
-        if "prototype" in plant:
-            raise WorkflowError("[rig.plant]: the prototype goes in [rig.prototype]")
-        try:
-            rig = RigParams.from_dict({**plant, "prototype": prototype})
-        except WorkflowError as exc:
-            raise WorkflowError(str(exc).replace("[rig]", "[rig.plant]", 1)) from None
+        head = config_from_section(_RigSection, section, "[rig]")
+        PrototypeParams.from_dict(physics)
+        prototype = PrototypeParams.from_dict({**physics, **head.prototype}, "[rig.prototype]")
+        if "prototype" in head.plant:
+            raise WorkflowError(
+                "[rig.plant] prototype: the prototype goes in [rig.prototype], not [rig.plant]"
+            )
+        rig = RigParams.from_dict({**head.plant, "prototype": prototype}, "[rig.plant]")
         experiments = {
             name: config_from_section(ExperimentConfig, table, f"[rig.experiments.{name}]")
-            for name, table in section.get("experiments", {}).items()
+            for name, table in head.experiments.items()
         }
-        for name, exp in experiments.items():
-            if exp.profile not in PROFILES:
-                raise WorkflowError(
-                    f"[rig.experiments.{name}] profile {exp.profile!r} is unknown; known: "
-                    f"{', '.join(PROFILES)}"
-                )
         if not experiments:
-            raise WorkflowError("[rig]: no [rig.experiments.<name>] table")
-        sample_time = section.get("sample_time", 0.01)
-        if not isinstance(sample_time, int | float) or not sample_time > 0:
-            raise WorkflowError(f"[rig] sample_time must be > 0 [s], got {sample_time!r}")
-        return cls(rig, float(sample_time), experiments)
+            raise WorkflowError(
+                "[rig] experiments: expected at least one [rig.experiments.<name>] table"
+            )
+        return cls(rig, head.sample_time, experiments)
 
 
 def run_experiment(cfg: RigConfig, name: str) -> RigRun:

@@ -8,12 +8,14 @@ Masoud & Maas 2025, Table 1, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005 (GMS f
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
+from typing import Annotated
 
-from pipeline.config import config_from_section
-from pipeline.errors import WorkflowError
+import pydantic
+from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
+
+from pipeline.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 from pipeline.physics.params import PrototypeParams
 
 __all__ = ["RigParams"]
@@ -23,14 +25,15 @@ def _default_prototype() -> PrototypeParams:
     return PrototypeParams.paper().replace(dz_1=0.15e-3, dz_2=0.05e-3)
 
 
-@dataclass(frozen=True)
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class RigParams:
     """The simulated prototype and the rig around it, SI units.
 
     Parameters
     ----------
     prototype : PrototypeParams
-        The physics of the prototype (Table 1 with NOTES items 1-6) including its asymmetry;
+        The physics of the prototype (Table 1 read as docs/interpretation.md items 1-6) with its
+        asymmetry;
         default the paper's prototype at b = 23 mm with ``dz_1 = 0.15 mm``,
         ``dz_2 = 0.05 mm`` (assembly tolerance of a 3D-printed frame; wells at -9.50 and
         +10.99 mm, still switchable by 3 kV on either DE).
@@ -71,9 +74,10 @@ class RigParams:
 
     Raises
     ------
-    WorkflowError
+    pydantic.ValidationError
         If a value is of the wrong type, not finite or out of range, or the friction tuples
-        differ in length.
+        differ in length (a ``ValueError``; :meth:`from_dict` and :meth:`replace` raise a
+        ``WorkflowError`` naming the key).
 
     References
     ----------
@@ -89,46 +93,25 @@ class RigParams:
     """
 
     prototype: PrototypeParams = field(default_factory=_default_prototype)
-    friction_k: tuple[float, ...] = (40.0, 12.0, 4.0)
-    friction_F: tuple[float, ...] = (0.4e-3, 0.6e-3, 1.0e-3)
-    friction_c: float = 0.0
-    friction_exponent: float = 4.0
-    driver_tau: float = 5e-3
-    driver_slew: float = 100e3
-    sensor_range: float = 25e-3
-    sensor_resolution: float = 0.3e-6
-    sensor_noise: float = 1e-6
-    monitor_noise: float = 2.0
-    oversample: int = 10
+    friction_k: Annotated[tuple[PositiveFloat, ...], AsTuple] = (40.0, 12.0, 4.0)
+    friction_F: Annotated[tuple[PositiveFloat, ...], AsTuple] = (0.4e-3, 0.6e-3, 1.0e-3)
+    friction_c: NonNegativeFloat = 0.0
+    friction_exponent: Annotated[float, Field(ge=1)] = 4.0
+    driver_tau: PositiveFloat = 5e-3
+    driver_slew: PositiveFloat = 100e3
+    sensor_range: PositiveFloat = 25e-3
+    sensor_resolution: NonNegativeFloat = 0.3e-6
+    sensor_noise: NonNegativeFloat = 1e-6
+    monitor_noise: NonNegativeFloat = 2.0
+    oversample: PositiveInt = 10
 
     def __post_init__(self) -> None:
-        if not isinstance(self.prototype, PrototypeParams):
-            raise WorkflowError(
-                f"rig parameter `prototype` must be a PrototypeParams, got {self.prototype!r}"
-            )
-        for name in ("friction_k", "friction_F"):
-            value = getattr(self, name)
-            if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
-                raise WorkflowError(f"rig parameter `{name}` must be a sequence, got {value!r}")
-            items = tuple(_number(f"{name}[{i}]", v, positive=True) for i, v in enumerate(value))
-            object.__setattr__(self, name, items)
         if len(self.friction_k) != len(self.friction_F):
-            raise WorkflowError(
-                f"rig parameters `friction_k` and `friction_F` must have equal lengths, got "
-                f"{len(self.friction_k)} and {len(self.friction_F)}"
+            raise ConfigValueError(
+                "friction_F",
+                f"as many values as friction_k ({len(self.friction_k)})",
+                list(self.friction_F),
             )
-        for name in ("driver_tau", "driver_slew", "sensor_range"):
-            object.__setattr__(self, name, _number(name, getattr(self, name), positive=True))
-        for name in ("friction_c", "sensor_resolution", "sensor_noise", "monitor_noise"):
-            object.__setattr__(self, name, _number(name, getattr(self, name), positive=False))
-        p = _number("friction_exponent", self.friction_exponent, positive=True)
-        if p < 1.0:
-            raise WorkflowError(f"rig parameter `friction_exponent` must be >= 1, got {p!r}")
-        object.__setattr__(self, "friction_exponent", p)
-        n = self.oversample
-        if isinstance(n, bool) or not isinstance(n, int | float) or n != int(n) or n < 1:
-            raise WorkflowError(f"rig parameter `oversample` must be an integer >= 1, got {n!r}")
-        object.__setattr__(self, "oversample", int(n))
 
     @property
     def n_friction(self) -> int:
@@ -141,15 +124,18 @@ class RigParams:
         return float(sum(self.friction_F))
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, object]) -> RigParams:
-        """Build rig parameters from a workflow section (e.g. a ``[rig]`` table).
+    def from_dict(cls, section: Mapping[str, object], where: str = "[rig.plant]") -> RigParams:
+        """Build rig parameters from a workflow section (e.g. the ``[rig.plant]`` table).
 
         Parameters
         ----------
         section : Mapping[str, object]
             Field name -> value [SI]; ``prototype`` is a nested table of
             :class:`PrototypeParams` keys (missing keys keep the paper's values, a missing
-            table the default asymmetric prototype); friction tuples may be lists.
+            table the default asymmetric prototype) or a :class:`PrototypeParams`;
+            friction tuples may be lists.
+        where : str, optional
+            The workflow table, for the messages.
 
         Returns
         -------
@@ -159,13 +145,20 @@ class RigParams:
         Raises
         ------
         WorkflowError
-            If a key is unknown (named) or a value invalid.
+            If a key is unknown (with a suggestion) or a value invalid:
+            ``[rig.plant] key: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> RigParams.from_dict({"oversample": 2.5})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
         """
-        kwargs = dict(section) if isinstance(section, Mapping) else section
-        proto = kwargs.get("prototype") if isinstance(kwargs, Mapping) else None
-        if proto is not None and not isinstance(proto, PrototypeParams):
-            kwargs["prototype"] = PrototypeParams.from_dict(proto)  # type: ignore[arg-type]
-        return config_from_section(cls, kwargs, "[rig]")  # type: ignore[arg-type]
+        if isinstance(section, Mapping) and isinstance(section.get("prototype"), Mapping):
+            proto = PrototypeParams.from_dict(section["prototype"], f"{where[:-1]}.prototype]")
+            section = {**section, "prototype": proto}
+        return config_from_section(cls, section, where)
 
     def to_dict(self) -> dict[str, object]:
         """Return the parameters as nested plain data [SI], the inverse of :meth:`from_dict`.
@@ -203,19 +196,5 @@ class RigParams:
         WorkflowError
             If a name is unknown or a value invalid.
         """
-        unknown = [k for k in changes if k not in {f.name for f in dataclasses.fields(self)}]
-        if unknown:
-            raise WorkflowError(f"[rig]: unknown key '{unknown[0]}'")
-        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
-
-
-def _number(name: str, value: object, *, positive: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise WorkflowError(f"rig parameter `{name}` must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise WorkflowError(f"rig parameter `{name}` must be finite, got {value!r}")
-    if value < 0 or (positive and value == 0):
-        kind = "positive" if positive else "non-negative"
-        raise WorkflowError(f"rig parameter `{name}` must be {kind}, got {value!r}")
-    return value
+        current = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return RigParams.from_dict({**current, **changes})
