@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.signal import resample_poly
 
+from pipeline import preflight
 from pipeline.errors import WorkflowError
 
 INTERPOLATIONS = ("bandlimited", "linear")
@@ -103,6 +103,8 @@ def upsample_inputs(v: np.ndarray, factor: int, method: str) -> np.ndarray:
         grid = np.arange(m) / factor
         return np.stack([np.interp(grid, np.arange(n), col) for col in v.T], axis=1)
     if method == "bandlimited":
+        from scipy.signal import resample_poly
+
         # Odd reflection about both end points keeps value and slope continuous, so the
         # FIR filter sees no step at the record's ends; the extension is cut off again.
         pad = min(_EDGE_PAD, n - 1)
@@ -174,6 +176,84 @@ def prepare_inputs(inputs: Sequence[np.ndarray], substeps: int, interpolation: s
     return FineInputs(values, lengths, int(substeps))
 
 
+def substeps_needed(model: FreeRunModel, dt: float, substeps: int) -> int:
+    """RK4 steps per sample interval a free run uses.
+
+    Parameters
+    ----------
+    model : FreeRunModel
+        The model (its ``max_step`` may ask for more steps).
+    dt : float
+        Sample time [s], positive.
+    substeps : int
+        Requested steps per sample interval, >= 1.
+
+    Returns
+    -------
+    int
+        ``max(substeps, ceil(dt / model.max_step()))``.
+
+    References
+    ----------
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (step size and stability).
+    """
+    return max(int(substeps), int(np.ceil(dt / model.max_step())))
+
+
+def check_free_run(
+    model: FreeRunModel,
+    lengths: Sequence[int],
+    n_inputs: int,
+    dt: float,
+    substeps: int,
+    setting: str,
+) -> int:
+    """Refuse a free run whose fine input grid and trajectories exceed the memory budget.
+
+    Parameters
+    ----------
+    model : FreeRunModel
+        The model.
+    lengths : sequence of int
+        Samples of each record of the batch.
+    n_inputs : int
+        Inputs per record.
+    dt : float
+        Sample time [s].
+    substeps : int
+        Requested RK4 steps per sample interval.
+    setting : str
+        The workflow key to name, e.g. ``"[validate] substeps = 2"``.
+
+    Returns
+    -------
+    int
+        The sub-steps the free run will use (:func:`substeps_needed`).
+
+    Raises
+    ------
+    ResourceError
+        If :func:`pipeline.preflight.free_run_bytes` exceeds the budget, before any
+        array is built.
+
+    References
+    ----------
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (classical RK4).
+    """
+    ns = substeps_needed(model, dt, substeps)
+    if ns > substeps:
+        setting += f" (the model's time constant needs {ns})"
+    n = max(lengths) if len(lengths) else 0
+    preflight.check_memory(
+        preflight.free_run_bytes(lengths, n_inputs, model.n_states, ns),
+        setting,
+        f"the free run of {len(lengths)} record(s) of up to {n} samples with {ns} RK4 "
+        "sub-steps per sample",
+        "fine input grid and trajectories",
+    )
+    return ns
+
+
 def simulate(
     model: FreeRunModel,
     inputs: Sequence[np.ndarray] | FineInputs,
@@ -216,6 +296,9 @@ def simulate(
     ------
     WorkflowError
         If ``dt`` or ``substeps`` is not positive, or the batch is empty.
+    ResourceError
+        If the fine input grid and trajectories would exceed the memory budget
+        (:func:`check_free_run`, naming ``substeps``).
 
     References
     ----------
@@ -223,14 +306,20 @@ def simulate(
     """
     if not dt > 0 or substeps < 1:
         raise WorkflowError(f"need dt > 0 and substeps >= 1, got dt={dt!r}, substeps={substeps!r}")
-    ns = max(int(substeps), int(np.ceil(dt / model.max_step())))
     if isinstance(inputs, FineInputs):
+        ns = substeps_needed(model, dt, substeps)
         if inputs.substeps < ns:
             raise WorkflowError(
                 f"prepared inputs have {inputs.substeps} sub-steps, the model needs {ns}"
             )
         prepared = inputs
     else:
+        if not len(inputs):
+            raise WorkflowError("nothing to simulate: no input records")
+        lengths = [np.shape(v)[0] for v in inputs]
+        ns = check_free_run(
+            model, lengths, np.shape(inputs[0])[1], dt, substeps, f"substeps = {substeps}"
+        )
         prepared = prepare_inputs(inputs, ns, interpolation)
     with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected and reported below
         return _integrate(model, prepared, dt, q0, q_dot0, q_limit)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import copy
 import importlib.util
+import re
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -11,10 +13,10 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from pipeline.errors import RigLogError
+from pipeline.errors import ResourceError, RigLogError
 from pipeline.ingest import IngestSpec, load_rig_log, read_raw
 from pipeline.ingest.channels import map_channels
-from pipeline.ingest.mat import interpret_mat
+from pipeline.ingest.mat import interpret_mat, read_mat
 from pipeline.ingest.mat73 import load_mat73
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -382,3 +384,139 @@ def test_raw_listing_of_a_recording(fixtures):
     assert raw.names[:3] == [LASER, DE1, DE2]
     assert [r.name for r in raw.rasters] == ["Periodic Task 1", "Periodic Task 2"]
     assert raw.channels[0].unit == "mm"
+
+
+# ------------------------------------------------------------- forged and oversized files
+def _v73(path: Path, build) -> Path:
+    """Write an HDF5 file with MATLAB's 512-byte user block and header; ``build(file)``."""
+    import h5py
+
+    with h5py.File(path, "w", userblock_size=512) as f:
+        build(f)
+    with open(path, "r+b") as fh:
+        fh.write(gen._header())
+    return path
+
+
+def _matlab(obj, cls: str):
+    obj.attrs["MATLAB_class"] = np.bytes_(cls)
+    return obj
+
+
+def _peak(call) -> tuple[BaseException, int]:
+    """Run ``call``, expecting it to raise; return the exception and tracemalloc's peak."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        call()
+    except Exception as exc:
+        peak = tracemalloc.get_traced_memory()[1]
+        return exc, peak
+    finally:
+        tracemalloc.stop()
+    raise AssertionError("no exception")
+
+
+def test_v73_data_set_declared_2gb_with_nothing_stored(tmp_path):
+    def build(f):
+        _matlab(f.create_dataset("qm", shape=(2**28, 1), dtype="f8"), "double")  # 2 GiB
+
+    path = _v73(tmp_path / "forged.mat", build)
+    assert path.stat().st_size < 4096
+    exc, peak = _peak(lambda: load(path, **EMPS))
+    assert isinstance(exc, RigLogError)
+    assert "forged.mat': cannot read mat-v7.3 file: data set '/qm' declares 2147483648" in str(exc)
+    assert "only 0 are stored" in str(exc)
+    assert peak < 5e6  # bytes: nothing of the declared 2 GB was allocated
+
+
+def test_v73_compressed_data_set_declaring_more_than_deflate_can_give(tmp_path):
+    def build(f):
+        d = f.create_dataset("qm", (2**27,), "f8", chunks=(2**14,), compression="gzip")
+        d[: 2**14] = 1.0  # one chunk of 8192 written, the rest never stored
+        _matlab(d, "double")
+
+    path = _v73(tmp_path / "bomb.mat", build)
+    exc, peak = _peak(lambda: load(path, **EMPS))
+    assert isinstance(exc, RigLogError)
+    assert re.search(
+        r"'/qm' declares 1073741824 bytes .* compressed bytes can hold at most", str(exc)
+    )
+    assert peak < 5e6
+
+
+def test_v73_wide_fan_out_of_references_is_bounded(tmp_path):
+    """Four cells of 1000 references each to the next: 10^12 decoder visits in 40 kB."""
+
+    def build(f):
+        refs = f.create_group("#refs#")
+        target = _matlab(refs.create_dataset("leaf", data=np.arange(3.0)), "double")
+        for k in range(3):
+            cell = refs.create_dataset(f"c{k}", data=[target.ref] * 1000, dtype=h5py.ref_dtype)
+            target = _matlab(cell, "cell")
+        _matlab(f.create_dataset("x", data=[target.ref] * 1000, dtype=h5py.ref_dtype), "cell")
+
+    import h5py
+
+    path = _v73(tmp_path / "fanout.mat", build)
+    exc, peak = _peak(lambda: load(path, **EMPS))
+    assert isinstance(exc, RigLogError)
+    assert "fanout.mat': cannot read mat-v7.3 file: decoding '/#refs#/c1' visits more than" in str(
+        exc
+    )
+    assert peak < 5e6
+
+
+def test_v73_reference_cycle(tmp_path):
+    import h5py
+
+    def build(f):
+        refs = f.create_group("#refs#")
+        a = _matlab(refs.create_dataset("a", shape=(1,), dtype=h5py.ref_dtype), "cell")
+        b = _matlab(refs.create_dataset("b", data=[a.ref], dtype=h5py.ref_dtype), "cell")
+        a[0] = b.ref
+        _matlab(f.create_dataset("x", data=[a.ref], dtype=h5py.ref_dtype), "cell")
+
+    path = _v73(tmp_path / "cycle.mat", build)
+    with pytest.raises(RigLogError, match=r"cycle.mat': cannot read .* form a cycle at '/#refs#/"):
+        load(path, **EMPS)
+
+
+def test_v73_declared_data_above_the_memory_budget(tmp_path, monkeypatch):
+    def build(f):
+        d = f.create_dataset("qm", data=np.zeros((2_000_000, 1)), compression="gzip")
+        _matlab(d, "double")
+
+    path = _v73(tmp_path / "big.mat", build)
+    monkeypatch.setenv("DEBIST_MEMORY_BUDGET_GB", "0.01")
+    with pytest.raises(ResourceError, match=r"big.mat': decoding its MAT v7.3 variables needs abo"):
+        load(path, **EMPS)
+    monkeypatch.setenv("DEBIST_MEMORY_BUDGET_GB", "1")
+    (channel,) = read_mat(path, "mat-v7.3").channels  # the same file within the budget
+    assert channel.name == "qm" and channel.data.shape == (2_000_000,)
+
+
+def test_v5_variable_declaring_more_than_the_file_holds(tmp_path):
+    path = tmp_path / "forged5.mat"
+    scipy.io.savemat(path, {"qm": np.arange(1000.0)[:, None]})
+    data = bytearray(path.read_bytes())
+    dims = data.index(struct.pack("<ii", 1000, 1))  # the dimensions sub-element
+    data[dims : dims + 8] = struct.pack("<ii", 100_000_000, 1)
+    path.write_bytes(bytes(data))
+    assert scipy.io.whosmat(path) == [("qm", (100_000_000, 1), "double")]
+    exc, peak = _peak(lambda: load(path, **EMPS))
+    assert isinstance(exc, RigLogError)
+    assert "forged5.mat': cannot read mat-v5 file: its variables declare 800000000 bytes" in str(
+        exc
+    )
+    assert "'qm', (100000000, 1) double" in str(exc)
+    assert peak < 5e6
+
+
+def test_v5_declared_data_above_the_memory_budget(tmp_path, monkeypatch):
+    path = tmp_path / "big5.mat"
+    scipy.io.savemat(path, {"qm": np.zeros((2_000_000, 1))}, do_compression=True)
+    monkeypatch.setenv("DEBIST_MEMORY_BUDGET_GB", "0.01")
+    with pytest.raises(ResourceError, match=r"big5.mat': loading its 1 MAT variables"):
+        load(path, **EMPS)

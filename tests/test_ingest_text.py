@@ -226,13 +226,90 @@ def test_non_numeric_value_names_channel_sample_and_value(tmp_path):
         load_rig_log(path, IngestSpec.from_dict(section))
 
 
-def test_truncated_last_line_is_a_nan_with_index_and_time(tmp_path):
-    path = tmp_path / "cut.csv"
-    path.write_text("0.0,1.0\n0.1,1.1\n0.2,1.2\n0.3")  # cut inside the last row
+def test_short_row_inside_the_file_is_a_nan_with_index_and_time(tmp_path):
+    path = tmp_path / "short.csv"
+    path.write_text("0.0,1.0\n0.1,1.1\n0.2\n0.3,1.3\n0.4,1.4\n")  # a field lost mid-file
     section = {"time": {"column": 0, "unit": "s"}, "q": {"column": 1, "unit": "m"}}
     section["v1"] = {"column": 1, "unit": "V"}
-    with pytest.raises(RigLogError, match=r"cut.csv', channel 'column 1'.*nan at sample 3 \(t"):
+    with pytest.raises(RigLogError, match=r"short.csv', channel 'column 1'.*nan at sample 2 \(t"):
         load_rig_log(path, IngestSpec.from_dict(section))
+
+
+# ------------------------------------------------------------------ truncated text files
+CUT_SECTION = {"time": {"column": 0, "unit": "s"}, "q": {"column": 1, "unit": "m"}}
+CUT_SECTION["v1"] = {"column": 2, "unit": "V"}
+
+
+def _fixed_log(n: int = 40) -> list[str]:
+    """A %.6f log (time, q, v1) whose last v1 is 1.609438, as a fixed-point writer has it."""
+    t = np.arange(n) * 0.01
+    v1 = 1.0 + 0.02 * np.arange(n) - 0.17056200000000002
+    return [f"{a:.6f},{np.sin(a):.6f},{b:.6f}" for a, b in zip(t, v1, strict=True)]
+
+
+def _write(path: Path, text: str) -> Path:
+    if path.suffix == ".gz":
+        import gzip
+
+        path.write_bytes(gzip.compress(text.encode()))
+    else:
+        path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("name", ["cut.csv", "cut.csv.gz"])
+@pytest.mark.parametrize("cut", ["1.", "1.6", "1.60943", "1", ""])
+def test_number_cut_at_the_end_names_file_and_line(tmp_path, name, cut):
+    lines = _fixed_log()
+    assert lines[-1].endswith(",1.609438")
+    last = lines[-1].rsplit(",", 1)[0] + "," + cut
+    path = _write(tmp_path / name, "t,q,v\n" + "\n".join([*lines[:-1], last]))
+    with pytest.raises(RigLogError, match=rf"{name}': line 41 ends the file without a newline"):
+        load_rig_log(path, IngestSpec.from_dict(CUT_SECTION))
+
+
+@pytest.mark.parametrize("name", ["short.csv", "short.csv.gz"])
+@pytest.mark.parametrize("final_newline", [True, False])
+def test_last_line_with_fewer_fields_names_file_and_line(tmp_path, name, final_newline):
+    lines = _fixed_log()
+    text = "t,q,v\n\n" + "\n".join([*lines[:-1], lines[-1].rsplit(",", 1)[0]])
+    path = _write(tmp_path / name, text + ("\n\n" if final_newline else ""))
+    with pytest.raises(RigLogError, match=rf"{name}': line 42 has 2 field\(s\), the lines before"):
+        load_rig_log(path, IngestSpec.from_dict(CUT_SECTION))
+
+
+@pytest.mark.parametrize("name", ["whole.csv", "whole.csv.gz"])
+def test_honest_file_without_final_newline_reads(tmp_path, name):
+    lines = _fixed_log()
+    path = _write(tmp_path / name, "t,q,v\n" + "\n".join(lines))
+    (df,) = load_rig_log(path, IngestSpec.from_dict(CUT_SECTION))
+    assert len(df) == 40
+    assert df["v1"].iloc[-1] == 1.609438
+
+
+def _silverbox_lines() -> list[str]:
+    import gzip
+
+    root = Path(__file__).resolve().parents[1]
+    with gzip.open(root / "data/silverbox/SNLS80mV.csv.gz", "rt") as fh:
+        return fh.read().splitlines()[40650:43650]
+
+
+@pytest.mark.parametrize("name", ["sb.csv", "sb.csv.gz"])
+def test_silverbox_slice_without_final_newline_reads_and_its_cuts_are_caught(tmp_path, name):
+    """%g-style values (5 significant digits): honest end reads, a cut to <= 3 digits fails."""
+    lines = _silverbox_lines()
+    section = {"sample_time": 0.0016384, "q": {"column": 1, "unit": "V"}}
+    section["v1"] = {"column": 0, "unit": "V"}
+    (df,) = load_rig_log(_write(tmp_path / name, "\n".join(lines)), IngestSpec.from_dict(section))
+    assert len(df) == 3000
+    assert df["q"].iloc[-1] == float(lines[-1].split(",")[1])
+    head, value = lines[-1].split(",")
+    assert value == "-0.061468"
+    for cut in ("-0.06", "-0.0", "-0.", "-0", "-", ""):
+        path = _write(tmp_path / name, "\n".join([*lines[:-1], f"{head},{cut}"]))
+        with pytest.raises(RigLogError, match=rf"{name}': line 3000 ends the file without"):
+            load_rig_log(path, IngestSpec.from_dict(section))
 
 
 def test_ragged_rows_are_a_parse_error_naming_the_file(tmp_path):

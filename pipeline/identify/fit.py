@@ -6,9 +6,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import signal
-from scipy.optimize import minimize_scalar
 
+from pipeline import preflight
 from pipeline.errors import IdentificationError
 from pipeline.identify.basis import RBFBasis
 from pipeline.identify.config import IdentifyConfig
@@ -117,6 +116,8 @@ def _prefilter(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
             f"data set '{r.name}': [identify] lowpass = {cfg.lowpass:g} Hz is not below the "
             f"Nyquist frequency {nyquist:g} Hz of its sample time {r.dt:g} s"
         )
+    from scipy import signal
+
     sos = signal.butter(4, cfg.lowpass, fs=1.0 / r.dt, output="sos")
     return signal.sosfiltfilt(sos, a, axis=0)
 
@@ -239,6 +240,9 @@ def fit_rbf_model(
         If a centre has no data near it, an input is never excited, the
         regressor is rank deficient or worse conditioned than ``max_condition``, or
         ``lowpass`` is not below a record's Nyquist frequency.
+    ResourceError
+        If the least squares would need more memory than the budget
+        (:func:`pipeline.preflight.check_identify`), before anything is allocated.
 
     References
     ----------
@@ -246,6 +250,8 @@ def fit_rbf_model(
     """
     records = _trimmed(records, cfg.trim)
     n_in = records[0].v.shape[1]
+    sizes = [r.q.size for r in records]
+    preflight.check_identify(cfg, n_in, sum(sizes), max(sizes))
     q_all = np.concatenate([r.q for r in records])
     q_range = cfg.q_range or (float(q_all.min()), float(q_all.max()))
     basis = RBFBasis.equidistant(q_range[0], q_range[1], cfg.M, cfg.sigma_n, cfg.outside)
@@ -315,6 +321,8 @@ def _search_T_z(records, basis, cfg, bounds):
         return value
 
     lo, hi = bounds
+    from scipy.optimize import minimize_scalar
+
     res = minimize_scalar(
         lambda s: cost(float(np.exp(s))),
         bounds=(np.log(lo), np.log(hi)),

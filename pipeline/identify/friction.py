@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter, lfiltic
 
 
 def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:
@@ -57,6 +56,8 @@ def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:
     r = (T_z / dt) * (-np.expm1(-dt / T_z))
     b = [1.0 - r, r - a]
     den = [1.0, -a]
+    from scipy.signal import lfilter, lfiltic
+
     zi = lfiltic(b, den, y=[q_dot[0]], x=[q_dot[0]])
     z, _ = lfilter(b, den, q_dot, zi=zi)
     return z

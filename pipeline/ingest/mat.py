@@ -16,10 +16,18 @@ Plain variables
     Any other file: every numeric vector or scalar variable is a channel named by the
     variable, e.g. the EMPS benchmark's ``t``, ``qm``, ``vir`` (n x 1) and ``gtau`` (1 x 1).
 
+Before a v4/v5/v7 file is loaded, :func:`scipy.io.whosmat` lists each variable's shape
+and class without reading its data; a file whose variables declare more bytes than it
+can hold (its size times :data:`~pipeline.preflight.DEFLATE_MAX_RATIO`, since v7
+variables may be zlib-compressed) is refused as truncated or forged, and the declared
+total is checked against the memory budget. v7.3 files are bounded the same way by
+:func:`~pipeline.ingest.mat73.load_mat73`.
+
 References
 ----------
 dSPACE GmbH, "ControlDesk Measurement and Recording", MAT-file export of recordings
-(struct with fields ``X``, ``Y``, ``Description``).
+(struct with fields ``X``, ``Y``, ``Description``). The MathWorks, "MAT-File Format"
+(miCOMPRESSED data elements hold a zlib stream).
 """
 
 from __future__ import annotations
@@ -31,11 +39,30 @@ from typing import Any
 import numpy as np
 import scipy.io
 
-from pipeline.errors import RigLogError
+from pipeline.errors import DebistError, RigLogError
 from pipeline.ingest.mat73 import load_mat73
 from pipeline.ingest.raw import RawChannel, RawLog
+from pipeline.preflight import DEFLATE_MAX_RATIO, check_memory
 
-__all__ = ["interpret_mat", "read_mat"]
+__all__ = ["check_declared", "interpret_mat", "read_mat"]
+
+#: Bytes per element of the MATLAB classes whose size ``whosmat`` reveals (char arrays
+#: become numpy unicode strings, 4 bytes per character); struct, cell, sparse and object
+#: variables are counted as 0 (their contents are not listed).
+_CLASS_BYTES = {
+    "double": 8,
+    "single": 4,
+    "int8": 1,
+    "uint8": 1,
+    "int16": 2,
+    "uint16": 2,
+    "int32": 4,
+    "uint32": 4,
+    "int64": 8,
+    "uint64": 8,
+    "logical": 1,
+    "char": 4,
+}
 
 
 def _as_list(value: Any) -> list[Any]:
@@ -171,6 +198,63 @@ def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
     return RawLog(path, fmt, tuple(channels))
 
 
+def check_declared(path: Path, fmt: str) -> int:
+    """Compare the sizes a MAT v4/v5/v7 file declares with what it can hold.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    fmt : str
+        ``"mat-v5"`` or ``"mat-v4"``.
+
+    Returns
+    -------
+    int
+        The declared bytes of its numeric, char and logical variables.
+
+    Raises
+    ------
+    RigLogError
+        If they exceed the file size times :data:`~pipeline.preflight.DEFLATE_MAX_RATIO`
+        (v5/v7, which may be compressed) or the file size (v4), naming the largest
+        variable and its declared shape and size.
+    ResourceError
+        If they exceed the memory budget.
+
+    References
+    ----------
+    SciPy, ``scipy.io.whosmat`` (variable headers without the data); RFC 1951 (deflate's
+    largest expansion).
+    """
+    listing = scipy.io.whosmat(path)
+    sizes = [
+        (int(np.prod(shape, dtype=object)) * _CLASS_BYTES.get(cls, 0), name, shape, cls)
+        for name, shape, cls in listing
+    ]
+    total = sum(size for size, *_ in sizes)
+    if not sizes or not total:
+        return 0
+    file_size = path.stat().st_size
+    bound = file_size * (DEFLATE_MAX_RATIO if fmt != "mat-v4" else 1)
+    size, name, shape, cls = max(sizes, key=lambda item: item[0])
+    if total > bound:
+        how = f"even compressed (x{DEFLATE_MAX_RATIO})" if fmt != "mat-v4" else "uncompressed"
+        raise RigLogError(
+            f"cannot read {fmt} file: its variables declare {total} bytes (the largest, "
+            f"'{name}', {shape} {cls}, {size} bytes), more than a file of {file_size} bytes "
+            f"can hold {how}: the file is truncated or forged",
+            path=path,
+        )
+    check_memory(
+        total,
+        f"file '{path}'",
+        f"loading its {len(sizes)} MAT variables (the largest, '{name}', {shape} {cls})",
+        "declared sizes",
+    )
+    return total
+
+
 def read_mat(path: Path, fmt: str) -> RawLog:
     """Read a MAT file (v4/v5/v7 with scipy, v7.3 with h5py).
 
@@ -191,13 +275,19 @@ def read_mat(path: Path, fmt: str) -> RawLog:
     ------
     RigLogError
         The file is truncated or corrupt (the scipy / h5py exception is chained and
-        quoted), or see :func:`interpret_mat`.
+        quoted), declares more data than it can hold (:func:`check_declared`,
+        :func:`~pipeline.ingest.mat73.load_mat73`), or see :func:`interpret_mat`.
+    ResourceError
+        Its declared data exceed the memory budget (before it is read).
     """
     try:
         if fmt == "mat-v7.3":
             variables = load_mat73(path)
         else:
+            check_declared(path, fmt)
             variables = scipy.io.loadmat(path, simplify_cells=True)
+    except DebistError:
+        raise
     except Exception as exc:
         raise RigLogError(
             f"cannot read {fmt} file, it is truncated or corrupt ({type(exc).__name__}: {exc})",
