@@ -1,37 +1,28 @@
-"""Stages and stage parts that use the physics model of Section 3.
+"""The analytical model's parts in identification and validation: backbone curves, m_q, phi(q).
 
-The design analysis, the virtual rig, and the analytical model's parts in identification
-and validation (backbone curves, m_q, phi(q)).
-
-Pure functions like :mod:`pipeline.stages`: parameters and sections in, results out; the
-runner writes the artifacts.
+Pure functions: parameters and data in, results out. The stages that use the physics model
+as a whole (the design analysis, the virtual rig) are :mod:`pipeline.stages.analyze` and
+:mod:`pipeline.stages.rig`.
 
 References
 ----------
-Masoud & Maas 2025, Section 3 (analytical model), Sec. 5.1 (rig), Eq. 24-26, Table 2.
+Masoud & Maas 2025, Section 3 (analytical model), Eq. 24-26, Table 2.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pipeline.errors import WorkflowError
-from pipeline.identify import Record
-from pipeline.validate import DataSet, ValidateConfig
 
-__all__ = [
-    "AnalyzeResult",
-    "RigResult",
-    "analytical_for",
-    "physics_mass",
-    "physics_prior",
-    "run_analyze",
-    "run_rig",
-]
+if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
+    from pipeline.identify import Record
+    from pipeline.validate import DataSet, ValidateConfig
+
+__all__ = ["analytical_for", "physics_mass", "physics_prior"]
 
 
 def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
@@ -143,157 +134,3 @@ def analytical_for(physics, datasets: Sequence[DataSet], cfg: ValidateConfig):
     from pipeline.physics.freerun import analytical_model
 
     return analytical_model(physics)
-
-
-@dataclass(frozen=True)
-class AnalyzeResult:
-    """Result of the analyze stage.
-
-    Attributes
-    ----------
-    tree : dict
-        Contents of ``statics.h5`` (:func:`pipeline.physics.analysis.analysis_tree`).
-    figures : dict of str to matplotlib.figure.Figure
-        Fig. 3, 4, 5, 6a, 7 and the reduced model's curves.
-    summary : dict
-        Operating points, bifurcation points [m] and the full vs reduced NRMSE [-].
-    """
-
-    tree: dict[str, Any]
-    figures: dict[str, Any]
-    summary: dict[str, Any]
-
-
-def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
-    """Design analysis of Section 3 for one prototype (``debist analyze``).
-
-    Parameters
-    ----------
-    params : pipeline.physics.params.PrototypeParams
-        The prototype [SI].
-    section : mapping
-        The ``[analyze]`` section (:class:`pipeline.physics.analysis.AnalyzeConfig`).
-
-    Returns
-    -------
-    AnalyzeResult
-
-    Raises
-    ------
-    WorkflowError
-        For an invalid section.
-    StaticsError
-        If the static analysis fails for these parameters.
-
-    References
-    ----------
-    Masoud & Maas 2025, Section 3, Fig. 3-7.
-    """
-    from pipeline.config import config_from_section
-    from pipeline.physics.analysis import (
-        AnalyzeConfig,
-        analysis_figures,
-        analysis_tree,
-        run_analysis,
-    )
-
-    cfg = config_from_section(AnalyzeConfig, section, "[analyze]")
-    res = run_analysis(params, cfg)
-    cmp = res.comparison
-    summary = {
-        "b": params.b,
-        "z_b_min": res.sweep.z_b_min,
-        "z_b_max": res.sweep.z_b_max,
-        "operating_points": {
-            name: [
-                {"q": float(q), "stable": bool(s)}
-                for q, s in zip(point["q"], point["stable"], strict=True)
-            ]
-            for name, point in res.operating_points.items()
-        },
-        "nrmse_q": cmp.nrmse_q,
-        "nrmse_phi": cmp.nrmse_phi,
-        "switches": {
-            "full": [float(cmp.full.q.min()), float(cmp.full.q.max())],
-            "reduced": [float(cmp.reduced.q.min()), float(cmp.reduced.q.max())],
-        },
-    }
-    return AnalyzeResult(analysis_tree(res), analysis_figures(res), summary)
-
-
-@dataclass(frozen=True)
-class RigResult:
-    """Result of the rig stage (the virtual rig's experiments).
-
-    Attributes
-    ----------
-    outputs : dict
-        ``<experiment>.mat`` (:class:`pipeline.artifacts.MatRecording`) and
-        ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment.
-    summary : dict
-        Per experiment: samples, q range [m], 3 kV switchings, saturated samples,
-        integration statistics and wall time [s].
-    """
-
-    outputs: dict[str, Any]
-    summary: dict[str, Any]
-
-
-def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult:
-    """Simulate the virtual rig's experiments (``debist simulate-rig``).
-
-    Parameters
-    ----------
-    physics : mapping
-        The ``[physics]`` section (nominal prototype).
-    section : mapping
-        The ``[rig]`` section (:class:`pipeline.rig.experiment.RigConfig`).
-
-    Returns
-    -------
-    RigResult
-
-    Raises
-    ------
-    WorkflowError
-        For an invalid section.
-    DebistError
-        If an integration fails (named by experiment).
-
-    References
-    ----------
-    Masoud & Maas 2025, Sec. 5.1, Fig. 11a.
-    """
-    from pipeline.artifacts import H5Tree, MatRecording
-    from pipeline.errors import DebistError
-    from pipeline.rig.experiment import (
-        CREATED,
-        RigConfig,
-        rig_recording,
-        run_experiment,
-        truth_tree,
-    )
-    from pipeline.rig.plant import true_curves
-
-    cfg = RigConfig.from_dict(section, physics)
-    curves = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 401))
-    outputs: dict[str, Any] = {}
-    summary: dict[str, Any] = {}
-    for name, exp in cfg.experiments.items():
-        run = run_experiment(cfg, name)
-        if not run.success:
-            raise DebistError(f"[rig.experiments.{name}]: the plant integration failed: "
-                              f"{run.message}")  # fmt: skip
-        outputs[f"{name}.mat"] = MatRecording(rig_recording(run, name, cfg), exp.format, CREATED)
-        outputs[f"{name}_truth.h5"] = H5Tree(truth_tree(run, cfg, curves))
-        sign = np.sign(run.q_true)
-        summary[name] = {
-            "samples": int(run.t.size),
-            "q_min": float(run.q_true.min()),
-            "q_max": float(run.q_true.max()),
-            "well_changes": int(np.count_nonzero(np.diff(sign[np.abs(run.q_true) > 5e-3]))),
-            "saturated": int(np.count_nonzero(run.saturated)),
-            "nfev": run.nfev,
-            "seconds": run.wall_time,
-        }
-    return RigResult(outputs, summary)

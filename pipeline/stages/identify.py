@@ -1,0 +1,171 @@
+"""The identify stage: the RBF model of Eq. 37-40 by least squares with the T_z search."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.identify import FitDiagnostics, IdentifyConfig, RBFModel, fit_rbf_model
+from pipeline.physics_stages import physics_mass, physics_prior
+from pipeline.records import estimation_records
+from pipeline.stages import StageInputs, StageOutput
+
+__all__ = ["IdentifyResult", "diagnostics_tree", "execute", "run_identify"]
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    """Output of the identification stage.
+
+    Attributes
+    ----------
+    model : RBFModel
+        The identified model.
+    diagnostics : FitDiagnostics
+        Rank, condition number, residuals, T_z trace.
+    curves : pandas.DataFrame
+        Characteristic curves on a grid: ``q, c, d, cq, g1..gN, dC1_dq..dCN_dq``.
+    summary : dict
+        Scalars for reports (reproducible: no wall times).
+    equation_error_model : RBFModel or None
+        The least-squares model before simulation-error refinement.
+    timings : dict of str to float
+        Wall times [s]: ``fit`` (least squares with the T_z search) and ``refine``.
+    """
+
+    model: RBFModel
+    diagnostics: FitDiagnostics
+    curves: pd.DataFrame
+    summary: dict[str, Any] = field(default_factory=dict)
+    equation_error_model: RBFModel | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
+    """Identify the RBF model (Eq. 37-40) on the estimation data sets.
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical tables (``attrs['role']`` tells estimation data).
+    derivs : mapping of str to pandas.DataFrame
+        Their derivatives.
+    section : mapping
+        The ``[identify]`` section (see :class:`IdentifyConfig`).
+    physics : PrototypeParams, optional
+        The ``[physics]`` prototype, whose curves the ``physics_*`` backbone terms use and
+        whose ``m_q`` at ``q = 0`` ``m_q = "physics"`` takes (:func:`physics_mass`).
+
+    Returns
+    -------
+    IdentifyResult
+
+    Raises
+    ------
+    IdentificationError
+        If the problem is under-excited, rank deficient or badly conditioned.
+    WorkflowError
+        For an invalid section.
+    """
+    from pipeline.identify.refine import refine_config, refine_model
+    from pipeline.identify.terms import PHYSICS_TERMS
+
+    section = dict(section)
+    if section.get("m_q") == "physics":
+        section["m_q"] = physics_mass(physics)
+    cfg = IdentifyConfig.from_dict(section)
+    t0 = time.perf_counter()
+    records = estimation_records(tables, derivs)
+    if set(PHYSICS_TERMS) & set(cfg.backbone):
+        cfg = replace(cfg, prior=physics_prior(physics, records))
+    model, diag = fit_rbf_model(records, cfg)
+    timings = {"fit": time.perf_counter() - t0}
+    ls_model, refine = model, None
+    rcfg = refine_config(cfg.refine)
+    if rcfg is not None:
+        res = refine_model(model, diag, records, cfg, rcfg)
+        model = res.model
+        refine = {
+            "accepted": res.accepted,
+            "window_rms_equation_error": res.window_rms_ls,
+            "window_rms_simulation_error": res.window_rms_refined,
+            "full_rms_equation_error": res.full_rms_ls,
+            "full_rms_simulation_error": res.full_rms_refined,
+            "nfev": res.nfev,
+            "message": res.message,
+        }
+        timings["refine"] = res.seconds
+    grid = np.linspace(model.q_range[0], model.q_range[1], 201)
+    cur = model.curves(grid)
+    curves = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
+    for j in range(model.n_inputs):
+        curves[f"g{j + 1}"] = cur["g"][:, j]
+        curves[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    summary = {
+        "T_z": model.T_z,
+        "m_q": model.m_q,
+        "condition": diag.condition,
+        "rank": diag.rank,
+        "n_columns": len(diag.columns),
+        "n_params": model.n_params,
+        "n_samples": diag.n_samples,
+        "fit_r2": diag.fit_r2,
+        "residual_rms": diag.residual_rms,
+        "backbone": {k: (np.asarray(v).tolist()) for k, v in model.backbone.items()},
+        "published": dict(cfg.published or {}),
+        "refine": refine,
+    }
+    return IdentifyResult(model, diag, pd.DataFrame(curves), summary, ls_model, timings)
+
+
+def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
+    """HDF5 layout of the fit diagnostics."""
+    return {
+        "attrs": {
+            "rank": diag.rank,
+            "condition": diag.condition,
+            "n_samples": diag.n_samples,
+            "residual_rms": diag.residual_rms,
+            "fit_r2": diag.fit_r2,
+        },
+        "columns": np.array(diag.columns),
+        "singular_values": diag.singular_values,
+        "support": diag.support,
+        "T_z_trace": diag.T_z_trace,
+    }
+
+
+def execute(ctx: StageInputs) -> StageOutput:
+    """Run the identify stage on the ingested tables and their derivatives.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The workflow and the ingest and differentiate artifacts.
+
+    Returns
+    -------
+    StageOutput
+        ``model.h5`` (the model, its fit diagnostics and, after refinement, the
+        equation-error model) and ``curves.parquet``.
+
+    Raises
+    ------
+    IdentificationError, WorkflowError
+        As :func:`run_identify`.
+    """
+    from pipeline.artifacts import H5Tree
+
+    res = run_identify(
+        ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
+    )
+    tree = {**res.model.to_tree(), "diagnostics": diagnostics_tree(res.diagnostics)}
+    if res.equation_error_model is not None and res.equation_error_model is not res.model:
+        tree["equation_error"] = res.equation_error_model.to_tree()["model"]
+    outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves}
+    return StageOutput(outputs, res.summary, res.timings)

@@ -1,0 +1,92 @@
+"""The ingest stage: every data set's rig log read into a canonical table."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pandas as pd
+
+from pipeline.stages import StageInputs, StageOutput
+
+if TYPE_CHECKING:
+    from pipeline.workflow import DatasetSpec
+
+__all__ = ["execute", "run_ingest"]
+
+
+def run_ingest(
+    datasets: Sequence[DatasetSpec], base: str | os.PathLike | None = None
+) -> dict[str, pd.DataFrame]:
+    """Read every data set into a canonical rig-log table.
+
+    Parameters
+    ----------
+    datasets : sequence of DatasetSpec
+        Data sets with their merged ingest sections.
+    base : path-like, optional
+        The workflow's folder: ``attrs["source"]`` records each source path relative to
+        it (POSIX separators), so the same workflow in two clones gives the same bytes; a
+        virtual-rig log is recorded as ``"rig:<experiment>"``. Default: the path as read.
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        Table name to table (``t [s], q, v1..vN [V], ...``). A data set split at
+        logging gaps gives ``<name>.seg<k>`` tables, each with the same role.
+
+    Raises
+    ------
+    RigLogError
+        For a file or channel that cannot be used (names file and channel).
+    WorkflowError
+        For an invalid ingest section.
+    """
+    from pipeline.ingest import IngestSpec, load_rig_log
+
+    tables: dict[str, pd.DataFrame] = {}
+    for ds in datasets:
+        spec = IngestSpec.from_dict(ds.ingest)
+        segments = load_rig_log(ds.source, spec)
+        for k, frame in enumerate(segments):
+            name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
+            frame.attrs["role"] = ds.role
+            frame.attrs["dataset"] = ds.name
+            frame.attrs["source"] = _recorded_source(ds, base)
+            tables[name] = frame
+    return tables
+
+
+def _recorded_source(ds: DatasetSpec, base: str | os.PathLike | None) -> str:
+    if ds.rig:
+        return f"rig:{ds.rig}"
+    if base is None:
+        return str(ds.source)
+    return Path(os.path.relpath(ds.source, base)).as_posix()
+
+
+def execute(ctx: StageInputs) -> StageOutput:
+    """Run the ingest stage on the workflow's data sets.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The workflow (data sets, their sources and ingest sections).
+
+    Returns
+    -------
+    StageOutput
+        ``<table>.parquet`` per table; summary: samples per table.
+
+    Raises
+    ------
+    RigLogError, WorkflowError
+        As :func:`run_ingest`.
+    """
+    tables = run_ingest(ctx.wf.datasets, ctx.wf.path.parent)
+    return StageOutput(
+        {f"{n}.parquet": f for n, f in tables.items()},
+        {"datasets": {n: len(f) for n, f in tables.items()}},
+    )

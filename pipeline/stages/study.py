@@ -1,0 +1,81 @@
+"""The study stage: sensitivity studies of Fig. 11b (M, sigma_n) and Fig. 11c (alpha)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from pipeline.stages import StageInputs, StageOutput
+
+__all__ = ["execute", "run_study"]
+
+
+def run_study(tables, derivs, section: Mapping[str, Any]) -> dict[str, Any]:
+    """Sensitivity studies of Fig. 11b (M, sigma_n) and Fig. 11c (TVRegDiff alpha).
+
+    Parameters
+    ----------
+    tables, derivs : mapping of str to pandas.DataFrame
+        Measured data and derivatives of every data set.
+    section : mapping
+        ``{"study": [study] section, "identify": ..., "validate": ...,
+        "differentiate": ...}``; the study section may hold ``identify`` (keys
+        overriding the identification settings for the studies) and
+        ``differentiate`` (the TVRegDiff settings the alpha study varies, default
+        the workflow's own).
+
+    Returns
+    -------
+    dict
+        ``rbf_grid`` and ``alpha``: (table, figure) pairs.
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section, or an alpha study without a TVRegDiff section.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 11b and 11c, Sec. 5.2.
+    """
+    from pipeline.studies import StudyConfig, alpha_study, rbf_grid_study
+
+    study = dict(section["study"])
+    identify = {**section["identify"], **study.pop("identify", {})}
+    diff = dict(study.pop("differentiate", section["differentiate"]))
+    cfg = StudyConfig.from_dict(study)
+    grid = rbf_grid_study(tables, derivs, identify, section["validate"], cfg)
+    alpha = alpha_study(tables, identify, section["validate"], diff, cfg)
+    return {"rbf_grid": grid, "alpha": alpha}
+
+
+def execute(ctx: StageInputs) -> StageOutput:
+    """Run the study stage on the ingested tables and their derivatives.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The ``[study]`` section with the sections it overrides, and the data.
+
+    Returns
+    -------
+    StageOutput
+        ``rbf_grid`` and ``alpha``: a Parquet table and a PNG figure each; summary: the
+        tables' rows.
+
+    Raises
+    ------
+    WorkflowError
+        As :func:`run_study`.
+    """
+    from pipeline.artifacts import Figure
+
+    results = run_study(
+        ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("study")
+    )
+    outputs: dict[str, Any] = {}
+    for name, (table, figure) in results.items():
+        outputs[f"{name}.parquet"] = table
+        outputs[f"{name}.png"] = Figure(figure)
+    summary = {name: table.to_dict(orient="records") for name, (table, _) in results.items()}
+    return StageOutput(outputs, summary)

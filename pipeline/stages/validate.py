@@ -1,0 +1,155 @@
+"""The validate stage: free runs of the identified model on every data set, NRMSE (Eq. 41)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+
+from pipeline.datasets import validation_datasets
+from pipeline.identify import RBFModel
+from pipeline.physics_stages import analytical_for
+from pipeline.stages import StageInputs, StageOutput
+from pipeline.validate import ValidateConfig, validate_model
+
+__all__ = ["ValidateResult", "execute", "run_validate"]
+
+
+@dataclass(frozen=True)
+class ValidateResult:
+    """Output of the validation stage.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        NRMSE and RMS per data set and model.
+    simulated : dict of str to pandas.DataFrame
+        Measured and simulated trajectories per data set.
+    figures : dict of str to matplotlib.figure.Figure
+        Measured vs simulated q per data set.
+    sim_time : float
+        Wall time of the free runs [s].
+    """
+
+    table: pd.DataFrame
+    simulated: dict[str, pd.DataFrame]
+    figures: dict[str, Any]
+    sim_time: float = 0.0
+
+
+def run_validate(
+    model: RBFModel,
+    tables,
+    derivs,
+    section: Mapping[str, Any],
+    baseline: RBFModel | None = None,
+    physics=None,
+) -> ValidateResult:
+    """Free-run the identified model on every data set and score it (Sec. 5, Eq. 41).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    tables, derivs : mapping of str to pandas.DataFrame
+        Measured data and derivatives of every data set.
+    section : mapping
+        The ``[validate]`` section (see :class:`ValidateConfig`).
+    baseline : RBFModel, optional
+        The equation-error (least-squares) model when ``model`` was refined by
+        simulation error; scored too, as model ``"rbf-ls"``, so both fits stand
+        side by side.
+    physics : PrototypeParams, optional
+        The prototype of the ``[physics]`` section: every row gets ``nrmse_phi`` through its
+        ``phi(q)`` map, and with ``analytical = true`` the analytical model (nominal
+        parameters, Eq. 26) is scored as model ``"analytical"``.
+
+    Returns
+    -------
+    ValidateResult
+
+    Raises
+    ------
+    WorkflowError
+        For an invalid section, or physics that does not fit the data.
+    """
+    from pipeline.plots import free_run_figure
+
+    cfg = ValidateConfig.from_dict(section)
+    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
+    q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
+    datasets = validation_datasets(tables, derivs)
+    analytical = analytical_for(physics, datasets, cfg)
+    phi = analytical.phi if analytical is not None else None
+    t0 = time.perf_counter()
+    table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit, phi)
+    sim_time = time.perf_counter() - t0
+    table["n_params"] = model.n_params
+    others = [(baseline, "rbf-ls")] if baseline is not None else []
+    if cfg.analytical:
+        others.append((analytical, "analytical"))
+    for other, name in others:
+        extra, _ = validate_model(other, name, datasets, cfg, q_limit, phi)
+        extra["n_params"] = getattr(other, "n_params", 0)
+        table = pd.concat([table, extra], ignore_index=True)
+    units = {ds.name: ds.q_unit for ds in datasets}
+    figures = {
+        name: free_run_figure(
+            sim,
+            name,
+            table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
+            cfg.init_samples,
+            units[name],
+        )
+        for name, sim in simulated.items()
+    }
+    return ValidateResult(table, simulated, figures, sim_time)
+
+
+def execute(ctx: StageInputs) -> StageOutput:
+    """Run the validate stage: the identified model (and its equation-error fit) in free run.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The workflow's ``[validate]`` section, the identified model and the data.
+
+    Returns
+    -------
+    StageOutput
+        ``nrmse.parquet``, ``simulated/<table>.parquet`` and ``plots/<table>.png``;
+        summary: the NRMSE rows, the published results to print beside them and the
+        data-set order.
+
+    Raises
+    ------
+    WorkflowError
+        As :func:`run_validate`.
+    """
+    from pipeline.artifacts import Figure
+
+    tree = ctx.read_h5("identify", "model.h5")
+    model = RBFModel.from_tree(tree)
+    ls = tree.get("equation_error")
+    baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
+    section = ctx.section("validate")
+    res = run_validate(
+        model,
+        ctx.tables("ingest"),
+        ctx.tables("differentiate"),
+        section,
+        baseline,
+        ctx.physics(),
+    )
+    outputs: dict[str, Any] = {"nrmse.parquet": res.table}
+    outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
+    outputs.update({f"plots/{n}.png": Figure(f) for n, f in res.figures.items()})
+    summary = {
+        "table": res.table.to_dict(orient="records"),
+        "published": list(section.get("published", [])),
+        "order": [d.name for d in ctx.wf.datasets],
+    }
+    return StageOutput(outputs, summary, {"simulate": res.sim_time})
