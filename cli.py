@@ -1,14 +1,19 @@
 """The ``debist`` command line: a thin Typer adapter over :mod:`pipeline`.
 
-Parses arguments, loads the workflow, calls the runner, prints with rich, and
-maps debist's exception classes to exit codes (1: a stage failed on its data;
-2: bad workflow or arguments; 3: artifacts failed verification).
+Parses arguments, loads the workflow, calls the runner, prints with rich, and maps
+debist's exceptions to exit codes in one place (:func:`pipeline.errors.exit_code`): 0 done,
+1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
+or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -16,7 +21,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from pipeline.errors import ArtifactError, DebistError, WorkflowError
+from pipeline.errors import DebistError, Interrupted, VerificationError, WorkflowError, exit_code
 
 app = typer.Typer(
     help="Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025).",
@@ -29,14 +34,62 @@ err = Console(stderr=True, soft_wrap=True)
 
 WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
-OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Override the workflow's output_dir.")]
+WaitOpt = Annotated[
+    bool,
+    typer.Option(
+        "--wait", help="If another debist run writes to the output folder, wait for it to end."
+    ),
+]
 
 
-def _runner(workflow: Path, out: Path | None):
+@app.callback()
+def _options(
+    memory_budget: Annotated[
+        float | None,
+        typer.Option(
+            "--memory-budget",
+            metavar="GB",
+            min=0.001,
+            help="Memory a stage may plan for, in GB; a setting that needs more is refused "
+            "before it allocates (default: half of this machine's RAM, or the environment "
+            "variable DEBIST_MEMORY_BUDGET_GB).",
+        ),
+    ] = None,
+) -> None:
+    """Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025)."""
+    if memory_budget is not None:
+        from pipeline.preflight import BUDGET_ENV
+
+        os.environ[BUDGET_ENV] = repr(float(memory_budget))  # batch workers inherit it
+
+
+@contextmanager
+def _guard() -> Iterator[None]:
+    """Turn debist's exceptions and interruptions into one line and their exit code."""
+    try:
+        yield
+    except DebistError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(exit_code(exc)) from None
+    except KeyboardInterrupt as exc:
+        what = str(exc) if isinstance(exc, Interrupted) else "interrupted"
+        err.print(
+            f"[yellow]{escape(what)}[/yellow]: stopped; finished stages are kept, the "
+            "unfinished one left nothing behind"
+        )
+        raise typer.Exit(exit_code(exc)) from None
+
+
+def _on_sigterm(signum: int, _frame: object) -> None:
+    raise Interrupted(signum)
+
+
+def _runner(workflow: Path, out: Path | None, wait: bool = False):
     from pipeline.runner import Runner
     from pipeline.workflow import load_workflow
 
-    return Runner(load_workflow(workflow, out))
+    return Runner(load_workflow(workflow, out), wait=wait)
 
 
 def _event(stage: str, what: str, detail: str) -> None:
@@ -44,6 +97,8 @@ def _event(stage: str, what: str, detail: str) -> None:
         console.print(f"[dim]Stage '{stage}' is up to date, skipping[/dim]")
     elif what == "start":
         console.print(f"Running stage '{stage}' ...")
+    elif what == "recovered":
+        console.print(f"[yellow]recovered:[/yellow] {escape(detail)}")
     else:
         console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
 
@@ -56,7 +111,7 @@ def _report(runner, manifests) -> None:
     if stopped:
         console.print(
             "[dim]differentiate: the iterative method stopped at its iteration limit on "
-            f"{len(stopped)} data set(s), as configured (converged = false in the manifest)[/dim]"
+            f"{len(stopped)} data set(s), as configured (converged = false in the summary)[/dim]"
         )
     if "rig" in manifests:
         console.print(report.rig_table(manifests["rig"].summary))
@@ -76,73 +131,65 @@ def _report(runner, manifests) -> None:
         )
         if table is not None:
             console.print(table)
-    console.print(f"[dim]artifacts: {runner.wf.output_dir}[/dim]")
+    console.print(f"[dim]artifacts: {escape(str(runner.wf.output_dir))}[/dim]")
 
 
-def _run(workflow: Path, stages: list[str] | None, force: bool, out: Path | None) -> None:
-    try:
-        runner = _runner(workflow, out)
+def _run(
+    workflow: Path, stages: list[str] | None, force: bool, out: Path | None, wait: bool
+) -> None:
+    with _guard():
+        runner = _runner(workflow, out, wait)
         manifests = runner.run(stages, force=force, on_event=_event)
         _report(runner, manifests)
-    except WorkflowError as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from None
-    except DebistError as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(1) from None
+        if stages is None and (digest := runner.digest()) is not None:
+            console.print(f"run digest: [bold]{digest}[/bold]")
+            console.print(
+                f"[dim]check it later with: debist verify {escape(str(workflow))} "
+                f"--digest {digest}[/dim]",
+                soft_wrap=True,
+            )
 
 
 @app.command()
-def run(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Run every stage of WORKFLOW, skipping those that are up to date."""
-    _run(workflow, None, force, out)
+def run(
+    workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+) -> None:
+    """Run every stage of WORKFLOW, skipping those that are up to date; print the run digest."""
+    _run(workflow, None, force, out, wait)
 
 
-@app.command()
-def ingest(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Read the rig logs into canonical tables (t [s], q, v1..vN [V])."""
-    _run(workflow, ["ingest"], force, out)
+def _stage_command(name: str, help_text: str, command: str | None = None) -> None:
+    def command_fn(
+        workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+    ) -> None:
+        _run(workflow, [name], force, out, wait)
+
+    command_fn.__doc__ = help_text
+    app.command(command or name)(command_fn)
 
 
-@app.command()
-def differentiate(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Compute q_dot and q_ddot (TVRegDiff or the configured differentiator)."""
-    _run(workflow, ["differentiate"], force, out)
-
-
-@app.command()
-def identify(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Identify the RBF model of Eq. 37-40 by least squares with the T_z search."""
-    _run(workflow, ["identify"], force, out)
-
-
-@app.command()
-def validate(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Free-run the identified model on every data set; NRMSE table and plots."""
-    _run(workflow, ["validate"], force, out)
-
-
-@app.command()
-def compare(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Fit SINDy on the same data and derivatives; free-run it with the same simulator."""
-    _run(workflow, ["compare"], force, out)
-
-
-@app.command()
-def study(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Sensitivity studies: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha (Fig. 11c)."""
-    _run(workflow, ["study"], force, out)
-
-
-@app.command("simulate-rig")
-def simulate_rig(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Run the virtual rig of [rig]: dSPACE MAT logs and truth files per experiment."""
-    _run(workflow, ["rig"], force, out)
+_stage_command("ingest", "Read the rig logs into canonical tables (t, q, v1..vN in SI units).")
+_stage_command("differentiate", "Compute q_dot and q_ddot (TVRegDiff or the configured method).")
+_stage_command(
+    "identify", "Identify the RBF model of Eq. 37-40 by least squares with the T_z search."
+)
+_stage_command(
+    "validate", "Free-run the identified model on every data set; NRMSE table and plots."
+)
+_stage_command(
+    "compare", "Fit SINDy on the same data and derivatives; free-run it with the same simulator."
+)
+_stage_command(
+    "study", "Sensitivity studies: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha (Fig. 11c)."
+)
+_stage_command(
+    "rig", "Run the virtual rig: dSPACE MAT logs and truth files per experiment.", "simulate-rig"
+)
 
 
 @app.command()
 def fleet(
-    template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
+    template: Annotated[Path, typer.Argument(help="Workflow with a rig section.")],
     size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
     folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
@@ -155,23 +202,19 @@ def fleet(
     from pipeline import artifacts
     from pipeline.rig.fleet_workflows import fleet_workflows
 
-    try:
-        raw = tomllib.loads(template.read_text(encoding="utf-8"))
+    with _guard():
+        try:
+            raw = tomllib.loads(template.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
         files = fleet_workflows(raw, template.resolve().parent, folder, size, seed=seed)
         paths = artifacts.write_text_files(folder, files)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from None
-    except DebistError as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2 if isinstance(exc, WorkflowError | ArtifactError) else 1) from None
     console.print(f"wrote {len(paths)} workflows to {folder}; run them with: debist batch {folder}")
 
 
-@app.command()
-def analyze(workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None) -> None:
-    """Design analysis of [physics] (Section 3): statics.h5 and Fig. 3, 4, 5, 6a, 7 as PNG."""
-    _run(workflow, ["analyze"], force, out)
+_stage_command(
+    "analyze", "Design analysis of the physics section (Section 3): statics.h5 and Fig. 3-7 as PNG."
+)
 
 
 @app.command()
@@ -180,35 +223,62 @@ def status(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
     out: OutOpt = None,
 ) -> None:
-    """Say per stage whether it is up to date, stale (and why) or missing."""
-    try:
-        states = _runner(workflow, out).status()
-    except DebistError as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from None
+    """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
+    from pipeline import outdir
+    from pipeline.runner import STAGES
+
+    with _guard():
+        runner = _runner(workflow, out)
+        states = runner.status()
+        warning = ""
+        try:
+            outdir.check_output_dir(
+                runner.wf.output_dir,
+                workflow=runner.wf.name,
+                workflow_dir=runner.wf.path.parent,
+                sources=[d.source for d in runner.wf.datasets if not d.rig],
+                stages=STAGES,
+            )
+        except DebistError as exc:
+            warning = f"a run would stop: {exc}"
     if as_json:
         typer.echo(json.dumps([s.__dict__ for s in states], indent=2))
         return
     for s in states:
         color = {"up to date": "green", "stale": "yellow", "missing": "red"}[s.state]
         console.print(
-            f"{s.stage:14s} [{color}]{s.state}[/{color}]" + (f"  ({s.reason})" if s.reason else "")
+            f"{s.stage:14s} [{color}]{s.state}[/{color}]"
+            + (f"  ({escape(s.reason)})" if s.reason else ""),
+            soft_wrap=True,
         )
+    if warning:
+        console.print(f"[yellow]{escape(warning)}[/yellow]")
 
 
 @app.command()
-def verify(workflow: WorkflowArg, out: OutOpt = None) -> None:
-    """Re-hash every artifact; exit 3 naming any file that changed."""
-    try:
-        problems = _runner(workflow, out).verify()
-    except (WorkflowError, ArtifactError) as exc:
-        err.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from None
-    if problems:
-        for p in problems:
-            err.print(f"[red]changed:[/red] {escape(p)}")
-        raise typer.Exit(3)
-    console.print("[green]all artifacts match their manifests[/green]")
+def verify(
+    workflow: WorkflowArg,
+    digest: Annotated[
+        str | None,
+        typer.Option(
+            "--digest",
+            help="The run digest that `run` printed: the manifests must be exactly those.",
+        ),
+    ] = None,
+    out: OutOpt = None,
+) -> None:
+    """Re-hash every artifact and check the chain of manifests; exit 3 naming any problem.
+
+    With --digest, the manifests must also be exactly those of the quoted run.
+    """
+    with _guard():
+        problems = _runner(workflow, out).verify(digest)
+        if problems:
+            for p in problems:
+                err.print(f"[red]problem:[/red] {escape(p)}")
+            raise typer.Exit(exit_code(VerificationError(problems)))
+    what = "the quoted digest, " if digest else ""
+    console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
 
 
 StagesOpt = Annotated[
@@ -221,19 +291,24 @@ SchedulerOpt = Annotated[
     str | None,
     typer.Option(
         "--scheduler",
-        help="synchronous | threads | processes | distributed "
-        "(default: processes, or distributed with --address).",
+        help="processes (default): a local Dask cluster of worker processes under nannies; "
+        "a workflow whose worker dies is retried once, then reported failed, and the others "
+        "run on | distributed: the cluster at --address (the default with --address) | "
+        "threads: one process | synchronous: one thread, for debugging.",
     ),
 ]
 WorkersOpt = Annotated[
     int | None,
-    typer.Option("--workers", min=1, help="Local worker processes (default: one per core)."),
+    typer.Option(
+        "--workers",
+        min=1,
+        help="Local worker processes, or threads (default: one per workflow, at most one "
+        "per core).",
+    ),
 ]
 AddressOpt = Annotated[
     str | None,
-    typer.Option(
-        "--address", help='Dask scheduler, e.g. tcp://host:8786 (pip install "debist\\[cluster]").'
-    ),
+    typer.Option("--address", help="A running Dask scheduler, e.g. tcp://host:8786."),
 ]
 
 
@@ -249,7 +324,10 @@ def batch(
     workers: WorkersOpt = None,
     address: AddressOpt = None,
 ) -> None:
-    """Run many workflows (one per prototype) on Dask; exit 1 if any of them failed."""
+    """Run many workflows (one per prototype) on Dask; exit 1 if any of them failed.
+
+    Ends with a summary table, one row per workflow file, also after failures.
+    """
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -282,13 +360,15 @@ def batch(
     frame = summary_table(results)
     failed = int((frame.status == "failed").sum())
     table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
-    for column in ("workflow", "status", "seconds", "ran", "skipped", "RBF NRMSE(q)", "error"):
+    columns = ("workflow file", "name", "status", "seconds", "ran", "skipped")
+    for column in (*columns, "RBF NRMSE(q)", "error"):
         justify = "right" if column == "seconds" else "left"
         table.add_column(column, overflow="fold", justify=justify)
     for row in frame.itertuples(index=False):
         style = "red" if row.status == "failed" else "green"
         where = f"{row.failed_stage}: " if row.failed_stage else ""
         table.add_row(
+            escape(row.file),
             escape(row.name),
             f"[{style}]{row.status}[/{style}]",
             f"{row.seconds:.1f}",
@@ -303,7 +383,8 @@ def batch(
 
 
 def main() -> None:
-    """Entry point of the ``debist`` console script."""
+    """Entry point of the ``debist`` console script (SIGTERM stops as cleanly as Ctrl-C)."""
+    signal.signal(signal.SIGTERM, _on_sigterm)
     app()
 
 

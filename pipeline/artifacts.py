@@ -1,19 +1,29 @@
-"""Stage artifacts: the only module that reads and writes stage outputs.
+"""Stage artifacts: the only module that reads and writes stage folders.
 
-Every stage directory ``<output_dir>/<stage>/`` holds the stage's outputs and a
-``manifest.json`` with the stage key, the sha256 of every input and output, the
-resolved configuration section and the versions of the libraries that made it.
+Every stage folder ``<output_dir>/<stage>/`` holds the stage's outputs, ``summary.json``
+(the small results that reports print, hashed like every output), ``manifest.json`` and
+``timings.json``. The manifest holds the stage key, the code fingerprint and library
+versions, the resolved configuration, the sha256 of every input, of every upstream stage's
+manifest (the chain) and of every output. It is byte-deterministic: no time stamps, no
+absolute paths; wall times go to ``timings.json``, which no hash covers.
 
-Writes are atomic: the outputs go to a temporary sibling directory, are hashed,
-the manifest is written last, and the directory is then swapped into place. A
-failed or interrupted stage leaves the previous state (or nothing), never half a
-stage. Parquet and HDF5 outputs are written byte-reproducibly (fixed column order
-and dtypes, zstd, no index, no timestamps; HDF5 without object time stamps), so
-the same workflow run twice on the same machine gives identical files.
+Writes are atomic: the outputs go to a temporary sibling folder, are hashed, the manifest
+is written last, and the folder is swapped into place (old folder moved aside, new one
+moved in, old one removed) with SIGINT and SIGTERM deferred until it is done. A process
+killed in between (SIGKILL, power loss) leaves ``.<stage>.tmp-*`` or ``.<stage>.old-*`` folders
+(:data:`SWAP_FOLDER`), which :func:`pipeline.outdir.recover` resolves. A stage folder is
+only ever replaced when every file in it is listed by its manifest: a file debist did not
+write is never deleted.
+
+The output folder as a whole (its owner, its lock, the recovery of leftovers and the run
+digest) is :mod:`pipeline.outdir`.
 
 References
 ----------
-DESIGN.md of the project ("Stages and artifacts").
+POSIX ``rename(2)`` (atomic replacement within a file system); Python documentation,
+:mod:`signal` (handlers run in the main thread); dvc's run cache
+(https://dvc.org/doc/user-guide/project-structure/internal-files) as the model of stages
+addressed by the hash of their inputs.
 """
 
 from __future__ import annotations
@@ -21,105 +31,109 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
+import secrets
 import shutil
+import signal
 import tempfile
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pipeline import __version__
-from pipeline.errors import ArtifactError
+from pipeline.errors import ArtifactError, OutputDirError
+from pipeline.faults import fault_point
+from pipeline.fileformats import (
+    Figure,
+    FileWriter,
+    H5Tree,
+    canonical_json,
+    read_h5,
+    read_parquet,
+    sha256_file,
+    write_output,
+)
+
+__all__ = [
+    "MANIFEST",
+    "SCHEMA_VERSION",
+    "SUMMARY",
+    "SWAP_FOLDER",
+    "TIMINGS",
+    "Figure",
+    "FileWriter",
+    "H5Tree",
+    "Manifest",
+    "canonical_json",
+    "changed_outputs",
+    "foreign_files",
+    "foreign_message",
+    "library_versions",
+    "manifest_digest",
+    "read_h5",
+    "read_manifest",
+    "read_parquet",
+    "read_summary",
+    "sha256_file",
+    "stage_key",
+    "write_stage",
+    "write_text_files",
+]
 
 MANIFEST = "manifest.json"
+#: The stage's small results for reports: an output like any other (hashed).
+SUMMARY = "summary.json"
+#: Wall times of the stage [s]: the one file of a stage folder that no hash covers.
+TIMINGS = "timings.json"
 #: Version of the artifact layout; part of every stage key.
-SCHEMA_VERSION = 1
-_LIBRARIES = ("numpy", "scipy", "pandas", "pyarrow", "h5py", "pysindy")
+SCHEMA_VERSION = 2
+#: Files of a stage folder that its manifest does not list as outputs.
+_UNLISTED = frozenset({MANIFEST, TIMINGS})
+#: Names of the temporary (``tmp``) and moved-aside (``old``) folders of a stage swap.
+SWAP_FOLDER = re.compile(r"^\.(?P<stage>[A-Za-z0-9_-]+)\.(?P<kind>tmp|old)-[0-9a-f]+$")
+_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
-def sha256_file(path: str | os.PathLike) -> str:
-    """Return the hex sha256 digest of a file's bytes.
+def sha256_bytes(data: bytes) -> str:
+    """Return the hex sha256 digest of ``data``.
 
     Parameters
     ----------
-    path : path-like
-        File to hash.
+    data : bytes
+        The content.
 
     Returns
     -------
     str
         64 hexadecimal characters.
 
-    Raises
-    ------
-    FileNotFoundError
-        If the file does not exist.
+    Examples
+    --------
+    >>> sha256_bytes(b"")[:12]
+    'e3b0c44298fc'
     """
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return hashlib.sha256(data).hexdigest()
 
 
-def canonical_json(obj: Any) -> str:
-    """Serialise ``obj`` to canonical JSON (sorted keys, no spaces, NumPy scalars as floats).
+def library_versions(names: Sequence[str]) -> dict[str, str]:
+    """Return the installed versions of libraries, and debist's own.
 
     Parameters
     ----------
-    obj : object
-        JSON-compatible data; NumPy scalars, arrays and paths are converted.
-
-    Returns
-    -------
-    str
-        The canonical text, identical for equal content.
-    """
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    raise TypeError(f"cannot serialise {type(obj).__name__} in a stage config")
-
-
-def code_version() -> str:
-    """Return the code version that enters every stage key.
-
-    The package version plus the sha256 of the sources of the ``pipeline``
-    package, so that any change of the code reruns the stages it may affect.
-
-    Returns
-    -------
-    str
-        ``"<version>+<first 12 hex digits of the source hash>"``.
-    """
-    root = Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode())
-        digest.update(path.read_bytes())
-    return f"{__version__}+{digest.hexdigest()[:12]}"
-
-
-def library_versions() -> dict[str, str]:
-    """Return the installed versions of the numerical libraries recorded in manifests.
+    names : sequence of str
+        Distribution names (e.g. ``"numpy"``).
 
     Returns
     -------
     dict of str to str
-        Distribution name to version (``"absent"`` when not installed).
+        ``"debist"`` and each name to its version (``"absent"`` when not installed).
     """
     versions = {"debist": __version__}
-    for name in _LIBRARIES:
+    for name in names:
         try:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
@@ -127,218 +141,193 @@ def library_versions() -> dict[str, str]:
     return versions
 
 
-def stage_key(stage: str, config: Mapping[str, Any], inputs: Mapping[str, str]) -> str:
+def stage_key(
+    stage: str,
+    *,
+    code: str,
+    versions: Mapping[str, str],
+    config: Mapping[str, Any],
+    inputs: Mapping[str, str],
+    upstream: Mapping[str, str],
+) -> str:
     """Compute the key of a stage run.
 
     Parameters
     ----------
     stage : str
         Stage name.
+    code : str
+        Fingerprint of the code the stage runs (:func:`pipeline.fingerprint.code_fingerprint`).
+    versions : mapping of str to str
+        Versions of the libraries the stage uses.
     config : mapping
-        The resolved configuration section of the stage.
+        The resolved configuration of the stage.
     inputs : mapping of str to str
-        Input name to sha256 of its content.
+        Input name to sha256 of its content (source files, upstream outputs).
+    upstream : mapping of str to str
+        Upstream stage to the sha256 of its ``manifest.json``.
 
     Returns
     -------
     str
-        sha256 of the canonical JSON of stage name, schema version, code version,
-        configuration and input hashes. No timestamps enter the key.
+        sha256 of the canonical JSON of all of the above and the schema version. No time
+        stamps or paths enter the key.
     """
     payload = {
         "stage": stage,
         "schema": SCHEMA_VERSION,
-        "code": code_version(),
+        "code": code,
+        "versions": dict(versions),
         "config": config,
         "inputs": dict(inputs),
+        "upstream": dict(upstream),
     }
-    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
-
-
-# --------------------------------------------------------------------------- writers
-
-
-def _write_parquet(frame: Any, path: Path) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    table = pa.Table.from_pandas(frame, preserve_index=False)
-    meta = dict(table.schema.metadata or {})
-    attrs = getattr(frame, "attrs", {}) or {}
-    if attrs:
-        meta[b"debist"] = canonical_json(attrs).encode()
-    table = table.replace_schema_metadata(meta)
-    pq.write_table(table, path, compression="zstd", write_statistics=True)
-
-
-def _write_h5_group(group: Any, tree: Mapping[str, Any]) -> None:
-    for name, value in tree.items():
-        if name == "attrs":
-            for key, attr in value.items():
-                group.attrs[key] = attr
-        elif isinstance(value, Mapping):
-            _write_h5_group(group.create_group(name), value)
-        else:
-            data = np.asarray(value)
-            if data.dtype.kind == "U":
-                data = data.astype(object)
-                group.create_dataset(name, data=data, dtype=_h5_str(), track_times=False)
-            else:
-                group.create_dataset(name, data=data, track_times=False)
-
-
-def _h5_str() -> Any:
-    import h5py
-
-    return h5py.string_dtype("utf-8")
-
-
-def _write_h5(tree: Mapping[str, Any], path: Path) -> None:
-    import h5py
-
-    with h5py.File(path, "w", libver=("earliest", "v110")) as fh:
-        _write_h5_group(fh, tree)
-
-
-@dataclass(frozen=True)
-class H5Tree:
-    """A nested mapping to be written as an HDF5 file.
-
-    Parameters
-    ----------
-    tree : mapping
-        Group name to nested mapping, dataset name to array-like; the key
-        ``"attrs"`` of a mapping holds that group's attributes.
-    """
-
-    tree: Mapping[str, Any]
-
-
-@dataclass(frozen=True)
-class Figure:
-    """A matplotlib figure to be written as PNG (closed after writing).
-
-    Parameters
-    ----------
-    figure : matplotlib.figure.Figure
-        The figure.
-    dpi : int, optional
-        Resolution [dots per inch].
-    """
-
-    figure: Any
-    dpi: int = 110
-
-
-@dataclass(frozen=True)
-class MatRecording:
-    """A dSPACE ControlDesk recording to be written as a MAT file (the virtual rig's log).
-
-    Parameters
-    ----------
-    recording : mapping
-        The value of :func:`pipeline.rig.dspace.recording`.
-    version : {"5", "7.3"}
-        MAT file version.
-    created : str
-        Fixed header timestamp (the file must be a function of its inputs).
-    """
-
-    recording: Mapping[str, Any]
-    version: str
-    created: str
-
-
-def _write_output(value: Any, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if isinstance(value, H5Tree):
-        _write_h5(value.tree, path)
-    elif isinstance(value, MatRecording):
-        from pipeline.rig.dspace import write_recording
-
-        write_recording(path, value.recording, version=value.version, created=value.created)
-    elif isinstance(value, Figure):
-        import matplotlib.pyplot as plt
-
-        value.figure.savefig(path, dpi=value.dpi, metadata={"Software": None})
-        plt.close(value.figure)
-    elif isinstance(value, str):
-        path.write_text(value, encoding="utf-8")
-    elif isinstance(value, bytes):
-        path.write_bytes(value)
-    elif hasattr(value, "to_parquet"):
-        _write_parquet(value, path)
-    else:
-        raise TypeError(f"no writer for output '{path.name}' of type {type(value).__name__}")
-
-
-# --------------------------------------------------------------------------- stage dirs
+    return sha256_bytes(canonical_json(payload).encode())
 
 
 @dataclass(frozen=True)
 class Manifest:
-    """The manifest of one stage directory.
+    """The manifest of one stage folder.
 
     Attributes
     ----------
     stage : str
         Stage name.
     key : str
-        Stage key (see :func:`stage_key`).
+        Stage key (:func:`stage_key` of the fields below).
+    code : str
+        Fingerprint of the stage's code.
+    versions : dict of str to str
+        Versions of the libraries the stage used.
+    config : dict
+        The resolved configuration.
     inputs : dict of str to str
         Input name to sha256.
+    upstream : dict of str to str
+        Upstream stage to the sha256 of its ``manifest.json``: the chain.
     outputs : dict of str to str
-        Output path relative to the stage directory to sha256.
-    config : dict
-        The resolved configuration section.
-    versions : dict of str to str
-        Library versions.
-    code : str
-        Code version (:func:`code_version`).
+        Output path relative to the stage folder to sha256 (``summary.json`` included).
     summary : dict
-        Small stage-specific results for reports (e.g. RMS values).
+        The content of ``summary.json`` once checked against its hash (not part of the
+        manifest file; empty until loaded).
     """
 
     stage: str
     key: str
-    inputs: dict[str, str]
-    outputs: dict[str, str]
-    config: dict[str, Any]
-    versions: dict[str, str]
     code: str
-    summary: dict[str, Any] = field(default_factory=dict)
+    versions: dict[str, str]
+    config: dict[str, Any]
+    inputs: dict[str, str]
+    upstream: dict[str, str]
+    outputs: dict[str, str]
+    summary: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def to_json(self) -> str:
-        """Return the manifest as indented, key-sorted JSON text."""
-        return json.dumps(self.__dict__, indent=2, sort_keys=True, default=_json_default) + "\n"
+        """Return the manifest file's text: indented, key-sorted JSON without ``summary``."""
+        data = asdict(self)
+        del data["summary"]
+        return json.dumps(data, indent=2, sort_keys=True) + "\n"
+
+    def expected_key(self) -> str:
+        """Return the key that this manifest's own fields give (a check against edits)."""
+        return stage_key(
+            self.stage,
+            code=self.code,
+            versions=self.versions,
+            config=self.config,
+            inputs=self.inputs,
+            upstream=self.upstream,
+        )
 
 
 def read_manifest(stage_dir: str | os.PathLike) -> Manifest | None:
-    """Read a stage directory's manifest.
+    """Read a stage folder's manifest.
 
     Parameters
     ----------
     stage_dir : path-like
-        The stage directory.
+        The stage folder.
 
     Returns
     -------
     Manifest or None
-        None when the directory or its manifest does not exist.
+        None when the folder or its manifest does not exist.
 
     Raises
     ------
     ArtifactError
-        If the manifest exists but cannot be parsed.
+        If the manifest exists but cannot be parsed (or is of an older layout).
     """
     path = Path(stage_dir) / MANIFEST
     if not path.is_file():
         return None
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise TypeError(f"expected a JSON object, got {type(data).__name__}")
+        if "summary" in data and "upstream" not in data:  # layout 1 (before the chain)
+            data = {
+                "stage": data["stage"],
+                "key": f"layout-1:{data['key']}",  # never equal to a computed key: stale
+                "code": str(data.get("code", "")),
+                "versions": data.get("versions", {}),
+                "config": data.get("config", {}),
+                "inputs": data.get("inputs", {}),
+                "upstream": {},
+                "outputs": data["outputs"],
+            }
         return Manifest(**data)
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, KeyError) as exc:
         raise ArtifactError(f"manifest '{path}' is unreadable: {exc}") from exc
+
+
+def manifest_digest(stage_dir: str | os.PathLike) -> str | None:
+    """Return the sha256 of a stage folder's ``manifest.json`` (None when it has none).
+
+    Parameters
+    ----------
+    stage_dir : path-like
+        The stage folder.
+
+    Returns
+    -------
+    str or None
+        64 hexadecimal characters, or None.
+    """
+    path = Path(stage_dir) / MANIFEST
+    return sha256_file(path) if path.is_file() else None
+
+
+def read_summary(stage_dir: str | os.PathLike, manifest: Manifest) -> dict[str, Any]:
+    """Read a stage's ``summary.json`` after checking it against its manifest.
+
+    Parameters
+    ----------
+    stage_dir : path-like
+        The stage folder.
+    manifest : Manifest
+        Its manifest.
+
+    Returns
+    -------
+    dict
+        The summary (empty for a stage without one).
+
+    Raises
+    ------
+    ArtifactError
+        If ``summary.json`` is missing or does not hash to the manifest: a report is never
+        printed from content the manifest does not vouch for.
+    """
+    expected = manifest.outputs.get(SUMMARY)
+    if expected is None:
+        return {}
+    path = Path(stage_dir) / SUMMARY
+    if not path.is_file() or sha256_file(path) != expected:
+        raise ArtifactError(
+            f"'{path}' is missing or changed since the stage wrote it (run `debist verify`)"
+        )
+    return json.loads(path.read_text(encoding="utf-8"))
 
 
 def changed_outputs(stage_dir: str | os.PathLike, manifest: Manifest) -> list[str]:
@@ -347,15 +336,16 @@ def changed_outputs(stage_dir: str | os.PathLike, manifest: Manifest) -> list[st
     Parameters
     ----------
     stage_dir : path-like
-        The stage directory.
+        The stage folder.
     manifest : Manifest
         Its manifest.
 
     Returns
     -------
     list of str
-        Paths (relative to the stage directory) that are missing or modified,
-        followed by files present in the directory but absent from the manifest.
+        Paths (relative to the stage folder) that are missing or modified, followed by
+        files present in the folder but absent from the manifest (``timings.json``
+        excepted).
     """
     root = Path(stage_dir)
     changed = []
@@ -365,12 +355,44 @@ def changed_outputs(stage_dir: str | os.PathLike, manifest: Manifest) -> list[st
             changed.append(f"{rel} (missing)")
         elif sha256_file(path) != digest:
             changed.append(f"{rel} (modified)")
-    listed = set(manifest.outputs) | {MANIFEST}
+    listed = set(manifest.outputs) | _UNLISTED
     for path in sorted(root.rglob("*")):
         rel = path.relative_to(root).as_posix()
-        if path.is_file() and rel not in listed:
+        if not path.is_dir() and rel not in listed:
             changed.append(f"{rel} (not in manifest)")
     return changed
+
+
+def foreign_files(stage_dir: str | os.PathLike) -> list[str]:
+    """List the files of an existing stage folder that debist did not write there.
+
+    Parameters
+    ----------
+    stage_dir : path-like
+        The stage folder (need not exist).
+
+    Returns
+    -------
+    list of str
+        Paths relative to the folder: every file when the folder has no manifest (or an
+        unreadable one), else the files its manifest does not list. Empty for a missing
+        folder. Such a folder is never replaced.
+    """
+    root = Path(stage_dir)
+    if not root.exists():
+        return []
+    if not root.is_dir():
+        return ["."]
+    try:
+        manifest = read_manifest(root)
+    except ArtifactError:
+        manifest = None
+    listed = set(manifest.outputs) | _UNLISTED if manifest is not None else set()
+    return [
+        path.relative_to(root).as_posix()
+        for path in sorted(root.rglob("*"))
+        if not path.is_dir() and path.relative_to(root).as_posix() not in listed
+    ]
 
 
 def write_stage(
@@ -378,75 +400,158 @@ def write_stage(
     *,
     stage: str,
     key: str,
-    inputs: Mapping[str, str],
+    code: str,
+    versions: Mapping[str, str],
     config: Mapping[str, Any],
+    inputs: Mapping[str, str],
+    upstream: Mapping[str, str],
     outputs: Mapping[str, Any],
     summary: Mapping[str, Any] | None = None,
+    timings: Mapping[str, float] | None = None,
 ) -> Manifest:
-    """Write a stage's outputs and manifest atomically.
+    """Write a stage's outputs, summary and manifest atomically.
 
     Parameters
     ----------
     stage_dir : path-like
-        Final stage directory; replaced as a whole.
-    stage, key : str
-        Stage name and key.
+        Final stage folder; replaced as a whole.
+    stage, key, code : str
+        Stage name, key and code fingerprint.
+    versions : mapping of str to str
+        Library versions.
+    config : mapping
+        Resolved configuration (stored in the manifest).
     inputs : mapping of str to str
         Input name to sha256.
-    config : mapping
-        Resolved configuration section (stored in the manifest).
+    upstream : mapping of str to str
+        Upstream stage to the sha256 of its manifest.
     outputs : mapping of str to object
-        Relative output path to value: a pandas DataFrame (Parquet), an
-        :class:`H5Tree` (HDF5), a :class:`Figure` (PNG), ``str`` or ``bytes``.
+        Relative output path to value (see :func:`pipeline.fileformats.write_output`).
     summary : mapping, optional
-        Small JSON-compatible results stored in the manifest for reports.
+        Small JSON-compatible results for reports, written as ``summary.json``.
+    timings : mapping of str to float, optional
+        Wall times [s], written to the unhashed ``timings.json``.
 
     Returns
     -------
     Manifest
-        The manifest written.
+        The manifest written, with its ``summary``.
 
     Raises
     ------
+    OutputDirError
+        If the existing stage folder holds files its manifest does not list (named;
+        nothing is written, moved or deleted).
     TypeError
         If an output has no writer. Nothing is left behind in that case.
     """
     final = Path(stage_dir)
+    foreign = foreign_files(final)
+    if foreign:
+        raise OutputDirError(_foreign_message(final, foreign))
+    if SUMMARY in outputs or MANIFEST in outputs or TIMINGS in outputs:
+        raise TypeError(f"output names {SUMMARY}, {MANIFEST}, {TIMINGS} are reserved")
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    tmp = final.parent / f".{final.name}.tmp-{secrets.token_hex(6)}"
+    os.mkdir(tmp)  # mode 0o777 less the umask, unlike tempfile.mkdtemp's 0o700
     try:
         hashes = {}
-        for rel in sorted(outputs):
+        summary_json = json.dumps(
+            json.loads(canonical_json(dict(summary or {}))), indent=2, sort_keys=True
+        )
+        for rel, value in [*sorted(outputs.items()), (SUMMARY, summary_json + "\n")]:
             path = tmp / rel
-            _write_output(outputs[rel], path)
+            write_output(value, path)
             hashes[rel] = sha256_file(path)
         manifest = Manifest(
             stage=stage,
             key=key,
-            inputs=dict(inputs),
-            outputs=hashes,
+            code=code,
+            versions=dict(versions),
             config=json.loads(canonical_json(config)),
-            versions=library_versions(),
-            code=code_version(),
-            summary=json.loads(canonical_json(dict(summary or {}))),
+            inputs=dict(inputs),
+            upstream=dict(upstream),
+            outputs=hashes,
+        )
+        (tmp / TIMINGS).write_text(
+            json.dumps(dict(timings or {}), indent=2, sort_keys=True) + "\n", encoding="utf-8"
         )
         (tmp / MANIFEST).write_text(manifest.to_json(), encoding="utf-8")
-        _swap_into_place(tmp, final)
+        fault_point(f"swap:{stage}:written")
+        _swap_into_place(tmp, final, stage)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return manifest
+    return Manifest(**{**asdict(manifest), "summary": json.loads(summary_json)})
 
 
-def _swap_into_place(tmp: Path, final: Path) -> None:
-    old = None
-    if final.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
-        old.rmdir()
-        os.replace(final, old)
-    os.replace(tmp, final)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Defer SIGINT and SIGTERM until the block ends (main thread; elsewhere a no-op).
+
+    Python runs signal handlers in the main thread, whichever thread the OS delivered the
+    signal to, so replacing the handlers there defers a signal reliably (a thread's signal
+    mask does not: another thread of the process, e.g. a BLAS worker, may receive it). A
+    deferred signal is handed to the previous handler when the block ends.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = {
+        s: signal.signal(s, lambda signum, _frame: pending.append(signum)) for s in _SIGNALS
+    }
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in pending:
+            handler = previous[s]
+            if callable(handler):
+                handler(s, None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(s)
+
+
+def _swap_into_place(tmp: Path, final: Path, stage: str) -> None:
+    with _signals_held():
+        old = None
+        if final.exists():
+            old = final.parent / f".{final.name}.old-{secrets.token_hex(6)}"
+            os.replace(final, old)
+            fault_point(f"swap:{stage}:moved-old")
+        os.replace(tmp, final)
+        fault_point(f"swap:{stage}:moved-new")
+        if old is not None:
+            shutil.rmtree(old)
+
+
+def _foreign_message(folder: Path, files: Sequence[str]) -> str:
+    shown = ", ".join(f"'{f}'" for f in files[:5])
+    more = f" and {len(files) - 5} more" if len(files) > 5 else ""
+    return (
+        f"stage folder '{folder}' holds files debist did not write: {shown}{more}; "
+        "move them elsewhere (debist never deletes a file it did not write)"
+    )
+
+
+def foreign_message(folder: str | os.PathLike, files: Sequence[str]) -> str:
+    """Return the message that names the foreign files of a stage folder.
+
+    Parameters
+    ----------
+    folder : path-like
+        The stage folder.
+    files : sequence of str
+        Its foreign files (:func:`foreign_files`).
+
+    Returns
+    -------
+    str
+        One line naming the folder and up to five files.
+    """
+    return _foreign_message(Path(folder), files)
 
 
 def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> list[Path]:
@@ -466,7 +571,7 @@ def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> lis
 
     Raises
     ------
-    ArtifactError
+    OutputDirError
         If a file of that name exists already: nothing a user has is overwritten, and
         nothing is written.
     """
@@ -474,7 +579,7 @@ def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> lis
     final.mkdir(parents=True, exist_ok=True)
     existing = [name for name in files if (final / name).exists()]
     if existing:
-        raise ArtifactError(
+        raise OutputDirError(
             f"'{final / existing[0]}' exists ({len(existing)} file(s) in all): choose another "
             "folder or remove them"
         )
@@ -493,83 +598,3 @@ def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> lis
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return [final / name for name in files]
-
-
-# --------------------------------------------------------------------------- readers
-
-
-def read_parquet(path: str | os.PathLike) -> Any:
-    """Read a Parquet artifact into a DataFrame, restoring the ``attrs`` metadata.
-
-    Parameters
-    ----------
-    path : path-like
-        Parquet file written by this module.
-
-    Returns
-    -------
-    pandas.DataFrame
-        The table, with ``attrs`` as stored.
-
-    Raises
-    ------
-    ArtifactError
-        If the file is missing or unreadable.
-    """
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path)
-    except (OSError, ValueError) as exc:
-        raise ArtifactError(f"cannot read artifact '{path}': {exc}") from exc
-    frame = table.to_pandas()
-    raw = (table.schema.metadata or {}).get(b"debist")
-    if raw:
-        frame.attrs.update(json.loads(raw))
-    return frame
-
-
-def read_h5(path: str | os.PathLike) -> dict[str, Any]:
-    """Read an HDF5 artifact into a nested dict (the inverse of :class:`H5Tree`).
-
-    Parameters
-    ----------
-    path : path-like
-        HDF5 file written by this module.
-
-    Returns
-    -------
-    dict
-        Nested mapping of NumPy arrays; each group's attributes under ``"attrs"``.
-
-    Raises
-    ------
-    ArtifactError
-        If the file is missing or unreadable.
-    """
-    import h5py
-
-    def load(group: Any) -> dict[str, Any]:
-        out: dict[str, Any] = {"attrs": {k: _attr(v) for k, v in group.attrs.items()}}
-        for name, item in group.items():
-            if isinstance(item, h5py.Group):
-                out[name] = load(item)
-            elif item.dtype.kind == "O":
-                out[name] = np.array([s.decode() if isinstance(s, bytes) else s for s in item[()]])
-            else:
-                out[name] = item[()]
-        return out
-
-    try:
-        with h5py.File(path, "r") as fh:
-            return load(fh)
-    except OSError as exc:
-        raise ArtifactError(f"cannot read artifact '{path}': {exc}") from exc
-
-
-def _attr(value: Any) -> Any:
-    if isinstance(value, bytes):
-        return value.decode()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

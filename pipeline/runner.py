@@ -1,45 +1,41 @@
-"""Run a workflow's stages with content-hash caching; report status; verify artifacts.
+"""Run a workflow's stages with content-hash caching; report status; verify a run.
 
-A stage is up to date when its manifest's key equals the key computed from the
-current configuration, code and input hashes, and its outputs still hash to the
-manifest. ``run`` skips such stages; anything else is rerun, and so is
-everything downstream whose inputs change as a result.
+A stage is up to date when its manifest's key equals the key computed from the current
+configuration, the fingerprint of the stage's code, its libraries' versions, its input
+hashes and its upstream manifests, and its outputs still hash to the manifest. ``run``
+skips such stages; anything else is rerun, and so is everything downstream whose inputs
+change as a result.
+
+Before a run writes anything it checks the output folder (:mod:`pipeline.outdir`: its
+owner, forbidden places, foreign files in stage folders), takes the folder's lock and
+resolves the leftovers of an interrupted run. ``status`` and ``verify`` only read.
 """
 
 from __future__ import annotations
 
+import importlib
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from pipeline import artifacts
-from pipeline.errors import ArtifactError, WorkflowError
+from pipeline import artifacts, outdir, registry
+from pipeline.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
+from pipeline.faults import fault_point
+from pipeline.fingerprint import code_fingerprint
 from pipeline.workflow import Workflow
 
-#: Stages in execution order and the stages each reads from.
-STAGES = ("rig", "ingest", "differentiate", "identify", "validate", "compare", "study", "analyze")
-#: Stages that run only when the workflow has their section.
-OPTIONAL = ("rig", "study", "analyze")
+#: Stage names in execution order.
+STAGES = registry.names()
 #: Stages that read measured data sets.
 DATA_STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "study")
-UPSTREAM = {
-    "rig": (),
-    "ingest": (),  # plus "rig" when a data set is a virtual-rig log (Runner._upstream)
-    "differentiate": ("ingest",),
-    "identify": ("ingest", "differentiate"),
-    "validate": ("ingest", "differentiate", "identify"),
-    "compare": ("ingest", "differentiate", "validate"),
-    "study": ("ingest", "differentiate"),
-    "analyze": (),
-}
 
 
 @dataclass(frozen=True)
 class StageStatus:
-    """State of one stage directory.
+    """State of one stage folder.
 
     Attributes
     ----------
@@ -48,7 +44,8 @@ class StageStatus:
     state : {"up to date", "stale", "missing"}
         What a run would do: skip, rerun, run.
     reason : str
-        Why it is stale or missing (empty when up to date).
+        Why it is stale or missing (empty when up to date); mentions the leftovers of an
+        interrupted run and what the next run does with them.
     """
 
     stage: str
@@ -82,14 +79,34 @@ def physics_params(wf: Workflow):
     return PrototypeParams.from_dict(wf.section("physics"))
 
 
-def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
+def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
+    """Return the resolved configuration of a stage: what of the workflow its key hashes.
+
+    Parameters
+    ----------
+    wf : Workflow
+        The workflow.
+    stage : str
+        Stage name.
+
+    Returns
+    -------
+    dict
+        JSON-compatible; source paths relative to the workflow file, so the same workflow
+        gives the same keys in any clone.
+
+    Raises
+    ------
+    WorkflowError
+        On an invalid ``[physics]`` section.
+    """
     if stage == "ingest":
         return {
             "datasets": {
                 d.name: {
                     "source": f"rig:{d.rig}"
                     if d.rig
-                    else os.path.relpath(d.source, wf.path.parent),
+                    else Path(os.path.relpath(d.source, wf.path.parent)).as_posix(),
                     "role": d.role,
                     "ingest": d.ingest,
                 }
@@ -116,21 +133,27 @@ def _stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
 class Runner:
     """Executes, inspects and verifies the stages of one workflow.
 
+    Implements :class:`pipeline.stages.StageInputs` for the stages it runs.
+
     Parameters
     ----------
     workflow : Workflow
         The parsed workflow.
+    wait : bool, optional
+        When another process writes to the same output folder, wait for it instead of
+        refusing.
     """
 
-    def __init__(self, workflow: Workflow):
+    def __init__(self, workflow: Workflow, *, wait: bool = False):
         self.wf = workflow
+        self.wait = wait
         self._source_hashes: dict[Path, str] = {}
 
     def stages(self) -> list[str]:
-        """List the stages of this workflow.
+        """List the stages of this workflow, in execution order.
 
-        The data stages when it has data sets, ``study`` with a ``[study]`` section, and
-        ``analyze`` with an ``[analyze]`` section or when ``[physics]`` is all there is.
+        The data stages when it has data sets, the optional stages with their section, and
+        ``analyze`` also when ``[physics]`` is all there is.
         """
         out = []
         for s in STAGES:
@@ -141,90 +164,180 @@ class Runner:
                     "physics" in self.wf.sections and not self.wf.datasets
                 ):
                     out.append(s)
-            elif s not in OPTIONAL or s in self.wf.sections:
+            elif s not in registry.OPTIONAL or s in self.wf.sections:
                 out.append(s)
         return out
+
+    # ------------------------------------------------------- stage inputs
+    def section(self, name: str) -> dict[str, Any]:
+        """Return a section of the workflow (empty when absent)."""
+        return self.wf.section(name)
+
+    def physics(self):
+        """Return the ``[physics]`` prototype, or None without that section."""
+        return physics_params(self.wf) if "physics" in self.wf.sections else None
+
+    def stage_config(self, stage: str) -> dict[str, Any]:
+        """Return the resolved configuration of a stage (:func:`stage_config`)."""
+        return stage_config(self.wf, stage)
+
+    def _manifest(self, stage: str) -> artifacts.Manifest:
+        manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
+        if manifest is None:
+            raise ArtifactError(f"stage '{stage}' has no artifacts in '{self.wf.stage_dir(stage)}'")
+        return manifest
+
+    def tables(self, stage: str) -> dict[str, Any]:
+        """Load the per-data-set Parquet tables of a stage (ingest or differentiate).
+
+        Parameters
+        ----------
+        stage : str
+            Stage name.
+
+        Returns
+        -------
+        dict of str to pandas.DataFrame
+            Table name to table, in name order.
+
+        Raises
+        ------
+        ArtifactError
+            If the stage has no artifacts.
+        """
+        manifest = self._manifest(stage)
+        return {
+            Path(rel).stem: artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
+            for rel in sorted(manifest.outputs)
+            if rel.endswith(".parquet") and "/" not in rel
+        }
+
+    def read_h5(self, stage: str, rel: str) -> dict[str, Any]:
+        """Read an HDF5 artifact of an upstream stage (see :mod:`pipeline.artifacts`)."""
+        self._manifest(stage)
+        return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
+
+    def read_parquet(self, stage: str, rel: str) -> Any:
+        """Read a Parquet artifact of an upstream stage (see :mod:`pipeline.artifacts`)."""
+        self._manifest(stage)
+        return artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
 
     # ------------------------------------------------------------------ keys
     def _upstream(self, stage: str) -> tuple[str, ...]:
         """Stages whose artifacts ``stage`` reads."""
         if stage == "ingest" and any(d.rig for d in self.wf.datasets):
             return ("rig",)
-        return UPSTREAM[stage]
+        return registry.stage(stage).upstream
 
-    def _inputs(self, stage: str) -> dict[str, str] | None:
-        """Input hashes of a stage, or None when an upstream stage has no manifest."""
-        if stage == "ingest":
-            out = {}
-            rig = artifacts.read_manifest(self.wf.stage_dir("rig"))
-            for d in self.wf.datasets:
-                if d.rig:
-                    if rig is None or f"{d.rig}.mat" not in rig.outputs:
-                        return None
-                    out[f"{d.name}:source"] = rig.outputs[f"{d.rig}.mat"]
-                    continue
-                if d.source not in self._source_hashes:
-                    self._source_hashes[d.source] = artifacts.sha256_file(d.source)
-                out[f"{d.name}:source"] = self._source_hashes[d.source]
-            return out
-        inputs = {}
+    def _inputs(self, stage: str) -> tuple[dict[str, str], dict[str, str]] | None:
+        """Input hashes and upstream manifest hashes, or None when an upstream stage has none."""
+        inputs: dict[str, str] = {}
+        upstream: dict[str, str] = {}
         for up in self._upstream(stage):
             manifest = artifacts.read_manifest(self.wf.stage_dir(up))
             if manifest is None:
                 return None
-            inputs.update({f"{up}/{rel}": h for rel, h in manifest.outputs.items()})
-        return inputs
+            upstream[up] = artifacts.manifest_digest(self.wf.stage_dir(up))
+            if stage != "ingest":
+                inputs.update({f"{up}/{rel}": h for rel, h in manifest.outputs.items()})
+        if stage == "ingest":
+            rig = artifacts.read_manifest(self.wf.stage_dir("rig")) if "rig" in upstream else None
+            for d in self.wf.datasets:
+                if d.rig:
+                    if rig is None or f"{d.rig}.mat" not in rig.outputs:
+                        return None
+                    inputs[f"{d.name}:source"] = rig.outputs[f"{d.rig}.mat"]
+                    continue
+                if d.source not in self._source_hashes:
+                    self._source_hashes[d.source] = artifacts.sha256_file(d.source)
+                inputs[f"{d.name}:source"] = self._source_hashes[d.source]
+        return inputs, upstream
 
-    def _key(self, stage: str) -> tuple[str | None, dict[str, str] | None]:
-        inputs = self._inputs(stage)
-        if inputs is None:
-            return None, None
-        return artifacts.stage_key(stage, _stage_config(self.wf, stage), inputs), inputs
+    def _code(self, stage: str) -> tuple[str, dict[str, str]]:
+        entry = registry.stage(stage)
+        return code_fingerprint(entry.module), artifacts.library_versions(entry.libraries)
+
+    def _key(self, stage: str) -> tuple[str, dict, dict] | None:
+        found = self._inputs(stage)
+        if found is None:
+            return None
+        inputs, upstream = found
+        code, versions = self._code(stage)
+        key = artifacts.stage_key(
+            stage,
+            code=code,
+            versions=versions,
+            config=stage_config(self.wf, stage),
+            inputs=inputs,
+            upstream=upstream,
+        )
+        return key, inputs, upstream
+
+    def _places(self) -> dict[str, Any]:
+        return {
+            "workflow_dir": self.wf.path.parent,
+            "sources": [d.source for d in self.wf.datasets if not d.rig],
+            "stages": STAGES,
+        }
 
     # ---------------------------------------------------------------- status
     def status(self) -> list[StageStatus]:
         """State of every stage: up to date, stale (with the reason) or missing.
+
+        Reads only: leftovers of an interrupted run are reported in the reasons of their
+        stages, not resolved.
 
         Returns
         -------
         list of StageStatus
             In stage order.
         """
+        notes: dict[str, list[str]] = {}
+        for path in outdir.leftovers(self.wf.output_dir):
+            stage = artifacts.SWAP_FOLDER.match(path.name)["stage"]
+            notes.setdefault(stage, []).append(outdir.describe_leftover(path))
         result: list[StageStatus] = []
         rerun: set[str] = set()
         for stage in self.stages():
-            manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
-            if manifest is None:
-                result.append(StageStatus(stage, "missing", "never run"))
+            state, reason = self._state(stage, rerun)
+            if state != "up to date":
                 rerun.add(stage)
-                continue
-            ups = [u for u in self._upstream(stage) if u in rerun]
-            if ups:
-                result.append(StageStatus(stage, "stale", f"upstream '{ups[-1]}' will rerun"))
-                rerun.add(stage)
-                continue
-            reason = self._stale_reason(stage, manifest)
-            if reason:
-                result.append(StageStatus(stage, "stale", reason))
-                rerun.add(stage)
-            else:
-                result.append(StageStatus(stage, "up to date"))
+            extra = "; ".join(notes.get(stage, []))
+            reason = "; ".join(r for r in (reason, extra) if r)
+            result.append(StageStatus(stage, state, reason))
         return result
 
+    def _state(self, stage: str, rerun: set[str]) -> tuple[str, str]:
+        sdir = self.wf.stage_dir(stage)
+        foreign = artifacts.foreign_files(sdir) if sdir.exists() else []
+        manifest = artifacts.read_manifest(sdir)
+        if manifest is None:
+            if foreign:
+                return "missing", artifacts.foreign_message(sdir, foreign)
+            return "missing", "never run"
+        ups = [u for u in self._upstream(stage) if u in rerun]
+        if ups:
+            return "stale", f"upstream '{ups[-1]}' will rerun"
+        reason = self._stale_reason(stage, manifest)
+        return ("stale", reason) if reason else ("up to date", "")
+
     def _stale_reason(self, stage: str, manifest: artifacts.Manifest) -> str:
-        key, inputs = self._key(stage)
         changed = artifacts.changed_outputs(self.wf.stage_dir(stage), manifest)
         if changed:
             return "outputs changed: " + ", ".join(changed[:3])
+        found = self._key(stage)
+        if found is None:
+            return "an upstream stage has no artifacts"
+        key, inputs, upstream = found
         if key == manifest.key:
             return ""
-        config = _stage_config(self.wf, stage)
-        if artifacts.canonical_json(config) != artifacts.canonical_json(manifest.config):
+        config = stage_config(self.wf, stage)
+        canon = artifacts.canonical_json
+        if canon(config) != canon(manifest.config):
             keys = sorted(
                 k
                 for k in set(config) | set(manifest.config)
-                if artifacts.canonical_json(config.get(k))
-                != artifacts.canonical_json(manifest.config.get(k))
+                if canon(config.get(k)) != canon(manifest.config.get(k))
             )
             return f"config changed ({', '.join(keys)})"
         diff = sorted(
@@ -232,9 +345,15 @@ class Runner:
         )
         if diff:
             return "inputs changed: " + ", ".join(diff[:3])
-        if manifest.code != artifacts.code_version():
-            return f"code changed ({manifest.code} -> {artifacts.code_version()})"
-        return "key changed"
+        if upstream != manifest.upstream:
+            return "upstream manifests changed: " + ", ".join(sorted(upstream))
+        code, versions = self._code(stage)
+        if manifest.code != code:
+            return f"code changed ({manifest.code[:12]} -> {code[:12]})"
+        if manifest.versions != versions:
+            diff = sorted(k for k in versions if versions[k] != manifest.versions.get(k))
+            return "library versions changed: " + ", ".join(diff)
+        return "made by an older debist (artifact layout changed)"
 
     # ------------------------------------------------------------------- run
     def run(
@@ -255,15 +374,20 @@ class Runner:
             Rerun even up-to-date stages.
         on_event : callable, optional
             Called as ``on_event(stage, what, detail)`` with ``what`` in
-            ``{"skip", "start", "done"}``.
+            ``{"recovered", "skip", "start", "done"}``.
 
         Returns
         -------
         dict of str to Manifest
-            The manifest of every stage considered.
+            The manifest of every stage considered, with its checked ``summary``.
 
         Raises
         ------
+        OutputDirError
+            Before anything is written: the output folder is not debist's, is a forbidden
+            place, or a stage folder holds files debist did not write (named).
+        RunLockedError
+            Another process writes to the output folder (unless ``wait``).
         ArtifactError
             If an upstream stage has no artifacts.
         DebistError
@@ -273,13 +397,34 @@ class Runner:
         selected = list(stages or self.stages())
         for s in selected:
             if s not in STAGES:
-                raise WorkflowError(f"unknown stage {s!r}; stages: {STAGES}")
+                raise WorkflowError(f"unknown stage {s!r}; stages: {', '.join(STAGES)}")
+        out = self.wf.output_dir
+        with outdir.writing(out, workflow=self.wf.name, wait=self.wait, **self._places()):
+            for line in outdir.recover(out):
+                on_event("", "recovered", line)
+            foreign = {
+                s: found
+                for s in selected
+                if (found := artifacts.foreign_files(self.wf.stage_dir(s)))
+            }
+            if foreign:
+                raise OutputDirError(
+                    "; ".join(
+                        artifacts.foreign_message(self.wf.stage_dir(s), f)
+                        for s, f in foreign.items()
+                    )
+                )
+            return self._run_locked(selected, force, on_event)
+
+    def _run_locked(
+        self, selected: list[str], force: bool, on_event: Event
+    ) -> dict[str, artifacts.Manifest]:
         manifests = {}
         for stage in STAGES:
             if stage not in selected:
                 continue
-            key, inputs = self._key(stage)
-            if key is None:
+            found = self._key(stage)
+            if found is None:
                 missing = [
                     u
                     for u in self._upstream(stage)
@@ -288,6 +433,7 @@ class Runner:
                 raise ArtifactError(
                     f"stage '{stage}' needs the artifacts of {missing}: run those first"
                 )
+            key, inputs, upstream = found
             sdir = self.wf.stage_dir(stage)
             manifest = artifacts.read_manifest(sdir)
             if (
@@ -297,135 +443,121 @@ class Runner:
                 and not artifacts.changed_outputs(sdir, manifest)
             ):
                 on_event(stage, "skip", "up to date")
-                manifests[stage] = manifest
+                summary = artifacts.read_summary(sdir, manifest)
+                manifests[stage] = replace(manifest, summary=summary)
                 continue
             on_event(stage, "start", "")
+            fault_point(f"stage:{stage}:start", self.wf.name)
             t0 = time.perf_counter()
-            outputs, summary = self._execute(stage)
+            module = importlib.import_module(registry.stage(stage).module)
+            result = module.execute(self)
+            seconds = time.perf_counter() - t0
+            code, versions = self._code(stage)
             manifests[stage] = artifacts.write_stage(
                 sdir,
                 stage=stage,
                 key=key,
+                code=code,
+                versions=versions,
+                config=stage_config(self.wf, stage),
                 inputs=inputs,
-                config=_stage_config(self.wf, stage),
-                outputs=outputs,
-                summary=summary,
+                upstream=upstream,
+                outputs=result.outputs,
+                summary=result.summary,
+                timings={"stage": seconds, **result.timings},
             )
-            on_event(stage, "done", f"{time.perf_counter() - t0:.2f} s")
+            on_event(stage, "done", f"{seconds:.2f} s")
         return manifests
 
-    # -------------------------------------------------------------- loading
-    def tables(self, stage: str) -> dict[str, Any]:
-        """Load the per-data-set Parquet tables of a stage (ingest or differentiate)."""
-        manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
-        if manifest is None:
-            raise ArtifactError(f"stage '{stage}' has no artifacts in '{self.wf.stage_dir(stage)}'")
-        return {
-            Path(rel).stem: artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
-            for rel in sorted(manifest.outputs)
-            if rel.endswith(".parquet") and "/" not in rel
-        }
-
-    def _physics(self):
-        return physics_params(self.wf) if "physics" in self.wf.sections else None
-
-    def _execute(self, stage: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        from pipeline import physics_stages as ps
-        from pipeline import stages as st
-
-        if stage == "rig":
-            res = ps.run_rig(self.wf.section("physics"), self.wf.section("rig"))
-            return res.outputs, res.summary
-        if stage == "analyze":
-            res = ps.run_analyze(physics_params(self.wf), self.wf.section("analyze"))
-            outputs: dict[str, Any] = {"statics.h5": artifacts.H5Tree(res.tree)}
-            outputs.update({f"{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})
-            return outputs, res.summary
-        if stage == "ingest":
-            tables = st.run_ingest(self.wf.datasets)
-            return {f"{n}.parquet": f for n, f in tables.items()}, {
-                "datasets": {n: len(f) for n, f in tables.items()}
-            }
-        tables = self.tables("ingest")
-        if stage == "differentiate":
-            derivs = st.run_differentiate(tables, self.wf.section("differentiate"))
-            converged = {n: d.attrs["converged"] for n, d in derivs.items()}
-            return {f"{n}.parquet": d for n, d in derivs.items()}, {"converged": converged}
-        derivs = self.tables("differentiate")
-        if stage == "identify":
-            res = st.run_identify(tables, derivs, self.wf.section("identify"), self._physics())
-            tree = {**res.model.to_tree(), "diagnostics": st.diagnostics_tree(res.diagnostics)}
-            if res.equation_error_model is not None and res.equation_error_model is not res.model:
-                tree["equation_error"] = res.equation_error_model.to_tree()["model"]
-            return {"model.h5": artifacts.H5Tree(tree), "curves.parquet": res.curves}, res.summary
-        if stage == "study":
-            results = st.run_study(tables, derivs, _stage_config(self.wf, "study"))
-            outputs = {}
-            for name, (table, figure) in results.items():
-                outputs[f"{name}.parquet"] = table
-                outputs[f"{name}.png"] = artifacts.Figure(figure)
-            return outputs, {
-                name: table.to_dict(orient="records") for name, (table, _) in results.items()
-            }
-        if stage == "compare":
-            rbf = artifacts.read_parquet(self.wf.stage_dir("validate") / "nrmse.parquet")
-            res = st.run_compare(
-                tables, derivs, rbf, _stage_config(self.wf, "compare"), self._physics()
-            )
-            outputs = {
-                "sindy.h5": artifacts.H5Tree(res.model.to_tree()),
-                "nrmse.parquet": res.table,
-            }
-            outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
-            summary = {
-                **res.summary,
-                "table": res.table.to_dict(orient="records"),
-                "published": list(self.wf.section("validate").get("published", [])),
-                "order": [d.name for d in self.wf.datasets],
-            }
-            return outputs, summary
-        from pipeline.identify import RBFModel
-
-        tree = artifacts.read_h5(self.wf.stage_dir("identify") / "model.h5")
-        model = RBFModel.from_tree(tree)
-        ls = tree.get("equation_error")
-        baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
-        res = st.run_validate(
-            model, tables, derivs, self.wf.section("validate"), baseline, self._physics()
-        )
-        outputs: dict[str, Any] = {"nrmse.parquet": res.table}
-        outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
-        outputs.update({f"plots/{n}.png": artifacts.Figure(f) for n, f in res.figures.items()})
-        summary = {
-            "table": res.table.to_dict(orient="records"),
-            "published": list(self.wf.section("validate").get("published", [])),
-            "order": [d.name for d in self.wf.datasets],
-            "sim_time": res.sim_time,
-        }
-        return outputs, summary
-
     # ---------------------------------------------------------------- verify
-    def verify(self) -> list[str]:
-        """Re-hash every artifact and check the chain of manifests.
+    def digest(self) -> str | None:
+        """Return the run digest over this workflow's stages (None when one is missing)."""
+        return outdir.run_digest(self.wf.output_dir, self.stages())
+
+    def verify(self, digest: str | None = None) -> list[str]:
+        """Check every artifact, every manifest and the chain (and a quoted digest).
+
+        Parameters
+        ----------
+        digest : str, optional
+            A run digest (as ``run`` prints it) the manifests must match.
 
         Returns
         -------
         list of str
-            Problems, each naming the file: modified or missing outputs, files
-            not in a manifest, and stages whose recorded inputs differ from
-            their upstream stage's current outputs. Empty when all is intact.
+            Problems, each naming the file: a missing output folder, missing or extra
+            stage folders and manifests, modified, missing or unlisted outputs, manifests
+            whose key does not match their own fields, a broken chain (recorded inputs or
+            upstream manifests that differ from the current ones, changed source files),
+            leftovers of an interrupted run, and a digest that differs. Empty when all is
+            intact.
+
+        Raises
+        ------
+        RunLockedError
+            While another process writes to the output folder.
         """
-        problems = []
-        for stage in STAGES:
-            sdir = self.wf.stage_dir(stage)
+        out = self.wf.output_dir
+        if not out.is_dir():
+            return [f"output folder '{out}' does not exist (the workflow was never run there)"]
+        if outdir.is_locked(out):
+            raise RunLockedError(
+                f"output folder '{out}' is being written by {outdir.lock_holder(out)}: "
+                "verify when it is done"
+            )
+        problems = [outdir.describe_leftover(p) for p in outdir.leftovers(out)]
+        mine = self.stages()
+        for entry in sorted(out.iterdir()):
+            if (
+                entry.is_dir()
+                and entry.name not in mine
+                and (entry.name in STAGES or (entry / artifacts.MANIFEST).exists())
+            ):
+                problems.append(f"'{entry}': extra stage folder (not a stage of this workflow)")
+        for stage in mine:
+            problems += self._verify_stage(stage)
+        if digest is not None and not problems:
+            actual = self.digest()
+            if actual != digest.strip().lower():
+                ups = {u for s in mine for u in self._upstream(s)}
+                last = [
+                    f"'{self.wf.stage_dir(s) / artifacts.MANIFEST}'" for s in mine if s not in ups
+                ]
+                problems.append(
+                    f"'{out}': run digest {actual} differs from the quoted {digest.strip()}; the "
+                    "chain holds, so the changed manifest is that of a last stage: "
+                    + ", ".join(last)
+                )
+        return problems
+
+    def _verify_stage(self, stage: str) -> list[str]:
+        sdir = self.wf.stage_dir(stage)
+        try:
             manifest = artifacts.read_manifest(sdir)
-            if manifest is None:
-                continue
-            problems += [f"{sdir / c}" for c in artifacts.changed_outputs(sdir, manifest)]
-            if stage not in ("ingest", "rig") or self._upstream(stage):
-                inputs = self._inputs(stage)
-                if inputs is not None and inputs != manifest.inputs:
-                    problems.append(
-                        f"{sdir / artifacts.MANIFEST} (built from other upstream artifacts)"
-                    )
+        except ArtifactError as exc:
+            return [str(exc)]
+        if manifest is None:
+            return [f"'{sdir / artifacts.MANIFEST}': missing (stage '{stage}' never ran)"]
+        path = sdir / artifacts.MANIFEST
+        problems = [f"'{sdir / c}'" for c in artifacts.changed_outputs(sdir, manifest)]
+        if manifest.stage != stage or manifest.expected_key() != manifest.key:
+            problems.append(f"'{path}': edited (its key does not match its own fields)")
+        for up in self._upstream(stage):
+            recorded = manifest.upstream.get(up)
+            actual = artifacts.manifest_digest(self.wf.stage_dir(up))
+            if recorded != actual:
+                problems.append(
+                    f"'{path}': broken chain, upstream manifest '{up}/{artifacts.MANIFEST}' "
+                    "is not the one this stage was made from"
+                )
+        found = self._inputs(stage)
+        if found is not None and found[0] != manifest.inputs:
+            names = sorted(
+                k
+                for k in set(found[0]) | set(manifest.inputs)
+                if found[0].get(k) != manifest.inputs.get(k)
+            )
+            problems.append(
+                f"'{path}': made from other inputs than the current ones ({', '.join(names[:3])})"
+            )
         return problems

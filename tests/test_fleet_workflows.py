@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 
 from cli import app
 from pipeline.artifacts import write_text_files
-from pipeline.errors import ArtifactError, WorkflowError
+from pipeline.errors import OutputDirError, WorkflowError
 from pipeline.rig.fleet_workflows import fleet_workflows
 from pipeline.runner import Runner
 from pipeline.workflow import load_workflow
@@ -40,7 +40,7 @@ def test_members_are_seeded_distinct_and_loadable(tmp_path):
 def test_existing_files_are_never_overwritten(tmp_path):
     files = render(tmp_path, n=2)
     (tmp_path / "paper-experiment-001.toml").write_text("mine", encoding="utf-8")
-    with pytest.raises(ArtifactError, match=r"paper-experiment-001\.toml' exists"):
+    with pytest.raises(OutputDirError, match=r"paper-experiment-001\.toml' exists"):
         write_text_files(tmp_path, files)
     assert not (tmp_path / "paper-experiment-000.toml").exists()
     assert (tmp_path / "paper-experiment-001.toml").read_text() == "mine"

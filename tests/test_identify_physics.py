@@ -64,8 +64,8 @@ def test_model_with_prior_round_trips_through_hdf5(record, tmp_path):
     cfg = IdentifyConfig.from_dict({"M": 4, "rbf": ["c"], "backbone": PHYSICS, "T_z": 0})
     model, _ = fit_rbf_model([rec], replace(cfg, prior=physics_prior(P, [rec])))
     artifacts.write_stage(
-        tmp_path / "s", stage="identify", key="k", inputs={}, config={},
-        outputs={"model.h5": artifacts.H5Tree(model.to_tree())}, summary={},
+        tmp_path / "s", stage="identify", key="k", code="c", versions={}, config={}, inputs={},
+        upstream={}, outputs={"model.h5": artifacts.H5Tree(model.to_tree())}, summary={},
     )  # fmt: skip
     back = RBFModel.from_tree(artifacts.read_h5(tmp_path / "s" / "model.h5"))
     x = np.stack([rec.q[::50], rec.q_dot[::50], rec.q_dot[::50]], axis=1)
@@ -79,7 +79,7 @@ def test_physics_terms_need_physics(record):
     cfg = IdentifyConfig.from_dict({"rbf": [], "backbone": PHYSICS, "T_z": 0})
     with pytest.raises(WorkflowError, match="add a \\[physics\\] section"):
         fit_rbf_model([rec], cfg)
-    with pytest.raises(WorkflowError, match="unknown key 'prior'"):
+    with pytest.raises(WorkflowError, match=r"\[identify\] unknown key 'prior'"):
         IdentifyConfig.from_dict({"prior": {}})
 
 

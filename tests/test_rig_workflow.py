@@ -64,7 +64,7 @@ def rig_run(tmp_path_factory):
 def test_rig_writes_mat_logs_and_truth(rig_run):
     wf, manifests = rig_run
     outs = set(manifests["rig"].outputs)
-    assert outs == {"a73.mat", "a73_truth.h5", "a5.mat", "a5_truth.h5"}
+    assert outs == {"a73.mat", "a73_truth.h5", "a5.mat", "a5_truth.h5", "summary.json"}
     rig_dir = wf.stage_dir("rig")
     assert (rig_dir / "a73.mat").read_bytes()[:10] == b"MATLAB 7.3"
     assert (rig_dir / "a5.mat").read_bytes()[:19] == b"MATLAB 5.0 MAT-file"
@@ -111,10 +111,10 @@ def test_rerun_skips_and_ingest_follows_the_rig(rig_run, tmp_path):
 def test_rig_workflow_errors(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(WORKFLOW.replace('rig = "a5"', 'rig = "nope"'), encoding="utf-8")
-    with pytest.raises(WorkflowError, match="rig experiment 'nope' is not in"):
+    with pytest.raises(WorkflowError, match=r"\[datasets.a5\] rig: expected the name of a \[rig"):
         load_workflow(path)
     path.write_text(WORKFLOW.replace('format = "5"', 'format = "6"'), encoding="utf-8")
-    with pytest.raises(WorkflowError, match="format"):
+    with pytest.raises(WorkflowError, match=r"\[rig.experiments.a5\] format: .*got '6'"):
         Runner(load_workflow(path)).run(["rig"])
     assert not (tmp_path / "runs" / "rig").exists()
 
@@ -122,12 +122,12 @@ def test_rig_workflow_errors(tmp_path):
 @pytest.mark.parametrize(
     ("section", "match"),
     [
-        ({"experiments": {"a": {"profile": "sweep"}}}, r"\[rig.experiments.a\] profile 'sweep'"),
-        ({"plant": {"friction_q": 1}, "experiments": {"a": {}}}, r"\[rig.plant\]: unknown key"),
-        ({"experiments": {"a": {"seeed": 1}}}, r"\[rig.experiments.a\]: unknown key 'seeed'"),
-        ({"experiments": {"a": {"format": "6"}}}, "format"),
-        ({"experiments": {}}, "no \\[rig.experiments"),
-        ({"sample_time": -1, "experiments": {"a": {}}}, "sample_time"),
+        ({"experiments": {"a": {"profile": "sweep"}}}, r"\[rig.experiments.a\] profile: .*'sweep'"),
+        ({"plant": {"friction_q": 1}, "experiments": {"a": {}}}, r"\[rig.plant\] unknown key"),
+        ({"experiments": {"a": {"seeed": 1}}}, r"\[rig.experiments.a\] unknown key 'seeed'"),
+        ({"experiments": {"a": {"format": "6"}}}, r"\[rig.experiments.a\] format: .*got '6'"),
+        ({"experiments": {}}, r"\[rig\] experiments: expected at least one \[rig.experiments"),
+        ({"sample_time": -1, "experiments": {"a": {}}}, r"\[rig\] sample_time: .* > 0, got -1"),
     ],
 )
 def test_rig_section_errors_name_the_table(section, match):

@@ -36,7 +36,7 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
     assert rms.loc["rbf", "test_arrow_no_extrapolation"] <= 0.32
     assert not table.diverged.any()
     assert (table[table.dataset == "test_multisine"].n_samples == 127400 - 105712 - 50).all()
-    identify = json.loads((tmp_path / "identify/manifest.json").read_text())["summary"]
+    identify = json.loads((tmp_path / "identify/summary.json").read_text())
     assert identify["refine"]["accepted"]
     refine = identify["refine"]
     assert refine["full_rms_simulation_error"] <= refine["full_rms_equation_error"]
@@ -52,7 +52,7 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
 @pytest.mark.slow
 def test_emps_identifies_mass_and_friction_near_idim(tmp_path):
     out = run("emps.toml", tmp_path)
-    summary = json.loads((tmp_path / "identify/manifest.json").read_text())["summary"]
+    summary = json.loads((tmp_path / "identify/summary.json").read_text())
     # published IDIM-LS: M = 95.11 kg, Fv = 203.50 N s/m, Fc = 20.39 N, OF = -3.16 N
     assert summary["m_q"] == pytest.approx(95.11, rel=0.03)
     assert summary["backbone"]["d_v"] == pytest.approx(203.5, rel=0.03)

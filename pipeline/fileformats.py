@@ -1,0 +1,285 @@
+"""Reading and writing the file formats of stage outputs: Parquet, HDF5, PNG, text.
+
+Used by :mod:`pipeline.artifacts` only (which re-exports the readers); written
+byte-reproducibly: Parquet with fixed column order and dtypes, zstd, no index,
+provenance in the key-value metadata; HDF5 without object time stamps; PNG without
+the software tag; canonical JSON with sorted keys.
+
+References
+----------
+Apache Parquet format specification (key-value metadata); HDF5 User Guide, "Dataset
+creation properties" (``track_times``); PNG specification, tEXt chunks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import ArtifactError
+
+__all__ = [
+    "Figure",
+    "FileWriter",
+    "H5Tree",
+    "canonical_json",
+    "read_h5",
+    "read_parquet",
+    "sha256_file",
+    "write_output",
+]
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """Return the hex sha256 digest of a file's bytes.
+
+    Parameters
+    ----------
+    path : path-like
+        File to hash.
+
+    Returns
+    -------
+    str
+        64 hexadecimal characters.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def canonical_json(obj: Any) -> str:
+    """Serialise ``obj`` to canonical JSON (sorted keys, no spaces, NumPy scalars as floats).
+
+    Parameters
+    ----------
+    obj : object
+        JSON-compatible data; NumPy scalars, arrays and paths are converted.
+
+    Returns
+    -------
+    str
+        The canonical text, identical for equal content.
+    """
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__} in a stage config")
+
+
+def _write_parquet(frame: Any, path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    attrs = getattr(frame, "attrs", {}) or {}
+    if attrs:
+        meta[b"debist"] = canonical_json(attrs).encode()
+    table = table.replace_schema_metadata(meta)
+    pq.write_table(table, path, compression="zstd", write_statistics=True)
+
+
+def _write_h5_group(group: Any, tree: Mapping[str, Any]) -> None:
+    for name, value in tree.items():
+        if name == "attrs":
+            for key, attr in value.items():
+                group.attrs[key] = attr
+        elif isinstance(value, Mapping):
+            _write_h5_group(group.create_group(name), value)
+        else:
+            data = np.asarray(value)
+            if data.dtype.kind == "U":
+                data = data.astype(object)
+                group.create_dataset(name, data=data, dtype=_h5_str(), track_times=False)
+            else:
+                group.create_dataset(name, data=data, track_times=False)
+
+
+def _h5_str() -> Any:
+    import h5py
+
+    return h5py.string_dtype("utf-8")
+
+
+def _write_h5(tree: Mapping[str, Any], path: Path) -> None:
+    import h5py
+
+    with h5py.File(path, "w", libver=("earliest", "v110")) as fh:
+        _write_h5_group(fh, tree)
+
+
+@dataclass(frozen=True)
+class H5Tree:
+    """A nested mapping to be written as an HDF5 file.
+
+    Parameters
+    ----------
+    tree : mapping
+        Group name to nested mapping, dataset name to array-like; the key
+        ``"attrs"`` of a mapping holds that group's attributes.
+    """
+
+    tree: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A matplotlib figure to be written as PNG (a ``matplotlib.figure.Figure``, no pyplot).
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+        The figure.
+    dpi : int, optional
+        Resolution [dots per inch].
+    """
+
+    figure: Any
+    dpi: int = 110
+
+
+@dataclass(frozen=True)
+class FileWriter:
+    """An output written by a function of its path (e.g. a MAT file of the virtual rig).
+
+    Parameters
+    ----------
+    write : callable
+        Called as ``write(path)``; must write the file deterministically (the same bytes
+        for the same inputs) and nothing else.
+    """
+
+    write: Callable[[Path], Any]
+
+
+def write_output(value: Any, path: Path) -> None:
+    """Write one stage output in the format its type asks for.
+
+    Parameters
+    ----------
+    value : object
+        :class:`H5Tree` (HDF5), :class:`FileWriter`, :class:`Figure` (PNG), ``str``
+        (UTF-8 text), ``bytes``, or an object with ``to_parquet`` (a pandas DataFrame,
+        written as Parquet with its ``attrs`` as metadata).
+    path : pathlib.Path
+        Target file; its folder is created.
+
+    Raises
+    ------
+    TypeError
+        If no writer handles the type of ``value``.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if isinstance(value, H5Tree):
+        _write_h5(value.tree, path)
+    elif isinstance(value, FileWriter):
+        value.write(path)
+    elif isinstance(value, Figure):
+        value.figure.savefig(path, dpi=value.dpi, metadata={"Software": None})
+    elif isinstance(value, str):
+        path.write_text(value, encoding="utf-8")
+    elif isinstance(value, bytes):
+        path.write_bytes(value)
+    elif hasattr(value, "to_parquet"):
+        _write_parquet(value, path)
+    else:
+        raise TypeError(f"no writer for output '{path.name}' of type {type(value).__name__}")
+
+
+def read_parquet(path: str | os.PathLike) -> Any:
+    """Read a Parquet artifact into a DataFrame, restoring the ``attrs`` metadata.
+
+    Parameters
+    ----------
+    path : path-like
+        Parquet file written by this module.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table, with ``attrs`` as stored.
+
+    Raises
+    ------
+    ArtifactError
+        If the file is missing or unreadable.
+    """
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (OSError, ValueError) as exc:
+        raise ArtifactError(f"cannot read artifact '{path}': {exc}") from exc
+    frame = table.to_pandas()
+    raw = (table.schema.metadata or {}).get(b"debist")
+    if raw:
+        frame.attrs.update(json.loads(raw))
+    return frame
+
+
+def read_h5(path: str | os.PathLike) -> dict[str, Any]:
+    """Read an HDF5 artifact into a nested dict (the inverse of :class:`H5Tree`).
+
+    Parameters
+    ----------
+    path : path-like
+        HDF5 file written by this module.
+
+    Returns
+    -------
+    dict
+        Nested mapping of NumPy arrays; each group's attributes under ``"attrs"``.
+
+    Raises
+    ------
+    ArtifactError
+        If the file is missing or unreadable.
+    """
+    import h5py
+
+    def load(group: Any) -> dict[str, Any]:
+        out: dict[str, Any] = {"attrs": {k: _attr(v) for k, v in group.attrs.items()}}
+        for name, item in group.items():
+            if isinstance(item, h5py.Group):
+                out[name] = load(item)
+            elif item.dtype.kind == "O":
+                out[name] = np.array([s.decode() if isinstance(s, bytes) else s for s in item[()]])
+            else:
+                out[name] = item[()]
+        return out
+
+    try:
+        with h5py.File(path, "r") as fh:
+            return load(fh)
+    except OSError as exc:
+        raise ArtifactError(f"cannot read artifact '{path}': {exc}") from exc
+
+
+def _attr(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value

@@ -1,0 +1,413 @@
+"""The output folder of a workflow: who owns it, one writer at a time, leftovers, the digest.
+
+debist writes only into a folder it owns: one it created (and marked with
+``.debist-output.json``, which names the workflow), an empty one, or one that holds nothing
+but debist's stage folders (an output folder of an earlier version, adopted). It refuses the
+file system root, the user's home folder, the workflow's own folder and any folder that holds
+the workflow's data sources. One process writes at a time: a lock file per output folder
+(:mod:`filelock`, an OS advisory lock released when the process ends, however it ends) with
+the holder's pid, host, command and start time beside it. Interrupted stage swaps leave
+folders that :func:`recover` resolves at the start of the next command that writes.
+
+References
+----------
+filelock documentation (https://py-filelock.readthedocs.io); POSIX ``flock(2)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+from pipeline import artifacts
+from pipeline.artifacts import SWAP_FOLDER
+from pipeline.errors import OutputDirError, RunLockedError
+
+__all__ = [
+    "HOLDER",
+    "LOCK",
+    "MARKER",
+    "check_output_dir",
+    "claim_output_dir",
+    "describe_leftover",
+    "leftovers",
+    "lock_holder",
+    "output_lock",
+    "recover",
+    "run_digest",
+    "writing",
+]
+
+#: The marker of an output folder debist owns (JSON naming the workflow).
+MARKER = ".debist-output.json"
+#: The lock file of an output folder.
+LOCK = ".debist.lock"
+#: Who holds the lock (JSON: pid, host, command, start time); removed on release.
+HOLDER = ".debist.lock.json"
+OWN_FILES = frozenset({MARKER, LOCK, HOLDER})
+
+
+def _marker_workflow(out: Path) -> str | None:
+    try:
+        data = json.loads((out / MARKER).read_text(encoding="utf-8"))
+        return str(data["workflow"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _debist_layout(out: Path, stages: Sequence[str]) -> bool:
+    """Tell whether every entry of ``out`` is debist's (an unmarked older output folder).
+
+    Stage folders with manifests, swap leftovers and lock files are debist's.
+    """
+    for entry in out.iterdir():
+        if entry.name in OWN_FILES or (entry.is_dir() and SWAP_FOLDER.match(entry.name)):
+            continue
+        if not (entry.is_dir() and entry.name in stages and (entry / artifacts.MANIFEST).is_file()):
+            return False
+    return True
+
+
+def check_output_dir(
+    out: str | os.PathLike,
+    *,
+    workflow: str,
+    workflow_dir: str | os.PathLike,
+    sources: Sequence[str | os.PathLike] = (),
+    stages: Sequence[str] = (),
+) -> None:
+    """Refuse an output folder debist must not write into (nothing is created).
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder (absolute).
+    workflow : str
+        The workflow's name (what the marker records).
+    workflow_dir : path-like
+        The folder of the workflow file.
+    sources : sequence of path-like
+        The workflow's data source files.
+    stages : sequence of str
+        The stage names of debist (to recognise an unmarked output folder of an earlier
+        version).
+
+    Raises
+    ------
+    OutputDirError
+        If ``out`` is the file system root, the home folder, the workflow's folder, holds
+        a data source, is a file, is marked for another workflow, or exists, is not empty
+        and is not debist's.
+    """
+    out = Path(out)
+    places = {Path(out.anchor): "the file system root", Path.home().resolve(): "your home folder"}
+    places[Path(workflow_dir).resolve()] = "the workflow file's own folder"
+    if out in places:
+        raise OutputDirError(
+            f"output folder '{out}' is {places[out]}: debist writes its stage folders only "
+            "into a folder of their own; set [workflow] output_dir or --out to one"
+        )
+    for source in sources:
+        if Path(source).resolve().is_relative_to(out):
+            raise OutputDirError(
+                f"output folder '{out}' holds the data source '{source}': choose an output "
+                "folder apart from the data"
+            )
+    if out.exists() and not out.is_dir():
+        raise OutputDirError(f"output folder '{out}' is a file, not a folder")
+    if not out.is_dir():
+        return
+    owner = _marker_workflow(out)
+    if (out / MARKER).exists():
+        if owner != workflow:
+            raise OutputDirError(
+                f"output folder '{out}' belongs to workflow {owner!r} (see its {MARKER}), not "
+                f"{workflow!r}: give this workflow its own output_dir"
+            )
+        return
+    entries = sorted(p.name for p in out.iterdir())
+    if entries and not _debist_layout(out, stages):
+        shown = ", ".join(f"'{e}'" for e in entries[:5])
+        more = f" and {len(entries) - 5} more" if len(entries) > 5 else ""
+        raise OutputDirError(
+            f"output folder '{out}' exists and holds files that are not debist's ({shown}{more}):"
+            " debist writes only into a new or empty folder, or one it made; choose another"
+            " output_dir or --out"
+        )
+
+
+def claim_output_dir(out: str | os.PathLike, *, workflow: str, **places) -> None:
+    """Check an output folder (:func:`check_output_dir`), create it and mark it as debist's.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder (absolute).
+    workflow : str
+        The workflow's name, recorded in the marker.
+    **places
+        ``workflow_dir``, ``sources`` and ``stages`` of :func:`check_output_dir`.
+
+    Raises
+    ------
+    OutputDirError
+        As :func:`check_output_dir`.
+    """
+    out = Path(out)
+    check_output_dir(out, workflow=workflow, **places)
+    out.mkdir(parents=True, exist_ok=True)
+    if _marker_workflow(out) != workflow:
+        tmp = out / f"{MARKER}.tmp-{os.getpid()}"
+        text = json.dumps({"debist": "output folder", "workflow": workflow}, indent=2)
+        tmp.write_text(text + "\n", encoding="utf-8")
+        os.replace(tmp, out / MARKER)
+
+
+@contextmanager
+def writing(
+    out: str | os.PathLike, *, workflow: str, wait: bool = False, **places
+) -> Iterator[None]:
+    """Claim an output folder and hold its lock while writing; undo a claim that wrote nothing.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder (absolute).
+    workflow : str
+        The workflow's name.
+    wait : bool, optional
+        Wait for another writer instead of failing.
+    **places
+        ``workflow_dir``, ``sources`` and ``stages`` of :func:`check_output_dir`.
+
+    Yields
+    ------
+    None
+        While the folder is claimed and locked.
+
+    Raises
+    ------
+    OutputDirError, RunLockedError
+        As :func:`claim_output_dir` and :func:`output_lock`.
+    """
+    out = Path(out)
+    new = not out.exists()
+    claim_output_dir(out, workflow=workflow, **places)
+    try:
+        with output_lock(out, wait=wait):
+            yield
+    finally:
+        if new and out.is_dir() and {p.name for p in out.iterdir()} <= OWN_FILES:
+            shutil.rmtree(out, ignore_errors=True)  # created here and nothing was written
+
+
+def lock_holder(out: str | os.PathLike) -> str:
+    """Describe who holds an output folder's lock, from its holder file.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder.
+
+    Returns
+    -------
+    str
+        E.g. ``"pid 4711 on lab-pc, `debist run wf.toml`, since 2026-11-22 10:01:02"``, or
+        ``"another debist process"`` when the holder file is missing or unreadable.
+    """
+    try:
+        data = json.loads((Path(out) / HOLDER).read_text(encoding="utf-8"))
+        return f"pid {data['pid']} on {data['host']}, `{data['command']}`, since {data['since']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another debist process"
+
+
+@contextmanager
+def output_lock(out: str | os.PathLike, *, wait: bool = False) -> Iterator[None]:
+    """Hold the output folder's lock: one writer at a time.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder (must exist).
+    wait : bool, optional
+        Wait for the holder to finish instead of failing at once.
+
+    Yields
+    ------
+    None
+        While the lock is held; the holder file names this process.
+
+    Raises
+    ------
+    RunLockedError
+        If another process holds the lock and ``wait`` is false (naming the holder).
+    """
+    from filelock import FileLock, Timeout
+
+    out = Path(out)
+    lock = FileLock(out / LOCK, timeout=-1 if wait else 0)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise RunLockedError(
+            f"output folder '{out}' is being written by {lock_holder(out)}; wait for it to "
+            "finish, or pass --wait"
+        ) from None
+    try:
+        holder = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+            "since": time.strftime("%Y-%m-%d %H:%M:%S"),
+        }
+        (out / HOLDER).write_text(json.dumps(holder) + "\n", encoding="utf-8")
+        yield
+    finally:
+        (out / HOLDER).unlink(missing_ok=True)
+        lock.release()
+
+
+def is_locked(out: str | os.PathLike) -> bool:
+    """Tell whether another process holds the output folder's lock now.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder.
+
+    Returns
+    -------
+    bool
+        True while a writer holds it (false for a missing folder).
+    """
+    from filelock import FileLock, Timeout
+
+    path = Path(out) / LOCK
+    if not path.is_file():
+        return False
+    lock = FileLock(path, timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        return True
+    lock.release()
+    return False
+
+
+def leftovers(output_dir: str | os.PathLike) -> list[Path]:
+    """List the leftovers of interrupted stage swaps in an output folder.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The workflow's output folder.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The ``.<stage>.tmp-*`` and ``.<stage>.old-*`` folders, sorted by name.
+    """
+    root = Path(output_dir)
+    if not root.is_dir():
+        return []
+    return sorted(p for p in root.iterdir() if p.is_dir() and SWAP_FOLDER.match(p.name))
+
+
+def describe_leftover(path: str | os.PathLike) -> str:
+    """Say what a leftover is and what :func:`recover` will do with it.
+
+    Parameters
+    ----------
+    path : path-like
+        A folder listed by :func:`leftovers`.
+
+    Returns
+    -------
+    str
+        One line naming the folder.
+    """
+    path = Path(path)
+    match = SWAP_FOLDER.match(path.name)
+    if match is None:
+        return f"'{path}' is not a leftover of a stage swap"
+    stage, kind = match["stage"], match["kind"]
+    if kind == "tmp":
+        return f"'{path}': unfinished outputs of stage '{stage}' (removed by the next run)"
+    if (path.parent / stage).exists():
+        return f"'{path}': the replaced outputs of stage '{stage}' (removed by the next run)"
+    return (
+        f"'{path}': the outputs of stage '{stage}', moved aside by an interrupted swap "
+        "(restored by the next run)"
+    )
+
+
+def recover(output_dir: str | os.PathLike) -> list[str]:
+    """Resolve the leftovers of interrupted stage swaps.
+
+    A moved-aside folder whose stage folder is missing is restored (the newest one, if
+    several); other moved-aside folders and all temporary folders are removed. Call it
+    only while holding the output folder's lock.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The workflow's output folder.
+
+    Returns
+    -------
+    list of str
+        One line per leftover, saying what was done.
+    """
+    done = []
+    found = leftovers(output_dir)
+    olds = sorted(
+        (p for p in found if SWAP_FOLDER.match(p.name)["kind"] == "old"),
+        key=lambda p: p.stat().st_mtime,
+        reverse=True,
+    )
+    for path in olds:
+        final = path.parent / SWAP_FOLDER.match(path.name)["stage"]
+        if not final.exists():
+            os.replace(path, final)
+            done.append(f"restored '{final.name}' from '{path.name}' (an interrupted swap)")
+        else:
+            shutil.rmtree(path)
+            done.append(f"removed '{path.name}' (replaced outputs of an interrupted swap)")
+    for path in found:
+        if SWAP_FOLDER.match(path.name)["kind"] == "tmp":
+            shutil.rmtree(path)
+            done.append(f"removed '{path.name}' (unfinished outputs of an interrupted run)")
+    return done
+
+
+def run_digest(output_dir: str | os.PathLike, stages: Sequence[str]) -> str | None:
+    """Return the digest of a run: sha256 over its stages' manifests, in stage order.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The workflow's output folder.
+    stages : sequence of str
+        The workflow's stages, in execution order.
+
+    Returns
+    -------
+    str or None
+        sha256 of the lines ``"<stage> <sha256 of manifest.json>"``; None when a stage has
+        no manifest.
+    """
+    lines = []
+    for stage in stages:
+        digest = artifacts.manifest_digest(Path(output_dir) / stage)
+        if digest is None:
+            return None
+        lines.append(f"{stage} {digest}\n")
+    return artifacts.sha256_bytes("".join(lines).encode())
