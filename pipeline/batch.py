@@ -3,19 +3,24 @@
 Each workflow is one Dask task that loads the workflow file and runs its stages with
 :class:`pipeline.runner.Runner` in a worker, with the runner's content-hash caching (a
 rerun skips up-to-date stages). One failing workflow never stops the others: its error
-comes back in its :class:`BatchResult`. Every workflow writes only to its own
-``output_dir`` (checked before anything runs), so a parallel batch writes the same bytes
-as a serial one.
+comes back in its :class:`BatchResult`, and so does a worker process that dies while
+running it (a crash in native code, the out-of-memory killer, ``kill -9``). Every
+workflow writes only to its own ``output_dir`` (checked before anything runs), so a
+parallel batch writes the same bytes as a serial one.
 
-The scheduling is Dask's: the local schedulers of ``dask.compute`` (``"synchronous"``,
-``"threads"``, ``"processes"``) on one machine, and ``dask.distributed`` (optional extra
-``debist[cluster]``) past one machine. Progress is shown by Dask's own diagnostics
-(``dask.diagnostics.ProgressBar``, ``distributed.progress``), or by the caller from the
-``on_done`` callbacks (e.g. a ``rich.progress`` bar).
+The scheduling is Dask's. By default (``scheduler="processes"``) a batch starts a
+``distributed.LocalCluster`` of single-threaded worker processes, each watched by a
+nanny that restarts it when it dies; the scheduler retries a workflow whose worker died
+once, and reports it failed (``KilledWorker``) when its second worker dies too, while the
+other workflows go on. ``"threads"`` and ``"synchronous"`` are the local schedulers of
+``dask.compute`` (one process: a crash there ends the batch), and ``"distributed"``
+with an ``address`` uses an existing Dask cluster past one machine. Progress is shown by
+the caller from the ``on_done`` callbacks (e.g. a ``rich.progress`` bar), or on the
+console with ``progress=True``.
 
 Examples
 --------
-A script that runs every prototype of a folder on two local processes (the
+A script that runs every prototype of a folder on two local worker processes (the
 ``__main__`` guard is needed because worker processes are spawned)::
 
     from pipeline.batch import expand_workflows, run_batch, summary_table
@@ -29,19 +34,24 @@ References
 Dask documentation: "Scheduling" (https://docs.dask.org/en/stable/scheduling.html),
 "Delayed" (https://docs.dask.org/en/stable/delayed.html), "Diagnostics (local)"
 (https://docs.dask.org/en/stable/diagnostics-local.html), "Futures"
-(https://docs.dask.org/en/stable/futures.html); dask.distributed "Quickstart" and
-"Diagnosing Performance" (https://distributed.dask.org/en/stable/).
+(https://docs.dask.org/en/stable/futures.html); dask.distributed "LocalCluster",
+"Nanny", "Why did my worker die?" (``KilledWorker``, ``allowed-failures``:
+https://distributed.dask.org/en/stable/killed.html) and "Configuration"
+(https://distributed.dask.org/en/stable/).
 """
 
 from __future__ import annotations
 
 import contextlib
 import glob
+import logging
 import os
 import socket
+import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,13 +60,18 @@ from pipeline.errors import DebistError, WorkflowError
 
 #: Values of ``scheduler`` in :func:`run_batch`.
 SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
+#: Times a workflow is retried on a fresh worker process after its worker died, on the
+#: local cluster (dask config ``distributed.scheduler.allowed-failures``).
+ALLOWED_FAILURES = 1
 #: Characters that make an argument of :func:`expand_workflows` a glob pattern.
 _GLOB_CHARS = frozenset("*?[")
-_CLUSTER_HINT = 'pip install "debist[cluster]"'
-#: One BLAS/OpenMP thread per worker process, as dask.distributed's nanny sets for its
-#: workers (config ``distributed.nanny.pre-spawn-environ``): n processes x n BLAS threads
-#: would oversubscribe the cores.
+_INSTALL_HINT = "pip install distributed"
+#: One BLAS/OpenMP thread per worker process (n processes x n BLAS threads would
+#: oversubscribe the cores), set by the nanny before it spawns a worker (dask config
+#: ``distributed.nanny.pre-spawn-environ``); a variable the user set keeps its value.
 _WORKER_ENVIRON = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+#: Type of the arguments of one batch item: (workflow file, stages, force).
+_Args = tuple[str, tuple[str, ...] | None, bool]
 
 
 @dataclass(frozen=True)
@@ -111,7 +126,8 @@ class BatchResult:
         when it was considered, which includes the RBF rows, else the validate
         stage's), when one of those stages was considered.
     worker : str
-        ``"<host>:<pid>"`` of the process that ran the workflow.
+        ``"<host>:<pid>"`` of the process that ran the workflow; the address of the last
+        Dask worker for a workflow whose worker processes died.
     """
 
     path: Path
@@ -125,6 +141,11 @@ class BatchResult:
     outputs: dict[str, dict[str, str]] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
     worker: str = ""
+
+    @property
+    def file(self) -> str:
+        """The workflow file relative to the current directory (absolute when outside it)."""
+        return display_path(self.path)
 
     @property
     def ok(self) -> bool:
@@ -202,26 +223,59 @@ def expand_workflows(paths_or_globs: str | os.PathLike | Iterable[str | os.PathL
     return list(found)
 
 
-def _check_output_dirs(paths: Sequence[Path]) -> None:
-    """Refuse a batch in which two workflows would write to the same (or a nested) directory.
+def display_path(path: str | os.PathLike) -> str:
+    """Show a workflow file as a person refers to it: relative to the current directory.
 
-    Workflows that cannot be loaded here are left to their worker, which reports the error.
+    Parameters
+    ----------
+    path : path-like
+        A file path.
+
+    Returns
+    -------
+    str
+        The path relative to the current working directory when the file is inside it,
+        else the absolute path.
+
+    Examples
+    --------
+    >>> display_path(Path.cwd() / "workflows" / "a.toml") == os.path.join("workflows", "a.toml")
+    True
+    """
+    absolute = Path(path).resolve()
+    try:
+        return str(absolute.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(absolute)
+
+
+def _load_headers(paths: Sequence[Path]) -> dict[Path, tuple[str, Path]]:
+    """Load every workflow's ``[workflow] name`` and ``output_dir``, refusing shared outputs.
+
+    Workflows that cannot be loaded here are left out: their worker reports the error.
+
+    Raises
+    ------
+    WorkflowError
+        If two workflows write to the same (or a nested) output directory.
     """
     from pipeline.workflow import load_workflow
 
-    owners: list[tuple[Path, Path]] = []
+    headers: dict[Path, tuple[str, Path]] = {}
     for path in paths:
         try:
-            out = load_workflow(path).output_dir
+            wf = load_workflow(path)
         except Exception:  # reported by the workflow's own task, as its failure
             continue
-        for other, other_out in owners:
+        out = wf.output_dir
+        for other, (_name, other_out) in headers.items():
             if out == other_out or out.is_relative_to(other_out) or other_out.is_relative_to(out):
                 raise WorkflowError(
                     f"workflows '{other}' and '{path}' write to the same output directory "
                     f"('{other_out}' and '{out}'); give each its own [workflow] output_dir"
                 )
-        owners.append((path, out))
+        headers[path] = (wf.name, out)
+    return headers
 
 
 # --------------------------------------------------------------------------- one item
@@ -335,57 +389,66 @@ def run_batch(
         Stages to consider in every workflow (default: each workflow's own stages).
     force : bool, optional
         Rerun up-to-date stages too.
-    scheduler : {"synchronous", "threads", "processes", "distributed"}, optional
+    scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
         Default ``"processes"``, or ``"distributed"`` when ``address`` is given.
-        ``"synchronous"`` runs in the calling thread (debugging); ``"threads"`` shares
-        one process (the validate and study stages draw with matplotlib's pyplot, which
-        is not thread-safe: prefer processes for those); ``"processes"`` spawns
-        ``workers`` processes; ``"distributed"`` connects to ``address``, or starts a
-        ``LocalCluster`` of ``workers`` single-threaded worker processes when there is
-        none. Spawned workers re-import the calling script: call from under
+
+        * ``"processes"`` starts a local ``distributed.LocalCluster`` of ``workers``
+          single-threaded worker processes, each under a nanny that restarts it when it
+          dies (about a second of start-up). A workflow whose worker process dies (killed
+          by a signal, or out of memory: the nanny also restarts a worker past 95 % of
+          its share of the machine's memory) is retried once on a fresh worker and
+          reported failed when that one dies too; the other workflows run on.
+        * ``"distributed"`` sends the workflows to the Dask cluster at ``address``
+          (without an address it is ``"processes"``).
+        * ``"threads"`` shares one process (the validate and study stages draw with
+          matplotlib's pyplot, which is not thread-safe: prefer processes for those),
+          and ``"synchronous"`` runs in the calling thread (debugging). With these two,
+          a crash of the process ends the batch.
+
+        Spawned workers re-import the calling script: call from under
         ``if __name__ == "__main__":``.
     workers : int, optional
-        Worker processes or threads of a local scheduler or local cluster (default:
+        Worker processes of the local cluster, or threads of ``"threads"`` (default:
         ``min(number of workflows, CPU count)``). Ignored by ``"synchronous"`` and
         with ``address`` (the cluster has its workers).
     address : str, optional
         A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``. Its
         workers must import this version of debist and see the workflow files and their
-        data at the same absolute paths; start them with ``--nthreads 1`` (pyplot).
+        data at the same absolute paths; start them with ``--nthreads 1`` (pyplot) and a
+        nanny (the default of ``dask worker``). How often a workflow whose worker died is
+        retried there is that scheduler's ``distributed.scheduler.allowed-failures``.
     on_done : callable, optional
         Called as ``on_done(result)`` in the calling thread each time a workflow
-        finishes, in completion order (e.g. to advance a ``rich.progress`` bar). With
-        ``progress=True`` on a cluster, the calls follow the end of the bar.
+        finishes (done or failed), in completion order (e.g. to advance a
+        ``rich.progress`` bar).
     progress : bool, optional
-        Show Dask's own console progress bar: ``dask.diagnostics.ProgressBar`` for
-        local schedulers, ``distributed.progress`` on a cluster.
+        Show a console progress bar: ``dask.diagnostics.ProgressBar`` for ``"threads"``
+        and ``"synchronous"``, and a bar of the same format, advanced as workflows
+        finish, on a cluster.
 
     Returns
     -------
     list of BatchResult
-        One per workflow, in input order; failed workflows included.
+        One per workflow, in input order; failed workflows included, those whose worker
+        processes died with ``error`` ``"KilledWorker: worker process died twice while
+        running it (...)"``.
 
     Raises
     ------
     WorkflowError
         Before anything runs: an unknown scheduler or stage, ``workers < 1``,
         ``address`` with a local scheduler, two workflows writing to the same output
-        directory, or ``"distributed"`` without the ``distributed`` package (the message
-        says ``pip install "debist[cluster]"``), or a cluster that cannot be reached.
-    concurrent.futures.process.BrokenProcessPool
-        When a worker process of the ``"processes"`` scheduler dies (a crash in native
-        code, the out-of-memory killer): Dask's local process pool cannot recover, so the
-        batch stops. Workflows that finished keep their artifacts and a rerun skips
-        them. ``"distributed"`` isolates such crashes: its nanny restarts the worker and
-        only that workflow fails (``KilledWorker``).
+        directory, the ``distributed`` package missing (the message says
+        ``pip install distributed``), or a cluster that cannot be reached.
 
     References
     ----------
-    ``dask.delayed`` and ``dask.compute(..., scheduler=, num_workers=, chunksize=)``:
+    ``dask.delayed`` and ``dask.compute(..., scheduler=, num_workers=)``:
     https://docs.dask.org/en/stable/scheduling.html; ``dask.diagnostics.Callback`` and
     ``ProgressBar``: https://docs.dask.org/en/stable/diagnostics-local.html;
-    ``distributed.Client.submit``, ``as_completed``, ``progress``:
-    https://docs.dask.org/en/stable/futures.html.
+    ``distributed.LocalCluster``, ``Client.submit``, ``as_completed``, ``KilledWorker``
+    and the configuration ``distributed.scheduler.allowed-failures``,
+    ``distributed.nanny.pre-spawn-environ``: https://distributed.dask.org/en/stable/.
     """
     from pipeline.runner import STAGES
 
@@ -404,31 +467,22 @@ def run_batch(
             raise WorkflowError(f"unknown stage {stage!r}; stages: {STAGES}")
     if not paths:
         return []
-    _check_output_dirs(paths)
+    headers = _load_headers(paths)
     n_workers = workers or min(len(paths), os.cpu_count() or 1)
     args = [(str(p), stages, force) for p in paths]
-    if scheduler == "distributed":
-        return _run_distributed(args, address, n_workers, on_done, progress)
-    return _run_local(args, scheduler, n_workers, on_done, progress)
-
-
-def _init_worker_process() -> None:
-    """Make BLAS single-threaded in a local worker process, unless the user set it.
-
-    It runs before the first task, so before the worker imports NumPy (unless the main
-    module of the calling program imports it at the top: then the setting comes too late).
-    """
-    for name, value in _WORKER_ENVIRON.items():
-        os.environ.setdefault(name, value)
+    if scheduler in ("synchronous", "threads"):
+        return _run_local(args, scheduler, n_workers, on_done, progress)
+    return _run_on_cluster(args, headers, address, n_workers, on_done, progress)
 
 
 def _run_local(
-    args: list[tuple[str, tuple[str, ...] | None, bool]],
+    args: list[_Args],
     scheduler: str,
     n_workers: int,
     on_done: Callable[[BatchResult], None] | None,
     progress: bool,
 ) -> list[BatchResult]:
+    """Run the items with a local scheduler of ``dask.compute`` (threads or synchronous)."""
     import dask
     from dask.diagnostics import Callback, ProgressBar
 
@@ -442,14 +496,7 @@ def _run_local(
         if on_done is not None and key in keys:
             on_done(result)
 
-    options: dict[str, Any] = {}
-    if scheduler != "synchronous":
-        options["num_workers"] = n_workers
-    if scheduler == "processes":
-        # The default chunksize (6) would send several workflows to one worker process
-        # together; each workflow is a long task, so hand them out one at a time.
-        options["chunksize"] = 1
-        options["initializer"] = _init_worker_process
+    options: dict[str, Any] = {} if scheduler == "synchronous" else {"num_workers": n_workers}
     with contextlib.ExitStack() as stack:
         stack.enter_context(Callback(posttask=posttask))
         if progress:
@@ -458,20 +505,119 @@ def _run_local(
     return list(results)
 
 
-def _run_distributed(
-    args: list[tuple[str, tuple[str, ...] | None, bool]],
+@contextlib.contextmanager
+def _environ_restored(names: Iterable[str]) -> Iterator[None]:
+    """Put the listed environment variables of this process back as they were on exit."""
+    saved = {name: os.environ.get(name) for name in names}
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+@contextlib.contextmanager
+def local_cluster(n_workers: int) -> Iterator[Any]:
+    """Start the local Dask cluster of a batch and yield a client of it.
+
+    Parameters
+    ----------
+    n_workers : int
+        Worker processes, one thread each.
+
+    Yields
+    ------
+    distributed.Client
+        A client of a ``distributed.LocalCluster`` on this machine's loopback interface
+        (no dashboard): each worker process runs under a nanny, which restarts it when it
+        dies; the scheduler retries a task whose worker died :data:`ALLOWED_FAILURES`
+        time(s) and then fails it with ``KilledWorker``. The worker processes start with
+        one BLAS/OpenMP thread (``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and
+        ``OPENBLAS_NUM_THREADS`` = 1, unless this process's environment sets them), each
+        with an equal share of the memory budget (``DEBIST_MEMORY_BUDGET_GB``, unless set
+        here: :func:`pipeline.preflight.memory_budget`), and inherit the rest of this
+        process's environment. The cluster's logs are silenced
+        (its failures come back as task errors), and the environment variables that the
+        nannies set in this process are restored on exit.
+
+    References
+    ----------
+    dask.distributed: ``LocalCluster``, ``Nanny`` ("env" and the configuration
+    ``distributed.nanny.pre-spawn-environ``), ``distributed.scheduler.allowed-failures``
+    (https://distributed.dask.org/en/stable/killed.html).
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    from pipeline import preflight
+
+    pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ"), **_WORKER_ENVIRON}
+    if preflight.BUDGET_ENV not in os.environ:  # the workers share this machine's budget
+        share = preflight.memory_budget() / n_workers / 1e9  # the variable is in 10^9 bytes
+        pre_spawn[preflight.BUDGET_ENV] = f"{share:.3f}"
+    config = {
+        "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+        "distributed.nanny.pre-spawn-environ": pre_spawn,
+    }
+    with contextlib.ExitStack() as stack:
+        # The nannies live in this process and set their pre-spawn variables here too
+        # (and PYTHONHASHSEED): undo that when the cluster is gone.
+        stack.enter_context(_environ_restored([*pre_spawn, "PYTHONHASHSEED"]))
+        with dask.config.set(config):  # read when the scheduler and nannies are created
+            cluster = LocalCluster(
+                host="127.0.0.1",
+                n_workers=n_workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+            )
+        stack.enter_context(cluster)
+        yield stack.enter_context(Client(cluster, set_as_default=False))
+
+
+def _died(allowed_failures: int) -> str:
+    """Describe the error of a workflow whose worker processes died (``KilledWorker``)."""
+    times = allowed_failures + 1
+    count = {1: "once", 2: "twice"}.get(times, f"{times} times")
+    return (
+        f"KilledWorker: worker process died {count} while running it "
+        "(killed by a signal or out of memory)"
+    )
+
+
+def _draw_progress(done: int, total: int, elapsed: float, width: int = 40) -> None:
+    """Draw the console bar of ``dask.diagnostics.ProgressBar`` on stdout."""
+    from dask.utils import format_time
+
+    frac = done / total
+    bar = "#" * int(width * frac)
+    end = "\n" if done == total else ""
+    msg = f"\r[{bar:<{width}}] | {int(100 * frac)}% Completed | {format_time(elapsed)}{end}"
+    sys.stdout.write(msg)
+    sys.stdout.flush()
+
+
+def _run_on_cluster(
+    args: list[_Args],
+    headers: dict[Path, tuple[str, Path]],
     address: str | None,
     n_workers: int,
     on_done: Callable[[BatchResult], None] | None,
     progress: bool,
 ) -> list[BatchResult]:
+    """Run the items on a Dask cluster: the one at ``address``, else a local one."""
     try:
-        from distributed import Client, LocalCluster, as_completed
-        from distributed import progress as show_progress
+        from distributed import Client, KilledWorker, as_completed
     except ImportError:
         raise WorkflowError(
-            f"the 'distributed' scheduler needs the dask.distributed package: {_CLUSTER_HINT}"
+            "a batch on worker processes needs the dask.distributed package, a dependency "
+            f"of debist that is missing here: {_INSTALL_HINT}"
         ) from None
+    t_start = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if address:
             try:
@@ -481,36 +627,49 @@ def _run_distributed(
                     f"cannot reach the Dask scheduler at {address!r}: {exc}"
                 ) from None
         else:
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=n_workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                )
-            )
-            client = stack.enter_context(Client(cluster, set_as_default=False))
-        futures = [client.submit(run_workflow_item, *a, pure=False) for a in args]
-        index = {f.key: i for i, f in enumerate(futures)}
-        if progress:  # blocks until done in a console (a widget in a notebook)
-            show_progress(futures, scheduler=client.scheduler.address)
+            client = stack.enter_context(local_cluster(n_workers))
+        batch_id = uuid.uuid4().hex[:8]
+        waiting = list(reversed(range(len(args))))  # popped from the end: input order
+        submitted: dict[str, tuple[int, float]] = {}
+        running = as_completed(loop=client.loop)
         results: dict[int, BatchResult] = {}
-        for future in as_completed(futures, loop=client.loop):
-            i = index[future.key]
+
+        def submit_to_idle_workers() -> None:
+            # At most one workflow per worker thread at a time: when a worker dies, the
+            # scheduler counts the death against every task assigned to it, queued ones
+            # too, so a queued workflow could fail for another one's crash.
+            slots = max(1, sum(client.nthreads().values()))
+            while waiting and running.count() < slots:
+                i = waiting.pop()
+                key = f"debist-{Path(args[i][0]).stem}-{batch_id}-{i}"
+                future = client.submit(run_workflow_item, *args[i], key=key, pure=False)
+                submitted[future.key] = (i, time.perf_counter())
+                running.add(future)
+
+        submit_to_idle_workers()
+        for future in running:
+            i, t_submit = submitted.pop(future.key)
             try:
                 results[i] = future.result()
-            except Exception as exc:  # the task never returned: its worker died, ...
+            except Exception as exc:  # the task never returned: its workers died, ...
                 path = Path(args[i][0])
+                name, output_dir = headers.get(path, (path.stem, None))
+                killed = isinstance(exc, KilledWorker)
                 results[i] = BatchResult(
                     path=path,
-                    name=path.stem,
+                    name=name,
                     status="failed",
-                    seconds=0.0,
-                    error=_describe(exc),
+                    seconds=time.perf_counter() - t_submit,
+                    error=_died(exc.allowed_failures) if killed else _describe(exc),
+                    output_dir=output_dir,
+                    worker=exc.last_worker.address if killed else "",
                 )
             future.release()
+            if progress:
+                _draw_progress(len(results), len(args), time.perf_counter() - t_start)
             if on_done is not None:
                 on_done(results[i])
+            submit_to_idle_workers()
     return [results[i] for i in range(len(args))]
 
 
@@ -528,17 +687,20 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
     Returns
     -------
     pandas.DataFrame
-        Columns ``name``, ``status``, ``seconds`` [s], ``ran`` and ``skipped`` (numbers
-        of stages), ``failed_stage``, ``error``, ``path`` and ``rbf_nrmse_q``: the free-run
+        Columns ``file`` (the workflow file relative to the current directory, see
+        :func:`display_path`), ``name`` (``[workflow] name``, which workflows may share),
+        ``status``, ``seconds`` [s], ``ran`` and ``skipped`` (numbers of stages),
+        ``failed_stage``, ``error``, ``path`` (absolute) and ``rbf_nrmse_q``: the free-run
         NRMSE(q) of the identified model per data set (``"name: value"``, empty without a
         validation table), in the order of ``results``.
     """
     import pandas as pd
 
-    columns = ["name", "status", "seconds", "ran", "skipped", "failed_stage", "error", "path"]
-    columns.append("rbf_nrmse_q")
+    columns = ["file", "name", "status", "seconds", "ran", "skipped", "failed_stage", "error"]
+    columns += ["path", "rbf_nrmse_q"]
     rows = [
         {
+            "file": r.file,
             "name": r.name,
             "status": r.status,
             "seconds": round(r.seconds, 3),

@@ -3,14 +3,16 @@
 import gzip
 import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
 from pipeline import artifacts
-from pipeline.batch import BatchResult, expand_workflows, run_batch, summary_table
+from pipeline.batch import BatchResult, expand_workflows, local_cluster, run_batch, summary_table
 from pipeline.errors import WorkflowError
+from pipeline.outdir import OWN_FILES
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ["ingest", "differentiate", "identify", "validate"]
@@ -79,11 +81,12 @@ def protos(tmp_path):
 
 
 def file_hashes(root):
-    """sha256 of every artifact but the manifests (their summaries hold timings)."""
+    """sha256 of every stage output: not the manifests, wall times, output marker and lock."""
+    skip = {artifacts.MANIFEST, artifacts.TIMINGS, *OWN_FILES}
     return {
         p.relative_to(root).as_posix(): artifacts.sha256_file(p)
         for p in sorted(root.rglob("*"))
-        if p.is_file() and p.name != artifacts.MANIFEST
+        if p.is_file() and p.name not in skip
     }
 
 
@@ -94,7 +97,8 @@ def test_processes_write_the_bytes_of_a_serial_run_and_a_rerun_skips_everything(
     assert all(r.ran == tuple(STAGES) for r in serial)
     assert all(r.worker == f"{os.uname().nodename}:{os.getpid()}" for r in serial)
     serial_files = file_hashes(runs)
-    assert len(serial_files) == 3 * 11  # ingest 2, differentiate 2, identify 2, validate 1 + 2 + 2
+    # ingest 2, differentiate 2, identify 2, validate 1 + 2 + 2, and a summary.json each
+    assert len(serial_files) == 3 * 15
     # the manifests' output hashes are those of the files on disk
     for r in serial:
         for stage, outputs in r.outputs.items():
@@ -124,6 +128,7 @@ def test_processes_write_the_bytes_of_a_serial_run_and_a_rerun_skips_everything(
     assert again[0].summary == parallel[0].summary
     table = summary_table(again)
     assert list(table.name) == NAMES
+    assert list(table.file) == [str(p) for p in protos]  # outside the current directory
     assert (table.ran == 0).all() and (table.skipped == 4).all() and (table.status == "done").all()
 
 
@@ -158,16 +163,13 @@ def test_broken_workflows_fail_alone_naming_their_files(protos):
 
 
 def test_unexpected_exception_is_a_failed_item_with_its_traceback(protos, monkeypatch):
-    from pipeline.runner import Runner
+    import pipeline.runner as runner
 
-    execute = Runner._execute
-
-    def flaky(self, stage):
-        if self.wf.name == "proto-b" and stage == "differentiate":
+    def flaky(point, workflow=None):  # the runner's fault point as a stage starts
+        if point == "stage:differentiate:start" and workflow == "proto-b":
             raise ZeroDivisionError("synthetic fault")
-        return execute(self, stage)
 
-    monkeypatch.setattr(Runner, "_execute", flaky)
+    monkeypatch.setattr(runner, "fault_point", flaky)
     results = run_batch(protos, stages=["ingest", "differentiate"], scheduler="synchronous")
     assert [r.status for r in results] == ["done", "failed", "done"]
     failed = results[1]
@@ -208,10 +210,13 @@ def test_arguments_are_checked_before_anything_runs(protos):
     assert run_batch([]) == []
 
 
-def test_distributed_without_the_package_says_how_to_install_it(protos, monkeypatch):
+def test_worker_processes_without_the_distributed_package_say_how_to_install_it(
+    protos, monkeypatch
+):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
-    with pytest.raises(WorkflowError, match=r'pip install "debist\[cluster\]"'):
-        run_batch(protos, scheduler="distributed")
+    for scheduler in ("processes", "distributed"):
+        with pytest.raises(WorkflowError, match="pip install distributed"):
+            run_batch(protos, scheduler=scheduler)
     assert not (protos[0].parent / "runs").exists()
 
 
@@ -251,20 +256,87 @@ def test_expand_workflows_files_directories_and_patterns(tmp_path):
         expand_workflows([])
 
 
-def test_local_worker_processes_get_single_threaded_blas_unless_set(monkeypatch):
-    from pipeline.batch import _init_worker_process
+def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry(monkeypatch):
+    blas = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")  # the user's own setting is kept
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    before = dict(os.environ)
+    with local_cluster(2) as client:
+        seen = client.run(lambda: {name: os.environ.get(name) for name in blas})
+        pids = client.run(os.getpid)
+        retries = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures)
+        threads = client.nthreads()
+    assert (
+        list(seen.values())
+        == [{"OMP_NUM_THREADS": "3", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}] * 2
+    )
+    assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()
+    assert sorted(threads.values()) == [1, 1] and retries == 1
+    assert dict(os.environ) == before  # what the nannies set in this process is undone
 
-    environ = {"OMP_NUM_THREADS": "3"}  # the user's own setting is kept
-    monkeypatch.setattr(os, "environ", environ)  # nothing leaks into this test process
-    _init_worker_process()
-    assert environ == {"OMP_NUM_THREADS": "3", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+def test_a_killed_batch_worker_fails_its_workflow_only(protos, monkeypatch, capsys):
+    """SIGKILL (as the out-of-memory killer sends) in proto-b's worker, on both attempts."""
+    folder = protos[0].parent
+    monkeypatch.chdir(folder)
+    monkeypatch.setenv("DEBIST_FAULT", "stage:ingest:start@proto-b")  # inherited by workers
+    done = []
+    results = run_batch(
+        protos, stages=["ingest", "differentiate"], workers=2, on_done=done.append, progress=True
+    )
+    assert [r.status for r in results] == ["done", "failed", "done"], results
+    assert sorted(r.name for r in done) == NAMES
+    assert "100% Completed" in capsys.readouterr().out
+
+    killed = results[1]
+    assert killed.name == "proto-b" and killed.path == protos[1] and killed.file == "proto-b.toml"
+    assert killed.error == (
+        "KilledWorker: worker process died twice while running it "
+        "(killed by a signal or out of memory)"
+    )
+    assert killed.outputs == {} and killed.output_dir == folder / "runs/proto-b"
+    assert artifacts.read_manifest(folder / "runs/proto-b/ingest") is None
+    assert killed.worker.startswith("tcp://127.0.0.1:")  # the last of its dead workers
+
+    for good in (results[0], results[2]):
+        # A result still held by a worker that is then killed is computed again elsewhere
+        # (distributed recomputes lost results): that second run finds every stage up to
+        # date, so the stages ran once, in one attempt or the other.
+        assert good.ran + good.skipped == ("ingest", "differentiate")
+        recorded = {
+            f"{stage}/{rel}": digest
+            for stage, outputs in good.outputs.items()
+            for rel, digest in outputs.items()
+        }
+        assert len(recorded) == 6 and recorded == file_hashes(good.output_dir)
+        for stage in good.outputs:  # the manifests on disk vouch for the bytes on disk
+            manifest = artifacts.read_manifest(good.output_dir / stage)
+            assert dict(manifest.outputs) == good.outputs[stage]
+            assert artifacts.changed_outputs(good.output_dir / stage, manifest) == []
+
+    # the command line: the summary table of all three workflow files, exit 1, no traceback
+    script = Path(sys.executable).with_name("debist")
+    command = [str(script)] if script.exists() else [sys.executable, "-c", "import cli; cli.main()"]
+    run = subprocess.run(
+        [*command, "batch", ".", "--stages", "ingest,differentiate", "--workers", "2"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    out = run.stdout + run.stderr
+    assert run.returncode == 1, out
+    assert "Batch: 3 workflows, 1 failed" in run.stdout
+    for name in NAMES:
+        assert f"{name}.toml" in run.stdout
+    assert "KilledWorker" in run.stdout and "died" in run.stdout  # the error column (wrapped)
+    assert "Traceback" not in out
 
 
 @pytest.mark.slow
 def test_local_dask_cluster_gives_the_serial_bytes(protos):
-    distributed = pytest.importorskip(
-        "distributed", reason='dask.distributed is optional: pip install "debist[cluster]"'
-    )
+    import distributed
+
     runs = protos[0].parent / "runs"
     serial = run_batch(protos, stages=STAGES, scheduler="synchronous")
     serial_files = file_hashes(runs)
@@ -286,9 +358,8 @@ def test_local_dask_cluster_gives_the_serial_bytes(protos):
 
 @pytest.mark.slow
 def test_a_task_lost_on_the_cluster_is_a_failed_item(protos, monkeypatch):
-    distributed = pytest.importorskip(
-        "distributed", reason='dask.distributed is optional: pip install "debist[cluster]"'
-    )
+    import distributed
+
     import pipeline.batch as batch
 
     item = batch.run_workflow_item
