@@ -1,14 +1,9 @@
-"""Figures of the validation stage (matplotlib, non-interactive Agg backend)."""
+"""Figures of the validation stage (matplotlib ``Figure`` objects: no backend, no pyplot state)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt
 import pandas as pd
 
 
@@ -35,7 +30,10 @@ def free_run_figure(
     matplotlib.figure.Figure
         Three axes: the whole record, a zoom of 200 samples in its middle, the error.
     """
-    fig, (ax1, ax_zoom, ax2) = plt.subplots(3, 1, figsize=(9, 7), height_ratios=(2, 2, 1))
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 7))
+    ax1, ax_zoom, ax2 = fig.subplots(3, 1, height_ratios=(2, 2, 1))
     t = sim["t"].to_numpy()
     mid = slice(max(t.size // 2 - 100, 0), min(t.size // 2 + 100, t.size))
     for ax, s in ((ax1, slice(None)), (ax_zoom, mid)):

@@ -9,14 +9,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.colors import LogNorm
 
 __all__ = ["WINDOW_SAMPLES", "alpha_figure", "grid_figure"]
 
@@ -70,7 +64,12 @@ def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> 
         err[i, j] = 100.0 * r["nrmse_q_est"] if free_run else r["eq_mse"]
         cond[i, j] = r["condition"]
         status[i, j] = r["status"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 0.55 * len(Ms) + 2.6), constrained_layout=True)
+    from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    fig = Figure(figsize=(11, 0.55 * len(Ms) + 2.6), layout="constrained")
+    axes = fig.subplots(1, 2)
     err_title = (
         "free-run NRMSE(q) on estimation data [%]"
         if free_run
@@ -99,7 +98,7 @@ def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> 
                 failed = status[i, j] != "ok"
                 if failed:
                     ax.add_patch(
-                        plt.Rectangle(
+                        Rectangle(
                             (j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///", ec="0.45", lw=0
                         )
                     )
@@ -124,7 +123,7 @@ def grid_figure(table: pd.DataFrame, free_run: bool = True, unit: str = "m") -> 
             )
             if ax is axes[0]:
                 ax.add_patch(
-                    plt.Rectangle((j - 0.48, i - 0.48), 0.96, 0.96, fill=False, ec="red", lw=2)
+                    Rectangle((j - 0.48, i - 0.48), 0.96, 0.96, fill=False, ec="red", lw=2)
                 )
     fig.suptitle(
         "RBF hyper-parameters (cf. Fig. 11b); red box: lowest error; "
@@ -169,7 +168,11 @@ def alpha_figure(
         Six axes: q, q_dot, q_ddot over the window (left); NRMSE(q), equation-error
         MSE and roughness versus ``alpha`` (right).
     """
-    fig, axes = plt.subplots(3, 2, figsize=(12, 8), width_ratios=(2.2, 1), constrained_layout=True)
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 8), layout="constrained")
+    axes = fig.subplots(3, 2, width_ratios=(2.2, 1))
     # window around the fastest motion of the most regularised derivative
     smooth = curves[int(np.argmax([a for a, _ in curves]))][1]
     n = min(len(smooth), int(table.attrs.get("max_samples", len(smooth))))
@@ -180,7 +183,7 @@ def alpha_figure(
     t = smooth["t"].to_numpy()[w]
     ax_q, ax_v, ax_a = axes[:, 0]
     ax_q.plot(t, smooth["q"].to_numpy()[w], color="0.2", lw=1.0, label="measured q")
-    colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(curves)))
+    colors = colormaps["viridis"](np.linspace(0.0, 0.9, len(curves)))
     for (alpha, d), c in zip(curves, colors, strict=True):
         label = f"alpha = {alpha:.3g}"
         ax_v.plot(t, d["q_dot"].to_numpy()[w], color=c, lw=0.9, label=label)

@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from pipeline.errors import WorkflowError
 
@@ -282,6 +281,8 @@ def _unit_gauss(x: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _triangle(tau: NDArray[np.float64], period: float) -> NDArray[np.float64]:
     """Triangle wave in [0, 1] starting at 0 [-]."""
+    from scipy import signal
+
     return 0.5 * (1.0 + signal.sawtooth(2.0 * np.pi * tau / period - np.pi, width=0.5))
 
 
@@ -359,6 +360,8 @@ def identification_profile(
             f"({lead + block + gap + _ID_PULSES[0] + ring:g} s)"
         )
     rng = np.random.default_rng(seed)
+    from scipy import signal
+
     sos = signal.butter(4, _ID_BAND, btype="bandpass", fs=1.0 / b.hold, output="sos")
     noise = signal.sosfiltfilt(sos, rng.standard_normal((2, n)), axis=1)
 
@@ -457,6 +460,8 @@ def validation_profile(
         raise ValueError(f"`duration` = {duration} s is shorter than one validation episode (8 s)")
 
     def chirp(tau, f0, f1, seconds):
+        from scipy import signal
+
         return _unit(signal.chirp(tau, f0, seconds, f1, method="logarithmic", phi=-90.0))
 
     def block_chirp_up(tau):
