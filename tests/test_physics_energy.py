@@ -37,7 +37,8 @@ def central(f, x, k, h):
 
 def test_geometry_at_rest_matches_notes_item_1():
     length = de_lengths(np.zeros(4), P)[0]
-    # (16 mm, 71 mm + u_y) with u_y = 0: l_DE = 72.78 mm, stretch 1.427 (NOTES: 72.7 mm, 1.43)
+    # (16 mm, 71 mm + u_y) with u_y = 0: l_DE = 72.78 mm, stretch 1.427
+    # (docs/interpretation.md item 1: 72.7 mm, 1.43)
     assert length == pytest.approx([np.hypot(16e-3, 71e-3)] * 2, rel=1e-12)
     assert stretches(np.zeros(4), P) == pytest.approx([1.4271] * 2, abs=1e-4)
 
@@ -51,7 +52,7 @@ def test_larger_b_shortens_the_des():
 def test_tilting_right_stretches_the_left_de():
     qm = np.array([0.5, 0.0, 0.0, 0.0])  # q = 4 mm to the right
     lam = stretches(qm, P)
-    assert lam[0] > lam[1]  # NOTES item 6: dC1/dq > 0, dC2/dq < 0
+    assert lam[0] > lam[1]  # docs/interpretation.md item 6: dC1/dq > 0, dC2/dq < 0
     assert tip_displacement(qm, P) == pytest.approx(0.5 * P.l**2)
     assert pitch_angle(qm, P) == pytest.approx(np.arctan(2 * 0.5 * P.l))
 

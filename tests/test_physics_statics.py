@@ -39,7 +39,7 @@ def test_bistable_at_b_23mm():
     assert 10e-3 <= -eqs[0].q <= 12e-3 and 10e-3 <= eqs[2].q <= 12e-3
     assert eqs[0].q == pytest.approx(-eqs[2].q, rel=1e-9)
     assert eqs[1].q == pytest.approx(0.0, abs=1e-12)
-    assert eqs[2].q == pytest.approx(10.206e-3, abs=2e-6)  # NOTES item 3: about +-10.2 mm
+    assert eqs[2].q == pytest.approx(10.206e-3, abs=2e-6)  # interpretation item 3: +-10.2 mm
     assert all(e.residual < 1e-9 and e.converged for e in eqs)
 
 

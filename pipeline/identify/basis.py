@@ -26,7 +26,7 @@ class RBFBasis:
 
     Notes
     -----
-    Eq. 35 as printed lacks the minus sign of the exponent (NOTES item 7); the
+    Eq. 35 as printed lacks the minus sign of the exponent (docs/interpretation.md item 7); the
     Gaussian ``exp(-(q - xi_i)^2 / (2 sigma^2))`` of Eq. 38 is implemented.
 
     References

@@ -53,7 +53,7 @@ class RBFModel:
 
     Notes
     -----
-    Eq. 37 carries 1/2 in front of g while Eq. 33 and 40 do not (NOTES item 8):
+    Eq. 37 carries 1/2 in front of g while Eq. 33 and 40 do not (docs/interpretation.md item 8):
     the stored g_i follow Eq. 33 and Eq. 40, g_i = 1/2 dC_i/dq, so dC_i/dq = 2 g_i.
 
     References

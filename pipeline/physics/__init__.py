@@ -19,6 +19,6 @@ reduced
 plots
     Matplotlib figures of the above (imports matplotlib; not imported here).
 
-The interpretations of the printed equations follow ``/work/shared/paper/NOTES.md`` and are
+The interpretations of the printed equations follow ``docs/interpretation.md`` and are
 documented where they are used.
 """

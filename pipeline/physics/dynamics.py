@@ -17,7 +17,7 @@ State ``x = [q_m, q_m_dot, q_eps]`` with ``q_m = [q_2, q_3, q_4, u_0]`` and the 
 
 References
 ----------
-Masoud & Maas 2025, Eq. 8, 12, 19-23, Fig. 6a; NOTES items 3, 6.
+Masoud & Maas 2025, Eq. 8, 12, 19-23, Fig. 6a; docs/interpretation.md items 3, 6.
 """
 
 from __future__ import annotations

@@ -4,16 +4,17 @@
 ``q_m = [q_2, q_3, q_4, u_0]``, with gradient and Hessian in closed form (no finite differences):
 
 * ``U_s = 1/2 int EI w''^2 (1 + w'^2) dx + 1/2 EA/l u_0^2`` (Eq. 9 with the textbook 1/2 on the
-  bending term, NOTES item 3), a quadratic plus a quartic form in ``q_2..q_4``;
-* ``U_m = m g u_y`` (Eq. 10, NOTES item 6);
+  bending term, docs/interpretation.md item 3), a quadratic plus a quartic form in ``q_2..q_4``;
+* ``U_m = m g u_y`` (Eq. 10, docs/interpretation.md item 6);
 * ``U_DE,i = V_DE Y/6 (lambda^2 + lambda^-2 - 2) - 1/2 C_0 lambda v_i^2`` (Eq. 11 with
-  ``C_0 / lambda_3^2 = C_0 lambda_1``, NOTES item 6). Eq. 11 is kept as printed (pure-shear form,
-  resisting compression); equilibria with a slack DE (``lambda_1 < 1``) are filtered out by
-  :mod:`pipeline.physics.statics` (NOTES item 5).
+  ``C_0 / lambda_3^2 = C_0 lambda_1``, docs/interpretation.md item 6). Eq. 11 is kept as
+  printed (pure-shear form, resisting compression); equilibria with a slack DE
+  (``lambda_1 < 1``) are filtered out by
+  :mod:`pipeline.physics.statics` (docs/interpretation.md item 5).
 
 References
 ----------
-Masoud & Maas 2025, Eq. 9-11, 14, 15, 18; NOTES items 3, 5, 6.
+Masoud & Maas 2025, Eq. 9-11, 14, 15, 18; docs/interpretation.md items 3, 5, 6.
 """
 
 from __future__ import annotations
@@ -114,7 +115,7 @@ def potential(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 9-11, 14, 15; NOTES items 3, 5, 6.
+    Masoud & Maas 2025, Eq. 9-11, 14, 15; docs/interpretation.md items 3, 5, 6.
 
     Examples
     --------
@@ -223,7 +224,7 @@ def capacitances(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 11, 18, 23; NOTES item 6.
+    Masoud & Maas 2025, Eq. 11, 18, 23; docs/interpretation.md item 6.
     """
     c = params.C_0 / params.l_0
     return tuple(c * x for x in de_lengths(qm, params, b=b, order=order))

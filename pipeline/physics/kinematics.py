@@ -4,13 +4,15 @@ Generalised coordinates ``q_m = [q_2, q_3, q_4, u_0]`` [1/m, 1/m^2, 1/m^3, m]; t
 is ``w(x) = q_2 x^2 + q_3 x^3 + q_4 x^4`` (Eq. 13). Every function accepts a batch of coordinates,
 ``qm`` of shape ``(..., 4)``, and broadcasts the pre-strain ``b`` over the batch shape.
 
-Geometry (NOTES items 1 and 6): the beam is clamped at the origin, ``x`` points up along the
-undeformed beam, the horizontal coordinate points right. The upper frame is a rigid inverted U
+Geometry (docs/interpretation.md items 1 and 6): the beam is clamped at the origin, ``x``
+points up along the undeformed beam, the horizontal coordinate points right. The upper frame is
+a rigid inverted U
 fixed to the beam tip ``(q, l + u_y)`` and rotated clockwise by the pitch angle ``phi``; the
 upper end of DE ``i`` sits at the frame offset ``o_i = (-+a, -(b - a_0))`` from the tip (left DE
 1 at ``-a``, right DE 2 at ``+a``), the fixed lower ends at ``p_i = (-+e_z + dz_i, e_x)``, where
 ``dz_1, dz_2`` are the (signed) anchor offsets of an asymmetric prototype, 0 in the paper. This is
-the printed Eq. 5 with the signs of ``x_i, y_i`` and of ``a_0 cos(phi)`` reversed (NOTES item 1):
+the printed Eq. 5 with the signs of ``x_i, y_i`` and of ``a_0 cos(phi)`` reversed
+(docs/interpretation.md item 1):
 
     l_DE1 = sqrt((-e_z - q - a_0 sin(phi) + x_1)^2 + (e_x - l - u_y - a_0 cos(phi) + y_1)^2)
     l_DE2 = sqrt(( e_z - q - a_0 sin(phi) - x_2)^2 + (e_x - l - u_y - a_0 cos(phi) + y_2)^2)
@@ -21,7 +23,7 @@ Eq. 4. All derivatives are exact (closed form); integrals of polynomials are com
 
 References
 ----------
-Masoud & Maas 2025, Eq. 1-6, 13, 16; NOTES items 1 and 6.
+Masoud & Maas 2025, Eq. 1-6, 13, 16; docs/interpretation.md items 1 and 6.
 """
 
 from __future__ import annotations
@@ -186,7 +188,7 @@ def pitch_angle(qm: ArrayLike, params: PrototypeParams) -> NDArray[np.float64]:
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 1; NOTES item 6.
+    Masoud & Maas 2025, Eq. 1; docs/interpretation.md item 6.
     """
     return np.arctan(tip_slope(qm, params))
 
@@ -208,7 +210,7 @@ def vertical_displacement(qm: ArrayLike, params: PrototypeParams) -> NDArray[np.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 2; NOTES item 6.
+    Masoud & Maas 2025, Eq. 2; docs/interpretation.md item 6.
     """
     qm = np.asarray(qm, dtype=float)
     w3 = qm[..., :3]
@@ -313,7 +315,7 @@ def de_lengths(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 1, 2, 4, 5; NOTES item 1 (sign corrections).
+    Masoud & Maas 2025, Eq. 1, 2, 4, 5; docs/interpretation.md item 1 (sign corrections).
     """
     if order not in (0, 1, 2):
         raise ValueError(f"`order` must be 0, 1 or 2, got {order!r}")

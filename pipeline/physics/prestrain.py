@@ -7,7 +7,7 @@ maximum of the actuated force curve), not read off a grid.
 
 References
 ----------
-Masoud & Maas 2025, Eq. 15-17, Section 3.3.3, Fig. 3; NOTES items 3, 5.
+Masoud & Maas 2025, Eq. 15-17, Section 3.3.3, Fig. 3; docs/interpretation.md items 3, 5.
 """
 
 from __future__ import annotations
@@ -325,7 +325,7 @@ def prestrain_sweep(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 15-17, Section 3.3.3, Fig. 3; NOTES item 5.
+    Masoud & Maas 2025, Eq. 15-17, Section 3.3.3, Fig. 3; docs/interpretation.md item 5.
     """
     if b is None:
         b = np.linspace(params.b_max - 12.5e-3, params.b_max, 101)

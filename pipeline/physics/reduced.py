@@ -75,7 +75,7 @@ class ReducedCurves:
         Tangent stiffness ``df/dq`` [N/m].
     g1, g2 : ndarray, shape (n,)
         ``g_i = 1/2 dC_i/dq`` (Eq. 18, 33) [F/m]; the electrostatic force is ``g_i v_i^2``
-        and ``dC_i/dq = 2 g_i`` (NOTES item 8).
+        and ``dC_i/dq = 2 g_i`` (docs/interpretation.md item 8).
     C1, C2 : ndarray, shape (n,)
         Capacitances [F].
     k1, k2 : ndarray, shape (n,)
@@ -344,7 +344,7 @@ def reduced_curves(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 26, 29, 33; NOTES item 8.
+    Masoud & Maas 2025, Eq. 26, 29, 33; docs/interpretation.md item 8.
     """
     q_grid = np.asarray(q_grid, dtype=float)
     q_max = max(25e-3, float(np.max(np.abs(q_grid))) if q_grid.size else 0.0)

@@ -6,12 +6,12 @@ Force-displacement curves are computed by continuation in the tip displacement `
 remaining three coordinates solve ``T^T dU/dq_m = 0`` and the reaction is ``F = dU/dq_2 / l^2``.
 All equilibria at a given load are found as the roots of ``F_v(q) - F`` along that path, each
 refined by a Newton solve of the full Eq. 15 (other starting points may be added); equilibria
-with a slack DE (``lambda_1 < 1``) are discarded (NOTES item 5). The pre-strain analysis of
-Fig. 3 is in :mod:`pipeline.physics.prestrain`.
+with a slack DE (``lambda_1 < 1``) are discarded (docs/interpretation.md item 5). The
+pre-strain analysis of Fig. 3 is in :mod:`pipeline.physics.prestrain`.
 
 References
 ----------
-Masoud & Maas 2025, Eq. 14-18, Fig. 3-5; NOTES items 1-6.
+Masoud & Maas 2025, Eq. 14-18, Fig. 3-5; docs/interpretation.md items 1-6.
 """
 
 from __future__ import annotations
@@ -408,7 +408,8 @@ def equilibria(
     Starting points are the sign changes of ``F_v(q) - F`` along the continuation path on
     ``[-q_max, q_max]``, the straight beam, cantilever-like shapes at ``q = +-5 ... +-20 mm``
     and the given ``starts``. Each is refined by Newton's method on Eq. 15; converged solutions
-    are deduplicated and those with a slack DE (``lambda_1 < 1``, NOTES item 5) are dropped.
+    are deduplicated and those with a slack DE (``lambda_1 < 1``, docs/interpretation.md
+    item 5) are dropped.
 
     Parameters
     ----------
@@ -434,7 +435,7 @@ def equilibria(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 15, Section 3.3.3-3.3.4; NOTES item 5.
+    Masoud & Maas 2025, Eq. 15, Section 3.3.3-3.3.4; docs/interpretation.md item 5.
 
     Examples
     --------

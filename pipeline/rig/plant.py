@@ -460,14 +460,14 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
         ``m_q q_ddot + d q_dot + f(q) = g_1 v_1^2 + g_2 v_2^2`` (Eq. 26, 37); ``"c"``
         ``= f / q`` [N/m] (Eq. 33; for an asymmetric prototype ``f(0) != 0`` and ``c`` has a
         pole at q = 0, use ``f``); ``"k"`` ``= df/dq`` [N/m]; ``"g1"``, ``"g2"``
-        ``= 1/2 dC_i/dq`` [N/V^2] (NOTES item 8); ``"g1_vmax"``, ``"g2_vmax"``
+        ``= 1/2 dC_i/dq`` [N/V^2] (docs/interpretation.md item 8); ``"g1_vmax"``, ``"g2_vmax"``
         ``= (F(q; 0) - F(q; v_i = V_MAX)) / V_MAX^2`` [N/V^2] with ``F`` the static holding
         force of the full model (Fig. 4); ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch
         angle along the static path [rad].
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; NOTES item 8.
+    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
     """
     c = reduced_curves(rig.prototype, q_grid)
     F0 = force_displacement(rig.prototype, c.q).F
