@@ -69,7 +69,12 @@ _INSTALL_HINT = "pip install distributed"
 #: One BLAS/OpenMP thread per worker process (n processes x n BLAS threads would
 #: oversubscribe the cores), set by the nanny before it spawns a worker (dask config
 #: ``distributed.nanny.pre-spawn-environ``); a variable the user set keeps its value.
-_WORKER_ENVIRON = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+_WORKER_ENVIRON = {
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",  # the free-run kernel's threads: one per worker process too
+}
 #: Type of the arguments of one batch item: (workflow file, stages, force).
 _Args = tuple[str, tuple[str, ...] | None, bool]
 

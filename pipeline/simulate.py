@@ -3,21 +3,27 @@
 One fixed-step classical Runge-Kutta integrator with sub-steps, driven by the
 measured inputs interpolated band-limited (polyphase FIR, the default) or
 linearly, never by a zero-order hold that delays the input by half a sample.
-Several records are simulated at once as a batch (vectorised over records).
+Several records are simulated at once as a batch. Two engines run the same scheme: the
+compiled kernel (:mod:`pipeline.kernel`, the default, for every model that hands it its
+arrays through ``kernel_arrays()``) and the NumPy reference, vectorised over the batch and
+calling the model's own ``rhs``; they agree to rounding.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from pipeline import preflight
+from pipeline import progress as _progress
 from pipeline.errors import WorkflowError
 
 INTERPOLATIONS = ("bandlimited", "linear")
+#: Free-run engines: the compiled kernel and the NumPy reference.
+ENGINES = ("compiled", "numpy")
 #: Samples of odd-reflected extension at each end before band-limited interpolation.
 _EDGE_PAD = 32
 
@@ -264,6 +270,8 @@ def simulate(
     substeps: int = 2,
     interpolation: str = "bandlimited",
     q_limit: float = np.inf,
+    engine: str = "compiled",
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[SimulationResult]:
     """Simulate a model in free run, driven by measured inputs, from measured initial states.
 
@@ -286,6 +294,13 @@ def simulate(
     q_limit : float, optional
         A trajectory with ``|q| > q_limit`` or a non-finite state counts as
         diverged and is not integrated further.
+    engine : {"compiled", "numpy"}, optional
+        The compiled kernel (models with ``kernel_arrays()``; others run on the NumPy
+        engine), or the NumPy reference engine.
+    progress : callable, optional
+        Called as ``progress(done, total)`` [samples] while the compiled engine integrates
+        long records (between chunks of :data:`pipeline.kernel.CHUNK` samples); default:
+        report to the listener of :mod:`pipeline.progress` as task "free run", if any.
 
     Returns
     -------
@@ -295,7 +310,8 @@ def simulate(
     Raises
     ------
     WorkflowError
-        If ``dt`` or ``substeps`` is not positive, or the batch is empty.
+        If ``dt`` or ``substeps`` is not positive, the batch is empty or the engine
+        unknown.
     ResourceError
         If the fine input grid and trajectories would exceed the memory budget
         (:func:`check_free_run`, naming ``substeps``).
@@ -306,6 +322,8 @@ def simulate(
     """
     if not dt > 0 or substeps < 1:
         raise WorkflowError(f"need dt > 0 and substeps >= 1, got dt={dt!r}, substeps={substeps!r}")
+    if engine not in ENGINES:
+        raise WorkflowError(f"`engine` must be one of {ENGINES}, got {engine!r}")
     if isinstance(inputs, FineInputs):
         ns = substeps_needed(model, dt, substeps)
         if inputs.substeps < ns:
@@ -321,12 +339,52 @@ def simulate(
             model, lengths, np.shape(inputs[0])[1], dt, substeps, f"substeps = {substeps}"
         )
         prepared = prepare_inputs(inputs, ns, interpolation)
+    if progress is None:
+        progress = _progress.reporter("free run")
+    if engine == "compiled" and hasattr(model, "kernel_arrays"):
+        return _integrate_compiled(model, prepared, dt, q0, q_dot0, q_limit, progress)
     with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected and reported below
         return _integrate(model, prepared, dt, q0, q_dot0, q_limit)
 
 
+def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
+    out = []
+    for b, length in enumerate(lengths):
+        st = states[b, :length]
+        qdd = acc[b, :length]
+        d = int(diverged_at[b])
+        if 0 <= d < length:  # a padded record may diverge after its end: not its divergence
+            st[d:] = np.nan
+            qdd[max(d - 1, 0) :] = np.nan
+        out.append(
+            SimulationResult(
+                q=st[:, 0].copy(),
+                q_dot=st[:, 1].copy(),
+                q_ddot=qdd.copy(),
+                states=st.copy(),
+                diverged=bool(0 <= d < length),
+                diverged_at=d if 0 <= d < length else -1,
+                substeps=ns,
+            )
+        )
+    return out
+
+
+def _integrate_compiled(model, prepared, dt, q0, q_dot0, q_limit, progress):
+    """Integrate with the compiled kernel over the prepared input grid (see :func:`simulate`)."""
+    from pipeline.kernel import free_run
+
+    x0 = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
+    lengths = np.asarray(prepared.lengths, dtype=np.int64)
+    states, acc, dead = free_run(
+        model.kernel_arrays(), prepared.values, lengths, dt, prepared.substeps,
+        np.atleast_2d(x0), q_limit, progress,
+    )  # fmt: skip
+    return _results(states, acc, dead, prepared.lengths, prepared.substeps)
+
+
 def _integrate(model, prepared: FineInputs, dt, q0, q_dot0, q_limit) -> list[SimulationResult]:
-    """RK4 over the prepared input grid (see :func:`simulate`)."""
+    """Integrate with NumPy over the prepared input grid (see :func:`simulate`)."""
     ns = prepared.substeps
     h = dt / ns
     fine, lengths = prepared.values, prepared.lengths
@@ -358,22 +416,4 @@ def _integrate(model, prepared: FineInputs, dt, q0, q_dot0, q_limit) -> list[Sim
         states[alive, k + 1] = x[alive]
     _, a_last = model.rhs(np.nan_to_num(states[:, -1]), fine[:, -1])
     acc[:, -1] = np.where(alive, a_last, np.nan)
-    out = []
-    for b, length in enumerate(lengths):
-        st = states[b, :length]
-        qdd = acc[b, :length]
-        if diverged_at[b] >= 0:
-            st[diverged_at[b] :] = np.nan
-            qdd[max(diverged_at[b] - 1, 0) :] = np.nan
-        out.append(
-            SimulationResult(
-                q=st[:, 0].copy(),
-                q_dot=st[:, 1].copy(),
-                q_ddot=qdd.copy(),
-                states=st.copy(),
-                diverged=bool(0 <= diverged_at[b] < length),
-                diverged_at=int(diverged_at[b]) if 0 <= diverged_at[b] < length else -1,
-                substeps=ns,
-            )
-        )
-    return out
+    return _results(states, acc, diverged_at, lengths, ns)

@@ -221,6 +221,40 @@ class SindyModel:
         z[:, 2:] = input_map(v, self.input_map)
         return (z[:, None, :] ** powers).prod(axis=2) @ coef
 
+    def table_model(self):
+        """Return the model as a term table (:class:`pipeline.termtable.TableModel`).
+
+        Returns
+        -------
+        TableModel
+            One term per nonzero coefficient: ``q^a q_dot^b prod h_i^c_i`` with weight xi,
+            mass 1, no friction state.
+
+        References
+        ----------
+        Brunton, Proctor & Kutz 2016, Eq. 4.
+        """
+        from pipeline.termtable import S_POW, TableModel, TermTableBuilder
+
+        build = TermTableBuilder(self.n_inputs, self.input_map)
+        one = build.one()
+        keep = np.flatnonzero(self.coefficients)
+        for j in keep:
+            e = self.exponents[j]
+            build.term(self.feature_names[j], one, qpow=e[0], skind=S_POW, spow=e[1], hpow=e[2:])
+        table = build.build()
+        return TableModel(table, self.coefficients[keep], np.ones(1), np.zeros(1), lag=False)
+
+    def kernel_arrays(self):
+        """Arrays of the compiled free-run kernel (:mod:`pipeline.kernel`), built once."""
+        return self._kernel
+
+    @cached_property
+    def _kernel(self):
+        from pipeline.kernel import table_arrays
+
+        return table_arrays(self.table_model())
+
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
         """State ``[q, q_dot]``.
 

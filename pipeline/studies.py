@@ -25,7 +25,7 @@ import pandas as pd
 import pydantic
 from pydantic import BeforeValidator, Field, PositiveFloat
 
-from pipeline import preflight
+from pipeline import preflight, progress
 from pipeline.config import CONFIG, config_from_section
 from pipeline.datasets import validation_datasets
 from pipeline.differentiate import TVRegDiffConfig
@@ -327,6 +327,7 @@ def rbf_grid_study(
             row = {"M": int(M), "sigma_n": float(sigma_n)}
             row.update(_fit_and_score(records, datasets, icfg, vcfg, cfg.free_run))
             rows.append(row)
+            progress.report("study: RBF grid", len(rows), len(cfg.M) * len(cfg.sigma_n))
     table = pd.DataFrame(rows)
     table.attrs.update(_attrs(cfg, records))
     return table, grid_figure(table, cfg.free_run, datasets[0].q_unit)
@@ -423,6 +424,7 @@ def alpha_study(
         records, datasets = _study_data(tables, derivs, cfg.max_samples)
         score = _fit_and_score(records, datasets, icfg, vcfg, cfg.free_run)
         rough = float(np.mean([derivative_roughness(r.q_dot) for r in records]))
+        progress.report("study: TVRegDiff alpha", len(rows) + 1, len(cfg.alpha))
         rows.append(
             {
                 "alpha": float(alpha),

@@ -12,6 +12,7 @@ import pydantic
 from pydantic import FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 from typing_extensions import TypedDict
 
+from pipeline import progress
 from pipeline.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.ingest.units import lookup_unit
@@ -160,6 +161,9 @@ class ValidateConfig:
         Also free-run the analytical reduced model (Eq. 26) with the nominal parameters of
         the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
         in metres and the two DE voltages as inputs.
+    engine : {"compiled", "numpy"}
+        Free-run engine: the compiled kernel (:mod:`pipeline.kernel`, default) or the NumPy
+        reference; the same scheme and the same numbers to rounding.
 
     Raises
     ------
@@ -175,6 +179,7 @@ class ValidateConfig:
     q_limit: PositiveFloat | None = None
     published: Annotated[tuple[PublishedResult, ...], AsTuple] = ()
     analytical: bool = False
+    engine: Literal["compiled", "numpy"] = "compiled"
 
     def __post_init__(self) -> None:
         if self.report_unit is not None and lookup_unit(self.report_unit) is None:
@@ -362,6 +367,10 @@ def validate_model(
             substeps=cfg.substeps,
             interpolation=cfg.input_interpolation,
             q_limit=q_limit,
+            engine=cfg.engine,
+            progress=progress.reporter(
+                f"free run of {model_name}: {', '.join(ds.name for ds in group)}"
+            ),
         )
         results.update({ds.name: sim for ds, sim in zip(group, sims, strict=True)})
     rows, simulated = [], {}

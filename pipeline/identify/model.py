@@ -140,6 +140,80 @@ class RBFModel:
             force = force - bb["F_c"] * np.tanh(z / self.coulomb_velocity)
         return force / self.m_q
 
+    def parameters(self) -> tuple[list[str], np.ndarray]:
+        """Return the model's terms and their values, as regressor column names and parameters.
+
+        Returns
+        -------
+        names : list of str
+            Column names of the term library (:func:`pipeline.identify.terms.term_table`):
+            the RBF terms of every curve with a nonzero weight, then the backbone terms the
+            model has.
+        values : ndarray, shape (len(names),)
+            Their parameters, in the sign convention of the regression (force terms on the
+            left of the balance, input terms on the right).
+        """
+        names: list[str] = []
+        values: list[float] = []
+        M = self.basis.M
+
+        def add(prefix: str, theta: np.ndarray) -> None:
+            if np.any(theta):
+                names.extend(f"{prefix}[{k}]" for k in range(M))
+                values.extend(theta.tolist())
+
+        add("c", self.theta_c)
+        add("d", self.theta_d)
+        for j in range(self.n_inputs):
+            add(f"g{j + 1}", self.theta_g[j])
+        bb = self.backbone
+        scalars = {"k_1": "linear_spring", "k_3": "cubic_spring", "d_v": "viscous",
+                   "F_c": "coulomb", "F_0": "offset", "s_c": "physics_spring",
+                   "s_d": "physics_damping"}  # fmt: skip
+        for sym, name in scalars.items():
+            if sym in bb:
+                names.append(name)
+                values.append(float(bb[sym]))
+        for sym, name in (("g_0", "input_gain"), ("s_g", "physics_gain")):
+            for j, value in enumerate(np.atleast_1d(bb.get(sym, ()))):
+                if value:
+                    names.append(f"{name}{j + 1}")
+                    values.append(float(value))
+        return names, np.asarray(values, dtype=float)
+
+    def table_model(self):
+        """Return the model as a term table with its weights (a ``TableModel``).
+
+        Returns
+        -------
+        TableModel
+            Terms of :meth:`parameters`, weights ``-theta`` (force side) or ``+theta``
+            (inputs), mass ``m_q``, this ``T_z``, with the friction state z.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37.
+        """
+        from pipeline.identify.terms import term_sign, term_table
+        from pipeline.termtable import TableModel
+
+        names, values = self.parameters()
+        table = term_table(
+            names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior
+        )
+        signs = np.array([term_sign(n) for n in names])
+        return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
+
+    def kernel_arrays(self):
+        """Arrays of the compiled free-run kernel (:mod:`pipeline.kernel`), built once."""
+        return self._kernel
+
+    @cached_property
+    def _kernel(self):
+        from pipeline.kernel import table_arrays
+
+        return table_arrays(self.table_model())
+
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
         """State ``[q, q_dot, z]`` at rest relative to the friction filter (z = q_dot).
 

@@ -29,13 +29,14 @@ import pydantic
 from pydantic import Field, PositiveFloat, PositiveInt
 from scipy.optimize import least_squares
 
-from pipeline import preflight
+from pipeline import preflight, progress
 from pipeline.config import CONFIG, config_from_section
 from pipeline.identify.config import IdentifyConfig
 from pipeline.identify.fit import FitDiagnostics, Record, assemble_model
 from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import force_columns, input_columns, input_map
+from pipeline.identify.terms import term_sign, term_table
 from pipeline.simulate import FineInputs, check_free_run, prepare_inputs, simulate
+from pipeline.termtable import TableModel
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
@@ -108,40 +109,59 @@ class RefineResult:
     seconds: float
 
 
-class _ThetaBatch:
-    """Eq. 37 with one parameter vector per trajectory, for batched window simulations."""
+def _theta_model(
+    thetas: np.ndarray,
+    names: Sequence[str],
+    basis,
+    cfg: IdentifyConfig,
+    n_inputs: int,
+    n_windows: int,
+    T_z: float,
+    log_tz: bool,
+) -> TableModel:
+    """Eq. 37 with one parameter vector per trajectory (rows repeated for every window).
 
-    n_states = 3
+    Parameters
+    ----------
+    thetas : ndarray, shape (R, P)
+        Parameter vectors in the order of the regressor columns ``names`` (and log T_z last
+        with ``log_tz``).
+    names : sequence of str
+        Regressor column names (``"m_q"`` first when the mass is identified).
+    basis : RBFBasis
+        The model's basis.
+    cfg : IdentifyConfig
+        Terms, input map, fixed input gains.
+    n_inputs : int
+        Number of inputs.
+    n_windows : int
+        Trajectories per parameter vector.
+    T_z : float
+        The model's T_z [s] when it is not refined.
+    log_tz : bool
+        Whether the last parameter is log T_z.
 
-    def __init__(self, thetas, names, basis, cfg: IdentifyConfig, n_windows, T_z, log_tz):
-        self.rows = np.repeat(thetas, n_windows, axis=0)
-        self.names, self.basis, self.cfg = names, basis, cfg
-        self.T_z = np.exp(self.rows[:, -1]) if log_tz else np.full(self.rows.shape[0], T_z)
-        self.theta = self.rows[:, :-1] if log_tz else self.rows
-
-    def initial_state(self, q0, q_dot0):
-        return np.stack([q0, q_dot0, q_dot0], axis=-1)
-
-    def max_step(self) -> float:
-        return float(np.inf if np.all(self.T_z == 0) else 1.5 * np.min(self.T_z[self.T_z > 0]))
-
-    def rhs(self, x, v):
-        cfg = self.cfg
-        q, q_dot, z = x[:, 0], x[:, 1], x[:, 2]
-        lag = self.T_z > 0
-        z = np.where(lag, z, q_dot)
-        F, _ = force_columns(
-            q, z, self.basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, prior=cfg.prior
-        )
-        hv = input_map(v, cfg.input_map)
-        if cfg.m_q == "identify":
-            force = hv @ np.asarray(cfg.input_gain) - np.einsum("bj,bj->b", F, self.theta[:, 1:])
-            acc = force / self.theta[:, 0]
-        else:
-            G, _ = input_columns(q, hv, self.basis, cfg.rbf, cfg.backbone, prior=cfg.prior)
-            acc = (np.einsum("bj,bj->b", np.hstack([-F, G]), self.theta)) / float(cfg.m_q)
-        z_dot = np.where(lag, (q_dot - z) / np.where(lag, self.T_z, 1.0), 0.0)
-        return np.stack([q_dot, acc, z_dot], axis=1), acc
+    Returns
+    -------
+    TableModel
+        ``R * n_windows`` trajectories, parameter vector by parameter vector.
+    """
+    rows = np.repeat(thetas, n_windows, axis=0)
+    tz = np.exp(rows[:, -1]) if log_tz else np.full(rows.shape[0], T_z)
+    theta = rows[:, :-1] if log_tz else rows
+    terms = [n for n in names if n != "m_q"]
+    if cfg.m_q == "identify":
+        gains = [f"input_gain{j + 1}" for j in range(n_inputs)]
+        table = term_table([*terms, *gains], basis, n_inputs, cfg.input_map,
+                           cfg.coulomb_velocity, cfg.prior)  # fmt: skip
+        fixed = np.broadcast_to(np.asarray(cfg.input_gain, float), (theta.shape[0], n_inputs))
+        weights = np.hstack([-theta[:, 1:], fixed])
+        mass = theta[:, 0]
+    else:
+        table = term_table(terms, basis, n_inputs, cfg.input_map, cfg.coulomb_velocity, cfg.prior)
+        weights = theta * np.array([term_sign(n) for n in terms])
+        mass = np.full(theta.shape[0], float(cfg.m_q))
+    return TableModel(table, weights, mass, tz)
 
 
 def _windows(records: Sequence[Record], rcfg: RefineConfig):
@@ -226,7 +246,9 @@ def refine_model(
 
     def residuals(xs: np.ndarray) -> np.ndarray:
         thetas = xs * scale
-        batch = _ThetaBatch(thetas, diag.columns, model.basis, cfg, W, model.T_z, log_tz)
+        batch = _theta_model(
+            thetas, diag.columns, model.basis, cfg, model.n_inputs, W, model.T_z, log_tz
+        )
         tiled = FineInputs(fine.values, fine.lengths, fine.substeps).tile(xs.shape[0])
         sims = simulate(
             batch, tiled, dt, np.tile(q0, xs.shape[0]), np.tile(qd0, xs.shape[0]), q_limit=q_limit
@@ -237,7 +259,11 @@ def refine_model(
 
     h = 1e-6
 
+    calls = [0]
+
     def fun(x):
+        calls[0] += 1
+        progress.report("refine: optimiser evaluations", calls[0], rcfg.max_nfev)
         return residuals(x[None, :])[0]
 
     def jac(x):

@@ -20,6 +20,7 @@ import numpy as np
 
 from pipeline.errors import WorkflowError
 from pipeline.identify.basis import RBFBasis
+from pipeline.termtable import S_POW, S_TANH, TermTable, TermTableBuilder
 
 #: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
 RBF_TERMS = ("c", "d", "g")
@@ -266,3 +267,123 @@ def input_columns(
         cols.append(_prior(prior)(q)[2] * hv)
         names += [f"physics_gain{j + 1}" for j in range(n_in)]
     return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
+
+
+#: Backbone terms on the force side (left of the balance), with their (qpow, s factor).
+_FORCE_SCALARS = {
+    "linear_spring": (1, None),
+    "cubic_spring": (3, None),
+    "viscous": (0, "z"),
+    "coulomb": (0, "tanh"),
+    "offset": (0, None),
+}
+
+
+def term_sign(name: str) -> float:
+    """Sign of a term's weight in the acceleration: -1 on the force side, +1 for inputs.
+
+    Parameters
+    ----------
+    name : str
+        A regressor column name (``"c[3]"``, ``"g2[0]"``, ``"viscous"``, ``"input_gain1"``).
+
+    Returns
+    -------
+    float
+        ``+1.0`` for the input terms (``g``, ``input_gain``, ``physics_gain``), else ``-1.0``.
+    """
+    return 1.0 if name.startswith(("g", "input_gain", "physics_gain")) else -1.0
+
+
+def term_table(
+    names: Sequence[str],
+    basis: RBFBasis,
+    n_inputs: int,
+    input_map_kind: str,
+    coulomb_velocity: float,
+    prior: PhysicsPrior | None = None,
+) -> TermTable:
+    """Build the term library of Eq. 37: one term per regressor column name, as a term table.
+
+    The one definition of the model's terms: the regressor columns of Eq. 40
+    (:meth:`~pipeline.termtable.TermTable.columns`), the NumPy and the compiled right-hand
+    sides and the refinement's parameters all come from it.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Column names as :func:`force_columns` and :func:`input_columns` give them:
+        ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), the backbone
+        names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
+        tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``physics_spring``
+        (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)).
+    basis : RBFBasis
+        Centres and width (Eq. 38-39); ``outside = "clip"`` holds q at the range's edge.
+    n_inputs : int
+        Number of inputs.
+    input_map_kind : {"v2", "v"}
+        h(v).
+    coulomb_velocity : float
+        v_c [unit of q / s].
+    prior : PhysicsPrior, optional
+        The analytical curves of the ``physics_*`` terms.
+
+    Returns
+    -------
+    TermTable
+        Terms in the order of ``names``; the velocity-like variable ``s`` is z.
+
+    Raises
+    ------
+    WorkflowError
+        For an unknown name, or a ``physics_*`` term without ``prior``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40.
+    """
+    lo, hi = (basis.xi[0], basis.xi[-1]) if basis.outside == "clip" else (-np.inf, np.inf)
+    build = TermTableBuilder(n_inputs, input_map_kind, coulomb_velocity)
+    prior_base: dict[str, int] = {}
+
+    def gauss(k: int) -> int:
+        return build.gauss(basis.xi[k], basis.sigma, lo, hi)  # shared by c, d, g of centre k
+
+    def tabulated(key: str, column: np.ndarray) -> int:
+        if key not in prior_base:
+            prior_base[key] = build.table(_prior(prior).q, column)
+        return prior_base[key]
+
+    def h(j: int) -> list[int]:
+        out = [0] * n_inputs
+        out[j] = 1
+        return out
+
+    for name in names:
+        rbf, _, index = name.partition("[")
+        if index:
+            k = int(index[:-1])
+            if rbf == "c":
+                build.term(name, gauss(k), qpow=1)
+            elif rbf == "d":
+                build.term(name, gauss(k), skind=S_POW, spow=1)
+            elif rbf.startswith("g") and rbf[1:].isdigit():
+                build.term(name, gauss(k), hpow=h(int(rbf[1:]) - 1))
+            else:
+                raise WorkflowError(f"unknown term {name!r}")
+        elif name in _FORCE_SCALARS:
+            qpow, s = _FORCE_SCALARS[name]
+            skind = {None: 0, "z": S_POW, "tanh": S_TANH}[s]
+            build.term(name, build.one(), qpow=qpow, skind=skind, spow=int(s == "z"))
+        elif name.startswith("input_gain"):
+            build.term(name, build.one(), hpow=h(int(name[len("input_gain") :]) - 1))
+        elif name == "physics_spring":
+            build.term(name, tabulated("c", _prior(prior).c), qpow=1)
+        elif name == "physics_damping":
+            build.term(name, tabulated("d", _prior(prior).d), skind=S_POW, spow=1)
+        elif name.startswith("physics_gain"):
+            j = int(name[len("physics_gain") :]) - 1
+            build.term(name, tabulated(f"g{j}", _prior(prior).g[:, j]), hpow=h(j))
+        else:
+            raise WorkflowError(f"unknown term {name!r}")
+    return build.build()

@@ -113,6 +113,12 @@ class AnalyticalModel:
         e2 = k2 * qd - self._relax * x[:, 3]
         return np.stack([qd, qdd, e1, e2], axis=1), qdd
 
+    def kernel_arrays(self):
+        """Arrays of the compiled free-run kernel: the splines of all curves but phi."""
+        from pipeline.kernel import spline_arrays
+
+        return spline_arrays(self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar)
+
     def max_step(self) -> float:
         """Largest stable RK4 step [s] (2.5 / fastest linearised rate of the curves)."""
         return 2.5 / max(self._omega, self._rate)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline import progress
 from pipeline.stages import StageInputs, StageOutput
 
 __all__ = ["RigResult", "execute", "run_rig"]
@@ -77,7 +78,8 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     outputs: dict[str, Any] = {}
     summary: dict[str, Any] = {}
     timings: dict[str, float] = {}
-    for name, exp in cfg.experiments.items():
+    for i, (name, exp) in enumerate(cfg.experiments.items()):
+        progress.report("rig: experiments", i, len(cfg.experiments))
         run = run_experiment(cfg, name)
         if not run.success:
             raise DebistError(f"[rig.experiments.{name}]: the plant integration failed: "

@@ -1,0 +1,589 @@
+"""The compiled free-run kernel: one fixed-step RK4 for every model that is compared.
+
+The scheme is exactly that of :func:`pipeline.simulate.simulate` (classical RK4 with
+sub-steps, the inputs interpolated once onto the grid of half sub-steps, divergence when a
+state is not finite or ``|q|`` exceeds the limit), compiled with numba (nopython, cached on
+disk) and parallel over the trajectories of a batch (records, windows, parameter vectors).
+Models hand it plain arrays: a term table with weights per trajectory
+(:class:`pipeline.termtable.TableModel`: the RBF model of Eq. 37 with its backbone and
+physics prior, the SINDy polynomials) or the tabulated curves of the analytical reduced model
+(Eq. 26), so one kernel integrates them all and "the same simulator for every model" holds by
+construction.
+
+Every model reaches the kernel as three flat arrays: floats ``fp``, integers ``ip`` and a
+layout ``lay`` of sizes and offsets (:class:`KernelArrays`); the right-hand sides are inlined
+into the integrator. Both keep numba's reference counting out of the inner loop (every array
+argument of a call that is not inlined costs two atomic updates).
+
+References
+----------
+Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I, Sec. II.1 (classical
+RK4); Lam, Pitrou & Seibert 2015, "Numba: a LLVM-based Python JIT compiler" (numba
+documentation: ``njit``, ``cache=True``, ``prange``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+__all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run"]
+
+#: Model kinds of the kernel.
+KIND_TABLE, KIND_SPLINE = 0, 1
+#: Samples integrated per kernel call when progress is reported between calls.
+CHUNK = 50_000
+
+# Layout of a table model: sizes, flags, offsets into fp, offsets into ip (positions in lay).
+(_K, _J, _U, _H, _NI, _QMAX, _BW, _BM, _BT, _G, _SQUARE, _LAG,
+ _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
+ _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
+ _I_RUN, _P_SPACING, _UNIFORM, _N_LAYOUT) = range(34)  # fmt: skip
+#: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
+_TINY = 1e-290
+# Layout of a spline model.
+_S_N, _S_P_X, _S_P_C, _S_P_RELAX, _S_P_KBAR, _S_N_LAYOUT = range(6)
+
+
+@dataclass(frozen=True)
+class KernelArrays:
+    """A model as the kernel takes it.
+
+    Attributes
+    ----------
+    kind : int
+        :data:`KIND_TABLE` or :data:`KIND_SPLINE`.
+    n_states : int
+        State dimension (first two: q, q_dot).
+    fp : ndarray of float64
+        Every real parameter (bases, tables, weights, masses, T_z; or spline coefficients).
+    ip : ndarray of int64
+        Every integer parameter (basis kinds, term structure).
+    lay : ndarray of int64
+        Sizes and offsets into ``fp`` and ``ip``.
+    n_work : int
+        Scratch floats per trajectory.
+    """
+
+    kind: int
+    n_states: int
+    fp: np.ndarray
+    ip: np.ndarray
+    lay: np.ndarray
+    n_work: int
+
+
+class _Packer:
+    def __init__(self) -> None:
+        self.f: list[np.ndarray] = []
+        self.i: list[np.ndarray] = []
+        self.nf = 0
+        self.ni = 0
+
+    def floats(self, a) -> int:
+        a = np.ascontiguousarray(a, dtype=np.float64).ravel()
+        self.f.append(a)
+        self.nf += a.size
+        return self.nf - a.size
+
+    def ints(self, a) -> int:
+        a = np.ascontiguousarray(a, dtype=np.int64).ravel()
+        self.i.append(a)
+        self.ni += a.size
+        return self.ni - a.size
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        fp = np.concatenate(self.f) if self.f else np.zeros(1)
+        ip = np.concatenate(self.i) if self.i else np.zeros(1, np.int64)
+        return (fp if fp.size else np.zeros(1)), (ip if ip.size else np.zeros(1, np.int64))
+
+
+def table_arrays(model) -> KernelArrays:
+    """Kernel arrays of a :class:`pipeline.termtable.TableModel`.
+
+    The terms are grouped by their factors other than the basis (power of q, velocity factor,
+    input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_k W_gk b_k(q)``
+    with a dense weight matrix ``W`` (groups x bases) per trajectory, so each right-hand side
+    evaluates every basis, velocity factor and monomial once and then a small matrix-vector
+    product.
+
+    Parameters
+    ----------
+    model : TableModel
+        Term table, weights (B or 1, J), masses, T_z and whether the friction lag is used.
+
+    Returns
+    -------
+    KernelArrays
+    """
+    from pipeline.termtable import INPUT_MAP_CODES
+
+    t = model.table
+    n_in = t.n_inputs
+    s_codes = np.stack([t.term_skind, t.term_spow], axis=1).reshape(-1, 2)
+    s_unique, s_index = np.unique(s_codes, axis=0, return_inverse=True)
+    h_unique, h_index = np.unique(t.term_hpow.reshape(-1, n_in), axis=0, return_inverse=True)
+    keys = np.stack([t.term_qpow, s_index.reshape(-1), h_index.reshape(-1)], axis=1)
+    groups, g_index = np.unique(keys.reshape(-1, 3), axis=0, return_inverse=True)
+    K, G = t.base_kind.size, len(groups)
+    dense = np.zeros((model.weights.shape[0], G, K))
+    for j, (g, k) in enumerate(zip(g_index.reshape(-1), t.term_base, strict=True)):
+        dense[:, g, k] += model.weights[:, j]
+    tables = t.tables if t.tables.size else np.zeros((1, t.table_q.size))
+    pack = _Packer()
+    lay = np.zeros(_N_LAYOUT, dtype=np.int64)
+    lay[_K], lay[_J], lay[_U], lay[_H], lay[_NI] = K, t.n_terms, len(s_unique), len(h_unique), n_in
+    lay[_NG] = G
+    lay[_QMAX] = int(t.term_qpow.max()) if t.n_terms else 0
+    lay[_BW], lay[_BM], lay[_BT] = model.weights.shape[0], model.mass.size, model.T_z.size
+    lay[_G] = t.table_q.size
+    lay[_SQUARE] = int(INPUT_MAP_CODES[t.input_map] == 0)
+    lay[_LAG] = int(model.lag)
+    lay[_P_CENTRE] = pack.floats(t.base_centre)
+    lay[_P_WIDTH] = pack.floats(t.base_width)
+    lay[_P_LO] = pack.floats(t.base_lo)
+    lay[_P_HI] = pack.floats(t.base_hi)
+    lay[_P_TQ] = pack.floats(t.table_q)
+    lay[_P_TAB] = pack.floats(tables)
+    lay[_P_W] = pack.floats(dense)
+    lay[_P_MASS] = pack.floats(model.mass)
+    lay[_P_TZ] = pack.floats(model.T_z)
+    lay[_P_VC] = pack.floats([t.coulomb_velocity])
+    lay[_I_BKIND] = pack.ints(t.base_kind)
+    lay[_I_BTAB] = pack.ints(t.base_table)
+    lay[_I_GQPOW] = pack.ints(groups[:, 0] if G else [0])
+    lay[_I_GSIDX] = pack.ints(groups[:, 1] if G else [0])
+    lay[_I_SUNIQ] = pack.ints(s_unique)
+    lay[_I_GHIDX] = pack.ints(groups[:, 2] if G else [0])
+    lay[_I_HUNIQ] = pack.ints(h_unique)
+    run, spacing = _gauss_runs(t)
+    lay[_I_RUN] = pack.ints(run)
+    lay[_P_SPACING] = pack.floats(spacing)
+    grid = t.table_q
+    step = (grid[-1] - grid[0]) / max(grid.size - 1, 1)
+    regular = grid[0] + step * np.arange(grid.size)
+    lay[_UNIFORM] = int(grid.size > 1 and np.allclose(grid, regular, rtol=0, atol=1e-9 * step))
+    fp, ip = pack.arrays()
+    n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
+    return KernelArrays(KIND_TABLE, model.n_states, fp, ip, lay, n_work)
+
+
+def _continues(t, k: int, n: int, spacing: float) -> bool:
+    """Whether basis k + n continues the run of Gaussians that starts at basis k."""
+    nxt, prev = k + n, k + n - 1
+    if t.base_kind[nxt] != 1 or t.base_centre[nxt] <= t.base_centre[prev]:
+        return False
+    if any(a[nxt] != a[k] for a in (t.base_width, t.base_lo, t.base_hi)):
+        return False
+    step = t.base_centre[nxt] - t.base_centre[prev]
+    return n == 1 or bool(np.isclose(step, spacing, rtol=1e-12, atol=0.0))
+
+
+def _gauss_runs(t) -> tuple[np.ndarray, np.ndarray]:
+    """Find the runs of equidistant Gaussian bases (same width and clipping) for the recurrence.
+
+    Returns ``run`` (per basis: the run's length at its first basis, 0 inside a run, 1 for a
+    basis on its own) and ``spacing`` (per basis: the centre spacing of its run).
+    """
+    K = t.base_kind.size
+    run = np.ones(K, dtype=np.int64)
+    spacing = np.zeros(K)
+    k = 0
+    while k < K:
+        n = 1
+        if t.base_kind[k] == 1:
+            while k + n < K and _continues(t, k, n, spacing[k]):
+                if n == 1:
+                    spacing[k] = t.base_centre[k + 1] - t.base_centre[k]
+                n += 1
+        run[k] = n
+        run[k + 1 : k + n] = 0
+        k += n
+    return run, spacing
+
+
+def spline_arrays(x: np.ndarray, c: np.ndarray, relax: float, kbar: float) -> KernelArrays:
+    """Kernel arrays of the analytical reduced model (Eq. 26) on its cubic splines.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Breakpoints [m].
+    c : ndarray, shape (4, n - 1, 8)
+        Piecewise-cubic coefficients (highest power first, as
+        :class:`scipy.interpolate.CubicSpline` stores them) of ``m_q, dm_q/dq, d, f, g1, g2,
+        k1, k2``.
+    relax : float
+        Relaxation rate of the Maxwell elements ``Y_MW / eta_MW`` [1/s].
+    kbar : float
+        ``V_DE Y_MW`` [J].
+
+    Returns
+    -------
+    KernelArrays
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26.
+    """
+    if np.shape(c)[2] != 8 or np.shape(c)[0] != 4:
+        raise ValueError(f"`c` must have shape (4, n - 1, 8), got {np.shape(c)}")
+    pack = _Packer()
+    lay = np.zeros(_S_N_LAYOUT, dtype=np.int64)
+    lay[_S_N] = np.size(x)
+    lay[_S_P_X] = pack.floats(x)
+    lay[_S_P_C] = pack.floats(np.transpose(c, (1, 2, 0)))  # [interval, curve, power]
+    lay[_S_P_RELAX] = pack.floats([relax])
+    lay[_S_P_KBAR] = pack.floats([kbar])
+    fp, ip = pack.arrays()
+    return KernelArrays(KIND_SPLINE, 4, fp, ip, lay, 8)
+
+
+# ------------------------------------------------------------------------------ right-hand sides
+
+
+@nb.njit(cache=True, inline="always")
+def _gauss_run(q, fp, lay, W, w_k, k0, n):  # pragma: no cover - compiled
+    """phi_k = exp(-(q - xi_k)^2 / (2 sigma^2)) of n equidistant centres by recurrence.
+
+    From the centre m nearest to q, phi_{k+1} = phi_k r_k with r_{k+1} = r_k exp(-delta^2)
+    (delta = spacing / sigma), and likewise downwards: three exponentials for the whole run.
+    """
+    lo = fp[lay[_P_LO] + k0]
+    hi = fp[lay[_P_HI] + k0]
+    qc = q if q > lo else lo
+    qc = qc if qc < hi else hi
+    sigma = fp[lay[_P_WIDTH] + k0]
+    delta = fp[lay[_P_SPACING] + k0] / sigma
+    u = (qc - fp[lay[_P_CENTRE] + k0]) / sigma
+    m = math.floor(u / delta + 0.5)
+    m = 0 if m < 0 else (n - 1 if m > n - 1 else m)
+    du = u - m * delta
+    step = math.exp(-delta * delta)
+    p = math.exp(-0.5 * du * du)
+    W[w_k + k0 + m] = p
+    r = math.exp(delta * du - 0.5 * delta * delta)
+    pk = p
+    for k in range(m + 1, n):
+        pk = pk * r if pk > _TINY else 0.0
+        W[w_k + k0 + k] = pk
+        r *= step
+    r = math.exp(-delta * du - 0.5 * delta * delta)
+    pk = p
+    for k in range(m - 1, -1, -1):
+        pk = pk * r if pk > _TINY else 0.0
+        W[w_k + k0 + k] = pk
+        r *= step
+
+
+@nb.njit(cache=True, inline="always")
+def _table_interval(q, fp, lay):  # pragma: no cover - compiled
+    """Interval i of the table grid with grid[i] <= q < grid[i + 1] (q inside the grid)."""
+    GQ = lay[_G]
+    tq = lay[_P_TQ]
+    if lay[_UNIFORM] == 1:
+        i = int((q - fp[tq]) / ((fp[tq + GQ - 1] - fp[tq]) / (GQ - 1)))
+        i = 0 if i < 0 else (GQ - 2 if i > GQ - 2 else i)
+        if q < fp[tq + i]:
+            i -= 1
+        elif q >= fp[tq + i + 1]:
+            i += 1
+        return i
+    lo_i = 0
+    hi_i = GQ - 1
+    while hi_i - lo_i > 1:  # fp[tq + lo_i] <= q < fp[tq + hi_i]
+        mid = (lo_i + hi_i) // 2
+        if fp[tq + mid] <= q:
+            lo_i = mid
+        else:
+            hi_i = mid
+    return lo_i
+
+
+@nb.njit(cache=True, inline="always")
+def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - compiled
+    # Offsets are read into locals once: stores into W could alias lay for the compiler.
+    K, U, H, NI, QMAX, G = lay[_K], lay[_U], lay[_H], lay[_NI], lay[_QMAX], lay[_NG]
+    o_kind, o_run, o_tab_row = lay[_I_BKIND], lay[_I_RUN], lay[_I_BTAB]
+    o_lo, o_hi, o_centre, o_width = lay[_P_LO], lay[_P_HI], lay[_P_CENTRE], lay[_P_WIDTH]
+    o_sun, o_hun, o_gq, o_gs, o_gh = (
+        lay[_I_SUNIQ],
+        lay[_I_HUNIQ],
+        lay[_I_GQPOW],
+        lay[_I_GSIDX],
+        lay[_I_GHIDX],
+    )
+    GQ, tq, o_tab = lay[_G], lay[_P_TQ], lay[_P_TAB]
+    w_k, w_hv = 0, K
+    w_qp = w_hv + NI
+    w_sf = w_qp + QMAX + 1
+    w_hm = w_sf + U
+    tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
+    lag = lay[_LAG] == 1
+    q = x[0]
+    q_dot = x[1]
+    s = x[2] if lag and tz > 0.0 else q_dot
+    t_i = -1
+    for k in range(K):
+        kind = ip[o_kind + k]
+        run = ip[o_run + k]
+        if kind == 0:
+            W[w_k + k] = 1.0
+        elif kind == 1:
+            if run > 1:
+                _gauss_run(q, fp, lay, W, w_k, k, run)
+            elif run == 1:
+                lo = fp[o_lo + k]
+                hi = fp[o_hi + k]
+                qc = q if q > lo else lo
+                qc = qc if qc < hi else hi
+                dq = qc - fp[o_centre + k]
+                wk = fp[o_width + k]
+                W[w_k + k] = math.exp(-(dq * dq) / (2.0 * wk * wk))
+        else:  # tabulated: linear interpolation, held outside (numpy.interp)
+            tab = o_tab + ip[o_tab_row + k] * GQ
+            if q <= fp[tq]:
+                W[w_k + k] = fp[tab]
+            elif q >= fp[tq + GQ - 1]:
+                W[w_k + k] = fp[tab + GQ - 1]
+            else:
+                if t_i < 0:  # one interval for all tables (one grid)
+                    t_i = _table_interval(q, fp, lay)
+                slope = (fp[tab + t_i + 1] - fp[tab + t_i]) / (fp[tq + t_i + 1] - fp[tq + t_i])
+                W[w_k + k] = slope * (q - fp[tq + t_i]) + fp[tab + t_i]
+    W[w_qp] = 1.0
+    for a in range(1, QMAX + 1):
+        W[w_qp + a] = W[w_qp + a - 1] * q
+    vc = fp[lay[_P_VC]]
+    for u in range(U):
+        skind = ip[o_sun + 2 * u]
+        if skind == 2:
+            W[w_sf + u] = math.tanh(s / vc)
+        else:
+            val = 1.0
+            if skind == 1:
+                for _ in range(ip[o_sun + 2 * u + 1]):
+                    val *= s
+            W[w_sf + u] = val
+    square = lay[_SQUARE] == 1
+    for i in range(NI):
+        vi = fine[b, j, i]
+        W[w_hv + i] = vi * vi if square else vi
+    for u in range(H):
+        val = 1.0
+        for i in range(NI):
+            for _ in range(ip[o_hun + u * NI + i]):
+                val *= W[w_hv + i]
+        W[w_hm + u] = val
+    acc = 0.0
+    w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * G * K
+    for g in range(G):
+        inner = 0.0
+        row_w = w0 + g * K
+        for k in range(K):
+            inner += fp[row_w + k] * W[w_k + k]
+        acc += inner * (W[w_qp + ip[o_gq + g]] * W[w_sf + ip[o_gs + g]] * W[w_hm + ip[o_gh + g]])
+    acc /= fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+    d[row, 0] = q_dot
+    d[row, 1] = acc
+    if lag:
+        d[row, 2] = (q_dot - x[2]) / tz if tz > 0.0 else 0.0
+    return acc
+
+
+@nb.njit(cache=True, inline="always")
+def _rhs_spline(x, fine, b, j, d, row, fp, lay, W):  # pragma: no cover - compiled
+    n = lay[_S_N]
+    px = lay[_S_P_X]
+    q = x[0]
+    lo_i = 0
+    hi_i = n - 1
+    if q < fp[px]:
+        hi_i = 1
+    elif q >= fp[px + n - 1]:
+        lo_i = n - 2
+    else:
+        while hi_i - lo_i > 1:  # the interval of q, as scipy's PPoly finds it
+            mid = (lo_i + hi_i) // 2
+            if fp[px + mid] <= q:
+                lo_i = mid
+            else:
+                hi_i = mid
+    s = q - fp[px + lo_i]
+    base = lay[_S_P_C] + lo_i * 32
+    for m in range(8):  # sum_k c[k] s^(3-k), from the constant term on, as PPoly does
+        res = 0.0
+        z = 1.0
+        for kp in range(4):
+            res += fp[base + m * 4 + 3 - kp] * z
+            z *= s
+        W[m] = res
+    relax = fp[lay[_S_P_RELAX]]
+    kbar = fp[lay[_S_P_KBAR]]
+    qd = x[1]
+    v1 = fine[b, j, 0]
+    v2 = fine[b, j, 1]
+    force = W[4] * v1**2 + W[5] * v2**2
+    force -= 0.5 * W[1] * qd * qd + W[2] * qd + W[3] + kbar * (W[6] * x[2] + W[7] * x[3])
+    acc = force / W[0]
+    d[row, 0] = qd
+    d[row, 1] = acc
+    d[row, 2] = W[6] * qd - relax * x[2]
+    d[row, 3] = W[7] * qd - relax * x[3]
+    return acc
+
+
+# ---------------------------------------------------------------------------------- the kernel
+
+
+@nb.njit(cache=True, inline="always")
+def _trajectory(
+    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, b
+):  # pragma: no cover - compiled
+    """RK4 steps k0 .. k1 - 1 of trajectory b (at its last sample: the acceleration only)."""
+    S = states.shape[2]
+    L = lengths[b]
+    if dead[b] >= 0 or k0 >= L:
+        return  # diverged, or finished in an earlier chunk
+    x = states[b, k0].copy()
+    xt = np.empty(S)
+    d = np.empty((4, S))
+    W = np.empty(max(n_work, 8))
+    for k in range(k0, min(k1, L)):
+        last = k == L - 1
+        for s in range(1 if last else ns):
+            j = (k * ns + s) * 2
+            for stage in range(1 if last else 4):
+                if stage == 0:
+                    for i in range(S):
+                        xt[i] = x[i]
+                    js = j
+                elif stage == 3:
+                    for i in range(S):
+                        xt[i] = x[i] + h * d[2, i]
+                    js = j + 2
+                else:
+                    for i in range(S):
+                        xt[i] = x[i] + 0.5 * h * d[stage - 1, i]
+                    js = j + 1
+                if kind == 0:
+                    a = _rhs_table(xt, fine, b, js, d, stage, fp, ip, lay, W)
+                else:
+                    a = _rhs_spline(xt, fine, b, js, d, stage, fp, lay, W)
+                if stage == 0 and s == 0:
+                    acc[b, k] = a
+            if not last:
+                for i in range(S):
+                    incr = d[0, i] + 2.0 * d[1, i] + 2.0 * d[2, i] + d[3, i]
+                    x[i] = x[i] + (h / 6.0) * incr
+        if last:
+            break
+        ok = abs(x[0]) <= q_limit
+        for i in range(S):
+            ok = ok and math.isfinite(x[i])
+        if not ok:
+            dead[b] = k + 1
+            break
+        for i in range(S):
+            states[b, k + 1, i] = x[i]
+
+
+@nb.njit(cache=True)
+def _integrate_serial(
+    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
+):  # pragma: no cover - compiled
+    """Integrate the trajectories in turn (one trajectory: no thread start-up)."""
+    for b in range(states.shape[0]):
+        _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
+                    acc, dead, b)  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _integrate_parallel(
+    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
+):  # pragma: no cover - compiled
+    """Integrate the trajectories on numba's threads (independent: the same numbers)."""
+    for bp in nb.prange(states.shape[0]):
+        b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
+        _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
+                    acc, dead, b)  # fmt: skip
+
+
+def free_run(
+    arrays: KernelArrays,
+    fine: np.ndarray,
+    lengths: np.ndarray,
+    dt: float,
+    substeps: int,
+    x0: np.ndarray,
+    q_limit: float,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Integrate a batch of free runs with the compiled RK4.
+
+    Parameters
+    ----------
+    arrays : KernelArrays
+        The model.
+    fine : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
+        Inputs on the grid of half sub-steps [V] (:func:`pipeline.simulate.prepare_inputs`).
+    lengths : ndarray of int, shape (B,)
+        Samples of each trajectory (``<= n``).
+    dt : float
+        Sample time [s].
+    substeps : int
+        RK4 steps per sample.
+    x0 : ndarray, shape (B, n_states)
+        Initial states.
+    q_limit : float
+        ``|q|`` beyond which a trajectory counts as diverged [unit of q].
+    progress : callable, optional
+        Called as ``progress(done, total)`` (samples of the longest trajectory) between
+        chunks of :data:`CHUNK` samples.
+
+    Returns
+    -------
+    states : ndarray, shape (B, n, n_states)
+        States at the samples; NaN from a trajectory's divergence on and beyond its length.
+    acc : ndarray, shape (B, n)
+        Acceleration at the samples; NaN from one sample before a divergence on.
+    diverged_at : ndarray of int, shape (B,)
+        First diverged sample, -1 if none.
+
+    References
+    ----------
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (classical RK4).
+    """
+    B, n = fine.shape[0], int(np.max(lengths))
+    states = np.full((B, n, arrays.n_states), np.nan)
+    acc = np.full((B, n), np.nan)
+    dead = np.full(B, -1, dtype=np.int64)
+    states[:, 0] = x0
+    lengths = np.ascontiguousarray(lengths, dtype=np.int64)
+    fine = np.ascontiguousarray(fine, dtype=np.float64)
+    h = float(dt) / int(substeps)
+    step = n if progress is None else CHUNK
+    integrate = (
+        _integrate_parallel if B > 1 and nb.config.NUMBA_NUM_THREADS > 1 else _integrate_serial
+    )
+    for k0 in range(0, n, step):
+        k1 = min(k0 + step, n)
+        integrate(arrays.kind, arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine, lengths, h,
+                   int(substeps), float(q_limit), k0, k1, states, acc, dead)  # fmt: skip
+        if progress is not None:
+            progress(k1, n)
+    for b in range(B):
+        L = int(lengths[b])
+        d = int(dead[b])
+        if 0 <= d < L:
+            states[b, d:] = np.nan
+            acc[b, max(d - 1, 0) :] = np.nan
+        else:
+            dead[b] = -1
+        states[b, L:] = np.nan
+        acc[b, L:] = np.nan
+    return states, acc, dead

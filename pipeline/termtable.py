@@ -1,0 +1,369 @@
+"""Models linear in their weights, written as plain arrays: the form every compared model takes.
+
+A *term table* describes the acceleration of a one-coordinate model as a weighted sum of terms,
+
+    q'' = (1 / m) sum_j w_j b_j(q) q^a_j S_j(s) prod_i h_i^c_ji,
+
+where ``b_j`` is one of a few *bases* of q (the constant 1, a Gaussian RBF with its centre,
+width and clipping range, or a table interpolated linearly and held outside its grid), ``S_j``
+is 1, ``s^k`` or ``tanh(s / v_c)`` of the velocity-like variable ``s`` (the friction state z
+of Eq. 37, or q_dot), and ``h_i = h(v_i)`` are the mapped inputs. The RBF model of Eq. 37 with
+its backbone and physics prior, and the SINDy polynomials, are such tables; the same arrays
+give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
+right-hand side (:class:`TableModel`) and the compiled one (:mod:`pipeline.kernel`), so the
+fitted, the reference-simulated and the compiled-simulated model are one object.
+
+References
+----------
+Masoud & Maas 2025, Eq. 37-40; Brunton, Proctor & Kutz 2016 (SINDy's library
+Theta(X) Xi); de Silva et al. 2020, "PySINDy" (feature libraries).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "BASE_GAUSS",
+    "BASE_ONE",
+    "BASE_TABLE",
+    "INPUT_MAP_CODES",
+    "S_ONE",
+    "S_POW",
+    "S_TANH",
+    "TableModel",
+    "TermTable",
+]
+
+#: Basis kinds: the constant 1, a Gaussian RBF (Eq. 38), a tabulated curve.
+BASE_ONE, BASE_GAUSS, BASE_TABLE = 0, 1, 2
+#: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``.
+S_ONE, S_POW, S_TANH = 0, 1, 2
+#: Input maps h(v) by code: ``"v2"`` is v^2 (DE actuators, Eq. 37), ``"v"`` is v.
+INPUT_MAP_CODES = {"v2": 0, "v": 1}
+
+
+def _int(a, shape=None) -> np.ndarray:
+    out = np.ascontiguousarray(np.asarray(a, dtype=np.int64))
+    return out.reshape(shape) if shape is not None else out
+
+
+def _float(a) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+
+
+@dataclass(frozen=True, eq=False)
+class TermTable:
+    """The terms of a model linear in its weights, as arrays (see the module docstring).
+
+    Parameters
+    ----------
+    names : tuple of str, length J
+        One name per term (e.g. ``"c[3]"``, ``"linear_spring"``, ``"q^2 q_dot"``).
+    base_kind : ndarray of int, shape (K,)
+        :data:`BASE_ONE`, :data:`BASE_GAUSS` or :data:`BASE_TABLE` per basis.
+    base_centre, base_width : ndarray, shape (K,)
+        Centre xi [unit of q] and width sigma [unit of q] of a Gaussian basis.
+    base_lo, base_hi : ndarray, shape (K,)
+        A Gaussian basis is evaluated at q clipped to ``[lo, hi]`` (``-inf, inf``: not
+        clipped).
+    base_table : ndarray of int, shape (K,)
+        Row of ``tables`` of a tabulated basis.
+    table_q : ndarray, shape (G,)
+        Ascending grid of the tables [unit of q] (length 1 when there are none).
+    tables : ndarray, shape (T, G)
+        Tabulated curves on ``table_q``, interpolated linearly and held outside the grid.
+    term_base : ndarray of int, shape (J,)
+        Basis of each term.
+    term_qpow : ndarray of int, shape (J,)
+        Power ``a_j >= 0`` of q.
+    term_skind, term_spow : ndarray of int, shape (J,)
+        Velocity factor of each term (:data:`S_ONE`, :data:`S_POW` with power ``term_spow``,
+        :data:`S_TANH`).
+    term_hpow : ndarray of int, shape (J, n_inputs)
+        Powers ``c_ji >= 0`` of the mapped inputs.
+    input_map : {"v2", "v"}
+        h(v) = v^2 [V^2] or v [V].
+    coulomb_velocity : float
+        v_c of the ``tanh`` factor [unit of q / s].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40 (RBF terms); Brunton, Proctor & Kutz 2016 (library).
+    """
+
+    names: tuple[str, ...]
+    base_kind: np.ndarray
+    base_centre: np.ndarray
+    base_width: np.ndarray
+    base_lo: np.ndarray
+    base_hi: np.ndarray
+    base_table: np.ndarray
+    table_q: np.ndarray
+    tables: np.ndarray
+    term_base: np.ndarray
+    term_qpow: np.ndarray
+    term_skind: np.ndarray
+    term_spow: np.ndarray
+    term_hpow: np.ndarray
+    input_map: str = "v2"
+    coulomb_velocity: float = 1.0
+
+    @property
+    def n_terms(self) -> int:
+        """Number of terms J."""
+        return len(self.names)
+
+    @property
+    def n_inputs(self) -> int:
+        """Number of inputs."""
+        return int(self.term_hpow.shape[1])
+
+    def map_inputs(self, v: np.ndarray) -> np.ndarray:
+        """Apply the input map: ``h(v)``, same shape as ``v`` [V^2 or V]."""
+        v = np.asarray(v, dtype=float)
+        return v * v if self.input_map == "v2" else v
+
+    def bases(self, q: np.ndarray) -> np.ndarray:
+        """Evaluate every basis.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+
+        Returns
+        -------
+        ndarray, shape (n, K)
+        """
+        q = np.asarray(q, dtype=float)
+        out = np.ones((q.size, self.base_kind.size))
+        for k, kind in enumerate(self.base_kind):
+            if kind == BASE_GAUSS:
+                qc = np.minimum(np.maximum(q, self.base_lo[k]), self.base_hi[k])
+                diff = qc - self.base_centre[k]
+                out[:, k] = np.exp(-(diff * diff) / (2.0 * self.base_width[k] ** 2))
+            elif kind == BASE_TABLE:
+                out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
+        return out
+
+    def columns(self, q: np.ndarray, s: np.ndarray, hv: np.ndarray) -> np.ndarray:
+        """Evaluate every term: the regressor columns (without weights and mass).
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+        s : array_like, shape (n,)
+            The velocity-like variable (friction state z or q_dot) [unit of q / s].
+        hv : array_like, shape (n, n_inputs)
+            Mapped inputs h(v_i).
+
+        Returns
+        -------
+        ndarray, shape (n, J)
+        """
+        q = np.asarray(q, dtype=float)
+        s = np.asarray(s, dtype=float)
+        hv = np.asarray(hv, dtype=float).reshape(q.size, self.n_inputs)
+        b = self.bases(q)
+        out = b[:, self.term_base].copy()
+        for a in np.unique(self.term_qpow):
+            if a:
+                out[:, self.term_qpow == a] *= (q**a)[:, None]
+        for j in range(self.n_terms):
+            kind = self.term_skind[j]
+            if kind == S_POW and self.term_spow[j]:
+                out[:, j] *= s ** self.term_spow[j]
+            elif kind == S_TANH:
+                out[:, j] *= np.tanh(s / self.coulomb_velocity)
+            for i in np.flatnonzero(self.term_hpow[j]):
+                out[:, j] *= hv[:, i] ** self.term_hpow[j, i]
+        return out
+
+    def select(self, keep: Sequence[int]) -> TermTable:
+        """Return the table of a subset of the terms (in the given order)."""
+        keep = _int(keep)
+        return TermTable(
+            tuple(self.names[j] for j in keep),
+            self.base_kind,
+            self.base_centre,
+            self.base_width,
+            self.base_lo,
+            self.base_hi,
+            self.base_table,
+            self.table_q,
+            self.tables,
+            self.term_base[keep],
+            self.term_qpow[keep],
+            self.term_skind[keep],
+            self.term_spow[keep],
+            self.term_hpow[keep],
+            self.input_map,
+            self.coulomb_velocity,
+        )
+
+
+@dataclass(eq=False)
+class TermTableBuilder:
+    """Collects bases and terms and builds a :class:`TermTable` (bases are shared).
+
+    Parameters
+    ----------
+    n_inputs : int
+        Number of inputs.
+    input_map : {"v2", "v"}
+        h(v).
+    coulomb_velocity : float
+        v_c [unit of q / s].
+    """
+
+    n_inputs: int
+    input_map: str = "v2"
+    coulomb_velocity: float = 1.0
+    _bases: list[tuple] = field(default_factory=list)
+    _tables: list[np.ndarray] = field(default_factory=list)
+    _table_q: np.ndarray | None = None
+    _terms: list[tuple] = field(default_factory=list)
+
+    def one(self) -> int:
+        """Index of the constant basis."""
+        return self._base((BASE_ONE, 0.0, 1.0, -np.inf, np.inf, -1))
+
+    def gauss(self, centre: float, width: float, lo: float = -np.inf, hi: float = np.inf) -> int:
+        """Index of a Gaussian basis ``exp(-(clip(q, lo, hi) - centre)^2 / (2 width^2))``."""
+        return self._base((BASE_GAUSS, float(centre), float(width), float(lo), float(hi), -1))
+
+    def table(self, q: np.ndarray, values: np.ndarray) -> int:
+        """Index of a tabulated basis on the grid ``q`` (every table shares one grid)."""
+        q = _float(q)
+        if self._table_q is None:
+            self._table_q = q
+        elif not np.array_equal(self._table_q, q):
+            raise ValueError("every tabulated basis of a term table shares one grid")
+        self._tables.append(_float(values))
+        return self._base((BASE_TABLE, 0.0, 1.0, -np.inf, np.inf, len(self._tables) - 1))
+
+    def _base(self, spec: tuple) -> int:
+        if spec in self._bases and spec[0] != BASE_TABLE:
+            return self._bases.index(spec)
+        self._bases.append(spec)
+        return len(self._bases) - 1
+
+    def term(
+        self,
+        name: str,
+        base: int,
+        *,
+        qpow: int = 0,
+        skind: int = S_ONE,
+        spow: int = 0,
+        hpow: Sequence[int] | None = None,
+    ) -> None:
+        """Add a term ``b(q) q^qpow S(s) prod h_i^hpow_i``."""
+        h = np.zeros(self.n_inputs, dtype=np.int64) if hpow is None else _int(hpow)
+        self._terms.append((name, base, int(qpow), int(skind), int(spow), h))
+
+    def build(self) -> TermTable:
+        """Return the table."""
+        bases = self._bases or [(BASE_ONE, 0.0, 1.0, -np.inf, np.inf, -1)]
+        kind, centre, width, lo, hi, tab = (np.array(col) for col in zip(*bases, strict=True))
+        table_q = self._table_q if self._table_q is not None else np.zeros(1)
+        tables = np.stack(self._tables) if self._tables else np.zeros((0, table_q.size))
+        terms = self._terms
+        return TermTable(
+            names=tuple(t[0] for t in terms),
+            base_kind=_int(kind),
+            base_centre=_float(centre),
+            base_width=_float(width),
+            base_lo=_float(lo),
+            base_hi=_float(hi),
+            base_table=_int(tab),
+            table_q=_float(table_q),
+            tables=_float(tables),
+            term_base=_int([t[1] for t in terms]),
+            term_qpow=_int([t[2] for t in terms]),
+            term_skind=_int([t[3] for t in terms]),
+            term_spow=_int([t[4] for t in terms]),
+            term_hpow=_int([t[5] for t in terms], (len(terms), self.n_inputs)),
+            input_map=self.input_map,
+            coulomb_velocity=float(self.coulomb_velocity),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class TableModel:
+    """A term table with weights per trajectory, as a free-run model of either engine.
+
+    States ``[q, q_dot, z]`` when ``lag`` (z' = (q_dot - z) / T_z, and z = q_dot where
+    ``T_z = 0``), else ``[q, q_dot]`` with ``s = q_dot``.
+
+    Parameters
+    ----------
+    table : TermTable
+        The terms.
+    weights : ndarray, shape (B or 1, J)
+        Weights per trajectory (one row: shared by all).
+    mass : ndarray, shape (B or 1,)
+        The divisor m (generalised mass [kg], 1 for curves per unit mass).
+    T_z : ndarray, shape (B or 1,)
+        Friction time constant per trajectory [s] (only with ``lag``).
+    lag : bool
+        Whether the model has the friction state z of Eq. 37.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (z' = (q' - z) / T_z).
+    """
+
+    table: TermTable
+    weights: np.ndarray
+    mass: np.ndarray
+    T_z: np.ndarray
+    lag: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "weights", np.atleast_2d(_float(self.weights)))
+        object.__setattr__(self, "mass", np.atleast_1d(_float(self.mass)))
+        object.__setattr__(self, "T_z", np.atleast_1d(_float(self.T_z)))
+
+    @property
+    def n_states(self) -> int:
+        """3 with the friction state, else 2."""
+        return 3 if self.lag else 2
+
+    def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
+        """States at ``q0``, ``q_dot0`` with the friction filter at rest (z = q_dot)."""
+        q0, q_dot0 = np.asarray(q0, float), np.asarray(q_dot0, float)
+        cols = [q0, q_dot0, q_dot0] if self.lag else [q0, q_dot0]
+        return np.stack(cols, axis=-1)
+
+    def max_step(self) -> float:
+        """Largest stable RK4 step of the friction filter [s] (inf without a lag)."""
+        positive = self.T_z[self.T_z > 0]
+        return float(1.5 * positive.min()) if self.lag and positive.size else np.inf
+
+    def kernel_arrays(self):
+        """Arrays of the compiled free-run kernel (:func:`pipeline.kernel.table_arrays`)."""
+        from pipeline.kernel import table_arrays
+
+        return table_arrays(self)
+
+    def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """State derivative (B, n_states) and acceleration (B,), evaluated with NumPy."""
+        q, q_dot = x[:, 0], x[:, 1]
+        if self.lag:
+            tz = np.broadcast_to(self.T_z, q.shape)
+            lagged = tz > 0
+            s = np.where(lagged, x[:, 2], q_dot)
+            z_dot = np.where(lagged, (q_dot - s) / np.where(lagged, tz, 1.0), 0.0)
+        else:
+            s = q_dot
+        cols = self.table.columns(q, s, self.table.map_inputs(v))
+        acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
+        acc = acc / np.broadcast_to(self.mass, q.shape)
+        derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
+        return np.stack(derivs, axis=1), acc

@@ -1,0 +1,181 @@
+"""The compiled free-run kernel against the NumPy reference engine, on every model class.
+
+The NumPy engine calls each model's own ``rhs`` (the RBF model's curve form of Eq. 37, SINDy's
+library, the analytical model's splines); the kernel gets the model as arrays. Agreement to
+1e-10 relative checks the kernel and the arrays (the term library) at once.
+"""
+
+import numpy as np
+import pytest
+
+from pipeline import kernel, progress
+from pipeline.identify.basis import RBFBasis
+from pipeline.identify.model import RBFModel
+from pipeline.identify.terms import PhysicsPrior, force_columns, input_columns, term_table
+from pipeline.physics.freerun import analytical_model
+from pipeline.physics.params import PrototypeParams
+from pipeline.simulate import prepare_inputs, simulate
+from pipeline.sindy import SindyModel
+
+DT = 0.01
+
+
+def inputs(n, seed, level=1500.0, n_in=2):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    f = rng.uniform(0.1, 1.0, size=n_in)
+    return np.stack(
+        [level + 0.6 * level * np.sin(2 * np.pi * f[i] * t + i) for i in range(n_in)], axis=1
+    )
+
+
+def rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0):
+    rng = np.random.default_rng(1)
+    M = 10
+    basis = RBFBasis.equidistant(-0.012, 0.012, M, 0.5, outside)
+    grid = np.linspace(-0.025, 0.025, 101)
+    pri = PhysicsPrior(
+        q=grid,
+        c=-30.0 + 3e5 * grid**2,
+        d=2.0 + 100.0 * grid**2,
+        g=np.stack([1e-7 * (1 + 20 * grid), -1e-7 * (1 - 20 * grid)], axis=1),
+    )
+    backbone = {"k_1": -40.0, "k_3": 4e5, "d_v": damping, "F_0": 0.01, "F_c": 0.02}
+    backbone["g_0"] = np.array([2e-7, -2e-7])
+    if prior:
+        backbone.update({"s_c": 0.3, "s_d": 0.5, "s_g": np.array([0.4, 0.6])})
+    return RBFModel(
+        basis,
+        "v2",
+        2,
+        1.0,
+        T_z,
+        1e-3,
+        rng.normal(0, 50, M) + 400,
+        rng.normal(0, 1, M),
+        rng.normal(0, 1e-7, (2, M)),
+        backbone,
+        (-0.012, 0.012),
+        pri if prior else None,
+    )
+
+
+def sindy_model():
+    exps = np.array(
+        [[0, 0, 0, 0], [1, 0, 0, 0], [3, 0, 0, 0], [0, 1, 0, 0], [2, 1, 0, 0],
+         [0, 0, 1, 0], [0, 0, 0, 1], [1, 0, 1, 0], [1, 0, 0, 1], [0, 1, 1, 1]]
+    )  # fmt: skip
+    coef = np.array([0.5, 40.0, -4e5, -5.0, -100.0, 2e-7, -2e-7, 1e-5, 1e-5, 1e-16])
+    names = [f"f{i}" for i in range(len(coef))]
+    return SindyModel(names, coef, exps, "v2", 2, "", 0.0, 0.0, (-0.012, 0.012))
+
+
+def both(model, records, q0, qd0, **kw):
+    out = []
+    for engine in ("numpy", "compiled"):
+        out.append(simulate(model, records, DT, q0, qd0, engine=engine, **kw))
+    return out
+
+
+def assert_same(ref, new, tol=1e-10):
+    for a, b in zip(ref, new, strict=True):
+        assert a.diverged == b.diverged and a.diverged_at == b.diverged_at
+        for x, y in ((a.q, b.q), (a.q_dot, b.q_dot), (a.q_ddot, b.q_ddot), (a.states, b.states)):
+            assert np.array_equal(np.isnan(x), np.isnan(y))
+            ok = ~np.isnan(x)
+            scale = np.max(np.abs(x[ok])) if ok.any() else 1.0
+            assert np.max(np.abs(x[ok] - y[ok]), initial=0.0) <= tol * scale
+
+
+@pytest.mark.parametrize("substeps", [1, 4])
+@pytest.mark.parametrize("interpolation", ["bandlimited", "linear"])
+@pytest.mark.parametrize(("T_z", "outside", "prior"), [(0.02, "clip", True), (0.0, "zero", False)])
+def test_rbf_model_with_backbone_and_prior(substeps, interpolation, T_z, outside, prior):
+    model = rbf_model(T_z, outside, prior)
+    records = [inputs(1500, 0), inputs(900, 1)]  # a batch of unequal lengths
+    q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
+    ref, new = both(model, records, q0, qd0, substeps=substeps, interpolation=interpolation)
+    assert not any(r.diverged for r in ref)
+    assert np.ptp(ref[0].q) > 1e-3  # it moves
+    assert_same(ref, new)
+
+
+def test_sindy_polynomials_with_input_products():
+    model = sindy_model()
+    records = [inputs(1200, 2)]
+    ref, new = both(model, records, np.array([0.01]), np.array([0.0]), substeps=2)
+    assert np.ptp(ref[0].q) > 1e-4
+    assert_same(ref, new)
+
+
+def test_analytical_model_on_its_splines():
+    model = analytical_model(PrototypeParams.paper())
+    v = np.zeros((600, 2))
+    v[100:250, 0] = 3000.0  # a switching pulse on DE 1
+    ref, new = both(model, [v], np.array([-0.0102]), np.array([0.0]), substeps=4)
+    assert ref[0].q[-1] > 0.005  # it switched to the right well
+    assert_same(ref, new)
+
+
+def test_a_diverging_model_diverges_at_the_same_sample_in_both_engines():
+    model = rbf_model(damping=-40.0)  # negative damping: the oscillation grows
+    records = [inputs(2000, 3), inputs(2000, 4, level=100.0)]
+    q0, qd0 = np.array([0.009, 0.0]), np.array([0.0, 0.0])
+    ref, new = both(model, records, q0, qd0, substeps=2, q_limit=0.05)
+    assert ref[0].diverged and ref[0].diverged_at > 10
+    assert np.isnan(ref[0].q[ref[0].diverged_at :]).all()
+    assert_same(ref, new)
+
+
+def test_the_term_table_is_the_regressor_and_the_models_rhs():
+    """One definition: regressor columns and right-hand side from the same term table."""
+    model = rbf_model()
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-0.02, 0.02, 200)
+    z = rng.normal(0, 0.05, 200)
+    v = rng.uniform(0, 3000, (200, 2))
+    names, _ = model.parameters()
+    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior)
+    backbone = ("linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
+                "input_gain", "physics_spring", "physics_damping", "physics_gain")  # fmt: skip
+    F, f_names = force_columns(q, z, model.basis, ("c", "d"), backbone, 1e-3, prior=model.prior)
+    G, g_names = input_columns(q, v**2, model.basis, ("g",), backbone, prior=model.prior)
+    cols = table.columns(q, z, v**2)
+    reference = dict(zip(f_names + g_names, np.hstack([F, G]).T, strict=True))
+    for j, name in enumerate(names):
+        np.testing.assert_allclose(cols[:, j], reference[name], rtol=1e-13, atol=0)
+    x = np.stack([q, rng.normal(0, 0.05, 200), z], axis=1)
+    np.testing.assert_allclose(
+        model.table_model().rhs(x, v)[0], model.rhs(x, v)[0], rtol=1e-12, atol=1e-12
+    )
+
+
+def test_progress_is_reported_in_chunks_and_does_not_change_the_numbers(monkeypatch):
+    monkeypatch.setattr(kernel, "CHUNK", 700)
+    model = rbf_model()
+    v = inputs(3000, 6)
+    quiet = simulate(model, [v], DT, np.array([0.01]), np.array([0.0]))
+    seen = []
+    with progress.listening(lambda task, done, total: seen.append((task, done, total))):
+        loud = simulate(model, [v], DT, np.array([0.01]), np.array([0.0]))
+    assert [s[1] for s in seen] == [700, 1400, 2100, 2800, 3000]
+    assert {s[2] for s in seen} == {3000}
+    np.testing.assert_array_equal(quiet[0].states, loud[0].states)  # bit for bit
+    np.testing.assert_array_equal(quiet[0].q_ddot, loud[0].q_ddot)
+
+
+def test_parallel_batch_equals_one_trajectory_at_a_time():
+    model = rbf_model()
+    records = [inputs(800, s) for s in range(6)]
+    q0 = np.linspace(-0.01, 0.01, 6)
+    batch = simulate(model, records, DT, q0, np.zeros(6), substeps=2)
+    for i, rec in enumerate(records):
+        one = simulate(model, [rec], DT, q0[i : i + 1], np.zeros(1), substeps=2)
+        np.testing.assert_array_equal(batch[i].states, one[0].states)
+
+
+def test_kernel_arrays_check_the_spline_shape():
+    with pytest.raises(ValueError, match="shape"):
+        kernel.spline_arrays(np.arange(3.0), np.zeros((4, 2, 7)), 1.0, 1.0)
+    fine = prepare_inputs([inputs(10, 0)], 1, "linear")
+    assert fine.values.shape == (1, 19, 2)
