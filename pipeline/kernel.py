@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-__all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run"]
+__all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run", "free_run_sensitivity"]
 
 #: Model kinds of the kernel.
 KIND_TABLE, KIND_SPLINE = 0, 1
@@ -42,7 +42,7 @@ CHUNK = 50_000
 (_K, _J, _U, _H, _NI, _QMAX, _BW, _BM, _BT, _G, _SQUARE, _LAG,
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
- _I_RUN, _P_SPACING, _UNIFORM, _N_LAYOUT) = range(34)  # fmt: skip
+ _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _N_LAYOUT) = range(36)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -67,6 +67,9 @@ class KernelArrays:
         Sizes and offsets into ``fp`` and ``ip``.
     n_work : int
         Scratch floats per trajectory.
+    term_order : ndarray of int or None
+        For a term table: the table's term index of each term as the kernel stores them
+        (grouped by their factors).
     """
 
     kind: int
@@ -75,6 +78,7 @@ class KernelArrays:
     ip: np.ndarray
     lay: np.ndarray
     n_work: int
+    term_order: np.ndarray | None = None
 
 
 class _Packer:
@@ -106,10 +110,9 @@ def table_arrays(model) -> KernelArrays:
     """Kernel arrays of a :class:`pipeline.termtable.TableModel`.
 
     The terms are grouped by their factors other than the basis (power of q, velocity factor,
-    input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_k W_gk b_k(q)``
-    with a dense weight matrix ``W`` (groups x bases) per trajectory, so each right-hand side
-    evaluates every basis, velocity factor and monomial once and then a small matrix-vector
-    product.
+    input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_(j in g) w_j
+    b_j(q)``, so each right-hand side evaluates every basis, velocity factor and monomial
+    once, then one product per term and three per group.
 
     Parameters
     ----------
@@ -130,9 +133,8 @@ def table_arrays(model) -> KernelArrays:
     keys = np.stack([t.term_qpow, s_index.reshape(-1), h_index.reshape(-1)], axis=1)
     groups, g_index = np.unique(keys.reshape(-1, 3), axis=0, return_inverse=True)
     K, G = t.base_kind.size, len(groups)
-    dense = np.zeros((model.weights.shape[0], G, K))
-    for j, (g, k) in enumerate(zip(g_index.reshape(-1), t.term_base, strict=True)):
-        dense[:, g, k] += model.weights[:, j]
+    order = np.argsort(g_index.reshape(-1), kind="stable")  # terms group by group
+    g_ptr = np.searchsorted(g_index.reshape(-1)[order], np.arange(G + 1))
     tables = t.tables if t.tables.size else np.zeros((1, t.table_q.size))
     pack = _Packer()
     lay = np.zeros(_N_LAYOUT, dtype=np.int64)
@@ -149,7 +151,7 @@ def table_arrays(model) -> KernelArrays:
     lay[_P_HI] = pack.floats(t.base_hi)
     lay[_P_TQ] = pack.floats(t.table_q)
     lay[_P_TAB] = pack.floats(tables)
-    lay[_P_W] = pack.floats(dense)
+    lay[_P_W] = pack.floats(model.weights[:, order])
     lay[_P_MASS] = pack.floats(model.mass)
     lay[_P_TZ] = pack.floats(model.T_z)
     lay[_P_VC] = pack.floats([t.coulomb_velocity])
@@ -160,6 +162,8 @@ def table_arrays(model) -> KernelArrays:
     lay[_I_SUNIQ] = pack.ints(s_unique)
     lay[_I_GHIDX] = pack.ints(groups[:, 2] if G else [0])
     lay[_I_HUNIQ] = pack.ints(h_unique)
+    lay[_I_GPTR] = pack.ints(g_ptr)
+    lay[_I_TK] = pack.ints(t.term_base[order])
     run, spacing = _gauss_runs(t)
     lay[_I_RUN] = pack.ints(run)
     lay[_P_SPACING] = pack.floats(spacing)
@@ -169,7 +173,7 @@ def table_arrays(model) -> KernelArrays:
     lay[_UNIFORM] = int(grid.size > 1 and np.allclose(grid, regular, rtol=0, atol=1e-9 * step))
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
-    return KernelArrays(KIND_TABLE, model.n_states, fp, ip, lay, n_work)
+    return KernelArrays(KIND_TABLE, model.n_states, fp, ip, lay, n_work, order)
 
 
 def _continues(t, k: int, n: int, spacing: float) -> bool:
@@ -380,12 +384,12 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
                 val *= W[w_hv + i]
         W[w_hm + u] = val
     acc = 0.0
-    w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * G * K
+    w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * lay[_J]
+    o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
     for g in range(G):
         inner = 0.0
-        row_w = w0 + g * K
-        for k in range(K):
-            inner += fp[row_w + k] * W[w_k + k]
+        for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+            inner += fp[w0 + m] * W[w_k + ip[o_tk + m]]
         acc += inner * (W[w_qp + ip[o_gq + g]] * W[w_sf + ip[o_gs + g]] * W[w_hm + ip[o_gh + g]])
     acc /= fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
     d[row, 0] = q_dot
@@ -393,6 +397,79 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     if lag:
         d[row, 2] = (q_dot - x[2]) / tz if tz > 0.0 else 0.0
     return acc
+
+
+@nb.njit(cache=True, inline="always")
+def _grad_table(x, b, fp, ip, lay, W, V, tv):  # pragma: no cover - compiled
+    """Differentiate the table model's acceleration, after :func:`_rhs_table` filled W.
+
+    Returns d acc / d q and d acc / d s, and fills ``tv`` with every term's value over the
+    mass (d acc / d w_j), in the kernel's term order. ``V`` is scratch (basis derivatives,
+    derivatives of the q powers and velocity factors).
+    """
+    K, U, NI, QMAX, G = lay[_K], lay[_U], lay[_NI], lay[_QMAX], lay[_NG]
+    w_k, w_hv = 0, K
+    w_qp = w_hv + NI
+    w_sf = w_qp + QMAX + 1
+    w_hm = w_sf + U
+    v_qp = K
+    v_sf = v_qp + QMAX + 1
+    tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
+    lag = lay[_LAG] == 1
+    q = x[0]
+    s = x[2] if lag and tz > 0.0 else x[1]
+    GQ, tq, o_tab = lay[_G], lay[_P_TQ], lay[_P_TAB]
+    for k in range(K):
+        kind = ip[lay[_I_BKIND] + k]
+        V[k] = 0.0
+        if kind == 1:
+            lo = fp[lay[_P_LO] + k]
+            hi = fp[lay[_P_HI] + k]
+            if lo < q < hi:
+                wk = fp[lay[_P_WIDTH] + k]
+                V[k] = -(q - fp[lay[_P_CENTRE] + k]) / (wk * wk) * W[w_k + k]
+        elif kind == 2 and fp[tq] < q < fp[tq + GQ - 1]:
+            i = _table_interval(q, fp, lay)
+            tab = o_tab + ip[lay[_I_BTAB] + k] * GQ
+            V[k] = (fp[tab + i + 1] - fp[tab + i]) / (fp[tq + i + 1] - fp[tq + i])
+    V[v_qp] = 0.0
+    for a in range(1, QMAX + 1):
+        V[v_qp + a] = a * W[w_qp + a - 1]
+    vc = fp[lay[_P_VC]]
+    for u in range(U):
+        skind = ip[lay[_I_SUNIQ] + 2 * u]
+        power = ip[lay[_I_SUNIQ] + 2 * u + 1]
+        if skind == 2:
+            th = W[w_sf + u]
+            V[v_sf + u] = (1.0 - th * th) / vc
+        elif skind == 1 and power > 0:
+            val = float(power)
+            for _ in range(power - 1):
+                val *= s
+            V[v_sf + u] = val
+        else:
+            V[v_sf + u] = 0.0
+    mass = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+    w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * lay[_J]
+    o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
+    dq = 0.0
+    ds = 0.0
+    for g in range(G):
+        a_g = ip[lay[_I_GQPOW] + g]
+        s_g = ip[lay[_I_GSIDX] + g]
+        fq, fqd = W[w_qp + a_g], V[v_qp + a_g]
+        fs, fsd = W[w_sf + s_g], V[v_sf + s_g]
+        fh = W[w_hm + ip[lay[_I_GHIDX] + g]]
+        inner = 0.0
+        innerd = 0.0
+        for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+            k = ip[o_tk + m]
+            inner += fp[w0 + m] * W[w_k + k]
+            innerd += fp[w0 + m] * V[k]
+            tv[m] = W[w_k + k] * fq * fs * fh / mass
+        dq += (innerd * fq + inner * fqd) * fs * fh
+        ds += inner * fq * fsd * fh
+    return dq / mass, ds / mass
 
 
 @nb.njit(cache=True, inline="always")
@@ -511,6 +588,192 @@ def _integrate_parallel(
         b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
         _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
                     acc, dead, b)  # fmt: skip
+
+
+@nb.njit(cache=True, inline="always")
+def _trajectory_sens(
+    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap, b
+):  # pragma: no cover - compiled
+    """RK4 of trajectory b with the forward sensitivities of its states to the parameters.
+
+    The sensitivities S = dx/dp obey S' = (df/dx) S + df/dp, integrated by the same RK4
+    stages as the states (so they are the exact derivatives of the discrete free run).
+    """
+    S = states.shape[2]
+    P = sens.shape[2]
+    J = lay[_J]
+    L = lengths[b]
+    lag = lay[_LAG] == 1
+    tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
+    mass = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+    p_mass = pmap[2 * J]
+    p_tz = pmap[2 * J + 1]
+    x = states[b, 0].copy()
+    xt = np.empty(S)
+    d = np.empty((4, S))
+    Sx = np.zeros((S, P))
+    St = np.empty((S, P))
+    dS = np.empty((4, S, P))
+    W = np.empty(max(n_work, 8))
+    V = np.empty(max(n_work, 8))
+    tv = np.empty(max(J, 1))
+    for k in range(L):
+        last = k == L - 1
+        for s in range(1 if last else ns):
+            j = (k * ns + s) * 2
+            for stage in range(1 if last else 4):
+                f = 0.0 if stage == 0 else (h if stage == 3 else 0.5 * h)
+                js = j if stage == 0 else (j + 2 if stage == 3 else j + 1)
+                for i in range(S):
+                    xt[i] = x[i] if stage == 0 else x[i] + f * d[stage - 1, i]
+                    for p in range(P):
+                        St[i, p] = Sx[i, p] if stage == 0 else Sx[i, p] + f * dS[stage - 1, i, p]
+                a = _rhs_table(xt, fine, b, js, d, stage, fp, ip, lay, W)
+                if stage == 0 and s == 0:
+                    acc[b, k] = a
+                    for p in range(P):
+                        sens[b, k, p] = St[0, p]
+                if last:
+                    break
+                a_q, a_s = _grad_table(xt, b, fp, ip, lay, W, V, tv)
+                lagged = lag and tz > 0.0
+                for p in range(P):
+                    dS[stage, 0, p] = St[1, p]
+                    row = a_q * St[0, p]
+                    row += a_s * (St[2, p] if lagged else St[1, p])
+                    dS[stage, 1, p] = row
+                    if lag:
+                        dS[stage, 2, p] = (St[1, p] - St[2, p]) / tz if lagged else 0.0
+                for m in range(J):  # d acc / d w_m = tv[m]; w_m = sign * parameter
+                    p = pmap[m]
+                    if p >= 0:
+                        dS[stage, 1, p] += pmap[J + m] * tv[m]
+                if p_mass >= 0:
+                    dS[stage, 1, p_mass] -= a / mass
+                if p_tz >= 0 and lagged:  # parameter log T_z: d z' / d log T_z
+                    dS[stage, 2, p_tz] -= (xt[1] - xt[2]) / tz
+            if not last:
+                for i in range(S):
+                    incr = d[0, i] + 2.0 * d[1, i] + 2.0 * d[2, i] + d[3, i]
+                    x[i] = x[i] + (h / 6.0) * incr
+                    for p in range(P):
+                        sincr = dS[0, i, p] + 2.0 * dS[1, i, p] + 2.0 * dS[2, i, p]
+                        Sx[i, p] = Sx[i, p] + (h / 6.0) * (sincr + dS[3, i, p])
+        if last:
+            break
+        ok = abs(x[0]) <= q_limit
+        for i in range(S):
+            ok = ok and math.isfinite(x[i])
+        if not ok:
+            dead[b] = k + 1
+            break
+        for i in range(S):
+            states[b, k + 1, i] = x[i]
+
+
+@nb.njit(cache=True, parallel=True)
+def _sensitivities(
+    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap
+):  # pragma: no cover - compiled
+    """Integrate every trajectory with its sensitivities on numba's threads."""
+    for bp in nb.prange(states.shape[0]):
+        b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
+        _trajectory_sens(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc,
+                         dead, sens, pmap, b)  # fmt: skip
+
+
+def free_run_sensitivity(
+    arrays: KernelArrays,
+    fine: np.ndarray,
+    lengths: np.ndarray,
+    dt: float,
+    substeps: int,
+    x0: np.ndarray,
+    q_limit: float,
+    term_param: np.ndarray,
+    term_sign: np.ndarray,
+    mass_param: int,
+    tz_param: int,
+    n_params: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Free runs of a term-table model and the sensitivities of q to its parameters.
+
+    The weights are ``w_j = term_sign[j] * p[term_param[j]]`` (a fixed weight where
+    ``term_param[j] < 0``), the mass is ``p[mass_param]`` (fixed if negative) and
+    ``T_z = exp(p[tz_param])`` (fixed if negative). The sensitivity equations are integrated
+    with the states by the same RK4 stages, so the result is the exact derivative of the
+    discrete free run (to rounding), which the simulation-error refinement uses as its
+    Jacobian.
+
+    Parameters
+    ----------
+    arrays : KernelArrays
+        A term-table model (its weights, mass and T_z at the parameter values).
+    fine : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
+        Inputs on the grid of half sub-steps [V].
+    lengths : ndarray of int, shape (B,)
+        Samples of each trajectory.
+    dt : float
+        Sample time [s].
+    substeps : int
+        RK4 steps per sample.
+    x0 : ndarray, shape (B, n_states)
+        Initial states (independent of the parameters).
+    q_limit : float
+        Divergence bound on ``|q|`` [unit of q].
+    term_param : ndarray of int, shape (J,)
+        Parameter of each term of the table (in the table's order), -1 for a fixed weight.
+    term_sign : ndarray, shape (J,)
+        Sign of each term's weight relative to its parameter.
+    mass_param, tz_param : int
+        Parameter index of the mass and of log T_z, -1 when fixed.
+    n_params : int
+        Number of parameters P.
+
+    Returns
+    -------
+    q : ndarray, shape (B, n)
+        Simulated positions; NaN from a divergence on.
+    dq_dp : ndarray, shape (B, n, P)
+        Their derivatives with respect to the parameters; NaN from a divergence on.
+
+    Raises
+    ------
+    ValueError
+        If the model is not a term table.
+
+    References
+    ----------
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. I.14 (variational equations); Ljung,
+    System Identification (1999), Sec. 10.3 (output-error gradients).
+    """
+    if arrays.kind != KIND_TABLE:
+        raise ValueError("sensitivities are computed for term-table models only")
+    B, n = fine.shape[0], int(np.max(lengths))
+    J = int(arrays.lay[_J])
+    order = arrays.term_order
+    pmap = np.concatenate([np.asarray(term_param, np.int64)[order],
+                           np.asarray(term_sign, np.float64)[order].astype(np.int64),
+                           [int(mass_param), int(tz_param)]]).astype(np.int64)  # fmt: skip
+    if not np.all(np.isin(np.asarray(term_sign)[order], (-1.0, 1.0))):
+        raise ValueError("`term_sign` must hold -1 or +1")
+    states = np.full((B, n, arrays.n_states), np.nan)
+    acc = np.full((B, n), np.nan)
+    dead = np.full(B, -1, dtype=np.int64)
+    sens = np.full((B, n, int(n_params)), np.nan)
+    states[:, 0] = x0
+    _sensitivities(arrays.fp, arrays.ip, arrays.lay, arrays.n_work,
+                   np.ascontiguousarray(fine, np.float64), np.ascontiguousarray(lengths, np.int64),
+                   float(dt) / int(substeps), int(substeps), float(q_limit), states, acc, dead,
+                   sens, pmap)  # fmt: skip
+    q = states[:, :, 0]
+    for b in range(B):
+        if dead[b] >= 0:
+            q[b, dead[b] :] = np.nan
+            sens[b, dead[b] :] = np.nan
+        q[b, lengths[b] :] = np.nan
+    assert len(order) == J
+    return q, sens
 
 
 def free_run(

@@ -179,3 +179,41 @@ def test_kernel_arrays_check_the_spline_shape():
         kernel.spline_arrays(np.arange(3.0), np.zeros((4, 2, 7)), 1.0, 1.0)
     fine = prepare_inputs([inputs(10, 0)], 1, "linear")
     assert fine.values.shape == (1, 19, 2)
+
+
+def test_forward_sensitivities_are_the_derivative_of_the_free_run():
+    """The refinement's Jacobian: d q / d p from the sensitivity equations against central
+    differences of the kernel's own free run, for weights, the mass and log T_z."""
+    from pipeline.identify.terms import term_sign, term_table
+    from pipeline.termtable import TableModel
+
+    model = rbf_model(T_z=0.02)
+    names, theta = model.parameters()
+    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior)
+    signs = np.array([term_sign(n) for n in names])
+
+    def build(p):
+        return TableModel(table, signs * p[:-2], np.array([p[-2]]), np.array([np.exp(p[-1])]))
+
+    p0 = np.concatenate([theta, [1.0, np.log(0.02)]])
+    fine = prepare_inputs([inputs(300, 0), inputs(300, 1)], 2, "bandlimited").values
+    x0 = np.array([[-0.01, 0.0, 0.0], [0.009, 0.01, 0.01]])
+    lengths = np.array([300, 300])
+
+    def q_of(p):
+        states = kernel.free_run(build(p).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
+        return states[..., 0]
+
+    n = len(names)
+    q, dq = kernel.free_run_sensitivity(
+        build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf, np.arange(n), signs, n,
+        n + 1, n + 2,
+    )  # fmt: skip
+    np.testing.assert_array_equal(q, q_of(p0))
+    for i in range(n + 2):
+        step = 1e-6 * abs(p0[i])
+        up, down = p0.copy(), p0.copy()
+        up[i] += step
+        down[i] -= step
+        fd = (q_of(up) - q_of(down)) / (2 * step)
+        assert np.max(np.abs(fd - dq[..., i])) <= 1e-3 * np.max(np.abs(fd)), names[i : i + 1]

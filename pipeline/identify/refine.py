@@ -35,7 +35,8 @@ from pipeline.identify.config import IdentifyConfig
 from pipeline.identify.fit import FitDiagnostics, Record, assemble_model
 from pipeline.identify.model import RBFModel
 from pipeline.identify.terms import term_sign, term_table
-from pipeline.simulate import FineInputs, check_free_run, prepare_inputs, simulate
+from pipeline.kernel import free_run_sensitivity
+from pipeline.simulate import check_free_run, prepare_inputs, simulate
 from pipeline.termtable import TableModel
 
 
@@ -210,8 +211,10 @@ def refine_model(
     -----
     Parameters are scaled by ``||y|| / ||psi_j||`` (the size of a parameter whose
     term would be as large as the regression output), so that the optimiser sees
-    comparable variables. The Jacobian is a forward difference computed in one
-    batched simulation of all windows for all perturbed parameter vectors.
+    comparable variables. The Jacobian comes from the forward sensitivities of the
+    windows' free runs, integrated with them by the compiled kernel
+    (:func:`pipeline.kernel.free_run_sensitivity`): the exact derivative of the discrete
+    free run, at the cost of about one run per window.
     Residuals are q_sim - q over each window, with diverged windows penalised.
     Before anything is allocated, settings whose batched simulations exceed the memory
     budget are refused (``ResourceError``, :mod:`pipeline.preflight`).
@@ -244,32 +247,45 @@ def refine_model(
     fine = prepare_inputs(inputs, ns, rcfg.interpolation)
     W = len(picks)
 
-    def residuals(xs: np.ndarray) -> np.ndarray:
-        thetas = xs * scale
-        batch = _theta_model(
-            thetas, diag.columns, model.basis, cfg, model.n_inputs, W, model.T_z, log_tz
-        )
-        tiled = FineInputs(fine.values, fine.lengths, fine.substeps).tile(xs.shape[0])
-        sims = simulate(
-            batch, tiled, dt, np.tile(q0, xs.shape[0]), np.tile(qd0, xs.shape[0]), q_limit=q_limit
-        )
-        q_sim = np.stack([s.q for s in sims]).reshape(xs.shape[0], W, L)
-        err = np.where(np.isfinite(q_sim), q_sim - q_meas, penalty)
-        return err.reshape(xs.shape[0], -1)
+    names = list(diag.columns)
+    identify_mass = cfg.m_q == "identify"
+    terms = [n for n in names if n != "m_q"]
+    n_fixed = model.n_inputs if identify_mass else 0  # the known input gains
+    term_param = [names.index(n) for n in terms] + [-1] * n_fixed
+    signs = [-1.0 if identify_mass else term_sign(n) for n in terms] + [1.0] * n_fixed
+    x_start = np.stack([q0, qd0, qd0], axis=1)
+    lengths = np.full(W, L)
+    last: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
-    h = 1e-6
+    def evaluate(xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Window residuals and their Jacobian (forward sensitivities) at scaled xs."""
+        key = xs.tobytes()
+        if key not in last:
+            theta = xs * scale
+            batch = _theta_model(
+                theta[None, :], names, model.basis, cfg, model.n_inputs, 1, model.T_z, log_tz
+            )
+            q_sim, dq = free_run_sensitivity(
+                batch.kernel_arrays(), fine.values, lengths, dt, fine.substeps, x_start,
+                q_limit, np.array(term_param), np.array(signs),
+                names.index("m_q") if identify_mass else -1,
+                len(names) if log_tz else -1, xs.size,
+            )  # fmt: skip
+            err = np.where(np.isfinite(q_sim), q_sim - q_meas, penalty)
+            jac = np.where(np.isfinite(dq), dq, 0.0) * scale  # d/d(xs) = d/d(theta) * scale
+            last.clear()
+            last[key] = (err.reshape(-1), jac.reshape(-1, xs.size))
+        return last[key]
 
     calls = [0]
 
     def fun(x):
         calls[0] += 1
         progress.report("refine: optimiser evaluations", calls[0], rcfg.max_nfev)
-        return residuals(x[None, :])[0]
+        return evaluate(x)[0]
 
     def jac(x):
-        pert = np.vstack([x, x + h * np.eye(x.size)])
-        r = residuals(pert)
-        return ((r[1:] - r[0]) / h).T
+        return evaluate(x)[1]
 
     r0 = fun(x0)
     sol = least_squares(
