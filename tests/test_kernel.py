@@ -127,27 +127,40 @@ def test_a_diverging_model_diverges_at_the_same_sample_in_both_engines():
     assert_same(ref, new)
 
 
-def test_the_term_table_is_the_regressor_and_the_models_rhs():
-    """One definition: regressor columns and right-hand side from the same term table."""
+def test_the_term_table_columns_are_the_terms_of_eq_37_written_out():
+    """Each regressor column against its expression written out with NumPy (Eq. 37-40)."""
     model = rbf_model()
     rng = np.random.default_rng(5)
-    q = rng.uniform(-0.02, 0.02, 200)
+    q = rng.uniform(-0.02, 0.02, 200)  # beyond the centres: the clip must hold q at the edge
     z = rng.normal(0, 0.05, 200)
-    v = rng.uniform(0, 3000, (200, 2))
+    hv = rng.uniform(0, 3000, (200, 2)) ** 2
     names, _ = model.parameters()
-    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior)
-    backbone = ("linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
-                "input_gain", "physics_spring", "physics_damping", "physics_gain")  # fmt: skip
-    F, f_names = force_columns(q, z, model.basis, ("c", "d"), backbone, 1e-3, prior=model.prior)
-    G, g_names = input_columns(q, v**2, model.basis, ("g",), backbone, prior=model.prior)
-    cols = table.columns(q, z, v**2)
-    reference = dict(zip(f_names + g_names, np.hstack([F, G]).T, strict=True))
+    cols = term_table(names, model.basis, 2, "v2", 1e-3, model.prior).columns(q, z, hv)
+    xi, sigma = model.basis.xi, model.basis.sigma
+    q_c = np.clip(q, xi[0], xi[-1])
+    phi = np.exp(-((q_c[:, None] - xi[None, :]) ** 2) / (2 * sigma**2))  # Eq. 38
+    pri = model.prior
+    expected = {"linear_spring": q, "cubic_spring": q**3, "viscous": z,
+                "coulomb": np.tanh(z / 1e-3), "offset": np.ones_like(q),
+                "physics_spring": np.interp(q, pri.q, pri.c) * q,
+                "physics_damping": np.interp(q, pri.q, pri.d) * z}  # fmt: skip
+    for i in range(model.basis.M):
+        expected[f"c[{i}]"] = phi[:, i] * q
+        expected[f"d[{i}]"] = phi[:, i] * z
+        for j in range(2):
+            expected[f"g{j + 1}[{i}]"] = phi[:, i] * hv[:, j]
+    for j in range(2):
+        expected[f"input_gain{j + 1}"] = hv[:, j]
+        expected[f"physics_gain{j + 1}"] = np.interp(q, pri.q, pri.g[:, j]) * hv[:, j]
+    assert sorted(names) == sorted(expected)
     for j, name in enumerate(names):
-        np.testing.assert_allclose(cols[:, j], reference[name], rtol=1e-13, atol=0)
-    x = np.stack([q, rng.normal(0, 0.05, 200), z], axis=1)
-    np.testing.assert_allclose(
-        model.table_model().rhs(x, v)[0], model.rhs(x, v)[0], rtol=1e-12, atol=1e-12
-    )
+        np.testing.assert_allclose(cols[:, j], expected[name], rtol=1e-12, atol=1e-300)
+    backbone = ("linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
+                "physics_spring", "physics_damping")  # fmt: skip
+    F, f_names = force_columns(q, z, model.basis, ("c", "d"), backbone, 1e-3, pri)
+    np.testing.assert_array_equal(F, cols[:, [names.index(n) for n in f_names]])
+    G, g_names = input_columns(q, hv, model.basis, ("g",), ("input_gain", "physics_gain"), pri)
+    np.testing.assert_array_equal(G, cols[:, [names.index(n) for n in g_names]])
 
 
 def test_progress_is_reported_in_chunks_and_does_not_change_the_numbers(monkeypatch):

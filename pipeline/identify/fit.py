@@ -132,9 +132,8 @@ def _system(
     rows, ys = [], []
     names: list[str] = []
     for r, z in zip(records, z_all, strict=True):
-        phi = basis(r.q)
         F, f_names = force_columns(
-            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, phi, cfg.prior
+            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior
         )
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
@@ -142,7 +141,7 @@ def _system(
             ys.append(_prefilter(hv @ np.asarray(cfg.input_gain, dtype=float), r, cfg))
             names = ["m_q", *f_names]
         else:
-            G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, phi, cfg.prior)
+            G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, cfg.prior)
             rows.append(_prefilter(np.hstack([-F, G]), r, cfg))
             ys.append(_prefilter(float(cfg.m_q) * r.q_ddot, r, cfg))
             names = [*f_names, *g_names]

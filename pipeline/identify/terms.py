@@ -147,6 +147,50 @@ def check_terms(rbf: Sequence[str], backbone: Sequence[str]) -> None:
             raise WorkflowError(f"duplicated term in {list(seq)}")
 
 
+def column_names(
+    rbf: Sequence[str], backbone: Sequence[str], M: int, n_inputs: int
+) -> tuple[list[str], list[str]]:
+    """Names of the regressor columns of Eq. 40 with the backbone, in their order.
+
+    Parameters
+    ----------
+    rbf, backbone : sequence of str
+        Active terms.
+    M : int
+        Number of RBF centres.
+    n_inputs : int
+        Number of inputs.
+
+    Returns
+    -------
+    force : list of str
+        The force terms F(q, z) (left of the balance): ``c[i]``, ``d[i]``, then the
+        backbone's ``linear_spring``, ``cubic_spring``, ``viscous``, ``coulomb``,
+        ``offset``, ``physics_spring``, ``physics_damping`` (in the order given).
+    inputs : list of str
+        The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``input_gain<j>``,
+        ``physics_gain<j>``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 40.
+    """
+    force: list[str] = []
+    if "c" in rbf:
+        force += [f"c[{i}]" for i in range(M)]
+    if "d" in rbf:
+        force += [f"d[{i}]" for i in range(M)]
+    force += [name for name in backbone if name in _FORCE_SCALARS or name in _PHYSICS_FORCE]
+    inputs: list[str] = []
+    if "g" in rbf:
+        inputs += [f"g{j + 1}[{i}]" for j in range(n_inputs) for i in range(M)]
+    if "input_gain" in backbone:
+        inputs += [f"input_gain{j + 1}" for j in range(n_inputs)]
+    if "physics_gain" in backbone:
+        inputs += [f"physics_gain{j + 1}" for j in range(n_inputs)]
+    return force, inputs
+
+
 def force_columns(
     q: np.ndarray,
     z: np.ndarray,
@@ -154,7 +198,6 @@ def force_columns(
     rbf: Sequence[str],
     backbone: Sequence[str],
     coulomb_velocity: float,
-    phi: np.ndarray | None = None,
     prior: PhysicsPrior | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
@@ -171,8 +214,6 @@ def force_columns(
         Active terms.
     coulomb_velocity : float
         v_c of the smoothed Coulomb term [unit of q / s].
-    phi : ndarray, shape (n, M), optional
-        Precomputed ``basis(q)``.
     prior : PhysicsPrior, optional
         The analytical model's curves (needed by the ``physics_*`` terms).
 
@@ -180,38 +221,19 @@ def force_columns(
     -------
     columns : ndarray, shape (n, p_F)
         ``[Phi q, Phi z, q, q^3, z, tanh(z/v_c), 1, c_phys q, d_phys z]`` restricted to
-        active terms.
+        active terms (:func:`term_table`, the one definition of the terms).
     names : list of str
-        One name per column, e.g. ``"c[3]"``, ``"linear_spring"``.
+        One name per column (:func:`column_names`).
 
     Raises
     ------
     WorkflowError
         If a ``physics_*`` term is active without ``prior``.
     """
-    if phi is None and ("c" in rbf or "d" in rbf):
-        phi = basis(q)
-    cols, names = [], []
-    if "c" in rbf:
-        cols.append(phi * q[:, None])
-        names += [f"c[{i}]" for i in range(basis.M)]
-    if "d" in rbf:
-        cols.append(phi * z[:, None])
-        names += [f"d[{i}]" for i in range(basis.M)]
-    scalar = {
-        "linear_spring": lambda: q,
-        "cubic_spring": lambda: q**3,
-        "viscous": lambda: z,
-        "coulomb": lambda: np.tanh(z / coulomb_velocity),
-        "offset": lambda: np.ones_like(q),
-        "physics_spring": lambda: _prior(prior)(q)[0] * q,
-        "physics_damping": lambda: _prior(prior)(q)[1] * z,
-    }
-    for name in backbone:
-        if name in scalar:
-            cols.append(scalar[name]()[:, None])
-            names.append(name)
-    return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
+    q = np.asarray(q, dtype=float)
+    names, _ = column_names(rbf, backbone, basis.M, 1)
+    table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
+    return table.columns(q, z, np.zeros((q.size, 1))), names
 
 
 def input_columns(
@@ -220,7 +242,6 @@ def input_columns(
     basis: RBFBasis,
     rbf: Sequence[str],
     backbone: Sequence[str],
-    phi: np.ndarray | None = None,
     prior: PhysicsPrior | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the input terms G(q, v) (right-hand side of the balance).
@@ -234,9 +255,7 @@ def input_columns(
     basis : RBFBasis
         The RBF basis.
     rbf, backbone : sequence of str
-        Active terms (``"g"`` and ``"input_gain"`` matter here).
-    phi : ndarray, shape (n, M), optional
-        Precomputed ``basis(q)``.
+        Active terms (``"g"``, ``"input_gain"`` and ``"physics_gain"`` matter here).
     prior : PhysicsPrior, optional
         The analytical model's curves (needed by ``physics_gain``).
 
@@ -244,7 +263,7 @@ def input_columns(
     -------
     columns : ndarray, shape (n, p_G)
         ``[Phi h(v_1), ..., Phi h(v_N), h(v_1), ..., h(v_N), g_phys,i h(v_i)]`` for the
-        active terms.
+        active terms (:func:`term_table`).
     names : list of str
         ``"g1[i]"``, ``"input_gain1"`` and ``"physics_gain1"`` style names.
 
@@ -253,22 +272,15 @@ def input_columns(
     WorkflowError
         If ``physics_gain`` is active without ``prior``.
     """
-    cols, names = [], []
-    n_in = hv.shape[1]
-    if "g" in rbf:
-        phi = basis(q) if phi is None else phi
-        for j in range(n_in):
-            cols.append(phi * hv[:, j : j + 1])
-            names += [f"g{j + 1}[{i}]" for i in range(basis.M)]
-    if "input_gain" in backbone:
-        cols.append(hv)
-        names += [f"input_gain{j + 1}" for j in range(n_in)]
-    if "physics_gain" in backbone:
-        cols.append(_prior(prior)(q)[2] * hv)
-        names += [f"physics_gain{j + 1}" for j in range(n_in)]
-    return (np.hstack(cols) if cols else np.empty((q.size, 0))), names
+    q = np.asarray(q, dtype=float)
+    hv = np.asarray(hv, dtype=float)
+    _, names = column_names(rbf, backbone, basis.M, hv.shape[1])
+    table = term_table(names, basis, hv.shape[1], "v", 1.0, prior)
+    return table.columns(q, np.zeros_like(q), hv), names
 
 
+#: Analytical-curve terms on the force side.
+_PHYSICS_FORCE = ("physics_spring", "physics_damping")
 #: Backbone terms on the force side (left of the balance), with their (qpow, s factor).
 _FORCE_SCALARS = {
     "linear_spring": (1, None),
