@@ -583,11 +583,25 @@ def _integrate_serial(
 def _integrate_parallel(
     kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
 ):  # pragma: no cover - compiled
-    """Integrate the trajectories on numba's threads (independent: the same numbers)."""
+    """Integrate the trajectories on numba's threads (independent: the same numbers).
+
+    The loop body is a call, not inlined code: numba's parfor pass hoists loop-invariant
+    array reads out of a prange body, also from branches that do not run (the table model's
+    offsets read from a spline model's short layout, out of bounds: a segmentation fault).
+    """
     for bp in nb.prange(states.shape[0]):
         b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
-        _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
-                    acc, dead, b)  # fmt: skip
+        _trajectory_call(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1,
+                         states, acc, dead, b)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _trajectory_call(
+    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, b
+):  # pragma: no cover - compiled
+    """:func:`_trajectory` behind a call boundary (see :func:`_integrate_parallel`)."""
+    _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
+                acc, dead, b)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -675,11 +689,23 @@ def _trajectory_sens(
 def _sensitivities(
     fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap
 ):  # pragma: no cover - compiled
-    """Integrate every trajectory with its sensitivities on numba's threads."""
+    """Integrate every trajectory with its sensitivities on numba's threads.
+
+    The body is a call, as in :func:`_integrate_parallel` (no reads hoisted out of branches).
+    """
     for bp in nb.prange(states.shape[0]):
         b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
-        _trajectory_sens(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc,
-                         dead, sens, pmap, b)  # fmt: skip
+        _trajectory_sens_call(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc,
+                              dead, sens, pmap, b)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _trajectory_sens_call(
+    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap, b
+):  # pragma: no cover - compiled
+    """:func:`_trajectory_sens` behind a call boundary (see :func:`_sensitivities`)."""
+    _trajectory_sens(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead,
+                     sens, pmap, b)  # fmt: skip
 
 
 def free_run_sensitivity(
