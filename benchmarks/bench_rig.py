@@ -1,20 +1,28 @@
-"""Benchmark of the virtual rig's plant integration: the chosen settings against the peers.
+"""Benchmark of the virtual rig's plant integration: compiled against NumPy, and the peers.
 
 Run from the repository root:
 
-    .venv/bin/python benchmarks/bench_rig.py [--duration 37.5]
+    .venv/bin/python benchmarks/bench_rig.py [--duration 37.5] [--no-peers] [--no-jit]
 
 One experiment of the identification profile (Fig. 11a; 3 kV switching both ways plus
 sub-threshold noise on a 1 ms DAC grid) on the default rig (paper prototype with anchor
-offsets, Maxwell-slip friction, HV drivers, laser), logged at 10 ms. Timed: the default
-(Radau, rtol 1e-4, atol 1e-8) and the peers, all in this run: BDF at the same tolerances, and
-Radau at rtol 1e-6 / atol 1e-10. Printed: wall time, right-hand-side evaluations, the ratio
-to the default, and the largest difference of the noise-free q from the tightest run [um].
+offsets, Maxwell-slip friction, HV drivers, laser), logged at 10 ms. Timed, all in this run:
+the default (compiled plant, Radau, rtol 1e-4, atol 1e-8), the NumPy reference plant at the
+same settings, and the peers: BDF at the same tolerances and Radau at rtol 1e-6 / atol 1e-10
+(the tight solution). Printed: wall time, right-hand-side evaluations, the ratio to the
+default, and the largest differences of the noise-free q from the tight run and from the
+NumPy reference [um]. The compiled kernels are loaded (or compiled) before the timing; the
+JIT table times the first plant evaluation in fresh processes with an empty numba cache
+(compile) and with the cache it left (load).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -23,33 +31,139 @@ from pipeline.rig.params import RigParams
 from pipeline.rig.plant import simulate_rig
 from pipeline.rig.profiles import identification_profile
 
-PEERS = (
-    ("Radau rtol 1e-4 (default)", {"method": "Radau", "rtol": 1e-4, "atol": 1e-8}),
-    ("BDF rtol 1e-4", {"method": "BDF", "rtol": 1e-4, "atol": 1e-8}),
-    ("Radau rtol 1e-6", {"method": "Radau", "rtol": 1e-6, "atol": 1e-10}),
+DEFAULT = "Radau rtol 1e-4, compiled"
+REFERENCE = "Radau rtol 1e-4, NumPy"
+TIGHT = "Radau rtol 1e-6, compiled"
+SETTINGS = (
+    (DEFAULT, {"method": "Radau", "rtol": 1e-4, "atol": 1e-8}),
+    (REFERENCE, {"method": "Radau", "rtol": 1e-4, "atol": 1e-8, "compiled": False}),
+    ("BDF rtol 1e-4, compiled", {"method": "BDF", "rtol": 1e-4, "atol": 1e-8}),
+    (TIGHT, {"method": "Radau", "rtol": 1e-6, "atol": 1e-10}),
 )
+
+_FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from pipeline.physics.dynamics import well_state
+from pipeline.rig.drivers import DriverOutput
+from pipeline.rig.params import RigParams
+from pipeline.rig.plant import RigPlant
+rig = RigParams()
+t = np.arange(10) * 1e-3
+d = [DriverOutput(t, np.full(10, 1e3), tau=rig.driver_tau, slew=rig.driver_slew) for i in (0, 1)]
+x = np.concatenate([well_state(rig.prototype, -1), np.zeros(rig.n_friction)])
+t1 = time.perf_counter()
+rhs, jac = RigPlant(rig, d[0], d[1])._compiled()
+rhs(0.0, x)
+jac(0.0, x)
+print(t1 - t0, time.perf_counter() - t1)
+"""
+
+
+def bench_plant(duration: float = 37.5, *, peers: bool = True) -> list[dict]:
+    """Time one identification-profile experiment with the compiled and the NumPy plant.
+
+    Parameters
+    ----------
+    duration : float
+        Experiment length [s].
+    peers : bool
+        Also time BDF and the tight Radau run; without the tight run ``max_dq_tight_um`` is
+        NaN.
+
+    Returns
+    -------
+    list of dict
+        One row per setting: ``setting``, ``seconds`` (wall time) [s], ``nfev``,
+        ``ratio`` (time over the default's), ``max_dq_tight_um`` (largest difference of
+        the noise-free q from the tight run) [um] and ``max_dq_reference_um`` (from the
+        NumPy reference at the default tolerances) [um].
+
+    References
+    ----------
+    SciPy ``scipy.integrate.solve_ivp`` (Radau, BDF); numba (``njit``).
+    """
+    prof = identification_profile(duration=duration)
+    rig = RigParams()
+    # load (or compile) the kernels outside the timing
+    simulate_rig(rig, prof.t[:50], prof.r1[:50], prof.r2[:50], sample_time=0.01, seed=1)
+    runs = []
+    for label, kw in SETTINGS if peers else SETTINGS[:2]:
+        t0 = time.perf_counter()
+        run = simulate_rig(rig, prof.t, prof.r1, prof.r2, sample_time=0.01, seed=1, **kw)
+        runs.append((label, time.perf_counter() - t0, run.nfev, run.q_true))
+    q = {label: q_true for label, _, _, q_true in runs}
+    base = runs[0][1]
+
+    def dq(a, b):
+        return 1e6 * float(np.max(np.abs(a - b))) if b is not None else float("nan")
+
+    return [
+        {
+            "setting": label,
+            "seconds": seconds,
+            "nfev": nfev,
+            "ratio": seconds / base,
+            "max_dq_tight_um": dq(q_true, q.get(TIGHT)),
+            "max_dq_reference_um": dq(q_true, q[REFERENCE]),
+        }
+        for label, seconds, nfev, q_true in runs
+    ]
+
+
+def bench_jit() -> list[dict]:
+    """Time the compiled plant's first evaluation in fresh processes: cold and warm cache.
+
+    A temporary ``NUMBA_CACHE_DIR`` is empty for the first process (numba compiles the
+    kernels and writes them) and holds that cache for the second (numba loads them).
+
+    Returns
+    -------
+    list of dict
+        Rows ``cache`` ("empty" or "warm"), ``import_s`` (imports and set-up) [s] and
+        ``first_call_s`` (first right-hand side and Jacobian) [s].
+
+    References
+    ----------
+    numba documentation, ``NUMBA_CACHE_DIR`` and "Notes on caching".
+    """
+    rows = []
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        for state in ("empty", "warm"):
+            out = subprocess.run(
+                [sys.executable, "-c", _FIRST_CALL], env=env, capture_output=True, text=True
+            )
+            if out.returncode:
+                raise RuntimeError(out.stderr)
+            setup, first = map(float, out.stdout.split())
+            rows.append({"cache": state, "import_s": setup, "first_call_s": first})
+    return rows
 
 
 def main() -> None:
-    """Time the plant integration with each setting and print the table."""
+    """Time the plant integration with each setting (and the JIT) and print the tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=37.5, help="experiment length [s]")
+    parser.add_argument("--no-peers", action="store_true", help="skip BDF and the tight run")
+    parser.add_argument("--no-jit", action="store_true", help="skip the JIT table")
     args = parser.parse_args()
-    prof = identification_profile(duration=args.duration)
-    rig = RigParams()
-    results = []
-    for label, kw in PEERS:
-        t0 = time.perf_counter()
-        run = simulate_rig(rig, prof.t, prof.r1, prof.r2, sample_time=0.01, seed=1, **kw)
-        results.append((label, time.perf_counter() - t0, run.nfev, run.q_true))
-    ref = results[-1][3]
-    base = results[0][1]
+    if not args.no_jit:
+        print("compiled plant, first rhs + jac in a fresh process")
+        print(f"{'numba cache':12s} {'imports [s]':>12s} {'first call [s]':>15s}")
+        for row in bench_jit():
+            print(f"{row['cache']:12s} {row['import_s']:12.2f} {row['first_call_s']:15.2f}")
+        print()
+    rows = bench_plant(args.duration, peers=not args.no_peers)
     print(f"identification profile, {args.duration} s, 10 ms log, default rig")
-    head = ("setting", "time [s]", "nfev", "x default", "max |dq| [um]")
-    print(f"{head[0]:28s} {head[1]:>9s} {head[2]:>9s} {head[3]:>10s} {head[4]:>14s}")
-    for label, seconds, nfev, q in results:
-        dq = 1e6 * float(np.max(np.abs(q - ref)))
-        print(f"{label:28s} {seconds:9.2f} {nfev:9d} {seconds / base:10.2f} {dq:14.3f}")
+    head = ("setting", "time [s]", "nfev", "x default", "dq tight [um]", "dq NumPy [um]")
+    print(f"{head[0]:28s} {head[1]:>9s} {head[2]:>9s} {head[3]:>10s} {head[4]:>14s} {head[5]:>14s}")
+    for r in rows:
+        print(
+            f"{r['setting']:28s} {r['seconds']:9.2f} {r['nfev']:9d} {r['ratio']:10.2f} "
+            f"{r['max_dq_tight_um']:14.3f} {r['max_dq_reference_um']:14.3f}"
+        )
 
 
 if __name__ == "__main__":

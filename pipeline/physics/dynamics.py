@@ -15,6 +15,10 @@ State ``x = [q_m, q_m_dot, q_eps]`` with ``q_m = [q_2, q_3, q_4, u_0]`` and the 
 * ``dU/dq_m`` includes the electrostatic term, i.e. ``f_F - 1/2 dC_i/dq_m v_i^2`` of Eq. 19, 23;
 * ``K = [d lambda_3,1/dq_m, d lambda_3,2/dq_m]`` (4 x 2), ``K_bar = V_DE Y_MW K`` (Eq. 12, 19).
 
+:class:`FullModel` evaluates the right-hand side and Jacobian with the compiled kernels of
+:mod:`pipeline.physics.compiled` (numba, imported on first use); ``compiled=False`` selects
+the NumPy implementation here, the reference the kernels are tested against.
+
 References
 ----------
 Masoud & Maas 2025, Eq. 8, 12, 19-23, Fig. 6a; docs/interpretation.md items 3, 6.
@@ -50,6 +54,13 @@ def _zero(t: float) -> float:
     return 0.0
 
 
+def _kernels():
+    """Return the compiled kernels (numba is imported on first use, not with this module)."""
+    from pipeline.physics import compiled
+
+    return compiled
+
+
 class FullModel:
     """Right-hand side and Jacobian of the state-space model Eq. 21-22.
 
@@ -63,6 +74,10 @@ class FullModel:
         External horizontal tip force ``F(t)`` [N]; zero if omitted.
     b : float, optional
         Pre-strain screw position [m]; ``params.b`` if omitted.
+    compiled : bool
+        Evaluate :meth:`rhs` and :meth:`jac` with the compiled kernels of
+        :mod:`pipeline.physics.compiled` (default; the same equations, equal to the NumPy
+        implementation to rounding, see there) or with NumPy (``False``, the reference).
 
     References
     ----------
@@ -78,9 +93,13 @@ class FullModel:
         v2: Signal,
         F: Signal | None = None,
         b: float | None = None,
+        *,
+        compiled: bool = True,
     ):
         p = params
         self.params = p
+        self.compiled = bool(compiled)
+        self._packed = None
         self.v1, self.v2 = v1, v2
         self.F = _zero if F is None else F
         self.b = p.b if b is None else float(b)
@@ -114,6 +133,12 @@ class FullModel:
         sym[iu] = np.arange(10)
         sym.T[iu] = np.arange(10)
         self._sym = sym
+
+    def _fp(self) -> NDArray[np.float64]:
+        """Return the model as the compiled kernels take it (packed on first use)."""
+        if self._packed is None:
+            self._packed = _kernels().pack_model(self)
+        return self._packed
 
     def _terms(self, qm: NDArray[np.float64], t: float, hess: bool = False):
         """Evaluate the generated terms: grad U, DE lengths and gradients (and the Hessian)."""
@@ -215,6 +240,11 @@ class FullModel:
         ----------
         Masoud & Maas 2025, Eq. 21-23.
         """
+        if self.compiled:
+            w1, w2 = float(self.v1(t)) ** 2, float(self.v2(t)) ** 2
+            F_tip = float(self.F(t)) + F_extra
+            x = np.ascontiguousarray(x, dtype=float)
+            return _kernels().full_rhs(x, w1, w2, F_tip, self._fp())
         force, M, _, K, _, _ = self._force(t, x, F_extra=F_extra)
         qd, qe = x[4:8], x[8:]
         return np.concatenate([qd, np.linalg.solve(M, force), K.T @ qd - self._relax * qe])
@@ -238,6 +268,10 @@ class FullModel:
             Approximate ``d x_dot / d x`` (the same for any ``F_extra`` of :meth:`rhs`,
             which enters additively).
         """
+        if self.compiled:
+            w1, w2 = float(self.v1(t)) ** 2, float(self.v2(t)) ** 2
+            x = np.ascontiguousarray(x, dtype=float)
+            return _kernels().full_jac(x, w1, w2, self._fp())
         _, M, D, K, g_uy, terms = self._force(t, x, hess=True)
         Minv = np.linalg.inv(M)
         dconv = np.zeros((4, 4))

@@ -3,7 +3,8 @@
 Each DE is fed by a high-voltage converter whose output follows the reference of the rig's DAC
 (zero-order hold) with a first-order lag and a slew-rate limit, within ``[0, 3000]`` V. The
 drivers do not depend on the mechanics, so :mod:`pipeline.rig.plant` computes their outputs
-first (:class:`DriverOutput`) and feeds them to the plant as functions of time.
+first (:class:`DriverOutput`) and feeds them to the plant as functions of time, or as arrays
+(:attr:`DriverOutput.table`) to the compiled plant (:func:`pipeline.rig.compiled.driver_value`).
 
 References
 ----------
@@ -16,7 +17,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 from scipy.signal import lfilter
 
 from pipeline.physics.params import V_MAX
@@ -63,14 +63,15 @@ class DriverOutput:
 
         dv/dt = clip((r(t) - v) / tau, -slew, slew),
 
-    ``r`` clipped to ``[0, v_max]``, so ``v`` stays in ``[0, v_max]``. Within a hold
-    interval that starts with ``|r - v| <= slew tau`` the limit is never reached and the
-    solution is the exact ZOH discretisation of the lag, ``v_{k+1} = a v_k + (1 - a) r_k``
-    with ``a = exp(-hold / tau)`` (run as a recursive filter, :func:`scipy.signal.lfilter`);
-    every interval that starts slew-limited is integrated by :func:`scipy.integrate.solve_ivp`
-    (RK45, ``max_step`` = the hold interval, dense output). Splitting at the hold intervals
-    keeps the discontinuities of ``r`` out of the integrator's steps: one ``solve_ivp`` over
-    a 1 ms staircase costs minutes of rejected steps.
+    ``r`` clipped to ``[0, v_max]``, so ``v`` stays in ``[0, v_max]``. The solution is
+    piecewise analytic. Within a hold interval that starts with ``|r - v| <= slew tau`` the
+    limit is never reached and ``v`` relaxes exponentially towards ``r_k``: the exact ZOH
+    discretisation of the lag, ``v_{k+1} = a v_k + (1 - a) r_k`` with ``a = exp(-hold / tau)``
+    (run as a recursive filter, :func:`scipy.signal.lfilter`). An interval that starts with
+    ``|r_k - v_k| > slew tau`` begins with a ramp at ``+-slew`` that lasts
+    ``t_c = (|r_k - v_k| - slew tau) / slew`` (or the whole interval), after which the lag
+    continues from ``r_k -+ slew tau`` (the clip is continuous there, so this is the exact
+    solution).
 
     Parameters
     ----------
@@ -92,6 +93,9 @@ class DriverOutput:
     ----------
     knots : ndarray, shape (n + 1,)
         Output at ``t_ref[0] + k hold``, ``k = 0..n`` [V].
+    ramp : ndarray, shape (n,)
+        Duration ``t_c`` of the slew-limited ramp at the start of each hold interval [s]
+        (0 where the interval starts within ``slew tau`` of its reference).
     n_slew : int
         Number of slew-limited hold intervals.
 
@@ -128,24 +132,18 @@ class DriverOutput:
         lim = slew * tau
         v = np.empty(n + 1)
         v[0] = min(max(float(v0), 0.0), v_max)
-        pieces: dict[int, object] = {}
+        ramp = np.zeros(n)
         k = 0
         block = 4096
         while k < n:
-            if abs(r[k] - v[k]) > lim:
-                sol = solve_ivp(
-                    self._slew_rhs,
-                    (self.t0 + k * hold, self.t0 + (k + 1) * hold),
-                    [v[k]],
-                    method="RK45",
-                    max_step=hold,
-                    rtol=1e-9,
-                    atol=1e-6,
-                    dense_output=True,
-                    args=(r[k],),
-                )
-                v[k + 1] = sol.y[0, -1]
-                pieces[k] = sol.sol
+            d = r[k] - v[k]
+            if abs(d) > lim:
+                sg = 1.0 if d > 0.0 else -1.0
+                ramp[k] = (abs(d) - lim) / slew
+                if ramp[k] >= hold:
+                    v[k + 1] = v[k] + sg * slew * hold
+                else:
+                    v[k + 1] = r[k] - sg * lim * math.exp(-(hold - ramp[k]) / tau)
                 k += 1
                 continue
             m = min(n - k, block)
@@ -156,13 +154,25 @@ class DriverOutput:
             v[k + 1 : k + j + 1] = y[:j]
             k += j
         self.knots = np.clip(v, 0.0, v_max)
-        self._pieces = pieces
+        self.ramp = ramp
+        self.n_slew = int(np.count_nonzero(ramp))
         self._knots_list = self.knots.tolist()
         self._r_list = r.tolist()
-        self.n_slew = len(pieces)
+        self._ramp_list = ramp.tolist()
 
-    def _slew_rhs(self, t: float, v: NDArray[np.float64], rk: float) -> NDArray[np.float64]:
-        return np.clip((rk - v) / self.tau, -self.slew, self.slew)
+    @property
+    def table(self) -> NDArray[np.float64]:
+        """The driver as one float array (the compiled plant's form).
+
+        Returns
+        -------
+        ndarray, shape (3 n + 6,)
+            ``[t_0, hold, tau, slew, n, r (n), knots (n + 1), ramp (n)]`` ([s], [s], [s],
+            [V/s], [-], [V], [V], [s]); :func:`pipeline.rig.compiled.driver_value` evaluates
+            it as :meth:`__call__` does.
+        """
+        head = [self.t0, self.hold, self.tau, self.slew, float(self._r.size)]
+        return np.concatenate([head, self._r, self.knots, self.ramp])
 
     def __call__(self, t: float) -> float:
         """Output voltage at one time ``t`` [s] (fast scalar path for the plant) [V].
@@ -170,9 +180,8 @@ class DriverOutput:
         Parameters
         ----------
         t : float
-            Time [s]; before ``t_ref[0]`` the initial value; after the end the lag towards
-            the last reference continues (without the slew limit: extend the reference to
-            cover the times needed).
+            Time [s]; before ``t_ref[0]`` the initial value; after the end the output
+            keeps following the last reference (ramp and lag as within a hold interval).
 
         Returns
         -------
@@ -183,11 +192,14 @@ class DriverOutput:
         if s <= 0.0:
             return self._knots_list[0]
         k = min(int(s), len(self._r_list) - 1)
-        piece = self._pieces.get(k)
-        if piece is not None and s < k + 1:
-            return float(piece(t)[0])
-        rk = self._r_list[k]
-        return rk + (self._knots_list[k] - rk) * math.exp(-(s - k) * self.hold / self.tau)
+        rk, vk, tc = self._r_list[k], self._knots_list[k], self._ramp_list[k]
+        e = (s - k) * self.hold
+        if tc > 0.0:
+            sg = 1.0 if rk > vk else -1.0
+            if e < tc:
+                return vk + sg * self.slew * e
+            return rk - sg * self.slew * self.tau * math.exp(-(e - tc) / self.tau)
+        return rk + (vk - rk) * math.exp(-e / self.tau)
 
     def values(self, t: ArrayLike) -> NDArray[np.float64]:
         """Output voltage at many times (vectorised :meth:`__call__`).
@@ -205,11 +217,10 @@ class DriverOutput:
         t = np.asarray(t, dtype=float)
         s = (t - self.t0) / self.hold
         k = np.clip(np.floor(s).astype(int), 0, self._r.size - 1)
-        rk = self._r[k]
-        out = rk + (self.knots[k] - rk) * np.exp(-(s - k) * self.hold / self.tau)
-        out = np.where(s <= 0.0, self.knots[0], out)
-        for i, piece in self._pieces.items():
-            sel = (s >= i) & (s < i + 1)
-            if np.any(sel):
-                out[sel] = piece(t[sel])[0]
-        return out
+        rk, vk, tc = self._r[k], self.knots[k], self.ramp[k]
+        e = (s - k) * self.hold
+        sg = np.where(rk > vk, 1.0, -1.0)
+        lag = rk + (vk - rk) * np.exp(-e / self.tau)
+        after = rk - sg * self.slew * self.tau * np.exp(-np.maximum(e - tc, 0.0) / self.tau)
+        out = np.where(tc > 0.0, np.where(e < tc, vk + sg * self.slew * e, after), lag)
+        return np.where(s <= 0.0, self.knots[0], out)

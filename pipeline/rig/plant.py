@@ -19,7 +19,10 @@ The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: th
 :class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
 elements. :func:`simulate_rig` integrates it with :func:`scipy.integrate.solve_ivp` (Radau
 with an approximate Jacobian) and returns the logged channels with the truth (:class:`RigRun`);
-:func:`true_curves` gives the characteristic curves an identification should recover.
+:func:`true_curves` gives the characteristic curves an identification should recover. The
+right-hand side and Jacobian run compiled (:mod:`pipeline.rig.compiled`, numba, drivers
+included); the NumPy implementation of :class:`RigPlant` is the reference they are tested
+against (``compiled=False``).
 
 References
 ----------
@@ -86,15 +89,21 @@ class RigPlant:
         Rig parameters.
     v1, v2 : callable
         Applied voltages ``v_i(t)`` [V] (e.g. :class:`~pipeline.rig.drivers.DriverOutput`).
+    compiled : bool
+        Evaluate :meth:`rhs` and :meth:`jac` with the compiled kernels of
+        :mod:`pipeline.rig.compiled` (default; two :class:`~pipeline.rig.drivers.DriverOutput`
+        are then evaluated inside the kernel, other callables in Python) or with NumPy
+        (``False``, the reference).
 
     References
     ----------
     Masoud & Maas 2025, Eq. 19-23; Al-Bender, Lampaert & Swevers 2005 (GMS model).
     """
 
-    def __init__(self, rig: RigParams, v1, v2):
+    def __init__(self, rig: RigParams, v1, v2, *, compiled: bool = True):
         self.rig = rig
-        self.model = FullModel(rig.prototype, v1, v2)
+        self.compiled = bool(compiled)
+        self.model = FullModel(rig.prototype, v1, v2, compiled=False)
         self.n_friction = rig.n_friction
         self.n_states = 10 + self.n_friction
         self._L = ritz_basis(rig.prototype.l).L
@@ -102,6 +111,40 @@ class RigPlant:
         self._kF = self._k / np.array(rig.friction_F)
         self._p = rig.friction_exponent
         self._c = rig.friction_c
+        self._kernels = None
+
+    def _compiled(self):
+        """``(rhs, jac)`` of the compiled path, built on first use (numba imported then)."""
+        if self._kernels is None:
+            from pipeline.physics.compiled import pack_model
+            from pipeline.rig import compiled as kern
+
+            fp, fr = pack_model(self.model), kern.pack_friction(self)
+            v1, v2 = self.model.v1, self.model.v2
+            krhs, kjac = kern.plant_rhs, kern.plant_jac
+            as_x = np.ascontiguousarray
+            if isinstance(v1, DriverOutput) and isinstance(v2, DriverOutput):
+                d1, d2, w = v1.table, v2.table, np.zeros(2)
+
+                def rhs(t, x):
+                    return krhs(float(t), as_x(x, dtype=float), fp, fr, d1, d2, w)
+
+                def jac(t, x):
+                    return kjac(float(t), as_x(x, dtype=float), fp, fr, d1, d2, w)
+
+            else:
+                none = kern.NO_DRIVER
+
+                def rhs(t, x):
+                    w = np.array([float(v1(t)) ** 2, float(v2(t)) ** 2])
+                    return krhs(float(t), as_x(x, dtype=float), fp, fr, none, none, w)
+
+                def jac(t, x):
+                    w = np.array([float(v1(t)) ** 2, float(v2(t)) ** 2])
+                    return kjac(float(t), as_x(x, dtype=float), fp, fr, none, none, w)
+
+            self._kernels = (rhs, jac)
+        return self._kernels
 
     def friction_force(self, x: ArrayLike) -> NDArray[np.float64]:
         """Friction force on the tip, ``-sum k_i z_i - c q_dot`` [N].
@@ -134,6 +177,8 @@ class RigPlant:
         ndarray, shape (n_states,)
             ``x_dot``.
         """
+        if self.compiled:
+            return self._compiled()[0](t, x)
         z = x[10:]
         qd = float(self._L @ x[4:8])
         out = np.empty(self.n_states)
@@ -157,6 +202,8 @@ class RigPlant:
         ndarray, shape (n_states, n_states)
             ``d x_dot / d x`` without the derivatives of M, D and K along ``q_m``.
         """
+        if self.compiled:
+            return self._compiled()[1](t, x)
         n = self.n_states
         J = np.zeros((n, n))
         J[:10, :10] = self.model.jac(t, x[:10])
@@ -262,6 +309,7 @@ def simulate_rig(
     rtol: float = 1e-4,
     atol: float = 1e-8,
     step_threshold: float = 0.1 * V_MAX,
+    compiled: bool = True,
 ) -> RigRun:
     """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
 
@@ -303,13 +351,18 @@ def simulate_rig(
         creep strains ``100 atol`` [-]. The looser axial and velocity tolerances spare the
         integrator the nanometre ringing of the stiff axial mode (about 400 Hz, undamped by
         the beam) that every 1 ms voltage kink excites; it does not show in ``q``. With
-        the defaults the noise-free ``q`` stays within about 0.2 um of a solution with
-        ``rtol = 1e-8, atol = 1e-12`` on broad-band experiments with 3 kV switching; the
+        the defaults the noise-free ``q`` stays within about 0.2-0.3 um of a solution with
+        ``rtol = 1e-8, atol = 1e-12`` on broad-band experiments with 3 kV switching (0.30
+        and 0.27 um on the 37.5 s identification and validation profiles); the
         integrator takes about one step per DAC interval (the kinks of the driver output
         limit the steps). Near a barrier crossing errors grow (the motion is unstable
         there), so no tolerance bounds them in general.
     step_threshold : float
         Reference jumps larger than this [V] become integration breakpoints.
+    compiled : bool
+        Integrate the compiled plant (default) or the NumPy reference (``False``, several
+        times slower). Their right-hand sides agree to rounding, not bit for bit, so the
+        integrator takes other steps: the two solutions differ by the integration error.
 
     Returns
     -------
@@ -369,7 +422,7 @@ def simulate_rig(
     drivers = [
         DriverOutput(t_ext, r_ext[i], tau=rig.driver_tau, slew=rig.driver_slew) for i in range(2)
     ]
-    plant = RigPlant(rig, drivers[0], drivers[1])
+    plant = RigPlant(rig, drivers[0], drivers[1], compiled=compiled)
     p = rig.prototype
     x_rest = np.concatenate([well_state(p, side), np.zeros(rig.n_friction)])
     scale = ritz_basis(p.l).scale
@@ -380,10 +433,10 @@ def simulate_rig(
     jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
     breaks = [t0 + (k + 1) * hold for k in jumps]
     t_run = t_fine[t_fine >= t0]
+    fun, jac = plant._compiled() if compiled else (plant.rhs, plant.jac)
     sol = solve_segments(
-        plant.rhs, (t0, t_end), x_rest, t_run, breaks,
-        method=method, jac=plant.jac, rtol=rtol, atol=atol_v,
-    )  # fmt: skip
+        fun, (t0, t_end), x_rest, t_run, breaks, method=method, jac=jac, rtol=rtol, atol=atol_v
+    )
     X = np.full((t_run.size, plant.n_states), np.nan)  # NaN beyond a failure
     X[: sol.t.size] = sol.y
     X_all = np.concatenate([np.repeat(x_rest[None, :], pad, axis=0), X])  # at rest before
