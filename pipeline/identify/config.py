@@ -78,6 +78,14 @@ class IdentifyConfig:
         ``[identify.refine]``: refine the least-squares parameters by minimising the
         windowed free-run error on the estimation data (see
         :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
+    bootstrap : int
+        Block-bootstrap replicates of the least squares for the curves' 95 % bands
+        (:mod:`pipeline.identify.bands`); 0: no bands, and no curve is marked identified.
+    bootstrap_seed : int
+        Seed of the bootstrap's random generator.
+    band_tolerance : float
+        A curve is identified where its band is at most this fraction of its range (and
+        the data support it; :mod:`pipeline.identify.bands`).
     prior : PhysicsPrior or None
         The analytical model's curves for the ``physics_*`` terms; set by the identify
         stage from the workflow's ``[physics]`` section, not a workflow key.
@@ -116,6 +124,9 @@ class IdentifyConfig:
         dict[str, Any] | bool | None,
         Field(description="a table of [identify.refine] settings, true or false"),
     ] = None
+    bootstrap: NonNegativeInt = 200
+    bootstrap_seed: NonNegativeInt = 0
+    band_tolerance: PositiveFloat = 0.25
     prior: Any = None
 
     def __post_init__(self) -> None:

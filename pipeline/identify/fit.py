@@ -72,6 +72,11 @@ class FitDiagnostics:
         2-norms of the regressor columns.
     y_norm : float
         2-norm of the regression output.
+    theta_boot : ndarray, shape (B, p) or None
+        Block-bootstrap replicates of ``theta`` (:func:`pipeline.identify.bands.block_bootstrap`);
+        None with ``bootstrap = 0``.
+    block : int
+        The bootstrap's block length [samples] (0 without bootstrap).
     """
 
     n_samples: int
@@ -86,6 +91,8 @@ class FitDiagnostics:
     theta: np.ndarray
     column_norms: np.ndarray
     y_norm: float
+    theta_boot: np.ndarray | None = None
+    block: int = 0
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -270,6 +277,13 @@ def fit_rbf_model(
     psi, y, names = _system(records, z_all, basis, cfg)
     theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range)
+    theta_boot, block = None, 0
+    if cfg.bootstrap > 0:
+        from pipeline.identify.bands import block_bootstrap
+
+        theta_boot, block = block_bootstrap(
+            psi, y, [r.q.size for r in records], cfg.bootstrap, cfg.bootstrap_seed
+        )
     diag = FitDiagnostics(
         n_samples=int(y.size),
         columns=names,
@@ -283,6 +297,8 @@ def fit_rbf_model(
         theta=theta,
         column_norms=np.linalg.norm(psi, axis=0),
         y_norm=float(np.linalg.norm(y)),
+        theta_boot=theta_boot,
+        block=block,
     )
     return model, diag
 

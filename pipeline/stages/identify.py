@@ -29,7 +29,8 @@ class IdentifyResult:
     diagnostics : FitDiagnostics
         Rank, condition number, residuals, T_z trace.
     curves : pandas.DataFrame
-        Characteristic curves on a grid: ``q, c, d, cq, g1..gN, dC1_dq..dCN_dq``.
+        Characteristic curves on a grid with 95 % bands and identified masks
+        (:func:`pipeline.identify.bands.curves_frame`).
     summary : dict
         Scalars for reports (reproducible: no wall times).
     equation_error_model : RBFModel or None
@@ -72,6 +73,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     WorkflowError
         For an invalid section.
     """
+    from pipeline.identify.bands import curves_frame
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
@@ -100,12 +102,9 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "message": res.message,
         }
         timings["refine"] = res.seconds
-    grid = np.linspace(model.q_range[0], model.q_range[1], 201)
-    cur = model.curves(grid)
-    curves = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
-    for j in range(model.n_inputs):
-        curves[f"g{j + 1}"] = cur["g"][:, j]
-        curves[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    curves, identified = curves_frame(
+        model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance
+    )
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
@@ -119,8 +118,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "backbone": {k: (np.asarray(v).tolist()) for k, v in model.backbone.items()},
         "published": dict(cfg.published or {}),
         "refine": refine,
+        "identified": identified,
+        "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
     }
-    return IdentifyResult(model, diag, pd.DataFrame(curves), summary, ls_model, timings)
+    return IdentifyResult(model, diag, curves, summary, ls_model, timings)
 
 
 def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
@@ -137,6 +138,7 @@ def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
         "singular_values": diag.singular_values,
         "support": diag.support,
         "T_z_trace": diag.T_z_trace,
+        **({} if diag.theta_boot is None else {"theta_boot": diag.theta_boot}),
     }
 
 

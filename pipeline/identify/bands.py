@@ -1,0 +1,405 @@
+"""Uncertainty of the identified curves: block bootstrap of the least squares, bands, masks.
+
+The equation errors of Eq. 40 are strongly autocorrelated (derivatives from TVRegDiff, the
+zero-phase low-pass of the filtered equation error), so the textbook covariance
+``s^2 (Psi^T Psi)^-1`` is far too optimistic. The parameters are instead re-estimated on
+``B`` resamples of the regression rows made of contiguous blocks (non-overlapping blocks
+within each estimation record, drawn with replacement; Carlstein 1986, Kuensch 1989), whose
+length covers the residuals' correlation time. Every curve of the model is a linear map of
+the parameters (:func:`curve_maps`, built from the term library that also builds the
+regressor), so each replicate gives a curve and the pointwise 2.5 and 97.5 percentiles give
+a 95 % band (percentile bootstrap, Efron & Tibshirani 1993, Ch. 13). The band is
+conditional on the identified ``T_z`` and on the derivatives; it measures how well the data
+pin the parameters down, not the model error.
+
+A curve is *identified* at ``q`` where (1) the data support it: the Gaussian-weighted number
+of estimation samples near ``q`` (the kernel of Eq. 38, width sigma) is at least
+``min_support``, counting for ``g_i`` only samples where input ``i`` is active (``h(v_i)``
+above 10 % of its largest value) and for ``d`` only samples in motion (``|q_dot|`` above
+10 % of its RMS); and (2) the band is narrow: its width is at most ``band_tolerance`` times
+the range of the curve over the supported points.
+
+References
+----------
+Masoud & Maas 2025, Eq. 37-40; Carlstein 1986, Ann. Statist. 14(3), 1171-1179;
+Kuensch 1989, Ann. Statist. 17(3), 1217-1241; Politis & White 2004, Econometric Reviews
+23(1), 53-70 (block length from the correlation time); Efron & Tibshirani 1993, An
+Introduction to the Bootstrap, Ch. 13 (percentile intervals).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from pipeline.identify.basis import RBFBasis
+from pipeline.identify.terms import PhysicsPrior, term_table
+
+#: Input activity threshold: h(v_i) above this fraction of its maximum counts as "applied".
+ACTIVE_FRACTION = 0.1
+#: Motion threshold for d: |q_dot| above this fraction of its RMS.
+MOVING_FRACTION = 0.1
+#: Names of the terms that are linear in the friction state z (the damping curve d).
+_D_PREFIX, _D_SCALARS = "d[", ("viscous", "physics_damping")
+
+
+def curve_names(n_inputs: int) -> list[str]:
+    """Names of the curves with bands: ``restoring``, ``d``, ``g1`` .. ``gN``."""
+    return ["restoring", "d", *[f"g{j + 1}" for j in range(n_inputs)]]
+
+
+def curve_maps(
+    names: Sequence[str],
+    q: np.ndarray,
+    basis: RBFBasis,
+    n_inputs: int,
+    input_map_kind: str,
+    coulomb_velocity: float,
+    prior: PhysicsPrior | None = None,
+) -> dict[str, np.ndarray]:
+    """Linear maps from the regression parameters to the characteristic curves.
+
+    Built from the term library (:func:`pipeline.identify.terms.term_table`): the restoring
+    force is the force side at rest (``z = 0``, ``h(v) = 0``), the damping the terms linear
+    in ``z`` at ``z = 1``, and ``g_j`` the input terms of input ``j`` at ``h(v_j) = 1``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Regression column names (:attr:`FitDiagnostics.columns`); a ``"m_q"`` column
+        (identified mass) maps to no curve.
+    q : ndarray, shape (n,)
+        Positions [unit of q].
+    basis : RBFBasis
+        The model's RBF basis.
+    n_inputs : int
+        Number of inputs.
+    input_map_kind : {"v2", "v"}
+        h(v).
+    coulomb_velocity : float
+        v_c [unit of q / s].
+    prior : PhysicsPrior, optional
+        The analytical curves of ``physics_*`` terms.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (n, len(names))
+        ``restoring`` (curve = map @ theta: ``c(q) q + F_0`` [N]), ``d`` [N s/m] and
+        ``g1`` .. ``gN`` [N/V^2 or N/V].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40.
+    """
+    q = np.asarray(q, dtype=float)
+    names = list(names)
+    terms = [n for n in names if n != "m_q"]
+    idx = np.array([names.index(n) for n in terms], dtype=int)
+    table = term_table(terms, basis, n_inputs, input_map_kind, coulomb_velocity, prior)
+    n = q.size
+    zero_h = np.zeros((n, n_inputs))
+
+    def full(cols: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        out = np.zeros((n, len(names)))
+        out[:, idx[keep]] = cols[:, keep]
+        return out
+
+    rest = table.columns(q, np.zeros(n), zero_h)
+    maps = {"restoring": full(rest, np.ones(len(terms), dtype=bool))}
+    is_d = np.array([t.startswith(_D_PREFIX) or t in _D_SCALARS for t in terms], dtype=bool)
+    maps["d"] = full(table.columns(q, np.ones(n), zero_h), is_d)
+    for j in range(n_inputs):
+        h = zero_h.copy()
+        h[:, j] = 1.0
+        own = (f"g{j + 1}[", f"input_gain{j + 1}", f"physics_gain{j + 1}")
+        is_g = np.array([t.startswith(own) for t in terms], dtype=bool)
+        maps[f"g{j + 1}"] = full(table.columns(q, np.zeros(n), h), is_g)
+    return maps
+
+
+def block_length(residuals: Sequence[np.ndarray], n_rows: int) -> int:
+    """Block length of the bootstrap from the residuals' correlation time.
+
+    Twice the first lag at which the residuals' autocorrelation (averaged over the records)
+    falls below ``1/e``, and at least ``n^(1/3)`` (the rate of Kuensch 1989), capped at a
+    quarter of the shortest record.
+
+    Parameters
+    ----------
+    residuals : sequence of ndarray, shape (n_r,)
+        Equation errors per record, in row order.
+    n_rows : int
+        Total rows ``n``.
+
+    Returns
+    -------
+    int
+        Block length [samples], >= 1.
+
+    References
+    ----------
+    Politis & White 2004 (block length grows with the dependence); Kuensch 1989.
+    """
+    shortest = min(r.size for r in residuals)
+    max_lag = max(1, shortest // 4)
+    acf = np.zeros(max_lag + 1)
+    for r in residuals:
+        x = r - r.mean()
+        spec = np.fft.rfft(x, 2 * x.size)
+        a = np.fft.irfft(spec * np.conj(spec))[: max_lag + 1]
+        acf += a / a[0] if a[0] > 0 else 0.0
+    acf /= len(residuals)
+    below = np.flatnonzero(acf < np.exp(-1.0))
+    tau = int(below[0]) if below.size else max_lag
+    return int(min(max(2 * tau, np.ceil(n_rows ** (1.0 / 3.0)), 1), max_lag))
+
+
+def block_bootstrap(
+    psi: np.ndarray,
+    y: np.ndarray,
+    record_rows: Sequence[int],
+    n_boot: int,
+    seed: int,
+    block: int | None = None,
+) -> tuple[np.ndarray, int]:
+    """Least-squares parameters re-estimated on block resamples of the regression rows.
+
+    Parameters
+    ----------
+    psi : ndarray, shape (n, p)
+        Regressor (rows of all records stacked, in time order within each record).
+    y : ndarray, shape (n,)
+        Regression output.
+    record_rows : sequence of int
+        Rows per record (they sum to ``n``); blocks never cross a record boundary.
+    n_boot : int
+        Number of replicates ``B`` (>= 1).
+    seed : int
+        Seed of the generator (:func:`numpy.random.default_rng`).
+    block : int, optional
+        Block length [rows]; default :func:`block_length` of the least-squares residuals.
+
+    Returns
+    -------
+    theta : ndarray, shape (B, p)
+        The replicates' parameters (least squares on the column-scaled rows, the block
+        counts as row weights; the regressor has full column rank, as the fit checks).
+    block : int
+        The block length used [rows].
+
+    Raises
+    ------
+    ValueError
+        If ``record_rows`` does not sum to the number of rows or ``n_boot < 1``.
+
+    References
+    ----------
+    Carlstein 1986 (non-overlapping blocks); Kuensch 1989.
+    """
+    n, p = psi.shape
+    if sum(record_rows) != n:
+        raise ValueError(f"record_rows sum to {sum(record_rows)}, the regressor has {n} rows")
+    if n_boot < 1:
+        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    scale = np.linalg.norm(psi, axis=0)
+    scale = np.where(scale == 0, 1.0, scale)
+    a = psi / scale
+    if block is None:
+        theta0, *_ = np.linalg.lstsq(a, y, rcond=None)
+        resid = y - a @ theta0
+        bounds = np.cumsum([0, *record_rows])
+        block = block_length([resid[s:e] for s, e in itertools.pairwise(bounds)], n)
+    starts, ends = [], []
+    offset = 0
+    for rows in record_rows:
+        s = np.arange(offset, offset + rows, block)
+        starts.extend(s.tolist())
+        ends.extend(np.minimum(s + block, offset + rows).tolist())
+        offset += rows
+    # Each replicate is the least squares with integer row weights (the block counts). With
+    # a = Q R once, it is (Q^T W Q) phi = Q^T W y, theta = R^-1 phi: the weighted Gram of the
+    # orthonormal Q is well conditioned (no squared condition number of normal equations),
+    # and it is a sum of per-block Grams, so all replicates cost one matrix product.
+    Q, R = np.linalg.qr(a)
+    rows = [slice(s, e) for s, e in zip(starts, ends, strict=True)]
+    gram = np.stack([Q[r].T @ Q[r] for r in rows]).reshape(len(rows), p * p)
+    qty = np.stack([Q[r].T @ y[r] for r in rows])
+    rng = np.random.default_rng(seed)
+    k = int(np.ceil(n / block))
+    counts = np.stack([np.bincount(rng.integers(0, len(rows), k), minlength=len(rows))
+                       for _ in range(n_boot)]).astype(float)  # fmt: skip
+    H = (counts @ gram).reshape(n_boot, p, p)
+    phi = np.linalg.solve(H, (counts @ qty)[:, :, None])[:, :, 0]
+    from scipy.linalg import solve_triangular
+
+    out = solve_triangular(R, phi.T).T / scale
+    return out, int(block)
+
+
+def support_weights(
+    grid: np.ndarray, q: np.ndarray, sigma: float, mask: np.ndarray | None = None
+) -> np.ndarray:
+    """Gaussian-weighted number of samples near each grid point (Eq. 38 kernel).
+
+    Parameters
+    ----------
+    grid : ndarray, shape (m,)
+        Positions [unit of q].
+    q : ndarray, shape (n,)
+        Sample positions [unit of q].
+    sigma : float
+        Kernel width [unit of q].
+    mask : ndarray of bool, shape (n,), optional
+        Samples that count.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        ``sum_s exp(-(grid - q_s)^2 / (2 sigma^2))`` over the counted samples, with the
+        samples binned at about sigma / 8 (memory independent of the record length).
+    """
+    qs = np.asarray(q, dtype=float)
+    if mask is not None:
+        qs = qs[mask]
+    counts, edges = np.histogram(qs, bins=max(16, int(np.ptp(grid) / sigma * 8) + 1))
+    mids = 0.5 * (edges[:-1] + edges[1:])
+    if qs.size == 0:
+        return np.zeros(np.size(grid))
+    return np.exp(-((grid[:, None] - mids[None, :]) ** 2) / (2 * sigma**2)) @ counts
+
+
+def curve_bands(
+    point: dict[str, np.ndarray],
+    maps: dict[str, np.ndarray],
+    theta: np.ndarray,
+    theta_boot: np.ndarray | None,
+    support: dict[str, np.ndarray],
+    min_support: float,
+    band_tolerance: float,
+) -> pd.DataFrame:
+    """Bands and identified masks of the curves on a grid.
+
+    Parameters
+    ----------
+    point : dict of str to ndarray, shape (m,)
+        The identified curves (``restoring``, ``d``, ``g1`` ...).
+    maps : dict of str to ndarray, shape (m, p)
+        :func:`curve_maps` on the same grid.
+    theta : ndarray, shape (p,)
+        The least-squares parameters.
+    theta_boot : ndarray, shape (B, p) or None
+        Bootstrap replicates; None: no band (every point unidentified).
+    support : dict of str to ndarray, shape (m,)
+        :func:`support_weights` per curve.
+    min_support : float
+        Smallest supported weight.
+    band_tolerance : float
+        Largest band width relative to the curve's range over the supported points.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Per curve ``<name>_lo``, ``<name>_hi`` (95 % band) and ``<name>_identified``.
+    """
+    cols: dict[str, np.ndarray] = {}
+    for name, value in point.items():
+        ok = support[name] >= min_support
+        if theta_boot is None:
+            lo = hi = np.full(value.shape, np.nan)
+            ident = np.zeros(value.shape, dtype=bool)
+        else:
+            dev = (theta_boot - theta) @ maps[name].T  # (B, m): replicate minus estimate
+            lo = value + np.percentile(dev, 2.5, axis=0)
+            hi = value + np.percentile(dev, 97.5, axis=0)
+            span = np.ptp(value[ok]) if ok.any() else 0.0
+            span = span if span > 0 else float(np.max(np.abs(value[ok]), initial=0.0))
+            ident = ok & (hi - lo <= band_tolerance * span) & (span > 0)
+        cols[f"{name}_lo"], cols[f"{name}_hi"], cols[f"{name}_identified"] = lo, hi, ident
+    return pd.DataFrame(cols)
+
+
+def identified_intervals(q: np.ndarray, mask: np.ndarray) -> list[list[float]]:
+    """Contiguous runs of a mask on a grid as ``[q_start, q_end]`` intervals [unit of q]."""
+    mask = np.asarray(mask, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [
+        [float(f"{q[s]:.6g}"), float(f"{q[e - 1]:.6g}")]
+        for s, e in zip(edges[::2], edges[1::2], strict=True)
+    ]
+
+
+def curves_frame(model, diag, records, *, min_support: float, band_tolerance: float, n=201):
+    """Tabulate the identified curves on a grid with their bands and identified masks.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model (after refinement, the refined one: its curves are the
+        points, the least-squares bootstrap deviations give the band around them).
+    diag : FitDiagnostics
+        The least-squares diagnostics (``columns``, ``theta``, ``theta_boot``).
+    records : sequence of Record
+        The estimation records (``q``, ``q_dot``, ``v``), for the data support.
+    min_support : float
+        Smallest Gaussian-weighted sample count for a supported point.
+    band_tolerance : float
+        Largest band width relative to the curve's range.
+    n : int
+        Grid points over the model's ``q_range``.
+
+    Returns
+    -------
+    curves : pandas.DataFrame
+        ``q, c, d, cq, restoring`` (= ``c(q) q + F_0`` [N], the static force at v = 0),
+        ``g1..gN``, ``dC1_dq..dCN_dq`` and per curve of :func:`curve_names`
+        ``<name>_lo``, ``<name>_hi``, ``<name>_identified``.
+    intervals : dict of str to list
+        Per curve the q intervals ``[a, b]`` where it is identified [unit of q].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40 (curves), Fig. 14.
+    """
+    from pipeline.identify.terms import input_map
+
+    grid = np.linspace(model.q_range[0], model.q_range[1], n)
+    cur = model.curves(grid)
+    F_0 = float(model.backbone.get("F_0", 0.0))
+    frame = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
+    frame["restoring"] = cur["cq"] + F_0
+    point = {"restoring": frame["restoring"], "d": cur["d"]}
+    for j in range(model.n_inputs):
+        frame[f"g{j + 1}"] = point[f"g{j + 1}"] = cur["g"][:, j]
+        frame[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    maps = curve_maps(
+        diag.columns,
+        grid,
+        model.basis,
+        model.n_inputs,
+        model.input_map,
+        model.coulomb_velocity,
+        model.prior,
+    )
+    q = np.concatenate([r.q for r in records])
+    q_dot = np.concatenate([r.q_dot for r in records])
+    hv = input_map(np.vstack([r.v for r in records]), model.input_map)
+    rms = float(np.sqrt(np.mean(q_dot**2)))
+    sigma = model.basis.sigma
+    support = {
+        "restoring": support_weights(grid, q, sigma),
+        "d": support_weights(grid, q, sigma, np.abs(q_dot) > MOVING_FRACTION * rms),
+    }
+    for j in range(model.n_inputs):
+        active = np.abs(hv[:, j]) > ACTIVE_FRACTION * np.max(np.abs(hv[:, j]))
+        support[f"g{j + 1}"] = support_weights(grid, q, sigma, active)
+    bands = curve_bands(
+        point, maps, diag.theta, diag.theta_boot, support, min_support, band_tolerance
+    )
+    out = pd.concat([pd.DataFrame(frame), bands], axis=1)
+    intervals = {
+        name: identified_intervals(grid, out[f"{name}_identified"].to_numpy()) for name in point
+    }
+    return out, intervals
