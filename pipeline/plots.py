@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 
@@ -62,3 +63,89 @@ def free_run_figure(
             ax.axvspan(t[0], t[min(init_samples, t.size - 1)], color="0.85", zorder=0)
     fig.tight_layout()
     return fig
+
+
+def curves_figure(
+    curves: pd.DataFrame, analytical: pd.DataFrame | None = None, unit: str = "m"
+) -> Any:
+    """Draw the identified curves with their 95 % bands, as Fig. 14 of the paper.
+
+    Where a curve is not identified (``<name>_identified`` false) it is drawn thin and grey
+    over its band; identified parts are drawn in colour.
+
+    Parameters
+    ----------
+    curves : pandas.DataFrame
+        ``curves.parquet`` of the identify stage: ``q``, ``restoring``, ``d``, ``g1..gN``
+        and per curve ``<name>_lo``, ``<name>_hi``, ``<name>_identified``.
+    analytical : pandas.DataFrame, optional
+        The analytical model's curves on a grid in the same units (``q``, ``restoring``,
+        ``d``, ``g1..gN``), drawn dashed beside the identified ones.
+    unit : str, optional
+        Unit of q for the axis labels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three axes: restoring force ``c(q) q + F_0``, damping ``d(q)`` and
+        ``dC_i/dq = 2 g_i(q)``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 14.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 8))
+    axes = fig.subplots(3, 1, sharex=True)
+    q = curves["q"].to_numpy()
+    inputs = sorted(c for c in curves.columns if c[:1] == "g" and c[1:].isdigit())
+    panels = [
+        (axes[0], [("restoring", 1.0, "tab:blue")], "restoring force c(q) q + F_0"),
+        (axes[1], [("d", 1.0, "tab:green")], "damping d(q)"),
+        (
+            axes[2],
+            [(g, 2.0, color) for g, color in zip(inputs, ("tab:red", "tab:purple"), strict=False)],
+            "dC_i/dq = 2 g_i(q)",
+        ),
+    ]
+    for ax, series, title in panels:
+        for name, factor, color in series:
+            y = factor * curves[name].to_numpy()
+            ident = curves[f"{name}_identified"].to_numpy()
+            lo = factor * curves[f"{name}_lo"].to_numpy()
+            hi = factor * curves[f"{name}_hi"].to_numpy()
+            ax.fill_between(q, lo, hi, color=color, alpha=0.2, lw=0, label=f"{name}: 95 % band")
+            ax.plot(q, y, color="0.6", lw=0.8)
+            ax.plot(q, np.where(ident, y, np.nan), color=color, lw=1.6, label=f"{name} identified")
+            if analytical is not None and name in analytical:
+                ax.plot(
+                    analytical["q"],
+                    factor * analytical[name],
+                    color=color,
+                    ls="--",
+                    lw=1.0,
+                    label=f"{name} analytical",
+                )
+        _limit_to_identified(ax, curves, series, analytical)
+        ax.set_title(title + " (grey: not identified)", fontsize=9)
+        ax.legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel(f"q [{unit}]")
+    return fig
+
+
+def _limit_to_identified(ax, curves, series, analytical) -> None:
+    """Scale the y axis to the identified parts (bands where unsupported can be huge)."""
+    values = []
+    for name, factor, _ in series:
+        ident = curves[f"{name}_identified"].to_numpy()
+        for key in (name, f"{name}_lo", f"{name}_hi"):
+            values.append(factor * curves[key].to_numpy()[ident])
+        if analytical is not None and name in analytical:
+            values.append(factor * analytical[name].to_numpy())
+    values = np.concatenate(values) if values else np.empty(0)
+    values = values[np.isfinite(values)]
+    if values.size:
+        lo, hi = float(values.min()), float(values.max())
+        pad = 0.1 * (hi - lo) if hi > lo else max(abs(hi), 1e-30)
+        ax.set_ylim(lo - pad, hi + pad)

@@ -73,6 +73,9 @@ def identify_table(summary: dict[str, Any]) -> Table:
     ]:
         value = f"{summary['rank']} / {summary['n_columns']}" if key is None else _fmt(summary[key])
         table.add_row(label, value, *([""] if published else []))
+    for name, spans in (summary.get("identified") or {}).items():
+        text = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans) or "nowhere"
+        table.add_row(f"{name} identified on q in", text, *([""] if published else []))
     refine = summary.get("refine")
     if refine:
         pad = [""] if published else []

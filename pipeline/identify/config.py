@@ -126,7 +126,7 @@ class IdentifyConfig:
     ] = None
     bootstrap: NonNegativeInt = 200
     bootstrap_seed: NonNegativeInt = 0
-    band_tolerance: PositiveFloat = 0.25
+    band_tolerance: PositiveFloat = 0.2
     prior: Any = None
 
     def __post_init__(self) -> None:

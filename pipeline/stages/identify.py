@@ -15,7 +15,7 @@ from pipeline.physics_stages import physics_mass, physics_prior
 from pipeline.records import estimation_records
 from pipeline.stages import StageInputs, StageOutput
 
-__all__ = ["IdentifyResult", "diagnostics_tree", "execute", "run_identify"]
+__all__ = ["IdentifyResult", "analytical_curves", "diagnostics_tree", "execute", "run_identify"]
 
 
 @dataclass(frozen=True)
@@ -154,14 +154,16 @@ def execute(ctx: StageInputs) -> StageOutput:
     -------
     StageOutput
         ``model.h5`` (the model, its fit diagnostics and, after refinement, the
-        equation-error model) and ``curves.parquet``.
+        equation-error model), ``curves.parquet`` and ``plots/curves.png`` (Fig. 14, with
+        the analytical curves when the workflow has ``[physics]``).
 
     Raises
     ------
     IdentificationError, WorkflowError
         As :func:`run_identify`.
     """
-    from pipeline.artifacts import H5Tree
+    from pipeline.artifacts import Figure, H5Tree
+    from pipeline.plots import curves_figure
 
     res = run_identify(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
@@ -169,5 +171,39 @@ def execute(ctx: StageInputs) -> StageOutput:
     tree = {**res.model.to_tree(), "diagnostics": diagnostics_tree(res.diagnostics)}
     if res.equation_error_model is not None and res.equation_error_model is not res.model:
         tree["equation_error"] = res.equation_error_model.to_tree()["model"]
-    outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves}
+    physics = ctx.physics()
+    analytical = analytical_curves(physics, res.model) if physics is not None else None
+    unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
+    figure = Figure(curves_figure(res.curves, analytical, unit))
+    outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     return StageOutput(outputs, res.summary, res.timings)
+
+
+def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
+    """Tabulate the analytical model's curves in the identified model's units, for Fig. 14.
+
+    Parameters
+    ----------
+    physics : PrototypeParams
+        The ``[physics]`` prototype.
+    model : RBFModel
+        The identified model (its ``q_range`` and ``m_q``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``q`` [m], ``restoring`` (``f(q)`` at ``v = 0``), ``d``, ``g1``, ``g2``, times
+        ``m_q / m_q,phys(0)``: the identified curves are per the model's ``m_q``
+        (``m_q = 1`` identifies them per unit mass), the analytical ones per its mass.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26, 33, Fig. 14.
+    """
+    from pipeline.physics.reduced import reduced_curves
+
+    grid = np.linspace(model.q_range[0], model.q_range[1], 201)
+    cur = reduced_curves(physics, grid)
+    scale = model.m_q / float(np.interp(0.0, grid, cur.m_q))
+    frame = {"q": grid, "restoring": cur.f, "d": cur.d, "g1": cur.g1, "g2": cur.g2}
+    return pd.DataFrame({k: (v if k == "q" else scale * v) for k, v in frame.items()})
