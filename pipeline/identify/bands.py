@@ -164,6 +164,7 @@ def block_bootstrap(
     n_boot: int,
     seed: int,
     block: int | None = None,
+    estimator=None,
 ) -> tuple[np.ndarray, int]:
     """Least-squares parameters re-estimated on block resamples of the regression rows.
 
@@ -181,6 +182,9 @@ def block_bootstrap(
         Seed of the generator (:func:`numpy.random.default_rng`).
     block : int, optional
         Block length [rows]; default :func:`block_length` of the least-squares residuals.
+    estimator : pipeline.identify.regularise.Estimator, optional
+        The estimator of the fit (penalty, bounds) when it is not plain least squares: each
+        replicate then solves its weighted problem through the Cholesky factor of its Gram.
 
     Returns
     -------
@@ -232,10 +236,16 @@ def block_bootstrap(
     counts = np.stack([np.bincount(rng.integers(0, len(rows), k), minlength=len(rows))
                        for _ in range(n_boot)]).astype(float)  # fmt: skip
     H = (counts @ gram).reshape(n_boot, p, p)
-    phi = np.linalg.solve(H, (counts @ qty)[:, :, None])[:, :, 0]
-    from scipy.linalg import solve_triangular
+    r = counts @ qty
+    from scipy.linalg import cholesky, solve_triangular
 
-    out = solve_triangular(R, phi.T).T / scale
+    if estimator is None or estimator.plain:
+        phi = np.linalg.solve(H, r[:, :, None])[:, :, 0]
+        return solve_triangular(R, phi.T).T / scale, int(block)
+    out = np.empty((n_boot, p))
+    for b in range(n_boot):  # A^T W A = (L^T R)^T (L^T R) with H = L L^T
+        L = cholesky(H[b], lower=True)
+        out[b] = estimator.solve(L.T @ R, solve_triangular(L, r[b], lower=True)) / scale
     return out, int(block)
 
 

@@ -78,6 +78,14 @@ class IdentifyConfig:
         ``[identify.refine]``: refine the least-squares parameters by minimising the
         windowed free-run error on the estimation data (see
         :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
+    smoothing : float or "gcv"
+        Weight lambda of a second-difference penalty on each RBF curve's weights
+        (:mod:`pipeline.identify.regularise`; dimensionless, on the column-scaled weights);
+        ``"gcv"`` chooses it by generalised cross-validation; 0 (default): the paper's plain
+        least squares.
+    constraints : tuple of str
+        Sign statements on the curves, ``"d >= 0"``, ``"g1 >= 0"``, ``"g2 <= 0"``, imposed
+        on their weights (bounded least squares); empty by default.
     bootstrap : int
         Block-bootstrap replicates of the least squares for the curves' 95 % bands
         (:mod:`pipeline.identify.bands`); 0: no bands, and no curve is marked identified.
@@ -124,6 +132,11 @@ class IdentifyConfig:
         dict[str, Any] | bool | None,
         Field(description="a table of [identify.refine] settings, true or false"),
     ] = None
+    smoothing: Annotated[
+        Annotated[float, Field(ge=0, allow_inf_nan=False)] | Literal["gcv"],
+        Field(description='a weight >= 0 or "gcv"'),
+    ] = 0.0
+    constraints: Annotated[tuple[str, ...], AsTuple] = ()
     bootstrap: NonNegativeInt = 200
     bootstrap_seed: NonNegativeInt = 0
     band_tolerance: PositiveFloat = 0.2
@@ -150,6 +163,13 @@ class IdentifyConfig:
             raise ConfigValueError(
                 "rbf", message="the model needs an input term: 'g' in rbf or 'input_gain'"
             )
+        from pipeline.identify.regularise import CONSTRAINT
+
+        for text in self.constraints:
+            if CONSTRAINT.match(text) is None:
+                raise ConfigValueError(
+                    "constraints", "statements like 'd >= 0', 'g1 >= 0', 'g2 <= 0'", text
+                )
         if self.refine:
             from pipeline.identify.refine import refine_config
 

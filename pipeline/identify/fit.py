@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -72,6 +72,10 @@ class FitDiagnostics:
         2-norms of the regressor columns.
     y_norm : float
         2-norm of the regression output.
+    smoothing : float
+        The smoothness penalty's lambda used (0: none; :mod:`pipeline.identify.regularise`).
+    gcv_trace : ndarray, shape (k, 3)
+        ``(lambda, GCV, tr H)`` of the GCV search (empty without it).
     theta_boot : ndarray, shape (B, p) or None
         Block-bootstrap replicates of ``theta`` (:func:`pipeline.identify.bands.block_bootstrap`);
         None with ``bootstrap = 0``.
@@ -93,6 +97,8 @@ class FitDiagnostics:
     y_norm: float
     theta_boot: np.ndarray | None = None
     block: int = 0
+    smoothing: float = 0.0
+    gcv_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -276,14 +282,21 @@ def fit_rbf_model(
     z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
     psi, y, names = _system(records, z_all, basis, cfg)
     theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
+    estimator, gcv_trace = _estimator(psi, y, names, cfg)
+    if not estimator.plain:
+        scale = np.linalg.norm(psi, axis=0)
+        Q, R = np.linalg.qr(psi / scale)
+        theta = estimator.solve(R, Q.T @ y) / scale
+        resid = y - psi @ theta
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
         from pipeline.identify.bands import block_bootstrap
 
         theta_boot, block = block_bootstrap(
-            psi, y, [r.q.size for r in records], cfg.bootstrap, cfg.bootstrap_seed
-        )
+            psi, y, [r.q.size for r in records], cfg.bootstrap, cfg.bootstrap_seed,
+            estimator=estimator,
+        )  # fmt: skip
     diag = FitDiagnostics(
         n_samples=int(y.size),
         columns=names,
@@ -299,8 +312,32 @@ def fit_rbf_model(
         y_norm=float(np.linalg.norm(y)),
         theta_boot=theta_boot,
         block=block,
+        smoothing=estimator.lam,
+        gcv_trace=gcv_trace,
     )
     return model, diag
+
+
+def _estimator(psi, y, names, cfg: IdentifyConfig):
+    """Build the workflow's estimator: plain, smoothed (fixed or GCV lambda), constrained."""
+    from pipeline.identify.regularise import (
+        Estimator,
+        constraint_bounds,
+        gcv_lambda,
+        smoothness_operator,
+    )
+
+    lower, upper = constraint_bounds(names, cfg.constraints)
+    penalty = smoothness_operator(names, cfg.M)
+    trace = np.empty((0, 3))
+    if cfg.smoothing == "gcv" and penalty.shape[0]:
+        scale = np.linalg.norm(psi, axis=0)
+        Q, R = np.linalg.qr(psi / scale)
+        qty = Q.T @ y
+        lam, trace = gcv_lambda(R, qty, float(y @ y - qty @ qty), y.size, penalty)
+    else:
+        lam = 0.0 if cfg.smoothing == "gcv" else float(cfg.smoothing)
+    return Estimator(penalty, lam, lower, upper), trace
 
 
 def _search_T_z(records, basis, cfg, bounds):

@@ -120,6 +120,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "refine": refine,
         "identified": identified,
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
+        "smoothing": diag.smoothing,
+        "constraints": list(cfg.constraints),
     }
     return IdentifyResult(model, diag, curves, summary, ls_model, timings)
 
@@ -139,6 +141,7 @@ def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
         "support": diag.support,
         "T_z_trace": diag.T_z_trace,
         **({} if diag.theta_boot is None else {"theta_boot": diag.theta_boot}),
+        **({"gcv_trace": diag.gcv_trace} if diag.gcv_trace.size else {}),
     }
 
 
