@@ -1,0 +1,836 @@
+"""Stability and design numbers of an identified model: equilibria, wells, switching voltages.
+
+The identified model of Masoud & Maas 2025 (Eq. 37),
+
+    m_q q'' + d(q) z + F_c tanh(z / v_c) + f(q) = sum_i g_i(q) h(v_i),   T_z z' = q' - z,
+
+with the restoring force ``f(q) = c(q) q + F_0`` (``c`` includes the backbone ``k_1 + k_3 q^2``
+and the scaled analytical curve, see :meth:`pipeline.identify.model.RBFModel.curves`), is at
+rest where the static force
+
+    F(q; v) = f(q) - sum_i g_i(q) h(v_i)
+
+vanishes. For each constant input level this module finds those roots, their stiffness
+``k = dF/dq``, the small-signal natural frequency and damping ratio, and the energy barrier of
+each well; per input the static switching voltage (the saddle-node where the well the input
+pushes out of merges with its saddle); a verdict on whether the model is stable where the data
+are; and the same numbers for the analytical model of a ``[physics]`` prototype, computed with
+the functions of :mod:`pipeline.physics` (so that the two sit side by side).
+
+Small-signal model
+------------------
+Linearised about an equilibrium ``q*`` (``z = 0`` there, so the Coulomb term exerts no force),
+``m_q s^2 + d s / (1 + T_z s) + k = 0``, i.e. ``m_q T_z s^3 + m_q s^2 + (k T_z + d) s + k =
+0``. By the Routh-Hurwitz criterion this is asymptotically stable if and only if ``k > 0`` and
+``d > 0`` (for ``m_q, T_z > 0``; for ``T_z = 0`` it is the same second-order criterion), so the
+lag of the friction state does not change the ``stable`` flag. ``f_n = sqrt(k / m_q) / (2 pi)``
+and ``zeta = d / (2 sqrt(k m_q))`` are those of the limit ``z = q_dot`` (``T_z = 0``),
+accurate when ``2 pi f_n T_z << 1``. The Coulomb term is left out of ``d``: its slope
+``F_c / v_c`` at ``z = 0`` damps only velocities below ``v_c`` (it saturates beyond), so it
+does not make a well with ``d < 0`` stable beyond tiny amplitudes.
+
+Units
+-----
+``q`` in its own unit (m for the prototype), forces in N, so ``k`` [N/unit of q], ``d``
+[N s/unit of q] and the barrier ``int F dq`` [N * unit of q] = [J] when ``q`` is in m. When the
+curves are identified per unit mass (``m_q = 1``) forces are accelerations and the barrier is
+in [unit of q^2 / s^2] (energy per unit mass); ``f_n`` and ``zeta`` are unaffected.
+
+References
+----------
+Masoud & Maas 2025, Eq. 15, 26, 33, 37, Section 3.3.3-3.3.4; Strogatz, Nonlinear Dynamics and
+Chaos (2015), Sec. 3.1 (saddle-node bifurcation); Ogata, Modern Control Engineering (2010),
+Sec. 5-6 (Routh's stability criterion).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from typing import NamedTuple
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import quad
+from scipy.optimize import brentq, minimize_scalar
+
+from pipeline.errors import DebistError
+from pipeline.identify.model import RBFModel
+from pipeline.identify.terms import input_map
+
+__all__ = [
+    "EquilibriumPoint",
+    "StabilityError",
+    "SwitchingVoltage",
+    "Verdict",
+    "analytical_design",
+    "analytical_switching_voltages",
+    "equilibria",
+    "model_is_stable",
+    "stability_table",
+    "switching_voltages",
+    "verdict",
+]
+
+
+class StabilityError(DebistError, ValueError):
+    """The stability analysis cannot be set up (empty range, level of the wrong length)."""
+
+
+@dataclass(frozen=True)
+class EquilibriumPoint:
+    """One equilibrium ``F(q*; v) = 0`` of a model at a constant input level.
+
+    Attributes
+    ----------
+    level : int
+        Index of the input level (0 = all inputs at 0 V).
+    v : tuple of float
+        The input voltages of the level [V].
+    q : float
+        Position ``q*`` [unit of q].
+    k : float
+        Stiffness ``dF/dq`` at ``q*`` [N/unit of q].
+    m_q : float
+        Generalised mass at ``q*`` [kg].
+    d : float
+        Viscous damping ``d(q*)`` [N s/unit of q] (the Coulomb term is left out, see the
+        module docstring).
+    static_stable : bool
+        ``k > 0`` (a well; for the analytical model: the Hessian of Eq. 15 positive definite).
+    damped : bool
+        ``d > 0``.
+    stable : bool
+        ``static_stable and damped``: small-signal asymptotic stability.
+    f_n : float
+        Natural frequency ``sqrt(k / m_q) / (2 pi)`` [Hz]; NaN unless ``k > 0``.
+    zeta : float
+        Damping ratio ``d / (2 sqrt(k m_q))`` [-]; NaN unless ``k > 0``.
+    barrier : float
+        For a well: the smallest ``int_{q*}^{q_s} F dq`` over its neighbouring unstable
+        equilibria ``q_s`` (the energy to leave it) [N * unit of q]; NaN for a saddle or a
+        well without a neighbouring saddle.
+    """
+
+    level: int
+    v: tuple[float, ...]
+    q: float
+    k: float
+    m_q: float
+    d: float
+    static_stable: bool
+    damped: bool
+    stable: bool
+    f_n: float
+    zeta: float
+    barrier: float
+
+
+@dataclass(frozen=True)
+class SwitchingVoltage:
+    """Static switching voltage of one input (the others at 0 V).
+
+    Attributes
+    ----------
+    input : int
+        The input, 1-based (``v1`` is 1).
+    v_switch : float
+        Smallest voltage at which the well the input pushes out of disappears [V]; NaN when
+        not reached (see ``reason``).
+    q_well : float
+        That well at ``v = 0`` [unit of q]; NaN when there is none.
+    q_saddle : float
+        The unstable equilibrium next to it on the push side at ``v = 0`` [unit of q].
+    q_fold : float
+        Where the well and the saddle merge at ``v_switch`` [unit of q]; NaN when not reached.
+    reached : bool
+        Whether the well disappears within ``[0, v_max]``.
+    reason : str
+        Why not reached (empty when reached).
+    """
+
+    input: int
+    v_switch: float
+    q_well: float
+    q_saddle: float
+    q_fold: float
+    reached: bool
+    reason: str
+
+
+class Verdict(NamedTuple):
+    """Result of :func:`verdict`: ``label`` is ``"stable"`` or ``"unstable"``, ``reason`` why."""
+
+    label: str
+    reason: str
+
+
+_COLUMNS = ("q", "static_stable", "damped", "stable", "k", "m_q", "d", "f_n", "zeta", "barrier")
+_SWITCH_COLUMNS = ("input", "v_switch", "q_well", "q_saddle", "q_fold", "reached", "reason")
+
+
+def _small_signal(k: float, m_q: float, d: float) -> tuple[float, float]:
+    """``f_n`` [Hz] and ``zeta`` [-] of ``m_q s^2 + d s + k``; NaN unless ``k > 0``."""
+    if not k > 0:
+        return float("nan"), float("nan")
+    return float(np.sqrt(k / m_q) / (2.0 * np.pi)), float(d / (2.0 * np.sqrt(k * m_q)))
+
+
+def _barriers(q: Sequence[float], wells: Sequence[bool], energy: Callable[[int, int], float]):
+    """Barrier of each well: min over neighbouring unstable roots of ``energy(well, saddle)``."""
+    out = []
+    for j, is_well in enumerate(wells):
+        sides = [n for n in (j - 1, j + 1) if 0 <= n < len(q) and not wells[n]]
+        out.append(min((energy(j, n) for n in sides), default=np.nan) if is_well else np.nan)
+    return out
+
+
+def _table(points: Sequence[EquilibriumPoint], n_inputs: int) -> pd.DataFrame:
+    """Rows of :class:`EquilibriumPoint` as the table of :func:`stability_table`."""
+    rows = []
+    for p in points:
+        row = {"level": p.level}
+        row.update({f"v{i + 1}": p.v[i] for i in range(n_inputs)})
+        row.update({c: asdict(p)[c] for c in _COLUMNS})
+        rows.append(row)
+    cols = ["level", *(f"v{i + 1}" for i in range(n_inputs)), *_COLUMNS]
+    return pd.DataFrame(rows, columns=cols)
+
+
+def _levels(levels: Sequence[Sequence[float]], n_inputs: int) -> list[tuple[float, ...]]:
+    """Rest level first, then the distinct given levels, each of length ``n_inputs``."""
+    out = [(0.0,) * n_inputs]
+    for lv in levels:
+        t = tuple(float(x) for x in np.atleast_1d(np.asarray(lv, dtype=float)))
+        if len(t) != n_inputs:
+            raise StabilityError(
+                f"input level {list(t)} has {len(t)} voltages, the model has {n_inputs} inputs"
+            )
+        if t not in out:
+            out.append(t)
+    return out
+
+
+# --------------------------------------------------------------------------- identified model
+
+
+def _force(model: RBFModel, v: Sequence[float]) -> Callable[[ArrayLike], NDArray[np.float64]]:
+    """``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)`` [N] as a vectorised function of ``q``."""
+    h = input_map(np.asarray(v, dtype=float), model.input_map)
+    F_0 = float(model.backbone.get("F_0", 0.0))
+
+    def F(q: ArrayLike) -> NDArray[np.float64]:
+        cur = model.curves(np.atleast_1d(np.asarray(q, dtype=float)))
+        return cur["cq"] + F_0 - cur["g"] @ h
+
+    return F
+
+
+def _search_range(model: RBFModel, q_range) -> tuple[float, float]:
+    lo, hi = model.q_range if q_range is None else q_range
+    lo, hi = float(lo), float(hi)
+    if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+        raise StabilityError(
+            f"the range of q searched for equilibria [{lo!r}, {hi!r}] is empty: give `q_range` "
+            "or a model with its estimation range"
+        )
+    return lo, hi
+
+
+def _roots(F: Callable, grid: NDArray[np.float64]) -> list[float]:
+    """Roots of ``F`` on ``grid``: exact zeros and sign changes refined by Brent's method."""
+    Fg = F(grid)
+    s = np.sign(Fg)
+    roots = [float(q) for q in grid[s == 0]]
+    for k in np.flatnonzero(s[:-1] * s[1:] < 0):
+        roots.append(brentq(lambda x: float(F(x)[0]), grid[k], grid[k + 1], xtol=1e-14, rtol=1e-13))
+    return sorted(roots)
+
+
+def equilibria(
+    model: RBFModel,
+    levels: Sequence[Sequence[float]] = (),
+    q_range: tuple[float, float] | None = None,
+    *,
+    n_grid: int = 4001,
+) -> tuple[EquilibriumPoint, ...]:
+    """Equilibria of the identified model at rest and at constant input levels.
+
+    The roots of ``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)`` are bracketed by the sign
+    changes of ``F`` on a uniform grid and refined by Brent's method (a double root that does
+    not change sign, i.e. a level exactly at a fold, is not reported). The stiffness is the
+    central difference ``dF/dq`` with step ``1e-5`` of the range.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    levels : sequence of sequence of float
+        Constant input levels, each ``(v_1, ..., v_N)`` [V]; the rest level (all 0 V) is always
+        first (level 0), repeated levels are dropped.
+    q_range : tuple of float, optional
+        Range searched [unit of q]; default ``model.q_range`` (the estimation range).
+    n_grid : int
+        Points of the bracketing grid.
+
+    Returns
+    -------
+    tuple of EquilibriumPoint
+        By level, then ascending ``q``.
+
+    Raises
+    ------
+    StabilityError
+        If the range is empty or a level does not have ``model.n_inputs`` voltages.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37; Brent, Algorithms for Minimization without Derivatives
+    (1973), ch. 4 (``scipy.optimize.brentq``).
+    """
+    lo, hi = _search_range(model, q_range)
+    grid = np.linspace(lo, hi, int(n_grid))
+    step = 1e-5 * (hi - lo)
+    out: list[EquilibriumPoint] = []
+    for index, v in enumerate(_levels(levels, model.n_inputs)):
+        F = _force(model, v)
+        q = _roots(F, grid)
+        if not q:
+            continue
+        qa = np.asarray(q)
+        k = (F(qa + step) - F(qa - step)) / (2.0 * step)
+        d = model.curves(qa)["d"]
+        wells = [bool(x > 0) for x in k]
+
+        def scalar(x: float, F=F) -> float:
+            return float(F(x)[0])
+
+        def energy(j: int, n: int, scalar=scalar, qa=qa) -> float:
+            return float(quad(scalar, qa[j], qa[n], limit=200)[0])
+
+        barrier = _barriers(q, wells, energy)
+        for j in range(len(q)):
+            f_n, zeta = _small_signal(float(k[j]), model.m_q, float(d[j]))
+            out.append(
+                EquilibriumPoint(
+                    level=index, v=v, q=float(q[j]), k=float(k[j]), m_q=float(model.m_q),
+                    d=float(d[j]), static_stable=wells[j], damped=bool(d[j] > 0),
+                    stable=wells[j] and bool(d[j] > 0), f_n=f_n, zeta=zeta,
+                    barrier=float(barrier[j]),
+                )
+            )  # fmt: skip
+    return tuple(out)
+
+
+def stability_table(
+    model: RBFModel,
+    levels: Sequence[Sequence[float]] = (),
+    *,
+    visited: Sequence[tuple[float, float]] | None = None,
+    q_range: tuple[float, float] | None = None,
+    n_grid: int = 4001,
+) -> pd.DataFrame:
+    """Equilibria of the identified model as a table, with the verdict when ``visited`` is given.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    levels : sequence of sequence of float
+        Constant input levels [V] (:func:`equilibria`).
+    visited : sequence of (float, float), optional
+        Intervals of ``q`` the data visit [unit of q]: adds the column ``visited`` and
+        ``attrs["verdict"]``, ``attrs["reason"]`` (:func:`verdict`).
+    q_range : tuple of float, optional
+        Range searched [unit of q]; default ``model.q_range``.
+    n_grid : int
+        Points of the bracketing grid.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per equilibrium: ``level`` (0 = rest), ``v1..vN`` [V], ``q`` [unit of q],
+        ``static_stable``, ``damped``, ``stable`` (bool), ``k`` [N/unit of q], ``m_q`` [kg],
+        ``d`` [N s/unit of q], ``f_n`` [Hz], ``zeta`` [-], ``barrier`` [N * unit of q]
+        (see :class:`EquilibriumPoint`), and ``visited`` (bool) when ``visited`` is given.
+
+    Raises
+    ------
+    StabilityError
+        As :func:`equilibria`.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37.
+    """
+    table = _table(equilibria(model, levels, q_range, n_grid=n_grid), model.n_inputs)
+    if visited is not None:
+        table["visited"] = _inside(table["q"].to_numpy(), visited)
+        table.attrs["verdict"], table.attrs["reason"] = verdict(table, visited)
+    return table
+
+
+def _inside(q: NDArray[np.float64], intervals: Sequence[tuple[float, float]]) -> NDArray:
+    """Whether each ``q`` lies in one of the closed ``intervals``."""
+    q = np.asarray(q, dtype=float)
+    hit = np.zeros(q.shape, dtype=bool)
+    for lo, hi in intervals:
+        hit |= (q >= lo) & (q <= hi)
+    return hit
+
+
+def verdict(table: pd.DataFrame, visited_intervals: Sequence[tuple[float, float]]) -> Verdict:
+    """Stable or unstable where the data are, from the equilibrium table.
+
+    Two rules, checked in this order:
+
+    1. **Negative damping in a visited well**: a well (``static_stable``) of any level inside a
+       visited interval with ``d < 0``. The model's free run resting there oscillates with a
+       growing amplitude.
+    2. **Nowhere to rest**: no well of the rest level (all inputs 0 V) inside the visited
+       intervals, i.e. only unstable equilibria (negative stiffness) or none where the data
+       rest; the model's free run at 0 V drifts out of the visited range.
+
+    ``d = 0`` is not flagged (undamped, e.g. a model with Coulomb friction only).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        From :func:`stability_table` or :func:`analytical_design` (columns ``level``, ``q``,
+        ``static_stable``, ``d``).
+    visited_intervals : sequence of (float, float)
+        Intervals of ``q`` the data visit [unit of q], e.g. ``[(q.min(), q.max())]``.
+
+    Returns
+    -------
+    Verdict
+        ``("unstable", reason)`` naming the first offending well or level, else
+        ``("stable", summary)``.
+
+    References
+    ----------
+    Ogata, Modern Control Engineering (2010), Sec. 5-6 (Routh's stability criterion).
+    """
+    inside = _inside(table["q"].to_numpy(), visited_intervals)
+    wells = table["static_stable"].to_numpy(dtype=bool)
+    span = ", ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in visited_intervals)
+    bad = table[inside & wells & (table["d"].to_numpy() < 0)]
+    if len(bad):
+        row = bad.iloc[0]
+        return Verdict(
+            "unstable",
+            f"negative damping d = {row['d']:.4g} in the visited well at q = {row['q']:.6g} "
+            f"(level {row['level']})",
+        )
+    rest = table["level"].to_numpy() == 0
+    if not np.any(rest & inside & wells):
+        return Verdict("unstable", f"no stable equilibrium at 0 V inside the visited {span}")
+    n = int(np.count_nonzero(inside & wells))
+    return Verdict("stable", f"{n} visited well(s), all with d >= 0, in {span}")
+
+
+def model_is_stable(
+    model: RBFModel, q_visited: ArrayLike, *, n_grid: int = 4001
+) -> tuple[bool, str]:
+    """Whether the identified model is stable where the data are (for refinement, validation).
+
+    The visited interval is ``[min, max]`` of ``q_visited``; the rest level (all inputs 0 V)
+    is analysed over that interval joined with the model's ``q_range``. The model is unstable
+    if :func:`verdict` says so (negative damping at a visited well, or no well at 0 V inside
+    the visited interval), or if ``d(q) < 0`` anywhere on the visited part of a visited well's
+    basin (between its neighbouring unstable equilibria): the free run around that well gains
+    energy on every swing through it.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    q_visited : array_like
+        Positions the data visit [unit of q] (e.g. the measured ``q``); NaN ignored.
+    n_grid : int
+        Points of the bracketing grid (also where ``d(q)`` is checked).
+
+    Returns
+    -------
+    stable : bool
+    reason : str
+        The rule that failed, with the offending value, or a summary.
+
+    Raises
+    ------
+    StabilityError
+        If ``q_visited`` has no finite value.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37; Ogata, Modern Control Engineering (2010), Sec. 5-6.
+    """
+    qv = np.asarray(q_visited, dtype=float).ravel()
+    qv = qv[np.isfinite(qv)]
+    if qv.size == 0:
+        raise StabilityError("`q_visited` has no finite position")
+    v_lo, v_hi = float(qv.min()), float(qv.max())
+    lo, hi = model.q_range
+    lo, hi = (v_lo, v_hi) if not hi > lo else (min(lo, v_lo), max(hi, v_hi))
+    if not hi > lo:
+        hi = lo + max(1.0, abs(lo)) * 1e-9
+    table = stability_table(model, (), q_range=(lo, hi), n_grid=n_grid)
+    label, reason = verdict(table, [(v_lo, v_hi)])
+    if label == "unstable":
+        return False, reason
+    q = table["q"].to_numpy()
+    wells = table["static_stable"].to_numpy(dtype=bool)
+    grid = np.linspace(lo, hi, int(n_grid))
+    d = model.curves(grid)["d"]
+    for j in np.flatnonzero(wells & (q >= v_lo) & (q <= v_hi)):
+        left = max([v_lo, *q[:j][~wells[:j]][-1:]])
+        right = min([v_hi, *q[j + 1 :][~wells[j + 1 :]][:1]])
+        sel = (grid >= left) & (grid <= right)
+        if np.any(sel) and np.min(d[sel]) < 0:
+            at = grid[sel][np.argmin(d[sel])]
+            return False, (
+                f"negative damping d = {np.min(d[sel]):.4g} at q = {at:.6g} in the visited "
+                f"basin [{left:.6g}, {right:.6g}] of the well at q = {q[j]:.6g}"
+            )
+    return True, reason
+
+
+# --------------------------------------------------------------------------- switching voltages
+
+
+def _push_target(
+    q: Sequence[float], wells: Sequence[bool], push: float
+) -> tuple[float, float] | None:
+    """Return the well an input pushing in direction ``push`` leaves, and its saddle there.
+
+    Pushing to +q: the leftmost well with an unstable equilibrium right next to it on the
+    right; pushing to -q: the rightmost well with one on its left.
+    """
+    order = range(len(q)) if push > 0 else range(len(q) - 1, -1, -1)
+    step = 1 if push > 0 else -1
+    for j in order:
+        n = j + step
+        if wells[j] and 0 <= n < len(q) and not wells[n]:
+            return float(q[j]), float(q[n])
+    return None
+
+
+def _switching(
+    input_: int,
+    q: Sequence[float],
+    wells: Sequence[bool],
+    push: float,
+    indicator: Callable[[float, float, float, float], tuple[float, float]],
+    v_max: float,
+    n_scan: int,
+    xtol: float,
+) -> SwitchingVoltage:
+    """Smallest ``v`` in ``[0, v_max]`` with ``indicator(v) < 0`` (scan, then Brent's method).
+
+    ``indicator(v, push, q_well, q_saddle)`` is the largest push-opposing force between the
+    v = 0 well and saddle, ``max push * F(q; v)`` over that interval, and where it is: positive
+    while the well exists, zero at the fold. The root is refined in ``v^2``, where the
+    indicator is close to linear.
+    """
+    nan = float("nan")
+    if push == 0:
+        return SwitchingVoltage(input_, nan, nan, nan, nan, False, "the input exerts no force")
+    target = _push_target(q, wells, push)
+    if target is None:
+        why = "no well at 0 V with an unstable equilibrium next to it on the side it pushes to"
+        return SwitchingVoltage(input_, nan, nan, nan, nan, False, why)
+    q_w, q_s = target
+
+    def ind(v: float) -> float:
+        return indicator(v, push, q_w, q_s)[0]
+
+    vs = np.linspace(0.0, v_max, int(n_scan) + 1)
+    prev = 0.0
+    for v in vs[1:]:
+        if ind(float(v)) < 0:
+            # in v^2 the indicator is near linear (exactly for h = v^2 and constant g)
+            w = brentq(lambda w: ind(np.sqrt(w)), prev**2, float(v) ** 2, xtol=2 * xtol * v)
+            v_sw = float(np.sqrt(w))
+            q_fold = indicator(v_sw, push, q_w, q_s)[1]
+            return SwitchingVoltage(input_, float(v_sw), q_w, q_s, float(q_fold), True, "")
+        prev = float(v)
+    why = (
+        f"the well at q = {q_w:.6g} persists up to v_max = {v_max:g} V (largest opposing "
+        f"force {ind(v_max):.4g} at v_max)"
+    )
+    return SwitchingVoltage(input_, nan, q_w, q_s, nan, False, why)
+
+
+def _switch_table(rows: Sequence[SwitchingVoltage]) -> pd.DataFrame:
+    return pd.DataFrame([asdict(r) for r in rows], columns=list(_SWITCH_COLUMNS))
+
+
+def switching_voltages(
+    model: RBFModel,
+    *,
+    v_max: float,
+    q_range: tuple[float, float] | None = None,
+    n_grid: int = 4001,
+    n_scan: int = 32,
+    xtol: float = 1e-6,
+) -> pd.DataFrame:
+    """Find the static switching voltage of each input of the identified model (others at 0 V).
+
+    An input ``i`` pushes towards the sign of ``g_i h(v_max)`` (its mean between the outer
+    equilibria at 0 V) and out of the outermost well on the other side, whose neighbouring
+    unstable equilibrium (saddle) lies on the push side. While ``I(v) = max push * F(q; v)``
+    over ``[well, saddle]`` (at 0 V) is positive the well and the saddle exist; at ``I = 0``
+    they merge (saddle-node) and the well disappears. ``I`` is scanned on ``n_scan`` steps of
+    ``[0, v_max]`` and the first sign change refined by Brent's method, so the smallest
+    switching voltage is found (to the scan's resolution when ``I`` is not monotone). The rule
+    assumes ``g_i`` of one sign between the well and the saddle (the input pushes one way).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    v_max : float
+        Largest voltage searched [V] (e.g. the largest in the data: beyond it the model
+        extrapolates).
+    q_range : tuple of float, optional
+        Range searched [unit of q]; default ``model.q_range``.
+    n_grid : int
+        Points of the grid of ``q``.
+    n_scan : int
+        Steps of the voltage scan.
+    xtol : float
+        Tolerance of the voltage [V].
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per input: ``input`` (1-based), ``v_switch`` [V] (NaN when not reached),
+        ``q_well``, ``q_saddle``, ``q_fold`` [unit of q], ``reached`` (bool) and ``reason``
+        (:class:`SwitchingVoltage`).
+
+    Raises
+    ------
+    StabilityError
+        If the range is empty.
+
+    References
+    ----------
+    Masoud & Maas 2025, Section 3.3.3 (switching by one DE); Strogatz, Nonlinear Dynamics and
+    Chaos (2015), Sec. 3.1.
+    """
+    lo, hi = _search_range(model, q_range)
+    grid = np.linspace(lo, hi, int(n_grid))
+    rest = [p for p in equilibria(model, (), (lo, hi), n_grid=n_grid) if p.level == 0]
+    q = [p.q for p in rest]
+    wells = [p.static_stable for p in rest]
+    rows = []
+    for i in range(model.n_inputs):
+        e_i = np.zeros(model.n_inputs)
+        e_i[i] = 1.0
+        span = (grid >= min(q)) & (grid <= max(q)) if len(q) > 1 else np.ones(grid.size, bool)
+        h_max = float(input_map(v_max * e_i, model.input_map)[i])
+        push = float(np.sign(np.mean(model.curves(grid[span])["g"][:, i] * h_max)))
+
+        def indicator(v, push, q_w, q_s, e_i=e_i):
+            F = _force(model, v * e_i)
+            a, b = min(q_w, q_s), max(q_w, q_s)
+            sub = np.linspace(a, b, max(3, int(n_grid * (b - a) / (hi - lo))))
+            Fs = push * F(sub)
+            k = int(np.argmax(Fs))
+            r = minimize_scalar(
+                lambda x: -push * float(F(x)[0]),
+                bounds=(sub[max(k - 1, 0)], sub[min(k + 1, sub.size - 1)]),
+                method="bounded",
+                options={"xatol": 1e-12 * (hi - lo)},
+            )
+            return (-float(r.fun), float(r.x)) if -r.fun > Fs[k] else (float(Fs[k]), sub[k])
+
+        rows.append(_switching(i + 1, q, wells, push, indicator, v_max, n_scan, xtol))
+    return _switch_table(rows)
+
+
+# --------------------------------------------------------------------------- analytical model
+
+
+def _condensed(params, qm: NDArray[np.float64], v1: float, v2: float):
+    """Condense statically onto ``q`` at ``q_m``: stiffness ``1 / (L^T H^-1 L)`` and ``Phi``.
+
+    ``Phi = H^-1 L / (L^T H^-1 L)`` is the change of ``q_m`` per unit of ``q`` under a tip
+    force; solved in the scaled coordinates ``q_m * scale`` of the statics.
+    """
+    from pipeline.physics.energy import potential
+    from pipeline.physics.kinematics import ritz_basis
+
+    basis = ritz_basis(params.l)
+    s = basis.scale
+    L_s = basis.L / s
+    H_s = potential(qm, params, v1=v1, v2=v2).hess / np.multiply.outer(s, s)
+    x = np.linalg.solve(H_s, L_s)
+    compliance = float(L_s @ x)
+    return 1.0 / compliance, x / compliance / s
+
+
+def analytical_design(
+    params,
+    levels: Sequence[tuple[float, float]] | None = None,
+    *,
+    q_max: float = 25e-3,
+) -> pd.DataFrame:
+    """Tabulate the equilibria of a prototype's analytical model as :func:`stability_table` does.
+
+    Equilibria and their stability are those of the design table of ``debist analyze``
+    (:func:`pipeline.physics.statics.equilibria`: Eq. 15, stable = Hessian positive definite).
+    At each, the full model is condensed statically onto the tip displacement ``q`` (the
+    shape ``Phi = H^-1 L / (L^T H^-1 L)`` the other coordinates take under a tip force, which
+    at 0 V is the tangent ``dq_m/dq`` of the reduced model, Eq. 24): ``k = 1 / (L^T H^-1 L)``
+    (the slope of ``F(q)`` along the static path), ``m_q = Phi^T M Phi``, ``d = Phi^T D Phi``
+    (Eq. 19, 26). The Maxwell (creep) elements are relaxed, as in the statics. The barrier of
+    a well is ``U(saddle) - U(well)`` of Eq. 14 for the neighbouring unstable equilibria,
+    which equals ``int F dq`` along the static path.
+
+    Parameters
+    ----------
+    params : pipeline.physics.params.PrototypeParams
+        The prototype [SI]; ``params.b`` is the operating point.
+    levels : sequence of (float, float), optional
+        Voltage states ``(v1, v2)`` [V]; default the four states of the design table
+        (:data:`pipeline.physics.statics.FORCE_STATES`). The rest state comes first.
+    q_max : float
+        Half width of the searched range of ``q`` [m].
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns as :func:`stability_table` with ``v1, v2`` [V], ``q`` [m], ``k`` [N/m],
+        ``m_q`` [kg], ``d`` [N s/m], ``barrier`` [J].
+
+    Raises
+    ------
+    StaticsError
+        If the static path cannot be continued for these parameters.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 14, 15, 19, 24, 26, Section 3.3.4; Guyan, AIAA J. 3 (1965) 380
+    (static condensation).
+    """
+    from pipeline.physics.dynamics import FullModel
+    from pipeline.physics.energy import potential
+    from pipeline.physics.statics import FORCE_STATES
+    from pipeline.physics.statics import equilibria as full_equilibria
+
+    states = _levels(FORCE_STATES if levels is None else levels, 2)
+    full = FullModel(params, lambda t: 0.0, lambda t: 0.0, b=params.b)
+    out: list[EquilibriumPoint] = []
+    for index, (v1, v2) in enumerate(states):
+        eqs = full_equilibria(params, v1=v1, v2=v2, q_max=q_max)
+        if not eqs:
+            continue
+        U = [float(potential(e.qm, params, v1=v1, v2=v2, order=0).U) for e in eqs]
+        wells = [e.stable for e in eqs]
+        barrier = _barriers([e.q for e in eqs], wells, lambda j, n, U=U: U[n] - U[j])
+        for j, e in enumerate(eqs):
+            k, Phi = _condensed(params, e.qm, v1, v2)
+            mats = full.matrices(e.qm)
+            m_q = float(Phi @ mats["M"] @ Phi)
+            d = float(Phi @ mats["D"] @ Phi)
+            f_n, zeta = _small_signal(k, m_q, d) if e.stable else (np.nan, np.nan)
+            out.append(
+                EquilibriumPoint(
+                    level=index, v=(v1, v2), q=e.q, k=k, m_q=m_q, d=d,
+                    static_stable=e.stable, damped=d > 0, stable=e.stable and d > 0,
+                    f_n=f_n, zeta=zeta, barrier=float(barrier[j]),
+                )
+            )  # fmt: skip
+    return _table(out, 2)
+
+
+def analytical_switching_voltages(
+    params,
+    *,
+    v_max: float | None = None,
+    dq: float = 0.2e-3,
+    n_scan: int = 3,
+    xtol: float = 1e-3,
+    q_max: float = 25e-3,
+) -> pd.DataFrame:
+    """Find the static switching voltage of each DE of the analytical model (the other at 0 V).
+
+    The same rule as :func:`switching_voltages`, with ``F(q; v)`` the reaction force along the
+    static path of the full model (:func:`pipeline.physics.statics.force_displacement`, Eq.
+    15-16) and the well and saddle at 0 V from the design table
+    (:func:`pipeline.physics.statics.equilibria`); the maximum on the path grid is refined by
+    a parabola through its neighbours. The push direction of DE ``i`` is the sign of ``g_i =
+    1/2 dC_i/dq`` (Eq. 18, 33) along the condensed shape, averaged over the rest equilibria.
+    Unlike :func:`pipeline.physics.prestrain.switching_limit_zb` (the pre-strain at which a
+    given voltage switches, assuming the mirror symmetry of the paper's prototype) this is the
+    voltage at the given pre-strain, for each DE separately.
+
+    Parameters
+    ----------
+    params : pipeline.physics.params.PrototypeParams
+        The prototype [SI].
+    v_max : float, optional
+        Largest voltage searched [V]; default :data:`pipeline.physics.params.V_MAX`.
+    dq : float
+        Spacing of the path grid [m].
+    n_scan : int
+        Steps of the voltage scan.
+    xtol : float
+        Tolerance of the voltage [V].
+    q_max : float
+        Half width of the range searched for the equilibria at 0 V [m].
+
+    Returns
+    -------
+    pandas.DataFrame
+        As :func:`switching_voltages` (``input`` 1 = DE 1, 2 = DE 2), positions in [m].
+
+    Raises
+    ------
+    StaticsError
+        If the static path cannot be continued for these parameters.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15-16, Section 3.3.3, Fig. 3-4.
+    """
+    from pipeline.physics.energy import capacitances
+    from pipeline.physics.params import V_MAX
+    from pipeline.physics.statics import equilibria as full_equilibria
+    from pipeline.physics.statics import force_displacement
+
+    v_max = V_MAX if v_max is None else float(v_max)
+    rest = full_equilibria(params, q_max=q_max)
+    q = [e.q for e in rest]
+    wells = [e.stable for e in rest]
+    # g_i = 1/2 dC_i/dq along the condensed shape at the rest equilibria (Eq. 18, 33)
+    g = [0.5 * capacitances(e.qm, params)[1] @ _condensed(params, e.qm, 0.0, 0.0)[1] for e in rest]
+
+    def path(a: float, b: float, v1: float, v2: float):
+        a, b = min(a, b, 0.0), max(a, b, 0.0)
+        grid = np.linspace(a, b, max(3, int(np.ceil((b - a) / dq)) + 1))
+        return grid, force_displacement(params, grid, v1=v1, v2=v2).F
+
+    rows = []
+    for i in range(2):
+        push = float(np.sign(np.mean([gg[i] for gg in g]))) if g else 1.0
+
+        def indicator(v, push, q_w, q_s, i=i):
+            grid, F = path(q_w, q_s, *((v, 0.0) if i == 0 else (0.0, v)))
+            a, b = min(q_w, q_s), max(q_w, q_s)
+            sel = np.flatnonzero((grid >= a) & (grid <= b))
+            Fs = push * F[sel]
+            k = int(np.argmax(Fs))
+            if 0 < k < sel.size - 1:
+                y0, y1, y2 = Fs[k - 1 : k + 2]
+                curv = y0 - 2.0 * y1 + y2
+                if curv < 0:
+                    t = 0.5 * (y0 - y2) / curv
+                    h = grid[sel[1]] - grid[sel[0]]
+                    return float(y1 - 0.25 * (y0 - y2) * t), float(grid[sel[k]] + t * h)
+            return float(Fs[k]), float(grid[sel[k]])
+
+        rows.append(_switching(i + 1, q, wells, push, indicator, v_max, n_scan, xtol))
+    return _switch_table(rows)
