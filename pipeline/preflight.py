@@ -276,7 +276,12 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
       plus 5 n p_z for the z columns, their projection and ``lstsq``'s copies;
     - SVD solve (``_solve``): the regressor, its column-scaled copy, LAPACK's copy of it,
       U and V^T twice (LAPACK buffers and numpy outputs) and gesdd's work space,
-      3 n p + 2 k (n + p) + 5 k^2. This is the peak in every measured case.
+      3 n p + 2 k (n + p) + 5 k^2;
+    - block bootstrap of the bands (``bootstrap = B > 0``): the regressor, numpy's QR of
+      its scaled copy (copy, LAPACK buffer, Q buffer and Q), the per-block Grams of Q
+      (``n / b`` blocks of ``p^2``, block length ``b >= n^(1/3)``), the replicates' Grams
+      and their copy in the solve, and the block counts,
+      5 n p + n^(2/3) p^2 + 2 B p^2 + B n^(2/3).
 
     References
     ----------
@@ -291,6 +296,9 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
     block = M + 5 * p if cfg.lowpass is not None else M + 2 * p + p_force
     build = max(2 * n * p, (n - n_r) * p + n_r * block)
     phases = [support, build, _solve_elements(n, p)]
+    if getattr(cfg, "bootstrap", 0) > 0:
+        blocks, B = math.ceil(n ** (2.0 / 3.0)), int(cfg.bootstrap)
+        phases.append(5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks)
     uses_z = p_z > 0
     if cfg.T_z == "search" and uses_z:
         p_f = p - p_z

@@ -126,12 +126,28 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     cols += [f"NRMSE({k.removeprefix('nrmse_')})" for k in keys] + ["RMS(q)"]
     for col in cols + (["params"] if params else []):
         table.add_column(col, justify="left" if col in ("data set", "role", "model") else "right")
+    table.add_column("note")
     for r in rows:
-        pct = [("diverged" if math.isnan(r[k]) else f"{100 * r[k]:.2f} %") for k in keys]
+        status = r.get("status") or "diverged"
+        failed = status if status != "ok" else "diverged"
+        pct = [(failed if math.isnan(r[k]) else f"{100 * r[k]:.2f} %") for k in keys]
         extra = [str(r["n_params"])] if params else []
-        rms_cell = "diverged" if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
-        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra)
+        rms_cell = failed if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
+        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, _note(r))
     return table
+
+
+def _note(row: dict[str, Any]) -> str:
+    """Word the warning of an NRMSE row: unstable, diverged, or not better than the mean."""
+    if row.get("status") == "unstable":
+        return f"unstable: {row.get('reason', '')}"
+    base = row.get("nrmse_q_baseline")
+    value = row.get("nrmse_q")
+    if base is None or value is None or math.isnan(value):
+        return "diverged: left twice the estimation range" if row.get("diverged") else ""
+    if value >= base:
+        return f"not better than the mean (NRMSE {100 * base:.1f} %): q is not predicted"
+    return ""
 
 
 def published_table(

@@ -152,8 +152,8 @@ class ValidateConfig:
     report_unit : str or None
         Unit for the RMS column (e.g. "mV", "mm"); default the unit of q.
     q_limit : float or None
-        |q| beyond which a run counts as diverged [unit of q]; default 100 times
-        the largest |q| of the estimation range.
+        |q| beyond which a run counts as diverged [unit of q]; default twice the
+        largest |q| of the estimation range (:func:`default_q_limit`).
     published : tuple of dict
         Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``
         (:class:`PublishedResult`).
@@ -278,6 +278,54 @@ def report_factor(q_unit: str, report_unit: str | None) -> tuple[float, str]:
     return 1.0 / unit.factor, report_unit
 
 
+def default_q_limit(q_range: tuple[float, float]) -> float:
+    """Divergence bound of a free run: twice the largest ``|q|`` of the estimation range.
+
+    A run that leaves it is reported as diverged, never scored: the model is extrapolating
+    far outside anything it was fitted on.
+
+    Parameters
+    ----------
+    q_range : (float, float)
+        The model's estimation range [unit of q].
+
+    Returns
+    -------
+    float
+        ``2 max(|q_lo|, |q_hi|)`` [unit of q].
+    """
+    return 2.0 * max(abs(float(q_range[0])), abs(float(q_range[1])))
+
+
+def mark_unstable(table: pd.DataFrame, model_name: str, reason: str) -> pd.DataFrame:
+    """Replace a model's scores by the verdict "unstable" (its numbers are not results).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        NRMSE rows (:func:`validate_model`).
+    model_name : str
+        The model whose rows are marked.
+    reason : str
+        Why (:func:`pipeline.identify.stability.model_is_stable`).
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy with NaN scores, ``status = "unstable"`` and ``reason`` for that model.
+    """
+    out = table.copy()
+    rows = out.model == model_name
+    score = [c for c in out.columns if c.startswith(("nrmse_", "rms_q"))]
+    score = [c for c in score if c != "nrmse_q_baseline" and out[c].dtype.kind == "f"]
+    out.loc[rows, score] = np.nan
+    out.loc[rows, "status"] = "unstable"
+    if "reason" not in out:
+        out["reason"] = ""
+    out.loc[rows, "reason"] = reason
+    return out
+
+
 def validate_model(
     model: FreeRunModel,
     model_name: str,
@@ -391,6 +439,8 @@ def validate_model(
                 "rms_q": rms(ds.q[s] - sim.q[s]) * factor,
                 "rms_unit": unit,
                 "diverged": sim.diverged,
+                "status": "diverged" if sim.diverged else "ok",
+                "nrmse_q_baseline": nrmse(ds.q[s], np.full(ds.q[s].size, np.mean(ds.q[s]))),
             }
         )
         simulated[ds.name] = pd.DataFrame(

@@ -95,3 +95,24 @@ def test_refine_config_parsing():
     assert refine_config({"windows": 5}).windows == 5
     with pytest.raises(WorkflowError, match=r"\[identify.refine\] unknown key 'window'; did you"):
         refine_config({"window": 5})
+
+
+def test_refinement_never_accepts_an_unstable_model(monkeypatch):
+    """The Duffing refinement is accepted on its error; declared unstable (as a negatively
+    damped well would be), the same refinement is rejected and the least squares kept."""
+    from pipeline.identify import stability
+
+    calls = []
+
+    def unstable(model, q, q_dot=None):
+        calls.append((q.size, None if q_dot is None else q_dot.size))
+        return False, "negative damping d = -1 in the visited well at q = 0"
+
+    monkeypatch.setattr(stability, "model_is_stable", unstable)
+    model, _, res = _refined(
+        _duffing_record(), 0.1, backbone=["linear_spring", "cubic_spring", "viscous", "input_gain"]
+    )
+    assert not res.accepted and res.model is model
+    assert res.full_rms_refined < res.full_rms_ls  # better in free run, but unstable
+    assert "unstable" in res.message and "negative damping" in res.message
+    assert len(calls) == 1 and calls[0][0] == calls[0][1] > 1000  # q and q_dot of the records

@@ -265,3 +265,25 @@ def test_analytical_switching_voltage_brackets_the_loss_of_the_well(paper):
     above = full_equilibria(paper, v1=1.005 * v1)
     assert any(e.stable and e.q < 0 for e in below)
     assert not any(e.stable and e.q < 0 for e in above)
+
+
+def test_a_model_without_restoring_force_is_not_judged_by_the_well_rules():
+    """A free mass with damping (a linear stage, EMPS): no equilibrium at rest, no verdict."""
+    model = double_well(k1=0.0)
+    model.backbone.update({"k_3": 0.0, "F_0": 0.02})  # a constant force: no root at 0 V
+    ok, reason = model_is_stable(model, np.linspace(-0.011, 0.011, 50))
+    assert ok and "no equilibrium" in reason
+
+
+def test_damping_that_feeds_energy_into_the_measured_motion_is_unstable():
+    """With the measured velocities, the basin rule is the power balance sum d q_dot^2."""
+    grid = np.linspace(-0.025, 0.025, 2001)
+    d = -0.3 + 8000.0 * grid**2  # < 0 for |q| < 6.1 mm, 0.5 at the wells
+    prior = PhysicsPrior(q=grid, c=np.zeros_like(grid), d=d, g=np.zeros((grid.size, 2)))
+    model = double_well(d_v=0.0, prior=prior, s_d=1.0)
+    q = np.linspace(-0.011, -0.0001, 200)
+    fast_near_wells = np.where(np.abs(q) > 0.007, 1.0, 0.05)  # slow in the middle
+    slow_near_wells = np.where(np.abs(q) > 0.007, 0.05, 1.0)  # fast in the middle
+    assert model_is_stable(model, q, q_dot=fast_near_wells)[0]
+    ok, reason = model_is_stable(model, q, q_dot=slow_near_wells)
+    assert not ok and "feeds energy" in reason

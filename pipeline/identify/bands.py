@@ -210,10 +210,9 @@ def block_bootstrap(
         raise ValueError(f"n_boot must be >= 1, got {n_boot}")
     scale = np.linalg.norm(psi, axis=0)
     scale = np.where(scale == 0, 1.0, scale)
-    a = psi / scale
+    Q, R = np.linalg.qr(psi / scale)
     if block is None:
-        theta0, *_ = np.linalg.lstsq(a, y, rcond=None)
-        resid = y - a @ theta0
+        resid = y - Q @ (Q.T @ y)  # the least-squares residual
         bounds = np.cumsum([0, *record_rows])
         block = block_length([resid[s:e] for s, e in itertools.pairwise(bounds)], n)
     starts, ends = [], []
@@ -227,7 +226,6 @@ def block_bootstrap(
     # a = Q R once, it is (Q^T W Q) phi = Q^T W y, theta = R^-1 phi: the weighted Gram of the
     # orthonormal Q is well conditioned (no squared condition number of normal equations),
     # and it is a sum of per-block Grams, so all replicates cost one matrix product.
-    Q, R = np.linalg.qr(a)
     rows = [slice(s, e) for s, e in zip(starts, ends, strict=True)]
     gram = np.stack([Q[r].T @ Q[r] for r in rows]).reshape(len(rows), p * p)
     qty = np.stack([Q[r].T @ y[r] for r in rows])

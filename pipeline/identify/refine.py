@@ -232,7 +232,7 @@ def refine_model(
     qd0 = np.array([records[i].q_dot[s] for i, s in picks])
     q_all = np.concatenate([r.q for r in records])
     penalty = 10.0 * float(np.ptp(q_all))
-    q_limit = 100.0 * float(np.max(np.abs(q_all)))
+    q_limit = 2.0 * float(np.max(np.abs(q_all)))  # as validation's divergence bound
     log_tz = rcfg.refine_T_z and model.T_z > 0
     scale = diag.y_norm / np.where(diag.column_norms > 0, diag.column_norms, 1.0)
     x0 = diag.theta / scale
@@ -307,6 +307,14 @@ def refine_model(
     )
     full_ls, full_ref = (_full_rms(m, records, rcfg, q_limit) for m in (model, refined))
     accepted = bool(np.isfinite(full_ref) and full_ref <= full_ls)
+    message = str(sol.message)
+    if accepted:
+        from pipeline.identify.stability import model_is_stable
+
+        qd_all = np.concatenate([r.q_dot for r in records])
+        stable, reason = model_is_stable(refined, q_all, q_dot=qd_all)
+        if not stable:
+            accepted, message = False, f"rejected: the refined model is unstable ({reason})"
     return RefineResult(
         model=refined if accepted else model,
         accepted=accepted,
@@ -315,7 +323,7 @@ def refine_model(
         full_rms_ls=full_ls,
         full_rms_refined=full_ref,
         nfev=int(sol.nfev),
-        message=str(sol.message),
+        message=message,
         seconds=time.perf_counter() - t_start,
     )
 

@@ -431,14 +431,21 @@ def verdict(table: pd.DataFrame, visited_intervals: Sequence[tuple[float, float]
 
 
 def model_is_stable(
-    model: RBFModel, q_visited: ArrayLike, *, n_grid: int = 4001
+    model: RBFModel,
+    q_visited: ArrayLike,
+    *,
+    q_dot: ArrayLike | None = None,
+    n_grid: int = 4001,
 ) -> tuple[bool, str]:
     """Whether the identified model is stable where the data are (for refinement, validation).
 
     The visited interval is ``[min, max]`` of ``q_visited``; the rest level (all inputs 0 V)
-    is analysed over that interval joined with the model's ``q_range``. The model is unstable
-    if :func:`verdict` says so (negative damping at a visited well, or no well at 0 V inside
-    the visited interval), or if ``d(q) < 0`` anywhere on the visited part of a visited well's
+    is analysed over that interval joined with the model's ``q_range``. A model without any
+    equilibrium at 0 V in the visited interval (no restoring force: a free mass, a linear
+    stage) is not judged here (its free run is checked by the divergence bound). Otherwise it
+    is unstable if :func:`verdict` says so (negative damping at a visited well, or only
+    unstable equilibria at 0 V inside the visited interval), or if ``d(q) < 0`` anywhere on
+    the visited part of a visited well's
     basin (between its neighbouring unstable equilibria): the free run around that well gains
     energy on every swing through it.
 
@@ -448,6 +455,12 @@ def model_is_stable(
         The identified model.
     q_visited : array_like
         Positions the data visit [unit of q] (e.g. the measured ``q``); NaN ignored.
+    q_dot : array_like, optional
+        The measured velocities at ``q_visited`` [unit of q / s]. Given, the basin rule asks
+        whether the identified damping dissipates energy along the measured motion,
+        ``sum d(q_s) q_dot_s^2 >= 0`` over the samples in the basin (a negative ``d`` where
+        the beam only passes at the range's edge is then tolerated); without, any
+        ``d(q) < 0`` in the visited basin fails.
     n_grid : int
         Points of the bracketing grid (also where ``d(q)`` is checked).
 
@@ -476,17 +489,32 @@ def model_is_stable(
     if not hi > lo:
         hi = lo + max(1.0, abs(lo)) * 1e-9
     table = stability_table(model, (), q_range=(lo, hi), n_grid=n_grid)
+    q = table["q"].to_numpy()
+    wells = table["static_stable"].to_numpy(dtype=bool)
+    inside = (q >= v_lo) & (q <= v_hi)
+    if not np.any(inside):  # no equilibrium at rest where the data are (a free mass, a
+        return True, "no equilibrium at 0 V in the visited range"  # driven stage): no rule
     label, reason = verdict(table, [(v_lo, v_hi)])
     if label == "unstable":
         return False, reason
-    q = table["q"].to_numpy()
-    wells = table["static_stable"].to_numpy(dtype=bool)
     grid = np.linspace(lo, hi, int(n_grid))
     d = model.curves(grid)["d"]
     for j in np.flatnonzero(wells & (q >= v_lo) & (q <= v_hi)):
         left = max([v_lo, *q[:j][~wells[:j]][-1:]])
         right = min([v_hi, *q[j + 1 :][~wells[j + 1 :]][:1]])
         sel = (grid >= left) & (grid <= right)
+        if q_dot is not None:
+            qd = np.asarray(q_dot, dtype=float).ravel()
+            qs = np.asarray(q_visited, dtype=float).ravel()
+            ok = np.isfinite(qs) & np.isfinite(qd) & (qs >= left) & (qs <= right)
+            power = float(np.sum(model.curves(qs[ok])["d"] * qd[ok] ** 2)) if ok.any() else 0.0
+            if power < 0:
+                return False, (
+                    f"the identified damping feeds energy into the measured motion in the "
+                    f"basin [{left:.6g}, {right:.6g}] of the well at q = {q[j]:.6g} "
+                    f"(sum d q_dot^2 = {power:.4g})"
+                )
+            continue
         if np.any(sel) and np.min(d[sel]) < 0:
             at = grid[sel][np.argmin(d[sel])]
             return False, (

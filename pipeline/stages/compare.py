@@ -13,7 +13,7 @@ from pipeline.datasets import validation_datasets
 from pipeline.physics_stages import analytical_for
 from pipeline.records import estimation_records
 from pipeline.stages import StageInputs, StageOutput
-from pipeline.validate import ValidateConfig, validate_model
+from pipeline.validate import ValidateConfig, default_q_limit, validate_model
 
 __all__ = ["CompareResult", "execute", "run_compare"]
 
@@ -89,8 +89,7 @@ def run_compare(
         records[0].dt,
         cfg,
     )
-    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
-    q_limit = vcfg.q_limit if vcfg.q_limit is not None else 100.0 * span
+    q_limit = vcfg.q_limit if vcfg.q_limit is not None else default_q_limit(model.q_range)
     datasets = validation_datasets(tables, derivs)
     analytical = analytical_for(physics, datasets, replace(vcfg, analytical=False))
     t0 = time.perf_counter()

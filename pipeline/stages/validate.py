@@ -7,13 +7,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from pipeline.datasets import validation_datasets
 from pipeline.identify import RBFModel
+from pipeline.identify.stability import model_is_stable
 from pipeline.physics_stages import analytical_for
 from pipeline.stages import StageInputs, StageOutput
-from pipeline.validate import ValidateConfig, validate_model
+from pipeline.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
 
 __all__ = ["ValidateResult", "execute", "run_validate"]
 
@@ -79,8 +81,7 @@ def run_validate(
     from pipeline.plots import free_run_figure
 
     cfg = ValidateConfig.from_dict(section)
-    span = max(abs(model.q_range[0]), abs(model.q_range[1]))
-    q_limit = cfg.q_limit if cfg.q_limit is not None else 100.0 * span
+    q_limit = cfg.q_limit if cfg.q_limit is not None else default_q_limit(model.q_range)
     datasets = validation_datasets(tables, derivs)
     analytical = analytical_for(physics, datasets, cfg)
     phi = analytical.phi if analytical is not None else None
@@ -95,6 +96,14 @@ def run_validate(
         extra, _ = validate_model(other, name, datasets, cfg, q_limit, phi)
         extra["n_params"] = getattr(other, "n_params", 0)
         table = pd.concat([table, extra], ignore_index=True)
+    table["reason"] = ""
+    q_est, qd_est = estimation_motion(tables, derivs)
+    for other, name in [(model, "rbf"), *others]:
+        if not isinstance(other, RBFModel) or not q_est.size:
+            continue  # the analytical model is the designed one: its stability is physics
+        stable, reason = model_is_stable(other, q_est, q_dot=qd_est)
+        if not stable:
+            table = mark_unstable(table, name, reason)
     units = {ds.name: ds.q_unit for ds in datasets}
     figures = {
         name: free_run_figure(
@@ -107,6 +116,29 @@ def run_validate(
         for name, sim in simulated.items()
     }
     return ValidateResult(table, simulated, figures, sim_time)
+
+
+def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities of the estimation data sets (where the model was fitted).
+
+    Parameters
+    ----------
+    tables, derivs : mapping of str to pandas.DataFrame
+        Canonical tables (``attrs['role']``) and their derivatives (``q_dot``).
+
+    Returns
+    -------
+    q : ndarray, shape (n,)
+        Their ``q`` concatenated [unit of q] (empty without estimation data).
+    q_dot : ndarray, shape (n,)
+        Their ``q_dot`` [unit of q / s].
+    """
+    names = [n for n, t in tables.items() if t.attrs.get("role") == "estimation"]
+    if not names:
+        return np.empty(0), np.empty(0)
+    q = np.concatenate([tables[n]["q"].to_numpy() for n in names])
+    q_dot = np.concatenate([derivs[n]["q_dot"].to_numpy() for n in names])
+    return q, q_dot
 
 
 def execute(ctx: StageInputs) -> StageOutput:

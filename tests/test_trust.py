@@ -1,0 +1,77 @@
+"""Numbers the data do not support are not shown as numbers: unstable, diverged, baseline."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_stability import double_well
+
+from pipeline.report import nrmse_table
+from pipeline.simulate import simulate
+from pipeline.stages.validate import run_validate
+from pipeline.validate import default_q_limit, nrmse
+
+DT = 2e-3
+
+
+def _tables(model, seed=0, n=3000):
+    """Logs of a model's free run under random sub-threshold and switching inputs."""
+    rng = np.random.default_rng(seed)
+    v = np.zeros((n, 2))
+    v[:, 0] = np.repeat(rng.uniform(0, 900, n // 100), 100)
+    v[:, 1] = np.repeat(rng.uniform(0, 900, n // 100), 100)
+    v[1000:1300, 0] = 3000.0  # switch right (0.18 N against a barrier force of 0.154 N)
+    v[2000:2300, 1] = 3000.0  # and back
+    sim = simulate(model, [v], DT, np.array([-0.01]), np.array([0.0]), engine="numpy")[0]
+    assert not sim.diverged and sim.q.max() > 0.008 and sim.q.min() < -0.008  # both wells
+    tables, derivs = {}, {}
+    for name, role in (("est", "estimation"), ("val", "validation")):  # the same log twice
+        t = np.arange(n) * DT
+        frame = pd.DataFrame({"t": t, "q": sim.q, "v1": v[:, 0], "v2": v[:, 1]})
+        frame.attrs.update(role=role, units={"q": "m", "t": "s", "v1": "V", "v2": "V"})
+        tables[name] = frame
+        derivs[name] = pd.DataFrame({"q_dot": sim.q_dot, "q_ddot": sim.q_ddot})
+    return tables, derivs
+
+
+def test_a_model_with_negative_damping_at_its_wells_is_unstable_not_a_number():
+    truth = double_well()
+    tables, derivs = _tables(truth)
+    bad = double_well(d_v=-0.2)
+    res = run_validate(bad, tables, derivs, {"substeps": 1})
+    rows = res.table[res.table.model == "rbf"]
+    assert (rows.status == "unstable").all()
+    assert rows.nrmse_q.isna().all() and rows.rms_q.isna().all()
+    assert rows.reason.str.contains("negative damping d = -0.2").all()
+    text = str(nrmse_table(res.table.to_dict(orient="records")).columns[-1]._cells)
+    assert "unstable" in text
+    good = run_validate(truth, tables, derivs, {"substeps": 1})
+    ok = good.table[good.table.model == "rbf"]
+    assert (ok.status == "ok").all() and (ok.nrmse_q < 1e-3).all()
+
+
+def test_every_row_has_the_mean_as_baseline_and_a_warning_when_it_is_not_beaten():
+    truth = double_well()
+    tables, derivs = _tables(truth)
+    res = run_validate(truth, tables, derivs, {"substeps": 1})
+    q = tables["val"]["q"].to_numpy()
+    row = res.table[(res.table.dataset == "val")].iloc[0]
+    assert row.nrmse_q_baseline == pytest.approx(nrmse(q, np.full(q.size, q.mean())), rel=1e-12)
+    assert row.nrmse_q_baseline > 0.2  # switching between the wells: the mean is a poor model
+    rows = res.table.to_dict(orient="records")
+    rows[0] = {**rows[0], "nrmse_q": rows[0]["nrmse_q_baseline"] * 1.01}
+    notes = nrmse_table(rows).columns[-1]._cells
+    assert "not better than the mean" in notes[0] and notes[1] == ""
+
+
+def test_a_free_run_that_leaves_twice_the_estimation_range_is_diverged():
+    assert default_q_limit((-0.012, 0.01)) == pytest.approx(0.024)
+    truth = double_well()
+    tables, derivs = _tables(truth)
+    # a stable, damped well at q = 0 whose softening (k_3 < 0) lets the 3 kV pulses push the
+    # beam over the barrier at +-10 mm (0.72 N against at most 0.154 N): it escapes to infinity
+    escape = double_well(g=8e-8, k1=40.0)
+    escape.backbone["k_3"] = -4e5
+    res = run_validate(escape, tables, derivs, {"substeps": 1})
+    rows = res.table[res.table.model == "rbf"]
+    assert rows.diverged.all() and (rows.status == "diverged").all()
+    assert rows.nrmse_q.isna().all()
