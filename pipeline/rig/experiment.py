@@ -309,7 +309,8 @@ def truth_tree(run: RigRun, cfg: RigConfig, curves: dict[str, np.ndarray]) -> di
     Returns
     -------
     dict
-        ``prototype`` and ``plant`` parameters [SI], ``states`` (noise-free ``q``,
+        ``prototype`` and ``plant`` parameters [SI] (the plant ``model`` in the attributes
+        of ``plant``), ``states`` (noise-free ``q``,
         ``q_dot``, ``phi``, the friction force and the applied voltages at the log
         instants) and ``curves``.
 
@@ -319,10 +320,12 @@ def truth_tree(run: RigRun, cfg: RigConfig, curves: dict[str, np.ndarray]) -> di
     """
     plant = cfg.rig.to_dict()
     prototype = plant.pop("prototype")
+    model = plant.pop("model")
     return {
         "attrs": {"units": "SI", "sample_time": run.sample_time, "seed": run.seed},
         "prototype": {"attrs": prototype},
-        "plant": {k: np.asarray(v, dtype=float) for k, v in plant.items()},
+        "plant": {"attrs": {"model": model}}
+        | {k: np.asarray(v, dtype=float) for k, v in plant.items()},
         "states": {
             "t": run.t,
             "q": run.q_true,

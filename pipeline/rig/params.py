@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import field
-from typing import Annotated
+from typing import Annotated, Literal
 
 import pydantic
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
@@ -37,6 +37,13 @@ class RigParams:
         default the paper's prototype at b = 23 mm with ``dz_1 = 0.15 mm``,
         ``dz_2 = 0.05 mm`` (assembly tolerance of a 3D-printed frame; wells at -9.50 and
         +10.99 mm, still switchable by 3 kV on either DE).
+    model : {"full", "reduced"}
+        The mechanics of the plant: ``"full"`` (default) the full model of Sec. 3
+        (:class:`pipeline.rig.plant.RigPlant`, Eq. 19-23), whose DE force is not of the
+        separable form ``g_i(q) v_i^2`` of Eq. 37; ``"reduced"`` the reduced one-coordinate
+        model of Eq. 24-26 of the same prototype (:class:`pipeline.rig.reduced.ReducedPlant`),
+        whose true curves ``f(q)``, ``d(q)``, ``g_i(q)`` are exactly those of Eq. 37. Both
+        have the same friction, drivers and sensors.
     friction_k : tuple of float
         Stiffnesses ``k_i`` of the Maxwell-slip elements at the beam tip [N/m]; default
         (40, 12, 4) N/m: pre-sliding distances ``F_i / k_i`` of 10, 50 and 250 um, a tangent
@@ -81,7 +88,8 @@ class RigParams:
 
     References
     ----------
-    Masoud & Maas 2025, Table 1, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005 (GMS).
+    Masoud & Maas 2025, Table 1, Sec. 5.1, Eq. 19-26, 37; Al-Bender, Lampaert & Swevers
+    2005 (GMS).
 
     Examples
     --------
@@ -93,6 +101,7 @@ class RigParams:
     """
 
     prototype: PrototypeParams = field(default_factory=_default_prototype)
+    model: Literal["full", "reduced"] = "full"
     friction_k: Annotated[tuple[PositiveFloat, ...], AsTuple] = (40.0, 12.0, 4.0)
     friction_F: Annotated[tuple[PositiveFloat, ...], AsTuple] = (0.4e-3, 0.6e-3, 1.0e-3)
     friction_c: NonNegativeFloat = 0.0
@@ -166,7 +175,8 @@ class RigParams:
         Returns
         -------
         dict[str, object]
-            Field name -> value; ``prototype`` as a dict, the friction tuples as lists.
+            Field name -> value; ``prototype`` as a dict, the friction tuples as lists,
+            ``model`` as a string.
         """
         out: dict[str, object] = {}
         for f in dataclasses.fields(self):

@@ -24,6 +24,12 @@ right-hand side and Jacobian run compiled (:mod:`pipeline.rig.compiled`, numba, 
 included); the NumPy implementation of :class:`RigPlant` is the reference they are tested
 against (``compiled=False``).
 
+``[rig.plant] model = "reduced"`` swaps the full model for the reduced one-coordinate model of
+Eq. 24-26 of the same prototype (:class:`pipeline.rig.reduced.ReducedPlant`, state ``[q,
+q_dot, q_eps (2), z]``), whose DE force is exactly ``g_i(q) v_i^2`` (Eq. 37): the same
+friction, drivers, sensors and recorder, so an identification can be checked against exact
+curves. :func:`make_plant` selects the plant.
+
 References
 ----------
 Masoud & Maas 2025, Eq. 19-23, 33, 37, Sec. 5.1 (3 kV converters, laser sensor, 10 ms log).
@@ -55,6 +61,7 @@ from pipeline.rig.params import RigParams
 __all__ = [
     "RigPlant",
     "RigRun",
+    "make_plant",
     "simulate_rig",
     "true_curves",
 ]
@@ -146,6 +153,102 @@ class RigPlant:
             self._kernels = (rhs, jac)
         return self._kernels
 
+    def functions(self) -> tuple:
+        """Return ``(rhs, jac)`` for :func:`scipy.integrate.solve_ivp`.
+
+        Returns
+        -------
+        tuple of callable
+            The compiled kernels or :meth:`rhs`, :meth:`jac` (``compiled=False``).
+        """
+        return self._compiled() if self.compiled else (self.rhs, self.jac)
+
+    def rest_state(self, side: int) -> NDArray[np.float64]:
+        """State at rest in a well at ``v = 0``: relaxed creep, unloaded friction.
+
+        Parameters
+        ----------
+        side : {-1, +1}
+            Which well (:func:`~pipeline.physics.dynamics.well_state`).
+
+        Returns
+        -------
+        ndarray, shape (n_states,)
+            ``[q_m, 0, 0, 0...]``.
+
+        Raises
+        ------
+        ValueError
+            If there is no stable equilibrium on that side.
+        """
+        return np.concatenate([well_state(self.rig.prototype, side), np.zeros(self.n_friction)])
+
+    def atol_vector(self, atol: float) -> NDArray[np.float64]:
+        """Absolute tolerances of the states for ``solve_ivp`` (see :func:`simulate_rig`).
+
+        Parameters
+        ----------
+        atol : float
+            Tolerance of the bending coordinates scaled to metres and of ``z`` [m].
+
+        Returns
+        -------
+        ndarray, shape (n_states,)
+            ``atol`` for the bending coordinates and ``z``, ``100 atol`` for ``u_0`` and
+            the creep strains, ``1e4 atol`` per second for the velocities.
+        """
+        scale = ritz_basis(self.rig.prototype.l).scale
+        tol_x = np.array([atol, atol, atol, 100.0 * atol])
+        return np.concatenate(
+            [tol_x / scale, 1e4 * atol / scale, np.full(2, 100.0 * atol),
+             np.full(self.n_friction, atol)]
+        )  # fmt: skip
+
+    def tip(self, x: ArrayLike) -> NDArray[np.float64]:
+        """Tip displacement ``q = L . q_m`` of states [m] (Eq. 16).
+
+        Parameters
+        ----------
+        x : array_like, shape (..., n_states)
+            States.
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``q`` [m].
+        """
+        return np.asarray(x, dtype=float)[..., :4] @ self._L
+
+    def tip_velocity(self, x: ArrayLike) -> NDArray[np.float64]:
+        """Tip velocity ``L . q_m_dot`` of states [m/s].
+
+        Parameters
+        ----------
+        x : array_like, shape (..., n_states)
+            States.
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``q_dot`` [m/s].
+        """
+        return np.asarray(x, dtype=float)[..., 4:8] @ self._L
+
+    def pitch(self, x: ArrayLike) -> NDArray[np.float64]:
+        """Pitch angle of the upper frame of states [rad] (Eq. 1).
+
+        Parameters
+        ----------
+        x : array_like, shape (..., n_states)
+            States.
+
+        Returns
+        -------
+        ndarray, shape (...)
+            ``phi`` [rad].
+        """
+        return pitch_angle(np.asarray(x, dtype=float)[..., :4], self.rig.prototype)
+
     def friction_force(self, x: ArrayLike) -> NDArray[np.float64]:
         """Friction force on the tip, ``-sum k_i z_i - c q_dot`` [N].
 
@@ -221,6 +324,37 @@ class RigPlant:
         return J
 
 
+def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
+    """Build the plant ``[rig.plant] model`` selects, with the rig's friction.
+
+    Parameters
+    ----------
+    rig : RigParams
+        Rig parameters; ``rig.model`` selects the mechanics.
+    v1, v2 : callable
+        Applied voltages ``v_i(t)`` [V].
+    compiled : bool
+        Compiled kernels for the full plant (:class:`RigPlant`); the reduced plant runs in
+        NumPy.
+
+    Returns
+    -------
+    RigPlant or pipeline.rig.reduced.ReducedPlant
+        ``"full"``: the full model of Sec. 3 (Eq. 19-23); ``"reduced"``: the reduced model
+        of Eq. 24-26. Both offer ``functions``, ``rest_state``, ``atol_vector``, ``tip``,
+        ``tip_velocity``, ``pitch`` and ``friction_force``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 19-26.
+    """
+    if rig.model == "reduced":
+        from pipeline.rig.reduced import ReducedPlant
+
+        return ReducedPlant(rig, v1, v2)
+    return RigPlant(rig, v1, v2, compiled=compiled)
+
+
 @dataclass(frozen=True)
 class RigRun:
     """One rig experiment: the logged channels and the truth behind them.
@@ -244,8 +378,9 @@ class RigRun:
         Tip velocity [m/s].
     phi_true : ndarray, shape (n,)
         Pitch angle of the upper frame [rad] (Eq. 1).
-    x_true : ndarray, shape (n, 10 + n_friction)
-        Plant states ``[q_m, q_m_dot, q_eps, z]``.
+    x_true : ndarray, shape (n, n_states)
+        Plant states: ``[q_m, q_m_dot, q_eps, z]`` (``10 + n_friction``) for the full plant,
+        ``[q, q_dot, q_eps, z]`` (``4 + n_friction``) for the reduced one.
     F_friction : ndarray, shape (n,)
         Friction force on the tip [N].
     v1_applied, v2_applied : ndarray, shape (n,)
@@ -315,9 +450,11 @@ def simulate_rig(
 
     1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
        voltages (:class:`~pipeline.rig.drivers.DriverOutput`; they do not depend on the mechanics).
-    2. The plant (:class:`RigPlant`) starts at rest in the well ``side`` (equilibrium at
-       v = 0, :func:`~pipeline.physics.dynamics.well_state`; relaxed creep, unloaded friction)
-       and is integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
+    2. The plant (:func:`make_plant`: :class:`RigPlant`, or the reduced plant of
+       :mod:`pipeline.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
+       ``side`` (equilibrium at v = 0, :func:`~pipeline.physics.dynamics.well_state`, or the
+       stable zero of the reduced ``f(q)``; relaxed creep, unloaded friction) and is
+       integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
        split at the reference steps larger than ``step_threshold``, with output on the
        internal grid ``sample_time / oversample``.
     3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
@@ -343,7 +480,7 @@ def simulate_rig(
     side : {-1, +1}
         Initial well: -1 left (the paper's experiments start at q = -10 mm), +1 right.
     method : {"Radau", "BDF"}
-        Implicit :func:`solve_ivp` method; both use :meth:`RigPlant.jac`.
+        Implicit :func:`solve_ivp` method; both use the plant's Jacobian.
     rtol, atol : float
         Integrator tolerances. ``atol`` [m] applies to the bending coordinates scaled to
         metres (``q_m * [l^2, l^3, l^4]``) and to the friction deflections; the axial
@@ -356,13 +493,16 @@ def simulate_rig(
         and 0.27 um on the 37.5 s identification and validation profiles); the
         integrator takes about one step per DAC interval (the kinks of the driver output
         limit the steps). Near a barrier crossing errors grow (the motion is unstable
-        there), so no tolerance bounds them in general.
+        there), so no tolerance bounds them in general. For the reduced plant ``atol``
+        applies to ``q`` and ``z``, ``100 atol`` to ``q_dot`` (per second) and the creep
+        strains (0.3 um from the tight solution on the identification profile, about 4 s).
     step_threshold : float
         Reference jumps larger than this [V] become integration breakpoints.
     compiled : bool
         Integrate the compiled plant (default) or the NumPy reference (``False``, several
-        times slower). Their right-hand sides agree to rounding, not bit for bit, so the
-        integrator takes other steps: the two solutions differ by the integration error.
+        times slower; the reduced plant always runs in NumPy). Their right-hand sides agree
+        to rounding, not bit for bit, so the integrator takes other steps: the two solutions
+        differ by the integration error.
 
     Returns
     -------
@@ -383,7 +523,7 @@ def simulate_rig(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 1, 16, 19-23, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
+    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
     """
     start = time.perf_counter()
     t_ref, hold = uniform_grid(t_ref)
@@ -422,26 +562,20 @@ def simulate_rig(
     drivers = [
         DriverOutput(t_ext, r_ext[i], tau=rig.driver_tau, slew=rig.driver_slew) for i in range(2)
     ]
-    plant = RigPlant(rig, drivers[0], drivers[1], compiled=compiled)
-    p = rig.prototype
-    x_rest = np.concatenate([well_state(p, side), np.zeros(rig.n_friction)])
-    scale = ritz_basis(p.l).scale
-    tol_x = np.array([atol, atol, atol, 100.0 * atol])
-    atol_v = np.concatenate(
-        [tol_x / scale, 1e4 * atol / scale, np.full(2, 100.0 * atol), np.full(rig.n_friction, atol)]
-    )
+    plant = make_plant(rig, drivers[0], drivers[1], compiled=compiled)
+    x_rest = plant.rest_state(side)
+    atol_v = plant.atol_vector(atol)
     jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
     breaks = [t0 + (k + 1) * hold for k in jumps]
     t_run = t_fine[t_fine >= t0]
-    fun, jac = plant._compiled() if compiled else (plant.rhs, plant.jac)
+    fun, jac = plant.functions()
     sol = solve_segments(
         fun, (t0, t_end), x_rest, t_run, breaks, method=method, jac=jac, rtol=rtol, atol=atol_v
     )
     X = np.full((t_run.size, plant.n_states), np.nan)  # NaN beyond a failure
     X[: sol.t.size] = sol.y
     X_all = np.concatenate([np.repeat(x_rest[None, :], pad, axis=0), X])  # at rest before
-    L = ritz_basis(p.l).L
-    q_fine = X_all[:, :4] @ L
+    q_fine = plant.tip(X_all)
     v_fine = np.stack([d.values(t_fine) for d in drivers])
     rng = np.random.default_rng(seed)
     y = q_fine + rng.normal(0.0, rig.sensor_noise, q_fine.size)
@@ -465,8 +599,8 @@ def simulate_rig(
         r1=r[0, k_ref],
         r2=r[1, k_ref],
         q_true=q_true,
-        q_dot_true=X_log[:, 4:8] @ L,
-        phi_true=pitch_angle(X_log[:, :4], p),
+        q_dot_true=plant.tip_velocity(X_log),
+        phi_true=plant.pitch(X_log),
         x_true=X_log,
         F_friction=plant.friction_force(X_log),
         v1_applied=v_fine[0, idx],
@@ -518,10 +652,20 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
         force of the full model (Fig. 4); ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch
         angle along the static path [rad].
 
+    Notes
+    -----
+    For ``rig.model = "reduced"`` the curves are the reduced plant's own, exact in the form
+    of Eq. 37 (:func:`pipeline.rig.reduced.reduced_true_curves`: the same keys, ``g1_vmax =
+    g1``, ``g2_vmax = g2``, plus ``dm_q``, ``k1``, ``k2``).
+
     References
     ----------
     Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
     """
+    if rig.model == "reduced":
+        from pipeline.rig.reduced import reduced_true_curves
+
+        return reduced_true_curves(rig, q_grid)
     c = reduced_curves(rig.prototype, q_grid)
     F0 = force_displacement(rig.prototype, c.q).F
     secant = [

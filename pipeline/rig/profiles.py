@@ -47,6 +47,7 @@ __all__ = [
     "Excitation",
     "identification_profile",
     "make_profile",
+    "staircase_profile",
     "validation_profile",
 ]
 
@@ -60,6 +61,9 @@ _ID_BAND = (0.5, 20.0)
 _ID_LEVELS = ((1.0, 0.5), (1.0, 0.5), (0.5, 1.0), (0.5, 1.0), (0.8, 0.8), (0.8, 0.8))
 #: Rectangular pulse lengths of the identification profile, cycled [s].
 _ID_PULSES = (0.6, 0.8, 1.0)
+#: Levels of the staircase profile as fractions of ``v_sub``: ``v^2`` in equal steps of
+#: ``v_sub^2 / 3``, so the force ``g_i(q) v_i^2`` rises in equal steps.
+_ST_LEVELS = (0.0, float(np.sqrt(1.0 / 3.0)), float(np.sqrt(2.0 / 3.0)), 1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -507,10 +511,150 @@ def validation_profile(
     return b.finish("validation")
 
 
+def staircase_profile(
+    *,
+    duration: float = 37.5,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = 1000.0,
+    seed: int = 0,
+    step: float = 1.0,
+    dither: float = 0.0,
+) -> Excitation:
+    """Staircase identification profile: held voltage levels in each well, then a switch.
+
+    Each well the beam rests in is excited by a block of held levels (``"staircase"``) on a
+    4 x 4 grid of both reference voltages, ``v_i`` in ``(0, 0.577, 0.816, 1) * v_sub``
+    (``v_i^2`` in equal steps of ``v_sub^2 / 3``), each held ``step`` seconds so that the
+    beam settles and the DE creep relaxes. The grid is walked as a serpentine, so that
+    consecutive levels differ in one voltage only: every step is a clean step of one
+    ``v_i^2`` taken at the equilibrium the other voltage holds, i.e. ``g_i(q) v_i^2`` is
+    excited at several ``v_i^2`` and at several positions near each well, approached from
+    both sides (friction). In the first visit to a well the DE pushing towards the barrier
+    (DE 1 in the left well, DE 2 in the right one) steps in the inner loop, in the next
+    visit the DE pushing the beam deeper into the well. Each block is followed by 0.2 s
+    rest, a rectangular ``v_max`` pulse of 0.8 s on the DE pushing towards the barrier
+    (``"pulse-DE1"`` / ``"pulse-DE2"``: the switch to the other well, whose transit and
+    ring-down cover the range between the wells) and 1 s rest.
+
+    Timing with the defaults (37.5 s): 0.5 s rest in the left well, a 16 s block there,
+    the switch to the right well (pulse onset 16.7 s), a 16 s block there, the switch
+    back (onset 34.7 s) and rest to the end. A longer ``duration`` repeats the episodes;
+    a last episode that does not fit entirely is a truncated block (at least 1 s) or rest.
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least the lead and one episode
+        (``0.5 + 16 step + 2`` s).
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Height of the switching pulses [V], at most 3000.
+    v_sub : float
+        Highest held level [V], below ``v_max`` and, for the profile to mean what it says,
+        below the prototype's switching threshold (about 1.45 kV for Table 1): the beam
+        stays in its well during the blocks.
+    seed : int
+        Seed of :func:`numpy.random.default_rng` for the dither; the same seed gives
+        identical arrays.
+    step : float
+        Hold time of each level [s], a multiple of ``hold``; default 1 s, about four times
+        the creep time constant of the Table 1 DEs (``eta_MW / Y_MW = 0.27 s``) and three
+        times the settling time of the well resonance.
+    dither : float
+        Peak of a band-limited random dither (0.5-20 Hz, as the identification profile's
+        noise) added to each held non-zero level, as a fraction of ``v_sub``, in
+        ``[0, 0.5]``; 0 (default): pure steps. The sum is clipped to ``[0, v_sub]``.
+
+    Returns
+    -------
+    Excitation
+        ``name = "staircase"``; ``r1``, ``r2`` of shape ``(round(duration / hold),)`` [V].
+
+    Raises
+    ------
+    ValueError
+        As :func:`identification_profile`; ``step`` not a positive multiple of ``hold``,
+        ``dither`` outside ``[0, 0.5]``, or ``duration`` shorter than the lead and one
+        episode.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the input term ``g_i(q) v_i^2``), Sec. 5.1 (3 kV
+    converters, start in the left well); Ljung 1999, System Identification, Sec. 13.2-13.3
+    (persistence of excitation; step and staircase inputs for static nonlinearities).
+    """
+    n = _grid(duration, hold, v_max, v_sub)
+    step = _positive("step", step)
+    if abs(round(step / hold) * hold - step) > 1e-9 * max(1.0, step) or round(step / hold) < 1:
+        raise ValueError(f"`step` = {step} s is not a multiple of `hold` = {hold} s")
+    dither = float(dither)
+    if not 0.0 <= dither <= 0.5:
+        raise ValueError(f"`dither` must be within [0, 0.5], got {dither}")
+    b = _Builder(n, float(hold))
+    levels = np.array(_ST_LEVELS) * v_sub
+    m = levels.size
+    lead, gap, flat, ring = 0.5, 0.2, 0.8, 1.0
+    block = m * m * step
+    if not b.fits(lead + block + gap + flat + ring):
+        raise ValueError(
+            f"`duration` = {duration} s is shorter than one staircase episode "
+            f"({lead + block + gap + flat + ring:g} s)"
+        )
+    rng = np.random.default_rng(seed)
+    from scipy import signal
+
+    sos = signal.butter(4, _ID_BAND, btype="bandpass", fs=1.0 / b.hold, output="sos")
+    noise = signal.sosfiltfilt(sos, rng.standard_normal((2, n)), axis=1)
+
+    def walk(inner_near: bool) -> list[tuple[int, int]]:
+        """Serpentine over the grid: (near, far) level indices, one voltage per step."""
+        out = []
+        for outer in range(m):
+            inner = range(m) if outer % 2 == 0 else range(m - 1, -1, -1)
+            out.extend((i, outer) if inner_near else (outer, i) for i in inner)
+        return out
+
+    def staircase(visit: int, seconds: float) -> None:
+        near = b.side  # the DE that pushes towards the barrier: the next pulse's side
+        path = walk(inner_near=(visit // 2) % 2 == 0)
+        k0, per = b.k, b.samples(step)
+
+        def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            idx = np.minimum(np.arange(tau.size) // per, len(path) - 1)
+            grid = np.array(path)[idx]  # (n, 2): near, far level index
+            v = {near: levels[grid[:, 0]], 3 - near: levels[grid[:, 1]]}
+            out = []
+            for de in (1, 2):
+                x = v[de]
+                if dither > 0.0:
+                    u = 2.0 * _unit_gauss(noise[de - 1, k0 : k0 + tau.size]) - 1.0
+                    x = np.where(x > 0.0, np.clip(x + dither * v_sub * u, 0.0, v_sub), 0.0)
+                out.append(x)
+            return out[0], out[1]
+
+        b.add("staircase", seconds, fill)
+
+    b.add("rest", lead)
+    visit = 0
+    while b.fits(block + gap + flat + ring):
+        staircase(visit, block)
+        b.add("rest", gap)
+        b.pulse(v_max, flat)
+        b.add("rest", ring)
+        visit += 1
+    left = (b.n - b.k) * b.hold
+    if left >= 1.0 - 1e-9:
+        staircase(visit, left)
+    return b.finish("staircase")
+
+
 #: Profile name -> builder; every builder takes keyword arguments only.
 PROFILES: dict[str, Callable[..., Excitation]] = {
     "identification": identification_profile,
     "validation": validation_profile,
+    "staircase": staircase_profile,
 }
 
 

@@ -23,7 +23,10 @@ class RigResult:
     ----------
     outputs : dict
         ``<experiment>.mat`` (:class:`pipeline.artifacts.FileWriter` of the MAT writer) and
-        ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment.
+        ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment; its
+        ``curves`` group holds the true curves (:func:`pipeline.rig.plant.true_curves`) with
+        the plant ``model`` and the mass they are per in its attributes
+        (:func:`pipeline.rig.reduced.truth_attrs`).
     summary : dict
         Per experiment: samples, q range [m], 3 kV switchings, saturated samples and
         integration statistics.
@@ -72,9 +75,11 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
         truth_tree,
     )
     from pipeline.rig.plant import true_curves
+    from pipeline.rig.reduced import truth_attrs
 
     cfg = RigConfig.from_dict(section, physics)
     curves = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 401))
+    curves = {**curves, "attrs": truth_attrs(cfg.rig, curves)}
     outputs: dict[str, Any] = {}
     summary: dict[str, Any] = {}
     timings: dict[str, float] = {}
