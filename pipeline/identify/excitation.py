@@ -1,0 +1,579 @@
+"""Excitation check before identification: which curves of Eq. 37-40 the data can identify.
+
+The RBF model of Masoud & Maas 2025 (Eq. 37-40),
+
+    m_q q'' + c(q) q + d(q) z + (backbone) = sum_i g_i(q) h(v_i),
+
+expands ``c``, ``d`` and ``g_i`` in Gaussian RBFs on centres ``xi_k`` (Eq. 38, 39). A weight
+of centre ``k`` is informed only by the samples near ``xi_k``, and only if the regressor
+column varies there: ``c`` needs samples, ``d`` samples in motion (``z`` follows ``q_dot``),
+``g_i`` samples with input ``i`` active. Beyond the local coverage, the least squares needs
+a persistently exciting experiment (Ljung 1999, Sec. 13.2): a response that is one sinusoid
+satisfies ``q'' = -W^2 q``, so stiffness and mass (and, with ``z`` a phase-shifted copy, the
+damping) cannot be told apart. And parts of the range crossed only during the fast
+switching transients between the wells hold no quasi-static samples: the stiffness there
+rests on the inertia and damping of those transients alone.
+
+:func:`check_excitation` measures the three from the estimation records and returns an
+:class:`ExcitationReport` with plain-language warnings.
+
+Units: the tables, intervals and ``sigma`` of the report are in the records' unit of q
+(SI, [m], as the records carry it); the warnings and :meth:`ExcitationReport.to_summary`
+are in a display unit given by ``unit_scale`` and ``unit_name`` (e.g. ``1e3, "mm"``, the
+factor of :func:`pipeline.validate.report_factor`).
+
+References
+----------
+Masoud & Maas 2025, Eq. 37-40; L. Ljung, System Identification: Theory for the User, 2nd
+ed., Prentice Hall 1999, Sec. 13.2 (informative experiments, persistence of excitation);
+P. D. Welch, IEEE Trans. Audio Electroacoust. 15(2), 70-73, 1967 (averaged periodograms).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+from scipy.signal import welch
+
+from pipeline.errors import WorkflowError
+from pipeline.identify.basis import RBFBasis
+from pipeline.identify.terms import RBF_TERMS, input_map
+
+if TYPE_CHECKING:  # the fit module may import this one
+    from pipeline.identify.fit import Record
+
+__all__ = ["ExcitationReport", "check_excitation"]
+
+#: Robust standard deviation of a zero-mean normal sample from the median of its magnitude.
+_MEDIAN_TO_SD = 1.4826
+#: A line is resolved if its band is at most this fraction of its frequency (else it is
+#: the low-frequency end of a broad spectrum, e.g. the slow switching between the wells).
+_LINE_RESOLVED = 0.5
+#: Shortest record for a spectrum [samples].
+_MIN_SPECTRUM = 32
+
+
+@dataclass(frozen=True)
+class ExcitationReport:
+    """What the estimation data can identify (result of :func:`check_excitation`).
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per RBF centre, columns ``centre`` [unit of q]; hard counts of the samples
+        with ``|q - xi_k| <= sigma``: ``n_total``, ``n_moving`` (``|q_dot|`` above
+        ``moving_fraction`` of its RMS), ``n_quasi_static`` (not in transit, see
+        ``transient_intervals``), ``n_inactive`` (every input inactive),
+        ``n_input1_active .. n_inputN_active``; the same weighted by the Gaussian of Eq. 38
+        (effective sample counts) ``neff_total``, ``neff_moving``, ``neff_inactive``,
+        ``neff_input1_active ..``; and the decisions ``supported_c``, ``supported_d``,
+        ``supported_g1 .. supported_gN`` (count at least ``min_samples``).
+    spectra : pandas.DataFrame
+        One row per record and channel (``q``, ``h1 .. hN`` = ``h(v_i)``): ``record``,
+        ``channel``, ``variance`` [unit^2], ``f_peak`` [Hz] (power-weighted centre of the
+        strongest cluster), ``n_lines`` (clusters of spectral bins carrying
+        ``power_fraction`` of the power), ``bandwidth`` [Hz] (their total width), ``df``
+        [Hz] (resolution), ``single_line`` (bool).
+    single_frequency : list of str
+        Records whose response q is one spectral line.
+    unsupported : dict of str to list of tuple of float
+        Per curve (``c``, ``d``, ``g1`` ..) the q intervals ``(a, b)`` [unit of q] of merged
+        runs of unsupported centres, ``(xi_a - sigma, xi_b + sigma)``.
+    transient_intervals : list of tuple of float
+        q intervals ``(a, b)`` [unit of q] visited only in transit (no quasi-static samples).
+    warnings : list of str
+        Plain-language warnings, q in ``unit_name``.
+    sigma : float
+        RBF width [unit of q].
+    settings : dict
+        The thresholds used (for the manifest; ``bin_width`` in the display unit).
+    unit_scale : float
+        Display unit per unit of q.
+    unit_name : str
+        Display unit.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40; Ljung 1999, Sec. 13.2.
+    """
+
+    table: pd.DataFrame
+    spectra: pd.DataFrame
+    single_frequency: list[str]
+    unsupported: dict[str, list[tuple[float, float]]]
+    transient_intervals: list[tuple[float, float]]
+    warnings: list[str]
+    sigma: float
+    settings: dict = field(default_factory=dict)
+    unit_scale: float = 1.0
+    unit_name: str = "m"
+
+    def to_summary(self) -> dict:
+        """Return a JSON-able summary, q values in the display unit.
+
+        Returns
+        -------
+        dict
+            ``unit``, ``sigma``, ``settings``, ``centres`` (the table as a list of row
+            dicts, ``centre`` scaled), ``unsupported`` (curve -> list of ``[a, b]``),
+            ``transient_only`` (list of ``[a, b]``), ``spectra`` (list of row dicts),
+            ``single_frequency`` and ``warnings``.
+        """
+        s = self.unit_scale
+        table = self.table.assign(centre=self.table["centre"] * s)
+        return {
+            "unit": self.unit_name,
+            "sigma": float(self.sigma * s),
+            "settings": dict(self.settings),
+            "centres": json.loads(table.to_json(orient="records")),
+            "unsupported": {
+                k: [[float(a * s), float(b * s)] for a, b in v] for k, v in self.unsupported.items()
+            },
+            "transient_only": [[float(a * s), float(b * s)] for a, b in self.transient_intervals],
+            "spectra": json.loads(self.spectra.to_json(orient="records")),
+            "single_frequency": list(self.single_frequency),
+            "warnings": list(self.warnings),
+        }
+
+
+def check_excitation(
+    records: Sequence[Record],
+    basis: RBFBasis,
+    input_map_kind: str = "v2",
+    *,
+    rbf: Sequence[str] = RBF_TERMS,
+    min_samples: int = 10,
+    active_fraction: float = 0.1,
+    moving_fraction: float = 0.1,
+    fast_factor: float = 3.0,
+    quasi_static_fraction: float = 0.05,
+    bin_width: float | None = None,
+    power_fraction: float = 0.95,
+    line_bins: int = 6,
+    nperseg: int | None = None,
+    unit_scale: float = 1.0,
+    unit_name: str = "m",
+) -> ExcitationReport:
+    """Check which curves of the RBF model the estimation records can identify.
+
+    Three checks, all deterministic:
+
+    1. *Coverage per centre.* Samples with ``|q - xi_k| <= sigma`` (as
+       :meth:`RBFBasis.support`) are counted in total, in motion (``|q_dot|`` above
+       ``moving_fraction`` of the pooled RMS of ``q_dot``), with input ``i`` active
+       (``|h(v_i)|`` above ``active_fraction`` of its pooled maximum) and with every input
+       inactive; the effective counts weight each sample by ``exp(-(q - xi_k)^2 /
+       (2 sigma^2))`` (Eq. 38, without clipping). Centre ``k`` supports ``c`` if
+       ``n_total >= min_samples``, ``d`` if ``n_moving >= min_samples`` and ``g_i`` if
+       ``n_input<i>_active >= min_samples``.
+    2. *Frequency content.* Per record, the Welch PSD (Hann window, ``nperseg`` samples,
+       half overlap, mean removed per segment, DC bin dropped) of q and of every ``h(v_i)``.
+       The fewest bins carrying ``power_fraction`` of the power are grouped into clusters
+       (bins at most two apart join); ``n_lines`` is the number of clusters and
+       ``bandwidth`` their total width. A channel is a *single line* if it has one cluster,
+       no wider than ``line_bins`` bins (the Hann main lobe is 4 bins) and resolved (its
+       band at most half its frequency, so a line needs about 16 periods in the record
+       at the default ``nperseg``). A record whose q is a single line is warned about: one
+       frequency cannot separate stiffness from mass and damping (Ljung 1999, Sec. 13.2).
+    3. *Transient-only intervals.* A sample is in transit if ``|q_dot|`` exceeds
+       ``fast_factor`` times a robust speed scale of its record: 1.4826 times the median
+       of ``|q_dot|`` (the standard deviation of zero-mean normal velocities; the median is
+       set by the dwelling, not by the brief transits), at least 1 % of the record's
+       largest ``|q_dot|``. The pooled q range is cut into bins of ``bin_width``; the
+       window ``+-sigma`` around a bin (the reach of one RBF) is *transient-only* if it
+       holds samples in transit and fewer than ``min_samples`` quasi-static ones, or
+       quasi-static ones below ``quasi_static_fraction`` of its samples. Runs of such bins
+       are merged into the union of their windows, clipped to the data range (as the
+       coverage intervals ``[xi_a - sigma, xi_b + sigma]``). The window bridges unvisited
+       bins between sparse fast samples; the far end of an overshoot, slow only at its few
+       turning points, is flagged with the way to it.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        Estimation records: ``q`` (n,) [unit of q], ``q_dot`` (n,) [unit/s], ``v``
+        (n, n_inputs) [V], ``dt`` [s]. All with the same number of inputs.
+    basis : RBFBasis
+        Centres ``xi`` (M,) and width ``sigma`` [unit of q].
+    input_map_kind : {"v2", "v"}, optional
+        The input map h(v) of the model (``v^2`` for DE actuators).
+    rbf : sequence of str, optional
+        The RBF curves of the model (subset of ``("c", "d", "g")``); warnings are issued for
+        these only. The table always has every column.
+    min_samples : int, optional
+        Fewest samples within one width of a centre for a supported curve.
+    active_fraction : float, optional
+        Input ``i`` is active where ``|h(v_i)|`` exceeds this fraction of its largest value
+        over all records, in [0, 1).
+    moving_fraction : float, optional
+        A sample is in motion where ``|q_dot|`` exceeds this fraction of the RMS of
+        ``q_dot`` over all records.
+    fast_factor : float, optional
+        Transit threshold in robust standard deviations of the record's ``q_dot``.
+    quasi_static_fraction : float, optional
+        A window is transient-only if fewer than this fraction of its samples (or fewer
+        than ``min_samples``) are quasi-static.
+    bin_width : float, optional
+        Bin width of the transient check [unit of q]; default ``sigma / 2``.
+    power_fraction : float, optional
+        Share of the spectral power that defines the lines and the bandwidth, in (0, 1).
+    line_bins : int, optional
+        Widest cluster [bins] that still counts as one spectral line.
+    nperseg : int, optional
+        Welch segment length [samples]; default half the record (three half-overlapping
+        segments; at least 256 samples, at most the record).
+    unit_scale : float, optional
+        Display unit per unit of q (e.g. 1e3 for q in m shown in mm); warnings and summary.
+    unit_name : str, optional
+        Display unit name.
+
+    Returns
+    -------
+    ExcitationReport
+
+    Raises
+    ------
+    WorkflowError
+        If there are no records, the records disagree in their number of inputs, a
+        record's lengths differ or its ``dt`` is not positive, a setting is out of range
+        or ``input_map_kind`` is unknown.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40; L. Ljung, System Identification: Theory for the User,
+    2nd ed., 1999, Sec. 13.2 (persistence of excitation); P. D. Welch, IEEE Trans. Audio
+    Electroacoust. 15(2), 70-73, 1967 (PSD estimate, :func:`scipy.signal.welch`).
+
+    Examples
+    --------
+    >>> from pipeline.identify import RBFBasis, Record
+    >>> t = np.arange(0, 20.0, 0.01)
+    >>> q = 0.01 * np.sin(2 * np.pi * 1.5 * t)
+    >>> v = np.full((t.size, 1), 100.0)
+    >>> rec = Record("sine", q, np.gradient(q, 0.01), np.zeros_like(q), v, 0.01)
+    >>> rep = check_excitation([rec], RBFBasis.equidistant(-0.01, 0.01, 5, 0.5), rbf=("c", "d"))
+    >>> rep.single_frequency
+    ['sine']
+    """
+    _validate(
+        records,
+        active_fraction,
+        moving_fraction,
+        power_fraction,
+        quasi_static_fraction,
+        min_samples=min_samples,
+        line_bins=line_bins,
+        fast_factor=fast_factor,
+        bin_width=bin_width,
+    )
+    n_inputs = np.asarray(records[0].v).reshape(len(records[0].q), -1).shape[1]
+    q = np.concatenate([np.asarray(r.q, dtype=float) for r in records])
+    q_dot = np.concatenate([np.asarray(r.q_dot, dtype=float) for r in records])
+    v = np.vstack([np.asarray(r.v, dtype=float).reshape(len(r.q), -1) for r in records])
+    hv = input_map(v, input_map_kind)
+    slow = np.concatenate([_calm(r.q_dot, fast_factor) for r in records])
+
+    rms = float(np.sqrt(np.mean(q_dot**2))) if q_dot.size else 0.0
+    masks = {"total": np.ones(q.size, dtype=bool), "moving": np.abs(q_dot) > moving_fraction * rms}
+    masks["quasi_static"] = slow
+    hmax = np.abs(hv).max(axis=0) if hv.size else np.zeros(n_inputs)
+    active = (np.abs(hv) > active_fraction * hmax) & (hmax > 0)
+    masks["inactive"] = ~active.any(axis=1)
+    for j in range(n_inputs):
+        masks[f"input{j + 1}_active"] = active[:, j]
+    table = _coverage(q, basis, masks, min_samples, n_inputs)
+
+    sigma = float(basis.sigma)
+    unsupported = {"c": _runs(basis.xi, sigma, ~table["supported_c"].to_numpy())}
+    unsupported["d"] = _runs(basis.xi, sigma, ~table["supported_d"].to_numpy())
+    for j in range(n_inputs):
+        col = table[f"supported_g{j + 1}"].to_numpy()
+        unsupported[f"g{j + 1}"] = _runs(basis.xi, sigma, ~col)
+
+    width = float(bin_width) if bin_width is not None else sigma / 2.0
+    transient = _transient_intervals(q, slow, width, sigma, min_samples, quasi_static_fraction)
+
+    spectra = _spectra(records, input_map_kind, nperseg, power_fraction, line_bins)
+    single = [
+        str(row.record)
+        for row in spectra.itertuples()
+        if row.channel == "q" and bool(row.single_line)
+    ]
+
+    fmt = _Formatter(sigma, unit_scale, unit_name)
+    settings = {
+        "input_map": input_map_kind,
+        "min_samples": int(min_samples),
+        "active_fraction": float(active_fraction),
+        "moving_fraction": float(moving_fraction),
+        "fast_factor": float(fast_factor),
+        "quasi_static_fraction": float(quasi_static_fraction),
+        "bin_width": float(width * unit_scale),
+        "power_fraction": float(power_fraction),
+        "line_bins": int(line_bins),
+    }
+    warnings = _warnings(
+        table, basis, rbf, n_inputs, hmax, transient, spectra, single, settings, fmt
+    )
+    return ExcitationReport(
+        table=table,
+        spectra=spectra,
+        single_frequency=single,
+        unsupported=unsupported,
+        transient_intervals=transient,
+        warnings=warnings,
+        sigma=sigma,
+        settings=settings,
+        unit_scale=float(unit_scale),
+        unit_name=unit_name,
+    )
+
+
+def _validate(
+    records,
+    active_fraction,
+    moving_fraction,
+    power_fraction,
+    qs_fraction,
+    *,
+    min_samples,
+    line_bins,
+    fast_factor,
+    bin_width,
+) -> None:
+    if not records:
+        raise WorkflowError("no estimation records to check the excitation of")
+    n_inputs = {np.asarray(r.v).reshape(len(r.q), -1).shape[1] for r in records}
+    if len(n_inputs) != 1:
+        raise WorkflowError(
+            f"the estimation records disagree in their number of inputs: {sorted(n_inputs)}"
+        )
+    for r in records:
+        if not r.dt > 0:
+            raise WorkflowError(f"record '{r.name}': sample time dt must be positive, got {r.dt!r}")
+        if not (len(r.q) == len(r.q_dot) == np.asarray(r.v).shape[0]):
+            raise WorkflowError(
+                f"record '{r.name}': q, q_dot and v differ in length "
+                f"({len(r.q)}, {len(r.q_dot)}, {np.asarray(r.v).shape[0]})"
+            )
+    for name, value, hi_open in (
+        ("active_fraction", active_fraction, True),
+        ("moving_fraction", moving_fraction, True),
+        ("quasi_static_fraction", qs_fraction, False),
+    ):
+        if not (0.0 <= value < 1.0 or (not hi_open and value == 1.0)):
+            raise WorkflowError(f"`{name}` must lie in [0, 1), got {value!r}")
+    if not 0.0 < power_fraction < 1.0:
+        raise WorkflowError(f"`power_fraction` must lie in (0, 1), got {power_fraction!r}")
+    for name, value in (("min_samples", min_samples), ("line_bins", line_bins)):
+        if int(value) != value or value < 1:
+            raise WorkflowError(f"`{name}` must be a positive integer, got {value!r}")
+    for name, value in (("fast_factor", fast_factor), ("bin_width", bin_width)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise WorkflowError(f"`{name}` must be positive, got {value!r}")
+
+
+def _calm(x: np.ndarray, fast_factor: float) -> np.ndarray:
+    """Flag the quasi-static samples of one record: ``|x|`` within ``fast_factor`` robust scales."""
+    x = np.abs(np.asarray(x, dtype=float))
+    if x.size == 0:
+        return np.zeros(0, dtype=bool)
+    scale = max(_MEDIAN_TO_SD * float(np.median(x)), 0.01 * float(np.max(x)))
+    return x <= fast_factor * scale
+
+
+def _coverage(q, basis, masks, min_samples, n_inputs) -> pd.DataFrame:
+    """Count per centre (one centre at a time: memory O(n), not O(n M))."""
+    xi = np.asarray(basis.xi, dtype=float)
+    weighted = [name for name in masks if name != "quasi_static"]
+    counts = {name: np.zeros(xi.size, dtype=int) for name in masks}
+    neff = {name: np.zeros(xi.size) for name in weighted}
+    for k, centre in enumerate(xi):
+        near = np.abs(q - centre) <= basis.sigma
+        gauss = np.exp(-((q - centre) ** 2) / (2.0 * basis.sigma**2))
+        for name, mask in masks.items():
+            counts[name][k] = np.count_nonzero(near & mask)
+            if name in neff:
+                neff[name][k] = float(gauss[mask].sum())
+    cols: dict[str, np.ndarray] = {"centre": xi}
+    cols |= {f"n_{name}": c for name, c in counts.items()}
+    cols |= {f"neff_{name}": c for name, c in neff.items()}
+    cols["supported_c"] = cols["n_total"] >= min_samples
+    cols["supported_d"] = cols["n_moving"] >= min_samples
+    for j in range(n_inputs):
+        cols[f"supported_g{j + 1}"] = cols[f"n_input{j + 1}_active"] >= min_samples
+    return pd.DataFrame(cols)
+
+
+def _index_runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """Return the first and last index of every run of True in ``flags``."""
+    padded = np.concatenate([[False], np.asarray(flags, dtype=bool), [False]])
+    change = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    return [(int(a), int(b) - 1) for a, b in zip(change[::2], change[1::2], strict=True)]
+
+
+def _runs(xi: np.ndarray, sigma: float, bad: np.ndarray) -> list[tuple[float, float]]:
+    """Merge runs of flagged centres into ``(xi_a - sigma, xi_b + sigma)``."""
+    return [(float(xi[a] - sigma), float(xi[b] + sigma)) for a, b in _index_runs(bad)]
+
+
+def _transient_intervals(q, slow, width, sigma, min_samples, fraction):
+    """Merge the windows ``+-sigma`` of grid bins that hold transit but hardly any rest."""
+    if q.size == 0:
+        return []
+    lo, hi = float(q.min()), float(q.max())
+    n_bins = max(1, math.ceil((hi - lo) / width))
+    edges = lo + width * np.arange(n_bins + 1)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+
+    def window_count(x):
+        x = np.sort(x)
+        return np.searchsorted(x, mid + sigma, "right") - np.searchsorted(x, mid - sigma, "left")
+
+    n_all, n_slow = window_count(q), window_count(q[slow])
+    flagged = (n_all > n_slow) & ((n_slow < min_samples) | (n_slow < fraction * n_all))
+    return [
+        (max(lo, float(mid[a] - sigma)), min(hi, float(mid[b] + sigma)))
+        for a, b in _index_runs(flagged)
+    ]
+
+
+def _default_nperseg(n: int) -> int:
+    return min(n, max(256, n // 2))
+
+
+def _lines(x, fs, nperseg, power_fraction, line_bins) -> dict:
+    """Spectral-line summary of one channel from its Welch PSD."""
+    x = np.asarray(x, dtype=float)
+    out = {
+        "variance": float(np.var(x)) if x.size else 0.0,
+        "f_peak": math.nan,
+        "n_lines": 0,
+        "bandwidth": math.nan,
+        "df": math.nan,
+        "single_line": False,
+    }
+    if x.size < _MIN_SPECTRUM or not np.ptp(x) > 0:
+        return out
+    seg = min(x.size, int(nperseg) if nperseg else _default_nperseg(x.size))
+    f, p = welch(x, fs=fs, window="hann", nperseg=seg, detrend="constant")
+    f, p = f[1:], p[1:]
+    out["df"] = fs / seg
+    total = float(p.sum())
+    if not total > 0:
+        return out
+    order = np.argsort(-p, kind="stable")
+    k = min(p.size, int(np.searchsorted(np.cumsum(p[order]), power_fraction * total)) + 1)
+    sel = np.sort(order[:k])
+    clusters = np.split(sel, np.flatnonzero(np.diff(sel) > 2) + 1)
+    strongest = next(c for c in clusters if order[0] in c)
+    out["f_peak"] = float(np.average(f[strongest], weights=p[strongest]))
+    out["n_lines"] = len(clusters)
+    out["bandwidth"] = float(k * fs / seg)
+    narrow = int(sel[-1] - sel[0] + 1) <= line_bins
+    resolved = out["bandwidth"] <= _LINE_RESOLVED * out["f_peak"]
+    out["single_line"] = len(clusters) == 1 and narrow and resolved
+    return out
+
+
+def _spectra(records, kind, nperseg, power_fraction, line_bins) -> pd.DataFrame:
+    rows = []
+    for r in records:
+        fs = 1.0 / float(r.dt)
+        hv = input_map(np.asarray(r.v, dtype=float).reshape(len(r.q), -1), kind)
+        channels = {"q": r.q} | {f"h{j + 1}": hv[:, j] for j in range(hv.shape[1])}
+        for name, x in channels.items():
+            summary = _lines(x, fs, nperseg, power_fraction, line_bins)
+            rows.append({"record": r.name, "channel": name, **summary})
+    return pd.DataFrame(rows)
+
+
+@dataclass(frozen=True)
+class _Formatter:
+    """q intervals in the display unit, to a tenth of the RBF width."""
+
+    sigma: float
+    scale: float
+    unit: str
+
+    def num(self, x: float) -> str:
+        """One q value [unit of q] in the display unit, without the unit name."""
+        width = abs(self.sigma * self.scale)
+        digits = max(0, 1 - math.floor(math.log10(width))) if width > 0 else 3
+        return f"{x * self.scale:.{digits}f}"
+
+    def value(self, x: float) -> str:
+        """One q value [unit of q] with the unit name."""
+        return self.num(x) + (f" {self.unit}" if self.unit else "")
+
+    def __call__(self, intervals: Sequence[tuple[float, float]]) -> str:
+        parts = [f"[{self.num(a)}, {self.num(b)}]" for a, b in intervals]
+        return " and ".join(parts) + (f" {self.unit}" if self.unit else "")
+
+
+def _warnings(table, basis, rbf, n_inputs, hmax, transient, spectra, single, settings, fmt):
+    """Plain-language warnings, in the order: coverage, d, g_i, transients, spectrum."""
+    xi, sigma, n_min = basis.xi, basis.sigma, settings["min_samples"]
+    curves = [c for c in RBF_TERMS if c in rbf and c != "g"]
+    if "g" in rbf:
+        curves += [f"g{j + 1}" for j in range(n_inputs)]
+    has_data = table["supported_c"].to_numpy()
+    out = []
+    empty = _runs(xi, sigma, ~has_data)
+    if empty and curves:
+        out.append(
+            f"no data: fewer than {n_min} samples within sigma = {fmt.value(sigma)} of the "
+            f"centres for q in {fmt(empty)}: {', '.join(curves)} there "
+            f"{'is' if len(curves) == 1 else 'are'} not identified"
+        )
+    if "d" in rbf:
+        still = _runs(xi, sigma, has_data & ~table["supported_d"].to_numpy())
+        if still:
+            out.append(
+                f"d: q barely moves (fewer than {n_min} samples with |q_dot| above "
+                f"{100 * settings['moving_fraction']:g} % of its RMS) for q in {fmt(still)}: "
+                "d there is not identified"
+            )
+    if "g" in rbf:
+        for j in range(n_inputs):
+            g = f"g{j + 1}"
+            if not hmax[j] > 0:
+                out.append(
+                    f"{g}: input {j + 1} is zero in every estimation record: {g} is not identified"
+                )
+                continue
+            idle = _runs(xi, sigma, has_data & ~table[f"supported_{g}"].to_numpy())
+            if idle:
+                out.append(
+                    f"{g}: input {j + 1} is never active (fewer than {n_min} samples with "
+                    f"|h(v_{j + 1})| above {100 * settings['active_fraction']:g} % of its maximum) "
+                    f"for q in {fmt(idle)}: {g} there is not identified"
+                )
+    if transient:
+        out.append(
+            f"transient only: q in {fmt(transient)} is crossed only in transit: within sigma "
+            f"of it fewer than {n_min} samples (or under "
+            f"{100 * settings['quasi_static_fraction']:g} %) are quasi-static (|q_dot| below "
+            f"{settings['fast_factor']:g} robust standard deviations of their record), so the "
+            "curves there rest on the switching transients alone"
+        )
+    for name in single:
+        rows = spectra[spectra["record"] == name]
+        q_row = rows[rows["channel"] == "q"].iloc[0]
+        inputs = rows[(rows["channel"] != "q") & (rows["variance"] > 0)]
+        same = (
+            " (and so do its inputs)" if len(inputs) and bool(inputs["single_line"].all()) else ""
+        )
+        out.append(
+            f"record '{name}': q carries {100 * settings['power_fraction']:g} % of its power in "
+            f"one spectral line at {q_row['f_peak']:.3g} Hz{same}: a single-frequency "
+            "excitation cannot separate stiffness from mass and damping; excite with a "
+            "multisine, a chirp or band-limited noise"
+        )
+    return out
