@@ -119,6 +119,11 @@ def _report(runner, manifests) -> None:
         console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
+        design = report.design_table(manifests["identify"].summary)
+        if design is not None:
+            console.print(design)
+        for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
+            console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
     last = "compare" if "compare" in manifests else "validate"
     if "compare" in manifests:
         s = manifests["compare"].summary

@@ -248,3 +248,43 @@ def rig_table(summary: dict[str, Any]) -> Table:
             str(s["nfev"]),
         )
     return table
+
+
+def design_table(summary: dict[str, Any]) -> Table | None:
+    """Tabulate the identified model's equilibria and switching voltages (and the analytical).
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``design`` entry).
+
+    Returns
+    -------
+    rich.table.Table or None
+        None when the summary has no design numbers.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 3.3, Eq. 37.
+    """
+    design = summary.get("design")
+    if not design:
+        return None
+    table = Table(
+        title="Equilibria and switching (identified beside analytical)",
+        caption=escape(f"identified model: {design['verdict']} ({design['reason']})"),
+    )
+    for col in ("model", "inputs [V]", "q*", "kind", "f_n [Hz]", "zeta", "barrier"):
+        table.add_column(col, justify="left" if col in ("model", "kind") else "right")
+    for r in design["equilibria"]:
+        if r["level"] != 0 and not r["static_stable"]:
+            continue  # at held levels only the wells
+        volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
+        well = bool(r["static_stable"])
+        kind = ("well" if r["stable"] else "well, negative damping") if well else "saddle"
+        small = [_fmt(r[k]) if well else "" for k in ("f_n", "zeta", "barrier")]
+        table.add_row(r["model"], volts, _fmt(r["q"]), kind, *small)
+    for r in design["switching"]:
+        text = f"{_fmt(r['v_switch'], 4)} V" if r["v_switch"] is not None else escape(r["reason"])
+        table.add_row(r["model"], f"switching, input {r['input']}", "", text, "", "", "")
+    return table

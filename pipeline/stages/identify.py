@@ -37,6 +37,8 @@ class IdentifyResult:
         The least-squares model before simulation-error refinement.
     timings : dict of str to float
         Wall times [s]: ``fit`` (least squares with the T_z search) and ``refine``.
+    design : dict of str to pandas.DataFrame
+        Equilibria and switching voltages (:func:`pipeline.identify.design.design_numbers`).
     """
 
     model: RBFModel
@@ -45,6 +47,7 @@ class IdentifyResult:
     summary: dict[str, Any] = field(default_factory=dict)
     equation_error_model: RBFModel | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    design: dict[str, pd.DataFrame] = field(default_factory=dict)
 
 
 def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
@@ -74,6 +77,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         For an invalid section.
     """
     from pipeline.identify.bands import curves_frame
+    from pipeline.identify.design import design_numbers
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
@@ -85,6 +89,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     records = estimation_records(tables, derivs)
     if set(PHYSICS_TERMS) & set(cfg.backbone):
         cfg = replace(cfg, prior=physics_prior(physics, records))
+    excitation = _excitation(records, cfg, tables)
     model, diag = fit_rbf_model(records, cfg)
     timings = {"fit": time.perf_counter() - t0}
     ls_model, refine = model, None
@@ -105,6 +110,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     curves, identified = curves_frame(
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance
     )
+    design = design_numbers(model, records, physics)
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
@@ -121,9 +127,39 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "identified": identified,
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
         "smoothing": diag.smoothing,
+        "excitation": excitation.to_summary(),
+        "design": {
+            "verdict": design["equilibria"].attrs["verdict"],
+            "reason": design["equilibria"].attrs["reason"],
+            "equilibria": _records_of(design["equilibria"]),
+            "switching": _records_of(design["switching"]),
+        },
         "constraints": list(cfg.constraints),
     }
-    return IdentifyResult(model, diag, curves, summary, ls_model, timings)
+    return IdentifyResult(model, diag, curves, summary, ls_model, timings, design)
+
+
+def _excitation(records, cfg: IdentifyConfig, tables):
+    """Run the excitation check on the estimation records (warnings in the data's unit)."""
+    from pipeline.identify.basis import RBFBasis
+    from pipeline.identify.excitation import check_excitation
+    from pipeline.validate import report_factor
+
+    q = np.concatenate([r.q for r in records])
+    lo, hi = cfg.q_range or (float(q.min()), float(q.max()))
+    basis = RBFBasis.equidistant(lo, hi, cfg.M, cfg.sigma_n, cfg.outside)
+    unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
+    factor, name = report_factor(unit, "mm" if unit == "m" else None)
+    return check_excitation(
+        records, basis, cfg.input_map, rbf=cfg.rbf, min_samples=cfg.min_support,
+        unit_scale=factor, unit_name=name,
+    )  # fmt: skip
+
+
+def _records_of(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    """Rows of a table as JSON-able dicts (NaN as None)."""
+    rows = frame.astype(object).where(frame.notna(), None).to_dict(orient="records")
+    return [{k: (v.item() if hasattr(v, "item") else v) for k, v in r.items()} for r in rows]
 
 
 def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
@@ -179,6 +215,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
     figure = Figure(curves_figure(res.curves, analytical, unit))
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
+    outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     return StageOutput(outputs, res.summary, res.timings)
 
 

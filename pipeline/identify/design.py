@@ -1,0 +1,151 @@
+"""Design numbers of an identified model beside the analytical model's (the identify stage's).
+
+The equilibria of the identified model at rest and at the constant input levels the data
+hold, their stability, small-signal frequency and damping, the barriers and the static
+switching voltages (:mod:`pipeline.identify.stability`), and, with a ``[physics]``
+prototype, the same numbers of the analytical model, which is what a designer compares.
+
+References
+----------
+Masoud & Maas 2025, Eq. 26, 37, Sec. 3.3 (equilibria and switching), Fig. 4.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.identify.stability import stability_table, switching_voltages
+from pipeline.physics.params import V_MAX
+
+
+def held_levels(
+    records: Sequence[Any],
+    *,
+    hold: float = 0.25,
+    resolution: float = 0.02,
+    max_levels: int = 4,
+) -> list[tuple[float, ...]]:
+    """Constant input levels the data hold long enough for the beam to settle.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        Estimation records (``v`` (n, n_inputs) [V], ``dt`` [s]).
+    hold : float
+        Shortest hold [s].
+    resolution : float
+        Inputs within this fraction of their largest value count as one level.
+    max_levels : int
+        Most levels returned (those held longest first).
+
+    Returns
+    -------
+    list of tuple of float
+        Input vectors [V] other than all-zero (the rest level is always analysed), rounded
+        to the resolution.
+    """
+    v_max = max(float(np.max(np.abs(r.v))) for r in records) or 1.0
+    step = resolution * v_max
+    held: dict[tuple[float, ...], float] = {}
+    for r in records:
+        key = np.round(np.asarray(r.v, dtype=float) / step).astype(np.int64)
+        change = np.flatnonzero(np.any(np.diff(key, axis=0) != 0, axis=1)) + 1
+        starts = np.concatenate([[0], change])
+        ends = np.concatenate([change, [key.shape[0]]])
+        for s, e in zip(starts, ends, strict=True):
+            if (e - s) * r.dt >= hold and np.any(key[s]):
+                level = tuple(float(x) for x in key[s] * step)
+                held[level] = held.get(level, 0.0) + (e - s) * r.dt
+    ordered = sorted(held, key=lambda k: -held[k])
+    return ordered[:max_levels]
+
+
+def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.DataFrame]:
+    """Equilibria, verdict and switching voltages of the identified (and analytical) model.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    records : sequence of Record
+        The estimation records (visited range, held levels, largest voltage).
+    physics : PrototypeParams, optional
+        The ``[physics]`` prototype: adds the analytical model's rows, from its reduced
+        model in the form of Eq. 37 (:func:`analytical_as_eq37`; the full model's numbers
+        are ``debist analyze``'s).
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        ``equilibria``: :func:`~pipeline.identify.stability.stability_table` rows with a
+        ``model`` column (``"rbf"``, and ``"analytical"`` with ``physics``), the verdict in
+        ``attrs``; ``switching``: the switching voltages, same ``model`` column (the
+        identified model's up to the largest voltage in the data, the analytical model's up
+        to the drivers' ``V_MAX``).
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 3.3, Eq. 37.
+    """
+    q = np.concatenate([r.q for r in records])
+    levels = held_levels(records)
+    eq = stability_table(model, levels, visited=[(float(q.min()), float(q.max()))])
+    verdict = (eq.attrs["verdict"], eq.attrs["reason"])
+    v_max = max(float(np.max(np.abs(r.v))) for r in records)
+    sw = switching_voltages(model, v_max=v_max)
+    eq.insert(0, "model", "rbf")
+    sw.insert(0, "model", "rbf")
+    if physics is not None and model.n_inputs == 2 and model.input_map == "v2":
+        reduced = analytical_as_eq37(physics, records, model)
+        ana = stability_table(reduced, levels)
+        ana.insert(0, "model", "analytical")
+        ana_sw = switching_voltages(reduced, v_max=max(v_max, V_MAX))
+        ana_sw.insert(0, "model", "analytical")
+        eq = pd.concat([eq, ana], ignore_index=True)
+        sw = pd.concat([sw, ana_sw], ignore_index=True)
+    eq.attrs["verdict"], eq.attrs["reason"] = verdict
+    return {"equilibria": eq, "switching": sw}
+
+
+def analytical_as_eq37(physics, records: Sequence[Any], model):
+    """Write the analytical reduced model as an identified model (Eq. 37 form, Eq. 26 curves).
+
+    Zero RBF weights and the physics backbone at scale one: ``f = c_phys(q) q``,
+    ``d = d_phys(q)``, ``g_i = g_phys,i(q)``, all times ``m_q / m_q,phys(0)`` so that the
+    numbers are in the identified model's units (``m_q = 1`` identifies per unit mass).
+    The stability functions then apply to both models alike.
+
+    Parameters
+    ----------
+    physics : PrototypeParams
+        The prototype.
+    records : sequence of Record
+        The estimation records (range of the tabulation).
+    model : RBFModel
+        The identified model (basis, range, ``m_q``).
+
+    Returns
+    -------
+    RBFModel
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 24-26, 33, 37.
+    """
+    from pipeline.identify.model import RBFModel
+    from pipeline.identify.terms import PhysicsPrior
+    from pipeline.physics_stages import physics_mass, physics_prior
+
+    prior = physics_prior(physics, records, n_grid=801)
+    scale = model.m_q / physics_mass(physics)
+    prior = PhysicsPrior(q=prior.q, c=scale * prior.c, d=scale * prior.d, g=scale * prior.g)
+    zeros = np.zeros(model.basis.M)
+    backbone = {"s_c": 1.0, "s_d": 1.0, "s_g": np.ones(2), "g_0": np.zeros(2)}
+    return RBFModel(
+        model.basis, "v2", 2, model.m_q, 0.0, model.coulomb_velocity, zeros, zeros,
+        np.zeros((2, model.basis.M)), backbone, model.q_range, prior,
+    )  # fmt: skip

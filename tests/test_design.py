@@ -1,0 +1,65 @@
+"""Design numbers in the identify stage: held levels, identified beside analytical."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_stability import F_MAX, K1, K3, M_Q, G, double_well
+
+from pipeline.identify import Record
+from pipeline.identify.design import analytical_as_eq37, design_numbers, held_levels
+from pipeline.physics.params import PrototypeParams
+
+
+def _record(v, dt=0.01):
+    n = v.shape[0]
+    q = np.linspace(-0.011, 0.011, n)
+    return Record("r", q, np.zeros(n), np.zeros(n), v, dt)
+
+
+def test_held_levels_are_the_inputs_held_long_enough():
+    v = np.zeros((1000, 2))
+    v[100:160, 0] = 3000.0  # 0.6 s: held
+    v[300:310, 1] = 3000.0  # 0.1 s: a pulse, not held
+    v[500:900, 1] = 1203.0  # 4 s at a sub-threshold level (rounded to 2 % of 3 kV)
+    v[600:700, 1] += np.linspace(0, 10, 100)  # a slow drift within the resolution
+    levels = held_levels([_record(v)])
+    assert levels[0] == pytest.approx((0.0, 1200.0))
+    assert levels[1] == pytest.approx((3000.0, 0.0))
+    assert len(levels) == 2
+
+
+def test_design_numbers_of_a_double_well_match_the_closed_forms():
+    v = np.zeros((1000, 2))
+    v[100:200, 0] = 0.5 * np.sqrt(F_MAX / G)  # a held sub-switching level
+    v[400:405] = 1.2 * np.sqrt(F_MAX / G)  # short pulses beyond the switching voltage
+    d = design_numbers(double_well(), [_record(v)])
+    eq = d["equilibria"]
+    wells = eq[(eq.level == 0) & eq.static_stable]
+    a = np.sqrt(-K1 / K3)
+    assert wells.q.to_numpy() == pytest.approx([-a, a], rel=1e-6)
+    f_n = np.sqrt(-2 * K1 / M_Q) / (2 * np.pi)
+    assert wells.f_n.to_numpy() == pytest.approx([f_n, f_n], rel=1e-5)
+    assert eq.attrs["verdict"] == "stable"
+    sw = d["switching"]
+    assert sw.v_switch.to_numpy() == pytest.approx(np.sqrt(F_MAX / G) * np.ones(2), rel=1e-4)
+    assert set(eq.model) == {"rbf"} and len(eq[eq.level == 1]) >= 1
+
+
+def test_the_analytical_rows_are_the_reduced_model_in_eq37_form():
+    """Paper prototype: wells at +-10.21 mm and 1.42 kV switching (the full model's statics
+    give 1425 V), with frequencies invariant to the model's m_q scaling."""
+    P = PrototypeParams.paper()
+    v = np.zeros((600, 2))
+    rec = _record(v)
+    for m_q in (1.0, 0.042):
+        model = dataclasses.replace(double_well(), m_q=m_q)
+        eq37 = analytical_as_eq37(P, [rec], model)
+        d = design_numbers(model, [rec], P)
+        ana = d["equilibria"][d["equilibria"].model == "analytical"]
+        wells = ana[ana.static_stable]
+        assert wells.q.to_numpy() == pytest.approx([-0.01021, 0.01021], abs=2e-5)
+        sw = d["switching"][d["switching"].model == "analytical"]
+        assert sw.v_switch.to_numpy() == pytest.approx([1425.0, 1425.0], rel=0.01)
+        assert eq37.m_q == model.m_q
+        assert wells.f_n.to_numpy() == pytest.approx([2.84, 2.84], rel=0.01)
