@@ -1,0 +1,665 @@
+"""Automatic hyper-parameters of the RBF identification by blocked cross-validation.
+
+The hyper-parameters of Eq. 37-40 (``M``, ``sigma_n``, the filtered equation error's
+``lowpass``, the smoothness penalty) decide between a free run that follows the rig to 1 %
+and one that misses it by 30 %, and the equation error of the least squares cannot tell:
+more centres always lower it. This module chooses them by what the model is used for, the
+free-run error, estimated on the estimation records alone by blocked cross-validation:
+
+* each estimation record is cut into ``folds`` contiguous time blocks; fold ``k`` holds
+  out block ``k`` of every record and fits on the rest, each record's remaining contiguous
+  pieces becoming records of their own (every piece is trimmed by ``trim`` at both ends by
+  :func:`pipeline.identify.fit.fit_rbf_model`, which is also the gap between the training
+  rows and the held-out block; the low-pass of the filtered equation error runs per piece,
+  so no held-out sample enters a training row through the filter);
+* the fitted model runs free on the held-out block from the measured ``q`` and ``q_dot`` at
+  its first sample, driven by the block's measured inputs, and scores NRMSE(q) (Eq. 41) on
+  it; a record's first and last ``trim`` samples are neither fitted nor scored;
+* a fit that raises :class:`~pipeline.errors.IdentificationError` (rank deficient, badly
+  conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
+  table says which;
+* the chosen setting is the most parsimonious one whose mean score is within one standard
+  error of the best mean (the one-standard-error rule; Hastie, Tibshirani & Friedman,
+  *The Elements of Statistical Learning*, 2nd ed., Springer 2009, Sec. 7.10).
+
+Parsimony order (:data:`PARSIMONY`): fewer least-squares parameters first (regressor
+columns; ``M`` and the terms set them), then wider RBFs (larger ``sigma_n``: smoother
+curves), then stronger smoothing (larger penalty weight lambda; with ``"gcv"`` the lambda
+GCV chose, averaged over the folds), then a lower ``lowpass`` corner (``None``, no filter,
+counts as the highest corner), finally the lower mean score.
+
+Candidates (:data:`MAX_PRODUCT`): the cartesian product of the grid when it has at most
+40 settings; otherwise one coordinate sweep: the parameters in the grid's order, each over
+all its values with the others held at the current setting, which starts at the base
+configuration and moves to the best mean score after each sweep (about the sum, not the
+product, of the grid's lengths). The one-standard-error rule then chooses among all
+evaluated settings.
+
+The differentiation stage's TVRegDiff ``alpha`` is not tuned here: the derivatives
+``q_dot`` and ``q_ddot`` are inputs of the records (computed once, on the whole record, by
+an earlier stage); a search over it belongs to the stage level. Their global computation
+is the one channel through which a held-out block informs the neighbouring training rows,
+over a few correlation lengths of the derivative error; ``trim`` widens the gap.
+
+References
+----------
+Masoud & Maas 2025, Eq. 37-41 and Fig. 11b, 11c (error against M and sigma_n); Hastie,
+Tibshirani & Friedman 2009, Sec. 7.10 (K-fold cross-validation, one-standard-error rule);
+Bergmeir & Benitez 2012, Inf. Sci. 191, 192-213 (blocked cross-validation of time series).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline import progress as _progress
+from pipeline.errors import IdentificationError, WorkflowError
+from pipeline.identify.config import IdentifyConfig
+from pipeline.identify.fit import Record, fit_rbf_model
+from pipeline.identify.terms import column_names
+
+__all__ = [
+    "MAX_PRODUCT",
+    "PARSIMONY",
+    "AutoResult",
+    "Fold",
+    "autotune_figure",
+    "blocked_folds",
+    "one_standard_error",
+    "select_hyperparameters",
+]
+
+#: Largest cartesian product of the grid evaluated whole; larger grids are swept.
+MAX_PRODUCT = 40
+#: Parsimony order of the table's columns: (column, ascending) -- most parsimonious first.
+PARSIMONY = (("n_params", True), ("sigma_n", False), ("lambda", False), ("lowpass", True))
+#: Samples a held-out segment needs at least to be scored.
+_MIN_SCORED = 10
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One fold of the blocked cross-validation: row spans ``(record, start, stop)``.
+
+    Attributes
+    ----------
+    index : int
+        Fold number, 0-based (the held-out block's position in each record).
+    test : tuple of (int, int, int)
+        The held-out block of every record: record index, first row, row after the last.
+    train : tuple of (int, int, int)
+        The records' remaining contiguous pieces (non-empty), in record and time order.
+    """
+
+    index: int
+    test: tuple[tuple[int, int, int], ...]
+    train: tuple[tuple[int, int, int], ...]
+
+
+def blocked_folds(lengths: Sequence[int], folds: int) -> list[Fold]:
+    """Cut every record into ``folds`` contiguous blocks; fold ``k`` holds out block ``k``.
+
+    Parameters
+    ----------
+    lengths : sequence of int
+        Samples of each record.
+    folds : int
+        Number of folds, at least 2.
+
+    Returns
+    -------
+    list of Fold
+        ``folds`` folds; their held-out blocks partition every record's rows (each row is
+        held out exactly once), and a fold's training pieces are the rows it does not hold
+        out. Block ``k`` of a record of ``n`` rows is ``[round(k n / K), round((k+1) n / K))``.
+
+    Raises
+    ------
+    WorkflowError
+        If ``folds < 2`` or a record has fewer rows than folds.
+
+    References
+    ----------
+    Bergmeir & Benitez 2012, Inf. Sci. 191, 192-213 (blocked cross-validation).
+    """
+    if folds < 2:
+        raise WorkflowError(f"blocked cross-validation needs folds >= 2, got {folds!r}")
+    edges = []
+    for j, n in enumerate(lengths):
+        if n < folds:
+            raise WorkflowError(f"record {j} has {n} samples, fewer than folds = {folds}")
+        edges.append(np.round(np.linspace(0, n, folds + 1)).astype(int))
+    out = []
+    for k in range(folds):
+        test, train = [], []
+        for j, e in enumerate(edges):
+            start, stop = int(e[k]), int(e[k + 1])
+            test.append((j, start, stop))
+            train += [(j, a, b) for a, b in ((0, start), (stop, int(e[-1]))) if b > a]
+        out.append(Fold(k, tuple(test), tuple(train)))
+    return out
+
+
+def one_standard_error(table: pd.DataFrame) -> Any:
+    """Choose by the one-standard-error rule: the most parsimonious row near the best.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        One row per candidate with ``mean`` and ``se`` (the cross-validation score's mean
+        and standard error over the folds; ``inf`` for a failed candidate) and any of the
+        parsimony columns of :data:`PARSIMONY` (``n_params``, ``sigma_n``, ``lambda``,
+        ``lowpass``; NaN ``lowpass`` means no filter, ranked as the highest corner).
+
+    Returns
+    -------
+    object
+        Index label of the chosen row: among the rows with ``mean <= mean_best + se_best``
+        (``best`` the row of least finite mean), the first in the parsimony order, ties
+        broken by the lower mean.
+
+    Raises
+    ------
+    IdentificationError
+        If no row has a finite mean (every candidate failed).
+
+    References
+    ----------
+    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
+    Sec. 7.10 (the one-standard-error rule).
+    """
+    finite = table[np.isfinite(table["mean"].to_numpy(dtype=float))]
+    if finite.empty:
+        raise IdentificationError("every hyper-parameter candidate failed or diverged")
+    best = finite["mean"].astype(float).idxmin()
+    se = float(finite.loc[best, "se"])
+    limit = float(finite.loc[best, "mean"]) + (se if np.isfinite(se) else 0.0)
+    near = finite[finite["mean"].astype(float) <= limit]
+    keys = []
+    for column, up in PARSIMONY:
+        if column in near:
+            values = near[column].astype(float)
+            if column == "lowpass":
+                values = values.fillna(np.inf)
+            elif column == "lambda":
+                values = values.fillna(0.0)
+            keys.append(values if up else -values)
+    keys.append(near["mean"].astype(float))
+    order = pd.DataFrame({f"k{i}": k for i, k in enumerate(keys)}, index=near.index)
+    return order.sort_values(list(order.columns), kind="stable").index[0]
+
+
+@dataclass(frozen=True)
+class AutoResult:
+    """Outcome of :func:`select_hyperparameters`.
+
+    Attributes
+    ----------
+    chosen : dict
+        The chosen value of every grid parameter (as given in the grid: ``None`` for no
+        low-pass, ``"gcv"`` for the GCV smoothing).
+    table : pandas.DataFrame
+        One row per evaluated candidate: ``candidate``, the grid parameters and ``M``,
+        ``sigma_n``, ``lowpass`` [Hz] (NaN: none), ``smoothing`` (numbers, or text when a
+        column mixes numbers and words), ``n_params`` (regressor columns), ``lambda`` (the
+        penalty weight used, mean over the folds), ``mean`` and ``se`` of the fold scores,
+        ``fold_1 .. fold_K`` (NRMSE(q) of each held-out block [-]; ``inf`` for a fold whose
+        fit failed or whose free run diverged, NaN for folds not evaluated after a failed fit),
+        ``status`` (``"ok"``, ``"fit failed"``, ``"diverged"``), ``message``,
+        ``within_1se`` and ``chosen``.
+    settings : list of dict
+        The grid values of each row of ``table``, as given.
+    folds : int
+        Number of folds.
+    strategy : str
+        ``"product"`` (the whole cartesian product) or ``"sweep"`` (coordinate sweeps).
+    best : int
+        Row of the least mean score.
+    threshold : float
+        ``mean_best + se_best``: the one-standard-error bound.
+    seconds : float
+        Wall time [s] of the search.
+    """
+
+    chosen: dict[str, Any]
+    table: pd.DataFrame
+    settings: list[dict[str, Any]]
+    folds: int
+    strategy: str
+    best: int
+    threshold: float
+    seconds: float = field(default=0.0, compare=False)
+
+    def to_summary(self) -> dict[str, Any]:
+        """Return the result as JSON-able data (non-finite scores as ``None``).
+
+        Returns
+        -------
+        dict
+            ``chosen``, ``strategy``, ``folds``, ``best``, ``threshold``, ``n_candidates``
+            and ``candidates``: per row its settings, ``n_params``, ``lambda``, ``mean``,
+            ``se``, ``folds`` (list), ``status``, ``message``. No wall time (reproducible).
+        """
+        k = self.folds
+        rows = []
+        for i, row in self.table.iterrows():
+            rows.append(
+                {
+                    "settings": _jsonable(self.settings[i]),
+                    "n_params": int(row["n_params"]),
+                    "lambda": _num(row["lambda"]),
+                    "mean": _num(row["mean"]),
+                    "se": _num(row["se"]),
+                    "folds": [_num(row[f"fold_{j + 1}"]) for j in range(k)],
+                    "status": str(row["status"]),
+                    "message": str(row["message"]),
+                }
+            )
+        return {
+            "chosen": _jsonable(self.chosen),
+            "strategy": self.strategy,
+            "folds": k,
+            "best": int(self.best),
+            "threshold": _num(self.threshold),
+            "n_candidates": len(rows),
+            "candidates": rows,
+        }
+
+
+def _num(x: Any) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _jsonable(setting: Mapping[str, Any]) -> dict[str, Any]:
+    out = {}
+    for key, value in setting.items():
+        if isinstance(value, tuple | list):
+            value = list(value)
+        elif isinstance(value, np.generic):
+            value = value.item()
+        out[key] = value
+    return out
+
+
+def _freeze(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list | tuple) else value
+
+
+def _candidate_cfg(base: IdentifyConfig, setting: Mapping[str, Any]) -> IdentifyConfig:
+    """Return the base configuration with a candidate's values, without bootstrap."""
+    try:
+        return replace(base, **dict(setting), bootstrap=0)
+    except ValueError as exc:  # pydantic.ValidationError and ConfigValueError
+        raise WorkflowError(
+            f"[identify] hyper-parameter grid: the setting {dict(setting)!r} is not a valid "
+            f"configuration: {exc}"
+        ) from None
+
+
+def _n_params(cfg: IdentifyConfig, n_inputs: int) -> int:
+    force, inputs = column_names(cfg.rbf, cfg.backbone, cfg.M, n_inputs)
+    return len(force) + len(inputs) + (cfg.m_q == "identify")
+
+
+def _pieces(records: Sequence[Record], spans, tag: str) -> list[Record]:
+    out = []
+    for j, a, b in spans:
+        r = records[j]
+        s = slice(a, b)
+        name = f"{r.name} {tag} rows {a}:{b}"
+        out.append(Record(name, r.q[s], r.q_dot[s], r.q_ddot[s], r.v[s], r.dt))
+    return out
+
+
+def _scored_spans(records, fold: Fold, trim: int) -> list[tuple[int, int, int]]:
+    """Return the held-out blocks without each record's first and last ``trim`` rows."""
+    spans = []
+    for j, a, b in fold.test:
+        n = records[j].q.size
+        a, b = max(a, trim), min(b, n - trim)
+        if b - a < _MIN_SCORED:
+            continue
+        spans.append((j, a, b))
+    return spans
+
+
+def _fold_score(model, records, spans, substeps) -> tuple[float, bool]:
+    """Mean NRMSE(q) of the free runs on the held-out spans; (inf, True) if one diverged."""
+    from pipeline.simulate import simulate
+    from pipeline.validate import default_q_limit, nrmse
+
+    scores = []
+    by_dt: dict[float, list[tuple[int, int, int]]] = {}
+    for span in spans:
+        by_dt.setdefault(round(records[span[0]].dt, 12), []).append(span)
+    q_limit = default_q_limit(model.q_range)
+    for group in by_dt.values():
+        recs = [records[j] for j, _, _ in group]
+        sims = simulate(
+            model,
+            [r.v[a:b] for r, (_, a, b) in zip(recs, group, strict=True)],
+            recs[0].dt,
+            np.array([r.q[a] for r, (_, a, _) in zip(recs, group, strict=True)]),
+            np.array([r.q_dot[a] for r, (_, a, _) in zip(recs, group, strict=True)]),
+            substeps=substeps,
+            q_limit=q_limit,
+            engine="compiled",
+            progress=lambda done, total: None,
+        )
+        for r, (_, a, b), sim in zip(recs, group, sims, strict=True):
+            if sim.diverged or not np.all(np.isfinite(sim.q)):
+                return np.inf, True
+            scores.append(nrmse(r.q[a:b], sim.q))
+    return float(np.mean(scores)), False
+
+
+def _evaluate(records, cfg: IdentifyConfig, fold_list, substeps) -> dict[str, Any]:
+    """Fit on each fold's training pieces and score the held-out block's free run.
+
+    A fit that raises ends the candidate (its later folds stay NaN: not evaluated); a
+    diverged free run scores that fold ``inf`` and the other folds are still evaluated.
+    """
+    scores = np.full(len(fold_list), np.nan)
+    lams: list[float] = []
+    diverged: list[int] = []
+    status, message = "ok", ""
+    minimum = 2 * cfg.trim + 11
+    for fold in fold_list:
+        pieces = _pieces(records, fold.train, f"fold {fold.index + 1}")
+        train = [p for p in pieces if p.q.size >= minimum]
+        try:
+            if not train:
+                raise IdentificationError(
+                    f"no training piece is longer than 2 trim + 10 = {minimum - 1} samples"
+                )
+            model, diag = fit_rbf_model(train, cfg)
+        except (IdentificationError, np.linalg.LinAlgError) as exc:
+            scores[fold.index] = np.inf
+            status, message = "fit failed", f"fold {fold.index + 1}: {exc}"
+            break
+        lams.append(diag.smoothing)
+        spans = _scored_spans(records, fold, cfg.trim)
+        scores[fold.index], bad = _fold_score(model, records, spans, substeps)
+        if bad:
+            diverged.append(fold.index + 1)
+    if diverged and status == "ok":
+        status = "diverged"
+        message = f"the free run diverged in fold(s) {diverged}"
+    return {"scores": scores, "lambda": float(np.mean(lams)) if lams else np.nan,
+            "status": status, "message": message}  # fmt: skip
+
+
+def _mean(scores: np.ndarray) -> float:
+    """Mean fold score; ``inf`` when a fold failed, diverged or was not evaluated."""
+    return float(np.mean(scores)) if np.all(np.isfinite(scores)) else np.inf
+
+
+def _column(values: list[Any]) -> list[Any] | np.ndarray:
+    """Make a table column: numbers (None as NaN) if every value is a number, else text."""
+    if all(v is None or isinstance(v, int | float | np.number) for v in values):
+        if all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in values):
+            return np.asarray(values, dtype=int)
+        return np.array([np.nan if v is None else float(v) for v in values])
+    return [str(list(v)) if isinstance(v, tuple | list) else str(v) for v in values]
+
+
+def _check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[str, list]:
+    known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap"}
+    out = {}
+    if not grid:
+        raise WorkflowError("[identify] hyper-parameter grid is empty")
+    for key, values in grid.items():
+        if key not in known:
+            raise WorkflowError(
+                f"[identify] hyper-parameter grid: unknown key {key!r}; choose from {sorted(known)}"
+            )
+        values = list(values) if isinstance(values, list | tuple) else [values]
+        if not values:
+            raise WorkflowError(f"[identify] hyper-parameter grid: {key} has no values")
+        for v in values:
+            _candidate_cfg(base, {key: v})  # refuse an invalid value before any fit
+        out[key] = values
+    return out
+
+
+def select_hyperparameters(
+    records: Sequence[Record],
+    base_cfg: IdentifyConfig,
+    grid: Mapping[str, Sequence[Any]],
+    *,
+    folds: int = 4,
+    substeps: int = 2,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> AutoResult:
+    """Choose RBF hyper-parameters by blocked cross-validation of the free-run error.
+
+    Only the estimation records are used: each is cut into ``folds`` contiguous time blocks
+    (:func:`blocked_folds`); per candidate and fold the model is fitted on the other blocks
+    (each remaining contiguous piece a record, trimmed by ``trim``) and run free on the
+    held-out block from its measured ``q``, ``q_dot`` at the first sample; the fold's score
+    is NRMSE(q) of Eq. 41 (mean over the records). A failed fit or a diverged run scores
+    ``inf``. The choice is the most parsimonious candidate within one standard error of the
+    best mean (:func:`one_standard_error`; order :data:`PARSIMONY`). Candidates: the
+    cartesian product of ``grid`` if it has at most :data:`MAX_PRODUCT` settings, else one
+    coordinate sweep from ``base_cfg`` (see the module docstring). The fits use
+    ``bootstrap = 0``.
+
+    TVRegDiff's ``alpha`` cannot be tuned here: ``q_dot`` and ``q_ddot`` are inputs (the
+    differentiation stage's output); tuning it needs the stage level.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        Estimation records (never validation data).
+    base_cfg : IdentifyConfig
+        The configuration the candidates modify (``m_q`` a number, as
+        :func:`pipeline.identify.fit.fit_rbf_model` takes it).
+    grid : mapping of str to list
+        Values per :class:`IdentifyConfig` field, e.g. ``{"M": [6, 8, 10, 12], "sigma_n":
+        [0.5, 1.0], "lowpass": [None, 5.0, 10.0], "smoothing": [0.0, "gcv"]}``.
+    folds : int, optional
+        Blocks per record (K of K-fold), at least 2.
+    substeps : int, optional
+        RK4 steps per sample of the free runs.
+    seed : int, optional
+        Unused: the folds are contiguous blocks and the fits deterministic, so nothing is
+        random (kept for a stable signature should a randomised strategy be added).
+    progress : callable, optional
+        Called as ``progress(done, total)`` [candidates]; default: the listener of
+        :mod:`pipeline.progress` (task "hyper-parameters"), if any.
+
+    Returns
+    -------
+    AutoResult
+        The chosen setting, the score table, the strategy.
+
+    Raises
+    ------
+    WorkflowError
+        If the grid is empty, names an unknown field or holds an invalid value (before any
+        fit), ``folds < 2``, or a record is too short for the folds.
+    IdentificationError
+        If every candidate failed or diverged.
+    ResourceError
+        If a free run would exceed the memory budget.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-41, Fig. 11b, 11c; Hastie, Tibshirani & Friedman, The
+    Elements of Statistical Learning, 2nd ed., 2009, Sec. 7.10; Bergmeir & Benitez 2012,
+    Inf. Sci. 191, 192-213.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    del seed  # deterministic: contiguous blocks, no sampling
+    grid = _check_grid(base_cfg, grid)
+    if not records:
+        raise WorkflowError("no estimation records to cross-validate")
+    fold_list = blocked_folds([r.q.size for r in records], folds)
+    for fold in fold_list:
+        if len(_scored_spans(records, fold, base_cfg.trim)) < len(fold.test):
+            raise WorkflowError(
+                f"folds = {folds}: a held-out block of fold {fold.index + 1} keeps fewer than "
+                f"{_MIN_SCORED} samples after trim = {base_cfg.trim}; use fewer folds"
+            )
+    report = progress or _progress.reporter("hyper-parameters") or (lambda done, total: None)
+    n_in = records[0].v.shape[1]
+    keys = list(grid)
+    size = math.prod(len(v) for v in grid.values())
+    strategy = "product" if size <= MAX_PRODUCT else "sweep"
+    total = size if strategy == "product" else sum(len(v) for v in grid.values())
+    cache: dict[tuple, dict[str, Any]] = {}
+    order: list[dict[str, Any]] = []
+
+    def run(setting: dict[str, Any]) -> dict[str, Any]:
+        key = tuple(_freeze(setting[k]) for k in keys)
+        if key not in cache:
+            cfg = _candidate_cfg(base_cfg, setting)
+            cache[key] = {**_evaluate(records, cfg, fold_list, substeps), "cfg": cfg}
+            order.append(dict(setting))
+            report(len(order), total)
+        return cache[key]
+
+    if strategy == "product":
+        for combo in itertools.product(*grid.values()):
+            run(dict(zip(keys, combo, strict=True)))
+    else:
+        current = {k: getattr(base_cfg, k) for k in keys}
+        for k in keys:
+            sweep = [{**current, k: v} for v in grid[k]]
+            means = [_mean(run(s)["scores"]) for s in sweep]
+            if np.isfinite(means).any():
+                current = sweep[int(np.argmin(means))]
+    report(total, total)
+    table = _table(order, cache, keys, n_in, len(fold_list))
+    chosen = one_standard_error(table)
+    best = int(table["mean"].astype(float).idxmin())
+    threshold = float(table.loc[best, "mean"] + np.nan_to_num(table.loc[best, "se"]))
+    table["within_1se"] = table["mean"] <= threshold
+    table["chosen"] = table.index == chosen
+    return AutoResult(
+        chosen=dict(order[chosen]),
+        table=table,
+        settings=order,
+        folds=len(fold_list),
+        strategy=strategy,
+        best=best,
+        threshold=threshold,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
+    rows = [cache[tuple(_freeze(s[key]) for key in keys)] for s in order]
+    cfgs = [r["cfg"] for r in rows]
+    scores = np.array([r["scores"] for r in rows]).reshape(len(rows), k)
+    finite = np.isfinite(scores).all(axis=1)  # a failed or unevaluated fold: mean inf
+    mean = np.where(finite, scores.mean(axis=1), np.inf)
+    se = np.full(len(rows), np.inf)
+    se[finite] = scores[finite].std(axis=1, ddof=1) / np.sqrt(k)
+    data: dict[str, Any] = {"candidate": np.arange(len(rows))}
+    for name in dict.fromkeys(["M", "sigma_n", "lowpass", "smoothing", *keys]):
+        data[name] = _column([getattr(c, name) for c in cfgs])
+    data["n_params"] = [_n_params(c, n_in) for c in cfgs]
+    data["lambda"] = [r["lambda"] for r in rows]
+    data["mean"] = mean
+    data["se"] = se
+    for j in range(k):
+        data[f"fold_{j + 1}"] = scores[:, j]
+    data["status"] = [r["status"] for r in rows]
+    data["message"] = [r["message"] for r in rows]
+    return pd.DataFrame(data)
+
+
+def autotune_figure(result: AutoResult) -> Any:
+    """Draw the cross-validation score against the candidates (Fig. 11b, 11c generalised).
+
+    The x axis is ``M`` when the grid varies it (else the first varied parameter); one line
+    per setting of the other grid parameters, with one-standard-error bars. The dashed line
+    is the one-standard-error bound, the ring the chosen candidate; failed or diverged
+    candidates are crosses at the top edge.
+
+    Parameters
+    ----------
+    result : AutoResult
+        Output of :func:`select_hyperparameters`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One axis: mean NRMSE(q) of the held-out blocks [%] against the x parameter.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 11b, 11c (validation error against M and sigma_n).
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.transforms import blended_transform_factory
+
+    table = result.table
+    keys = list(result.settings[0]) if result.settings else ["M"]
+    varied = [k for k in keys if len({repr(s[k]) for s in result.settings}) > 1] or keys
+    x_key = "M" if "M" in varied else varied[0]
+    others = [k for k in varied if k != x_key]
+    xs = [s[x_key] for s in result.settings]
+    numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
+    labels = sorted({repr(x) for x in xs}) if not numeric else []
+
+    def pos(x: Any) -> float:
+        return float(x) if numeric else float(labels.index(repr(x)))
+
+    fig = Figure(figsize=(8, 5))
+    ax = fig.subplots()
+    groups: dict[str, list[int]] = {}
+    for i, s in enumerate(result.settings):
+        label = ", ".join(f"{k} = {s[k]!r}" for k in others) or "score"
+        groups.setdefault(label, []).append(i)
+    top = blended_transform_factory(ax.transData, ax.transAxes)
+    failed = False
+    for label, rows in groups.items():
+        rows = sorted(rows, key=lambda i: pos(result.settings[i][x_key]))
+        ok = [i for i in rows if np.isfinite(table.loc[i, "mean"])]
+        if ok:
+            ax.errorbar(
+                [pos(result.settings[i][x_key]) for i in ok],
+                [100 * table.loc[i, "mean"] for i in ok],
+                yerr=[100 * table.loc[i, "se"] for i in ok],
+                marker="o", ms=4, capsize=3, lw=1, label=label,
+            )  # fmt: skip
+        for i in rows:
+            if not np.isfinite(table.loc[i, "mean"]):
+                failed = True
+                ax.plot(pos(result.settings[i][x_key]), 0.97, "x", color="tab:red",
+                        transform=top, clip_on=False)  # fmt: skip
+    c = int(table.index[table["chosen"]][0])
+    ax.plot(pos(result.settings[c][x_key]), 100 * table.loc[c, "mean"], "o", ms=13, mfc="none",
+            mec="k", mew=1.5, label="chosen (one-standard-error rule)")  # fmt: skip
+    ax.axhline(100 * result.threshold, color="0.4", ls="--", lw=1, label="best + 1 SE")
+    if failed:
+        ax.plot([], [], "x", color="tab:red", label="fit failed / diverged")
+    finite = table["mean"][np.isfinite(table["mean"])]
+    if len(finite) and finite.max() > 10 * finite.min() > 0:
+        ax.set_yscale("log")
+    if not numeric:
+        ax.set_xticks(range(len(labels)), labels)
+    ax.set_xlabel(x_key)
+    ax.set_ylabel("held-out free-run NRMSE(q) [%]")
+    ax.set_title(
+        f"blocked {result.folds}-fold cross-validation ({result.strategy}, "
+        f"{len(result.settings)} candidates)\nchosen: "
+        + ", ".join(f"{k} = {v!r}" for k, v in result.chosen.items()),
+        fontsize=9,
+    )
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return fig
