@@ -56,12 +56,34 @@ def _options(
             "variable DEBIST_MEMORY_BUDGET_GB).",
         ),
     ] = None,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            is_eager=True,
+            callback=lambda value: _print_version(value),
+            help="Print debist's version and exit.",
+        ),
+    ] = False,
 ) -> None:
     """Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025)."""
     if memory_budget is not None:
         from pipeline.preflight import BUDGET_ENV
 
         os.environ[BUDGET_ENV] = repr(float(memory_budget))  # batch workers inherit it
+
+
+def _print_version(value: bool) -> None:
+    """Print the installed version (package metadata) and exit, for ``--version``."""
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("debist")
+        except PackageNotFoundError:  # run from a source tree that is not installed
+            text = "unknown (not installed)"
+        console.print(f"debist {text}")
+        raise typer.Exit(0)
 
 
 @contextmanager
