@@ -75,3 +75,34 @@ def test_a_free_run_that_leaves_twice_the_estimation_range_is_diverged():
     rows = res.table[res.table.model == "rbf"]
     assert rows.diverged.all() and (rows.status == "diverged").all()
     assert rows.nrmse_q.isna().all()
+
+
+def test_a_single_frequency_duffing_gets_the_excitation_warning_and_an_honest_row():
+    """One sine cannot separate stiffness from damping: identify says so; the validation row
+    is a number only if the identified damping at the well is positive, else 'unstable'."""
+    from test_excitation import _duffing
+
+    from pipeline.stages.identify import run_identify
+
+    rec = _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=120.0)
+    t = np.arange(rec.q.size) * rec.dt
+    tables, derivs = {}, {}
+    for name, role in (("est", "estimation"), ("val", "validation")):
+        frame = pd.DataFrame({"t": t, "q": rec.q, "v1": rec.v[:, 0]})
+        frame.attrs.update(role=role, units={"q": "m", "t": "s", "v1": "V"})
+        tables[name] = frame
+        derivs[name] = pd.DataFrame({"q_dot": rec.q_dot, "q_ddot": rec.q_ddot})
+        derivs[name].attrs["dt"] = rec.dt
+    section = {"M": 8, "T_z": 0.0, "input_map": "v", "rbf": ["c", "d"], "bootstrap": 20,
+               "backbone": ["linear_spring", "cubic_spring", "viscous", "input_gain"]}  # fmt: skip
+    res = run_identify(tables, derivs, section)
+    exc = res.summary["excitation"]
+    assert exc["single_frequency"]
+    assert any("spectral line" in w for w in exc["warnings"])
+    val = run_validate(res.model, tables, derivs, {"substeps": 2})
+    rows = val.table[val.table.model == "rbf"]
+    d_at_rest = res.model.curves(np.array([0.0]))["d"][0]
+    if d_at_rest < 0:
+        assert (rows.status == "unstable").all() and rows.nrmse_q.isna().all()
+    else:
+        assert (rows.status == "ok").all() and (rows.nrmse_q < 0.05).all()
