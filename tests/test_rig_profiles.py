@@ -197,10 +197,10 @@ def test_bad_arguments(builder, kwargs, match):
 
 
 def test_make_profile_registry_and_errors():
-    assert set(PROFILES) == {"identification", "validation"}
+    assert set(PROFILES) == {"identification", "validation", "staircase"}
     assert V_LIMIT == 3000.0
     with pytest.raises(
-        WorkflowError, match=r"unknown excitation profile 'chirp'.*identification, validation"
+        WorkflowError, match=r"profile 'chirp'.*identification, validation, staircase"
     ):
         make_profile("chirp")
     with pytest.raises(WorkflowError, match=r"unknown parameter 'amplitude'.*v_max"):
