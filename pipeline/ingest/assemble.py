@@ -5,9 +5,12 @@ Order of operations on a log whose channels share one sample index:
 1. time ``t`` from the time channel, or ``k * sample_time`` (k the file sample index);
 2. ``slice`` (sample indices), then ``time_window`` (``start <= t < stop``);
 3. at least 3 samples left; time finite and strictly increasing; every channel finite;
-   ``sample_time`` (if also given) within 1 % of the median step;
+   ``sample_time`` (if also given) within 1 % of the median step; sensor faults (a
+   channel's ``range`` / ``stuck``, :mod:`pipeline.ingest.validity`) under
+   ``faults = "error"``;
 4. gaps (a step > ``gap_tolerance * median(dt)``): error, or split into gap-free
-   segments and drop those shorter than ``min_segment``;
+   segments; under ``faults = "split"`` the faulty samples are cut out too; segments
+   shorter than ``min_segment`` are dropped;
 5. ``resample`` each segment on its own.
 
 Channels of a dSPACE recording on *different* rasters (time bases) need ``resample``:
@@ -40,6 +43,7 @@ from pipeline.ingest.checks import (
 )
 from pipeline.ingest.resample import resample_segment, uniform_grid
 from pipeline.ingest.spec import IngestSpec, ResampleSpec
+from pipeline.ingest.validity import cut_faults, fault_mask
 
 __all__ = ["Segment", "assemble", "to_frame"]
 
@@ -100,6 +104,7 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
         check_finite(values[:, j], t, index, role=c.role, channel=c.source, path=path)
     if mapped.time is not None and spec.sample_time is not None:
         check_sample_time(t, spec.sample_time, channel=t_name, path=path)
+    faulty = fault_mask(t, values, index, mapped.columns, spec, path=path)
     gaps, median = find_gaps(t, spec.gap_tolerance)
     if gaps.size and spec.gaps == "error":
         raise gap_error(t, index, gaps, median, spec.gap_tolerance, channel=t_name, path=path)
@@ -107,6 +112,8 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
         kept, dropped = split_segments(t.size, gaps, spec.min_segment)
     else:
         kept, dropped = [(0, t.size)], []
+    if faulty.any():
+        kept, dropped = cut_faults(kept, dropped, faulty, spec.min_segment)
     dropped_info = [
         {"first_index": int(index[i]), "n_samples": j - i, "t_start": float(t[i])}
         for i, j in dropped
@@ -158,6 +165,7 @@ def _mixed_bases(
     for c in mapped.columns:
         t = bases[c.base].values
         check_finite(c.values, t, np.arange(t.size), role=c.role, channel=c.source, path=path)
+        fault_mask(t, c.values[:, None], np.arange(t.size), (c,), spec, path=path, split=False)
         what = f"`{c.role}` ('{c.source}')"
         pieces.append(_resample(t, c.values[:, None], resample, path, what))
     t0 = max(float(p[0][0]) for p in pieces)

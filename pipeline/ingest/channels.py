@@ -41,6 +41,11 @@ class Column:
     base : int or None
         Index of its time base in :attr:`Mapped.bases` (dSPACE raster), or None when
         every channel shares the file's single sample index.
+    gain : float
+        ``values = recorded * gain`` (unit factor times ``scale``), to state limits given
+        in the recorded unit in SI.
+    file_unit : str or None
+        The recorded unit (the spec's or the file's), for messages.
     """
 
     role: str
@@ -48,6 +53,8 @@ class Column:
     values: np.ndarray
     unit: str
     base: int | None = None
+    gain: float = 1.0
+    file_unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -201,7 +208,9 @@ def to_float(channel: RawChannel, log: RawLog) -> np.ndarray:
     return numbers
 
 
-def _convert(channel: RawChannel, spec: ChannelSpec, log: RawLog) -> tuple[np.ndarray, str]:
+def _convert(
+    channel: RawChannel, spec: ChannelSpec, log: RawLog
+) -> tuple[np.ndarray, str, float, str | None]:
     key = "time" if spec.role == "t" else spec.role
     declared = canonical_unit(channel.unit) if channel.unit and channel.unit.strip() else None
     if spec.unit is not None and declared is not None and declared != spec.unit:
@@ -234,8 +243,8 @@ def _convert(channel: RawChannel, spec: ChannelSpec, log: RawLog) -> tuple[np.nd
             path=log.path,
             channel=channel.name,
         )
-    values = to_float(channel, log) * (factor * (1.0 if spec.scale is None else spec.scale))
-    return values, si
+    gain = factor * (1.0 if spec.scale is None else spec.scale)
+    return to_float(channel, log) * gain, si, gain, unit
 
 
 def _dspace_bases(log: RawLog, spec: IngestSpec, columns: list[Column]) -> dict[int, Column]:
@@ -255,7 +264,7 @@ def _dspace_bases(log: RawLog, spec: IngestSpec, columns: list[Column]) -> dict[
     bases = {}
     for k in used:
         raster = log.rasters[k]
-        values, unit = _convert(raster, time_spec, log)
+        values, unit, _, _ = _convert(raster, time_spec, log)
         bases[k] = Column("t", raster.name, values, unit, k)
     return bases
 
@@ -286,7 +295,7 @@ def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
     columns = []
     for cspec in spec.channels:
         raw = select_channel(log.channels, cspec, log)
-        values, unit = _convert(raw, cspec, log)
+        values, unit, gain, file_unit = _convert(raw, cspec, log)
         if log.rasters:
             if raw.raster is None:
                 raise RigLogError(
@@ -303,13 +312,13 @@ def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
                     path=log.path,
                     channel=raw.name,
                 )
-        columns.append(Column(cspec.role, raw.name, values, unit, raw.raster))
+        columns.append(Column(cspec.role, raw.name, values, unit, raw.raster, gain, file_unit))
     if log.rasters:
         return Mapped(tuple(columns), bases=_dspace_bases(log, spec, columns))
     time = None
     if spec.time is not None:
         raw = select_channel(log.channels, spec.time, log)
-        values, unit = _convert(raw, spec.time, log)
+        values, unit, _, _ = _convert(raw, spec.time, log)
         time = Column("t", raw.name, values, unit)
     elif spec.sample_time is None:
         raise RigLogError(

@@ -20,6 +20,7 @@ Schema (every key optional unless marked required)::
     gaps = "error"             # error | split
     min_segment = 100          # [samples] shorter segments are dropped when splitting
     resample = { sample_time = 0.01, method = "polyphase" }   # polyphase | linear
+    faults = "error"           # error | split: a sensor fault (channel `range`, `stuck`)
     delimiter = "auto"         # text files: auto | whitespace | a single character
     header = "auto"            # text files: auto | true | false
 
@@ -27,7 +28,11 @@ A channel table holds exactly one selector, ``name`` (exact channel name), ``reg
 (:func:`re.search` on the channel name, must match exactly one channel) or ``column``
 (0-based column index, text and Parquet files), plus ``unit`` (see
 :data:`pipeline.ingest.units.UNITS`), ``scale`` (extra factor) and ``si_unit`` (the SI
-unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration).
+unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration), and the
+sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in the
+recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
+identical consecutive samples are a fault; 0 turns the check off; default: 10 on ``q`` when
+it varies, none on other channels).
 """
 
 from __future__ import annotations
@@ -51,6 +56,7 @@ from pipeline.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
+    Interval,
     config_from_section,
     unknown_key_message,
 )
@@ -58,6 +64,7 @@ from pipeline.errors import WorkflowError
 from pipeline.ingest.units import SI_UNITS, UNITS, canonical_unit
 
 __all__ = [
+    "FAULT_POLICIES",
     "FORMATS",
     "GAP_POLICIES",
     "OPTION_KEYS",
@@ -71,6 +78,8 @@ __all__ = [
 FORMATS = ("auto", "mat", "csv", "parquet")
 #: Values of the ``gaps`` key.
 GAP_POLICIES = ("error", "split")
+#: Values of the ``faults`` key.
+FAULT_POLICIES = ("error", "split")
 #: Values of ``resample.method``.
 RESAMPLE_METHODS = ("polyphase", "linear")
 #: Keys of the section that are options, not channels.
@@ -86,8 +95,9 @@ OPTION_KEYS = (
     "resample",
     "delimiter",
     "header",
+    "faults",
 )
-_CHANNEL_KEYS = ("name", "regex", "column", "unit", "scale", "si_unit")
+_CHANNEL_KEYS = ("name", "regex", "column", "unit", "scale", "si_unit", "range", "stuck")
 _SELECTORS = ("name", "regex", "column")
 _INPUT = re.compile(r"v(\d+)")
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -154,6 +164,12 @@ def _ordered(pair: tuple[Any, Any]) -> tuple[Any, Any]:
     return pair
 
 
+def _stuck(k: int) -> int:
+    if k == 1:
+        raise ConfigValueError(None, "0 (no check) or a run length >= 2 [samples]")
+    return k
+
+
 _Unit = Annotated[str, BeforeValidator(_canonical), AfterValidator(_known_unit)]
 
 
@@ -179,6 +195,14 @@ class ChannelSpec:
     si_unit : str, optional
         SI unit of the result, needed only when ``scale`` changes the quantity (a sensor
         calibration, e.g. ``unit = "V", scale = 2e-3, si_unit = "m"`` for 2 mm/V).
+    range : tuple of float, optional
+        ``(lo, hi)`` valid range of the sensor in the recorded unit (before ``scale``),
+        ``lo < hi``; a sample at or beyond a limit is a sensor fault (out-of-range value,
+        saturation). None: no range check.
+    stuck : int, optional
+        [samples] ``k``: ``k`` or more identical consecutive samples are a stuck sensor;
+        0: no check. None: the default rule of :func:`pipeline.ingest.validity.stuck_length`
+        (10 on ``q`` when its median absolute step is > 0, no check elsewhere).
 
     At most one of ``name``, ``regex``, ``column`` is set; a channel table of a workflow
     gives exactly one (checked by :meth:`from_dict`; only the default time channel of a
@@ -199,6 +223,8 @@ class ChannelSpec:
     unit: Annotated[_Unit | None, Field(description=_UNIT_TEXT)] = None
     scale: Annotated[FiniteFloat, AfterValidator(_nonzero)] | None = None
     si_unit: Annotated[str | None, AfterValidator(lambda u: u and _si_unit(u))] = None
+    range: Interval | None = None
+    stuck: Annotated[NonNegativeInt, AfterValidator(_stuck)] | None = None
 
     def __post_init__(self) -> None:
         given = [k for k in _SELECTORS if getattr(self, k) is not None]
@@ -211,6 +237,13 @@ class ChannelSpec:
                 if si is not None and si != "s":
                     raise ConfigValueError(
                         key, "a time unit (the time channel)", getattr(self, key)
+                    )
+            for key in ("range", "stuck"):
+                if getattr(self, key) is not None:
+                    raise ConfigValueError(
+                        key,
+                        message="the time channel has no sensor checks (checked: strictly "
+                        "increasing, gaps)",
                     )
 
     @property
@@ -270,13 +303,14 @@ class ChannelSpec:
         Returns
         -------
         dict
-            Keys ``name|regex|column`` and, when set, ``unit``, ``scale``, ``si_unit``.
+            Keys ``name|regex|column`` and, when set, ``unit``, ``scale``, ``si_unit``,
+            ``range``, ``stuck``.
         """
         out: dict[str, Any] = {}
         for k in _CHANNEL_KEYS:
             v = getattr(self, k)
             if v is not None:
-                out[k] = v
+                out[k] = list(v) if isinstance(v, tuple) else v
         return out
 
 
@@ -379,6 +413,10 @@ class IngestSpec:
         Text files: ``"auto"``, ``"whitespace"`` or a single character.
     header : bool or None
         Text files: whether the first line holds the channel names; None = detect.
+    faults : {"error", "split"}
+        What a sensor fault (a channel's ``range`` or ``stuck`` check) does, for every
+        channel of the data set: raise, or cut the faulty samples out of every column and
+        keep the segments in between (segments shorter than ``min_segment`` are dropped).
 
     Raises
     ------
@@ -413,6 +451,7 @@ class IngestSpec:
     header: Annotated[
         bool | None, BeforeValidator(_header), Field(description='"auto", true or false')
     ] = None
+    faults: Literal["error", "split"] = "error"
 
     def __post_init__(self) -> None:
         if self.time is None and self.sample_time is None and self.format in ("csv", "parquet"):
@@ -548,4 +587,5 @@ class IngestSpec:
             }
         out["delimiter"] = self.delimiter
         out["header"] = "auto" if self.header is None else self.header
+        out["faults"] = self.faults
         return out
