@@ -14,6 +14,7 @@ import signal
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -306,6 +307,70 @@ def verify(
             raise typer.Exit(exit_code(VerificationError(problems)))
     what = "the quoted digest, " if digest else ""
     console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
+
+
+class ExportFormat(StrEnum):
+    """Formats of ``debist export``: C99 header and source, or a NumPy module."""
+
+    c = "c"
+    python = "python"
+
+
+@app.command()
+def export(
+    workflow: WorkflowArg,
+    fmt: Annotated[
+        ExportFormat,
+        typer.Option(
+            "--format",
+            help="c: debist_model.h and debist_model.c (C99, math.h only, no allocation); "
+            "python: debist_model.py (NumPy only).",
+        ),
+    ] = ExportFormat.c,
+    dest: Annotated[
+        Path | None,
+        typer.Option("--dest", help="Folder for the files (default: <output_dir>/export)."),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace existing files of the same names.")
+    ] = False,
+    out: OutOpt = None,
+) -> None:
+    """Write the identified model as self-contained C99 or NumPy code for a controller.
+
+    Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
+    """
+    import shutil
+    import tempfile
+    from contextlib import nullcontext
+
+    from pipeline import artifacts, outdir
+    from pipeline.errors import OutputDirError
+    from pipeline.export import export_files, load_identified
+
+    with _guard():
+        runner = _runner(workflow, out)
+        folder = runner.wf.output_dir
+        with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
+            model, info = load_identified(runner)
+            files = export_files(model, fmt.value, info)
+            target = dest if dest is not None else folder / "export"
+            if force:  # each file replaced atomically (os.replace from a sibling folder)
+                target.mkdir(parents=True, exist_ok=True)
+                tmp = Path(tempfile.mkdtemp(prefix=".export.tmp-", dir=target))
+                try:
+                    for path in artifacts.write_text_files(tmp, files):
+                        os.replace(path, target / path.name)
+                finally:
+                    shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                try:
+                    artifacts.write_text_files(target, files)
+                except OutputDirError as exc:
+                    raise OutputDirError(f"{exc}, or pass --force") from None
+    for name in files:
+        console.print(f"wrote {escape(str(target / name))}")
+    console.print(f"run digest: {info.run_digest or 'n/a (not every stage has run)'}")
 
 
 StagesOpt = Annotated[

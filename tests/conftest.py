@@ -67,3 +67,40 @@ def bistable_record():
     cur = bistable_truth(q)
     q_ddot = cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2 - cur["c"] * q - cur["d"] * q_dot
     return {"t": t, "dt": dt, "q": q, "q_dot": q_dot, "q_ddot": q_ddot, "v": v}
+
+
+def example_rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0, input_map="v2"):
+    """An RBF model with backbone, physics prior (tabulated curves) and friction lag (seeded)."""
+    from pipeline.identify.basis import RBFBasis
+    from pipeline.identify.model import RBFModel
+    from pipeline.identify.terms import PhysicsPrior
+
+    rng = np.random.default_rng(1)
+    M = 10
+    basis = RBFBasis.equidistant(-0.012, 0.012, M, 0.5, outside)
+    grid = np.linspace(-0.025, 0.025, 101)
+    pri = PhysicsPrior(
+        q=grid,
+        c=-30.0 + 3e5 * grid**2,
+        d=2.0 + 100.0 * grid**2,
+        g=np.stack([1e-7 * (1 + 20 * grid), -1e-7 * (1 - 20 * grid)], axis=1),
+    )
+    backbone = {"k_1": -40.0, "k_3": 4e5, "d_v": damping, "F_0": 0.01, "F_c": 0.02}
+    backbone["g_0"] = np.array([2e-7, -2e-7])
+    if prior:
+        backbone.update({"s_c": 0.3, "s_d": 0.5, "s_g": np.array([0.4, 0.6])})
+    scale = 1.0 if input_map == "v2" else 1500.0  # h = v: gains per V, not per V^2
+    return RBFModel(
+        basis,
+        input_map,
+        2,
+        1.0,
+        T_z,
+        1e-3,
+        rng.normal(0, 50, M) + 400,
+        rng.normal(0, 1, M),
+        rng.normal(0, 1e-7, (2, M)) * scale,
+        {k: (v * scale if k in ("g_0", "s_g") else v) for k, v in backbone.items()},
+        (-0.012, 0.012),
+        pri if prior else None,
+    )

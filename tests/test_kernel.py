@@ -7,11 +7,10 @@ library, the analytical model's splines); the kernel gets the model as arrays. A
 
 import numpy as np
 import pytest
+from conftest import example_rbf_model
 
 from pipeline import kernel, progress
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import PhysicsPrior, force_columns, input_columns, term_table
+from pipeline.identify.terms import force_columns, input_columns, term_table
 from pipeline.physics.freerun import analytical_model
 from pipeline.physics.params import PrototypeParams
 from pipeline.simulate import prepare_inputs, simulate
@@ -30,34 +29,8 @@ def inputs(n, seed, level=1500.0, n_in=2):
 
 
 def rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0):
-    rng = np.random.default_rng(1)
-    M = 10
-    basis = RBFBasis.equidistant(-0.012, 0.012, M, 0.5, outside)
-    grid = np.linspace(-0.025, 0.025, 101)
-    pri = PhysicsPrior(
-        q=grid,
-        c=-30.0 + 3e5 * grid**2,
-        d=2.0 + 100.0 * grid**2,
-        g=np.stack([1e-7 * (1 + 20 * grid), -1e-7 * (1 - 20 * grid)], axis=1),
-    )
-    backbone = {"k_1": -40.0, "k_3": 4e5, "d_v": damping, "F_0": 0.01, "F_c": 0.02}
-    backbone["g_0"] = np.array([2e-7, -2e-7])
-    if prior:
-        backbone.update({"s_c": 0.3, "s_d": 0.5, "s_g": np.array([0.4, 0.6])})
-    return RBFModel(
-        basis,
-        "v2",
-        2,
-        1.0,
-        T_z,
-        1e-3,
-        rng.normal(0, 50, M) + 400,
-        rng.normal(0, 1, M),
-        rng.normal(0, 1e-7, (2, M)),
-        backbone,
-        (-0.012, 0.012),
-        pri if prior else None,
-    )
+    """The shared example model (conftest): backbone, prior and friction lag."""
+    return example_rbf_model(T_z, outside, prior, damping)
 
 
 def sindy_model():

@@ -1,0 +1,319 @@
+"""The exported C and Python model against debist's own free run (NumPy engine, linear inputs).
+
+Both exports get the model as its term table; a 2000-step free run driven by a seeded random
+input sequence must agree with ``simulate(..., substeps=1, interpolation="linear")`` to 1e-9
+relative on q, and the curve tables with ``RBFModel.curves``.
+"""
+
+import ctypes
+import functools
+import importlib.util
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import example_rbf_model
+
+from pipeline.errors import ArtifactError, WorkflowError
+from pipeline.export import (
+    C_FILES,
+    PYTHON_FILE,
+    ExportInfo,
+    c_sources,
+    curve_table,
+    export_files,
+    python_source,
+)
+from pipeline.identify.model import RBFModel
+from pipeline.simulate import simulate
+
+DT = 0.01
+N = 2000
+CC = shutil.which("cc")
+
+
+def rbf_model(T_z=0.02, prior=True, outside="clip", input_map="v2"):
+    """The shared example model (conftest) with the arguments in this file's order."""
+    return example_rbf_model(T_z, outside, prior, input_map=input_map)
+
+
+def random_inputs(seed, n=N, level=1500.0):
+    """Seeded random inputs [V]: a random walk around ``level`` with white jitter."""
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(0, 15.0, (n, 2)), axis=0)
+    return np.clip(level + walk + rng.normal(0, 30.0, (n, 2)), 0.0, 3000.0)
+
+
+def reference(model, v, q0=0.004, q_dot0=0.0):
+    (res,) = simulate(
+        model, [v], DT, np.array([q0]), np.array([q_dot0]),
+        substeps=1, interpolation="linear", engine="numpy",
+    )  # fmt: skip
+    assert not res.diverged
+    return res.q
+
+
+def assert_close_q(q, ref):
+    scale = np.max(np.abs(ref))
+    np.testing.assert_allclose(q, ref, rtol=1e-9, atol=1e-9 * scale)
+
+
+@functools.cache
+def free_run(key):
+    """The model, its inputs and debist's free run (the NumPy reference is slow: run once)."""
+    model = MODELS[key]()
+    v = random_inputs(3)
+    return model, v, reference(model, v)
+
+
+MODELS = {
+    "lag+prior": lambda: rbf_model(),
+    "T_z=0": lambda: rbf_model(T_z=0.0, prior=False),
+    "zero-outside,h=v": lambda: rbf_model(outside="zero", input_map="v"),
+}
+
+
+def load_python(tmp_path, model, info=None):
+    files = python_source(model, info)
+    path = tmp_path / PYTHON_FILE
+    path.write_text(files[PYTHON_FILE], encoding="utf-8")
+    name = f"debist_model_{abs(hash(str(tmp_path)))}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules.pop(name, None)
+    return module
+
+
+def build_c(tmp_path, model, info=None):
+    for name, text in c_sources(model, info).items():
+        (tmp_path / name).write_text(text, encoding="utf-8")
+    lib = tmp_path / "libdebist_model.so"
+    cmd = [CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-shared", "-fPIC"]
+    subprocess.run(
+        [*cmd, str(tmp_path / C_FILES[1]), "-o", str(lib), "-lm"],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    dll = ctypes.CDLL(str(lib))
+    arr = ctypes.POINTER(ctypes.c_double)
+    dll.debist_rk4_step.argtypes = [arr, arr, arr, ctypes.c_double]
+    dll.debist_deriv.argtypes = [arr, arr, arr]
+    dll.debist_curves.argtypes = [ctypes.c_double, arr]
+    return dll
+
+
+def ptr(a):
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+@pytest.mark.parametrize("key", list(MODELS))
+def test_python_export_matches_free_run(tmp_path, key):
+    model, v, ref = free_run(key)
+    mod = load_python(tmp_path, model)
+    n_x = mod.N_STATES
+    assert n_x == (3 if model.T_z > 0 else 2)
+    x = mod.initial_state(0.004, 0.0)
+    q = np.empty(N)
+    q[0] = x[0]
+    for k in range(N - 1):
+        x = mod.rk4_step(x, v[k], v[k + 1], DT)
+        q[k + 1] = x[0]
+    assert np.ptp(ref) > 1e-3  # the run moves (a trivial trajectory would prove little)
+    assert_close_q(q, ref)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
+@pytest.mark.parametrize("key", list(MODELS))
+def test_c_export_matches_free_run(tmp_path, key):
+    model, v, ref = free_run(key)
+    dll = build_c(tmp_path, model)
+    n_x = 3 if model.T_z > 0 else 2
+    x = np.array([0.004, 0.0, 0.0][:n_x])
+    q = np.empty(N)
+    q[0] = x[0]
+    for k in range(N - 1):
+        v0, v1 = np.ascontiguousarray(v[k]), np.ascontiguousarray(v[k + 1])
+        dll.debist_rk4_step(ptr(x), ptr(v0), ptr(v1), DT)
+        q[k + 1] = x[0]
+    assert np.ptp(ref) > 1e-3
+    assert_close_q(q, ref)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
+def test_c_deriv_and_curves_match_model(tmp_path):
+    model = rbf_model()
+    dll = build_c(tmp_path, model)
+    rng = np.random.default_rng(5)
+    tm = model.table_model()
+    for _ in range(20):
+        x = np.array([rng.uniform(-0.02, 0.02), rng.normal(0, 0.1), rng.normal(0, 0.1)])
+        v = rng.uniform(0, 3000, 2)
+        h = v * v
+        dx = np.empty(3)
+        dll.debist_deriv(ptr(x), ptr(h), ptr(dx))
+        want, _ = tm.rhs(x[None, :], v[None, :])
+        np.testing.assert_allclose(dx, want[0], rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    q, names, values = curve_table(model)
+    mid = 0.5 * (q[:-1] + q[1:])
+    out = np.empty(len(names))
+    for qq in [*q[::17], *mid[::13], q[0] - 1.0, q[-1] + 1.0]:
+        dll.debist_curves(qq, ptr(out))
+        want = [np.interp(qq, q, row) for row in values]
+        np.testing.assert_allclose(out, want, rtol=1e-13, atol=1e-300)
+
+
+def test_python_curves_match_model(tmp_path):
+    model = rbf_model()
+    mod = load_python(tmp_path, model)
+    grid = np.linspace(*model.q_range, 201)
+    cur = model.curves(grid)
+    got = np.array([mod.curves(qq) for qq in grid])
+    assert mod.CURVE_NAMES == ["restoring", "d", "g1", "g2"]
+    np.testing.assert_allclose(got[:, 0], cur["cq"] + model.backbone["F_0"], rtol=1e-12)
+    np.testing.assert_allclose(got[:, 1], cur["d"], rtol=1e-12)
+    np.testing.assert_allclose(got[:, 2:], cur["g"], rtol=1e-12)
+
+
+def test_header_states_provenance_and_range():
+    model = rbf_model()
+    info = ExportInfo(
+        workflow="proto-7",
+        run_digest="ab" * 32,
+        identify_manifest="cd" * 32,
+        identified={"restoring": [[-0.011, 0.0095]]},
+        version="9.9.9",
+    )
+    files = {**c_sources(model, info), **python_source(model, info)}
+    assert set(files) == {*C_FILES, PYTHON_FILE}
+    for text in files.values():
+        head = text[:3000]
+        for needle in ("proto-7", "ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
+            assert needle in head
+        assert "restoring identified" in head and "[-0.011, 0.0095]" in head
+        assert "q [m]" in head and "v [V]" in head and "[s]" in head
+    assert "#define DEBIST_N_STATES 3" in files[C_FILES[0]]
+    assert "#define DEBIST_N_STATES 2" in c_sources(rbf_model(T_z=0.0))[C_FILES[0]]
+    assert "Run digest: n/a" in c_sources(model)[C_FILES[0]]
+
+
+def test_export_files_and_errors():
+    model = rbf_model()
+    assert set(export_files(model, "c")) == set(C_FILES)
+    assert set(export_files(model, "python")) == {PYTHON_FILE}
+    with pytest.raises(WorkflowError, match="fortran"):
+        export_files(model, "fortran")
+    bad = rbf_model(T_z=0.0)
+    object.__setattr__(bad, "q_range", (0.0, 0.0))
+    with pytest.raises(ArtifactError, match="q_range"):
+        c_sources(bad)
+    nan = rbf_model()
+    nan.theta_c[0] = np.nan
+    with pytest.raises(ArtifactError, match="NaN"):
+        python_source(nan)
+
+
+WORKFLOW = """
+[workflow]
+name = "export-check"
+output_dir = "out"
+
+[ingest]
+time = { name = "time_ms", unit = "ms" }
+q = { name = "laser", unit = "mm" }
+v1 = { name = "v_left", unit = "kV" }
+v2 = { name = "v_right", unit = "kV" }
+
+[datasets.estimation]
+source = "rig.csv"
+role = "estimation"
+slice = [0, 5000]
+
+[differentiate]
+method = "tvregdiff"
+alpha = 1e-6
+iterations = 10
+
+[identify]
+M = 8
+sigma_n = 0.5
+T_z = 0.0
+trim = 50
+max_condition = 1e10
+"""
+
+
+def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_record):
+    import pandas as pd
+    from typer.testing import CliRunner
+
+    from cli import app
+    from pipeline import artifacts
+
+    def invoke(*args):
+        result = CliRunner().invoke(app, [str(a) for a in args])
+        return result.exit_code, result.output
+
+    rec = bistable_record
+    rng = np.random.default_rng(0)
+    pd.DataFrame(
+        {
+            "time_ms": rec["t"] * 1e3,
+            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
+            "v_left": rec["v"][:, 0] * 1e-3,
+            "v_right": rec["v"][:, 1] * 1e-3,
+        }
+    ).to_csv(tmp_path / "rig.csv", index=False)
+    wf = tmp_path / "wf.toml"
+    wf.write_text(WORKFLOW)
+    code, out = invoke("export", wf)
+    assert code == 1 and "identify" in out and "never run" in out
+
+    for stage in ("ingest", "differentiate", "identify"):
+        code, out = invoke(stage, wf)
+        assert code == 0, out
+    code, out = invoke("export", wf, "--format", "c")
+    assert code == 0, out
+    export = tmp_path / "out/export"
+    header = (export / C_FILES[0]).read_text()
+    sha = artifacts.manifest_digest(tmp_path / "out/identify")
+    assert sha in header and "export-check" in header
+    assert "restoring identified" in header  # intervals from curves.parquet
+
+    before = (export / C_FILES[1]).read_bytes()
+    code, out = invoke("export", wf)
+    assert code == 2 and C_FILES[0] in out and "--force" in out
+    assert (export / C_FILES[1]).read_bytes() == before
+    (export / C_FILES[1]).write_text("edited")
+    code, out = invoke("export", wf, "--force")
+    assert code == 0 and (export / C_FILES[1]).read_bytes() == before
+    assert sorted(p.name for p in export.iterdir()) == sorted(C_FILES)  # no temporary left
+
+    # the Python module reproduces debist's free run of the identified model
+    code, out = invoke("export", wf, "--format", "python", "--dest", tmp_path / "py")
+    assert code == 0, out
+    model = RBFModel.from_tree(artifacts.read_h5(tmp_path / "out/identify/model.h5"))
+    data = pd.read_parquet(tmp_path / "out/ingest/estimation.parquet")
+    v = data[["v1", "v2"]].to_numpy()[:300]
+    dt = float(data.t.iloc[1] - data.t.iloc[0])
+    q0 = float(data.q.iloc[0])
+    (ref,) = simulate(
+        model, [v], dt, np.array([q0]), np.array([0.0]),
+        substeps=1, interpolation="linear", engine="numpy",
+    )  # fmt: skip
+    spec = importlib.util.spec_from_file_location("debist_model_cli", tmp_path / "py" / PYTHON_FILE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    x = mod.initial_state(q0, 0.0)
+    q = [x[0]]
+    for k in range(len(v) - 1):
+        x = mod.rk4_step(x, v[k], v[k + 1], dt)
+        q.append(x[0])
+    assert_close_q(np.array(q), ref.q)
+
+    # a modified model.h5 is refused, naming the file
+    with open(tmp_path / "out/identify/model.h5", "ab") as fh:
+        fh.write(b"\0")
+    code, out = invoke("export", wf, "--force")
+    assert code == 1 and "model.h5" in out and "stale" in out
