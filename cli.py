@@ -309,6 +309,26 @@ def verify(
     console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
 
 
+@app.command()
+def report(workflow: WorkflowArg, out: OutOpt = None) -> None:
+    """Write one self-contained HTML page of the run: tables, figures, provenance.
+
+    Goes to <output_dir>/report/report.html (replaced atomically); stages that have not run
+    are left out. The page is not a hashed stage: `verify` checks the artifacts it shows.
+    """
+    from contextlib import nullcontext
+
+    from pipeline import htmlreport, outdir
+
+    with _guard():
+        runner = _runner(workflow, out)
+        folder = runner.wf.output_dir
+        with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
+            html = htmlreport.render_report(htmlreport.load_run(runner, workflow))
+            path = htmlreport.write_report(folder / "report", html)
+    console.print(f"wrote {escape(str(path))}")
+
+
 class ExportFormat(StrEnum):
     """Formats of ``debist export``: C99 header and source, or a NumPy module."""
 
