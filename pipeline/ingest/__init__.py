@@ -60,7 +60,7 @@ def read_raw(path: Path, spec: IngestSpec) -> RawLog:
     path : Path
         The rig log.
     spec : IngestSpec
-        For ``format``, ``delimiter`` and ``header``.
+        For ``format``, ``delimiter``, ``decimal`` and ``header``.
 
     Returns
     -------
@@ -78,7 +78,7 @@ def read_raw(path: Path, spec: IngestSpec) -> RawLog:
         return read_mat(path, fmt)
     if fmt == "parquet":
         return read_parquet(path)
-    return read_text(path, spec.delimiter, spec.header)
+    return read_text(path, spec.delimiter, spec.header, spec.decimal)
 
 
 def load_rig_log(path: str | os.PathLike[str], spec: IngestSpec) -> list[pd.DataFrame]:

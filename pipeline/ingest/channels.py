@@ -1,9 +1,9 @@
 """Mapping of a rig log's channels to the canonical columns, with unit conversion to SI.
 
 Pure functions of a :class:`~pipeline.ingest.raw.RawLog` and an
-:class:`~pipeline.ingest.spec.IngestSpec`: select each channel (by exact name, regex
-or column index), convert it to float64 and to SI (``x * factor(unit) * scale``),
-and attach it to its time base.
+:class:`~pipeline.ingest.spec.IngestSpec`: select each channel (by exact name, regex,
+column index, or a MAT variable and its column), convert it to float64 and to SI
+(``x * factor(unit) * scale``), and attach it to its time base.
 """
 
 from __future__ import annotations
@@ -83,6 +83,51 @@ def _listing(names: list[str]) -> str:
     return shown + (f", ... ({more} more)" if more > 0 else "") if names else "none"
 
 
+def _shape(data: np.ndarray) -> str:
+    return " x ".join(str(n) for n in data.shape)
+
+
+def _variable_column(spec: ChannelSpec, log: RawLog, key: str) -> RawChannel:
+    """Return the vector, or the column of a matrix variable, that ``var`` selects."""
+    if not log.format.startswith("mat") or log.rasters:
+        kind = "dSPACE recording" if log.rasters else f"{log.format} file"
+        raise RigLogError(
+            f"`{key}` selects var '{spec.var}', but variables are selected in plain MAT "
+            f"files only; select the channels of this {kind} by `name`, `regex`"
+            + ("" if log.rasters else " or `column`"),
+            path=log.path,
+            channel=spec.var,
+        )
+    found = {v.name: np.asarray(v.data) for v in log.variables}
+    if spec.var not in found:
+        listing = _listing([f"{n} ({_shape(d)})" for n, d in found.items()])
+        raise RigLogError(
+            f"`{key}`: no numeric variable named '{spec.var}'; available: {listing}",
+            path=log.path,
+            channel=spec.var,
+        )
+    data = found[spec.var]
+    matrix = data.reshape(-1, 1) if data.ndim == 1 else data
+    if spec.column is None:
+        if matrix.shape[1] != 1:
+            raise RigLogError(
+                f"`{key}`: variable '{spec.var}' is a {_shape(data)} matrix, not a vector; "
+                f"add `column = i` (0-based, 0 ... {matrix.shape[1] - 1})",
+                path=log.path,
+                channel=spec.var,
+            )
+        return RawChannel(str(spec.var), matrix[:, 0])
+    if spec.column >= matrix.shape[1]:
+        raise RigLogError(
+            f"`{key}` selects column {spec.column} of variable '{spec.var}', but its shape is "
+            f"{_shape(data)} ({matrix.shape[1]} column(s), 0-based: 0 ... "
+            f"{matrix.shape[1] - 1})",
+            path=log.path,
+            channel=spec.var,
+        )
+    return RawChannel(f"{spec.var}[:, {spec.column}]", matrix[:, spec.column])
+
+
 def select_channel(
     candidates: tuple[RawChannel, ...], spec: ChannelSpec, log: RawLog, what: str = "channel"
 ) -> RawChannel:
@@ -93,7 +138,9 @@ def select_channel(
     candidates : tuple of RawChannel
         Where to look (the channels, or the dSPACE time bases).
     spec : ChannelSpec
-        The selector (``name``, ``regex`` or ``column``).
+        The selector (``name``, ``regex``, ``column``, or ``var`` with an optional
+        ``column``: a vector variable of a MAT file, or the 0-based column of an n x k
+        matrix variable, named ``"<var>[:, <column>]"``).
     log : RawLog
         The rig log, for its path and capabilities in messages.
     what : str
@@ -109,15 +156,26 @@ def select_channel(
     RigLogError
         Naming the file and the selector: no such name (with the available names,
         truncated), a regex matching none or several channels (named), a column index
-        out of range or a column selection on a MAT file.
+        out of range or a column selection on a MAT file without ``var``; with ``var``:
+        not a plain MAT file, no such variable (the variables and their shapes listed), a
+        matrix without ``column``, a column index beyond the variable's shape (naming
+        variable, shape and index).
     """
     key = "time" if spec.role == "t" else spec.role
+    if spec.var is not None:
+        return _variable_column(spec, log, key)
     names = [c.name for c in candidates]
     if spec.column is not None:
         if not log.by_column:
+            hint = (
+                f'; a column of a matrix variable is `{key} = {{ var = "...", column = '
+                f"{spec.column} }}`"
+                if log.variables and not log.rasters
+                else ""
+            )
             raise RigLogError(
                 f"`{key}` selects column {spec.column}, but {log.format} {what}s are selected "
-                f"by `name` or `regex`; available: {_listing(names)}",
+                f"by `name` or `regex`; available: {_listing(names)}{hint}",
                 path=log.path,
                 channel=f"column {spec.column}",
             )
@@ -132,11 +190,17 @@ def select_channel(
     if spec.name is not None:
         hits = [c for c in candidates if c.name == spec.name]
         if not hits:
+            matrix = {v.name: v.data for v in log.variables}.get(spec.name)
             hint = (
                 "the file has no header line; select with `column = i`"
                 if not log.has_names
                 else f"available {what}s: {_listing(names)}"
             )
+            if matrix is not None and np.ndim(matrix) == 2 and not log.rasters:
+                hint = (
+                    f"'{spec.name}' is a {_shape(np.asarray(matrix))} matrix variable; select "
+                    f'a column with `{key} = {{ var = "{spec.name}", column = i }}`'
+                )
             raise RigLogError(
                 f"`{key}`: no {what} named '{spec.name}'; {hint}",
                 path=log.path,

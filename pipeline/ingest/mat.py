@@ -15,6 +15,13 @@ dSPACE ControlDesk recording
 Plain variables
     Any other file: every numeric vector or scalar variable is a channel named by the
     variable, e.g. the EMPS benchmark's ``t``, ``qm``, ``vir`` (n x 1) and ``gtau`` (1 x 1).
+Matrix variables
+    In any file, every numeric top-level variable (vectors and n x k matrices, samples in
+    rows) is also kept in :attr:`~pipeline.ingest.raw.RawLog.variables`, where a channel
+    table ``{ var = "X3", column = 1 }`` selects one column, e.g. of a data set storing each
+    channel as an n x 2 ``[t, value]`` matrix. v7.3 files store arrays transposed (an n x 2
+    matrix is an HDF5 data set of shape (2, n)); :mod:`~pipeline.ingest.mat73` transposes
+    them back, so both versions give the same orientation.
 
 Before a v4/v5/v7 file is loaded, :func:`scipy.io.whosmat` lists each variable's shape
 and class without reading its data; a file whose variables declare more bytes than it
@@ -32,6 +39,7 @@ dSPACE GmbH, "ControlDesk Measurement and Recording", MAT-file export of recordi
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -164,7 +172,8 @@ def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
     -------
     RawLog
         The channels of the single dSPACE recording if there is one, else one channel
-        per numeric vector or scalar variable.
+        per numeric vector or scalar variable; in both cases the numeric vector and
+        matrix variables in ``variables``.
 
     Raises
     ------
@@ -172,6 +181,19 @@ def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
         Several dSPACE recordings in one file, a malformed recording, or no numeric
         variable at all.
     """
+    matrices = tuple(
+        RawChannel(name, arr)
+        for name, value in variables.items()
+        if not name.startswith("__") and not isinstance(value, Mapping | list | str)
+        if (arr := _array(value)).dtype.kind in "biuf" and 1 <= arr.ndim <= 2
+    )
+    log = _interpret(path, fmt, variables, matrices)
+    return dataclasses.replace(log, variables=matrices)
+
+
+def _interpret(
+    path: Path, fmt: str, variables: Mapping[str, Any], matrices: tuple[RawChannel, ...]
+) -> RawLog:
     recordings = [k for k, v in variables.items() if _is_recording(v)]
     if len(recordings) > 1:
         raise RigLogError(
@@ -188,7 +210,7 @@ def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
         arr = _array(value)
         if arr.dtype.kind in "biuf" and arr.ndim <= 1:
             channels.append(RawChannel(name, arr))
-    if not channels:
+    if not channels and not matrices:
         raise RigLogError(
             "no numeric vector variable in the MAT file (variables: "
             + (", ".join(k for k in variables if not k.startswith("__")) or "none")

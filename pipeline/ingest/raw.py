@@ -59,6 +59,10 @@ class RawLog:
         Whether channels may be selected by 0-based column index (text, Parquet).
     has_names : bool
         False for a headerless text file (channels are only addressable by column).
+    variables : tuple of RawChannel
+        MAT files: every numeric top-level variable as stored (vector or n x k matrix in
+        MATLAB orientation, samples in rows), selectable with ``var`` (and ``column``);
+        empty for other files.
     """
 
     path: Path
@@ -67,6 +71,7 @@ class RawLog:
     rasters: tuple[RawChannel, ...] = ()
     by_column: bool = False
     has_names: bool = True
+    variables: tuple[RawChannel, ...] = ()
 
     @property
     def names(self) -> list[str]:

@@ -22,15 +22,18 @@ Schema (every key optional unless marked required)::
     resample = { sample_time = 0.01, method = "polyphase" }   # polyphase | linear
     faults = "error"           # error | split: a sensor fault (channel `range`, `stuck`)
     delimiter = "auto"         # text files: auto | whitespace | a single character
+    decimal = "auto"           # text files: auto | "." | "," (decimal separator)
     header = "auto"            # text files: auto | true | false
 
 A channel table holds exactly one selector, ``name`` (exact channel name), ``regex``
-(:func:`re.search` on the channel name, must match exactly one channel) or ``column``
-(0-based column index, text and Parquet files), plus ``unit`` (see
-:data:`pipeline.ingest.units.UNITS`), ``scale`` (extra factor) and ``si_unit`` (the SI
-unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration), and the
-sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in the
-recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
+(:func:`re.search` on the channel name, must match exactly one channel), ``column`` (0-based
+column index, text and Parquet files) or ``var`` (a MAT file's numeric variable, with
+``column``: the 0-based column of an n x k matrix variable, rows being samples, e.g.
+``q = { var = "X3", column = 1 }`` for the values of an n x 2 ``[t, value]`` variable), plus
+``unit`` (see :data:`pipeline.ingest.units.UNITS`), ``scale`` (extra factor) and ``si_unit``
+(the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration),
+and the sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in
+the recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
 identical consecutive samples are a fault; 0 turns the check off; default: 10 on ``q`` when
 it varies, none on other channels).
 """
@@ -94,11 +97,13 @@ OPTION_KEYS = (
     "min_segment",
     "resample",
     "delimiter",
+    "decimal",
     "header",
     "faults",
 )
-_CHANNEL_KEYS = ("name", "regex", "column", "unit", "scale", "si_unit", "range", "stuck")
-_SELECTORS = ("name", "regex", "column")
+_CHANNEL_KEYS = ("name", "regex", "column", "var", "unit", "scale", "si_unit", "range", "stuck")
+_SELECTORS = ("name", "regex", "column", "var")
+_SELECTOR_TEXT = "give exactly one of `name`, `regex`, `column`, `var` (`var` with `column`)"
 _INPUT = re.compile(r"v(\d+)")
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DELIMITER_ALIASES = {"tab": "\t", "space": "whitespace", "\\s+": "whitespace"}
@@ -186,7 +191,8 @@ class ChannelSpec:
     regex : str, optional
         Pattern searched (:func:`re.search`) in the channel names; must match exactly one.
     column : int, optional
-        0-based column index (text and Parquet files).
+        0-based column index: of the file (text and Parquet files), or with ``var`` of
+        that variable (MAT files).
     unit : str, optional
         Unit of the recorded values, a key of :data:`~pipeline.ingest.units.UNITS`. When
         omitted the unit the file declares (dSPACE ``Unit``) is used.
@@ -203,10 +209,14 @@ class ChannelSpec:
         [samples] ``k``: ``k`` or more identical consecutive samples are a stuck sensor;
         0: no check. None: the default rule of :func:`pipeline.ingest.validity.stuck_length`
         (10 on ``q`` when its median absolute step is > 0, no check elsewhere).
+    var : str, optional
+        Name of a numeric variable of a MAT file: a vector, or with ``column`` an n x k
+        matrix (n samples in rows, MATLAB orientation in v5 and v7.3 files alike).
 
-    At most one of ``name``, ``regex``, ``column`` is set; a channel table of a workflow
-    gives exactly one (checked by :meth:`from_dict`; only the default time channel of a
-    dSPACE recording, ``ChannelSpec("t")``, has none).
+    At most one of ``name``, ``regex``, ``column``, ``var`` is set, except ``var`` with
+    ``column``; a channel table of a workflow gives exactly one (checked by
+    :meth:`from_dict`; only the default time channel of a dSPACE recording,
+    ``ChannelSpec("t")``, has none).
 
     Raises
     ------
@@ -225,13 +235,12 @@ class ChannelSpec:
     si_unit: Annotated[str | None, AfterValidator(lambda u: u and _si_unit(u))] = None
     range: Interval | None = None
     stuck: Annotated[NonNegativeInt, AfterValidator(_stuck)] | None = None
+    var: Annotated[str, Field(min_length=1)] | None = None
 
     def __post_init__(self) -> None:
         given = [k for k in _SELECTORS if getattr(self, k) is not None]
-        if len(given) > 1:
-            raise ConfigValueError(
-                "", message="give exactly one of `name`, `regex`, `column`, got " + ", ".join(given)
-            )
+        if len(given) > 1 and set(given) != {"var", "column"}:
+            raise ConfigValueError("", message=f"{_SELECTOR_TEXT}, got " + ", ".join(given))
         if self.role == "t":
             for key, si in (("unit", self.unit and UNITS[self.unit].si), ("si_unit", self.si_unit)):
                 if si is not None and si != "s":
@@ -248,7 +257,9 @@ class ChannelSpec:
 
     @property
     def selector(self) -> str:
-        """Human-readable selector, e.g. ``name 'vir'`` or ``column 1``."""
+        """Human-readable selector, e.g. ``name 'vir'``, ``column 1``, ``var 'X3' column 1``."""
+        if self.var is not None:
+            return f"var '{self.var}'" + ("" if self.column is None else f" column {self.column}")
         if self.name is not None:
             return f"name '{self.name}'"
         if self.regex is not None:
@@ -264,7 +275,7 @@ class ChannelSpec:
         role : str
             The key of the table in the section (``"time"`` is stored as role ``"t"``).
         table : dict
-            ``{name|regex|column = ..., unit = ..., scale = ..., si_unit = ...}``.
+            ``{name|regex|column|var = ..., unit = ..., scale = ..., si_unit = ...}``.
         where : str or callable, optional
             The workflow table holding the channel (or a function of its key giving it),
             for the messages.
@@ -290,9 +301,7 @@ class ChannelSpec:
         key = "time" if role == "t" else role
         label = _label(where, key)
         if isinstance(table, Mapping) and not any(k in table for k in _SELECTORS):
-            raise WorkflowError(
-                f"{label} {key}: give exactly one of `name`, `regex`, `column`, got {dict(table)!r}"
-            )
+            raise WorkflowError(f"{label} {key}: {_SELECTOR_TEXT}, got {dict(table)!r}")
         return config_from_section(
             cls, table, label, prefix=f"{key}.", internal=("role",), extra={"role": role}
         )
@@ -303,7 +312,7 @@ class ChannelSpec:
         Returns
         -------
         dict
-            Keys ``name|regex|column`` and, when set, ``unit``, ``scale``, ``si_unit``,
+            Keys ``name|regex|column|var`` and, when set, ``unit``, ``scale``, ``si_unit``,
             ``range``, ``stuck``.
         """
         out: dict[str, Any] = {}
@@ -411,6 +420,10 @@ class IngestSpec:
         Resampling of each segment.
     delimiter : str
         Text files: ``"auto"``, ``"whitespace"`` or a single character.
+    decimal : {"auto", ".", ","}
+        Text files: the decimal separator; ``"auto"`` detects ``","`` from numbers with a
+        comma between digits when the delimiter is not a comma
+        (:func:`pipeline.ingest.text.detect_decimal`).
     header : bool or None
         Text files: whether the first line holds the channel names; None = detect.
     faults : {"error", "split"}
@@ -448,6 +461,7 @@ class IngestSpec:
         AfterValidator(_check_delimiter),
         Field(description=_DELIMITER_TEXT),
     ] = "auto"
+    decimal: Literal["auto", ".", ","] = "auto"
     header: Annotated[
         bool | None, BeforeValidator(_header), Field(description='"auto", true or false')
     ] = None
@@ -459,6 +473,11 @@ class IngestSpec:
                 "format",
                 message=f"{self.format!r} needs a time channel (`time = {{ ... }}`) "
                 "or `sample_time` [s]",
+            )
+        if self.decimal == "," and self.delimiter == ",":
+            raise ConfigValueError(
+                "decimal",
+                message='`decimal = ","` needs another `delimiter` than ",", got both ","',
             )
 
     @property
@@ -586,6 +605,7 @@ class IngestSpec:
                 "method": self.resample.method,
             }
         out["delimiter"] = self.delimiter
+        out["decimal"] = self.decimal
         out["header"] = "auto" if self.header is None else self.header
         out["faults"] = self.faults
         return out

@@ -1,10 +1,12 @@
 """Reader of delimited text rig logs (CSV, tab- or whitespace-separated) via pandas.
 
-The delimiter and the presence of a header line are detected from the first lines
-(:func:`detect_delimiter`, :func:`detect_header`) unless the ingest section fixes them;
-parsing itself is :func:`pandas.read_csv` with the C engine. Decimal separator ``.``;
-blank lines are skipped. Channels are named by the header, or ``"column <i>"`` in a
-headerless file (select those with ``column = i``).
+The delimiter, the decimal separator and the presence of a header line are detected from
+the first lines (:func:`detect_dialect`, :func:`detect_header`) unless the ingest section
+fixes them; parsing itself is :func:`pandas.read_csv` with the C engine (``sep`` and
+``decimal``). European exports (``1,609;0,5``: ``;`` between fields, a decimal comma) are
+recognised; a decimal comma needs a delimiter other than ``,``. Blank lines are skipped.
+Channels are named by the header, or ``"column <i>"`` in a headerless file (select those
+with ``column = i``).
 
 Truncated files
 ---------------
@@ -50,7 +52,15 @@ from pipeline.errors import RigLogError
 from pipeline.ingest.detect import is_gzip, open_binary
 from pipeline.ingest.raw import RawChannel, RawLog
 
-__all__ = ["TAIL_LINES", "check_tail", "detect_delimiter", "detect_header", "read_text"]
+__all__ = [
+    "TAIL_LINES",
+    "check_tail",
+    "detect_decimal",
+    "detect_delimiter",
+    "detect_dialect",
+    "detect_header",
+    "read_text",
+]
 
 _SAMPLE_BYTES = 65536
 _SAMPLE_LINES = 50
@@ -62,6 +72,10 @@ _TAIL_BYTES = 65536
 _CHUNK = 1 << 20
 #: A decimal number: sign, mantissa (digits, point, digits) and exponent.
 _NUMBER = re.compile(r"[+-]?(\d*)(\.?)(\d*)(?:[eE]([+-]?)(\d+))?")
+#: A number written with a decimal comma: digits, a comma, digits (``-0,5``, ``1,6e-3``).
+_COMMA_NUMBER = re.compile(r"[+-]?\d+,\d+(?:[eE][+-]?\d+)?")
+#: A number written with a decimal point and at least one digit after it.
+_POINT_NUMBER = re.compile(r"[+-]?\d*\.\d+(?:[eE][+-]?\d+)?")
 
 
 def _split(line: str, delimiter: str) -> list[str]:
@@ -70,13 +84,15 @@ def _split(line: str, delimiter: str) -> list[str]:
     return [f.strip() for f in line.split(delimiter)]
 
 
-def detect_delimiter(lines: list[str]) -> str:
+def detect_delimiter(lines: list[str], decimal: str = ".") -> str:
     r"""Guess the field delimiter of a text rig log.
 
     Parameters
     ----------
     lines : list of str
         The first non-blank lines of the file.
+    decimal : str
+        The decimal separator; with ``","`` a comma is not a candidate delimiter.
 
     Returns
     -------
@@ -95,6 +111,8 @@ def detect_delimiter(lines: list[str]) -> str:
     'whitespace'
     """
     for candidate in _CANDIDATES:
+        if candidate == decimal:
+            continue
         counts = Counter(line.count(candidate) for line in lines)
         count, lines_with_it = counts.most_common(1)[0]
         if count > 0 and 2 * lines_with_it >= len(lines):
@@ -102,7 +120,87 @@ def detect_delimiter(lines: list[str]) -> str:
     return "whitespace"
 
 
-def detect_header(line: str, delimiter: str) -> bool:
+def detect_decimal(lines: list[str], delimiter: str) -> str:
+    """Guess the decimal separator of a text rig log.
+
+    Parameters
+    ----------
+    lines : list of str
+        The first non-blank lines of the file.
+    delimiter : str
+        The field delimiter (``"whitespace"`` or one character).
+
+    Returns
+    -------
+    str
+        ``","`` when the delimiter is not a comma and the fields holding a number with a
+        comma between digits (``1,609``, ``-0,5``) are at least as many as those holding
+        one with a decimal point, else ``"."``.
+
+    Examples
+    --------
+    >>> detect_decimal(["t;q", "0,0;1,609", "0,1;0,5"], ";")
+    ','
+    >>> detect_decimal(["0.1;2", "0.2;3"], ";")
+    '.'
+    """
+    if delimiter == ",":
+        return "."
+    fields = [f for line in lines for f in _split(line, delimiter)]
+    commas = sum(1 for f in fields if _COMMA_NUMBER.fullmatch(f))
+    points = sum(1 for f in fields if _POINT_NUMBER.fullmatch(f))
+    return "," if commas and commas >= points else "."
+
+
+def _whitespace_with_commas(lines: list[str]) -> bool:
+    """Whether most lines are >= 2 blank-separated numbers, some with a decimal comma."""
+    rows = [line.split() for line in lines]
+    numeric = [
+        r
+        for r in rows
+        if len(r) >= 2 and all(_COMMA_NUMBER.fullmatch(f) or f.lstrip("+-").isdigit() for f in r)
+    ]
+    return 2 * len(numeric) >= len(rows) and any(
+        _COMMA_NUMBER.fullmatch(f) for r in numeric for f in r
+    )
+
+
+def detect_dialect(lines: list[str]) -> tuple[str, str]:
+    """Guess the delimiter and the decimal separator of a text rig log together.
+
+    Parameters
+    ----------
+    lines : list of str
+        The first non-blank lines of the file.
+
+    Returns
+    -------
+    delimiter : str
+        As :func:`detect_delimiter`, except that blank-separated numbers with decimal
+        commas (``1,609  0,5``), which look comma-separated, give ``"whitespace"``.
+    decimal : str
+        ``"."`` or ``","``, see :func:`detect_decimal`.
+
+    Examples
+    --------
+    >>> detect_dialect(["1,609;0,5", "1,610;0,6"])
+    (';', ',')
+    >>> detect_dialect(["0.1,0.2", "0.3,0.4"])
+    (',', '.')
+    >>> detect_dialect(["1,609  0,5", "1,610  0,6"])
+    ('whitespace', ',')
+    """
+    delimiter = detect_delimiter(lines)
+    if delimiter == "," and _whitespace_with_commas(lines):
+        return "whitespace", ","
+    return delimiter, detect_decimal(lines, delimiter)
+
+
+def _dot(field: str, decimal: str) -> str:
+    return field.replace(",", ".") if decimal == "," else field
+
+
+def detect_header(line: str, delimiter: str, decimal: str = ".") -> bool:
     """Tell whether the first line of a text rig log holds channel names.
 
     Parameters
@@ -111,6 +209,8 @@ def detect_header(line: str, delimiter: str) -> bool:
         The first non-blank line.
     delimiter : str
         As returned by :func:`detect_delimiter`.
+    decimal : str
+        The decimal separator, ``"."`` or ``","``.
 
     Returns
     -------
@@ -126,7 +226,7 @@ def detect_header(line: str, delimiter: str) -> bool:
     """
     for field in _split(line, delimiter):
         try:
-            float(field)
+            float(_dot(field, decimal))
         except ValueError:
             return True
     return False
@@ -226,7 +326,7 @@ def _cut_reason(field: str, before: list[str]) -> str | None:
     return None
 
 
-def check_tail(path: Path, delimiter: str, header: bool) -> None:
+def check_tail(path: Path, delimiter: str, header: bool, decimal: str = ".") -> None:
     """Refuse a text rig log whose last line was cut (see the module notes).
 
     Parameters
@@ -238,6 +338,9 @@ def check_tail(path: Path, delimiter: str, header: bool) -> None:
     header : bool
         Whether the first non-blank line of the file holds channel names (it is not
         compared).
+    decimal : str
+        The decimal separator, ``"."`` or ``","`` (a decimal comma is read as a point
+        for rules a-e).
 
     Raises
     ------
@@ -275,7 +378,7 @@ def check_tail(path: Path, delimiter: str, header: bool) -> None:
         )
     elif not ends_with_newline:
         column = [f[len(fields) - 1] for f in before if len(f) == len(fields)]
-        reason = _cut_reason(fields[-1], column)
+        reason = _cut_reason(_dot(fields[-1], decimal), [_dot(v, decimal) for v in column])
         if reason is not None:
             problem = (
                 f"ends the file without a newline and its last field {fields[-1]!r} {reason}: "
@@ -290,7 +393,29 @@ def check_tail(path: Path, delimiter: str, header: bool) -> None:
     raise RigLogError(f"line {number} {problem}", path=path)
 
 
-def read_text(path: Path, delimiter: str = "auto", header: bool | None = None) -> RawLog:
+def _check_decimal(frame: pd.DataFrame, names: list[str], decimal: str, path: Path) -> None:
+    """Refuse a column left as text because its numbers use the other decimal separator."""
+    other, pattern = (",", _COMMA_NUMBER) if decimal == "." else (".", _POINT_NUMBER)
+    for i, name in enumerate(names):
+        column = frame.iloc[:, i]
+        if pd.api.types.is_numeric_dtype(column.dtype):
+            continue
+        values = column.dropna().astype(str).str.strip()
+        hits = values[values.str.fullmatch(pattern.pattern)]
+        if len(hits):
+            mark = "comma" if other == "," else "point"
+            raise RigLogError(
+                f"column {i} holds {hits.iloc[0]!r} at sample {hits.index[0]}, a number with a "
+                f"decimal {mark}, but the decimal separator is {decimal!r}; set "
+                f'`decimal = "{other}"` (or "auto")',
+                path=path,
+                channel=name,
+            )
+
+
+def read_text(
+    path: Path, delimiter: str = "auto", header: bool | None = None, decimal: str = "auto"
+) -> RawLog:
     """Read a delimited text rig log.
 
     Parameters
@@ -302,6 +427,10 @@ def read_text(path: Path, delimiter: str = "auto", header: bool | None = None) -
     header : bool or None
         Whether the first line holds channel names; None detects it
         (:func:`detect_header`).
+    decimal : str
+        ``"auto"``, ``"."`` or ``","``. With ``delimiter`` and ``decimal`` both
+        ``"auto"`` both are guessed together (:func:`detect_dialect`); with one fixed
+        the other is guessed given it (:func:`detect_delimiter`, :func:`detect_decimal`).
 
     Returns
     -------
@@ -311,9 +440,15 @@ def read_text(path: Path, delimiter: str = "auto", header: bool | None = None) -
     Raises
     ------
     RigLogError
-        No data line, a truncated last line (:func:`check_tail`, naming the line), or
-        pandas cannot parse the file (e.g. a row with too many fields); the pandas
-        message (with its line number) is quoted.
+        No data line, a truncated last line (:func:`check_tail`, naming the line), a
+        decimal comma as delimiter, a column of numbers written with the other decimal
+        separator (naming the column, sample and value), or pandas cannot parse the
+        file (e.g. a row with too many fields); the pandas message (with its line
+        number) is quoted.
+
+    References
+    ----------
+    pandas, :func:`pandas.read_csv` (``sep``, ``decimal``).
     """
     try:
         lines = _sample_lines(path)
@@ -321,16 +456,26 @@ def read_text(path: Path, delimiter: str = "auto", header: bool | None = None) -
         raise RigLogError(f"cannot read ({exc})", path=path) from exc
     if not lines:
         raise RigLogError("text file without any data line", path=path)
-    sep = detect_delimiter(lines) if delimiter == "auto" else delimiter
-    has_header = detect_header(lines[0], sep) if header is None else header
+    if delimiter == "auto" and decimal == "auto":
+        sep, dec = detect_dialect(lines)
+    else:
+        sep = detect_delimiter(lines, decimal) if delimiter == "auto" else delimiter
+        dec = detect_decimal(lines, sep) if decimal == "auto" else decimal
+    if sep == dec:
+        raise RigLogError(
+            f"the delimiter and the decimal separator are both {sep!r}; set `delimiter`",
+            path=path,
+        )
+    has_header = detect_header(lines[0], sep, dec) if header is None else header
     try:
-        check_tail(path, sep, has_header)
+        check_tail(path, sep, has_header, dec)
     except (OSError, EOFError) as exc:
         raise RigLogError(f"cannot read ({type(exc).__name__}: {exc})", path=path) from exc
     try:
         frame = pd.read_csv(
             path,
             sep=r"\s+" if sep == "whitespace" else sep,
+            decimal=dec,
             header=0 if has_header else None,
             engine="c",
             encoding="utf-8-sig",
@@ -340,12 +485,14 @@ def read_text(path: Path, delimiter: str = "auto", header: bool | None = None) -
         )
     except (ValueError, OSError, EOFError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         raise RigLogError(
-            f"cannot parse as delimited text (delimiter {sep!r}): {type(exc).__name__}: {exc}",
+            f"cannot parse as delimited text (delimiter {sep!r}, decimal {dec!r}): "
+            f"{type(exc).__name__}: {exc}",
             path=path,
         ) from exc
     if has_header:
         names = [str(c).strip() for c in frame.columns]
     else:
         names = [f"column {i}" for i in range(frame.shape[1])]
+    _check_decimal(frame, names, dec, path)
     channels = tuple(RawChannel(name, frame.iloc[:, i].to_numpy()) for i, name in enumerate(names))
     return RawLog(path, "csv", channels, by_column=True, has_names=has_header)
