@@ -1,8 +1,8 @@
 """Excitation profiles of the virtual rig: reference voltages of DE 1 (left) and DE 2 (right).
 
 A profile is a pair of reference voltages ``r1``, ``r2`` sampled on the uniform grid of the
-rig's DAC (zero-order hold, interval ``hold``). Two profiles are defined, both built as a
-sequence of episodes "sub-threshold block -> 3 kV switching pulse -> free ring-down", with
+rig's DAC (zero-order hold, interval ``hold``). Three profiles are defined, all built as a
+sequence of episodes "sub-threshold block -> switching pulse -> free ring-down", with
 the pulses alternating between DE 1 (the beam moves to the right well) and DE 2 (back to the
 left well); the beam starts in the left well (the paper's experiment starts at q = -10 mm):
 
@@ -12,8 +12,14 @@ left well); the beam starts in the left well (the paper's experiment starts at q
 ``validation``
     Unseen data for the cross-validation of Fig. 15: chirps, staircases, triangles and a
     multisine between trapezoidal, rectangular and shorter pulses, at other times.
+``staircase``
+    A richer identification profile (75 s): both voltages held on a grid of levels in each
+    well until the beam settles (the DE pushing towards the barrier up to ``v_sub``, the
+    one pushing deeper up to 3 kV), and pulses of three heights, so that ``g_i(q) v_i^2``
+    is excited at several ``v_i^2`` over a few mm around each well.
 
-The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV). The
+The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV; in the staircase
+profile the DE that pushes the beam deeper into its well goes higher, as it cannot switch). The
 electrostatic force is ``g_i(q) v_i^2`` (Eq. 37), so every block has a non-zero offset:
 ``v = v0 + u`` gives ``v^2 = v0^2 + 2 v0 u + u^2``, a force linear in the excitation ``u``
 around a shifted operating point. The static switching threshold of the Table 1 prototype
@@ -64,6 +70,9 @@ _ID_PULSES = (0.6, 0.8, 1.0)
 #: Levels of the staircase profile as fractions of ``v_sub``: ``v^2`` in equal steps of
 #: ``v_sub^2 / 3``, so the force ``g_i(q) v_i^2`` rises in equal steps.
 _ST_LEVELS = (0.0, float(np.sqrt(1.0 / 3.0)), float(np.sqrt(2.0 / 3.0)), 1.0)
+#: Heights of the staircase profile's switching pulses as fractions of ``v_max``, cycled:
+#: the transits between the wells happen at three ``v_i^2``.
+_ST_PULSES = (1.0, 0.8, 0.7)
 
 
 @dataclass(frozen=True, eq=False)
@@ -513,59 +522,74 @@ def validation_profile(
 
 def staircase_profile(
     *,
-    duration: float = 37.5,
+    duration: float = 75.0,
     hold: float = 1e-3,
     v_max: float = 3000.0,
     v_sub: float = 1000.0,
     seed: int = 0,
+    v_deep: float | None = None,
     step: float = 1.0,
+    rows: int = 2,
     dither: float = 0.0,
 ) -> Excitation:
     """Staircase identification profile: held voltage levels in each well, then a switch.
 
-    Each well the beam rests in is excited by a block of held levels (``"staircase"``) on a
-    4 x 4 grid of both reference voltages, ``v_i`` in ``(0, 0.577, 0.816, 1) * v_sub``
-    (``v_i^2`` in equal steps of ``v_sub^2 / 3``), each held ``step`` seconds so that the
-    beam settles and the DE creep relaxes. The grid is walked as a serpentine, so that
-    consecutive levels differ in one voltage only: every step is a clean step of one
-    ``v_i^2`` taken at the equilibrium the other voltage holds, i.e. ``g_i(q) v_i^2`` is
-    excited at several ``v_i^2`` and at several positions near each well, approached from
-    both sides (friction). In the first visit to a well the DE pushing towards the barrier
-    (DE 1 in the left well, DE 2 in the right one) steps in the inner loop, in the next
-    visit the DE pushing the beam deeper into the well. Each block is followed by 0.2 s
-    rest, a rectangular ``v_max`` pulse of 0.8 s on the DE pushing towards the barrier
-    (``"pulse-DE1"`` / ``"pulse-DE2"``: the switch to the other well, whose transit and
-    ring-down cover the range between the wells) and 1 s rest.
+    The profile is a sequence of episodes "staircase block -> 0.2 s rest -> rectangular
+    pulse of 0.8 s on the DE pushing towards the barrier (``"pulse-DE1"`` /
+    ``"pulse-DE2"``: the switch to the other well, DE 1 first) -> 1 s rest". The pulse
+    heights cycle through ``(1, 0.8, 0.7) * v_max``, so each DE drives the transit at three
+    ``v_i^2`` and ``g_i`` can be told from ``f`` between the wells too (the lowest, 2.1 kV
+    with the defaults, must exceed the switching threshold: on the reduced plant of the
+    default rig prototype 1.5 kV switches from the left well, 1.7 kV from the right one). A block
+    (``"staircase"``) holds both reference voltages on levels of a 4 x 4 grid, each
+    level for ``step`` seconds, so that the beam settles and the DE creep relaxes: the DE
+    pushing the beam towards the barrier (DE 1 in the left well, DE 2 in the right one) on
+    ``(0, 0.577, 0.816, 1) * v_sub``, the DE pushing it deeper into the well on
+    ``(0, 0.577, 0.816, 1) * v_deep`` (``v^2`` in equal steps, so the force
+    ``g_i(q) v_i^2`` rises in equal steps). Neither can switch the beam: ``v_sub`` is
+    below the switching threshold and the other DE pushes away from the barrier. The grid
+    is walked as a serpentine, consecutive levels differing in one voltage only, so every
+    change is a clean step of one ``v_i^2`` taken at the equilibrium the other voltage
+    holds: ``g_i(q) v_i^2`` is excited at several ``v_i^2``, at several positions near each
+    well (the deepening DE moves the beam by a few mm) and approached from both sides
+    (friction). A block walks ``rows`` rows of the serpentine; the walk of each well goes on
+    where the previous visit to that well stopped, the DE pushing towards the barrier in
+    the inner loop in the first pass over the grid and the deepening DE in the next.
 
-    Timing with the defaults (37.5 s): 0.5 s rest in the left well, a 16 s block there,
-    the switch to the right well (pulse onset 16.7 s), a 16 s block there, the switch
-    back (onset 34.7 s) and rest to the end. A longer ``duration`` repeats the episodes;
-    a last episode that does not fit entirely is a truncated block (at least 1 s) or rest.
+    Timing with the defaults (75 s, 8 s blocks): 0.5 s rest in the left well, then seven
+    episodes of 10 s, the pulses alternating DE 1, DE 2, ... (onsets 8.7, 18.7, ..., 68.7
+    s), and a truncated block (4.5 s) in the right well. A last episode that does not
+    fit entirely is a truncated block (at least 1 s) or rest.
 
     Parameters
     ----------
     duration : float
         Length [s]; a multiple of ``hold``, at least the lead and one episode
-        (``0.5 + 16 step + 2`` s).
+        (``0.5 + 4 rows step + 2`` s).
     hold : float
         DAC interval [s], at most 0.01.
     v_max : float
-        Height of the switching pulses [V], at most 3000.
+        Height of the highest switching pulse [V], at most 3000.
     v_sub : float
-        Highest held level [V], below ``v_max`` and, for the profile to mean what it says,
-        below the prototype's switching threshold (about 1.45 kV for Table 1): the beam
-        stays in its well during the blocks.
+        Highest level of the DE pushing towards the barrier [V], below ``v_max`` and, for
+        the profile to mean what it says, below the prototype's switching threshold (about
+        1.45 kV for Table 1): the beam stays in its well during the blocks.
     seed : int
         Seed of :func:`numpy.random.default_rng` for the dither; the same seed gives
         identical arrays.
+    v_deep : float or None
+        Highest level of the DE pushing the beam deeper into its well [V], at most
+        ``v_max``; default ``v_max``.
     step : float
         Hold time of each level [s], a multiple of ``hold``; default 1 s, about four times
         the creep time constant of the Table 1 DEs (``eta_MW / Y_MW = 0.27 s``) and three
         times the settling time of the well resonance.
+    rows : int
+        Rows of the 4 x 4 serpentine per block, 1 to 4 (a block lasts ``4 rows step``).
     dither : float
         Peak of a band-limited random dither (0.5-20 Hz, as the identification profile's
-        noise) added to each held non-zero level, as a fraction of ``v_sub``, in
-        ``[0, 0.5]``; 0 (default): pure steps. The sum is clipped to ``[0, v_sub]``.
+        noise) added to each held non-zero level, as a fraction of that DE's highest level,
+        in ``[0, 0.5]``; 0 (default): pure steps. The sum is clipped to ``[0, peak]``.
 
     Returns
     -------
@@ -575,28 +599,35 @@ def staircase_profile(
     Raises
     ------
     ValueError
-        As :func:`identification_profile`; ``step`` not a positive multiple of ``hold``,
-        ``dither`` outside ``[0, 0.5]``, or ``duration`` shorter than the lead and one
-        episode.
+        As :func:`identification_profile`; ``v_deep`` above ``v_max``, ``step`` not a
+        multiple of ``hold``, ``rows`` outside 1-4, ``dither`` outside ``[0, 0.5]``, or
+        ``duration`` shorter than the lead and one episode.
 
     References
     ----------
     Masoud & Maas 2025, Eq. 37 (the input term ``g_i(q) v_i^2``), Sec. 5.1 (3 kV
-    converters, start in the left well); Ljung 1999, System Identification, Sec. 13.2-13.3
-    (persistence of excitation; step and staircase inputs for static nonlinearities).
+    converters, start in the left well); Ljung 1999, System Identification, 2nd ed.,
+    Sec. 13.2-13.3 (informative experiments; steps and staircases for static
+    nonlinearities).
     """
     n = _grid(duration, hold, v_max, v_sub)
+    v_deep = v_max if v_deep is None else _positive("v_deep", v_deep)
+    if v_deep > v_max:
+        raise ValueError(f"`v_deep` must be <= `v_max` = {v_max}, got {v_deep}")
     step = _positive("step", step)
-    if abs(round(step / hold) * hold - step) > 1e-9 * max(1.0, step) or round(step / hold) < 1:
+    if round(step / hold) < 1 or abs(round(step / hold) * hold - step) > 1e-9 * max(1.0, step):
         raise ValueError(f"`step` = {step} s is not a multiple of `hold` = {hold} s")
+    if isinstance(rows, bool) or not isinstance(rows, int | np.integer) or not 1 <= rows <= 4:
+        raise ValueError(f"`rows` must be an integer in 1..4, got {rows!r}")
     dither = float(dither)
     if not 0.0 <= dither <= 0.5:
         raise ValueError(f"`dither` must be within [0, 0.5], got {dither}")
     b = _Builder(n, float(hold))
-    levels = np.array(_ST_LEVELS) * v_sub
-    m = levels.size
+    unit = np.array(_ST_LEVELS)
+    m = unit.size
+    peaks = (v_sub, v_deep)  # towards the barrier, deeper
     lead, gap, flat, ring = 0.5, 0.2, 0.8, 1.0
-    block = m * m * step
+    block = rows * m * step
     if not b.fits(lead + block + gap + flat + ring):
         raise ValueError(
             f"`duration` = {duration} s is shorter than one staircase episode "
@@ -607,46 +638,48 @@ def staircase_profile(
 
     sos = signal.butter(4, _ID_BAND, btype="bandpass", fs=1.0 / b.hold, output="sos")
     noise = signal.sosfiltfilt(sos, rng.standard_normal((2, n)), axis=1)
-
-    def walk(inner_near: bool) -> list[tuple[int, int]]:
-        """Serpentine over the grid: (near, far) level indices, one voltage per step."""
-        out = []
+    # Per well: the serpentine walk, (towards, deeper) level indices; the barrier-side DE
+    # in the inner loop first, then the deepening DE.
+    walk = []
+    for inner_near in (True, False):
         for outer in range(m):
             inner = range(m) if outer % 2 == 0 else range(m - 1, -1, -1)
-            out.extend((i, outer) if inner_near else (outer, i) for i in inner)
-        return out
+            walk.extend((i, outer) if inner_near else (outer, i) for i in inner)
+    done = {1: 0, 2: 0}  # levels walked per well (keyed by the DE pushing to the barrier)
 
-    def staircase(visit: int, seconds: float) -> None:
-        near = b.side  # the DE that pushes towards the barrier: the next pulse's side
-        path = walk(inner_near=(visit // 2) % 2 == 0)
-        k0, per = b.k, b.samples(step)
+    def staircase(seconds: float) -> None:
+        near = b.side  # the DE pushing towards the barrier: the next pulse's side
+        k0, per, start = b.k, b.samples(step), done[near]
+        count = -(-b.samples(seconds) // per)
+        path = np.array([walk[(start + j) % len(walk)] for j in range(count)])
+        done[near] += count
 
         def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-            idx = np.minimum(np.arange(tau.size) // per, len(path) - 1)
-            grid = np.array(path)[idx]  # (n, 2): near, far level index
-            v = {near: levels[grid[:, 0]], 3 - near: levels[grid[:, 1]]}
+            idx = path[np.arange(tau.size) // per]  # (n, 2): towards, deeper level index
+            level = {near: idx[:, 0], 3 - near: idx[:, 1]}
+            peak = {near: peaks[0], 3 - near: peaks[1]}
             out = []
             for de in (1, 2):
-                x = v[de]
+                x = peak[de] * unit[level[de]]
                 if dither > 0.0:
                     u = 2.0 * _unit_gauss(noise[de - 1, k0 : k0 + tau.size]) - 1.0
-                    x = np.where(x > 0.0, np.clip(x + dither * v_sub * u, 0.0, v_sub), 0.0)
+                    x = np.where(x > 0.0, np.clip(x + dither * peak[de] * u, 0.0, peak[de]), 0.0)
                 out.append(x)
             return out[0], out[1]
 
         b.add("staircase", seconds, fill)
 
     b.add("rest", lead)
-    visit = 0
+    i = 0
     while b.fits(block + gap + flat + ring):
-        staircase(visit, block)
+        staircase(block)
         b.add("rest", gap)
-        b.pulse(v_max, flat)
+        b.pulse(v_max * _ST_PULSES[i % len(_ST_PULSES)], flat)
         b.add("rest", ring)
-        visit += 1
+        i += 1
     left = (b.n - b.k) * b.hold
     if left >= 1.0 - 1e-9:
-        staircase(visit, left)
+        staircase(left)
     return b.finish("staircase")
 
 
@@ -664,10 +697,10 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
     Parameters
     ----------
     name : str
-        ``"identification"`` or ``"validation"``.
+        ``"identification"``, ``"validation"`` or ``"staircase"``.
     **kwargs
         Keyword arguments of the builder (``duration``, ``hold``, ``v_max``, ``v_sub``,
-        ``seed``).
+        ``seed``; the staircase profile also ``v_deep``, ``step``, ``rows``, ``dither``).
 
     Returns
     -------
@@ -682,7 +715,8 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
 
     References
     ----------
-    Masoud & Maas 2025, Fig. 11a (identification) and Fig. 15 (validation).
+    Masoud & Maas 2025, Fig. 11a (identification) and Fig. 15 (validation); Eq. 37
+    (staircase).
 
     Examples
     --------
