@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.identify.basis import RBFBasis
-from pipeline.identify.terms import PhysicsPrior
+from pipeline.identify.terms import PhysicsPrior, input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")
@@ -103,12 +103,12 @@ class RBFModel:
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
     @cached_property
-    def _table(self):
-        """The model as its term table (:meth:`table_model`), built once."""
-        return self.table_model()
+    def _weights(self) -> np.ndarray:
+        """Stacked RBF weights, shape (M, 2 + n_inputs): columns c, d, g_1..g_N."""
+        return np.column_stack([self.theta_c, self.theta_d, self.theta_g.T])
 
     def accel(self, q: np.ndarray, z: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Acceleration of Eq. 37 solved for q'' (from the term library, as the fit uses it).
+        """Acceleration of Eq. 37 solved for q''.
 
         Parameters
         ----------
@@ -124,10 +124,21 @@ class RBFModel:
         ndarray, shape (B,)
             q'' [unit of q / s^2].
         """
-        q = np.asarray(q, dtype=float)
-        z = np.asarray(z, dtype=float)
-        x = np.stack([q, z, z], axis=1)  # the velocity-like variable of the terms is z
-        return self._table.rhs(x, np.asarray(v, dtype=float))[1]
+        bb = self.backbone
+        w = self.basis(q) @ self._weights
+        c = w[:, 0] + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q * q
+        d = w[:, 1] + bb.get("d_v", 0.0)
+        g = w[:, 2:] + bb["g_0"] if "g_0" in bb else w[:, 2:]
+        if self.prior is not None:
+            c_p, d_p, g_p = self.prior(q)
+            c, d = c + bb.get("s_c", 0.0) * c_p, d + bb.get("s_d", 0.0) * d_p
+            g = g + g_p * bb["s_g"]
+        force = (g * input_map(v, self.input_map)).sum(axis=1) - c * q - d * z
+        if bb.get("F_0", 0.0):
+            force = force - bb["F_0"]
+        if bb.get("F_c", 0.0):
+            force = force - bb["F_c"] * np.tanh(z / self.coulomb_velocity)
+        return force / self.m_q
 
     def parameters(self) -> tuple[list[str], np.ndarray]:
         """Return the model's terms and their values, as regressor column names and parameters.
@@ -235,7 +246,14 @@ class RBFModel:
         q_ddot : ndarray, shape (B,)
             The acceleration (second column of ``x_dot``).
         """
-        return self._table.rhs(x, v)
+        q, q_dot, z = x[:, 0], x[:, 1], x[:, 2]
+        if self.T_z == 0:
+            z_dot = np.zeros_like(z)
+            z = q_dot
+        else:
+            z_dot = (q_dot - z) / self.T_z
+        a = self.accel(q, z, v)
+        return np.stack([q_dot, a, z_dot], axis=1), a
 
     def max_step(self) -> float:
         """Largest stable RK4 step for the friction filter [s] (inf when T_z = 0)."""
