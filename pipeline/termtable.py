@@ -174,14 +174,18 @@ class TermTable:
         for a in np.unique(self.term_qpow):
             if a:
                 out[:, self.term_qpow == a] *= (q**a)[:, None]
-        for j in range(self.n_terms):
-            kind = self.term_skind[j]
-            if kind == S_POW and self.term_spow[j]:
-                out[:, j] *= s ** self.term_spow[j]
-            elif kind == S_TANH:
-                out[:, j] *= np.tanh(s / self.coulomb_velocity)
-            for i in np.flatnonzero(self.term_hpow[j]):
-                out[:, j] *= hv[:, i] ** self.term_hpow[j, i]
+        # the factors by groups of terms (one array operation per distinct power), in the
+        # order q power, velocity factor, inputs: the same products as term by term
+        for p in np.unique(self.term_spow[self.term_skind == S_POW]):
+            if p:
+                out[:, (self.term_skind == S_POW) & (self.term_spow == p)] *= (s**p)[:, None]
+        tanh = self.term_skind == S_TANH
+        if tanh.any():
+            out[:, tanh] *= np.tanh(s / self.coulomb_velocity)[:, None]
+        for i in range(self.n_inputs):
+            for p in np.unique(self.term_hpow[:, i]):
+                if p:
+                    out[:, self.term_hpow[:, i] == p] *= (hv[:, i] ** p)[:, None]
         return out
 
     def select(self, keep: Sequence[int]) -> TermTable:
