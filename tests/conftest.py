@@ -104,3 +104,56 @@ def example_rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0, input_m
         (-0.012, 0.012),
         pri if prior else None,
     )
+
+
+#: The synthetic rig-log workflow of the CLI tests (``{alpha}``: TVRegDiff's alpha).
+SYNTHETIC_WORKFLOW = """
+[workflow]
+name = "synthetic"
+output_dir = "out"
+
+[ingest]
+time = {{ name = "time_ms", unit = "ms" }}
+q = {{ name = "laser", unit = "mm" }}
+v1 = {{ name = "v_left", unit = "kV" }}
+v2 = {{ name = "v_right", unit = "kV" }}
+
+[datasets.estimation]
+source = "rig.csv"
+role = "estimation"
+slice = [0, 5000]
+
+[datasets.check]
+source = "rig.csv"
+slice = [5000, 6500]
+
+[differentiate]
+method = "tvregdiff"
+alpha = {alpha}
+iterations = 10
+
+[identify]
+M = 8
+sigma_n = 0.5
+T_z = 0.0
+trim = 50
+max_condition = 1e10
+
+[validate]
+substeps = 2
+"""
+
+
+def write_rig_csv(folder, rec) -> None:
+    """Write a record as the synthetic rig log ``rig.csv`` (ms, mm, kV; seeded laser noise)."""
+    import pandas as pd
+
+    rng = np.random.default_rng(0)
+    pd.DataFrame(
+        {
+            "time_ms": rec["t"] * 1e3,
+            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
+            "v_left": rec["v"][:, 0] * 1e-3,
+            "v_right": rec["v"][:, 1] * 1e-3,
+        }
+    ).to_csv(folder / "rig.csv", index=False)

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import example_rbf_model
+from conftest import example_rbf_model, write_rig_csv
 
 from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.export import (
@@ -255,16 +255,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
         result = CliRunner().invoke(app, [str(a) for a in args])
         return result.exit_code, result.output
 
-    rec = bistable_record
-    rng = np.random.default_rng(0)
-    pd.DataFrame(
-        {
-            "time_ms": rec["t"] * 1e3,
-            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
-            "v_left": rec["v"][:, 0] * 1e-3,
-            "v_right": rec["v"][:, 1] * 1e-3,
-        }
-    ).to_csv(tmp_path / "rig.csv", index=False)
+    write_rig_csv(tmp_path, bistable_record)
     wf = tmp_path / "wf.toml"
     wf.write_text(WORKFLOW)
     code, out = invoke("export", wf)

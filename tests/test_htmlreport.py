@@ -8,6 +8,7 @@ import re
 from html.parser import HTMLParser
 
 import pytest
+from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from matplotlib.figure import Figure
 
 from pipeline.errors import ArtifactError
@@ -212,62 +213,14 @@ def test_a_figure_that_is_not_a_png_is_refused(run):
         render_report(run)
 
 
-WORKFLOW = """
-[workflow]
-name = "synthetic"
-output_dir = "out"
-
-[ingest]
-time = { name = "time_ms", unit = "ms" }
-q = { name = "laser", unit = "mm" }
-v1 = { name = "v_left", unit = "kV" }
-v2 = { name = "v_right", unit = "kV" }
-
-[datasets.estimation]
-source = "rig.csv"
-role = "estimation"
-slice = [0, 5000]
-
-[datasets.check]
-source = "rig.csv"
-slice = [5000, 6500]
-
-[differentiate]
-method = "tvregdiff"
-alpha = 1e-6
-iterations = 10
-
-[identify]
-M = 8
-sigma_n = 0.5
-T_z = 0.0
-trim = 50
-max_condition = 1e10
-
-[validate]
-substeps = 2
-"""
-
-
 def test_cli_report_of_a_synthetic_run(tmp_path, bistable_record):
-    import numpy as np
-    import pandas as pd
     from typer.testing import CliRunner
 
     from cli import app
 
-    rec = bistable_record
-    rng = np.random.default_rng(0)
-    pd.DataFrame(
-        {
-            "time_ms": rec["t"] * 1e3,
-            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
-            "v_left": rec["v"][:, 0] * 1e-3,
-            "v_right": rec["v"][:, 1] * 1e-3,
-        }
-    ).to_csv(tmp_path / "rig.csv", index=False)
+    write_rig_csv(tmp_path, bistable_record)
     wf = tmp_path / "wf.toml"
-    wf.write_text(WORKFLOW)
+    wf.write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
     cli = CliRunner()
     missing = cli.invoke(app, ["report", str(wf)])
     assert missing.exit_code == 1 and "no stage has run" in missing.output

@@ -3,65 +3,19 @@
 import json
 import shutil
 
-import numpy as np
 import pandas as pd
 import pytest
+from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
 from cli import app
 from pipeline import artifacts
 
-WORKFLOW = """
-[workflow]
-name = "synthetic"
-output_dir = "out"
-
-[ingest]
-time = {{ name = "time_ms", unit = "ms" }}
-q = {{ name = "laser", unit = "mm" }}
-v1 = {{ name = "v_left", unit = "kV" }}
-v2 = {{ name = "v_right", unit = "kV" }}
-
-[datasets.estimation]
-source = "rig.csv"
-role = "estimation"
-slice = [0, 5000]
-
-[datasets.check]
-source = "rig.csv"
-slice = [5000, 6500]
-
-[differentiate]
-method = "tvregdiff"
-alpha = {alpha}
-iterations = 10
-
-[identify]
-M = 8
-sigma_n = 0.5
-T_z = 0.0
-trim = 50
-max_condition = 1e10
-
-[validate]
-substeps = 2
-"""
-
 
 @pytest.fixture
 def project(tmp_path, bistable_record):
-    rec = bistable_record
-    rng = np.random.default_rng(0)
-    frame = pd.DataFrame(
-        {
-            "time_ms": rec["t"] * 1e3,
-            "laser": rec["q"] * 1e3 + 1e-4 * rng.standard_normal(rec["t"].size),
-            "v_left": rec["v"][:, 0] * 1e-3,
-            "v_right": rec["v"][:, 1] * 1e-3,
-        }
-    )
-    frame.to_csv(tmp_path / "rig.csv", index=False)
-    (tmp_path / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6))
+    write_rig_csv(tmp_path, bistable_record)
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
     return tmp_path
 
 
@@ -103,7 +57,7 @@ def test_run_skip_status_and_downstream_only_rerun(project):
 
     # changing the differentiation parameter reruns it and everything after it, not ingest
     before = stage_hashes(project / "out/ingest")
-    (project / "wf.toml").write_text(WORKFLOW.format(alpha=2e-6))
+    (project / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=2e-6))
     code, out = invoke("status", wf, "--json")
     states = {s["stage"]: (s["state"], s["reason"]) for s in json.loads(out)}
     assert states["ingest"][0] == "up to date"
@@ -153,7 +107,8 @@ def test_corrupt_input_fails_naming_file_and_keeps_previous_artifacts(project):
 
 
 def test_missing_channel_fails_and_writes_nothing(project):
-    (project / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6).replace('"v_right"', '"v_r"'))
+    text = SYNTHETIC_WORKFLOW.format(alpha=1e-6).replace('"v_right"', '"v_r"')
+    (project / "wf.toml").write_text(text)
     code, out = invoke("ingest", project / "wf.toml")
     assert code == 1
     assert "rig.csv" in out and "v_r" in out
@@ -166,7 +121,7 @@ def test_stage_without_upstream_artifacts_is_refused(project):
 
 
 def test_bad_workflow_key_is_a_usage_error(project):
-    (project / "wf.toml").write_text(WORKFLOW.format(alpha=1e-6) + "\n[identfy]\nM = 3\n")
+    (project / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6) + "\n[identfy]\nM = 3\n")
     code, out = invoke("run", project / "wf.toml")
     assert code == 2 and "identfy" in out
 
@@ -176,7 +131,7 @@ def test_study_stage_runs_only_when_configured(project):
     code, out = invoke("status", wf, "--json")
     assert "study" not in {s["stage"] for s in json.loads(out)}
     text = (
-        WORKFLOW.format(alpha=1e-6)
+        SYNTHETIC_WORKFLOW.format(alpha=1e-6)
         + "\n[study]\nM = [4, 6]\nsigma_n = [0.5, 1.0]\nalpha = [1e-7, 1e-6]\n"
     )
     text += "max_samples = 1500\n"
