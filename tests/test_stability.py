@@ -4,7 +4,7 @@ The identified models here have known curves: the cubic double well f(q) = k1 q 
 k1 < 0 (wells at +-sqrt(-k1/k3), stiffness -2 k1 there, barrier k1^2 / (4 k3), local maximum
 f_max = 2 (-k1/3)^(3/2) / sqrt(k3) at -sqrt(-k1/(3 k3))), constant damping and constant input
 gains of opposite sign, either as backbone terms (exact) or as RBF weights fitted by least
-squares. The analytical design is checked against the physics code it reuses.
+squares.
 """
 
 import numpy as np
@@ -15,8 +15,6 @@ from pipeline.identify.basis import RBFBasis
 from pipeline.identify.model import RBFModel
 from pipeline.identify.stability import (
     StabilityError,
-    analytical_design,
-    analytical_switching_voltages,
     equilibria,
     model_is_stable,
     stability_table,
@@ -195,76 +193,6 @@ def test_bad_levels_and_ranges_raise():
         equilibria(double_well(), q_range=(0.01, 0.01))
     with pytest.raises(ValueError, match="no finite"):
         model_is_stable(double_well(), [np.nan])
-
-
-# --------------------------------------------------------------------------- analytical model
-
-
-@pytest.fixture(scope="module")
-def paper():
-    from pipeline.physics.params import PrototypeParams
-
-    return PrototypeParams.paper()
-
-
-@pytest.fixture(scope="module")
-def design(paper):
-    return analytical_design(paper)
-
-
-def test_analytical_design_is_the_analyze_design_table(paper, design):
-    from pipeline.physics.statics import FORCE_STATES
-    from pipeline.physics.statics import equilibria as full_equilibria
-
-    # the operating points of `debist analyze` (run_analysis) are exactly these equilibria
-    # (running run_analysis itself simulates the full model: too slow for a unit test)
-    for level, (v1, v2) in enumerate(FORCE_STATES):
-        eqs = full_equilibria(paper, v1=v1, v2=v2)
-        rows = design[design.level == level]
-        assert (rows["v1"] == v1).all() and (rows["v2"] == v2).all()
-        assert rows["q"].tolist() == [e.q for e in eqs]
-        assert rows["static_stable"].tolist() == [e.stable for e in eqs]
-    assert list(design.columns) == list(stability_table(double_well()).columns)
-
-
-def test_analytical_stiffness_mass_damping_and_barrier(paper, design):
-    from pipeline.physics.reduced import fit_reduced
-    from pipeline.physics.statics import force_displacement
-
-    rest = design[design.level == 0]
-    assert rest["static_stable"].tolist() == [True, False, True]
-    q_w = float(rest["q"].iloc[2])
-    # k is the slope of the static force-displacement path at the well (Fig. 4)
-    path = force_displacement(paper, np.linspace(0.0, q_w, 81))
-    assert float(rest["k"].iloc[2]) == pytest.approx(path.dF_dq[-1], rel=1e-8)
-    # the barrier is the work of F along that path from the saddle to the well
-    barrier = -np.trapezoid(path.F, path.q)
-    assert float(rest["barrier"].iloc[2]) == pytest.approx(barrier, rel=1e-3)
-    # at 0 V the condensed shape is the reduced model's dq_m/dq (Eq. 24, 26)
-    cur = fit_reduced(paper).curves([q_w])
-    assert float(rest["m_q"].iloc[2]) == pytest.approx(cur.m_q[0], rel=1e-4)
-    assert float(rest["d"].iloc[2]) == pytest.approx(cur.d[0], rel=1e-2)
-    k, m, d = (float(rest[c].iloc[2]) for c in ("k", "m_q", "d"))
-    assert float(rest["f_n"].iloc[2]) == pytest.approx(np.sqrt(k / m) / (2 * np.pi))
-    assert float(rest["zeta"].iloc[2]) == pytest.approx(d / (2 * np.sqrt(k * m)))
-    # mirror symmetry of the paper's prototype
-    assert rest["k"].iloc[0] == pytest.approx(rest["k"].iloc[2], rel=1e-8)
-
-
-def test_analytical_switching_voltage_brackets_the_loss_of_the_well(paper):
-    from pipeline.physics.statics import equilibria as full_equilibria
-
-    sw = analytical_switching_voltages(paper)
-    assert list(sw.columns) == list(switching_voltages(double_well(), v_max=3e3).columns)
-    assert sw["reached"].tolist() == [True, True]
-    v1, v2 = sw["v_switch"]
-    assert v2 == pytest.approx(v1, rel=1e-6)  # symmetric prototype
-    assert sw["q_fold"].iloc[0] == pytest.approx(-sw["q_fold"].iloc[1], rel=1e-6)
-    assert sw["q_fold"].iloc[0] < 0 < sw["q_well"].iloc[1]
-    below = full_equilibria(paper, v1=0.995 * v1)
-    above = full_equilibria(paper, v1=1.005 * v1)
-    assert any(e.stable and e.q < 0 for e in below)
-    assert not any(e.stable and e.q < 0 for e in above)
 
 
 def test_a_model_without_restoring_force_is_not_judged_by_the_well_rules():

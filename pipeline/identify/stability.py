@@ -14,8 +14,8 @@ vanishes. For each constant input level this module finds those roots, their sti
 ``k = dF/dq``, the small-signal natural frequency and damping ratio, and the energy barrier of
 each well; per input the static switching voltage (the saddle-node where the well the input
 pushes out of merges with its saddle); a verdict on whether the model is stable where the data
-are; and the same numbers for the analytical model of a ``[physics]`` prototype, computed with
-the functions of :mod:`pipeline.physics` (so that the two sit side by side).
+are. The analytical model's numbers come from the same functions, applied to the analytical
+reduced model written in the form of Eq. 37 (:func:`pipeline.identify.design.analytical_as_eq37`).
 
 Small-signal model
 ------------------
@@ -64,8 +64,6 @@ __all__ = [
     "StabilityError",
     "SwitchingVoltage",
     "Verdict",
-    "analytical_design",
-    "analytical_switching_voltages",
     "equilibria",
     "model_is_stable",
     "stability_table",
@@ -98,7 +96,7 @@ class EquilibriumPoint:
         Viscous damping ``d(q*)`` [N s/unit of q] (the Coulomb term is left out, see the
         module docstring).
     static_stable : bool
-        ``k > 0`` (a well; for the analytical model: the Hessian of Eq. 15 positive definite).
+        ``k > 0`` (a well).
     damped : bool
         ``d > 0``.
     stable : bool
@@ -397,7 +395,7 @@ def verdict(table: pd.DataFrame, visited_intervals: Sequence[tuple[float, float]
     Parameters
     ----------
     table : pandas.DataFrame
-        From :func:`stability_table` or :func:`analytical_design` (columns ``level``, ``q``,
+        From :func:`stability_table` (columns ``level``, ``q``,
         ``static_stable``, ``d``).
     visited_intervals : sequence of (float, float)
         Intervals of ``q`` the data visit [unit of q], e.g. ``[(q.min(), q.max())]``.
@@ -673,192 +671,6 @@ def switching_voltages(
                 options={"xatol": 1e-12 * (hi - lo)},
             )
             return (-float(r.fun), float(r.x)) if -r.fun > Fs[k] else (float(Fs[k]), sub[k])
-
-        rows.append(_switching(i + 1, q, wells, push, indicator, v_max, n_scan, xtol))
-    return _switch_table(rows)
-
-
-# --------------------------------------------------------------------------- analytical model
-
-
-def _condensed(params, qm: NDArray[np.float64], v1: float, v2: float):
-    """Condense statically onto ``q`` at ``q_m``: stiffness ``1 / (L^T H^-1 L)`` and ``Phi``.
-
-    ``Phi = H^-1 L / (L^T H^-1 L)`` is the change of ``q_m`` per unit of ``q`` under a tip
-    force; solved in the scaled coordinates ``q_m * scale`` of the statics.
-    """
-    from pipeline.physics.energy import potential
-    from pipeline.physics.kinematics import ritz_basis
-
-    basis = ritz_basis(params.l)
-    s = basis.scale
-    L_s = basis.L / s
-    H_s = potential(qm, params, v1=v1, v2=v2).hess / np.multiply.outer(s, s)
-    x = np.linalg.solve(H_s, L_s)
-    compliance = float(L_s @ x)
-    return 1.0 / compliance, x / compliance / s
-
-
-def analytical_design(
-    params,
-    levels: Sequence[tuple[float, float]] | None = None,
-    *,
-    q_max: float = 25e-3,
-) -> pd.DataFrame:
-    """Tabulate the equilibria of a prototype's analytical model as :func:`stability_table` does.
-
-    Equilibria and their stability are those of the design table of ``debist analyze``
-    (:func:`pipeline.physics.statics.equilibria`: Eq. 15, stable = Hessian positive definite).
-    At each, the full model is condensed statically onto the tip displacement ``q`` (the
-    shape ``Phi = H^-1 L / (L^T H^-1 L)`` the other coordinates take under a tip force, which
-    at 0 V is the tangent ``dq_m/dq`` of the reduced model, Eq. 24): ``k = 1 / (L^T H^-1 L)``
-    (the slope of ``F(q)`` along the static path), ``m_q = Phi^T M Phi``, ``d = Phi^T D Phi``
-    (Eq. 19, 26). The Maxwell (creep) elements are relaxed, as in the statics. The barrier of
-    a well is ``U(saddle) - U(well)`` of Eq. 14 for the neighbouring unstable equilibria,
-    which equals ``int F dq`` along the static path.
-
-    Parameters
-    ----------
-    params : pipeline.physics.params.PrototypeParams
-        The prototype [SI]; ``params.b`` is the operating point.
-    levels : sequence of (float, float), optional
-        Voltage states ``(v1, v2)`` [V]; default the four states of the design table
-        (:data:`pipeline.physics.statics.FORCE_STATES`). The rest state comes first.
-    q_max : float
-        Half width of the searched range of ``q`` [m].
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns as :func:`stability_table` with ``v1, v2`` [V], ``q`` [m], ``k`` [N/m],
-        ``m_q`` [kg], ``d`` [N s/m], ``barrier`` [J].
-
-    Raises
-    ------
-    StaticsError
-        If the static path cannot be continued for these parameters.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 14, 15, 19, 24, 26, Section 3.3.4; Guyan, AIAA J. 3 (1965) 380
-    (static condensation).
-    """
-    from pipeline.physics.dynamics import FullModel
-    from pipeline.physics.energy import potential
-    from pipeline.physics.statics import FORCE_STATES
-    from pipeline.physics.statics import equilibria as full_equilibria
-
-    states = _levels(FORCE_STATES if levels is None else levels, 2)
-    full = FullModel(params, lambda t: 0.0, lambda t: 0.0, b=params.b)
-    out: list[EquilibriumPoint] = []
-    for index, (v1, v2) in enumerate(states):
-        eqs = full_equilibria(params, v1=v1, v2=v2, q_max=q_max)
-        if not eqs:
-            continue
-        U = [float(potential(e.qm, params, v1=v1, v2=v2, order=0).U) for e in eqs]
-        wells = [e.stable for e in eqs]
-        barrier = _barriers([e.q for e in eqs], wells, lambda j, n, U=U: U[n] - U[j])
-        for j, e in enumerate(eqs):
-            k, Phi = _condensed(params, e.qm, v1, v2)
-            mats = full.matrices(e.qm)
-            m_q = float(Phi @ mats["M"] @ Phi)
-            d = float(Phi @ mats["D"] @ Phi)
-            f_n, zeta = _small_signal(k, m_q, d) if e.stable else (np.nan, np.nan)
-            out.append(
-                EquilibriumPoint(
-                    level=index, v=(v1, v2), q=e.q, k=k, m_q=m_q, d=d,
-                    static_stable=e.stable, damped=d > 0, stable=e.stable and d > 0,
-                    f_n=f_n, zeta=zeta, barrier=float(barrier[j]),
-                )
-            )  # fmt: skip
-    return _table(out, 2)
-
-
-def analytical_switching_voltages(
-    params,
-    *,
-    v_max: float | None = None,
-    dq: float = 0.2e-3,
-    n_scan: int = 3,
-    xtol: float = 1e-3,
-    q_max: float = 25e-3,
-) -> pd.DataFrame:
-    """Find the static switching voltage of each DE of the analytical model (the other at 0 V).
-
-    The same rule as :func:`switching_voltages`, with ``F(q; v)`` the reaction force along the
-    static path of the full model (:func:`pipeline.physics.statics.force_displacement`, Eq.
-    15-16) and the well and saddle at 0 V from the design table
-    (:func:`pipeline.physics.statics.equilibria`); the maximum on the path grid is refined by
-    a parabola through its neighbours. The push direction of DE ``i`` is the sign of ``g_i =
-    1/2 dC_i/dq`` (Eq. 18, 33) along the condensed shape, averaged over the rest equilibria.
-    Unlike :func:`pipeline.physics.prestrain.switching_limit_zb` (the pre-strain at which a
-    given voltage switches, assuming the mirror symmetry of the paper's prototype) this is the
-    voltage at the given pre-strain, for each DE separately.
-
-    Parameters
-    ----------
-    params : pipeline.physics.params.PrototypeParams
-        The prototype [SI].
-    v_max : float, optional
-        Largest voltage searched [V]; default :data:`pipeline.physics.params.V_MAX`.
-    dq : float
-        Spacing of the path grid [m].
-    n_scan : int
-        Steps of the voltage scan.
-    xtol : float
-        Tolerance of the voltage [V].
-    q_max : float
-        Half width of the range searched for the equilibria at 0 V [m].
-
-    Returns
-    -------
-    pandas.DataFrame
-        As :func:`switching_voltages` (``input`` 1 = DE 1, 2 = DE 2), positions in [m].
-
-    Raises
-    ------
-    StaticsError
-        If the static path cannot be continued for these parameters.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 15-16, Section 3.3.3, Fig. 3-4.
-    """
-    from pipeline.physics.energy import capacitances
-    from pipeline.physics.params import V_MAX
-    from pipeline.physics.statics import equilibria as full_equilibria
-    from pipeline.physics.statics import force_displacement
-
-    v_max = V_MAX if v_max is None else float(v_max)
-    rest = full_equilibria(params, q_max=q_max)
-    q = [e.q for e in rest]
-    wells = [e.stable for e in rest]
-    # g_i = 1/2 dC_i/dq along the condensed shape at the rest equilibria (Eq. 18, 33)
-    g = [0.5 * capacitances(e.qm, params)[1] @ _condensed(params, e.qm, 0.0, 0.0)[1] for e in rest]
-
-    def path(a: float, b: float, v1: float, v2: float):
-        a, b = min(a, b, 0.0), max(a, b, 0.0)
-        grid = np.linspace(a, b, max(3, int(np.ceil((b - a) / dq)) + 1))
-        return grid, force_displacement(params, grid, v1=v1, v2=v2).F
-
-    rows = []
-    for i in range(2):
-        push = float(np.sign(np.mean([gg[i] for gg in g]))) if g else 1.0
-
-        def indicator(v, push, q_w, q_s, i=i):
-            grid, F = path(q_w, q_s, *((v, 0.0) if i == 0 else (0.0, v)))
-            a, b = min(q_w, q_s), max(q_w, q_s)
-            sel = np.flatnonzero((grid >= a) & (grid <= b))
-            Fs = push * F[sel]
-            k = int(np.argmax(Fs))
-            if 0 < k < sel.size - 1:
-                y0, y1, y2 = Fs[k - 1 : k + 2]
-                curv = y0 - 2.0 * y1 + y2
-                if curv < 0:
-                    t = 0.5 * (y0 - y2) / curv
-                    h = grid[sel[1]] - grid[sel[0]]
-                    return float(y1 - 0.25 * (y0 - y2) * t), float(grid[sel[k]] + t * h)
-            return float(Fs[k]), float(grid[sel[k]])
 
         rows.append(_switching(i + 1, q, wells, push, indicator, v_max, n_scan, xtol))
     return _switch_table(rows)
