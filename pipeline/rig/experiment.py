@@ -33,7 +33,10 @@ Masoud & Maas 2025, Sec. 5.1 (rig), Fig. 11a (identification profile).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import multiprocessing
+import os
+from collections.abc import Callable, Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import field
 from typing import Annotated, Any, Literal
 
@@ -47,6 +50,7 @@ from pydantic import (
     PositiveFloat,
 )
 
+from pipeline import progress
 from pipeline.config import CONFIG, ConfigValueError, config_from_section
 from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
@@ -61,6 +65,7 @@ __all__ = [
     "RigConfig",
     "rig_recording",
     "run_experiment",
+    "run_experiments",
     "truth_tree",
 ]
 
@@ -262,6 +267,90 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
         cfg.rig, prof.t, prof.r1, prof.r2, sample_time=cfg.sample_time, seed=exp.seed,
         side=exp.side,
     )  # fmt: skip
+
+
+def _experiment_workers(n: int) -> int:
+    """Count the processes for ``n`` experiments: one per core, 1 where fork is unsafe.
+
+    A daemonic process (a Dask or multiprocessing worker, which already runs in parallel
+    with its peers) may not start children, and only POSIX ``fork`` starts a child without
+    importing the library again (``spawn`` costs more than one short experiment saves).
+    """
+    if n < 2 or multiprocessing.current_process().daemon:
+        return 1
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return 1
+    return max(1, min(n, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                      else (os.cpu_count() or 1)))  # fmt: skip
+
+
+def _run_unobserved(cfg: RigConfig, name: str) -> RigRun:
+    """:func:`run_experiment` in a child process, with the parent's progress listener muted.
+
+    A forked child inherits the listener (a context variable) of the thread that forked; it
+    must not draw on the parent's display, so the parent reports whole experiments instead.
+    """
+    with progress.listening(None):
+        return run_experiment(cfg, name)
+
+
+def run_experiments(
+    cfg: RigConfig, meanwhile: Callable[[], Any] | None = None
+) -> tuple[dict[str, RigRun], Any]:
+    """Simulate every experiment of the rig, in parallel processes where that is safe.
+
+    The experiments are independent (each starts at rest with its own seeds), so they run
+    in forked worker processes (:class:`concurrent.futures.ProcessPoolExecutor`), one per
+    core; each result is the same as a serial run's (the same deterministic computation in
+    another process). Serially inside a daemonic worker (``debist batch`` already runs one
+    prototype per worker) and on platforms without ``fork``.
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        The rig and its experiments.
+    meanwhile : callable, optional
+        Work of the calling process that does not depend on the runs (the true curves): run
+        while the workers integrate, or after the runs when they are serial.
+
+    Returns
+    -------
+    runs : dict of str to RigRun
+        Per experiment name, in the order of ``cfg.experiments``.
+    other : object
+        What ``meanwhile`` returned (None without it).
+
+    Raises
+    ------
+    WorkflowError, ValueError
+        As :func:`run_experiment` (the first failing experiment's error).
+
+    References
+    ----------
+    Python documentation, :mod:`concurrent.futures` (ProcessPoolExecutor) and
+    :mod:`multiprocessing` (start methods).
+    """
+    names = list(cfg.experiments)
+    task = "rig: experiments"
+    workers = _experiment_workers(len(names))
+    other = None
+    if workers == 1:
+        runs = {}
+        for i, name in enumerate(names):
+            progress.report(task, i, len(names))
+            runs[name] = run_experiment(cfg, name)
+        progress.report(task, len(names), len(names))
+        return runs, (meanwhile() if meanwhile is not None else None)
+    context = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        futures = {pool.submit(_run_unobserved, cfg, name): name for name in names}
+        progress.report(task, 0, len(names))
+        if meanwhile is not None:
+            other = meanwhile()
+        for i, _ in enumerate(as_completed(futures)):
+            progress.report(task, i + 1, len(names))
+        done = {futures[f]: f.result() for f in futures}
+    return {name: done[name] for name in names}, other
 
 
 def rig_recording(run: RigRun, name: str, cfg: RigConfig) -> dict[str, Any]:

@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 
-from pipeline import progress
 from pipeline.stages import StageInputs, StageOutput
 
 __all__ = ["RigResult", "execute", "run_rig"]
@@ -71,21 +70,22 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
         CREATED,
         RigConfig,
         rig_recording,
-        run_experiment,
+        run_experiments,
         truth_tree,
     )
     from pipeline.rig.plant import true_curves
     from pipeline.rig.reduced import truth_attrs
 
     cfg = RigConfig.from_dict(section, physics)
-    curves = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 401))
+    runs, curves = run_experiments(
+        cfg, meanwhile=partial(true_curves, cfg.rig, np.linspace(-20e-3, 20e-3, 401))
+    )
     curves = {**curves, "attrs": truth_attrs(cfg.rig, curves)}
     outputs: dict[str, Any] = {}
     summary: dict[str, Any] = {}
     timings: dict[str, float] = {}
-    for i, (name, exp) in enumerate(cfg.experiments.items()):
-        progress.report("rig: experiments", i, len(cfg.experiments))
-        run = run_experiment(cfg, name)
+    for name, exp in cfg.experiments.items():
+        run = runs[name]
         if not run.success:
             raise DebistError(f"[rig.experiments.{name}]: the plant integration failed: "
                               f"{run.message}")  # fmt: skip
