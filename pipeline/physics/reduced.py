@@ -138,6 +138,8 @@ class ReducedModel:
         self.params = params
         self.b = float(b)
         self.polys = polys
+        # q_m and its first two derivatives, differentiated once here, not at every call
+        self._derivs = tuple(tuple(P.deriv(der) if der else P for P in polys) for der in (0, 1, 2))
         self.q_range = q_range
         self.fit_residual = float(fit_residual)
         self._full = FullModel(params, lambda t: 0.0, lambda t: 0.0, b=b)
@@ -146,7 +148,7 @@ class ReducedModel:
         self._kbar = p.V_DE * p.Y_MW
 
     def _y(self, q: NDArray[np.float64], der: int) -> NDArray[np.float64]:
-        return np.stack([(P.deriv(der) if der else P)(q) for P in self.polys], axis=-1)
+        return np.stack([P(q) for P in self._derivs[der]], axis=-1)
 
     def qm(self, q: ArrayLike, der: int = 0) -> NDArray[np.float64]:
         """Ritz coordinates ``q_m(q)`` (Eq. 24) or their ``der``-th derivative in ``q``.
@@ -191,7 +193,10 @@ class ReducedModel:
 
     def _point(self, q: float):
         """Scalar terms at one ``q``: m_q, dm_q, d, f (v=0), g (2,), k (2,)."""
-        qm, Phi, dPhi = self.qm(q), self.qm(q, 1), self.qm(q, 2)
+        return self._point_at(self.qm(q), self.qm(q, 1), self.qm(q, 2))
+
+    def _point_at(self, qm, Phi, dPhi):
+        """:meth:`_point` from ``q_m``, ``Phi`` and ``dPhi`` at the point (4,) each."""
         grad, length, dlen = self._full._terms(qm, 0.0)
         M, D, K, g_uy = self._full._mats(qm, length, dlen)
         p = self.params
@@ -225,7 +230,7 @@ class ReducedModel:
         ev = potential(qm, p, b=self.b, order=2)
         f = np.sum(ev.grad * Phi, axis=-1)
         k = np.einsum("ni,nij,nj->n", Phi, ev.hess, Phi) + np.sum(ev.grad * dPhi, axis=-1)
-        rows = [self._point(float(qq)) for qq in q]
+        rows = [self._point_at(*point) for point in zip(qm, Phi, dPhi, strict=True)]
         m_q, dm_q, d = (np.array([r[i] for r in rows]) for i in range(3))
         g = np.array([r[4] for r in rows])
         kk = np.array([r[5] for r in rows])
