@@ -45,6 +45,10 @@ def _is_type_checking(test: ast.expr) -> bool:
     )
 
 
+#: Fields of AST nodes that hold statements (bodies, branches, handlers, match cases).
+_BLOCKS = ("body", "orelse", "finalbody", "handlers", "cases")
+
+
 def _imported_names(tree: ast.AST, package: str) -> set[str]:
     """Absolute names of the modules an AST imports (and the names it imports from them)."""
     names: set[str] = set()
@@ -65,8 +69,10 @@ def _imported_names(tree: ast.AST, package: str) -> set[str]:
                 base = node.module or ""
             names.add(base)
             names.update(f"{base}.{alias.name}" for alias in node.names)
-        for child in ast.iter_child_nodes(node):
-            visit(child)
+        # imports are statements: follow the statement lists only, not the expressions
+        for field in _BLOCKS:
+            for child in getattr(node, field, ()):
+                visit(child)
 
     visit(tree)
     return names
