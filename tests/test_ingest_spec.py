@@ -16,7 +16,7 @@ def spec(**changes):
 
 
 def test_formats_constant():
-    assert RIG_LOG_FORMATS == ("auto", "mat", "csv", "parquet")
+    assert RIG_LOG_FORMATS == ("auto", "mat", "csv", "parquet", "mf4")
 
 
 def test_defaults():
@@ -72,9 +72,13 @@ def test_full_section_parses_every_key():
     assert IngestSpec.from_dict(s.to_dict()) == s
 
 
-def test_unit_aliases_are_canonicalised():
-    s = spec(q={"column": 1, "unit": "\u00b5m"})
-    assert s.channels[0].unit == "um"
+def test_unit_brackets_and_dash_are_canonicalised():
+    s = spec(q={"column": 1, "unit": " [\u00b5m] "}, v1={"column": 0, "unit": "-"})
+    assert s.channels[0].unit == "\u00b5m"
+    assert s.channels[1].unit == "1"
+    # any unit pint parses; si_unit is stored as its SI symbol
+    s = spec(q={"column": 1, "unit": "V", "scale": 2e-3, "si_unit": "meter"})
+    assert s.channels[0].si_unit == "m"
 
 
 def test_resample_method_defaults_to_polyphase():
@@ -86,7 +90,7 @@ def test_resample_method_defaults_to_polyphase():
     [
         (
             {"format": "xlsx"},
-            r"^\[ingest\] format: expected 'auto', 'mat', 'csv' or 'parquet', got 'xlsx'$",
+            r"^\[ingest\] format: expected 'auto', 'mat', 'csv', 'parquet' or 'mf4', got 'xlsx'$",
         ),
         ({"sample_time": -1.0}, r"^\[ingest\] sample_time: expected a number > 0, got -1.0$"),
         ({"sample_time": "1ms"}, r"^\[ingest\] sample_time: expected a number, got '1ms'$"),
@@ -120,14 +124,40 @@ def test_resample_method_defaults_to_polyphase():
         ({"q": {"column": -1}}, r"^\[ingest\] q.column: expected an integer >= 0, got -1$"),
         ({"q": {"name": ""}}, r"^\[ingest\] q.name: expected a non-empty string, got ''$"),
         ({"q": {"regex": "a(b"}}, r"\[ingest\] q.regex: expected a valid regular .*, got 'a\(b'"),
-        ({"q": {"column": 1, "unit": "furlong"}}, r"q.unit: expected a known unit .*'furlong'"),
-        ({"q": {"column": 1, "unit": ["V"]}}, r"q.unit: expected a known unit .*got \['V'\]"),
+        (
+            {"q": {"column": 1, "unit": "bananas"}},
+            r"q.unit: expected a unit pint parses.*'bananas'",
+        ),
+        ({"q": {"column": 1, "unit": "degC"}}, r"q.unit: expected a unit pint parses.*'degC'"),
+        ({"q": {"column": 1, "unit": ["V"]}}, r"q.unit: expected .*got \['V'\]"),
         ({"q": {"column": 1, "scale": 2, "si_unit": ["m"]}}, r"q.si_unit: .*got \['m'\]"),
         ({"q": {"column": 1, "unit": "V", "scale": 0}}, r"q.scale: expected a non-zero .*got 0"),
-        ({"q": {"column": 1, "si_unit": "mm"}}, r"q.si_unit: expected one of .*, got 'mm'"),
+        ({"q": {"column": 1, "si_unit": "mm"}}, r"q.si_unit: expected a coherent SI .*, got 'mm'"),
         ({"q": {"column": 1, "units": "V"}}, r"unknown key 'q.units'; did you mean 'unit'\?"),
         ({"resampel": {"sample_time": 1}}, r"unknown key 'resampel'; did you mean 'resample'\?"),
-        ({"time": {"column": 0, "unit": "mm"}}, r"\[ingest\] time.unit: expected a time unit"),
+        (
+            {"time": {"column": 0, "unit": "mm"}},
+            r"^\[ingest\] time.unit: expected a time \[s\] unit for the time channel, got 'mm' "
+            r"\(length \[m\]\)$",
+        ),
+        (
+            {"q": {"column": 1, "unit": "N"}},
+            r"^\[ingest\] q.unit: expected a length \[m\], angle \[rad\], dimensionless \[1\] "
+            r"or voltage \[V\] unit for `q` .*got 'N' \(force \[N\]\)$",
+        ),
+        (
+            {"v1": {"column": 0, "unit": "mm/s"}},
+            r"^\[ingest\] v1.unit: expected a voltage \[V\], acceleration .*got 'mm/s' "
+            r"\(velocity \[m/s\]\)$",
+        ),
+        (
+            {"q": {"column": 1, "unit": "V", "scale": 2.0, "si_unit": "m/s"}},
+            r"^\[ingest\] q.si_unit: expected a length .*got 'm/s' \(velocity \[m/s\]\)$",
+        ),
+        (
+            {"q": {"column": 1, "unit": "V", "si_unit": "m"}},
+            r"^\[ingest\] q.si_unit: expected `scale` with an `si_unit` of another quantity",
+        ),
         ({"time": "t"}, r"^\[ingest\] time: expected a table, got 't'$"),
     ],
 )

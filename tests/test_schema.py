@@ -202,7 +202,7 @@ BAD_VALUES = [
         "[validate] report_unit: expected a unit of q (SI unit 'V')",
     ),
     ("validate", "init_samples = -1", "[validate] init_samples: expected an integer >= 0, got -1"),
-    ("ingest", 'q = { column = 1, unit = "furlong" }', "[ingest] q.unit: expected a known unit"),
+    ("ingest", 'q = { column = 1, unit = "bananas" }', "[ingest] q.unit: expected a unit pint"),
     ("ingest", "q = { column = 1.5 }", "[ingest] q.column: expected an integer, got 1.5"),
     ("ingest", "gap_tolerance = 1", "[ingest] gap_tolerance: expected a number > 1, got 1"),
     (

@@ -3,11 +3,13 @@
 Pure functions of a :class:`~pipeline.ingest.raw.RawLog` and an
 :class:`~pipeline.ingest.spec.IngestSpec`: select each channel (by exact name, regex,
 column index, or a MAT variable and its column), convert it to float64 and to SI
-(``x * factor(unit) * scale``), and attach it to its time base.
+(``x * factor(unit) * scale``, the factor from pint, :mod:`pipeline.ingest.units`), check
+that the result is a quantity the column can hold, and attach it to its time base.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -15,9 +17,16 @@ import numpy as np
 import pandas as pd
 
 from pipeline.errors import RigLogError
+from pipeline.ingest.checks import printed_resolution
 from pipeline.ingest.raw import RawChannel, RawLog
 from pipeline.ingest.spec import ChannelSpec, IngestSpec
-from pipeline.ingest.units import UNITS, canonical_unit, lookup_unit
+from pipeline.ingest.units import (
+    EXAMPLES,
+    canonical_unit,
+    describe_quantities,
+    lookup_unit,
+    role_quantities,
+)
 
 __all__ = ["Column", "Mapped", "map_channels", "select_channel", "to_float"]
 
@@ -46,6 +55,9 @@ class Column:
         in the recorded unit in SI.
     file_unit : str or None
         The recorded unit (the spec's or the file's), for messages.
+    resolution : float
+        Time columns: the rounding step of the recorded values in SI [s]
+        (:func:`pipeline.ingest.checks.printed_resolution` times ``|gain|``); 0 elsewhere.
     """
 
     role: str
@@ -55,6 +67,7 @@ class Column:
     base: int | None = None
     gain: float = 1.0
     file_unit: str | None = None
+    resolution: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -69,12 +82,21 @@ class Mapped:
         The time channel [s] of a file with a single sample index; None when the time is
         ``k * sample_time`` or comes from dSPACE time bases.
     bases : dict of int to Column
-        dSPACE recordings: the time bases [s] used by the columns, by raster index.
+        dSPACE and MF4 recordings: the time bases [s] used by the columns, by raster index.
+    file_time : Column or None
+        With ``sample_time`` and no ``time`` mapped: a channel of the file named as a time
+        in seconds (``t``, ``time``, ``Time [s]``, ...; see :data:`TIME_NAMES`), against
+        which ``sample_time`` is checked; None otherwise.
     """
 
     columns: tuple[Column, ...]
     time: Column | None = None
     bases: dict[int, Column] | None = None
+    file_time: Column | None = None
+
+
+#: Names of an unmapped channel taken for a time in seconds (case-insensitive).
+TIME_NAMES = re.compile(r"(t|time|zeit|timestamp)(\s*\[s\]|\s*\(s\)|_s)?", re.IGNORECASE)
 
 
 def _listing(names: list[str]) -> str:
@@ -272,12 +294,25 @@ def to_float(channel: RawChannel, log: RawLog) -> np.ndarray:
     return numbers
 
 
+def _same_unit(a: str, b: str) -> bool:
+    """Whether two unit expressions are the same unit (``"mm"``, ``"millimeter"``)."""
+    if a == b:
+        return True
+    ua, ub = lookup_unit(a), lookup_unit(b)
+    return (
+        ua is not None
+        and ub is not None
+        and ua.si == ub.si
+        and math.isclose(ua.factor, ub.factor, rel_tol=1e-12)
+    )
+
+
 def _convert(
     channel: RawChannel, spec: ChannelSpec, log: RawLog
 ) -> tuple[np.ndarray, str, float, str | None]:
     key = "time" if spec.role == "t" else spec.role
     declared = canonical_unit(channel.unit) if channel.unit and channel.unit.strip() else None
-    if spec.unit is not None and declared is not None and declared != spec.unit:
+    if spec.unit is not None and declared is not None and not _same_unit(declared, spec.unit):
         raise RigLogError(
             f"wrong units for `{key}`: the file declares '{channel.unit}', the ingest spec "
             f"says '{spec.unit}'; fix `{key}.unit` (or `{key}.scale`)",
@@ -286,29 +321,75 @@ def _convert(
         )
     unit = spec.unit if spec.unit is not None else declared
     if unit is None and spec.role == "t" and log.rasters:
-        unit = "s"  # a dSPACE time base without a declared unit is in seconds
+        unit = "s"  # a recording's time base without a declared unit is in seconds
+    examples = ", ".join(EXAMPLES)
+    entry = lookup_unit(unit) if unit is not None else None
     if unit is None:
         if spec.scale is None or spec.si_unit is None:
             raise RigLogError(
                 f"no unit for `{key}`: the file declares none; add `unit = ...` "
-                f"(one of {', '.join(UNITS)}) to `{key}`",
+                f"(a unit pint parses, e.g. {examples}) to `{key}`",
                 path=log.path,
                 channel=channel.name,
             )
         factor, si = 1.0, spec.si_unit
-    elif (entry := lookup_unit(unit)) is not None:
+    elif entry is not None:
         factor, si = entry.factor, spec.si_unit or entry.si
+        if spec.si_unit is not None and entry.si != spec.si_unit and spec.scale is None:
+            raise RigLogError(
+                f"`{key}.si_unit` = '{spec.si_unit}' is another quantity than the declared "
+                f"unit '{unit}' ({entry.quantity} [{entry.si}]); add `{key}.scale` (the "
+                "calibration factor)",
+                path=log.path,
+                channel=channel.name,
+            )
     elif spec.scale is not None and spec.si_unit is not None:
-        factor, si = 1.0, spec.si_unit  # explicit calibration of a unit outside the table
+        factor, si = 1.0, spec.si_unit  # explicit calibration of a unit pint cannot use
     else:
         raise RigLogError(
-            f"unknown unit '{unit}' declared by the file for `{key}`; known units are "
-            f"{', '.join(UNITS)}; give `{key}.scale` (factor to SI) and `{key}.si_unit`",
+            f"unknown unit '{unit}' declared by the file for `{key}` (pint does not parse "
+            f"it as a unit with a factor to SI; e.g. {examples}); set `{key}.unit`, or give "
+            f"`{key}.scale` (factor to SI) and `{key}.si_unit`",
+            path=log.path,
+            channel=channel.name,
+        )
+    allowed = role_quantities(spec.role)
+    quantity = entry.quantity if entry is not None and spec.si_unit is None else None
+    if allowed is not None and quantity is not None and quantity not in allowed:
+        raise RigLogError(
+            f"the file declares unit '{channel.unit}' ({quantity} [{si}]) for `{key}`, which "
+            f"needs {describe_quantities(allowed)}; set `{key}.unit` (or `{key}.scale` and "
+            f"`{key}.si_unit`)",
             path=log.path,
             channel=channel.name,
         )
     gain = factor * (1.0 if spec.scale is None else spec.scale)
     return to_float(channel, log) * gain, si, gain, unit
+
+
+def _time_column(raw: RawChannel, spec: ChannelSpec, log: RawLog, index: int | None) -> Column:
+    """Convert a time channel, with the rounding step of its recorded digits."""
+    values, unit, gain, file_unit = _convert(raw, spec, log)
+    resolution = printed_resolution(to_float(raw, log)) * abs(gain)
+    return Column("t", raw.name, values, unit, index, gain, file_unit, resolution)
+
+
+def _file_time(log: RawLog, spec: IngestSpec, used: set[str]) -> Column | None:
+    """Return the unmapped time-named channel of a file read with ``sample_time``, if any."""
+    for raw in log.channels:
+        if raw.name in used or not TIME_NAMES.fullmatch(raw.name.strip()):
+            continue
+        declared = lookup_unit(raw.unit) if raw.unit and raw.unit.strip() else None
+        if declared is not None and declared.quantity != "time":
+            continue
+        try:
+            own = ChannelSpec("t", name=raw.name, unit=None if declared else "s")
+            column = _time_column(raw, own, log, None)
+        except RigLogError:
+            continue  # not numeric: not a time
+        if column.values.size >= 2 and np.all(np.isfinite(column.values)):
+            return column
+    return None
 
 
 def _dspace_bases(log: RawLog, spec: IngestSpec, columns: list[Column]) -> dict[int, Column]:
@@ -325,12 +406,7 @@ def _dspace_bases(log: RawLog, spec: IngestSpec, columns: list[Column]) -> dict[
                         path=log.path,
                         channel=c.source,
                     )
-    bases = {}
-    for k in used:
-        raster = log.rasters[k]
-        values, unit, _, _ = _convert(raster, time_spec, log)
-        bases[k] = Column("t", raster.name, values, unit, k)
-    return bases
+    return {k: _time_column(log.rasters[k], time_spec, log, k) for k in used}
 
 
 def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
@@ -379,12 +455,12 @@ def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
         columns.append(Column(cspec.role, raw.name, values, unit, raw.raster, gain, file_unit))
     if log.rasters:
         return Mapped(tuple(columns), bases=_dspace_bases(log, spec, columns))
-    time = None
+    time = file_time = None
     if spec.time is not None:
-        raw = select_channel(log.channels, spec.time, log)
-        values, unit, _, _ = _convert(raw, spec.time, log)
-        time = Column("t", raw.name, values, unit)
-    elif spec.sample_time is None:
+        time = _time_column(select_channel(log.channels, spec.time, log), spec.time, log, None)
+    elif spec.sample_time is not None:
+        file_time = _file_time(log, spec, {c.source for c in columns})
+    else:
         raise RigLogError(
             "no time channel is mapped and `sample_time` is not set; add "
             '`time = { name = "...", unit = "s" }` or `sample_time = <s>`',
@@ -399,4 +475,6 @@ def map_channels(log: RawLog, spec: IngestSpec) -> Mapped:
                 path=log.path,
                 channel=c.source,
             )
-    return Mapped(tuple(columns), time=time)
+    if file_time is not None and file_time.values.size != reference.values.size:
+        file_time = None  # another length: not this table's time
+    return Mapped(tuple(columns), time=time, file_time=file_time)

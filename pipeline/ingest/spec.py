@@ -3,11 +3,11 @@
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
 parsed from TOML) into frozen pydantic dataclasses (:mod:`pipeline.config`) and rejects
 anything it does not understand with a one-line :class:`~pipeline.errors.WorkflowError`
-naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'furlong'``).
+naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
 Schema (every key optional unless marked required)::
 
-    format = "auto"            # auto | mat | csv | parquet
+    format = "auto"            # auto | mat | csv | parquet | mf4
     sample_time = 0.0016384    # [s] t = k * sample_time when no time channel is mapped
     time = { name = "t", unit = "s" }         # the time channel
     q  = { column = 1, unit = "V" }           # required: the displacement / output
@@ -30,9 +30,14 @@ A channel table holds exactly one selector, ``name`` (exact channel name), ``reg
 column index, text and Parquet files) or ``var`` (a MAT file's numeric variable, with
 ``column``: the 0-based column of an n x k matrix variable, rows being samples, e.g.
 ``q = { var = "X3", column = 1 }`` for the values of an n x 2 ``[t, value]`` variable), plus
-``unit`` (see :data:`pipeline.ingest.units.UNITS`), ``scale`` (extra factor) and ``si_unit``
-(the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration),
-and the sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in
+``unit`` (any unit pint parses, e.g. ``"mm"``, ``"mm/s"``, ``"g0"``, ``"kV"``, ``"m/s^2"``,
+``"deg"``, ``"1"``; see :mod:`pipeline.ingest.units`), ``scale`` (extra factor) and ``si_unit``
+(the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration).
+The quantity of the result must suit the column (:func:`pipeline.ingest.units.role_quantities`):
+the time a time, ``q`` a length, angle, dimensionless value or voltage, an input a voltage,
+acceleration, force, pressure, current, length or dimensionless value; ``q = { unit = "N" }`` or
+``time = { unit = "mm" }`` is refused naming ``[ingest] q.unit``. Further keys are
+the sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in
 the recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
 identical consecutive samples are a fault; 0 turns the check off; default: 10 on ``q`` when
 it varies, none on other channels).
@@ -64,7 +69,14 @@ from pipeline.config import (
     unknown_key_message,
 )
 from pipeline.errors import WorkflowError
-from pipeline.ingest.units import SI_UNITS, UNITS, canonical_unit
+from pipeline.ingest.units import (
+    EXAMPLES,
+    canonical_unit,
+    describe_quantities,
+    lookup_unit,
+    role_quantities,
+    si_symbol,
+)
 
 __all__ = [
     "FAULT_POLICIES",
@@ -78,7 +90,7 @@ __all__ = [
 ]
 
 #: Values of the ``format`` key.
-FORMATS = ("auto", "mat", "csv", "parquet")
+FORMATS = ("auto", "mat", "csv", "parquet", "mf4")
 #: Values of the ``gaps`` key.
 GAP_POLICIES = ("error", "split")
 #: Values of the ``faults`` key.
@@ -107,8 +119,10 @@ _SELECTOR_TEXT = "give exactly one of `name`, `regex`, `column`, `var` (`var` wi
 _INPUT = re.compile(r"v(\d+)")
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DELIMITER_ALIASES = {"tab": "\t", "space": "whitespace", "\\s+": "whitespace"}
-_UNIT_TEXT = "a known unit (" + ", ".join(UNITS) + ")"
-_SI_TEXT = "one of " + ", ".join(sorted(SI_UNITS))
+_UNIT_TEXT = (
+    "a unit pint parses, with a factor to SI (e.g. " + ", ".join(f"'{u}'" for u in EXAMPLES) + ")"
+)
+_SI_TEXT = "a coherent SI unit (factor 1; e.g. 'm', 'rad', 'V', 'N', 'm/s^2', '1')"
 _DELIMITER_TEXT = '"auto", "whitespace", "tab" or a single non-alphanumeric character'
 
 #: ``where`` of the messages: a section label, or a function of the top-level key giving it.
@@ -124,15 +138,16 @@ def _canonical(value: object) -> object:
 
 
 def _known_unit(unit: str) -> str:
-    if unit not in UNITS:
+    if lookup_unit(unit) is None:
         raise ConfigValueError(None, _UNIT_TEXT)
     return unit
 
 
 def _si_unit(unit: str) -> str:
-    if unit not in SI_UNITS:
+    si = si_symbol(unit)
+    if si is None:
         raise ConfigValueError(None, _SI_TEXT)
-    return unit
+    return si
 
 
 def _regex(pattern: str) -> str:
@@ -194,13 +209,16 @@ class ChannelSpec:
         0-based column index: of the file (text and Parquet files), or with ``var`` of
         that variable (MAT files).
     unit : str, optional
-        Unit of the recorded values, a key of :data:`~pipeline.ingest.units.UNITS`. When
-        omitted the unit the file declares (dSPACE ``Unit``) is used.
+        Unit of the recorded values, any unit pint parses with a factor to SI (``"mm/s"``,
+        ``"g0"``, ``"kV"``, ``"m/s^2"``, ``"deg"``, ``"1"``). When omitted the unit the file
+        declares (dSPACE ``Unit``, MF4 channel unit, Parquet field metadata) is used.
     scale : float, optional
         Extra factor applied after the unit conversion: ``x_si = x * factor(unit) * scale``.
     si_unit : str, optional
-        SI unit of the result, needed only when ``scale`` changes the quantity (a sensor
-        calibration, e.g. ``unit = "V", scale = 2e-3, si_unit = "m"`` for 2 mm/V).
+        Coherent SI unit of the result (stored as its SI symbol, e.g. ``"m/s^2"``), needed
+        only when ``scale`` changes the quantity (a sensor calibration, e.g. ``unit = "V",
+        scale = 2e-3, si_unit = "m"`` for 2 mm/V); another quantity than ``unit`` needs
+        ``scale``.
     range : tuple of float, optional
         ``(lo, hi)`` valid range of the sensor in the recorded unit (before ``scale``),
         ``lo < hi``; a sample at or beyond a limit is a sensor fault (out-of-range value,
@@ -221,9 +239,14 @@ class ChannelSpec:
     Raises
     ------
     pydantic.ValidationError
-        On a value of the wrong type or out of range, several selectors, or a time channel
-        in a unit that is not a time (a ``ValueError``; :meth:`from_dict` raises a
-        ``WorkflowError`` naming the key).
+        On a value of the wrong type or out of range, several selectors, a unit pint does
+        not parse, or a unit (or ``si_unit``) of a quantity the role cannot hold, e.g. a
+        time channel in ``mm`` (a ``ValueError``; :meth:`from_dict` raises a
+        ``WorkflowError`` naming the key, the value and the expected quantity).
+
+    References
+    ----------
+    pint (https://pint.readthedocs.io) parses the units, see :mod:`pipeline.ingest.units`.
     """
 
     role: str
@@ -232,7 +255,9 @@ class ChannelSpec:
     column: NonNegativeInt | None = None
     unit: Annotated[_Unit | None, Field(description=_UNIT_TEXT)] = None
     scale: Annotated[FiniteFloat, AfterValidator(_nonzero)] | None = None
-    si_unit: Annotated[str | None, AfterValidator(lambda u: u and _si_unit(u))] = None
+    si_unit: Annotated[
+        str | None, BeforeValidator(_canonical), AfterValidator(lambda u: u and _si_unit(u))
+    ] = None
     range: Interval | None = None
     stuck: Annotated[NonNegativeInt, AfterValidator(_stuck)] | None = None
     var: Annotated[str, Field(min_length=1)] | None = None
@@ -241,12 +266,8 @@ class ChannelSpec:
         given = [k for k in _SELECTORS if getattr(self, k) is not None]
         if len(given) > 1 and set(given) != {"var", "column"}:
             raise ConfigValueError("", message=f"{_SELECTOR_TEXT}, got " + ", ".join(given))
+        self._check_quantity()
         if self.role == "t":
-            for key, si in (("unit", self.unit and UNITS[self.unit].si), ("si_unit", self.si_unit)):
-                if si is not None and si != "s":
-                    raise ConfigValueError(
-                        key, "a time unit (the time channel)", getattr(self, key)
-                    )
             for key in ("range", "stuck"):
                 if getattr(self, key) is not None:
                     raise ConfigValueError(
@@ -254,6 +275,34 @@ class ChannelSpec:
                         message="the time channel has no sensor checks (checked: strictly "
                         "increasing, gaps)",
                     )
+
+    def _check_quantity(self) -> None:
+        """Raise unless the result (``si_unit``, else ``unit``) suits the role."""
+        unit = lookup_unit(self.unit) if self.unit is not None else None
+        if self.si_unit is not None:
+            result = lookup_unit(self.si_unit)
+            if unit is not None and unit.si != result.si and self.scale is None:
+                raise ConfigValueError(
+                    "si_unit",
+                    message=f"expected `scale` with an `si_unit` of another quantity than "
+                    f"`unit` (the calibration factor, {result.si} per {self.unit}), got "
+                    f"unit = {self.unit!r} ({unit.quantity}), si_unit = {self.si_unit!r} "
+                    f"({result.quantity})",
+                )
+            key, value, found = "si_unit", self.si_unit, result
+        elif unit is not None:
+            key, value, found = "unit", self.unit, unit
+        else:
+            return
+        allowed = role_quantities(self.role)
+        if allowed is not None and found.quantity not in allowed:
+            what = "the time channel" if self.role == "t" else f"`{self.role}`"
+            calibrate = "" if self.role == "t" else " (or `scale` and `si_unit` calibrating it)"
+            raise ConfigValueError(
+                key,
+                message=f"expected {describe_quantities(allowed)} for {what}{calibrate}, got "
+                f"{value!r} ({found.quantity} [{found.si}])",
+            )
 
     @property
     def selector(self) -> str:
@@ -293,10 +342,14 @@ class ChannelSpec:
 
         Examples
         --------
-        >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "furlong"})  # doctest: +ELLIPSIS
+        >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "bananas"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [ingest] q.unit: expected a known unit (...), got 'furlong'
+        pipeline.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
+        >>> ChannelSpec.from_dict("t", {"name": "t", "unit": "mm"})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... (length [m])
         """
         key = "time" if role == "t" else role
         label = _label(where, key)
@@ -397,8 +450,9 @@ class IngestSpec:
     ----------
     channels : tuple of ChannelSpec
         ``q``, ``v1``, ..., ``vN``, then the extra channels sorted by name.
-    format : {"auto", "mat", "csv", "parquet"}
-        ``"auto"``: detect by magic bytes, then by extension.
+    format : {"auto", "mat", "csv", "parquet", "mf4"}
+        ``"auto"``: detect by magic bytes, then by extension; ``"mf4"``: ASAM MDF
+        (versions 3 and 4, read with asammdf, the ``mf4`` extra).
     sample_time : float, optional
         Sample time [s]; the time is ``k * sample_time`` (k the 0-based sample index of the
         file) when no time channel is mapped. With a time channel it is checked against
@@ -440,7 +494,7 @@ class IngestSpec:
     """
 
     channels: tuple[ChannelSpec, ...]
-    format: Literal["auto", "mat", "csv", "parquet"] = "auto"
+    format: Literal["auto", "mat", "csv", "parquet", "mf4"] = "auto"
     sample_time: PositiveFloat | None = None
     time: ChannelSpec | None = None
     sample_slice: Annotated[

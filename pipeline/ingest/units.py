@@ -1,32 +1,71 @@
-"""Table of the units a rig-log channel may be recorded in, and their factors to SI.
+"""Units of rig-log channels, parsed by pint, and their factors to SI.
 
-Conversion to SI happens here and only here (STYLE: SI inside, conversion at ingest):
-a recorded value ``x`` in unit ``u`` becomes ``x * UNITS[u].factor`` in ``UNITS[u].si``.
+Conversion to SI happens here and only here (SI inside, conversion at ingest): a value
+``x`` recorded in unit ``u`` becomes ``x * lookup_unit(u).factor`` in ``lookup_unit(u).si``.
+
+Any unit expression the pint default registry parses is accepted: SI prefixes
+(``mm``, ``kV``, ``mN``, ``us`` or ``µs``), products and quotients (``mm/s``, ``m/s^2``,
+``N*m``), long names (``millimeter``, ``degree``) and constants used as units (``g0`` or
+``g_0``, standard gravity 9.80665 m/s^2). Square brackets around a unit (``[mm]``) and
+``-`` for a dimensionless value are understood. Units with an offset (``degC``) are not
+factors to SI and are refused (give ``scale`` and ``si_unit`` instead).
+
+Which quantity a canonical column may hold is :func:`role_quantities`: the time an
+interval, ``q`` a length, an angle (or dimensionless) or a voltage (an uncalibrated sensor
+or an electrical analogue such as the Silverbox circuit), an input ``v1 ... vN`` a
+voltage (a DE, an amplifier command), acceleration or force (a shaker, a motor), pressure
+(a pneumatic piston), current, length or a dimensionless value; extra channels anything.
+
+References
+----------
+H. E. Grecco et al., "Pint: makes units easy", https://pint.readthedocs.io (the unit
+definitions and parser); BIPM, "The International System of Units (SI)", 9th edition
+(2019), tables 2 and 4 (the coherent SI units the values are converted to).
 """
 
 from __future__ import annotations
 
-import math
+import functools
+import re
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from types import MappingProxyType
+from typing import TYPE_CHECKING
 
-__all__ = ["SI_UNITS", "UNITS", "Unit", "canonical_unit", "lookup_unit"]
+if TYPE_CHECKING:
+    import pint
+
+__all__ = [
+    "EXAMPLES",
+    "INPUT_QUANTITIES",
+    "Q_QUANTITIES",
+    "UNITS",
+    "Unit",
+    "canonical_unit",
+    "describe_quantities",
+    "lookup_unit",
+    "registry",
+    "role_quantities",
+    "si_symbol",
+]
 
 
 @dataclass(frozen=True)
 class Unit:
-    """One known unit.
+    """One unit, as pint understands it.
 
     Parameters
     ----------
     symbol : str
-        Canonical symbol, e.g. ``"kV"``.
+        The unit as written (blanks and brackets stripped), e.g. ``"kV"``.
     factor : float
         Multiply a value in this unit by ``factor`` to get it in ``si``.
     si : str
-        The SI unit of the same quantity, e.g. ``"V"``.
+        The coherent SI unit of the same quantity, e.g. ``"V"``, ``"m/s^2"``, ``"rad"``,
+        ``"1"`` (dimensionless).
     quantity : str
-        What the unit measures (``"time"``, ``"length"``, ``"voltage"``, ...).
+        What the unit measures: ``"time"``, ``"length"``, ``"angle"``, ``"dimensionless"``,
+        ``"voltage"``, ``"force"``, ``"acceleration"``, ... (see :data:`QUANTITIES`), or
+        the pint dimensionality for other quantities (``"[mass] / [length]"``).
     """
 
     symbol: str
@@ -35,67 +74,90 @@ class Unit:
     quantity: str
 
 
-_TABLE = (
-    Unit("s", 1.0, "s", "time"),
-    Unit("ms", 1e-3, "s", "time"),
-    Unit("us", 1e-6, "s", "time"),
-    Unit("m", 1.0, "m", "length"),
-    Unit("mm", 1e-3, "m", "length"),
-    Unit("um", 1e-6, "m", "length"),
-    Unit("V", 1.0, "V", "voltage"),
-    Unit("kV", 1e3, "V", "voltage"),
-    Unit("mV", 1e-3, "V", "voltage"),
-    Unit("N", 1.0, "N", "force"),
-    Unit("mN", 1e-3, "N", "force"),
-    Unit("rad", 1.0, "rad", "angle"),
-    Unit("deg", math.pi / 180.0, "rad", "angle"),
-    Unit("Pa", 1.0, "Pa", "pressure"),
-    Unit("kPa", 1e3, "Pa", "pressure"),
-    Unit("bar", 1e5, "Pa", "pressure"),
-    Unit("1", 1.0, "1", "dimensionless"),
+#: Coherent SI units by the quantity they measure; the first unit of a dimensionality
+#: names it (``N*m`` and ``J`` share one: a value is reported in ``J``).
+QUANTITIES: dict[str, str] = {
+    "time": "s",
+    "length": "m",
+    "angle": "rad",
+    "dimensionless": "1",
+    "voltage": "V",
+    "force": "N",
+    "acceleration": "m/s^2",
+    "velocity": "m/s",
+    "angular velocity": "rad/s",
+    "angular acceleration": "rad/s^2",
+    "pressure": "Pa",
+    "current": "A",
+    "mass": "kg",
+    "temperature": "K",
+    "frequency": "Hz",
+    "energy": "J",
+    "power": "W",
+    "charge": "C",
+    "capacitance": "F",
+    "resistance": "ohm",
+    "magnetic flux density": "T",
+}
+
+#: Quantities the displacement ``q`` may hold.
+Q_QUANTITIES = ("length", "angle", "dimensionless", "voltage")
+#: Quantities an input ``v1 ... vN`` may hold (the input map ``h(v)`` is unit-agnostic).
+INPUT_QUANTITIES = (
+    "voltage",
+    "acceleration",
+    "force",
+    "pressure",
+    "current",
+    "length",
+    "angle",
+    "dimensionless",
 )
+#: A few units, for messages (any unit pint parses is accepted).
+EXAMPLES = ("s", "ms", "m", "mm", "um", "deg", "V", "kV", "N", "mN", "m/s^2", "g0", "1")
 
-#: Known units by canonical symbol (read-only).
-UNITS = MappingProxyType({u.symbol: u for u in _TABLE})
+_INPUT = re.compile(r"v\d+")
+_ALIASES = {"-": "1", "sec": "s", "msec": "ms", "usec": "us"}
 
-#: The SI units the table converts to.
-SI_UNITS = frozenset(u.si for u in _TABLE)
 
-# Other spellings of the same units (the micro sign and the Greek mu, long names).
-_ALIASES = MappingProxyType(
-    {
-        "\u00b5s": "us",
-        "\u03bcs": "us",
-        "\u00b5m": "um",
-        "\u03bcm": "um",
-        "sec": "s",
-        "msec": "ms",
-        "-": "1",
-    }
-)
+@functools.cache
+def registry() -> pint.UnitRegistry:
+    """Return the one pint unit registry of debist (created on first use).
+
+    Returns
+    -------
+    pint.UnitRegistry
+        The default definitions; importing pint costs about a second, so it is loaded
+        only when a unit is looked up.
+
+    References
+    ----------
+    pint, ``UnitRegistry`` (https://pint.readthedocs.io).
+    """
+    import pint
+
+    return pint.UnitRegistry()
 
 
 def canonical_unit(symbol: str) -> str:
-    """Return the canonical spelling of a unit symbol (``"µm"`` -> ``"um"``).
+    """Return a unit as written, without blanks and square brackets (``" [mm] "`` -> ``"mm"``).
 
     Parameters
     ----------
     symbol : str
-        A unit as written in a workflow file or declared by a rig log; surrounding
-        blanks and square brackets (``"[mm]"``) are ignored.
+        A unit as written in a workflow file or declared by a rig log.
 
     Returns
     -------
     str
-        The canonical symbol if the unit is known (or an alias of one), else the
-        stripped input unchanged.
+        The stripped symbol; ``"-"`` becomes ``"1"`` (dimensionless), ``"sec"`` ``"s"``.
 
     Examples
     --------
     >>> canonical_unit(" [\u00b5m] ")
-    'um'
-    >>> canonical_unit("furlong")
-    'furlong'
+    '\u00b5m'
+    >>> canonical_unit("-")
+    '1'
     """
     s = symbol.strip()
     if s.startswith("[") and s.endswith("]"):
@@ -103,24 +165,175 @@ def canonical_unit(symbol: str) -> str:
     return _ALIASES.get(s, s)
 
 
+@functools.cache
+def _si_units() -> dict[tuple, tuple[str, str]]:
+    """Base-unit signature -> (quantity, SI symbol), from :data:`QUANTITIES`."""
+    reg = registry()
+    table: dict[tuple, tuple[str, str]] = {}
+    for quantity, symbol in QUANTITIES.items():
+        _, base = reg.get_base_units(reg.parse_units(symbol.replace("^", "**")))
+        table.setdefault(_signature(base), (quantity, symbol))
+    return table
+
+
+def _signature(base: pint.Unit) -> tuple:
+    return tuple(sorted((name, float(power)) for name, power in base._units.items()))
+
+
+def _parse(symbol: str) -> pint.Unit | None:
+    text = canonical_unit(symbol)
+    if not text:
+        return None
+    try:
+        # the parser raises many kinds of errors (undefined name, syntax, a number)
+        return registry().parse_units(text.replace("^", "**"))
+    except Exception:  # any parse failure means "not a unit"
+        return None
+
+
+def _fallback_symbol(base: pint.Unit) -> str:
+    parts = []
+    for name, power in sorted(base._units.items()):
+        short = f"{registry().parse_units(name):~}"
+        p = float(power)
+        parts.append(short if p == 1 else f"{short}^{p:g}")
+    return "*".join(parts)
+
+
+@functools.cache
 def lookup_unit(symbol: str) -> Unit | None:
-    """Return the :class:`Unit` of a symbol, or None when it is not in the table.
+    """Return the :class:`Unit` of a unit expression, or None when pint cannot use it.
 
     Parameters
     ----------
     symbol : str
-        A unit symbol or one of its aliases (see :func:`canonical_unit`).
+        Any unit pint parses (``"mm/s"``, ``"g0"``, ``"kV"``, ``"m/s^2"``, ``"deg"``,
+        ``"1"``); blanks and square brackets are ignored (see :func:`canonical_unit`).
 
     Returns
     -------
     Unit or None
-        The table entry.
+        Factor to SI, SI symbol and quantity; None for text pint does not parse as a
+        unit, a number (``"2 mm"``), an empty string, or a unit with an offset to SI
+        (``"degC"``).
 
     Examples
     --------
     >>> lookup_unit("kV").factor
     1000.0
-    >>> lookup_unit("ms").si
-    's'
+    >>> lookup_unit("g0").factor, lookup_unit("g0").si
+    (9.80665, 'm/s^2')
+    >>> lookup_unit("bananas") is None, lookup_unit("degC") is None
+    (True, True)
     """
-    return UNITS.get(canonical_unit(symbol))
+    unit = _parse(symbol)
+    if unit is None:
+        return None
+    reg = registry()
+    try:
+        one = reg.Quantity(1.0, unit).to_base_units()
+        zero = reg.Quantity(0.0, unit).to_base_units()
+    except Exception:  # an offset unit inside a product (degC/s) cannot be converted
+        return None
+    if zero.magnitude != 0.0:  # an offset (degC): no factor to SI
+        return None
+    factor, base = one.magnitude, one.units
+    quantity, si = _si_units().get(_signature(base), (None, None))
+    if si is None:
+        quantity, si = str(base.dimensionality), _fallback_symbol(base)
+    return Unit(canonical_unit(symbol), float(factor), si, quantity)
+
+
+def si_symbol(symbol: str) -> str | None:
+    """Return the coherent SI unit that a unit expression names, or None if it is not one.
+
+    Parameters
+    ----------
+    symbol : str
+        A unit expression, e.g. ``"m"``, ``"meter"``, ``"m/s^2"``, ``"N"``.
+
+    Returns
+    -------
+    str or None
+        The SI symbol (``"m"``, ``"m/s^2"``, ``"N"``) when the unit's factor to SI is 1;
+        None for an unknown unit or one with another factor (``"mm"``).
+
+    Examples
+    --------
+    >>> si_symbol("meter"), si_symbol("mm")
+    ('m', None)
+    """
+    unit = lookup_unit(symbol)
+    if unit is None or abs(unit.factor - 1.0) > 1e-12:
+        return None
+    return unit.si
+
+
+def role_quantities(role: str) -> tuple[str, ...] | None:
+    """Return the quantities a canonical column may hold.
+
+    Parameters
+    ----------
+    role : str
+        ``"t"``, ``"q"``, ``"v1"``, ... or the name of an extra channel.
+
+    Returns
+    -------
+    tuple of str or None
+        ``("time",)`` for ``t``, :data:`Q_QUANTITIES` for ``q``,
+        :data:`INPUT_QUANTITIES` for an input; None (anything) for an extra channel.
+    """
+    if role == "t":
+        return ("time",)
+    if role == "q":
+        return Q_QUANTITIES
+    if _INPUT.fullmatch(role):
+        return INPUT_QUANTITIES
+    return None
+
+
+def describe_quantities(quantities: tuple[str, ...]) -> str:
+    """Describe quantities for a message: ``"a length [m] or angle [rad] unit"``.
+
+    Parameters
+    ----------
+    quantities : tuple of str
+        Keys of :data:`QUANTITIES`.
+
+    Returns
+    -------
+    str
+        The text.
+    """
+    named = [f"{q} [{QUANTITIES[q]}]" for q in quantities]
+    listed = named[0] if len(named) == 1 else ", ".join(named[:-1]) + " or " + named[-1]
+    article = "an" if listed[0] in "aeiou" else "a"
+    return f"{article} {listed} unit"
+
+
+class _PintUnits(Mapping[str, Unit]):
+    """Read-only mapping of unit expressions to :class:`Unit`, backed by pint.
+
+    ``symbol in UNITS`` is true for every unit :func:`lookup_unit` accepts, and
+    ``UNITS[symbol]`` returns its :class:`Unit`; iteration yields :data:`EXAMPLES` only.
+    """
+
+    def __getitem__(self, symbol: str) -> Unit:
+        unit = lookup_unit(symbol) if isinstance(symbol, str) else None
+        if unit is None:
+            raise KeyError(symbol)
+        return unit
+
+    def __contains__(self, symbol: object) -> bool:
+        return isinstance(symbol, str) and lookup_unit(symbol) is not None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(EXAMPLES)
+
+    def __len__(self) -> int:
+        return len(EXAMPLES)
+
+
+#: Every unit pint parses, by expression: ``UNITS["mm"].factor == 1e-3`` (read-only;
+#: iterating gives a few examples, :data:`EXAMPLES`).
+UNITS: Mapping[str, Unit] = _PintUnits()
