@@ -17,14 +17,18 @@ from pipeline.errors import RigLogError
 __all__ = [
     "GAP_RTOL",
     "MIN_SAMPLES",
+    "TIME_RTOL",
+    "TIME_RTOL_MAX",
     "check_enough",
     "check_finite",
     "check_sample_time",
     "check_time",
     "find_gaps",
     "gap_error",
+    "printed_resolution",
     "slice_range",
     "split_segments",
+    "time_rtol",
     "window_range",
 ]
 
@@ -32,8 +36,12 @@ __all__ = [
 MIN_SAMPLES = 3
 #: Relative margin above ``gap_tolerance * median(dt)`` (rounding of converted units).
 GAP_RTOL = 1e-9
-#: Relative tolerance between ``sample_time`` and the median step of a time channel.
-SAMPLE_TIME_RTOL = 0.01
+#: Smallest relative tolerance of a time step (float64 time bases written in full).
+TIME_RTOL = 1e-6
+#: Largest relative tolerance of a time step, however coarsely the time is written.
+TIME_RTOL_MAX = 1e-3
+#: Values sampled to find the digits a time column is written with.
+_DIGIT_SAMPLES = 2000
 
 
 def _t(value: float) -> str:
@@ -205,30 +213,122 @@ def check_time(t: np.ndarray, index: np.ndarray, *, channel: str, path: Path) ->
         )
 
 
-def check_sample_time(t: np.ndarray, sample_time: float, *, channel: str, path: Path) -> None:
-    """Raise when ``sample_time`` disagrees with the median step of the time channel.
+def printed_resolution(values: np.ndarray) -> float:
+    """Return the rounding step implied by the significant digits a column is written with.
+
+    A time column written with ``N`` significant digits (``"%.9g"``: 0.000488281,
+    1.99951172) is rounded to ``10**(e - N + 1)`` where ``e`` is the decimal exponent of
+    its largest value; ``N`` is the most digits any value needs in its shortest round-trip
+    form (at most 17 for float64, whose own spacing is the floor).
+
+    Parameters
+    ----------
+    values : ndarray, shape (n,)
+        The column as recorded (before any unit conversion, which would add digits).
+
+    Returns
+    -------
+    float
+        The rounding step in the recorded unit, ``>= 0`` (0 for an empty or all-zero
+        column).
+
+    References
+    ----------
+    G. L. Steele and J. L. White, "How to print floating-point numbers accurately",
+    PLDI 1990 (the shortest round-trip form, :func:`numpy.format_float_scientific`).
+
+    Examples
+    --------
+    >>> printed_resolution(np.array([0.000488281, 0.000976563, 1.99951172]))
+    1e-08
+    """
+    x = np.asarray(values, dtype=np.float64)
+    x = np.abs(x[np.isfinite(x) & (x != 0.0)])
+    if x.size == 0:
+        return 0.0
+    picks = x[np.unique(np.linspace(0, x.size - 1, min(x.size, _DIGIT_SAMPLES)).astype(int))]
+    digits = max(
+        sum(ch.isdigit() for ch in np.format_float_scientific(v, unique=True).split("e")[0])
+        for v in picks
+    )
+    largest = float(x.max())
+    exponent = int(np.floor(np.log10(largest)))
+    return float(max(10.0 ** (exponent - digits + 1), np.spacing(largest)))
+
+
+def time_rtol(t: np.ndarray, resolution: float = 0.0) -> float:
+    """Relative tolerance of the steps of a time base: uniformity, resampling, sample_time.
+
+    Each step is a difference of two values rounded to ``resolution``, so it may be off
+    by ``resolution`` (plus the float64 spacing of the largest time); relative to the
+    mean step that is the tolerance, bounded by :data:`TIME_RTOL` below and
+    :data:`TIME_RTOL_MAX` above. The same number decides whether a time base is uniform,
+    whether ``resample.sample_time`` is a rational multiple of its step, and whether
+    ``sample_time`` agrees with a time column.
 
     Parameters
     ----------
     t : ndarray, shape (n_samples,) [s]
-        Time, strictly increasing.
+        Time, at least 2 samples, increasing.
+    resolution : float
+        [s] the rounding step of the recorded time (:func:`printed_resolution` times the
+        unit factor); 0 for a computed time base.
+
+    Returns
+    -------
+    float
+        The relative tolerance.
+
+    Examples
+    --------
+    >>> t = np.round(np.arange(4096) / 2048.0, 8)      # 9 significant digits below 10 s
+    >>> round(time_rtol(t, 1e-8), 7)
+    4.1e-05
+    """
+    t = np.asarray(t, dtype=np.float64)
+    step = (float(t[-1]) - float(t[0])) / (t.size - 1)
+    rounding = max(resolution, float(np.spacing(np.max(np.abs(t)))))
+    return float(min(TIME_RTOL_MAX, max(TIME_RTOL, 2.0 * rounding / step)))
+
+
+def check_sample_time(
+    t: np.ndarray,
+    sample_time: float,
+    *,
+    channel: str,
+    path: Path,
+    resolution: float = 0.0,
+    hint: str = "remove `sample_time` or fix the time unit",
+) -> None:
+    """Raise when ``sample_time`` disagrees with the median step of a time channel.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,) [s]
+        Time, at least 2 samples.
     sample_time : float
         The ``sample_time`` key [s].
     channel : str
         Source name of the time channel.
     path : Path
         For messages.
+    resolution : float
+        [s] rounding step of the recorded time (see :func:`time_rtol`).
+    hint : str
+        The advice that ends the message.
 
     Raises
     ------
     RigLogError
-        Relative difference above :data:`SAMPLE_TIME_RTOL`.
+        Relative difference above :func:`time_rtol`, naming both values.
     """
     median = float(np.median(np.diff(t)))
-    if abs(median - sample_time) > SAMPLE_TIME_RTOL * sample_time:
+    rtol = time_rtol(t, resolution)
+    if abs(median - sample_time) > rtol * sample_time:
         raise RigLogError(
-            f"`sample_time` = {sample_time:g} s but the median step of the time channel is "
-            f"{median:.6g} s; remove `sample_time` or fix the time unit",
+            f"`sample_time` = {sample_time:.12g} s but the median step of the time channel is "
+            f"{median:.12g} s (relative difference {abs(median / sample_time - 1):.3g}, "
+            f"tolerance {rtol:.3g}); {hint}",
             path=path,
             channel=channel,
         )

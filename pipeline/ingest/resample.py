@@ -8,7 +8,12 @@ Two methods (key ``resample.method``):
     anti-aliased decimation). Its FIR low-pass (Kaiser window, cut-off at the lower of
     the two Nyquist frequencies) removes what the new rate cannot represent, and
     ``padtype = "line"`` keeps the ends free of the zero-padding transient. Needs a
-    uniformly sampled input (steps within 0.1 % of their median).
+    uniformly sampled input: every step within the time tolerance
+    (:func:`pipeline.ingest.checks.time_rtol`: the larger of 1e-6 and what the digits the
+    time is written with imply, at most 0.1 %) of the mean step, and a target step whose
+    ratio to the mean step is a fraction with denominator <= 100 within the same
+    tolerance. The mean step ``(t[-1] - t[0]) / (n - 1)`` is the estimate of the recorded
+    step: rounding of the time values averages out of it.
 ``"linear"``
     :func:`numpy.interp` on the new grid. No anti-aliasing: use it for upsampling, for
     jittery time bases, or with a target step much shorter than the signal's time scales.
@@ -25,13 +30,15 @@ from fractions import Fraction
 import numpy as np
 
 from pipeline.errors import RigLogError
+from pipeline.ingest.checks import TIME_RTOL_MAX, time_rtol
 
 __all__ = ["MAX_DOWN", "UNIFORM_RTOL", "resample_segment", "uniform_grid"]
 
 #: Largest denominator of the polyphase ratio.
 MAX_DOWN = 100
-#: Largest relative deviation of a step from the median step for "polyphase".
-UNIFORM_RTOL = 1e-3
+#: Largest relative deviation of a step from the mean step for "polyphase" (the bound of
+#: :func:`~pipeline.ingest.checks.time_rtol`, which gives the tolerance of a time base).
+UNIFORM_RTOL = TIME_RTOL_MAX
 
 
 def uniform_grid(t0: float, t1: float, dt: float) -> np.ndarray:
@@ -59,7 +66,11 @@ def uniform_grid(t0: float, t1: float, dt: float) -> np.ndarray:
 
 
 def resample_segment(
-    t: np.ndarray, values: np.ndarray, sample_time: float, method: str
+    t: np.ndarray,
+    values: np.ndarray,
+    sample_time: float,
+    method: str,
+    resolution: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Resample one gap-free segment.
 
@@ -73,6 +84,10 @@ def resample_segment(
         Target step [s].
     method : {"polyphase", "linear"}
         See the module docstring.
+    resolution : float, optional
+        [s] rounding step of the recorded time
+        (:func:`~pipeline.ingest.checks.printed_resolution` times the unit factor); 0 for
+        a time base written in full or computed.
 
     Returns
     -------
@@ -84,9 +99,16 @@ def resample_segment(
     Raises
     ------
     RigLogError
-        ``"polyphase"`` on a non-uniform time base, or with a ratio ``dt_in / dt_out``
-        that is not a fraction with denominator <= :data:`MAX_DOWN` (the message suggests
-        ``"linear"``); no file name here, the caller adds it.
+        ``"polyphase"`` on a non-uniform time base, or with a ratio ``dt_out / dt_in``
+        that is not a fraction with denominator <= :data:`MAX_DOWN` (both within
+        :func:`~pipeline.ingest.checks.time_rtol`; the message suggests ``"linear"``); no
+        file name here, the caller adds it.
+
+    References
+    ----------
+    P. P. Vaidyanathan, "Multirate Systems and Filter Banks", Prentice Hall, 1993, ch. 4
+    (polyphase rational-rate conversion), as implemented by
+    :func:`scipy.signal.resample_poly`.
 
     Examples
     --------
@@ -100,21 +122,22 @@ def resample_segment(
         columns = [np.interp(t_new, t, values[:, j]) for j in range(values.shape[1])]
         return t_new, np.column_stack(columns) if columns else np.empty((t_new.size, 0))
     steps = np.diff(t)
-    dt_in = float(np.median(steps))
+    dt_in = (float(t[-1]) - float(t[0])) / steps.size
+    rtol = time_rtol(t, resolution)
     spread = float(np.max(np.abs(steps - dt_in)))
-    if spread > UNIFORM_RTOL * dt_in:
+    if spread > rtol * dt_in:
         raise RigLogError(
             f'resample method "polyphase" needs uniform sampling, but the steps range from '
-            f"{steps.min():.6g} s to {steps.max():.6g} s (median {dt_in:.6g} s); "
-            'use method = "linear"'
+            f"{steps.min():.9g} s to {steps.max():.9g} s (mean {dt_in:.9g} s, tolerance "
+            f'{rtol:.3g}); use method = "linear"'
         )
-    ratio = Fraction(sample_time / dt_in).limit_denominator(MAX_DOWN)
     exact = sample_time / dt_in
-    if abs(float(ratio) - exact) > 1e-6 * exact:
+    ratio = Fraction(exact).limit_denominator(MAX_DOWN)
+    if abs(float(ratio) - exact) > rtol * exact:
         raise RigLogError(
             f"resample.sample_time = {sample_time:g} s is not a simple fraction of the "
-            f"recorded step {dt_in:.6g} s (ratio {exact:.6g}); choose a rational ratio "
-            'or use method = "linear"'
+            f"recorded step {dt_in:.9g} s (ratio {exact:.9g}, tolerance {rtol:.3g}); "
+            'choose a rational ratio or use method = "linear"'
         )
     down, up = ratio.numerator, ratio.denominator
     if up == down:
