@@ -1,7 +1,7 @@
 """Ingest: rig logs into canonical, checked tables in SI units.
 
 Reads MAT v5/v7.3 files (dSPACE ControlDesk recordings or plain variables), delimited
-text and Parquet.
+text, Parquet and ASAM MDF (MF4, with the optional asammdf).
 
 Public API::
 
@@ -16,8 +16,9 @@ is ``data/README.md``.
 
 The modules, one concern each: :mod:`.spec` (configuration), :mod:`.units`,
 :mod:`.detect` (magic bytes), :mod:`.mat` / :mod:`.mat73` / :mod:`.text` /
-:mod:`.parquet` (readers), :mod:`.channels` (mapping and unit conversion),
-:mod:`.checks` (validation), :mod:`.resample`, :mod:`.assemble` (the canonical table).
+:mod:`.parquet` / :mod:`.mf4` (readers), :mod:`.cache` (one read per file and stage),
+:mod:`.channels` (mapping and unit conversion), :mod:`.checks` (validation),
+:mod:`.resample`, :mod:`.assemble` (the canonical table).
 """
 
 from __future__ import annotations
@@ -28,9 +29,11 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.ingest.assemble import assemble, to_frame
+from pipeline.ingest.cache import RawLogCache
 from pipeline.ingest.channels import map_channels
 from pipeline.ingest.detect import detect_format
 from pipeline.ingest.mat import read_mat
+from pipeline.ingest.mf4 import read_mf4
 from pipeline.ingest.parquet import read_parquet
 from pipeline.ingest.raw import RawLog
 from pipeline.ingest.spec import FORMATS, ChannelSpec, IngestSpec, ResampleSpec
@@ -42,13 +45,14 @@ __all__ = [
     "UNITS",
     "ChannelSpec",
     "IngestSpec",
+    "RawLogCache",
     "ResampleSpec",
     "detect_format",
     "load_rig_log",
     "read_raw",
 ]
 
-#: Accepted values of the ``format`` key: ``("auto", "mat", "csv", "parquet")``.
+#: Accepted values of the ``format`` key: ``("auto", "mat", "csv", "parquet", "mf4")``.
 RIG_LOG_FORMATS: tuple[str, ...] = FORMATS
 
 
@@ -78,20 +82,27 @@ def read_raw(path: Path, spec: IngestSpec) -> RawLog:
         return read_mat(path, fmt)
     if fmt == "parquet":
         return read_parquet(path)
+    if fmt == "mf4":
+        return read_mf4(path)
     return read_text(path, spec.delimiter, spec.header, spec.decimal)
 
 
-def load_rig_log(path: str | os.PathLike[str], spec: IngestSpec) -> list[pd.DataFrame]:
+def load_rig_log(
+    path: str | os.PathLike[str], spec: IngestSpec, cache: RawLogCache | None = None
+) -> list[pd.DataFrame]:
     r"""Read a rig log into canonical tables, one per gap-free segment.
 
     Parameters
     ----------
     path : str or os.PathLike
         The rig log: MAT v5/v7 or v7.3 (dSPACE ControlDesk recording or plain
-        variables), delimited text, or Parquet; the format is detected from the content
-        unless ``spec.format`` fixes it.
+        variables), delimited text, Parquet, or MF4; the format is detected from the
+        content unless ``spec.format`` fixes it.
     spec : IngestSpec
         From :meth:`IngestSpec.from_dict`.
+    cache : RawLogCache, optional
+        Shares the reading of a file between calls (the ingest stage's data sets);
+        None reads the file.
 
     Returns
     -------
@@ -106,7 +117,8 @@ def load_rig_log(path: str | os.PathLike[str], spec: IngestSpec) -> list[pd.Data
         - ``source``: the path as a string;
         - ``channels``: column -> source channel name (``"k * <Ts> s"`` for a synthetic time);
         - ``segment``: 0-based number, ``n_segments``: tables returned;
-        - ``format``: ``"mat-v5"``, ``"mat-v7.3"``, ``"mat-v4"``, ``"csv"`` or ``"parquet"``;
+        - ``format``: ``"mat-v5"``, ``"mat-v7.3"``, ``"mat-v4"``, ``"csv"``, ``"parquet"``
+          or ``"mf4"``;
         - ``first_index``: file sample index of the first (original) sample;
         - ``dropped_segments``: segments dropped as shorter than ``min_segment``
           (``first_index``, ``n_samples``, ``t_start``);
@@ -136,7 +148,7 @@ def load_rig_log(path: str | os.PathLike[str], spec: IngestSpec) -> list[pd.Data
     {'t': 's', 'q': 'm', 'v1': 'V'}
     """
     path = Path(path)
-    log = read_raw(path, spec)
+    log = read_raw(path, spec) if cache is None else cache.read(path, spec)
     mapped = map_channels(log, spec)
     segments, time_source = assemble(mapped, spec, path)
     return [

@@ -5,7 +5,9 @@ Order of operations on a log whose channels share one sample index:
 1. time ``t`` from the time channel, or ``k * sample_time`` (k the file sample index);
 2. ``slice`` (sample indices), then ``time_window`` (``start <= t < stop``);
 3. at least 3 samples left; time finite and strictly increasing; every channel finite;
-   ``sample_time`` (if also given) within 1 % of the median step; sensor faults (a
+   ``sample_time`` (if also given) equal to the median step of the time channel within
+   the time tolerance (:func:`pipeline.ingest.checks.time_rtol`), and so is that of an
+   unmapped time-named channel when the time is ``k * sample_time``; sensor faults (a
    channel's ``range`` / ``stuck``, :mod:`pipeline.ingest.validity`) under
    ``faults = "error"``;
 4. gaps (a step > ``gap_tolerance * median(dt)``): error, or split into gap-free
@@ -29,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.errors import RigLogError
-from pipeline.ingest.channels import Column, Mapped
+from pipeline.ingest.channels import Mapped
 from pipeline.ingest.checks import (
     check_enough,
     check_finite,
@@ -76,10 +78,17 @@ def _with_path(exc: RigLogError, path: Path, channel: str | None = None) -> RigL
 
 
 def _resample(
-    t: np.ndarray, values: np.ndarray, resample: ResampleSpec, path: Path, what: str
+    t: np.ndarray,
+    values: np.ndarray,
+    resample: ResampleSpec,
+    path: Path,
+    what: str,
+    resolution: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     try:
-        t_new, v_new = resample_segment(t, values, resample.sample_time, resample.method)
+        t_new, v_new = resample_segment(
+            t, values, resample.sample_time, resample.method, resolution
+        )
     except RigLogError as exc:
         raise _with_path(exc, path, what) from None
     check_enough(t_new.size, t.size, what=f"resampling {what}", path=path)
@@ -90,8 +99,10 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
     n = mapped.columns[0].values.size
     start, stop = slice_range(n, spec.sample_slice, path=path)
     index = np.arange(start, stop)
+    resolution = 0.0
     if mapped.time is not None:
         t, t_name = mapped.time.values[start:stop], mapped.time.source
+        resolution = mapped.time.resolution
     else:
         t, t_name = index * float(spec.sample_time), f"k * {spec.sample_time:g} s"
     values = np.column_stack([c.values[start:stop] for c in mapped.columns])
@@ -103,7 +114,18 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
     for j, c in enumerate(mapped.columns):
         check_finite(values[:, j], t, index, role=c.role, channel=c.source, path=path)
     if mapped.time is not None and spec.sample_time is not None:
-        check_sample_time(t, spec.sample_time, channel=t_name, path=path)
+        check_sample_time(t, spec.sample_time, channel=t_name, path=path, resolution=resolution)
+    elif mapped.file_time is not None and spec.sample_time is not None:
+        own = mapped.file_time
+        check_sample_time(
+            own.values[start:stop][a:b],
+            spec.sample_time,
+            channel=own.source,
+            path=path,
+            resolution=own.resolution,
+            hint=f"the time is k * sample_time; map the file's time with `time = {{ name = "
+            f'"{own.source}", unit = "s" }}` or fix `sample_time`',
+        )
     faulty = fault_mask(t, values, index, mapped.columns, spec, path=path)
     gaps, median = find_gaps(t, spec.gap_tolerance)
     if gaps.size and spec.gaps == "error":
@@ -130,7 +152,7 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
         seg_t, seg_v = t[i:j], values[i:j]
         if spec.resample is not None:
             what = f"segment at t = {t[i]:.6g} s"
-            seg_t, seg_v = _resample(seg_t, seg_v, spec.resample, path, what)
+            seg_t, seg_v = _resample(seg_t, seg_v, spec.resample, path, what, resolution)
         segments.append(Segment(seg_t, seg_v, int(index[i]), dropped_info))
     return segments
 
@@ -167,7 +189,8 @@ def _mixed_bases(
         check_finite(c.values, t, np.arange(t.size), role=c.role, channel=c.source, path=path)
         fault_mask(t, c.values[:, None], np.arange(t.size), (c,), spec, path=path, split=False)
         what = f"`{c.role}` ('{c.source}')"
-        pieces.append(_resample(t, c.values[:, None], resample, path, what))
+        resolution = bases[c.base].resolution
+        pieces.append(_resample(t, c.values[:, None], resample, path, what, resolution))
     t0 = max(float(p[0][0]) for p in pieces)
     t1 = min(float(p[0][-1]) for p in pieces)
     grid = uniform_grid(t0, t1, resample.sample_time) if t1 > t0 else np.empty(0)
@@ -219,7 +242,7 @@ def assemble(mapped: Mapped, spec: IngestSpec, path: Path) -> tuple[list[Segment
         return _single_base(mapped, spec, path), source
     if _same_base(mapped):
         base = mapped.bases[mapped.columns[0].base]
-        single = Mapped(mapped.columns, time=Column("t", base.source, base.values, "s"))
+        single = Mapped(mapped.columns, time=base)
         return _single_base(single, spec, path), base.source
     if spec.resample is None:
         first = mapped.columns[0]

@@ -31,6 +31,9 @@ def run_ingest(
         it (POSIX separators), so the same workflow in two clones gives the same bytes; a
         virtual-rig log is recorded as ``"rig:<experiment>"``. Default: the path as read.
 
+    Each source file is read once, however many data sets name it
+    (:class:`pipeline.ingest.RawLogCache`).
+
     Returns
     -------
     dict of str to pandas.DataFrame
@@ -44,12 +47,13 @@ def run_ingest(
     WorkflowError
         For an invalid ingest section.
     """
-    from pipeline.ingest import IngestSpec, load_rig_log
+    import pipeline.ingest as ingest
 
     tables: dict[str, pd.DataFrame] = {}
+    cache = ingest.RawLogCache(ingest.read_raw, [ds.source for ds in datasets])
     for ds in datasets:
-        spec = IngestSpec.from_dict(ds.ingest)
-        segments = load_rig_log(ds.source, spec)
+        spec = ingest.IngestSpec.from_dict(ds.ingest)
+        segments = ingest.load_rig_log(ds.source, spec, cache)
         for k, frame in enumerate(segments):
             name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
             frame.attrs["role"] = ds.role
