@@ -13,12 +13,15 @@ Signatures
   HDF5 file whose signature ``\x89HDF\r\n\x1a\n`` sits at offset 512 (the header is
   the HDF5 user block).
 - Parquet (``"parquet"``): ``PAR1`` at the start (and at the end).
+- ASAM MDF (``"mf4"``, versions 3 and 4): the file identifier ``MDF     `` (or
+  ``UnFinMF `` for a file not finalised) in the first 8 bytes.
 - Text (``"csv"``): anything without NUL bytes that decodes as UTF-8.
 
 References
 ----------
 The MathWorks, "MAT-File Format", MATLAB documentation (version 7, 2019), section
-"MAT-File Header Format"; Apache Parquet, "File Format".
+"MAT-File Header Format"; Apache Parquet, "File Format"; ASAM e.V., "ASAM MDF" 4.1.1
+(2019), the identification block.
 """
 
 from __future__ import annotations
@@ -42,7 +45,11 @@ _EXTENSIONS = {
     ".tsv": "csv",
     ".dat": "csv",
     ".gz": "csv",
+    ".mf4": "mf4",
+    ".mdf": "mf4",
 }
+#: File identifiers of an ASAM MDF file (finalised, not finalised).
+MDF_MAGIC = (b"MDF     ", b"UnFinMF ")
 
 
 #: First bytes of a gzip stream (RFC 1952); a gzip-compressed text log is read as text.
@@ -99,8 +106,8 @@ def sniff_format(head: bytes) -> str | None:
     Returns
     -------
     str or None
-        ``"mat-v5"``, ``"mat-v7.3"``, ``"parquet"``, ``"csv"`` (text), or None for binary
-        content without a known signature.
+        ``"mat-v5"``, ``"mat-v7.3"``, ``"parquet"``, ``"mf4"``, ``"csv"`` (text), or None
+        for binary content without a known signature.
 
     Raises
     ------
@@ -136,6 +143,8 @@ def sniff_format(head: bytes) -> str | None:
         raise RigLogError(f"unsupported MAT file version 0x{version:04x} (bytes 124-125)")
     if head.startswith(b"PAR1"):
         return "parquet"
+    if head.startswith(MDF_MAGIC):
+        return "mf4"
     if head.startswith(HDF5_SIGNATURE):
         return None
     if _is_text(head):
@@ -150,7 +159,7 @@ def detect_format(path: Path, declared: str = "auto") -> str:
     ----------
     path : Path
         The file.
-    declared : {"auto", "mat", "csv", "parquet"}
+    declared : {"auto", "mat", "csv", "parquet", "mf4"}
         The ``format`` key of the ingest section. ``"auto"`` trusts the content and uses
         the extension only for binary content without a signature; an explicit format
         must agree with the content.
@@ -159,7 +168,7 @@ def detect_format(path: Path, declared: str = "auto") -> str:
     -------
     str
         ``"mat-v5"``, ``"mat-v7.3"``, ``"mat-v4"`` (headerless MAT, read by scipy),
-        ``"csv"`` or ``"parquet"``.
+        ``"csv"``, ``"parquet"`` or ``"mf4"``.
 
     Raises
     ------
@@ -190,7 +199,7 @@ def detect_format(path: Path, declared: str = "auto") -> str:
             return by_extension
         raise RigLogError(
             f"unrecognised format: binary content starting {head[:8]!r} is neither MAT, "
-            "Parquet nor text",
+            "Parquet, MF4 nor text",
             path=path,
         )
     if declared == "mat":

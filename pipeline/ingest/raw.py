@@ -1,8 +1,8 @@
 """The raw content of a rig log as the readers return it, before channel mapping.
 
 Every reader (:mod:`~pipeline.ingest.mat`, :mod:`~pipeline.ingest.text`,
-:mod:`~pipeline.ingest.parquet`) returns a :class:`RawLog`; :mod:`~pipeline.ingest.channels`
-maps it to the canonical table. Nothing here touches a file.
+:mod:`~pipeline.ingest.parquet`, :mod:`~pipeline.ingest.mf4`) returns a :class:`RawLog`;
+:mod:`~pipeline.ingest.channels` maps it to the canonical table. Nothing here touches a file.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ class RawChannel:
         The values, any dtype (numeric conversion and checks happen in channels.py).
     unit : str or None
         The unit the file declares for the channel (dSPACE ``Unit``, Parquet field
-        metadata ``unit``); None or ``""`` when it declares none.
+        metadata ``unit``, MF4 channel unit); None or ``""`` when it declares none.
     raster : int or None
-        dSPACE recordings: index into :attr:`RawLog.rasters` of the channel's time base.
+        dSPACE and MF4 recordings: index into :attr:`RawLog.rasters` of the channel's time base.
     """
 
     name: str
@@ -48,13 +48,13 @@ class RawLog:
     path : Path
         The file.
     format : str
-        ``"mat-v5"``, ``"mat-v7.3"``, ``"csv"`` or ``"parquet"``.
+        ``"mat-v5"``, ``"mat-v7.3"``, ``"csv"``, ``"parquet"`` or ``"mf4"``.
     channels : tuple of RawChannel
         The channels in file order (``column = i`` selects ``channels[i]`` when
         :attr:`by_column` is true).
     rasters : tuple of RawChannel
-        dSPACE recordings: the time bases ``X(1..k)``, named by their raster name; empty
-        for other files.
+        dSPACE recordings: the time bases ``X(1..k)``, named by their raster name; MF4
+        files: the master channel of each channel group; empty for other files.
     by_column : bool
         Whether channels may be selected by 0-based column index (text, Parquet).
     has_names : bool
