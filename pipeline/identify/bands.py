@@ -411,3 +411,88 @@ def curves_frame(model, diag, records, *, min_support: float, band_tolerance: fl
         name: identified_intervals(grid, out[f"{name}_identified"].to_numpy()) for name in point
     }
     return out, intervals
+
+
+def static_frame(
+    model,
+    diag,
+    records,
+    levels: Sequence[Sequence[float]],
+    *,
+    min_support: float,
+    band_tolerance: float,
+    n: int = 201,
+) -> tuple[pd.DataFrame, list[dict]]:
+    """Tabulate the static force of the identified model at held levels, with bands, masks.
+
+    At a constant input ``v`` the beam rests where the static force of Eq. 37,
+    ``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)``, vanishes; an external force ``F``
+    holds it at ``q`` (the identified counterpart of the force-displacement curves of
+    Fig. 4). ``F`` is a linear map of the parameters like every curve, so it gets the
+    bootstrap band of :func:`curve_bands`. It is *identified* at ``q`` where the data
+    dwelt near ``q`` at that level (the Gaussian-weighted count of samples at the level,
+    :func:`pipeline.identify.design.at_level`, is at least ``min_support``; a switching
+    transit at the level passes too fast to count) and the band is narrow. Away from where
+    the data held a level, ``g_i h(v_i)`` is an extrapolation in amplitude: a DE's force is
+    of the separable form ``g_i(q) v_i^2`` only approximately (the full model's is not).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    diag : FitDiagnostics
+        The least-squares diagnostics (``columns``, ``theta``, ``theta_boot``).
+    records : sequence of Record
+        The estimation records (``q`` [m], ``v`` [V]).
+    levels : sequence of sequence of float
+        Input vectors [V] (:func:`pipeline.identify.design.held_levels`).
+    min_support, band_tolerance : float
+        As :func:`curves_frame`.
+    n : int
+        Grid points over the model's ``q_range``.
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        Long format, one row per level and grid point: ``level`` (index into ``levels``),
+        ``v1..vN`` [V], ``q`` [m], ``F``, ``F_lo``, ``F_hi`` [N, or N/kg for ``m_q = 1``]
+        and ``F_identified``.
+    intervals : list of dict
+        Per level ``{"v": [...], "identified": [[q_a, q_b], ...]}``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37, Fig. 4.
+    """
+    from pipeline.identify.design import at_level
+    from pipeline.identify.terms import input_map
+
+    grid = np.linspace(model.q_range[0], model.q_range[1], n)
+    cur = model.curves(grid)
+    restoring = cur["cq"] + float(model.backbone.get("F_0", 0.0))
+    maps = curve_maps(
+        diag.columns, grid, model.basis, model.n_inputs, model.input_map,
+        model.coulomb_velocity, model.prior,
+    )  # fmt: skip
+    q = np.concatenate([r.q for r in records])
+    frames, intervals = [], []
+    for k, level in enumerate(levels):
+        h = input_map(np.asarray(level, dtype=float)[None, :], model.input_map)[0]
+        point = restoring - cur["g"] @ h
+        linear = maps["restoring"] - sum(h[j] * maps[f"g{j + 1}"] for j in range(h.size))
+        support = support_weights(grid, q, model.basis.sigma, at_level(records, level))
+        band = curve_bands(
+            {"F": point}, {"F": linear}, diag.theta, diag.theta_boot, {"F": support},
+            min_support, band_tolerance,
+        )  # fmt: skip
+        frame = {"level": np.full(n, k)}
+        frame.update({f"v{j + 1}": np.full(n, float(level[j])) for j in range(h.size)})
+        frames.append(pd.concat([pd.DataFrame({**frame, "q": grid, "F": point}), band], axis=1))
+        mask = band["F_identified"].to_numpy()
+        intervals.append({"v": [float(x) for x in level],
+                          "identified": identified_intervals(grid, mask)})  # fmt: skip
+    if not frames:
+        columns = ["level", *[f"v{j + 1}" for j in range(model.n_inputs)], "q", "F", "F_lo",
+                   "F_hi", "F_identified"]  # fmt: skip
+        return pd.DataFrame({c: [] for c in columns}), intervals
+    return pd.concat(frames, ignore_index=True), intervals

@@ -22,6 +22,40 @@ from pipeline.identify.stability import stability_table, switching_voltages
 from pipeline.physics.params import V_MAX
 
 
+def _level_step(records: Sequence[Any], resolution: float) -> float:
+    """Input resolution of a level [V]: ``resolution`` times the largest input in the data."""
+    return resolution * (max(float(np.max(np.abs(r.v))) for r in records) or 1.0)
+
+
+def _level_keys(v: np.ndarray, step: float) -> np.ndarray:
+    """Integer level of every sample's input vector (n, n_inputs) at resolution ``step``."""
+    return np.round(np.asarray(v, dtype=float) / step).astype(np.int64)
+
+
+def at_level(
+    records: Sequence[Any], level: Sequence[float], *, resolution: float = 0.02
+) -> np.ndarray:
+    """Mark the samples whose inputs are at a level, as :func:`held_levels` groups them.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        Estimation records (``v`` (n, n_inputs) [V]).
+    level : sequence of float, shape (n_inputs,)
+        Input vector [V] (one of :func:`held_levels`).
+    resolution : float
+        Inputs within this fraction of their largest value count as one level.
+
+    Returns
+    -------
+    ndarray of bool, shape (sum of n,)
+        Per sample of the concatenated records.
+    """
+    step = _level_step(records, resolution)
+    key = _level_keys(np.asarray(level, dtype=float)[None, :], step)[0]
+    return np.concatenate([np.all(_level_keys(r.v, step) == key, axis=1) for r in records])
+
+
 def held_levels(
     records: Sequence[Any],
     *,
@@ -48,11 +82,10 @@ def held_levels(
         Input vectors [V] other than all-zero (the rest level is always analysed), rounded
         to the resolution.
     """
-    v_max = max(float(np.max(np.abs(r.v))) for r in records) or 1.0
-    step = resolution * v_max
+    step = _level_step(records, resolution)
     held: dict[tuple[float, ...], float] = {}
     for r in records:
-        key = np.round(np.asarray(r.v, dtype=float) / step).astype(np.int64)
+        key = _level_keys(r.v, step)
         change = np.flatnonzero(np.any(np.diff(key, axis=0) != 0, axis=1)) + 1
         starts = np.concatenate([[0], change])
         ends = np.concatenate([change, [key.shape[0]]])

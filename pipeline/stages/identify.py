@@ -38,7 +38,9 @@ class IdentifyResult:
     timings : dict of str to float
         Wall times [s]: ``fit`` (least squares with the T_z search) and ``refine``.
     design : dict of str to pandas.DataFrame
-        Equilibria and switching voltages (:func:`pipeline.identify.design.design_numbers`).
+        Equilibria and switching voltages (:func:`pipeline.identify.design.design_numbers`)
+        and the static force at the held input levels with bands and masks (``static``,
+        :func:`pipeline.identify.bands.static_frame`).
     """
 
     model: RBFModel
@@ -76,8 +78,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     WorkflowError
         For an invalid section.
     """
-    from pipeline.identify.bands import curves_frame
-    from pipeline.identify.design import design_numbers
+    from pipeline.identify.bands import curves_frame, static_frame
+    from pipeline.identify.design import design_numbers, held_levels
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
@@ -111,6 +113,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance
     )
     design = design_numbers(model, records, physics)
+    design["static"], static = static_frame(
+        model, diag, records, held_levels(records), min_support=cfg.min_support,
+        band_tolerance=cfg.band_tolerance,
+    )  # fmt: skip
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
@@ -133,6 +139,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "reason": design["equilibria"].attrs["reason"],
             "equilibria": _records_of(design["equilibria"]),
             "switching": _records_of(design["switching"]),
+            "static": static,
         },
         "constraints": list(cfg.constraints),
     }
@@ -194,7 +201,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     StageOutput
         ``model.h5`` (the model, its fit diagnostics and, after refinement, the
         equation-error model), ``curves.parquet`` and ``plots/curves.png`` (Fig. 14, with
-        the analytical curves when the workflow has ``[physics]``).
+        the analytical curves when the workflow has ``[physics]``), ``equilibria.parquet``,
+        ``switching.parquet`` and ``static.parquet`` (the static force at the held levels).
 
     Raises
     ------
