@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.physics import _generated
+from pipeline.physics.energy import HESS_INDEX, generated_constants
 from pipeline.physics.kinematics import de_lengths, deflection, pitch_angle, ritz_basis
 from pipeline.physics.params import PrototypeParams
 from pipeline.physics.segments import solve_segments
@@ -114,25 +115,8 @@ class FullModel:
         self._D0 = D0
         self._relax = p.Y_MW / p.eta_MW if p.eta_MW > 0 else 0.0
         self._kbar = p.V_DE * p.Y_MW
-        self._consts = (
-            p.l,
-            p.E * p.I,
-            p.E * p.A,
-            p.m * p.g,
-            p.a,
-            p.a_0,
-            p.e_x,
-            -p.e_z + p.dz_1,
-            p.e_z + p.dz_2,
-            p.l_0,
-            p.V_DE * p.Y / 6.0,
-            0.5 * p.C_0,
-        )
-        iu = np.triu_indices(4)
-        sym = np.zeros((4, 4), dtype=int)
-        sym[iu] = np.arange(10)
-        sym.T[iu] = np.arange(10)
-        self._sym = sym
+        self._consts = generated_constants(p)
+        self._sym = HESS_INDEX
 
     def _fp(self) -> NDArray[np.float64]:
         """Return the model as the compiled kernels take it (packed on first use)."""

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import ConvergenceWarning, DebistError
 from pipeline.physics._newton import newton
-from pipeline.physics.energy import capacitances, potential
+from pipeline.physics.energy import capacitances, potential, scalar_gradient_hessian
 from pipeline.physics.kinematics import ritz_basis
 from pipeline.physics.params import V_MAX, PrototypeParams
 
@@ -40,6 +40,11 @@ __all__ = [
 
 FORCE_STATES = ((0.0, 0.0), (V_MAX, 0.0), (0.0, V_MAX), (V_MAX, V_MAX))
 """Voltage states ``(v1, v2)`` [V] of the force-displacement curves of Fig. 4."""
+
+
+#: Up to this many simultaneous Newton problems the generated scalar terms are faster than
+#: the vectorised :func:`~pipeline.physics.energy.potential` (the same equations).
+_SCALAR_BATCH = 4
 
 
 class StaticsError(DebistError, RuntimeError):
@@ -69,8 +74,13 @@ def _solve_at_q(
     tq = t * np.asarray(q, dtype=float)[..., None]
 
     def fun(y):
-        ev = potential(y @ T.T + tq, params, b=b, v1=v1, v2=v2)
-        return ev.grad @ T, T.T @ ev.hess @ T
+        qm = y @ T.T + tq
+        if qm.ndim == 2 and qm.shape[0] <= _SCALAR_BATCH:
+            grad, hess = scalar_gradient_hessian(qm, params, b, v1, v2)
+        else:
+            ev = potential(qm, params, b=b, v1=v1, v2=v2)
+            grad, hess = ev.grad, ev.hess
+        return grad @ T, T.T @ hess @ T
 
     res = newton(fun, y0, sy, max_step=max_step)
     return res.x @ T.T + tq, res.x, res.converged
