@@ -129,7 +129,9 @@ class BatchResult:
     summary : dict
         Small results: ``"nrmse"``, the rows of the NRMSE table (the compare stage's
         when it was considered, which includes the RBF rows, else the validate
-        stage's), when one of those stages was considered.
+        stage's), when one of those stages was considered; ``"design"``, the identified
+        model's equilibria and switching voltages (the identify summary's), and
+        ``"q_unit"``, the SI unit of q.
     worker : str
         ``"<host>:<pid>"`` of the process that ran the workflow; the address of the last
         Dask worker for a workflow whose worker processes died.
@@ -355,6 +357,9 @@ def run_workflow_item(
         if rows is not None:
             summary["nrmse"] = rows
             break
+    if "identify" in manifests and manifests["identify"].summary.get("design"):
+        summary["design"] = manifests["identify"].summary["design"]
+        summary["q_unit"] = manifests["identify"].summary.get("units", {}).get("q", "m")
     return BatchResult(
         path=path,
         name=name,
@@ -723,3 +728,57 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
         for r in results
     ]
     return pd.DataFrame(rows, columns=columns)
+
+
+def write_index(
+    results: Sequence[BatchResult], folder: str | os.PathLike | None = None
+) -> Path | None:
+    """Write the batch's index page: one row per prototype, linking each one's report.
+
+    Parameters
+    ----------
+    results : sequence of BatchResult
+        The batch's results (:func:`run_batch`), in the order of the rows.
+    folder : path-like, optional
+        Where ``index.html`` goes; default the folder that holds every workflow's output
+        folder (``runs/`` of a fleet from ``debist fleet``).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The page written (replaced atomically); None when no workflow could be loaded or
+        the common folder is the file system root or the home folder.
+
+    References
+    ----------
+    :func:`pipeline.htmlreport.render_index` (the page).
+    """
+    from pipeline.htmlreport import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
+
+    dirs = [Path(r.output_dir).resolve() for r in results if r.output_dir is not None]
+    if folder is None:
+        if not dirs:
+            return None
+        folder = Path(os.path.commonpath([d.parent for d in dirs]))
+        if folder in (Path(folder.anchor), Path.home().resolve()):
+            return None
+    folder = Path(folder).resolve()
+    rows = []
+    for r in results:
+        page = Path(r.output_dir) / "report" / REPORT_FILE if r.output_dir else None
+        link = None
+        if page is not None and REPORT_FILE in r.outputs.get("report", {}) and page.is_file():
+            link = Path(os.path.relpath(page.resolve(), folder)).as_posix()
+        rows.append(
+            index_row(
+                r.name,
+                r.file,
+                r.status,
+                error=r.error,
+                nrmse=r.summary.get("nrmse", []),
+                design=r.summary.get("design"),
+                q_unit=r.summary.get("q_unit", "m"),
+                link=link,
+            )
+        )
+    return write_page(folder / INDEX_FILE, render_index(rows))

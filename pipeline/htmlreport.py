@@ -1,14 +1,16 @@
 """One self-contained HTML report of a workflow run: tables, figures and provenance.
 
-:func:`load_run` gathers what the stages wrote (summaries checked against their manifests,
-PNG figures checked against their hashes), :func:`render_report` turns that into one HTML
-page without any external URL or script (figures as base64 data URIs, readable on a phone,
-printable), and :func:`write_report` replaces ``<output_dir>/report/report.html`` atomically.
-The report is not a hashed stage: no manifest covers it, and ``debist verify`` ignores it.
+:func:`render_report` turns the results of a run (the stages' summaries, figures and
+provenance, gathered by the report stage :mod:`pipeline.stages.report` from hashed
+artifacts only) into one HTML page without any external URL or script: figures as base64
+data URIs, readable on a phone, printable. The page is the report stage's artifact
+(``<output_dir>/report/report.html``), covered by its manifest and checked by ``debist
+verify``. :func:`render_index` is the index page of a batch: one row per prototype, linking
+each prototype's report.
 
 References
 ----------
-Masoud & Maas 2025, Front. Robot. AI 12 (Table 2, Fig. 12-15, Eq. 41); Jinja2 documentation,
+Masoud & Maas 2025, Front. Robot. AI 12 (Table 2, Fig. 11-15, Eq. 41); Jinja2 documentation,
 "API" (``Environment(autoescape=True)``); RFC 2397 (the "data" URL scheme).
 """
 
@@ -17,19 +19,39 @@ from __future__ import annotations
 import base64
 import math
 import os
-import shlex
 import shutil
 import tempfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import jinja2
+import pydantic
+from pydantic import PositiveFloat
 
-from pipeline import artifacts
+from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
+
+__all__ = [
+    "FIGURE_GROUPS",
+    "INDEX_FILE",
+    "NRMSE_COLUMNS",
+    "PNG_SIGNATURE",
+    "REPORT_FILE",
+    "SECTIONS",
+    "ReportConfig",
+    "index_row",
+    "render_index",
+    "render_report",
+    "write_page",
+]
 
 #: The first eight bytes of every PNG file (PNG specification, Sec. 5.2).
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: The report stage's page (relative to its stage folder).
+REPORT_FILE = "report.html"
+#: The batch index page's file name.
+INDEX_FILE = "index.html"
 #: NRMSE columns of Table 2, in the paper's order (summary key, heading).
 NRMSE_COLUMNS = (
     ("nrmse_q", "q"),
@@ -40,16 +62,75 @@ NRMSE_COLUMNS = (
 #: Section headings, in page order (the tests check each of them).
 SECTIONS = (
     "Workflow and data sets",
+    "Excitation (Fig. 11a)",
     "Free-run validation (NRMSE, Table 2)",
-    "Identified model",
+    "Free runs (Fig. 12, 13, 15)",
+    "Identified model (Fig. 14)",
     "Equilibria and switching",
     "Excitation warnings",
-    "Free-run figures",
+    "Hyper-parameter search (Fig. 11b, 11c)",
+    "Design analysis (Fig. 3-7)",
     "SINDy equations",
     "Provenance",
 )
-#: Which PNG outputs of which stage are shown, and in which figure group.
-FIGURE_STAGES = ("identify", "validate", "study", "analyze")
+#: Figure groups of :func:`render_report`, each shown in its section.
+FIGURE_GROUPS = ("excitation", "free_run", "identify", "study", "analyze")
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
+class ReportConfig:
+    """The ``[report]`` workflow section (an empty table takes the defaults).
+
+    Parameters
+    ----------
+    zoom_window : float
+        Length of the zoom on the most dynamic part of each free run (Fig. 13): the window
+        of this length whose acceleration ``q_ddot`` has the largest RMS [s].
+
+    Raises
+    ------
+    pydantic.ValidationError
+        On a non-positive or non-numeric value (:meth:`from_dict` raises a
+        ``WorkflowError`` naming the key instead).
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 13.
+    """
+
+    zoom_window: PositiveFloat = 2.0
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any], where: str = "[report]") -> ReportConfig:
+        """Build from the workflow's ``[report]`` section.
+
+        Parameters
+        ----------
+        section : mapping
+            The table; missing keys take the defaults.
+        where : str, optional
+            The workflow table, for the messages.
+
+        Returns
+        -------
+        ReportConfig
+
+        Raises
+        ------
+        WorkflowError
+            On an unknown key or an invalid value: ``[report] key: expected ..., got ...``.
+
+        Examples
+        --------
+        >>> ReportConfig.from_dict({}).zoom_window
+        2.0
+        >>> ReportConfig.from_dict({"zoom_window": 0})
+        Traceback (most recent call last):
+        ...
+        pipeline.errors.WorkflowError: [report] zoom_window: expected a number > 0, got 0
+        """
+        return config_from_section(cls, section, where)
+
 
 _TEMPLATE = """<!DOCTYPE html>
 <html lang="en">
@@ -59,7 +140,7 @@ _TEMPLATE = """<!DOCTYPE html>
 <title>debist report: {{ workflow }}</title>
 <style>
 body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 0 auto; padding: 0.8rem;
-       line-height: 1.4; color: #111; }
+       line-height: 1.4; color: #111; background: #fff; }
 h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc; }
 .scroll { overflow-x: auto; }
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
@@ -68,27 +149,35 @@ th:first-child, td.text { text-align: left; }
 td.bad { color: #a00; font-weight: bold; }
 img { width: 100%; height: auto; }
 figure { margin: 0.5rem 0; }
+nav a { margin-right: 0.6rem; white-space: nowrap; }
 pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
-@media print { body { max-width: none; } figure, table { page-break-inside: avoid; } }
+@media print { body { max-width: none; } nav { display: none; }
+               figure, table { page-break-inside: avoid; } }
 </style>
 </head>
 <body>
 <h1>debist report: {{ workflow }}</h1>
+<nav>{% for h in sections %}<a href="#s{{ loop.index }}">{{ h }}</a> {% endfor %}</nav>
 
-<h2>{{ sections[0] }}</h2>
+<h2 id="s1">{{ sections[0] }}</h2>
 <p>Workflow <strong>{{ workflow }}</strong></p>
 {% if datasets %}
 <div class="scroll"><table>
-<tr><th>data set</th><th>role</th><th>source</th></tr>
+<tr><th>data set</th><th>role</th><th>source</th><th>samples</th><th>duration [s]</th></tr>
 {% for d in datasets %}
 <tr><td class="text">{{ d.name }}</td><td class="text">{{ d.role }}</td>
-<td class="text">{{ d.source }}</td></tr>
+<td class="text">{{ d.source }}</td><td>{{ d.samples }}</td><td>{{ d.duration }}</td></tr>
 {% endfor %}
 </table></div>
 {% else %}<p>No data sets.</p>{% endif %}
 
-<h2>{{ sections[1] }}</h2>
+<h2 id="s2">{{ sections[1] }}</h2>
+{{ show(figures.excitation, "Not run.") }}
+
+<h2 id="s3">{{ sections[2] }}</h2>
 {% if nrmse %}
+<p>NRMSE of the free run (Eq. 41); the last number is that of the trivial model that predicts
+the mean of q (a model is only useful below it).</p>
 <div class="scroll"><table>
 <tr><th>model</th><th>data set</th>{% for h in nrmse_heads %}<th>NRMSE {{ h }}</th>{% endfor %}
 <th>NRMSE q, mean baseline</th><th>status / note</th></tr>
@@ -100,7 +189,10 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 </table></div>
 {% else %}<p>Not run.</p>{% endif %}
 
-<h2>{{ sections[2] }}</h2>
+<h2 id="s4">{{ sections[3] }}</h2>
+{{ show(figures.free_run, "Not run.") }}
+
+<h2 id="s5">{{ sections[4] }}</h2>
 {% if model %}
 <div class="scroll"><table>
 <tr><th>quantity</th><th>value</th></tr>
@@ -109,12 +201,9 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 {% endfor %}
 </table></div>
 {% else %}<p>Not run.</p>{% endif %}
-{% for f in figures.identify %}
-<figure><img src="{{ f.uri }}" alt="{{ f.caption }}"><figcaption>{{ f.caption }}</figcaption>
-</figure>
-{% endfor %}
+{{ show(figures.identify, "") }}
 
-<h2>{{ sections[3] }}</h2>
+<h2 id="s6">{{ sections[5] }}</h2>
 {% if design %}
 <p>Identified model: {{ design.verdict }}{% if design.reason %} ({{ design.reason }}){% endif %}</p>
 <div class="scroll"><table>
@@ -127,31 +216,32 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 </table></div>
 {% else %}<p>No design numbers.</p>{% endif %}
 
-<h2>{{ sections[4] }}</h2>
+<h2 id="s7">{{ sections[6] }}</h2>
 {% if warnings %}
 <ul>{% for w in warnings %}<li>{{ w }}</li>{% endfor %}</ul>
 {% else %}<p>None.</p>{% endif %}
 
-<h2>{{ sections[5] }}</h2>
-{% for group in ("validate", "study", "analyze") %}{% for f in figures[group] %}
-<figure><img src="{{ f.uri }}" alt="{{ f.caption }}"><figcaption>{{ f.caption }}</figcaption>
-</figure>
-{% endfor %}{% endfor %}
-{% if not (figures.validate or figures.study or figures.analyze) %}<p>No figures.</p>{% endif %}
+<h2 id="s8">{{ sections[7] }}</h2>
+{{ show(figures.study, "Not run (add a [study] section).") }}
 
-<h2>{{ sections[6] }}</h2>
+<h2 id="s9">{{ sections[8] }}</h2>
+{{ show(figures.analyze, "Not run (add an [analyze] section).") }}
+
+<h2 id="s10">{{ sections[9] }}</h2>
 {% if equations %}<pre>{{ equations }}</pre>{% else %}<p>Not run.</p>{% endif %}
 
-<h2>{{ sections[7] }}</h2>
+<h2 id="s11">{{ sections[10] }}</h2>
 {% if digest %}
-<p>Run digest: <code>{{ digest }}</code></p>
-<p>Verify these artifacts with: <code>{{ verify }}</code></p>
-{% else %}<p>No run digest: not every stage of the workflow has run.</p>{% endif %}
+<p>Digest of the stages shown: <code>{{ digest }}</code></p>
+{% else %}<p>No digest: not every stage shown has run.</p>{% endif %}
+{% if verify %}<p>Verify this page and the artifacts it shows with: <code>{{ verify }}</code>
+(in the workflow's folder; add <code>--digest</code> with the run digest that
+<code>debist run</code> printed, which covers this page's manifest too).</p>{% endif %}
 {% if stages %}
 <div class="scroll"><table>
-<tr><th>stage</th><th>stage key</th></tr>
-{% for s, k in stages %}<tr><td class="text">{{ s }}</td><td class="text"><code>{{ k }}</code>
-</td></tr>{% endfor %}
+<tr><th>stage</th><th>stage key</th><th>manifest sha256</th></tr>
+{% for s in stages %}<tr><td class="text">{{ s.name }}</td><td class="text"><code>{{ s.key }}</code>
+</td><td class="text"><code>{{ s.manifest }}</code></td></tr>{% endfor %}
 </table></div>
 {% endif %}
 {% if versions %}
@@ -161,7 +251,56 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 {% endfor %}
 </table></div>
 {% endif %}
-<p>This page is not covered by a manifest: it is rebuilt from the hashed artifacts.</p>
+<p>This page is the report stage's artifact: built from the hashed artifacts above only, and
+covered by <code>report/manifest.json</code>.</p>
+</body>
+</html>
+"""
+
+_MACROS = """{% macro show(items, empty) %}
+{% for f in items %}
+<figure><img src="{{ f.uri }}" alt="{{ f.caption }}"><figcaption>{{ f.caption }}</figcaption>
+</figure>
+{% endfor %}
+{% if not items and empty %}<p>{{ empty }}</p>{% endif %}
+{% endmacro %}
+"""
+
+_INDEX = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>debist batch: {{ rows|length }} prototypes</title>
+<style>
+body { font-family: system-ui, sans-serif; max-width: 72rem; margin: 0 auto; padding: 0.8rem;
+       line-height: 1.4; color: #111; background: #fff; }
+h1 { font-size: 1.5rem; }
+.scroll { overflow-x: auto; }
+table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
+th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
+th:first-child, td.text { text-align: left; }
+td.bad { color: #a00; font-weight: bold; }
+</style>
+</head>
+<body>
+<h1>debist batch: {{ rows|length }} prototypes, {{ failed }} failed</h1>
+<p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
+(Eq. 41), its wells at rest and its switching voltages. Each name links to the prototype's
+report.</p>
+<div class="scroll"><table>
+<tr><th>prototype</th><th>workflow file</th><th>status</th>
+{% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
+<th>wells q* at rest</th><th>switching voltages [V]</th></tr>
+{% for r in rows %}
+<tr><td class="text">{% if r.link %}<a href="{{ r.link }}">{{ r.name }}</a>{% else %}{{ r.name }}\
+{% endif %}</td><td class="text">{{ r.file }}</td>
+<td class="text{% if r.status != 'done' %} bad{% endif %}">{{ r.status }}{% if r.error %}: \
+{{ r.error }}{% endif %}</td>
+{% for d in datasets %}<td>{{ r.nrmse.get(d, "-") }}</td>{% endfor %}
+<td>{{ r.wells }}</td><td class="text">{{ r.switching }}</td></tr>
+{% endfor %}
+</table></div>
 </body>
 </html>
 """
@@ -275,14 +414,15 @@ def render_report(run: dict[str, Any]) -> str:
     Parameters
     ----------
     run : dict
-        As :func:`load_run` returns it: ``workflow`` (name), ``datasets`` (list of dicts with
-        ``name``, ``role``, ``source``), ``identify`` (the identify summary, or None),
+        As :func:`pipeline.stages.report.run_report` builds it: ``workflow`` (name),
+        ``datasets`` (list of dicts with ``name``, ``role``, ``source``,
+        ``samples``, ``duration`` [s]), ``identify`` (the identify summary, or None),
         ``nrmse`` (rows of the validate/compare summary's ``table``; NRMSE dimensionless,
         Eq. 41), ``equations`` (the compare summary's SINDy equations, or None),
-        ``figures`` (stage -> list of ``(caption, PNG bytes)``; stages ``identify``,
-        ``validate``, ``study``, ``analyze``), ``digest`` (run digest or None), ``verify``
-        (the command that checks it), ``stages`` (stage -> stage key) and ``versions``
-        (library -> version). Missing keys are shown as not run.
+        ``figures`` (group of :data:`FIGURE_GROUPS` -> list of ``(caption, PNG bytes)``),
+        ``digest`` (digest of the stages shown, or None), ``verify`` (the command that
+        checks them), ``stages`` (stage -> ``(stage key, manifest sha256)``) and
+        ``versions`` (library -> version). Missing keys are shown as not run.
 
     Returns
     -------
@@ -296,18 +436,22 @@ def render_report(run: dict[str, Any]) -> str:
 
     References
     ----------
-    Masoud & Maas 2025, Table 2 (NRMSE layout), Fig. 12-15; RFC 2397 (data URLs).
+    Masoud & Maas 2025, Table 2 (NRMSE layout), Fig. 11-15; RFC 2397 (data URLs).
     """
     identify = run.get("identify") or {}
     heads, nrmse = _nrmse_rows(run.get("nrmse") or [])
     figures = {
-        stage: [
+        group: [
             {"caption": caption, "uri": _data_uri(caption, data)}
-            for caption, data in (run.get("figures") or {}).get(stage, [])
+            for caption, data in (run.get("figures") or {}).get(group, [])
         ]
-        for stage in FIGURE_STAGES
+        for group in FIGURE_GROUPS
     }
-    return _ENV.from_string(_TEMPLATE).render(
+    stages = [
+        {"name": name, "key": key, "manifest": manifest}
+        for name, (key, manifest) in (run.get("stages") or {}).items()
+    ]
+    return _ENV.from_string(_MACROS + _TEMPLATE).render(
         sections=SECTIONS,
         workflow=run.get("workflow", ""),
         datasets=run.get("datasets") or [],
@@ -320,104 +464,134 @@ def render_report(run: dict[str, Any]) -> str:
         equations=run.get("equations"),
         digest=run.get("digest"),
         verify=run.get("verify", ""),
-        stages=list((run.get("stages") or {}).items()),
+        stages=stages,
         versions=sorted((run.get("versions") or {}).items()),
     )
 
 
-def _caption(stage: str, rel: str) -> str:
-    name = Path(rel).stem
-    if stage == "identify":
-        return f"Identified curves (Fig. 14): {rel}"
-    if stage == "validate":
-        return f"Free run on '{name}', measured and simulated (Fig. 12, 13, 15)"
-    return f"{stage}: {rel}"
+def _wells(design: Mapping[str, Any] | None, unit: str = "m") -> str:
+    """Return the identified model's wells at rest, ascending (in mm for q in m)."""
+    rows = (design or {}).get("equilibria", [])
+    wells = sorted(
+        r["q"]
+        for r in rows
+        if r.get("model") == "rbf" and r.get("level", 0) == 0 and r.get("static_stable")
+    )
+    if not wells:
+        return "-"
+    factor, label = (1e3, "mm") if unit == "m" else (1.0, unit)
+    return ", ".join(f"{factor * q:.4g}" for q in wells) + f" {label}"
 
 
-def load_run(runner, workflow_arg: str | os.PathLike | None = None) -> dict[str, Any]:
-    """Read what a workflow's stages wrote into the ``run`` dict of :func:`render_report`.
+def _switching(design: Mapping[str, Any] | None) -> str:
+    """Return the identified model's switching voltage per input (or "none")."""
+    parts = []
+    for r in (design or {}).get("switching", []):
+        if r.get("model") != "rbf":
+            continue
+        value = r.get("v_switch")
+        text = f"{value:.0f}" if not _missing(value) else "none"
+        parts.append(f"v{r.get('input')}: {text}")
+    return ", ".join(parts) or "-"
 
-    Only stages with a manifest are read; the others are left out of the report.
+
+def index_row(
+    name: str,
+    file: str,
+    status: str,
+    *,
+    error: str = "",
+    nrmse: Sequence[Mapping[str, Any]] = (),
+    design: Mapping[str, Any] | None = None,
+    q_unit: str = "m",
+    link: str | None = None,
+) -> dict[str, Any]:
+    """One prototype's row of the batch index page.
 
     Parameters
     ----------
-    runner : pipeline.runner.Runner
-        The workflow's runner.
-    workflow_arg : path-like, optional
-        The workflow file as the user names it in the verify command (default: its path).
+    name : str
+        ``[workflow] name``.
+    file : str
+        The workflow file as shown.
+    status : {"done", "failed"}
+        How its run ended.
+    error : str, optional
+        The error of a failed run.
+    nrmse : sequence of dict, optional
+        Rows of its NRMSE table (the validate or compare summary's ``table``); the
+        ``rbf`` rows are shown (NRMSE dimensionless, Eq. 41).
+    design : dict, optional
+        The identify summary's ``design`` (equilibria [SI] and switching voltages [V]).
+    q_unit : str, optional
+        SI unit of q (wells in m are shown in mm).
+    link : str, optional
+        Relative URL of its report page (None: no report).
 
     Returns
     -------
     dict
-        The ``run`` dict (see :func:`render_report`).
-
-    Raises
-    ------
-    ArtifactError
-        If no stage has run, or a summary or figure does not match its manifest's sha256.
+        The row for :func:`render_index`: ``nrmse`` maps data set to a percentage text
+        (``"unstable"``, ``"diverged"`` instead where that is the verdict), ``wells`` the
+        wells at rest with their unit, ``switching`` the switching voltage per input [V].
     """
-    wf = runner.wf
-    manifests = {}
-    for stage in runner.stages():
-        manifest = artifacts.read_manifest(wf.stage_dir(stage))
-        if manifest is not None:
-            manifests[stage] = manifest
-    if not manifests:
-        raise ArtifactError(
-            f"workflow '{wf.name}': no stage has run in '{wf.output_dir}' (run `debist run` first)"
-        )
-    summaries = {s: artifacts.read_summary(wf.stage_dir(s), m) for s, m in manifests.items()}
-    figures: dict[str, list[tuple[str, bytes]]] = {}
-    for stage in FIGURE_STAGES:
-        if stage not in manifests:
+    scores = {}
+    for r in nrmse:
+        if r.get("model") != "rbf":
             continue
-        rels = sorted(r for r in manifests[stage].outputs if r.endswith(".png"))
-        if stage == "identify":
-            rels = [r for r in rels if r == "plots/curves.png"]
-        elif stage == "validate":
-            rels = [r for r in rels if r.startswith("plots/")]
-        for rel in rels:
-            path = wf.stage_dir(stage) / rel
-            data = path.read_bytes() if path.is_file() else b""
-            if artifacts.sha256_bytes(data) != manifests[stage].outputs[rel]:
-                raise ArtifactError(
-                    f"'{path}' is missing or changed since the stage wrote it (run `debist verify`)"
-                )
-            figures.setdefault(stage, []).append((_caption(stage, rel), data))
-    versions: dict[str, set[str]] = {}
-    for manifest in manifests.values():
-        for lib, version in manifest.versions.items():
-            versions.setdefault(lib, set()).add(str(version))
-    last = next((s for s in ("compare", "validate") if s in summaries), None)
-    digest = runner.digest()
-    arg = str(workflow_arg if workflow_arg is not None else wf.path)
-    datasets = []
-    for d in wf.datasets:
-        source = d.rig or os.path.relpath(d.source, wf.path.parent)
-        datasets.append({"name": d.name, "role": d.role, "source": str(source)})
+        status_r = r.get("status") or "ok"
+        value = r.get("nrmse_q")
+        if status_r != "ok":
+            scores[r["dataset"]] = status_r
+        elif r.get("diverged") or _missing(value):
+            scores[r["dataset"]] = "diverged"
+        else:
+            scores[r["dataset"]] = f"{100 * value:.2f} %"
     return {
-        "workflow": wf.name,
-        "datasets": datasets,
-        "identify": summaries.get("identify"),
-        "nrmse": summaries[last].get("table", []) if last else [],
-        "equations": summaries.get("compare", {}).get("equations"),
-        "figures": figures,
-        "digest": digest,
-        "verify": f"debist verify {shlex.quote(arg)} --digest {digest}" if digest else "",
-        "stages": {s: m.key for s, m in manifests.items()},
-        "versions": {lib: " / ".join(sorted(v)) for lib, v in versions.items()},
+        "name": name,
+        "file": file,
+        "status": status,
+        "error": error,
+        "nrmse": scores,
+        "wells": _wells(design, q_unit),
+        "switching": _switching(design),
+        "link": link,
     }
 
 
-def write_report(folder: str | os.PathLike, html: str) -> Path:
-    """Write ``report.html`` into a folder, replacing an older one atomically.
+def render_index(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Render the batch index page: one row per prototype, linking each report.
 
     Parameters
     ----------
-    folder : path-like
-        Target folder (created if missing), normally ``<output_dir>/report``.
+    rows : sequence of dict
+        :func:`index_row` per prototype, in the batch's order.
+
+    Returns
+    -------
+    str
+        A self-contained HTML document (no script, no external URL; the links are relative).
+
+    References
+    ----------
+    Jinja2 documentation, "API" (autoescaping).
+    """
+    datasets: list[str] = []
+    for r in rows:
+        datasets += [d for d in r["nrmse"] if d not in datasets]
+    failed = sum(r["status"] != "done" for r in rows)
+    return _ENV.from_string(_INDEX).render(rows=rows, datasets=datasets, failed=failed)
+
+
+def write_page(path: str | os.PathLike, html: str) -> Path:
+    """Write an HTML page that is not a stage artifact (the batch index), atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        The file; its folder is created, an older page of that name is replaced.
     html : str
-        The page (:func:`render_report`).
+        The page.
 
     Returns
     -------
@@ -429,12 +603,14 @@ def write_report(folder: str | os.PathLike, html: str) -> Path:
     POSIX ``rename(2)``: the new file replaces the old one in one step, so a reader never
     sees half a page.
     """
-    target = Path(folder)
-    target.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".report.tmp-", dir=target))
+    from pipeline import artifacts
+
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".page.tmp-", dir=target.parent))
     try:
-        (written,) = artifacts.write_text_files(tmp, {"report.html": html})
-        os.replace(written, target / "report.html")
+        (written,) = artifacts.write_text_files(tmp, {target.name: html})
+        os.replace(written, target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return target / "report.html"
+    return target

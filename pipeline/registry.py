@@ -31,8 +31,8 @@ class StageDef:
     module : str
         Module with the stage's ``execute(ctx)``; its import closure is the stage's code.
     upstream : tuple of str
-        Stages whose artifacts it reads (``ingest`` also reads ``rig`` when a data set
-        is a virtual-rig log; the runner adds that).
+        Stages whose artifacts it reads, those of them that the workflow has (``ingest``
+        also reads ``rig`` when a data set is a virtual-rig log; the runner adds that).
     libraries : tuple of str
         Distributions whose versions enter the stage key.
     help : str
@@ -108,6 +108,14 @@ STAGES: tuple[StageDef, ...] = (
         (),
         ("numpy", "scipy", "h5py", "matplotlib"),
         "Design analysis of Section 3: statics.h5 and Fig. 3-7.",
+        optional=True,
+    ),
+    StageDef(
+        "report",
+        "pipeline.stages.report",
+        ("ingest", "differentiate", "identify", "validate", "compare", "study", "analyze"),
+        (*_BASE, "jinja2", "matplotlib"),
+        "One self-contained HTML page of the run (Table 2, Fig. 11-15, provenance).",
         optional=True,
     ),
 )

@@ -40,6 +40,7 @@ from pipeline.physics.params import PrototypeParams
 from pipeline.validate import ValidateConfig
 
 if TYPE_CHECKING:  # the modules of optional sections are imported when a workflow has them
+    from pipeline.htmlreport import ReportConfig
     from pipeline.physics.analysis import AnalyzeConfig
     from pipeline.rig.experiment import RigConfig
     from pipeline.sindy import SindyConfig
@@ -68,6 +69,7 @@ SECTIONS = (
     "physics",
     "analyze",
     "rig",
+    "report",
 )
 #: Sections that make a workflow meaningful without data sets (a design analysis).
 DATALESS = ("physics",)
@@ -145,6 +147,8 @@ class CheckedWorkflow:
         ``[analyze]``.
     rig : RigConfig or None
         ``[rig]`` with ``[physics]``.
+    report : ReportConfig or None
+        ``[report]`` (an empty table: the defaults).
     """
 
     head: WorkflowHead
@@ -157,6 +161,7 @@ class CheckedWorkflow:
     physics: PrototypeParams | None = None
     analyze: AnalyzeConfig | None = None
     rig: RigConfig | None = None
+    report: ReportConfig | None = None
 
 
 def _origin(own: Mapping[str, Any], here: str, base: str) -> Callable[[str], str]:
@@ -393,6 +398,12 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
         from pipeline.physics.analysis import AnalyzeConfig
 
         analyze = AnalyzeConfig.from_dict(raw["analyze"])
+    report = None
+    if "report" in raw:
+        from pipeline.htmlreport import ReportConfig
+
+        report = ReportConfig.from_dict(raw["report"])
     return CheckedWorkflow(
-        head, datasets, differentiate, identify, validate, compare, study, physics, analyze, rig
-    )
+        head, datasets, differentiate, identify, validate, compare, study, physics, analyze, rig,
+        report,
+    )  # fmt: skip

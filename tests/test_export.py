@@ -1,13 +1,15 @@
-"""The exported C and Python model against debist's own free run (NumPy engine, linear inputs).
+"""The exported C, MATLAB and Python model against debist's own free run (NumPy engine).
 
-Both exports get the model as its term table; a 2000-step free run driven by a seeded random
-input sequence must agree with ``simulate(..., substeps=1, interpolation="linear")`` to 1e-9
-relative on q, and the curve tables with ``RBFModel.curves``.
+Every export gets the model as its term table; a free run driven by a seeded random input
+sequence (2000 steps; 400 under Octave, whose loops are slow) must agree with
+``simulate(..., substeps=1, interpolation="linear")`` to 1e-9 relative on q, and the curve
+tables with ``RBFModel.curves``.
 """
 
 import ctypes
 import functools
 import importlib.util
+import re
 import shutil
 import subprocess
 import sys
@@ -19,11 +21,13 @@ from conftest import example_rbf_model, write_rig_csv
 from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.export import (
     C_FILES,
+    MATLAB_FILE,
     PYTHON_FILE,
     ExportInfo,
     c_sources,
     curve_table,
     export_files,
+    matlab_source,
     python_source,
 )
 from pipeline.identify.model import RBFModel
@@ -32,6 +36,9 @@ from pipeline.simulate import simulate
 DT = 0.01
 N = 2000
 CC = shutil.which("cc")
+OCTAVE = shutil.which("octave-cli") or shutil.which("octave")
+#: Steps of the Octave free run (its interpreted loops take ~15 ms a step).
+N_OCTAVE = 400
 
 
 def rbf_model(T_z=0.02, prior=True, outside="clip", input_map="v2"):
@@ -164,6 +171,74 @@ def test_c_deriv_and_curves_match_model(tmp_path):
         np.testing.assert_allclose(out, want, rtol=1e-13, atol=1e-300)
 
 
+def run_octave(folder, v, q0, dt, n_x, q_curves=()):
+    """Drive the exported debist_model.m in Octave; return q of the free run and curve rows."""
+    np.savetxt(folder / "v.txt", v, fmt="%.17g")
+    np.savetxt(folder / "qc.txt", [*q_curves, 0.0], fmt="%.17g")  # never an empty file
+    x0 = ", ".join(repr(x) for x in [q0, 0.0, 0.0][:n_x])
+    (folder / "drive.m").write_text(
+        f"""v = load('v.txt'); x = [{x0}]'; n = size(v, 1); q = zeros(n, 1); q(1) = x(1);
+for k = 1:n - 1
+  x = debist_model(x, v(k, :)', v(k + 1, :)', {dt!r}); q(k + 1) = x(1);
+end
+fid = fopen('q.txt', 'w'); fprintf(fid, '%.17g\\n', q); fclose(fid);
+qc = load('qc.txt'); fid = fopen('curves.txt', 'w');
+for k = 1:numel(qc) - 1
+  [~, c] = debist_model([qc(k); zeros({n_x - 1}, 1)], v(1, :)', v(1, :)', 0.0);
+  fprintf(fid, '%.17g ', c); fprintf(fid, '\\n');
+end
+fclose(fid);
+""",
+        encoding="utf-8",
+    )
+    done = subprocess.run(
+        [OCTAVE, "--no-gui", "--norc", "--quiet", "drive.m"],
+        cwd=folder, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    curves = np.loadtxt(folder / "curves.txt", ndmin=2) if len(q_curves) else None
+    return np.loadtxt(folder / "q.txt"), curves
+
+
+@pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave-cli)")
+@pytest.mark.parametrize("key", list(MODELS))
+def test_matlab_export_matches_free_run_in_octave(tmp_path, key):
+    model, v, ref = free_run(key)
+    (tmp_path / MATLAB_FILE).write_text(matlab_source(model)[MATLAB_FILE], encoding="utf-8")
+    q_grid, names, values = curve_table(model)
+    probes = [q_grid[0] - 1.0, *q_grid[::37], 0.5 * (q_grid[3] + q_grid[4]), q_grid[-1] + 1.0]
+    n_x = 3 if model.T_z > 0 else 2
+    q, curves = run_octave(tmp_path, v[:N_OCTAVE], 0.004, DT, n_x, probes)
+    assert np.ptp(ref[:N_OCTAVE]) > 1e-3
+    assert_close_q(q, ref[:N_OCTAVE])
+    want = np.array([[np.interp(p, q_grid, row) for row in values] for p in probes])
+    np.testing.assert_allclose(curves, want, rtol=1e-13, atol=1e-300)
+    assert len(names) == curves.shape[1]
+
+
+def test_matlab_file_is_fixed_size_code_for_simulink():
+    model = rbf_model()
+    info = ExportInfo(workflow="proto-7", run_digest="ef" * 32, identify_manifest="01" * 32)
+    text = matlab_source(model, info)[MATLAB_FILE]
+    assert text.startswith("function [x_next, curves] = debist_model(x, v0, v1, dt)\n")
+    local = re.findall(r"^function .*?(\w+)\(", text, flags=re.M)
+    assert local == ["debist_model", "map_inputs", "deriv", "ipow", "interp_held", "lookup_curves"]
+    assert text.count("\nend\n") == len(local)  # every function closed: one file, one style
+    for needle in ("ef" * 32, "01" * 32, "[-0.012, 0.012] m", "q [m]", "v [V]", "dt [s]"):
+        assert needle in text
+    # nothing code generation refuses or a Simulink block cannot size at compile time
+    code = "\n".join(ln for ln in text.splitlines() if not ln.lstrip().startswith("%"))
+    for banned in ("{", "}", "persistent", "containers.Map", "global", "eval(", "cell(", "'"):
+        assert banned not in code, banned  # no cells, state, maps or char arrays (strings)
+    weights = re.search(r"weights = \[ \.\.\.\n(.*?)\];", text, flags=re.S).group(1)
+    got = [float(w) for w in weights.replace("...", "").split(",")]
+    assert got == model.table_model().weights[0].tolist()  # round-trip literals
+    # T_z = 0: two states and no friction-state line; no prior: no table branch
+    plain = matlab_source(rbf_model(T_z=0.0, prior=False))[MATLAB_FILE]
+    assert "dx(3)" not in plain and "s = x(2);" in plain and "tables(" not in plain
+    assert "dx(3) = (x(2) - s) / (0.02);" in text
+
+
 def test_python_curves_match_model(tmp_path):
     model = rbf_model()
     mod = load_python(tmp_path, model)
@@ -185,8 +260,8 @@ def test_header_states_provenance_and_range():
         identified={"restoring": [[-0.011, 0.0095]]},
         version="9.9.9",
     )
-    files = {**c_sources(model, info), **python_source(model, info)}
-    assert set(files) == {*C_FILES, PYTHON_FILE}
+    files = {**c_sources(model, info), **python_source(model, info), **matlab_source(model, info)}
+    assert set(files) == {*C_FILES, PYTHON_FILE, MATLAB_FILE}
     for text in files.values():
         head = text[:3000]
         for needle in ("proto-7", "ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
@@ -202,6 +277,7 @@ def test_export_files_and_errors():
     model = rbf_model()
     assert set(export_files(model, "c")) == set(C_FILES)
     assert set(export_files(model, "python")) == {PYTHON_FILE}
+    assert set(export_files(model, "matlab")) == {MATLAB_FILE}
     with pytest.raises(WorkflowError, match="fortran"):
         export_files(model, "fortran")
     bad = rbf_model(T_z=0.0)
@@ -302,6 +378,15 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
         x = mod.rk4_step(x, v[k], v[k + 1], dt)
         q.append(x[0])
     assert_close_q(np.array(q), ref.q)
+
+    # the MATLAB function of the same run: its provenance, and in Octave the same free run
+    code, out = invoke("export", wf, "--format", "matlab", "--dest", tmp_path / "m")
+    assert code == 0, out
+    text = (tmp_path / "m" / MATLAB_FILE).read_text()
+    assert sha in text and "export-check" in text and f"[{model.q_range[0]!r}," in text
+    if OCTAVE is not None:
+        q_m, _ = run_octave(tmp_path / "m", v, q0, dt, 2)
+        assert_close_q(q_m, ref.q)
 
     # a modified model.h5 is refused, naming the file
     with open(tmp_path / "out/identify/model.h5", "ab") as fh:

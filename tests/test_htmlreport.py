@@ -1,18 +1,24 @@
-"""The HTML run report: sections, Table 2 numbers, verdicts, embedded PNGs, self-containment."""
+"""The HTML run report and the batch index: sections, Table 2 numbers, verdicts, embedded PNGs,
+self-containment."""
 
 import base64
 import io
-import json
 import math
 import re
 from html.parser import HTMLParser
 
 import pytest
-from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from matplotlib.figure import Figure
 
 from pipeline.errors import ArtifactError
-from pipeline.htmlreport import PNG_SIGNATURE, SECTIONS, render_report
+from pipeline.htmlreport import (
+    FIGURE_GROUPS,
+    PNG_SIGNATURE,
+    SECTIONS,
+    index_row,
+    render_index,
+    render_report,
+)
 
 
 def tiny_png(color: str) -> bytes:
@@ -105,13 +111,15 @@ def run():
         ],
         "equations": "q_ddot = 1.7e-01 + 1.4e+02 q & <h1>",
         "figures": {
+            "excitation": [("Fig. 11a", tiny_png("g"))],
+            "free_run": [("Free run on unseen", tiny_png("r"))],
             "identify": [("Fig. 14", tiny_png("k"))],
-            "validate": [("Free run on unseen", tiny_png("r"))],
+            "study": [("Fig. 11b", tiny_png("c")), ("Fig. 11c", tiny_png("m"))],
             "analyze": [("analyze: fig3.png", tiny_png("b"))],
         },
         "digest": "ab" * 32,
-        "verify": "debist verify wf.toml --digest " + "ab" * 32,
-        "stages": {"ingest": "1" * 64, "identify": "2" * 64},
+        "verify": "debist verify wf.toml",
+        "stages": {"ingest": ("1" * 64, "3" * 64), "identify": ("2" * 64, "4" * 64)},
         "versions": {"numpy": "2.4.6", "pysindy": "2.0.1"},
     }
 
@@ -158,7 +166,7 @@ def test_sections_numbers_and_verdicts(run):
     html = render_report(run)
     parser = parse(html)
     for heading in SECTIONS:
-        assert f"<h2>{heading}</h2>" in html
+        assert f">{heading}</h2>" in html
     assert '<meta name="viewport"' in html and "max-width" in html
     table = {(r[0], r[1]): r for r in parser.rows if len(r) == 8}
     rbf = table[("rbf", "unseen")]
@@ -181,8 +189,8 @@ def test_sections_numbers_and_verdicts(run):
     assert "the well persists up to v_max = 3018.48 V" in html
     assert "g1: input 1 is never active" in html
     # provenance
-    assert "debist verify wf.toml --digest " + "ab" * 32 in html
-    assert ["identify", "2" * 64] in parser.rows and ["pysindy", "2.0.1"] in parser.rows
+    assert "debist verify wf.toml" in html and "ab" * 32 in html
+    assert ["identify", "2" * 64, "4" * 64] in parser.rows and ["pysindy", "2.0.1"] in parser.rows
     # content is escaped, not markup
     assert "&amp; &lt;h1&gt;" in html
 
@@ -190,7 +198,7 @@ def test_sections_numbers_and_verdicts(run):
 def test_images_are_embedded_pngs_and_nothing_is_external(run):
     html = render_report(run)
     parser = parse(html)
-    assert len(parser.imgs) == 3
+    assert len(parser.imgs) == sum(len(v) for v in run["figures"].values()) == 6
     for src in parser.imgs:
         prefix, data = src.split(",", 1)
         assert prefix == "data:image/png;base64"
@@ -199,49 +207,56 @@ def test_images_are_embedded_pngs_and_nothing_is_external(run):
     assert "<script" not in html.lower() and "<link" not in html.lower()
 
 
+def test_figures_go_to_their_sections(run):
+    html = render_report(run)
+    heads = [html.index(f">{h}</h2>") for h in SECTIONS]
+    where = {
+        "excitation": SECTIONS.index("Excitation (Fig. 11a)"),
+        "free_run": SECTIONS.index("Free runs (Fig. 12, 13, 15)"),
+        "identify": SECTIONS.index("Identified model (Fig. 14)"),
+        "study": SECTIONS.index("Hyper-parameter search (Fig. 11b, 11c)"),
+        "analyze": SECTIONS.index("Design analysis (Fig. 3-7)"),
+    }
+    assert set(where) == set(FIGURE_GROUPS)
+    for group, k in where.items():
+        for caption, _ in run["figures"][group]:
+            at = html.index(f"<figcaption>{caption}</figcaption>")
+            assert heads[k] < at < (heads[k + 1] if k + 1 < len(heads) else len(html)), caption
+
+
 def test_missing_stages_are_left_out(run):
-    html = render_report({"workflow": "only-ingest", "stages": {"ingest": "1" * 64}})
+    html = render_report({"workflow": "only-ingest", "stages": {"ingest": ("1" * 64, "2" * 64)}})
     parse(html)
-    assert all(f"<h2>{h}</h2>" in html for h in SECTIONS)
-    assert "<img" not in html and "No run digest" in html
+    assert all(f">{h}</h2>" in html for h in SECTIONS)
+    assert "<img" not in html and "No digest" in html
+    assert "Not run (add a [study] section)." in html
     assert run["identify"]["design"]["reason"] not in html
 
 
 def test_a_figure_that_is_not_a_png_is_refused(run):
-    run["figures"]["validate"] = [("broken", b"GIF89a....")]
+    run["figures"]["free_run"] = [("broken", b"GIF89a....")]
     with pytest.raises(ArtifactError, match="broken"):
         render_report(run)
 
 
-def test_cli_report_of_a_synthetic_run(tmp_path, bistable_record):
-    from typer.testing import CliRunner
-
-    from cli import app
-
-    write_rig_csv(tmp_path, bistable_record)
-    wf = tmp_path / "wf.toml"
-    wf.write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
-    cli = CliRunner()
-    missing = cli.invoke(app, ["report", str(wf)])
-    assert missing.exit_code == 1 and "no stage has run" in missing.output
-    ran = cli.invoke(app, ["run", str(wf)])
-    assert ran.exit_code == 0, ran.output
-    digest = re.search(r"run digest: ([0-9a-f]{64})", ran.output).group(1)
-    for _ in range(2):  # a second report replaces the first
-        done = cli.invoke(app, ["report", str(wf)])
-        assert done.exit_code == 0, done.output
-    page = tmp_path / "out" / "report" / "report.html"
-    assert sorted(p.name for p in page.parent.iterdir()) == ["report.html"]
-    html = page.read_text(encoding="utf-8")
+def test_index_rows_and_page(run):
+    design = run["identify"]["design"]
+    rows = [
+        index_row("proto-0", "fleet/proto-0.toml", "done", nrmse=run["nrmse"], design=design,
+                  link="proto-0/report/report.html"),
+        index_row("proto-1", "fleet/proto-1.toml", "failed", error="IdentificationError: x < y"),
+    ]  # fmt: skip
+    assert rows[0]["nrmse"] == {"unseen": "1.13 %"}  # the identified model's rows only
+    assert rows[0]["wells"] == "-9.516 mm" and rows[0]["switching"] == "v1: 1976, v2: none"
+    assert index_row("x", "x.toml", "done", design=design, q_unit="V")["wells"] == "-0.009516 V"
+    assert rows[1]["wells"] == "-" and rows[1]["link"] is None
+    html = render_index(rows)
     parser = parse(html)
-    assert f"debist verify {wf} --digest {digest}" in html
-    assert len(parser.imgs) == 1 + 2  # Fig. 14 and one free run per data set
-    summary = json.loads((tmp_path / "out" / "validate" / "summary.json").read_text())
-    rows = {(r[0], r[1]): r for r in parser.rows if len(r) == 7}  # no phi without [physics]
-    for r in summary["table"]:
-        cells = rows[(r["model"], r["dataset"])]
-        assert cells[2] == f"{100 * r['nrmse_q']:.2f} %"
-        assert cells[5] == f"{100 * r['nrmse_q_baseline']:.2f} %"
-    assert "http://" not in html and "https://" not in html
-    verified = cli.invoke(app, ["verify", str(wf), "--digest", digest])
-    assert verified.exit_code == 0, verified.output
+    assert "1 failed" in html and "IdentificationError: x &lt; y" in html
+    assert 'href="proto-0/report/report.html"' in html and html.count("<a ") == 1
+    table = [r for r in parser.rows if len(r) == 6]
+    assert table[0][0] == "prototype" and table[0][3] == "NRMSE(q) unseen"
+    assert table[1] == ["proto-0", "fleet/proto-0.toml", "done", "1.13 %", "-9.516 mm",
+                        "v1: 1976, v2: none"]  # fmt: skip
+    assert table[2][3] == "-"
+    assert "http" not in html and "<script" not in html

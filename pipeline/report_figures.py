@@ -1,0 +1,242 @@
+"""Figures of the HTML run report, drawn from stage artifacts (``Figure`` objects, no pyplot).
+
+The excitation overview (Fig. 11a of the paper), the free runs of every model against the
+measurement (Fig. 12 on estimation data, Fig. 15 on unseen data) with a zoom on the most
+dynamic window (Fig. 13), and :func:`png_bytes`, which turns a figure into the same PNG
+bytes on every call (no time stamp, no software tag) so that the report is a pure function
+of its inputs.
+
+References
+----------
+Masoud & Maas 2025, Front. Robot. AI 12, Fig. 11a, 12, 13, 15; matplotlib documentation,
+"Embedding in a web application server" (``matplotlib.figure.Figure`` without pyplot) and
+``Figure.savefig`` (``metadata={"Software": None}``).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "MODEL_STYLES",
+    "dynamic_window",
+    "excitation_figure",
+    "free_run_figure",
+    "png_bytes",
+    "q_scale",
+]
+
+#: Line colour and style per model name (others cycle through the last entry's colours).
+MODEL_STYLES = {
+    "rbf": ("tab:red", "--"),
+    "sindy": ("tab:green", ":"),
+    "rbf-ls": ("tab:orange", "-."),
+    "analytical": ("tab:purple", "-."),
+}
+
+
+def png_bytes(figure: Any, dpi: int = 90) -> bytes:
+    """Render a figure to PNG bytes, the same bytes for the same figure.
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+        The figure.
+    dpi : int, optional
+        Resolution [dots per inch].
+
+    Returns
+    -------
+    bytes
+        The PNG file.
+
+    References
+    ----------
+    matplotlib ``Figure.savefig``: ``metadata={"Software": None}`` leaves out the only
+    field that would differ between matplotlib builds of one version.
+    """
+    buf = io.BytesIO()
+    figure.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def q_scale(unit: str) -> tuple[float, str]:
+    """Factor and unit in which positions are drawn: mm for q in m, else q's own unit.
+
+    Parameters
+    ----------
+    unit : str
+        SI unit of q (``"m"`` or ``"rad"``).
+
+    Returns
+    -------
+    factor : float
+        Multiply q [unit] by it.
+    label : str
+        The drawn unit.
+    """
+    return (1e3, "mm") if unit == "m" else (1.0, unit)
+
+
+def dynamic_window(t: np.ndarray, q_ddot: np.ndarray, width: float) -> tuple[int, int]:
+    """Find the window of a record whose acceleration has the largest RMS.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times [s], uniformly spaced.
+    q_ddot : ndarray, shape (n,)
+        Acceleration [unit of q / s^2] (NaN counts as zero).
+    width : float
+        Window length [s]; the whole record when it is shorter.
+
+    Returns
+    -------
+    start, stop : int
+        Sample slice ``[start, stop)`` of the window (the earliest one on ties).
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 13 (a zoom on the switching, where the dynamics are fastest).
+    """
+    n = t.size
+    if n < 2:
+        return 0, n
+    dt = float(t[1] - t[0])
+    m = int(min(max(round(width / dt), 2), n)) if dt > 0 else n
+    power = np.nan_to_num(np.asarray(q_ddot, dtype=float)) ** 2
+    csum = np.concatenate([[0.0], np.cumsum(power)])
+    energy = csum[m:] - csum[:-m]
+    start = int(np.argmax(energy))
+    return start, start + m
+
+
+def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit: str) -> Any:
+    """Position, velocity, acceleration and inputs of one record, as Fig. 11a of the paper.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The ingested record: ``t`` [s], ``q`` [unit], ``v1`` .. ``vN`` [V].
+    deriv : pandas.DataFrame
+        Its derivatives: ``q_dot`` [unit/s], ``q_ddot`` [unit/s^2].
+    name : str
+        Data set name (title).
+    unit : str
+        SI unit of q.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Four axes sharing t: q, q_dot, q_ddot (in mm for q in m) and the inputs in kV.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 11a.
+    """
+    from matplotlib.figure import Figure
+
+    factor, label = q_scale(unit)
+    t = table["t"].to_numpy()
+    inputs = sorted((c for c in table.columns if c[:1] == "v" and c[1:].isdigit()), key=_index)
+    fig = Figure(figsize=(9, 7.5), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True)
+    series = (
+        (table["q"], f"q [{label}]"),
+        (deriv["q_dot"], f"q_dot [{label}/s]"),
+        (deriv["q_ddot"], f"q_ddot [{label}/s^2]"),
+    )
+    for ax, (values, ylabel) in zip(axes[:3], series, strict=True):
+        ax.plot(t, factor * values.to_numpy(), color="0.15", lw=0.6)
+        ax.set_ylabel(ylabel, fontsize=8)
+    for col, color in zip(inputs, ("tab:red", "tab:blue", "tab:green", "tab:orange"), strict=False):
+        axes[3].plot(t, 1e-3 * table[col].to_numpy(), color=color, lw=0.7, label=col)
+    axes[3].set_ylabel("v_i [kV]", fontsize=8)
+    if inputs:
+        axes[3].legend(fontsize=7, loc="upper right")
+    axes[3].set_xlabel("t [s]")
+    axes[0].set_title(f"{name}: excitation and response", fontsize=10)
+    return fig
+
+
+def _index(column: str) -> int:
+    return int(column[1:])
+
+
+def free_run_figure(
+    measured: pd.DataFrame,
+    runs: Mapping[str, pd.DataFrame],
+    window: tuple[int, int],
+    name: str,
+    unit: str,
+    nrmse: Mapping[str, float] | None = None,
+) -> Any:
+    """Measured position against the free run of every model, a zoom and the errors.
+
+    Parameters
+    ----------
+    measured : pandas.DataFrame
+        ``t`` [s] and the measured ``q`` [unit] of one data set.
+    runs : mapping of str to pandas.DataFrame
+        Model name to its free run on that data set (``q_sim`` [unit], same samples).
+    window : tuple of int
+        Sample slice of the zoom (:func:`dynamic_window`).
+    name : str
+        Data set name (title).
+    unit : str
+        SI unit of q.
+    nrmse : mapping of str to float, optional
+        NRMSE(q) per model, shown in the legend (dimensionless; NaN: diverged).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three axes: the whole record (Fig. 12 / 15), the zoom (Fig. 13, shaded in the
+        first axes) and the error ``q - q_sim`` of each model.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 12, 13, 15.
+    """
+    from matplotlib.figure import Figure
+
+    factor, label = q_scale(unit)
+    nrmse = nrmse or {}
+    t = measured["t"].to_numpy()
+    q = factor * measured["q"].to_numpy()
+    a, b = window
+    fig = Figure(figsize=(9, 7.5), layout="constrained")
+    full, zoom, err = fig.subplots(3, 1, height_ratios=(2, 2, 1.2))
+    for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
+        ax.plot(t[part], q[part], color="0.15", lw=0.9, label="measured")
+    for model, run in runs.items():
+        color, style = MODEL_STYLES.get(model, ("tab:brown", "--"))
+        sim = factor * run["q_sim"].to_numpy()
+        score = nrmse.get(model)
+        text = "" if score is None else f" (NRMSE(q) {_percent(score)})"
+        for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
+            ax.plot(t[part], sim[part], color=color, ls=style, lw=0.9, label=f"{model}{text}")
+        err.plot(t, q - sim, color=color, lw=0.6, label=model)
+    if b > a:
+        full.axvspan(t[a], t[b - 1], color="0.88", zorder=0)
+        zoom.set_title(
+            f"zoom on the most dynamic window (largest q_ddot RMS): "
+            f"t = {t[a]:.3g} ... {t[b - 1]:.3g} s",
+            fontsize=9,
+        )
+    full.set_title(f"{name}: measured and free-run q", fontsize=10)
+    full.legend(fontsize=7, loc="upper right")
+    for ax in (full, zoom):
+        ax.set_ylabel(f"q [{label}]", fontsize=8)
+    err.set_ylabel(f"error [{label}]", fontsize=8)
+    err.set_xlabel("t [s]")
+    return fig
+
+
+def _percent(value: float) -> str:
+    return "diverged" if value is None or not np.isfinite(value) else f"{100 * value:.2f} %"
