@@ -4,6 +4,11 @@ Parses arguments, loads the workflow, calls the runner, prints with rich, and ma
 debist's exceptions to exit codes in one place (:func:`pipeline.errors.exit_code`): 0 done,
 1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
 or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
+
+Long steps report through :mod:`pipeline.progress`; the CLI draws those reports as rich
+progress bars on stderr when stderr is a terminal (not with ``-q``). Help texts are plain
+text (Typer's ``rich_markup_mode=None``), so workflow sections such as ``[rig]`` and units
+such as ``[s]`` print literally instead of being taken for rich markup.
 """
 
 from __future__ import annotations
@@ -12,30 +17,58 @@ import json
 import os
 import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer.core import TyperGroup
 
 from pipeline.errors import DebistError, Interrupted, VerificationError, WorkflowError, exit_code
 
+
+class _Commands(TyperGroup):
+    """The command group, listing each command with its whole first paragraph of help.
+
+    Click cuts the listing at the first period or at the terminal width, which would drop
+    the sections and units of a help line (``Eq. 37`` ends a "sentence").
+    """
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """Write the Commands section (see :meth:`click.Group.format_commands`)."""
+        rows = []
+        for name in self.list_commands(ctx):
+            cmd = self.get_command(ctx, name)
+            if cmd is not None and not cmd.hidden:
+                text = cmd.short_help or (cmd.help or "").split("\n\n")[0]
+                rows.append((name, " ".join(text.split())))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
 app = typer.Typer(
+    cls=_Commands,
     help="Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025).",
     no_args_is_help=True,
     add_completion=False,
+    rich_markup_mode=None,  # help is plain text: "[rig]", "[s]" are words, not rich markup
 )
 #: Reports written to a file or pipe are not squeezed to 80 columns (rich's default there).
 console = Console(width=None if sys.stdout.isatty() else 140)
 err = Console(stderr=True, soft_wrap=True)
+#: Output level set by the global options: -1 with ``-q``, 1 with ``-v``, else 0.
+_level = {"value": 0}
 
 WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
-OutOpt = Annotated[Path | None, typer.Option("--out", help="Override the workflow's output_dir.")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
 WaitOpt = Annotated[
     bool,
     typer.Option(
@@ -52,7 +85,7 @@ def _options(
             "--memory-budget",
             metavar="GB",
             min=0.001,
-            help="Memory a stage may plan for, in GB; a setting that needs more is refused "
+            help="Memory a stage may plan for [GB]; a setting that needs more is refused "
             "before it allocates (default: half of this machine's RAM, or the environment "
             "variable DEBIST_MEMORY_BUDGET_GB).",
         ),
@@ -66,8 +99,26 @@ def _options(
             help="Print debist's version and exit.",
         ),
     ] = False,
+    quiet: Annotated[
+        bool,
+        typer.Option(
+            "-q", "--quiet", help="Print only errors and the run digest; no progress bars."
+        ),
+    ] = False,
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "-v",
+            "--verbose",
+            help="Also print why each stage runs or is skipped, and its timings [s].",
+        ),
+    ] = False,
 ) -> None:
     """Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025)."""
+    if quiet and verbose:
+        raise typer.BadParameter("give -q/--quiet or -v/--verbose, not both")
+    _level["value"] = -1 if quiet else (1 if verbose else 0)
+    console.quiet = quiet
     if memory_budget is not None:
         from pipeline.preflight import BUDGET_ENV
 
@@ -83,7 +134,7 @@ def _print_version(value: bool) -> None:
             text = version("debist")
         except PackageNotFoundError:  # run from a source tree that is not installed
             text = "unknown (not installed)"
-        console.print(f"debist {text}")
+        typer.echo(f"debist {text}")
         raise typer.Exit(0)
 
 
@@ -115,27 +166,193 @@ def _runner(workflow: Path, out: Path | None, wait: bool = False):
     return Runner(load_workflow(workflow, out), wait=wait)
 
 
-def _event(stage: str, what: str, detail: str) -> None:
-    if what == "skip":
-        console.print(f"[dim]Stage '{stage}' is up to date, skipping[/dim]")
-    elif what == "start":
-        console.print(f"Running stage '{stage}' ...")
-    elif what == "recovered":
-        console.print(f"[yellow]recovered:[/yellow] {escape(detail)}")
-    else:
-        console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
+def _essential(text: str) -> None:
+    """Print a line that ``-q`` keeps (the run digest, the lines of ``status``)."""
+    quiet, console.quiet = console.quiet, False
+    try:
+        console.print(text, soft_wrap=True)
+    finally:
+        console.quiet = quiet
 
 
-def _report(runner, manifests) -> None:
-    from pipeline import report
+def _progress_console() -> Console | None:
+    """Return the console for progress bars: stderr if a terminal and not ``-q``, else None."""
+    try:
+        terminal = sys.stderr.isatty()  # not rich's is_terminal: FORCE_COLOR must not draw bars
+    except (AttributeError, ValueError):  # replaced or closed
+        terminal = False
+    return Console(stderr=True) if terminal and _level["value"] >= 0 else None
 
+
+class _Display:
+    """Progress reports (:mod:`pipeline.progress`) drawn as rich progress bars, one per task.
+
+    A row reads ``stage: task``, a bar, ``done/total``, the elapsed time and rich's
+    estimate of the time left. A row goes when its task reaches its total; when a stage
+    ends, its rows are drawn complete (work that stopped early, such as an optimiser that
+    converged before its evaluation budget, is finished too) and removed.
+
+    Parameters
+    ----------
+    target : rich.console.Console
+        Where to draw (stderr, a terminal).
+
+    References
+    ----------
+    rich documentation, ``rich.progress.Progress``.
+    """
+
+    def __init__(self, target: Console):
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self.bars = Progress(
+            TextColumn("{task.description}", markup=False),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("left"),
+            TimeRemainingColumn(),
+            console=target,
+            transient=True,
+            redirect_stdout=sys.stdout.isatty(),  # stage lines above the bars, not through them
+            redirect_stderr=True,
+        )
+        self.stage = ""
+        self._rows: dict[str, tuple[object, int]] = {}  # label -> (task id, done)
+        self._lock = threading.Lock()
+
+    def listen(self, task: str, done: int, total: int) -> None:
+        """Show one report (the :data:`pipeline.progress.Listener` signature)."""
+        label = (
+            task
+            if not self.stage or task.startswith(f"{self.stage}:")
+            else (f"{self.stage}: {task}")
+        )
+        total = max(total, done) if total > 0 else None
+        with self._lock:
+            row = self._rows.get(label)
+            if row is not None and done < row[1]:  # the same task started over
+                self.bars.remove_task(row[0])
+                row = None
+            if row is None:
+                tid = self.bars.add_task(label, total=total, completed=done)
+            else:
+                tid = row[0]
+                self.bars.update(tid, total=total, completed=done)
+            self._rows[label] = (tid, done)
+            if total is not None and done >= total:
+                self.bars.refresh()
+                self.bars.remove_task(tid)
+                del self._rows[label]
+
+    def finish(self) -> None:
+        """Draw every open row complete, then remove it (at the end of a stage)."""
+        with self._lock:
+            for tid, done in self._rows.values():
+                self.bars.update(tid, total=max(done, 1), completed=max(done, 1))
+            if self._rows:
+                self.bars.refresh()
+            for tid, _done in self._rows.values():
+                self.bars.remove_task(tid)
+            self._rows.clear()
+
+
+@contextmanager
+def _progress() -> Iterator[_Display | None]:
+    """Draw the progress reports made inside the block, if there is a terminal to draw on."""
+    from pipeline.progress import listening
+
+    target = _progress_console()
+    if target is None:
+        yield None
+        return
+    display = _Display(target)
+    with display.bars, listening(display.listen):
+        try:
+            yield display
+        finally:
+            display.finish()
+
+
+def _events(runner, display: _Display | None, ran: set[str]):
+    """Return the runner's ``on_event`` callback: stage lines, and with ``-v`` why and timings.
+
+    The names of the stages that ran go into ``ran``.
+    """
+    verbose = _level["value"] > 0
+
+    def on_event(stage: str, what: str, detail: str) -> None:
+        why = f" ({escape(detail)})" if verbose and detail else ""
+        if what == "skip":
+            console.print(f"[dim]Stage '{stage}' is up to date, skipping{why}[/dim]")
+        elif what == "start":
+            if display is not None:
+                display.finish()
+                display.stage = stage
+            console.print(f"Running stage '{stage}' ...{why}")
+        elif what == "recovered":
+            console.print(f"[yellow]recovered:[/yellow] {escape(detail)}")
+        else:
+            if display is not None:
+                display.finish()
+            ran.add(stage)
+            console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
+            if verbose:
+                _print_timings(runner.wf.stage_dir(stage))
+
+    return on_event
+
+
+def _print_timings(stage_dir: Path) -> None:
+    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``)."""
+    try:
+        timings = json.loads((stage_dir / "timings.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    parts = [f"{k} {v:.2f} s" for k, v in timings.items() if k != "stage" and isinstance(v, float)]
+    if parts:
+        console.print(f"[dim]  timings: {escape(', '.join(parts))}[/dim]", soft_wrap=True)
+
+
+def _convergence_notice(runner, manifests) -> str | None:
+    """Say on how many data sets TVRegDiff stopped at its iteration limit, and what to change."""
     diff = manifests.get("differentiate")
     stopped = [n for n, ok in (diff.summary.get("converged", {}) if diff else {}).items() if not ok]
-    if stopped:
-        console.print(
-            "[dim]differentiate: the iterative method stopped at its iteration limit on "
-            f"{len(stopped)} data set(s), as configured (converged = false in the summary)[/dim]"
-        )
+    if not stopped:
+        return None
+    names = ", ".join(stopped[:3]) + (", ..." if len(stopped) > 3 else "")
+    section = runner.wf.section("differentiate")
+    try:
+        from pipeline.differentiate.tvregdiff_method import TVRegDiffConfig
+
+        params = {k: v for k, v in section.items() if k != "method"}
+        cfg = TVRegDiffConfig.from_dict(params)
+        iterations, tol = cfg.iterations, cfg.tol
+        second = cfg.iterations if cfg.iterations2 is None else cfg.iterations2
+    except DebistError:  # another method: name the keys without their values
+        iterations = tol = second = "?"
+    return (
+        f"differentiate: TVRegDiff stopped at its iteration limit before its tolerance on "
+        f"{len(stopped)} data set(s) ({names}; converged = false in the "
+        f"summary). A fixed small count is how Chartrand and the paper run it; for "
+        f"converged derivatives raise [differentiate] iterations (now {iterations}) and "
+        f"iterations2 (now {second}), or loosen [differentiate] tol (now {tol})."
+    )
+
+
+def _report(runner, manifests, ran: set[str]) -> None:
+    from pipeline import report
+
+    notice = _convergence_notice(runner, manifests)
+    if notice and ("differentiate" in ran or _level["value"] > 0):  # once, not on every rerun
+        console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
     if "rig" in manifests:
         console.print(report.rig_table(manifests["rig"].summary))
     if "analyze" in manifests:
@@ -163,14 +380,27 @@ def _report(runner, manifests) -> None:
 
 
 def _run(
-    workflow: Path, stages: list[str] | None, force: bool, out: Path | None, wait: bool
+    workflow: Path,
+    stages: list[str] | None,
+    force: bool,
+    out: Path | None,
+    wait: bool,
+    select: dict[str, str | None] | None = None,
 ) -> None:
     with _guard():
         runner = _runner(workflow, out, wait)
-        manifests = runner.run(stages, force=force, on_event=_event)
-        _report(runner, manifests)
+        if select is not None:
+            listed = select["stages"]
+            names = (
+                [n.strip() for n in listed.split(",") if n.strip()] if listed is not None else None
+            )
+            stages = runner.select(names, start=select["start"], until=select["until"])
+        ran: set[str] = set()
+        with _progress() as display:
+            manifests = runner.run(stages, force=force, on_event=_events(runner, display, ran))
+        _report(runner, manifests, ran)
         if stages is None and (digest := runner.digest()) is not None:
-            console.print(f"run digest: [bold]{digest}[/bold]")
+            _essential(f"run digest: [bold]{digest}[/bold]")
             console.print(
                 f"[dim]check it later with: debist verify {escape(str(workflow))} "
                 f"--digest {digest}[/dim]",
@@ -180,10 +410,32 @@ def _run(
 
 @app.command()
 def run(
-    workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+    workflow: WorkflowArg,
+    force: ForceOpt = False,
+    out: OutOpt = None,
+    wait: WaitOpt = False,
+    stages: Annotated[
+        str | None,
+        typer.Option(
+            "--stages",
+            help="Run only these stages, comma-separated, e.g. 'identify,validate'; the "
+            "stages they read must be up to date.",
+        ),
+    ] = None,
+    start: Annotated[
+        str | None,
+        typer.Option("--from", help="Run from this stage on (in the workflow's order)."),
+    ] = None,
+    until: Annotated[
+        str | None, typer.Option("--until", help="Run up to and including this stage.")
+    ] = None,
 ) -> None:
-    """Run every stage of WORKFLOW, skipping those that are up to date; print the run digest."""
-    _run(workflow, None, force, out, wait)
+    """Run every stage of WORKFLOW, skipping those that are up to date; print the run digest.
+
+    --stages, or --from and --until, run a part of the workflow (no digest then); a stage
+    whose upstream stage outside the part is missing or stale is refused (exit 2).
+    """
+    _run(workflow, None, force, out, wait, {"stages": stages, "start": start, "until": until})
 
 
 def _stage_command(name: str, help_text: str, command: str | None = None) -> None:
@@ -196,28 +448,43 @@ def _stage_command(name: str, help_text: str, command: str | None = None) -> Non
     app.command(command or name)(command_fn)
 
 
-_stage_command("ingest", "Read the rig logs into canonical tables (t, q, v1..vN in SI units).")
-_stage_command("differentiate", "Compute q_dot and q_ddot (TVRegDiff or the configured method).")
 _stage_command(
-    "identify", "Identify the RBF model of Eq. 37-40 by least squares with the T_z search."
+    "ingest",
+    "Read the rig logs of [datasets.*] into canonical tables (t [s], q [m], v1..vN [V]) "
+    "as [ingest] maps their channels.",
 )
 _stage_command(
-    "validate", "Free-run the identified model on every data set; NRMSE table and plots."
+    "differentiate",
+    "Compute q_dot [m/s] and q_ddot [m/s^2] by the [differentiate] method (TVRegDiff by default).",
 )
 _stage_command(
-    "compare", "Fit SINDy on the same data and derivatives; free-run it with the same simulator."
+    "identify",
+    "Identify the RBF model of Eq. 37-40 from [identify] by least squares with the search "
+    "over the friction lag T_z [s].",
 )
 _stage_command(
-    "study", "Sensitivity studies: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha (Fig. 11c)."
+    "validate",
+    "Free-run the identified model on every data set as [validate] says; NRMSE table and plots.",
 )
 _stage_command(
-    "rig", "Run the virtual rig: dSPACE MAT logs and truth files per experiment.", "simulate-rig"
+    "compare",
+    "Fit SINDy by [compare] on the same data and derivatives; free-run it with the same simulator.",
+)
+_stage_command(
+    "study",
+    "Sensitivity studies of [study]: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha "
+    "(Fig. 11c).",
+)
+_stage_command(
+    "rig",
+    "Run the virtual rig of [rig]: dSPACE MAT logs and truth files per experiment.",
+    "simulate-rig",
 )
 
 
 @app.command()
 def fleet(
-    template: Annotated[Path, typer.Argument(help="Workflow with a rig section.")],
+    template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
     size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
     folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
@@ -237,18 +504,28 @@ def fleet(
             raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
         files = fleet_workflows(raw, template.resolve().parent, folder, size, seed=seed)
         paths = artifacts.write_text_files(folder, files)
-    console.print(f"wrote {len(paths)} workflows to {folder}; run them with: debist batch {folder}")
+    console.print(
+        f"wrote {len(paths)} workflows to {escape(str(folder))}; run them with: debist batch "
+        f"{escape(str(folder))}"
+    )
 
 
 _stage_command(
-    "analyze", "Design analysis of the physics section (Section 3): statics.h5 and Fig. 3-7 as PNG."
+    "analyze", "Design analysis of [physics] (Section 3): statics.h5 and Fig. 3-7 as PNG."
 )
 
 
 @app.command()
 def status(
     workflow: WorkflowArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON object keyed by stage: {"state": "up_to_date" | "stale" | '
+            '"missing", "reasons": [{"kind": ..., "detail": ...}]}.',
+        ),
+    ] = False,
     out: OutOpt = None,
 ) -> None:
     """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
@@ -270,14 +547,15 @@ def status(
         except DebistError as exc:
             warning = f"a run would stop: {exc}"
     if as_json:
-        typer.echo(json.dumps([s.__dict__ for s in states], indent=2))
+        typer.echo(json.dumps({s.stage: s.to_json() for s in states}, indent=2))
+        if warning:
+            err.print(f"[yellow]{escape(warning)}[/yellow]")
         return
     for s in states:
         color = {"up to date": "green", "stale": "yellow", "missing": "red"}[s.state]
-        console.print(
+        _essential(
             f"{s.stage:14s} [{color}]{s.state}[/{color}]"
-            + (f"  ({escape(s.reason)})" if s.reason else ""),
-            soft_wrap=True,
+            + (f"  ({escape(s.reason)})" if s.reason else "")
         )
     if warning:
         console.print(f"[yellow]{escape(warning)}[/yellow]")
@@ -310,29 +588,33 @@ def verify(
 
 
 @app.command()
-def report(workflow: WorkflowArg, out: OutOpt = None) -> None:
-    """Write one self-contained HTML page of the run: tables, figures, provenance.
+def report(
+    workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+) -> None:
+    """Run the report stage: one self-contained HTML page of the run (needs a [report] section).
 
-    Goes to <output_dir>/report/report.html (replaced atomically); stages that have not run
-    are left out. The page is not a hashed stage: `verify` checks the artifacts it shows.
+    Writes <output_dir>/report/report.html (tables, figures, provenance) from the artifacts of
+    the workflow's stages, which must be up to date; `debist run` makes it as its last step,
+    and `debist verify` checks it like every artifact.
     """
-    from contextlib import nullcontext
-
-    from pipeline import htmlreport, outdir
+    from pipeline.htmlreport import REPORT_FILE
 
     with _guard():
-        runner = _runner(workflow, out)
-        folder = runner.wf.output_dir
-        with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
-            html = htmlreport.render_report(htmlreport.load_run(runner, workflow))
-            path = htmlreport.write_report(folder / "report", html)
-    console.print(f"wrote {escape(str(path))}")
+        runner = _runner(workflow, out, wait)
+        if "report" not in runner.stages():
+            raise WorkflowError(
+                f"[report] workflow '{workflow}' has no [report] section: add an empty "
+                "`[report]` table to it (`debist run` then writes the report too)"
+            )
+    _run(workflow, ["report"], force, out, wait)
+    console.print(f"report: {escape(str(runner.wf.stage_dir('report') / REPORT_FILE))}")
 
 
 class ExportFormat(StrEnum):
-    """Formats of ``debist export``: C99 header and source, or a NumPy module."""
+    """Formats of ``debist export``: C99 header and source, a MATLAB function, a NumPy module."""
 
     c = "c"
+    matlab = "matlab"
     python = "python"
 
 
@@ -344,6 +626,7 @@ def export(
         typer.Option(
             "--format",
             help="c: debist_model.h and debist_model.c (C99, math.h only, no allocation); "
+            "matlab: debist_model.m (a Simulink MATLAB Function block or Octave); "
             "python: debist_model.py (NumPy only).",
         ),
     ] = ExportFormat.c,
@@ -356,7 +639,7 @@ def export(
     ] = False,
     out: OutOpt = None,
 ) -> None:
-    """Write the identified model as self-contained C99 or NumPy code for a controller.
+    """Write the identified model as self-contained C99, MATLAB or NumPy code for a controller.
 
     Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
     """
@@ -446,16 +729,25 @@ def batch(
         Progress,
         TextColumn,
         TimeElapsedColumn,
+        TimeRemainingColumn,
     )
     from rich.table import Table
 
-    from pipeline.batch import expand_workflows, run_batch, summary_table
+    from pipeline.batch import expand_workflows, run_batch, summary_table, write_index
 
     selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
         files = expand_workflows(paths)
-        columns = (TextColumn("batch"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-        with Progress(*columns, console=console, transient=True) as bar:
+        columns = (
+            TextColumn("batch: workflows"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("left"),
+            TimeRemainingColumn(),
+        )
+        target = _progress_console()
+        with Progress(*columns, console=target, transient=True, disable=target is None) as bar:
             task = bar.add_task("batch", total=len(files))
             results = run_batch(
                 files,
@@ -490,6 +782,9 @@ def batch(
             escape(where + row.error),
         )
     console.print(table)
+    index = write_index(results)
+    if index is not None:
+        console.print(f"index of the reports: {escape(str(index))}")
     if failed:
         raise typer.Exit(1)
 

@@ -26,8 +26,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from functools import partial
+from typing import Any
 
-__all__ = ["Listener", "listening", "report", "reporter"]
+__all__ = ["Listener", "listening", "report", "reporter", "tracking_time"]
 
 #: A listener: called as ``listener(task, done, total)``; ``total`` 0 when unknown.
 Listener = Callable[[str, int, int], None]
@@ -35,13 +36,14 @@ _LISTENER: ContextVar[Listener | None] = ContextVar("debist_progress", default=N
 
 
 @contextmanager
-def listening(listener: Listener) -> Iterator[None]:
+def listening(listener: Listener | None) -> Iterator[None]:
     """Send every progress report made inside the block to ``listener``.
 
     Parameters
     ----------
-    listener : callable
-        Called as ``listener(task, done, total)``.
+    listener : callable or None
+        Called as ``listener(task, done, total)``; None mutes the reports inside the block
+        (e.g. in a forked child, which must not draw on its parent's display).
 
     Yields
     ------
@@ -85,3 +87,57 @@ def reporter(task: str) -> Callable[[int, int], None] | None:
         Called as ``f(done, total)``.
     """
     return partial(report, task) if _LISTENER.get() is not None else None
+
+
+def tracking_time(
+    fun: Callable[..., Any],
+    t_span: tuple[float, float],
+    task: str = "simulated time [ms]",
+    steps: int = 200,
+) -> Callable[..., Any]:
+    """Wrap an ODE right-hand side ``fun(t, x, *args)`` to report the simulated time reached.
+
+    An integrator evaluates the right-hand side at ever later times; the wrapper reports
+    the latest time as milliseconds done of the span, at most ``steps`` times. With no
+    listener the function is returned unwrapped (no cost).
+
+    Parameters
+    ----------
+    fun : callable
+        Right-hand side, as for :func:`scipy.integrate.solve_ivp`.
+    t_span : tuple of float
+        Start and end time of the whole integration [s].
+    task : str, optional
+        The task label.
+    steps : int, optional
+        Reports at most this many times.
+
+    Returns
+    -------
+    callable
+        ``fun`` itself, or a wrapper with the same signature and results.
+
+    Examples
+    --------
+    >>> seen = []
+    >>> with listening(lambda task, done, total: seen.append((done, total))):
+    ...     f = tracking_time(lambda t, x: -x, (0.0, 2.0), steps=2)
+    ...     _ = [f(t, 1.0) for t in (0.0, 0.5, 1.0, 1.5, 2.0)]
+    >>> seen
+    [(0, 2000), (1000, 2000), (2000, 2000)]
+    """
+    rep = reporter(task)
+    if rep is None:
+        return fun
+    t0, t1 = float(t_span[0]), float(t_span[1])
+    total = max(1, round((t1 - t0) * 1e3))
+    stride = (t1 - t0) / max(1, steps)
+    state = {"next": t0}
+
+    def wrapped(t: float, *args: Any) -> Any:
+        if t >= state["next"]:
+            state["next"] = t + stride
+            rep(min(total, round((t - t0) * 1e3)), total)
+        return fun(t, *args)
+
+    return wrapped

@@ -34,6 +34,26 @@ DATA_STAGES = ("ingest", "differentiate", "identify", "validate", "compare", "st
 
 
 @dataclass(frozen=True)
+class Reason:
+    """One reason why a stage is stale or missing.
+
+    Attributes
+    ----------
+    kind : str
+        One of ``never_run``, ``foreign_files``, ``upstream_stale`` (an upstream stage will
+        rerun), ``upstream_missing``, ``upstream_changed`` (recorded upstream manifests
+        differ), ``artifact_missing``, ``artifact_modified``, ``artifact_unlisted``,
+        ``config_changed``, ``input_changed``, ``code_changed``, ``library_changed``,
+        ``layout_changed`` (made by an older debist) and ``interrupted_run`` (leftovers).
+    detail : str
+        The same in words, naming the keys, files or stages.
+    """
+
+    kind: str
+    detail: str
+
+
+@dataclass(frozen=True)
 class StageStatus:
     """State of one stage folder.
 
@@ -46,11 +66,27 @@ class StageStatus:
     reason : str
         Why it is stale or missing (empty when up to date); mentions the leftovers of an
         interrupted run and what the next run does with them.
+    reasons : tuple of Reason
+        The same, one entry per reason.
     """
 
     stage: str
     state: str
     reason: str = ""
+    reasons: tuple[Reason, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """Return ``{"state": "up_to_date" | "stale" | "missing", "reasons": [...]}``.
+
+        Returns
+        -------
+        dict
+            ``reasons``: one ``{"kind": ..., "detail": ...}`` per :class:`Reason`.
+        """
+        return {
+            "state": self.state.replace(" ", "_"),
+            "reasons": [{"kind": r.kind, "detail": r.detail} for r in self.reasons],
+        }
 
 
 Event = Callable[[str, str, str], None]
@@ -224,10 +260,11 @@ class Runner:
 
     # ------------------------------------------------------------------ keys
     def _upstream(self, stage: str) -> tuple[str, ...]:
-        """Stages whose artifacts ``stage`` reads."""
+        """Stages whose artifacts ``stage`` reads: those of its upstream the workflow has."""
         if stage == "ingest" and any(d.rig for d in self.wf.datasets):
             return ("rig",)
-        return registry.stage(stage).upstream
+        mine = self.stages()
+        return tuple(u for u in registry.stage(stage).upstream if u in mine)
 
     def _inputs(self, stage: str) -> tuple[dict[str, str], dict[str, str]] | None:
         """Input hashes and upstream manifest hashes, or None when an upstream stage has none."""
@@ -292,45 +329,60 @@ class Runner:
         list of StageStatus
             In stage order.
         """
-        notes: dict[str, list[str]] = {}
+        notes: dict[str, list[Reason]] = {}
         for path in outdir.leftovers(self.wf.output_dir):
             stage = artifacts.SWAP_FOLDER.match(path.name)["stage"]
-            notes.setdefault(stage, []).append(outdir.describe_leftover(path))
+            notes.setdefault(stage, []).append(
+                Reason("interrupted_run", outdir.describe_leftover(path))
+            )
         result: list[StageStatus] = []
         rerun: set[str] = set()
         for stage in self.stages():
-            state, reason = self._state(stage, rerun)
+            state, reasons = self._state(stage, rerun)
             if state != "up to date":
                 rerun.add(stage)
-            extra = "; ".join(notes.get(stage, []))
-            reason = "; ".join(r for r in (reason, extra) if r)
-            result.append(StageStatus(stage, state, reason))
+            reasons = [*reasons, *notes.get(stage, [])]
+            reason = "; ".join(r.detail for r in reasons)
+            result.append(StageStatus(stage, state, reason, tuple(reasons)))
         return result
 
-    def _state(self, stage: str, rerun: set[str]) -> tuple[str, str]:
+    def _state(self, stage: str, rerun: set[str]) -> tuple[str, list[Reason]]:
         sdir = self.wf.stage_dir(stage)
         foreign = artifacts.foreign_files(sdir) if sdir.exists() else []
         manifest = artifacts.read_manifest(sdir)
         if manifest is None:
             if foreign:
-                return "missing", artifacts.foreign_message(sdir, foreign)
-            return "missing", "never run"
+                return "missing", [
+                    Reason("foreign_files", artifacts.foreign_message(sdir, foreign))
+                ]
+            return "missing", [Reason("never_run", "never run")]
         ups = [u for u in self._upstream(stage) if u in rerun]
         if ups:
-            return "stale", f"upstream '{ups[-1]}' will rerun"
-        reason = self._stale_reason(stage, manifest)
-        return ("stale", reason) if reason else ("up to date", "")
+            return "stale", [Reason("upstream_stale", f"upstream '{ups[-1]}' will rerun")]
+        reasons = self._stale_reasons(stage, manifest)
+        return ("stale", reasons) if reasons else ("up to date", [])
 
-    def _stale_reason(self, stage: str, manifest: artifacts.Manifest) -> str:
+    def _stale_reasons(self, stage: str, manifest: artifacts.Manifest) -> list[Reason]:
+        """Every reason why a stage with a manifest is stale (empty when it is up to date)."""
+        reasons = []
         changed = artifacts.changed_outputs(self.wf.stage_dir(stage), manifest)
-        if changed:
-            return "outputs changed: " + ", ".join(changed[:3])
+        for kind, tag in (("missing", "(missing)"), ("modified", "(modified)")):
+            names = [c for c in changed if c.endswith(tag)]
+            if names:
+                reasons.append(
+                    Reason(f"artifact_{kind}", f"outputs {kind}: " + ", ".join(names[:3]))
+                )
+        unlisted = [c for c in changed if c.endswith("(not in manifest)")]
+        if unlisted:
+            reasons.append(
+                Reason("artifact_unlisted", "outputs changed: " + ", ".join(unlisted[:3]))
+            )
         found = self._key(stage)
         if found is None:
-            return "an upstream stage has no artifacts"
+            return [*reasons, Reason("upstream_missing", "an upstream stage has no artifacts")]
         key, inputs, upstream = found
         if key == manifest.key:
-            return ""
+            return reasons
         config = stage_config(self.wf, stage)
         canon = artifacts.canonical_json
         if canon(config) != canon(manifest.config):
@@ -339,21 +391,36 @@ class Runner:
                 for k in set(config) | set(manifest.config)
                 if canon(config.get(k)) != canon(manifest.config.get(k))
             )
-            return f"config changed ({', '.join(keys)})"
+            reasons.append(Reason("config_changed", f"config changed ({', '.join(keys)})"))
         diff = sorted(
             k for k in set(inputs) | set(manifest.inputs) if inputs.get(k) != manifest.inputs.get(k)
         )
         if diff:
-            return "inputs changed: " + ", ".join(diff[:3])
+            reasons.append(Reason("input_changed", "inputs changed: " + ", ".join(diff[:3])))
         if upstream != manifest.upstream:
-            return "upstream manifests changed: " + ", ".join(sorted(upstream))
+            ups = sorted(
+                u
+                for u in set(upstream) | set(manifest.upstream)
+                if upstream.get(u) != manifest.upstream.get(u)
+            )
+            reasons.append(
+                Reason("upstream_changed", "upstream manifests changed: " + ", ".join(ups))
+            )
         code, versions = self._code(stage)
         if manifest.code != code:
-            return f"code changed ({manifest.code[:12]} -> {code[:12]})"
+            reasons.append(
+                Reason("code_changed", f"code changed ({manifest.code[:12]} -> {code[:12]})")
+            )
         if manifest.versions != versions:
             diff = sorted(k for k in versions if versions[k] != manifest.versions.get(k))
-            return "library versions changed: " + ", ".join(diff)
-        return "made by an older debist (artifact layout changed)"
+            reasons.append(
+                Reason("library_changed", "library versions changed: " + ", ".join(diff))
+            )
+        if not reasons:
+            reasons.append(
+                Reason("layout_changed", "made by an older debist (artifact layout changed)")
+            )
+        return reasons
 
     # ------------------------------------------------------------------- run
     def run(
@@ -368,13 +435,14 @@ class Runner:
         Parameters
         ----------
         stages : sequence of str, optional
-            Stages to consider (default all, in order). Upstream stages outside
-            the selection must have artifacts.
+            Stages to consider (default all, in order; see :meth:`select`). Upstream
+            stages outside the selection must be up to date.
         force : bool, optional
             Rerun even up-to-date stages.
         on_event : callable, optional
             Called as ``on_event(stage, what, detail)`` with ``what`` in
-            ``{"recovered", "skip", "start", "done"}``.
+            ``{"recovered", "skip", "start", "done"}``; the detail of ``"start"`` says why
+            the stage runs, that of ``"done"`` its wall time.
 
         Returns
         -------
@@ -388,8 +456,10 @@ class Runner:
             place, or a stage folder holds files debist did not write (named).
         RunLockedError
             Another process writes to the output folder (unless ``wait``).
-        ArtifactError
-            If an upstream stage has no artifacts.
+        WorkflowError
+            Before anything is written: an unknown stage name (the message lists the
+            stages), or a selected stage whose upstream stage outside the selection is
+            missing or stale (named, with the reason).
         DebistError
             Whatever a stage raises; that stage's previous artifacts stay.
         """
@@ -397,7 +467,7 @@ class Runner:
         selected = list(stages or self.stages())
         for s in selected:
             if s not in STAGES:
-                raise WorkflowError(f"unknown stage {s!r}; stages: {', '.join(STAGES)}")
+                raise WorkflowError(f"unknown stage '{s}'; the stages are: {', '.join(STAGES)}")
         out = self.wf.output_dir
         with outdir.writing(out, workflow=self.wf.name, wait=self.wait, **self._places()):
             for line in outdir.recover(out):
@@ -414,7 +484,77 @@ class Runner:
                         for s, f in foreign.items()
                     )
                 )
+            if stages is not None:
+                self._check_upstream(selected)
             return self._run_locked(selected, force, on_event)
+
+    def select(
+        self,
+        stages: Sequence[str] | None = None,
+        *,
+        start: str | None = None,
+        until: str | None = None,
+    ) -> list[str] | None:
+        """Resolve a stage selection: a list of names, or a range of this workflow's stages.
+
+        Parameters
+        ----------
+        stages : sequence of str, optional
+            Stage names, in any order.
+        start, until : str, optional
+            First and last stage of a range of :meth:`stages` (inclusive).
+
+        Returns
+        -------
+        list of str or None
+            The selected stages in execution order; None when nothing was given (all).
+
+        Raises
+        ------
+        WorkflowError
+            A list together with a range, an empty list, an unknown stage, a range end
+            that is not a stage of this workflow, or ``start`` after ``until``; the message
+            names the value and lists the valid stages.
+        """
+        if stages is None and start is None and until is None:
+            return None
+        if stages is not None and (start is not None or until is not None):
+            raise WorkflowError("give either a list of stages or a range (from, until), not both")
+        mine = self.stages()
+        given = stages if stages is not None else (start, until)
+        names = list(dict.fromkeys(n for n in given if n is not None))
+        if not names:
+            raise WorkflowError(f"no stage selected; the stages are: {', '.join(mine)}")
+        for name in names:
+            if name not in mine:
+                what = "unknown stage" if name not in STAGES else "not a stage of this workflow:"
+                raise WorkflowError(
+                    f"{what} '{name}'; the stages of workflow '{self.wf.name}' are: "
+                    + ", ".join(mine)
+                )
+        if stages is not None:
+            return sorted(names, key=mine.index)
+        first = mine.index(start) if start is not None else 0
+        last = mine.index(until) if until is not None else len(mine) - 1
+        if first > last:
+            raise WorkflowError(
+                f"stage '{start}' runs after '{until}': nothing between them "
+                f"(order: {', '.join(mine)})"
+            )
+        return mine[first : last + 1]
+
+    def _check_upstream(self, selected: list[str]) -> None:
+        """Refuse a selection whose stages read a missing or stale stage outside it."""
+        states = {s.stage: s for s in self.status()}
+        for stage in selected:
+            for up in self._upstream(stage):
+                state = states.get(up)
+                if up in selected or state is None or state.state == "up to date":
+                    continue
+                raise WorkflowError(
+                    f"stage '{stage}' reads stage '{up}', which is {state.state} "
+                    f"({state.reason}): run '{up}' first or include it in the selection"
+                )
 
     def _run_locked(
         self, selected: list[str], force: bool, on_event: Event
@@ -442,11 +582,17 @@ class Runner:
                 and manifest.key == key
                 and not artifacts.changed_outputs(sdir, manifest)
             ):
-                on_event(stage, "skip", "up to date")
+                on_event(stage, "skip", f"key {key[:12]} matches its manifest, outputs unchanged")
                 summary = artifacts.read_summary(sdir, manifest)
                 manifests[stage] = replace(manifest, summary=summary)
                 continue
-            on_event(stage, "start", "")
+            if manifest is None:
+                why = "never run"
+            elif force:
+                why = "forced"
+            else:
+                why = "; ".join(r.detail for r in self._stale_reasons(stage, manifest))
+            on_event(stage, "start", why)
             fault_point(f"stage:{stage}:start", self.wf.name)
             t0 = time.perf_counter()
             module = importlib.import_module(registry.stage(stage).module)

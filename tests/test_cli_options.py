@@ -1,7 +1,10 @@
 """Global options of the debist CLI."""
 
+import re
 from importlib.metadata import version
 
+import pytest
+from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
 from cli import app
@@ -16,3 +19,66 @@ def test_version_prints_the_installed_version_and_exits():
 def test_version_runs_before_a_command_would():
     result = CliRunner().invoke(app, ["--version", "verify", "does-not-exist.toml"])
     assert result.exit_code == 0 and "debist" in result.output
+
+
+@pytest.fixture
+def project(tmp_path, bistable_record):
+    write_rig_csv(tmp_path, bistable_record)
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    return tmp_path
+
+
+def test_quiet_prints_only_the_run_digest_and_verbose_says_why(project):
+    wf = str(project / "wf.toml")
+    result = CliRunner().invoke(app, ["-q", "run", wf])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert len(lines) == 1 and re.fullmatch(r"run digest: [0-9a-f]{64}", lines[0]), lines
+    digest = lines[0].split()[-1]
+    assert CliRunner().invoke(app, ["verify", wf, "--digest", digest]).exit_code == 0
+
+    normal = CliRunner().invoke(app, ["run", wf]).output
+    assert "up to date, skipping" in normal and "matches its manifest" not in normal
+    verbose = " ".join(CliRunner().invoke(app, ["-v", "run", wf]).output.split())
+    assert verbose.count("matches its manifest, outputs unchanged") == 5
+
+    out = " ".join(CliRunner().invoke(app, ["-v", "identify", wf, "--force"]).output.split())
+    assert "Running stage 'identify' ... (forced)" in out
+    fit = re.search(r"timings: fit (\d+\.\d+) s", out)
+    assert fit is not None and float(fit.group(1)) > 0, out
+    assert "timings:" not in CliRunner().invoke(app, ["identify", wf, "--force"]).output
+
+    # a changed setting: -v says what changed; -q still prints nothing but the digest
+    (project / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=2e-6))
+    out = " ".join(CliRunner().invoke(app, ["-v", "differentiate", wf]).output.split())
+    assert "Running stage 'differentiate' ... (config changed (alpha))" in out
+    result = CliRunner().invoke(app, ["--quiet", "run", wf])
+    assert result.exit_code == 0 and result.output.startswith("run digest: ")
+    assert len(result.output.splitlines()) == 1
+
+
+def test_quiet_still_prints_errors_and_status():
+    result = CliRunner().invoke(app, ["-q", "run", "does-not-exist.toml"])
+    assert result.exit_code == 2 and "does-not-exist.toml" in result.output
+
+
+def test_quiet_and_verbose_together_are_a_usage_error():
+    result = CliRunner().invoke(app, ["-q", "-v", "run", "does-not-exist.toml"])
+    assert result.exit_code == 2 and "not both" in result.output
+
+
+def test_the_convergence_notice_names_the_keys_to_change(project):
+    wf = str(project / "wf.toml")
+    out = " ".join(CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output.split())
+    # the workflow's 10 iterations stop TVRegDiff before its default tolerance of 1e-6
+    assert "stopped at its iteration limit before its tolerance on 2 data set(s)" in out
+    assert "raise [differentiate] iterations (now 10) and iterations2 (now 10)" in out
+    assert "loosen [differentiate] tol (now 1e-06)" in out
+    again = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
+    assert "iteration limit" not in again  # said once, when the stage ran
+    text = SYNTHETIC_WORKFLOW.format(alpha=1e-6)
+    (project / "wf.toml").write_text(
+        text.replace("iterations = 10", "iterations = 400\ntol = 1e-2")
+    )
+    out = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
+    assert "Stage 'differentiate' done" in out and "iteration limit" not in out

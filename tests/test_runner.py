@@ -53,16 +53,19 @@ def test_run_skip_status_and_downstream_only_rerun(project):
     assert code == 0 and out.count("up to date, skipping") == 5
 
     code, out = invoke("status", wf, "--json")
-    assert {s["state"] for s in json.loads(out)} == {"up to date"}
+    assert {s["state"] for s in json.loads(out).values()} == {"up_to_date"}
 
     # changing the differentiation parameter reruns it and everything after it, not ingest
     before = stage_hashes(project / "out/ingest")
     (project / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=2e-6))
     code, out = invoke("status", wf, "--json")
-    states = {s["stage"]: (s["state"], s["reason"]) for s in json.loads(out)}
-    assert states["ingest"][0] == "up to date"
-    assert states["differentiate"] == ("stale", "config changed (alpha)")
-    assert states["validate"][0] == "stale"
+    states = json.loads(out)
+    assert states["ingest"]["state"] == "up_to_date"
+    assert states["differentiate"] == {
+        "state": "stale",
+        "reasons": [{"kind": "config_changed", "detail": "config changed (alpha)"}],
+    }
+    assert states["validate"]["state"] == "stale"
     code, out = invoke("run", wf)
     assert code == 0
     assert "Stage 'ingest' is up to date" in out and "Stage 'differentiate' done" in out
@@ -117,7 +120,7 @@ def test_missing_channel_fails_and_writes_nothing(project):
 
 def test_stage_without_upstream_artifacts_is_refused(project):
     code, out = invoke("identify", project / "wf.toml")
-    assert code == 1 and "run those first" in out
+    assert code == 2 and "run 'ingest' first" in out
 
 
 def test_bad_workflow_key_is_a_usage_error(project):
@@ -129,7 +132,7 @@ def test_bad_workflow_key_is_a_usage_error(project):
 def test_study_stage_runs_only_when_configured(project):
     wf = project / "wf.toml"
     code, out = invoke("status", wf, "--json")
-    assert "study" not in {s["stage"] for s in json.loads(out)}
+    assert "study" not in json.loads(out)
     text = (
         SYNTHETIC_WORKFLOW.format(alpha=1e-6)
         + "\n[study]\nM = [4, 6]\nsigma_n = [0.5, 1.0]\nalpha = [1e-7, 1e-6]\n"

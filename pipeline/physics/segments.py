@@ -22,6 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import solve_ivp
 
+from pipeline import progress
+
 __all__ = ["SegmentedSolution", "solve_segments"]
 
 
@@ -86,6 +88,7 @@ def solve_segments(
         Output times and states, statistics and messages.
     """
     t0, t1 = map(float, t_span)
+    fun = progress.tracking_time(fun, (t0, t1))  # unwrapped unless someone listens
     t_eval = np.asarray(t_eval, dtype=float)
     edges = [t0, *sorted(b for b in breakpoints if t0 < b < t1), t1]
     x = np.asarray(x0, dtype=float)

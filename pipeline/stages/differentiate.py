@@ -8,6 +8,7 @@ from typing import Any
 
 import pandas as pd
 
+from pipeline import progress
 from pipeline.errors import ConvergenceWarning
 from pipeline.stages import StageInputs, StageOutput
 from pipeline.stages.tables import sample_time
@@ -44,7 +45,9 @@ def run_differentiate(
     params = dict(section)
     method = params.pop("method", "tvregdiff")
     out = {}
-    for name, frame in tables.items():
+    for i, name in enumerate(tables):
+        progress.report("differentiate: data sets", i, len(tables))
+        frame = tables[name]
         dt = sample_time(frame, name)
         q = frame["q"].to_numpy()
         with warnings.catch_warnings():
@@ -62,6 +65,7 @@ def run_differentiate(
         )
         deriv.attrs.update({"method": method, "converged": bool(res.converged), "dt": dt})
         out[name] = deriv
+    progress.report("differentiate: data sets", len(tables), len(tables))
     return out
 
 
