@@ -9,7 +9,12 @@ import pandas as pd
 
 
 def free_run_figure(
-    sim: pd.DataFrame, name: str, row: Any, init_samples: int = 0, unit: str = "m"
+    sim: pd.DataFrame,
+    name: str,
+    row: Any,
+    init_samples: int = 0,
+    unit: str = "m",
+    report_unit: str | None = None,
 ) -> Any:
     """Measured vs simulated position, a zoom and the error, as in Fig. 12, 13 and 15 of the paper.
 
@@ -24,24 +29,37 @@ def free_run_figure(
     init_samples : int, optional
         Samples used for initialisation (shaded).
     unit : str, optional
-        SI unit of q, for the axis labels.
+        SI unit of q, the unit of ``sim``.
+    report_unit : str, optional
+        Unit the axes show q in (``[validate] report_unit``, e.g. ``"mm"``); the data are
+        converted for display only. None: ``unit``.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Three axes: the whole record, a zoom of 200 samples in its middle, the error.
+        Three axes: the whole record, a zoom of 200 samples in its middle, the error; q
+        and the error in ``report_unit``.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q (:func:`pipeline.validate.report_factor`).
     """
     from matplotlib.figure import Figure
 
+    from pipeline.validate import report_factor
+
+    factor, unit = report_factor(unit, report_unit)
+    q, q_sim = factor * sim["q"].to_numpy(), factor * sim["q_sim"].to_numpy()
     fig = Figure(figsize=(9, 7))
     ax1, ax_zoom, ax2 = fig.subplots(3, 1, height_ratios=(2, 2, 1))
     t = sim["t"].to_numpy()
     mid = slice(max(t.size // 2 - 100, 0), min(t.size // 2 + 100, t.size))
     for ax, s in ((ax1, slice(None)), (ax_zoom, mid)):
-        ax.plot(t[s], sim["q"].to_numpy()[s], color="0.2", lw=0.8, label="measured")
+        ax.plot(t[s], q[s], color="0.2", lw=0.8, label="measured")
         ax.plot(
             t[s],
-            sim["q_sim"].to_numpy()[s],
+            q_sim[s],
             color="tab:red",
             lw=0.8,
             ls="--",
@@ -55,7 +73,7 @@ def free_run_figure(
         f"RMS = {row['rms_q']:.4g} {row['rms_unit']}" + ("  (diverged)" if row["diverged"] else ""),
         fontsize=10,
     )
-    ax2.plot(t, sim["q"] - sim["q_sim"], color="tab:blue", lw=0.6)
+    ax2.plot(t, q - q_sim, color="tab:blue", lw=0.6)
     ax2.set_ylabel(f"error [{unit}]")
     ax2.set_xlabel("t [s]")
     if init_samples:
@@ -66,7 +84,10 @@ def free_run_figure(
 
 
 def curves_figure(
-    curves: pd.DataFrame, analytical: pd.DataFrame | None = None, unit: str = "m"
+    curves: pd.DataFrame,
+    analytical: pd.DataFrame | None = None,
+    unit: str = "m",
+    units: dict[str, Any] | None = None,
 ) -> Any:
     """Draw the identified curves with their 95 % bands, as Fig. 14 of the paper.
 
@@ -83,6 +104,9 @@ def curves_figure(
         ``d``, ``g1..gN``), drawn dashed beside the identified ones.
     unit : str, optional
         Unit of q for the axis labels.
+    units : dict, optional
+        Units of the identified quantities (:func:`pipeline.report.summary_units`:
+        ``force``, ``d_v``, ``g_0``) for the y labels; None: no y units.
 
     Returns
     -------
@@ -109,6 +133,11 @@ def curves_figure(
             "dC_i/dq = 2 g_i(q)",
         ),
     ]
+    if units is not None:
+        gains = sorted(set(units["g_0"])) or ["1"]
+        labels = (units["force"], units["d_v"], ", ".join(gains))
+        for ax, label in zip(axes, labels, strict=True):
+            ax.set_ylabel(f"[{label}]")
     for ax, series, title in panels:
         for name, factor, color in series:
             y = factor * curves[name].to_numpy()

@@ -13,7 +13,7 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
-#: How identified quantities are labelled in reports (summary key -> label, unit note).
+#: How identified quantities are labelled in reports (summary key -> label).
 PARAMETER_LABELS = {
     "m_q": "mass m_q",
     "d_v": "viscous friction d_v",
@@ -24,6 +24,105 @@ PARAMETER_LABELS = {
     "s_c": "scale of the analytical c(q) q, s_c",
     "s_d": "scale of the analytical d(q), s_d",
 }
+
+
+#: Dimension of each backbone parameter in the force unit F, q and the mapped input h.
+_DIMENSIONS = {
+    "k_1": "F/q",
+    "k_3": "F/q**3",
+    "d_v": "F*s/q",
+    "F_c": "F",
+    "F_0": "F",
+    "s_c": "1",
+    "s_d": "1",
+}
+
+
+def pretty_unit(expression: str) -> str:
+    """Simplify a unit expression with pint and write it as the reports do.
+
+    Parameters
+    ----------
+    expression : str
+        Any unit expression pint parses (``"(m/s**2)/m"``).
+
+    Returns
+    -------
+    str
+        The simplified unit, products with a blank and powers with ``^`` (``"1/s^2"``,
+        ``"N s/m"``); ``"1"`` for a dimensionless one.
+
+    References
+    ----------
+    pint, unit formatting (https://pint.readthedocs.io).
+    """
+    from pipeline.ingest.units import registry
+
+    unit = registry().parse_units(expression.replace("^", "**"))
+    text = format(unit, "~C").replace("**", "^").replace("*", " ")
+    return text or "1"
+
+
+def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
+    """Units of the identify stage's quantities, derived from the data and the model form.
+
+    The force unit F of Eq. 37 is N when ``m_q`` is a mass and the acceleration of q
+    (``q/s^2``) when the curves are identified per unit mass (``m_q = 1``); a parameter's
+    unit follows from its term: ``k_1`` [F/q], ``k_3`` [F/q^3], ``d_v`` [F s/q],
+    ``F_0``, ``F_c`` [F], ``g_0,i`` [F/h] with ``h = v^2`` or ``v``.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``units`` entry: ``q``, ``v1..vN``,
+        ``input_map``, ``per_unit_mass``; q in m, inputs in V, ``h = v^2`` and
+        ``m_q == 1`` meaning per unit mass where a summary lacks it).
+
+    Returns
+    -------
+    dict
+        ``q``, ``force``, ``mass`` (``"kg"`` or ``"1"``), ``barrier`` (F q), ``inputs``
+        (one unit per input), ``g_0`` and ``s_g`` (one unit per input) and one unit per
+        scalar backbone parameter (``k_1``, ``k_3``, ``d_v``, ``F_c``, ``F_0``, ``s_c``,
+        ``s_d``).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40.
+    """
+    given = summary.get("units") or {}
+    q = given.get("q", "m")
+    n_inputs = len(summary.get("backbone", {}).get("g_0") or []) or sum(
+        1 for k in given if k[:1] == "v" and k[1:].isdigit()
+    )
+    inputs = [given.get(f"v{i + 1}", "V") for i in range(n_inputs)]
+    per_mass = given.get("per_unit_mass", summary.get("m_q") == 1.0)
+    power = "**2" if given.get("input_map", "v2") == "v2" else ""
+    force = f"({q})/s**2" if per_mass else "N"
+
+    def unit(dim: str, h: str = "1") -> str:
+        expr = dim.replace("F", f"({force})").replace("q", f"({q})")
+        return pretty_unit(expr.replace("h", f"({h}){power}"))
+
+    out: dict[str, Any] = {k: unit(d) for k, d in _DIMENSIONS.items()}
+    out.update(
+        q=pretty_unit(q),
+        force=pretty_unit(force),
+        mass="1" if per_mass else "kg",
+        barrier=_energy(unit("F*q")),
+        inputs=[pretty_unit(v) for v in inputs],
+        g_0=[unit("F/h", v) for v in inputs],
+        s_g=["1"] * n_inputs,
+    )
+    return out
+
+
+def _energy(unit: str) -> str:
+    """``"J"`` for a unit of energy with factor 1 (``N m``), else the unit as given."""
+    from pipeline.ingest.units import lookup_unit
+
+    found = lookup_unit(unit.replace(" ", "*"))
+    return "J" if found is not None and found.si == "J" and found.factor == 1.0 else unit
 
 
 def _fmt(value: Any, digits: int = 4) -> str:
@@ -48,20 +147,32 @@ def identify_table(summary: dict[str, Any]) -> Table:
     -------
     rich.table.Table
     """
-    table = Table(title="Identified model (Eq. 37-40)")
+    units = summary_units(summary)
+    q = units["q"]
+    per_mass = units["mass"] == "1"
+    table = Table(
+        title="Identified model (Eq. 37-40)",
+        caption=escape(f"per unit mass (m_q = 1): forces in {units['force']}")
+        if per_mass
+        else None,
+    )
     published = summary.get("published") or {}
     table.add_column("quantity")
     table.add_column("identified", justify="right")
     if published:
         table.add_column("published", justify="right")
-    scalars = {"T_z [s]": summary["T_z"], "m_q": summary["m_q"]}
-    scalars.update({k: v for k, v in summary["backbone"].items() if not isinstance(v, list)})
-    rows = [(escape("T_z [s]"), summary["T_z"])]
-    rows += [(PARAMETER_LABELS.get(k, k), v, k) for k, v in scalars.items() if k != "T_z [s]"]
-    for row in rows:
-        label, value = row[0], row[1]
-        key = row[2] if len(row) > 2 else None
-        cells = [label, _fmt(value)]
+    rows = [("T_z", "s", summary["T_z"], None), ("mass m_q", units["mass"], summary["m_q"], "m_q")]
+    for key, value in summary["backbone"].items():
+        if not isinstance(value, list):
+            rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))
+        elif key in ("g_0", "s_g") and any(value):
+            label = "input gain" if key == "g_0" else "scale of the analytical g_i,"
+            rows += [
+                (f"{label} {key},{i + 1}", units[key][i], v, f"{key}_{i + 1}")
+                for i, v in enumerate(value)
+            ]
+    for label, unit, value, key in rows:
+        cells = [escape(f"{label} [{unit}]"), _fmt(value)]
         if published:
             cells.append(_fmt(published.get(key)) if key else "")
         table.add_row(*cells)
@@ -75,29 +186,19 @@ def identify_table(summary: dict[str, Any]) -> Table:
         table.add_row(label, value, *([""] if published else []))
     for name, spans in (summary.get("identified") or {}).items():
         text = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans) or "nowhere"
-        table.add_row(f"{name} identified on q in", text, *([""] if published else []))
+        label = escape(f"{name} identified on q [{q}] in")
+        table.add_row(label, text, *([""] if published else []))
     refine = summary.get("refine")
     if refine:
         pad = [""] if published else []
         verdict = "accepted" if refine["accepted"] else "rejected (not better on the full records)"
-        table.add_row(
-            "free-run RMS, windows: equation error", _fmt(refine["window_rms_equation_error"]), *pad
-        )
-        table.add_row(
-            "free-run RMS, windows: simulation error",
-            _fmt(refine["window_rms_simulation_error"]),
-            *pad,
-        )
-        table.add_row(
-            "free-run RMS, estimation: equation error",
-            _fmt(refine["full_rms_equation_error"]),
-            *pad,
-        )
-        table.add_row(
-            "free-run RMS, estimation: simulation error",
-            _fmt(refine["full_rms_simulation_error"]),
-            *pad,
-        )
+        for label, key in [
+            ("windows: equation error", "window_rms_equation_error"),
+            ("windows: simulation error", "window_rms_simulation_error"),
+            ("estimation: equation error", "full_rms_equation_error"),
+            ("estimation: simulation error", "full_rms_simulation_error"),
+        ]:
+            table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
         table.add_row(
             "refinement",
             f"{verdict}, {refine['nfev']} evaluations",
@@ -270,12 +371,23 @@ def design_table(summary: dict[str, Any]) -> Table | None:
     design = summary.get("design")
     if not design:
         return None
+    units = summary_units(summary)
+    inputs = sorted(set(units["inputs"])) or ["V"]
     table = Table(
         title="Equilibria and switching (identified beside analytical)",
         caption=escape(f"identified model: {design['verdict']} ({design['reason']})"),
     )
-    for col in ("model", "inputs [V]", "q*", "kind", "f_n [Hz]", "zeta", "barrier"):
-        table.add_column(col, justify="left" if col in ("model", "kind") else "right")
+    cols = (
+        "model",
+        f"inputs [{', '.join(inputs)}]",
+        f"q* [{units['q']}]",
+        "kind",
+        "f_n [Hz]",
+        "zeta [1]",
+        f"barrier [{units['barrier']}]",
+    )
+    for i, col in enumerate(cols):
+        table.add_column(escape(col), justify="left" if i in (0, 3) else "right")
     for r in design["equilibria"]:
         if r["level"] != 0 and not r["static_stable"]:
             continue  # at held levels only the wells
@@ -285,6 +397,8 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         small = [_fmt(r[k]) if well else "" for k in ("f_n", "zeta", "barrier")]
         table.add_row(r["model"], volts, _fmt(r["q"]), kind, *small)
     for r in design["switching"]:
-        text = f"{_fmt(r['v_switch'], 4)} V" if r["v_switch"] is not None else escape(r["reason"])
+        unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
+        text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]
+        text = escape(text)
         table.add_row(r["model"], f"switching, input {r['input']}", "", text, "", "", "")
     return table

@@ -372,7 +372,28 @@ def _parse_exponents(names: Sequence[str], variables: Sequence[str]) -> np.ndarr
     return out
 
 
-def _equation_text(coef: np.ndarray, names: Sequence[str], kind: str, n_inputs: int) -> str:
+def _input_legend(kind: str, units: Sequence[str]) -> str:
+    """``h_i = v_i^2 [V^2], i = 1..N`` in the inputs' units (none for dimensionless ones)."""
+    if not units:
+        return "no inputs"
+
+    def one(i: str, unit: str) -> str:
+        base = unit if unit.isalnum() else f"({unit})"
+        u = "" if unit in ("1", "") else f" [{base}^2]" if kind == "v2" else f" [{unit}]"
+        return f"h_{i} = v_{i}" + ("^2" if kind == "v2" else "") + u
+
+    if len(set(units)) == 1:
+        return one("i", units[0]) + f", i = 1..{len(units)}"
+    return ", ".join(one(str(i + 1), u) for i, u in enumerate(units))
+
+
+def _equation_text(
+    coef: np.ndarray,
+    names: Sequence[str],
+    kind: str,
+    n_inputs: int,
+    input_units: Sequence[str] | None = None,
+) -> str:
     """``q_ddot = ...`` with the nonzero terms, plus the imposed kinematics and h."""
     terms = []
     for c, name in zip(coef, names, strict=True):
@@ -388,8 +409,7 @@ def _equation_text(coef: np.ndarray, names: Sequence[str], kind: str, n_inputs: 
         first_sign, first = terms[0]
         rhs = ("-" if first_sign == "-" else "") + first
         rhs += "".join(f" {s} {b}" for s, b in terms[1:])
-    h = "v_i^2 [V^2]" if kind == "v2" else "v_i [V]"
-    legend = f"h_i = {h}, i = 1..{n_inputs}" if n_inputs else "no inputs"
+    legend = _input_legend(kind, list(input_units or ["V"] * n_inputs)[:n_inputs])
     return f"q_dot = q_dot (imposed)\nq_ddot = {rhs}\n({legend})"
 
 
@@ -400,6 +420,7 @@ def fit_sindy(
     v: np.ndarray | Sequence[np.ndarray],
     dt: float,
     cfg: SindyConfig,
+    input_units: Sequence[str] | None = None,
 ) -> SindyModel:
     """Fit the SINDy(c) baseline with pysindy on given states and derivatives.
 
@@ -415,6 +436,9 @@ def fit_sindy(
         Sample time [s] (passed to pysindy as ``t``; unused since x_dot is given).
     cfg : SindyConfig
         Library and optimizer settings.
+    input_units : sequence of str, optional
+        Unit of each input (``"V"``, ``"1"`` for a dimensionless one), for the legend of
+        the equation text; default V.
 
     Returns
     -------
@@ -548,7 +572,7 @@ def fit_sindy(
         exponents=exponents,
         input_map=cfg.input_map,
         n_inputs=n_inputs,
-        equations=_equation_text(coef, names, cfg.input_map, n_inputs),
+        equations=_equation_text(coef, names, cfg.input_map, n_inputs, input_units),
         fit_time=fit_time,
         threshold=cfg.threshold,
         q_range=(float(x[:, 0].min()), float(x[:, 0].max())),

@@ -19,12 +19,17 @@ from pipeline.ingest.channels import map_channels
 from pipeline.ingest.mat import interpret_mat, read_mat
 from pipeline.ingest.mat73 import load_mat73
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+REPO_DATA = Path(__file__).resolve().parents[1] / "data"
 DATA = Path(__file__).resolve().parent / "data"
 
 _gen_spec = importlib.util.spec_from_file_location("make_dspace", DATA / "make_dspace_fixtures.py")
 gen = importlib.util.module_from_spec(_gen_spec)
 _gen_spec.loader.exec_module(gen)
+_cols_spec = importlib.util.spec_from_file_location(
+    "matcolumns", Path(__file__).resolve().parent / "test_ingest_matcolumns.py"
+)
+matcolumns = importlib.util.module_from_spec(_cols_spec)
+_cols_spec.loader.exec_module(matcolumns)
 
 LASER = "Model Root/Sensors/Laser/q"
 DE1 = "Model Root/Amplifier/DE1/v_DE1"
@@ -44,10 +49,11 @@ EMPS = {
 }
 
 
-def shared(*parts: str) -> Path:
-    path = SHARED.joinpath(*parts)
+def repo_data(*parts: str) -> Path:
+    """A data set the repository ships under ``data/``."""
+    path = REPO_DATA.joinpath(*parts)
     if not path.exists():
-        pytest.skip(f"shared data set {path} not present (a clone has no ../shared)")
+        pytest.skip(f"data set {path} not present (the repository ships it under data/)")
     return path
 
 
@@ -64,7 +70,7 @@ def load(path: Path, **section) -> list[pd.DataFrame]:
 
 # ---------------------------------------------------------------------------- EMPS
 def test_emps_plain_variables():
-    path = shared("emps", "DATA_EMPS.mat")
+    path = repo_data("emps", "DATA_EMPS.mat")
     (df,) = load(path, **EMPS, qg={"name": "qg", "unit": "m"})
     ref = scipy.io.loadmat(path)
     assert df.shape == (24841, 4)
@@ -78,13 +84,13 @@ def test_emps_plain_variables():
 
 
 def test_emps_scalar_variable_is_not_a_time_series():
-    path = shared("emps", "DATA_EMPS.mat")
+    path = repo_data("emps", "DATA_EMPS.mat")
     with pytest.raises(RigLogError, match=r"DATA_EMPS.mat', channel 'gtau'.*1 samples.*24841"):
         load(path, **EMPS, gtau={"name": "gtau", "unit": "1"})
 
 
 def test_emps_missing_variable_lists_available():
-    path = shared("emps", "DATA_EMPS.mat")
+    path = repo_data("emps", "DATA_EMPS.mat")
     section = {**EMPS, "q": {"name": "q_motor", "unit": "m"}}
     with pytest.raises(
         RigLogError, match=r"channel 'q_motor'.*no channel named 'q_motor'.*'qm'.*'vir'"
@@ -94,7 +100,7 @@ def test_emps_missing_variable_lists_available():
 
 @pytest.mark.parametrize("keep", [0.5, 0.01])
 def test_emps_truncated_copy_is_a_rig_log_error(tmp_path, keep):
-    src = shared("emps", "DATA_EMPS.mat").read_bytes()
+    src = repo_data("emps", "DATA_EMPS.mat").read_bytes()
     cut = tmp_path / "DATA_EMPS_cut.mat"
     cut.write_bytes(src[: int(len(src) * keep)])
     with pytest.raises(RigLogError, match=r"DATA_EMPS_cut.mat': cannot read mat-v5 file"):
@@ -143,6 +149,50 @@ def test_mat73_decoder_matches_scipy_simplify_cells(fixtures):
     assert [y["Unit"] for y in v73["Y"]] == [y["Unit"] for y in v5["Y"]]
     for a, b in zip(v73["Y"] + v73["X"], v5["Y"] + v5["X"], strict=True):
         np.testing.assert_array_equal(a["Data"], b["Data"])
+
+
+def _as_records(value):
+    """pymatreader's struct array (dict of lists) as a list of dicts, as load_mat73 gives."""
+    if isinstance(value, dict) and value and all(isinstance(v, list) for v in value.values()):
+        n = {len(v) for v in value.values()}
+        assert len(n) == 1
+        return [{k: v[i] for k, v in value.items()} for i in range(n.pop())]
+    return value
+
+
+def test_mat73_decoder_matches_pymatreader_on_a_dspace_recording(fixtures):
+    pymatreader = pytest.importorskip("pymatreader", reason="the independent v7.3 oracle")
+    ours = load_mat73(fixtures["v73"])
+    oracle = pymatreader.read_mat(str(fixtures["v73"]))
+    assert set(ours) == set(oracle) == {"Recording1"}
+    a, b = ours["Recording1"], oracle["Recording1"]
+    assert set(a) == set(b)
+    assert a["Description"] == b["Description"]
+    for field in ("X", "Y"):
+        mine, theirs = a[field], _as_records(b[field])
+        assert len(mine) == len(theirs) > 0
+        for x, y in zip(mine, theirs, strict=True):
+            assert set(x) == set(y)
+            for key, value in x.items():
+                if isinstance(value, np.ndarray):
+                    np.testing.assert_array_equal(value, np.asarray(y[key]).reshape(value.shape))
+                else:
+                    assert value == y[key], (field, key)
+
+
+def test_mat73_decoder_matches_pymatreader_on_n_by_2_variables(tmp_path):
+    pymatreader = pytest.importorskip("pymatreader", reason="the independent v7.3 oracle")
+    variables = matcolumns.channels()
+    path = matcolumns.write_v73(tmp_path / "columns.mat", variables)
+    ours = load_mat73(path)
+    oracle = pymatreader.read_mat(str(path))
+    assert set(ours) == set(oracle) == set(variables)
+    for name, value in variables.items():
+        mine, theirs = np.asarray(ours[name]), np.asarray(oracle[name])
+        assert mine.dtype == theirs.dtype == np.float64
+        np.testing.assert_array_equal(mine, theirs.reshape(mine.shape))
+        np.testing.assert_array_equal(mine.reshape(value.shape), value)
+    assert np.asarray(ours["X3"]).shape == (variables["X3"].shape[0], 2)
 
 
 @pytest.mark.parametrize("version", ["v5", "v73"])

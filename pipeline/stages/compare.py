@@ -7,8 +7,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
+from pipeline import progress
 from pipeline.datasets import validation_datasets
 from pipeline.physics_stages import analytical_for
 from pipeline.records import estimation_records
@@ -81,6 +83,7 @@ def run_compare(
     cfg = SindyConfig.from_dict(dict(section["sindy"]))
     vcfg = ValidateConfig.from_dict(section["validate"])
     records = estimation_records(tables, derivs)
+    progress.report("compare: SINDy fit", 0, 1)
     model = fit_sindy(
         [r.q for r in records],
         [r.q_dot for r in records],
@@ -88,7 +91,9 @@ def run_compare(
         [r.v for r in records],
         records[0].dt,
         cfg,
+        input_units=_input_units(tables, records[0].v),
     )
+    progress.report("compare: SINDy fit", 1, 1)
     q_limit = vcfg.q_limit if vcfg.q_limit is not None else default_q_limit(model.q_range)
     datasets = validation_datasets(tables, derivs)
     analytical = analytical_for(physics, datasets, replace(vcfg, analytical=False))
@@ -102,6 +107,13 @@ def run_compare(
     summary = {"equations": model.equations, "n_params": model.n_params}
     timings = {"fit": model.fit_time, "simulate": sim_time}
     return CompareResult(model, combined, simulated, summary, timings)
+
+
+def _input_units(tables, v) -> list[str]:
+    """Units of the inputs ``v1..vN`` from the ingested tables' attrs (V where not given)."""
+    units = next(iter(tables.values())).attrs.get("units", {})
+    n = 1 if np.ndim(v) == 1 else np.shape(v)[1]
+    return [units.get(f"v{i + 1}", "V") for i in range(n)]
 
 
 def execute(ctx: StageInputs) -> StageOutput:

@@ -142,6 +142,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "static": static,
         },
         "constraints": list(cfg.constraints),
+        "units": _units(tables, cfg),
     }
     return IdentifyResult(model, diag, curves, summary, ls_model, timings, design)
 
@@ -161,6 +162,17 @@ def _excitation(records, cfg: IdentifyConfig, tables):
         records, basis, cfg.input_map, rbf=cfg.rbf, min_samples=cfg.min_support,
         unit_scale=factor, unit_name=name,
     )  # fmt: skip
+
+
+def _units(tables, cfg: IdentifyConfig) -> dict[str, Any]:
+    """Units of q and the inputs (SI), the input map and whether ``m_q = 1`` (per unit mass)."""
+    attrs = next(iter(tables.values())).attrs.get("units", {})
+    units = {k: v for k, v in attrs.items() if k == "q" or (k[:1] == "v" and k[1:].isdigit())}
+    return {
+        **{"q": "m", **units},
+        "input_map": cfg.input_map,
+        "per_unit_mass": cfg.m_q == 1.0,
+    }
 
 
 def _records_of(frame: pd.DataFrame) -> list[dict[str, Any]]:
@@ -211,6 +223,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     """
     from pipeline.artifacts import Figure, H5Tree
     from pipeline.plots import curves_figure
+    from pipeline.report import summary_units
 
     res = run_identify(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
@@ -221,7 +234,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     physics = ctx.physics()
     analytical = analytical_curves(physics, res.model) if physics is not None else None
     unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
-    figure = Figure(curves_figure(res.curves, analytical, unit))
+    figure = Figure(curves_figure(res.curves, analytical, unit, summary_units(res.summary)))
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     return StageOutput(outputs, res.summary, res.timings)

@@ -112,6 +112,7 @@ def run_validate(
             table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
             cfg.init_samples,
             units[name],
+            cfg.report_unit,
         )
         for name, sim in simulated.items()
     }

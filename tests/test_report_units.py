@@ -1,0 +1,141 @@
+"""Every printed table and plot shows units, derived from the data and the model form."""
+
+import numpy as np
+import pytest
+from rich.console import Console
+from test_stability import double_well
+from test_trust import DT, _tables
+
+from pipeline.report import design_table, identify_table, summary_units
+from pipeline.sindy import SindyConfig, fit_sindy
+from pipeline.stages.identify import run_identify
+from pipeline.stages.validate import run_validate
+
+SECTION = {
+    "T_z": 0,
+    "bootstrap": 0,
+    "backbone": ["linear_spring", "cubic_spring", "viscous", "offset"],
+}
+
+
+def _render(table) -> str:
+    console = Console(record=True, width=200)
+    console.print(table)
+    return console.export_text()
+
+
+@pytest.fixture(scope="module")
+def data():
+    truth = double_well()
+    tables, derivs = _tables(truth)
+    for d in derivs.values():
+        d.attrs["dt"] = DT
+    return truth, tables, derivs
+
+
+def test_identified_model_in_newtons_when_m_q_is_a_mass(data):
+    truth, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": truth.m_q}).summary
+    assert summary["units"] == {
+        "q": "m",
+        "v1": "V",
+        "v2": "V",
+        "input_map": "v2",
+        "per_unit_mass": False,
+    }
+    text = _render(identify_table(summary))
+    for row in (
+        "mass m_q [kg]",
+        "linear spring k_1 [N/m]",
+        "cubic spring k_3 [N/m^3]",
+        "viscous friction d_v [N s/m]",
+        "offset force F_0 [N]",
+        "T_z [s]",
+    ):
+        assert row in text
+    assert "per unit mass" not in text
+    design = _render(design_table(summary))
+    assert "q* [m]" in design and "inputs [V]" in design and "barrier [J]" in design
+
+
+def test_identified_model_per_unit_mass_in_accelerations(data):
+    _, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": 1.0}).summary
+    assert summary["units"]["per_unit_mass"] is True
+    text = _render(identify_table(summary))
+    for row in (
+        "mass m_q [1]",
+        "linear spring k_1 [1/s^2]",
+        "cubic spring k_3 [1/m^2/s^2]",
+        "viscous friction d_v [1/s]",
+        "offset force F_0 [m/s^2]",
+        "forces in m/s^2",
+    ):
+        assert row in text
+    assert "[N" not in text
+
+
+@pytest.mark.parametrize(
+    ("per_unit_mass", "expected"),
+    [
+        (True, {"k_1": "1/s^2", "d_v": "1/s", "F_0": "V/s^2", "g_0": ["V/s^2"], "force": "V/s^2"}),
+        (False, {"k_1": "N/V", "k_3": "N/V^3", "d_v": "N s/V", "F_c": "N", "g_0": ["N"]}),
+    ],
+)
+def test_units_follow_q_in_volts_and_a_dimensionless_linear_input(per_unit_mass, expected):
+    summary = {
+        "m_q": 1.0 if per_unit_mass else 2.0,
+        "backbone": {"k_1": 1.0, "g_0": [0.0]},
+        "units": {"q": "V", "v1": "1", "input_map": "v", "per_unit_mass": per_unit_mass},
+    }
+    units = summary_units(summary)
+    assert {k: units[k] for k in expected} == expected
+    assert units["inputs"] == ["1"]
+
+
+def test_input_gain_rows_in_force_per_mapped_input():
+    summary = {
+        "T_z": 0.0,
+        "m_q": 95.0,
+        "condition": 1.0,
+        "rank": 3,
+        "n_columns": 3,
+        "n_params": 3,
+        "fit_r2": 1.0,
+        "backbone": {"k_1": 1.0, "g_0": [35.15]},
+        "units": {"q": "m", "v1": "V", "input_map": "v", "per_unit_mass": False},
+    }
+    assert "input gain g_0,1 [N/V]" in _render(identify_table(summary))
+
+
+def test_validation_plot_shows_q_in_the_report_unit(data):
+    truth, tables, derivs = data
+    res = run_validate(truth, tables, derivs, {"substeps": 1, "report_unit": "mm"})
+    fig = res.figures["val"]
+    whole, zoom, error = fig.axes[:3]
+    assert whole.get_ylabel() == "q [mm]" and zoom.get_ylabel() == "q [mm]"
+    assert error.get_ylabel() == "error [mm]"
+    measured = whole.get_lines()[0].get_ydata()
+    np.testing.assert_allclose(measured, 1e3 * tables["val"]["q"].to_numpy(), rtol=1e-12)
+    simulated = res.simulated["val"]
+    np.testing.assert_allclose(
+        error.get_lines()[0].get_ydata(),
+        1e3 * (simulated["q"] - simulated["q_sim"]).to_numpy(),
+        rtol=1e-9,
+        atol=1e-12,  # [mm]: the difference of two scaled values rounds differently
+    )
+    plain = run_validate(truth, tables, derivs, {"substeps": 1}).figures["val"]
+    assert plain.axes[0].get_ylabel() == "q [m]"
+    np.testing.assert_allclose(plain.axes[0].get_lines()[0].get_ydata(), tables["val"]["q"])
+
+
+def test_sindy_legend_names_the_inputs_actual_unit(data):
+    _, tables, derivs = data
+    frame, d = tables["est"], derivs["est"]
+    args = (frame["q"].to_numpy(), d["q_dot"].to_numpy(), d["q_ddot"].to_numpy())
+    v = frame[["v1", "v2"]].to_numpy()
+    cfg = SindyConfig.from_dict({})
+    volts = fit_sindy(*args, v, DT, cfg).equations
+    assert "h_i = v_i^2 [V^2], i = 1..2" in volts
+    plain = fit_sindy(*args, v, DT, cfg, input_units=["1", "1"]).equations
+    assert "h_i = v_i^2, i = 1..2" in plain and "[V" not in plain
