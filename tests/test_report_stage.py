@@ -297,3 +297,17 @@ def test_chromium_renders_the_report(synthetic_run, tmp_path):
     gray = image.mean(axis=2)
     assert gray.std() > 0.1  # text and figures, not a blank page
     assert (gray < 0.5).mean() > 0.01  # dark pixels: text and lines drawn
+
+
+def test_the_validate_stages_other_models_become_runs_of_their_own():
+    """q_sim_<model> columns of validate's free runs are drawn as that model's run."""
+    from pipeline.stages.report import _split_runs
+
+    t = np.arange(5) * 0.01
+    frame = pd.DataFrame({"t": t, "q": t, "q_sim": 2 * t, "q_dot_sim": t,
+                          "q_sim_analytical": 3 * t, "q_dot_sim_analytical": t})  # fmt: skip
+    runs = _split_runs(frame, "rbf")
+    assert sorted(runs) == ["analytical", "rbf"]
+    np.testing.assert_array_equal(runs["analytical"]["q_sim"], 3 * t)
+    np.testing.assert_array_equal(runs["analytical"]["q"], t)
+    np.testing.assert_array_equal(runs["rbf"]["q_sim"], 2 * t)

@@ -258,7 +258,7 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
         for rel in sorted(manifests[stage].outputs):
             if rel.startswith("simulated/") and rel.endswith(".parquet"):
                 name = rel[len("simulated/") : -len(".parquet")]
-                runs.setdefault(name, {})[model] = ctx.read_parquet(stage, rel)
+                runs.setdefault(name, {}).update(_split_runs(ctx.read_parquet(stage, rel), model))
     images: dict[str, list[tuple[str, bytes]]] = {}
     for stage, rel, group, caption in IMAGES:
         if stage not in manifests:
@@ -301,6 +301,20 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
 
 def _relative(source, folder) -> str:
     return Path(os.path.relpath(source, folder)).as_posix()
+
+
+def _split_runs(frame: pd.DataFrame, model: str) -> dict[str, pd.DataFrame]:
+    """Split one ``simulated/<data set>.parquet`` into the free run of each model it holds.
+
+    Its own model's ``q_sim`` and, from columns ``q_sim_<other>``, the other models the
+    validate stage ran beside it (analytical, equation-error).
+    """
+    runs = {model: frame}
+    for col in frame.columns:
+        if col.startswith("q_sim_"):
+            other = col[len("q_sim_") :]
+            runs[other] = frame[["t", "q"]].assign(q_sim=frame[col].to_numpy())
+    return runs
 
 
 def execute(ctx: StageInputs) -> StageOutput:

@@ -17,6 +17,10 @@ from pipeline.physics_stages import analytical_for
 from pipeline.stages import StageInputs, StageOutput
 from pipeline.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
 
+#: Free-run columns of ``simulated/<data set>.parquet``; those of the other models validated
+#: beside the RBF model (``analytical``, ``rbf-ls``) carry the model name as a suffix.
+SIM_COLUMNS = ("q_sim", "q_dot_sim", "q_ddot_sim")
+
 __all__ = ["ValidateResult", "execute", "run_validate"]
 
 
@@ -93,9 +97,13 @@ def run_validate(
     if cfg.analytical:
         others.append((analytical, "analytical"))
     for other, name in others:
-        extra, _ = validate_model(other, name, datasets, cfg, q_limit, phi)
+        extra, runs = validate_model(other, name, datasets, cfg, q_limit, phi)
         extra["n_params"] = getattr(other, "n_params", 0)
         table = pd.concat([table, extra], ignore_index=True)
+        for ds, run in runs.items():  # the other models' free runs beside the rbf's
+            simulated[ds] = simulated[ds].assign(
+                **{f"{col}_{name}": run[col].to_numpy() for col in SIM_COLUMNS}
+            )
     table["reason"] = ""
     q_est, qd_est = estimation_motion(tables, derivs)
     for other, name in [(model, "rbf"), *others]:
