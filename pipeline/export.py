@@ -207,14 +207,19 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str]) -> list[s
 
 
 # ------------------------------------------------------------------ C99
-def _c_num(x: float) -> str:
-    """Format a double literal that round-trips (``repr``), ``HUGE_VAL`` for infinities."""
+def _literal(x: float, infinity: str) -> str:
+    """Format a double that round-trips (``repr``), ``infinity`` (signed) for infinities."""
     x = float(x)
     if np.isnan(x):
         raise ArtifactError("the model has a NaN constant: it cannot be exported")
     if np.isinf(x):
-        return "HUGE_VAL" if x > 0 else "-HUGE_VAL"
+        return infinity if x > 0 else f"-{infinity}"
     return repr(x)
+
+
+def _c_num(x: float) -> str:
+    """Format a C double literal (``HUGE_VAL`` for infinities)."""
+    return _literal(x, "HUGE_VAL")
 
 
 def _c_array(ctype: str, name: str, values, fmt=_c_num) -> str:
@@ -471,11 +476,8 @@ def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
 
 # ------------------------------------------------------------------ Python
 def _py_num(x) -> str:
-    """Format a float literal that round-trips (``INF`` for infinities)."""
-    x = float(x)
-    if np.isnan(x):
-        raise ArtifactError("the model has a NaN constant: it cannot be exported")
-    return repr(x) if np.isfinite(x) else ("-INF" if x < 0 else "INF")
+    """Format a Python float literal (the module's ``INF`` for infinities)."""
+    return _literal(x, "INF")
 
 
 def _py_list(values, fmt=_py_num, indent: int = 4) -> str:
@@ -642,11 +644,8 @@ def curves(q):
 
 # ------------------------------------------------------------------ MATLAB / Octave
 def _m_num(x) -> str:
-    """Format a double literal that round-trips (``Inf`` for infinities)."""
-    x = float(x)
-    if np.isnan(x):
-        raise ArtifactError("the model has a NaN constant: it cannot be exported")
-    return repr(x) if np.isfinite(x) else ("-Inf" if x < 0 else "Inf")
+    """Format a MATLAB double literal (``Inf`` for infinities)."""
+    return _literal(x, "Inf")
 
 
 def _m_row(values, fmt=_m_num, indent: int = 8) -> str:

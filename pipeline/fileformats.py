@@ -14,6 +14,7 @@ creation properties" (``track_times``); PNG specification, tEXt chunks.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 from collections.abc import Callable, Mapping
@@ -30,6 +31,7 @@ __all__ = [
     "FileWriter",
     "H5Tree",
     "canonical_json",
+    "png_bytes",
     "read_h5",
     "read_parquet",
     "sha256_file",
@@ -160,6 +162,31 @@ class Figure:
     dpi: int = 110
 
 
+def png_bytes(figure: Any, dpi: int = 110) -> bytes:
+    """Render a figure to PNG bytes, the same bytes for the same figure.
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+        The figure.
+    dpi : int, optional
+        Resolution [dots per inch].
+
+    Returns
+    -------
+    bytes
+        The PNG file.
+
+    References
+    ----------
+    matplotlib ``Figure.savefig``: ``metadata={"Software": None}`` leaves out the only
+    field that would differ between matplotlib builds of one version.
+    """
+    buf = io.BytesIO()
+    figure.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return buf.getvalue()
+
+
 @dataclass(frozen=True)
 class FileWriter:
     """An output written by a function of its path (e.g. a MAT file of the virtual rig).
@@ -197,7 +224,7 @@ def write_output(value: Any, path: Path) -> None:
     elif isinstance(value, FileWriter):
         value.write(path)
     elif isinstance(value, Figure):
-        value.figure.savefig(path, dpi=value.dpi, metadata={"Software": None})
+        path.write_bytes(png_bytes(value.figure, value.dpi))
     elif isinstance(value, str):
         path.write_text(value, encoding="utf-8")
     elif isinstance(value, bytes):

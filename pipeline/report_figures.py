@@ -15,7 +15,6 @@ Masoud & Maas 2025, Front. Robot. AI 12, Fig. 11a, 12, 13, 15; matplotlib docume
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping
 from typing import Any
 
@@ -41,7 +40,7 @@ MODEL_STYLES = {
 
 
 def png_bytes(figure: Any, dpi: int = 90) -> bytes:
-    """Render a figure to PNG bytes, the same bytes for the same figure.
+    """Render a report figure to PNG bytes (:func:`pipeline.fileformats.png_bytes`, 90 dpi).
 
     Parameters
     ----------
@@ -54,15 +53,10 @@ def png_bytes(figure: Any, dpi: int = 90) -> bytes:
     -------
     bytes
         The PNG file.
-
-    References
-    ----------
-    matplotlib ``Figure.savefig``: ``metadata={"Software": None}`` leaves out the only
-    field that would differ between matplotlib builds of one version.
     """
-    buf = io.BytesIO()
-    figure.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
-    return buf.getvalue()
+    from pipeline.fileformats import png_bytes as render
+
+    return render(figure, dpi)
 
 
 def q_scale(unit: str) -> tuple[float, str]:
