@@ -31,6 +31,7 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
+from pipeline.report import equilibrium_kind
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -392,9 +393,8 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
             continue
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         well = bool(r.get("static_stable"))
-        kind = ("well" if r.get("stable") else "well, negative damping") if well else "saddle"
         small = [_num(r.get(k)) if well else "" for k in ("f_n", "zeta", "barrier")]
-        rows.append([r.get("model", ""), volts, _num(r.get("q")), kind, *small])
+        rows.append([r.get("model", ""), volts, _num(r.get("q")), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
         text = f"{_num(r['v_switch'])} V" if r.get("v_switch") is not None else r.get("reason")
         label = f"switching, input {r.get('input')}"
@@ -470,17 +470,23 @@ def render_report(run: dict[str, Any]) -> str:
 
 
 def _wells(design: Mapping[str, Any] | None, unit: str = "m") -> str:
-    """Return the identified model's wells at rest, ascending (in mm for q in m)."""
+    """Return the identified model's wells at rest, ascending (in mm for q in m).
+
+    Wells where the restoring force is not identified are counted, not listed.
+    """
     rows = (design or {}).get("equilibria", [])
-    wells = sorted(
-        r["q"]
+    at_rest = [
+        r
         for r in rows
         if r.get("model") == "rbf" and r.get("level", 0) == 0 and r.get("static_stable")
-    )
+    ]
+    wells = sorted(r["q"] for r in at_rest if r.get("identified", True))
+    spurious = len(at_rest) - len(wells)
+    note = f" (+{spurious} not identified)" if spurious else ""
     if not wells:
-        return "-"
+        return "-" + note
     factor, label = (1e3, "mm") if unit == "m" else (1.0, unit)
-    return ", ".join(f"{factor * q:.4g}" for q in wells) + f" {label}"
+    return ", ".join(f"{factor * q:.4g}" for q in wells) + f" {label}" + note
 
 
 def _switching(design: Mapping[str, Any] | None) -> str:

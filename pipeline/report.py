@@ -351,6 +351,28 @@ def rig_table(summary: dict[str, Any]) -> Table:
     return table
 
 
+def equilibrium_kind(row: dict[str, Any]) -> str:
+    """Describe one equilibrium row: well, well with negative damping, or saddle.
+
+    A row the data do not support (``identified`` false: the force curve it sits on is not
+    identified at ``q*``, :func:`pipeline.identify.design.mark_identified`) says so.
+
+    Parameters
+    ----------
+    row : dict
+        One row of the identify summary's ``design.equilibria``.
+
+    Returns
+    -------
+    str
+    """
+    well = bool(row.get("static_stable"))
+    kind = ("well" if row.get("stable") else "well, negative damping") if well else "saddle"
+    if row.get("identified") is False:
+        kind += " (not identified at q*)"
+    return kind
+
+
 def design_table(summary: dict[str, Any]) -> Table | None:
     """Tabulate the identified model's equilibria and switching voltages (and the analytical).
 
@@ -393,9 +415,8 @@ def design_table(summary: dict[str, Any]) -> Table | None:
             continue  # at held levels only the wells
         volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         well = bool(r["static_stable"])
-        kind = ("well" if r["stable"] else "well, negative damping") if well else "saddle"
         small = [_fmt(r[k]) if well else "" for k in ("f_n", "zeta", "barrier")]
-        table.add_row(r["model"], volts, _fmt(r["q"]), kind, *small)
+        table.add_row(r["model"], volts, _fmt(r["q"]), equilibrium_kind(r), *small)
     for r in design["switching"]:
         unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
         text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]

@@ -63,3 +63,32 @@ def test_the_analytical_rows_are_the_reduced_model_in_eq37_form():
         assert sw.v_switch.to_numpy() == pytest.approx([1425.0, 1425.0], rel=0.01)
         assert eq37.m_q == model.m_q
         assert wells.f_n.to_numpy() == pytest.approx([2.84, 2.84], rel=0.01)
+
+
+def test_equilibria_where_the_curves_are_not_identified_are_marked():
+    """An equilibrium on an unidentified part of its force curve is flagged, not vouched for."""
+    import pandas as pd
+
+    from pipeline.identify.design import mark_identified
+    from pipeline.report import equilibrium_kind
+
+    q = np.linspace(-0.01, 0.01, 21)
+    curves = pd.DataFrame({"q": q, "restoring_identified": np.abs(q) > 0.004})
+    static = pd.DataFrame({"v1": 1e3, "v2": 0.0, "q": q, "F_identified": q > 0.0})
+    eq = pd.DataFrame({
+        "model": ["rbf", "rbf", "rbf", "rbf", "analytical"],
+        "level": [0, 0, 1, 1, 0],
+        "v1": [0.0, 0.0, 1e3, 1e3, 0.0],
+        "v2": 0.0,
+        "q": [-0.008, 0.001, -0.005, 0.005, 0.0],
+        "static_stable": [True, False, True, True, False],
+        "stable": [True, False, True, True, False],
+    })  # fmt: skip
+    eq.attrs["verdict"] = "stable"
+    out = mark_identified(eq, curves, static)
+    assert out["identified"].tolist() == [True, False, False, True, True]
+    assert out.attrs["verdict"] == "stable"
+    rows = out.to_dict(orient="records")
+    assert equilibrium_kind(rows[0]) == "well"
+    assert equilibrium_kind(rows[1]) == "saddle (not identified at q*)"
+    assert equilibrium_kind(rows[2]) == "well (not identified at q*)"

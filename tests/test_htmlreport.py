@@ -260,3 +260,18 @@ def test_index_rows_and_page(run):
                         "v1: 1976, v2: none"]  # fmt: skip
     assert table[2][3] == "-"
     assert "http" not in html and "<script" not in html
+
+
+def test_batch_index_lists_only_identified_wells():
+    """The fleet index counts a well on an unidentified part of the curve, it does not list it."""
+    from pipeline.htmlreport import _wells
+
+    rows = [
+        {"model": "rbf", "level": 0, "q": -0.0105, "static_stable": True, "identified": True},
+        {"model": "rbf", "level": 0, "q": -0.0014, "static_stable": True, "identified": False},
+        {"model": "rbf", "level": 0, "q": 0.0113, "static_stable": True, "identified": True},
+        {"model": "rbf", "level": 0, "q": 0.0008, "static_stable": False, "identified": False},
+        {"model": "analytical", "level": 0, "q": 0.0102, "static_stable": True},
+    ]
+    assert _wells({"equilibria": rows}) == "-10.5, 11.3 mm (+1 not identified)"
+    assert _wells({"equilibria": rows[:1]}) == "-10.5 mm"

@@ -182,3 +182,62 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
         model.basis, "v2", 2, model.m_q, 0.0, model.coulomb_velocity, zeros, zeros,
         np.zeros((2, model.basis.M)), backbone, model.q_range, prior,
     )  # fmt: skip
+
+
+def mark_identified(
+    equilibria: pd.DataFrame, curves: pd.DataFrame, static: pd.DataFrame
+) -> pd.DataFrame:
+    """Say of each equilibrium of the identified model whether the data support it.
+
+    An equilibrium ``q*`` at rest lies where the restoring force ``c(q) q + F_0`` crosses
+    zero; it is a result of the data only where that curve is identified (its
+    ``restoring_identified`` mask of :func:`pipeline.identify.bands.curves_frame`). At a
+    held input level the static force of that level (:func:`pipeline.identify.bands.
+    static_frame`) must be identified at ``q*``. Elsewhere, e.g. a third "well" between the
+    two where the data only pass in switching transits, the equilibrium is an artefact of
+    the curve's unidentified part. The analytical model's rows are the designed model's
+    and count as identified.
+
+    Parameters
+    ----------
+    equilibria : pandas.DataFrame
+        :func:`pipeline.identify.stability.stability_table` rows with a ``model`` column,
+        ``level``, ``v1..vN`` [V] and ``q`` [unit of q].
+    curves : pandas.DataFrame
+        ``q`` and ``restoring_identified`` on the model's grid.
+    static : pandas.DataFrame
+        :func:`pipeline.identify.bands.static_frame` rows (``v1..vN``, ``q``,
+        ``F_identified``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``equilibria`` with a boolean ``identified`` column (its ``attrs`` kept).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37, Sec. 3.3.
+    """
+    grid = curves["q"].to_numpy()
+    inputs = [c for c in equilibria.columns if c[:1] == "v" and c[1:].isdigit()]
+
+    def at(q_grid: np.ndarray, mask: np.ndarray, q: float) -> bool:
+        if not q_grid.size or not q_grid[0] <= q <= q_grid[-1]:
+            return False
+        return bool(mask[int(np.argmin(np.abs(q_grid - q)))])
+
+    flags = []
+    for _, row in equilibria.iterrows():
+        if row.get("model", "rbf") != "rbf":
+            flags.append(True)
+        elif int(row["level"]) == 0:
+            flags.append(at(grid, curves["restoring_identified"].to_numpy(), float(row["q"])))
+        else:
+            same = np.ones(len(static), dtype=bool)
+            for c in inputs:
+                same &= np.isclose(static[c].to_numpy(), float(row[c]), rtol=1e-9, atol=1e-6)
+            rows = static[same]
+            flags.append(at(rows["q"].to_numpy(), rows["F_identified"].to_numpy(), float(row["q"])))
+    out = equilibria.assign(identified=np.array(flags, dtype=bool))
+    out.attrs = dict(equilibria.attrs)
+    return out

@@ -79,7 +79,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         For an invalid section.
     """
     from pipeline.identify.bands import curves_frame, static_frame
-    from pipeline.identify.design import design_numbers, held_levels
+    from pipeline.identify.design import design_numbers, held_levels, mark_identified
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
@@ -117,6 +117,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, records, held_levels(records), min_support=cfg.min_support,
         band_tolerance=cfg.band_tolerance,
     )  # fmt: skip
+    design["equilibria"] = mark_identified(design["equilibria"], curves, design["static"])
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
