@@ -8,6 +8,7 @@ import importlib
 import inspect
 import pkgutil
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -177,11 +178,62 @@ def test_tvregdiff_method_matches_two_passes_and_reports():
     assert np.mean(d.x_hat - x) == pytest.approx(0.0, abs=1e-12)
 
 
-def test_tvregdiff_config_defaults_are_the_papers_in_metres():
+def test_tvregdiff_config_defaults_auto_alpha_and_the_papers_ep_in_metres():
     cfg = TVRegDiffConfig()
     # Paper: alpha = 0.01, ep = 1e-6 with q in mm; data * c -> alpha * c, ep * c**2.
-    assert cfg.alpha == pytest.approx(0.01 * 1e-3) and cfg.ep == pytest.approx(1e-6 * 1e-6)
+    assert cfg.alpha == "auto" and cfg.ep == pytest.approx(1e-6 * 1e-6)
     assert (cfg.iterations, cfg.scale, cfg.alpha2, cfg.iterations2) == (10, "large", None, None)
+
+
+def _noisy_motion(seed: int, noise: float):
+    """Two switches between wells plus ringing, sampled at 100 Hz, with white sensor noise [m]."""
+    t = np.arange(1500) * 0.01
+    q = 0.01 * np.tanh(3.0 * np.sin(2 * np.pi * 0.2 * t)) + 1e-3 * np.exp(-((t % 5) / 0.5)) * (
+        np.sin(2 * np.pi * 3.0 * t)
+    )
+    q_dot = np.gradient(q, 0.01)
+    return t, q + noise * np.random.default_rng(seed).standard_normal(t.size), q_dot
+
+
+def test_auto_alpha_takes_the_largest_alpha_where_the_residual_levels_off():
+    """The choice follows the documented rule, recomputed here from fixed-alpha runs."""
+    from pipeline.differentiate.tvregdiff_method import AUTO_GRID_MM, AUTO_SLOPE
+
+    _, x, _ = _noisy_motion(5, 20e-6)
+    auto = TVRegDiffConfig(alpha="auto", ep=1e-6, unit="mm", iterations=10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        d = tvregdiff_derivatives(x, 0.01, config=auto)
+        residual = []
+        for a in AUTO_GRID_MM:
+            fixed = tvregdiff_derivatives(x, 0.01, config=replace(auto, alpha=a, alpha2=a))
+            residual.append(float(np.sqrt(np.mean((x - fixed.x_hat) ** 2))))
+    slopes = np.diff(np.log(residual)) / np.diff(np.log(AUTO_GRID_MM))
+    expected = AUTO_GRID_MM[int(np.flatnonzero(slopes < AUTO_SLOPE)[0])]
+    assert d.info["alpha"] == pytest.approx(expected)
+    got = [row["residual"] * 1e-3 for row in d.info["alpha_search"]]  # mm -> m
+    assert got == pytest.approx(residual, rel=1e-9)
+    # the rule is not trivially an end of the grid on this signal
+    assert min(AUTO_GRID_MM) < d.info["alpha"] < max(AUTO_GRID_MM)
+
+
+@pytest.mark.parametrize("noise", [5e-6, 20e-6, 50e-6])
+def test_auto_alpha_velocity_error_is_near_the_best_of_the_grid(noise):
+    """Against the true derivative (which the rule never sees), auto is within 1.25x the best."""
+    from pipeline.differentiate.tvregdiff_method import AUTO_GRID_MM
+
+    _, x, q_dot = _noisy_motion(6, noise)
+    inner = slice(50, -50)
+    auto = TVRegDiffConfig(alpha="auto", ep=1e-6, unit="mm", iterations=10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        err = {}
+        for a in AUTO_GRID_MM:
+            d = tvregdiff_derivatives(x, 0.01, config=replace(auto, alpha=a, alpha2=a))
+            err[a] = float(np.sqrt(np.mean((d.x_dot - q_dot)[inner] ** 2)))
+        chosen = tvregdiff_derivatives(x, 0.01, config=auto)
+    got = float(np.sqrt(np.mean((chosen.x_dot - q_dot)[inner] ** 2)))
+    assert got <= 1.25 * min(err.values()), (got, err)
 
 
 def test_tvregdiff_unit_mm_takes_the_papers_values_as_printed():

@@ -64,6 +64,9 @@ def run_differentiate(
             }
         )
         deriv.attrs.update({"method": method, "converged": bool(res.converged), "dt": dt})
+        if "alpha_search" in res.info:  # alpha = "auto": what it chose, and from what
+            deriv.attrs["alpha"] = res.info["alpha"]
+            deriv.attrs["alpha_search"] = res.info["alpha_search"]
         out[name] = deriv
     progress.report("differentiate: data sets", len(tables), len(tables))
     return out
@@ -80,7 +83,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     Returns
     -------
     StageOutput
-        ``<table>.parquet`` per table; summary: whether each iterative solve converged.
+        ``<table>.parquet`` per table; summary: whether each iterative solve converged and,
+        with ``alpha = "auto"``, the alpha chosen per table and the residuals it was chosen
+        from.
 
     Raises
     ------
@@ -88,5 +93,9 @@ def execute(ctx: StageInputs) -> StageOutput:
         As :func:`run_differentiate`.
     """
     derivs = run_differentiate(ctx.tables("ingest"), ctx.section("differentiate"))
-    converged = {n: d.attrs["converged"] for n, d in derivs.items()}
-    return StageOutput({f"{n}.parquet": d for n, d in derivs.items()}, {"converged": converged})
+    summary: dict = {"converged": {n: d.attrs["converged"] for n, d in derivs.items()}}
+    auto = {n: {"alpha": d.attrs["alpha"], "search": d.attrs["alpha_search"]}
+            for n, d in derivs.items() if "alpha_search" in d.attrs}  # fmt: skip
+    if auto:
+        summary["auto_alpha"] = auto
+    return StageOutput({f"{n}.parquet": d for n, d in derivs.items()}, summary)
