@@ -2,9 +2,9 @@
 
 The excitation overview (Fig. 11a of the paper), the free runs of every model against the
 measurement (Fig. 12 on estimation data, Fig. 15 on unseen data) with a zoom on the most
-dynamic window (Fig. 13), and :func:`png_bytes`, which turns a figure into the same PNG
-bytes on every call (no time stamp, no software tag) so that the report is a pure function
-of its inputs.
+dynamic window (Fig. 13); :func:`pipeline.fileformats.png_bytes` turns each into the same
+PNG bytes on every call (no time stamp, no software tag), so that the report is a pure
+function of its inputs.
 
 References
 ----------
@@ -26,7 +26,6 @@ __all__ = [
     "dynamic_window",
     "excitation_figure",
     "free_run_figure",
-    "png_bytes",
     "q_scale",
 ]
 
@@ -37,26 +36,6 @@ MODEL_STYLES = {
     "rbf-ls": ("tab:orange", "-."),
     "analytical": ("tab:purple", "-."),
 }
-
-
-def png_bytes(figure: Any, dpi: int = 90) -> bytes:
-    """Render a report figure to PNG bytes (:func:`pipeline.fileformats.png_bytes`, 90 dpi).
-
-    Parameters
-    ----------
-    figure : matplotlib.figure.Figure
-        The figure.
-    dpi : int, optional
-        Resolution [dots per inch].
-
-    Returns
-    -------
-    bytes
-        The PNG file.
-    """
-    from pipeline.fileformats import png_bytes as render
-
-    return render(figure, dpi)
 
 
 def q_scale(unit: str) -> tuple[float, str]:

@@ -23,6 +23,7 @@ import pandas as pd
 
 from pipeline import artifacts, outdir
 from pipeline.errors import ArtifactError
+from pipeline.fileformats import png_bytes
 from pipeline.htmlreport import (
     FIGURE_GROUPS,
     REPORT_FILE,
@@ -35,12 +36,13 @@ from pipeline.report_figures import (
     dynamic_window,
     excitation_figure,
     free_run_figure,
-    png_bytes,
 )
 from pipeline.stages import StageInputs, StageOutput
 
 __all__ = ["ReportInputs", "ReportResult", "execute", "gather_run", "run_report"]
 
+#: Resolution of the report's own figures [dots per inch] (small pages, phone-readable).
+REPORT_DPI = 90
 #: Stages whose free runs (``simulated/<data set>.parquet``) the report draws, and the
 #: model each holds.
 SIMULATED = (("validate", "rbf"), ("compare", "sindy"))
@@ -167,7 +169,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
             table = inputs.tables[name]
             fig = excitation_figure(table, inputs.derivs[name], name, _unit(table))
             caption = f"Fig. 11a: estimation record '{name}': q, q_dot, q_ddot and the inputs v_i"
-            excitation.append((caption, png_bytes(fig)))
+            excitation.append((caption, png_bytes(fig, REPORT_DPI)))
     free_run = []
     for name in order:
         runs = inputs.runs.get(name) or {}
@@ -189,7 +191,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
             f"{', '.join(runs)}; middle: Fig. 13, the {cfg.zoom_window:g} s window with the "
             "largest q_ddot RMS; bottom: the errors"
         )
-        free_run.append((caption, png_bytes(fig)))
+        free_run.append((caption, png_bytes(fig, REPORT_DPI)))
     figures["excitation"] = excitation
     figures["free_run"] = free_run
     datasets = []
