@@ -306,7 +306,8 @@ def test_differentiate_value_of_its_method_is_checked(write):
         'method = "spectral"\ncutoff_hz = 290.0', 'method = "tvregdiff"\nalpha = "1e-7"'
     )
     result, output = invoke("status", write(text))
-    assert_rejected(result, output, "[differentiate] alpha: expected a number, got '1e-7'")
+    message = "[differentiate] alpha: expected a number or 'auto', got '1e-7'"
+    assert_rejected(result, output, message)
     result, output = invoke("status", write(BASE.replace("cutoff_hz = 290.0", "alpha = 1e-7")))
     assert_rejected(
         result, output, "unknown key 'alpha' (known keys of method 'spectral': cutoff_hz"
