@@ -139,7 +139,7 @@ AUTO_SLOPE = 0.1
 
 def auto_alpha(
     x: NDArray[np.float64], dt: float, config: TVRegDiffConfig
-) -> tuple[float, list[dict[str, float]]]:
+) -> tuple[float, list[dict[str, float]], Any]:
     """Choose TVRegDiff's alpha from the data: the strongest smoothing that still fits them.
 
     For each alpha of the grid (``config.alpha_grid``, in the unit of ``x`` given by
@@ -168,14 +168,14 @@ def auto_alpha(
         The chosen alpha [unit s].
     search : list of dict
         Per grid value ``{"alpha", "residual"}`` (residual [unit]), largest alpha first.
+    first : TVRegDiffResult
+        The first pass at the chosen alpha (reused, not recomputed).
 
     References
     ----------
     Chartrand 2011, ISRN Applied Mathematics 2011, 164564 (TVRegDiff); Hansen 1992, SIAM
     Review 34(4), 561-580 (the L-curve); Masoud & Maas 2025, Sec. 5 (alpha = 0.01, q in mm).
     """
-    from scipy.integrate import cumulative_trapezoid
-
     if config.alpha_grid is not None:
         grid = sorted(config.alpha_grid, reverse=True)
     else:
@@ -183,20 +183,30 @@ def auto_alpha(
             1.0 if config.unit is None else float(unit_factor(config.unit))
         )
         grid = [a * per_mm for a in AUTO_GRID_MM]
-    search = []
+    search, passes = [], []
     for a in grid:
         res = tvregdiff(x, config.iterations, a, scale=config.scale, ep=config.ep, dx=dt,
                         tol=config.tol)  # fmt: skip
-        integral = cumulative_trapezoid(res.derivative, dx=dt, initial=0.0)
-        resid = x - integral - np.mean(x - integral)
+        resid = x - _antiderivative(x, res.derivative, dt)
         search.append({"alpha": float(a), "residual": float(np.sqrt(np.mean(resid**2)))})
-    for hi, lo in itertools.pairwise(search):
+        passes.append(res)
+    chosen = len(search) - 1
+    for i, (hi, lo) in enumerate(itertools.pairwise(search)):
         if lo["residual"] <= 0.0 or hi["alpha"] <= lo["alpha"]:
             continue
         slope = np.log(hi["residual"] / lo["residual"]) / np.log(hi["alpha"] / lo["alpha"])
         if slope < AUTO_SLOPE:
-            return hi["alpha"], search
-    return search[-1]["alpha"], search
+            chosen = i
+            break
+    return search[chosen]["alpha"], search, passes[chosen]
+
+
+def _antiderivative(x: NDArray[np.float64], x_dot: NDArray[np.float64], dt: float):
+    """``x_hat``: the cumulative trapezoid integral of ``x_dot`` plus the constant fitting ``x``."""
+    from scipy.integrate import cumulative_trapezoid
+
+    integral = cumulative_trapezoid(x_dot, dx=dt, initial=0.0)
+    return integral + np.mean(x - integral)
 
 
 def tvregdiff_derivatives(
@@ -259,19 +269,17 @@ def tvregdiff_derivatives(
     s = 1.0 if c.unit is None else float(unit_factor(c.unit))
     x = x / s
     search = None
-    if c.alpha == "auto":
-        alpha, search = auto_alpha(x, dt, c)
+    if c.alpha == "auto":  # the search ran the first pass at every alpha: keep the chosen one
+        alpha, search, first = auto_alpha(x, dt, c)
         c = replace(c, alpha=alpha)
+    else:
+        first = tvregdiff(x, c.iterations, c.alpha, scale=c.scale, ep=c.ep, dx=dt, tol=c.tol)
     alpha2 = c.alpha if c.alpha2 is None else c.alpha2
     iterations2 = c.iterations if c.iterations2 is None else c.iterations2
     ep2 = c.ep if c.ep2 is None else c.ep2
-    first = tvregdiff(x, c.iterations, c.alpha, scale=c.scale, ep=c.ep, dx=dt, tol=c.tol)
     x_dot = first.derivative
     second = tvregdiff(x_dot, iterations2, alpha2, scale=c.scale, ep=ep2, dx=dt, tol=c.tol)
-    from scipy.integrate import cumulative_trapezoid
-
-    integral = cumulative_trapezoid(x_dot, dx=dt, initial=0.0)
-    x_hat = integral + np.mean(x - integral)
+    x_hat = _antiderivative(x, x_dot, dt)
     info = {
         "n_iter": first.n_iter,
         "n_iter2": second.n_iter,
