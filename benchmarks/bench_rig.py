@@ -28,8 +28,8 @@ import time
 import numpy as np
 
 from pipeline.rig.params import RigParams
-from pipeline.rig.plant import simulate_rig
 from pipeline.rig.profiles import identification_profile
+from pipeline.rig.run import simulate_rig
 
 DEFAULT = "Radau rtol 1e-4, compiled"
 REFERENCE = "Radau rtol 1e-4, NumPy"

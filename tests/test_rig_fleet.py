@@ -94,7 +94,7 @@ def test_impossible_nominal_raises_fleet_error():
 
 
 def test_every_member_switches_in_the_rig(fleet):
-    from pipeline.rig.plant import simulate_rig
+    from pipeline.rig.run import simulate_rig
 
     t = np.arange(4000) * 1e-3
     r1 = np.where((t >= 0.1) & (t < 1.1), V_MAX, 0.0)

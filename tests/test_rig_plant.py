@@ -13,7 +13,8 @@ from pipeline.physics.params import PrototypeParams
 from pipeline.physics.statics import equilibria, force_displacement
 from pipeline.rig.drivers import DriverOutput
 from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigPlant, simulate_rig, true_curves
+from pipeline.rig.plant import RigPlant
+from pipeline.rig.run import simulate_rig, true_curves
 
 RIG = RigParams()
 L = ritz_basis(RIG.prototype.l).L

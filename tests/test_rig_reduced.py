@@ -10,8 +10,8 @@ from pipeline.errors import WorkflowError, exit_code
 from pipeline.physics.freerun import AnalyticalModel
 from pipeline.physics.reduced import fit_reduced
 from pipeline.rig.params import RigParams
-from pipeline.rig.plant import make_plant, simulate_rig, true_curves
 from pipeline.rig.reduced import Q_MAX, ReducedPlant
+from pipeline.rig.run import make_plant, simulate_rig, true_curves
 from pipeline.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]

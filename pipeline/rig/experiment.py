@@ -56,8 +56,8 @@ from pipeline.errors import WorkflowError
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.dspace import Channel, recording
 from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigRun, simulate_rig
 from pipeline.rig.profiles import PROFILES, make_profile
+from pipeline.rig.run import RigRun, simulate_rig
 
 __all__ = [
     "CHANNELS",
@@ -254,7 +254,7 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
     WorkflowError
         For an unknown profile or invalid profile settings.
     ValueError
-        From :func:`pipeline.rig.plant.simulate_rig` (e.g. no well on the start side).
+        From :func:`pipeline.rig.run.simulate_rig` (e.g. no well on the start side).
     """
     exp = cfg.experiments[name]
     kwargs: dict[str, Any] = {"duration": exp.duration, "hold": exp.hold}
@@ -392,7 +392,7 @@ def truth_tree(run: RigRun, cfg: RigConfig, curves: dict[str, np.ndarray]) -> di
     cfg : RigConfig
         The rig.
     curves : dict of str to ndarray
-        The prototype's true curves, :func:`pipeline.rig.plant.true_curves` (the same for
+        The prototype's true curves, :func:`pipeline.rig.run.true_curves` (the same for
         every experiment of the rig, so computed once by the caller).
 
     Returns

@@ -17,18 +17,18 @@ The "real" prototype that the virtual rig measures is the full dynamic model of
 
 The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: the state of
 :class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
-elements. :func:`simulate_rig` integrates it with :func:`scipy.integrate.solve_ivp` (Radau
-with an approximate Jacobian) and returns the logged channels with the truth (:class:`RigRun`);
-:func:`true_curves` gives the characteristic curves an identification should recover. The
-right-hand side and Jacobian run compiled (:mod:`pipeline.rig.compiled`, numba, drivers
-included); the NumPy implementation of :class:`RigPlant` is the reference they are tested
-against (``compiled=False``).
+elements. :func:`pipeline.rig.run.simulate_rig` integrates it with
+:func:`scipy.integrate.solve_ivp` (Radau with the analytic Jacobian) behind the drivers and
+sensors; :func:`pipeline.rig.run.true_curves` gives the characteristic curves an
+identification should recover. The right-hand side and Jacobian run compiled
+(:mod:`pipeline.rig.compiled`, numba, drivers included); the NumPy implementation of
+:class:`RigPlant` is the reference they are tested against (``compiled=False``).
 
 ``[rig.plant] model = "reduced"`` swaps the full model for the reduced one-coordinate model of
 Eq. 24-26 of the same prototype (:class:`pipeline.rig.reduced.ReducedPlant`, state ``[q,
 q_dot, q_eps (2), z]``), whose DE force is exactly ``g_i(q) v_i^2`` (Eq. 37): the same
 friction, drivers, sensors and recorder, so an identification can be checked against exact
-curves. :func:`make_plant` selects the plant.
+curves. :func:`pipeline.rig.run.make_plant` selects the plant.
 
 References
 ----------
@@ -39,36 +39,15 @@ model for friction simulation and compensation. IEEE Trans. Autom. Control 50(11
 
 from __future__ import annotations
 
-import math
-import time
-import warnings
-from dataclasses import dataclass
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import decimate
 
-from pipeline.errors import DebistWarning
 from pipeline.physics.dynamics import FullModel, well_state
 from pipeline.physics.kinematics import pitch_angle, ritz_basis
-from pipeline.physics.params import V_MAX
-from pipeline.physics.reduced import reduced_curves
-from pipeline.physics.segments import solve_segments
-from pipeline.physics.statics import force_displacement
-from pipeline.rig.drivers import DriverOutput, uniform_grid
+from pipeline.rig.drivers import DriverOutput
 from pipeline.rig.params import RigParams
 
-__all__ = [
-    "RigPlant",
-    "RigRun",
-    "make_plant",
-    "simulate_rig",
-    "true_curves",
-]
-
-#: Log samples simulated beyond each end of the record so that the zero-phase FIR of the
-#: decimation (half length 10 log samples, :func:`scipy.signal.decimate`) has no edge effect.
-_PAD_LOG = 11
+__all__ = ["RigPlant"]
 
 
 class RigPlant:
@@ -184,7 +163,7 @@ class RigPlant:
         return np.concatenate([well_state(self.rig.prototype, side), np.zeros(self.n_friction)])
 
     def atol_vector(self, atol: float) -> NDArray[np.float64]:
-        """Absolute tolerances of the states for ``solve_ivp`` (see :func:`simulate_rig`).
+        """Absolute tolerances of the states for ``solve_ivp`` (see :mod:`pipeline.rig.run`).
 
         Parameters
         ----------
@@ -322,366 +301,3 @@ class RigPlant:
         dz = np.where(slip, -qd * p * u ** (p - 1.0) * np.sign(z) * self._kF, 0.0)
         J[10:, 10:] = np.diag(dz)
         return J
-
-
-def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
-    """Build the plant ``[rig.plant] model`` selects, with the rig's friction.
-
-    Parameters
-    ----------
-    rig : RigParams
-        Rig parameters; ``rig.model`` selects the mechanics.
-    v1, v2 : callable
-        Applied voltages ``v_i(t)`` [V].
-    compiled : bool
-        Compiled kernels for the full plant (:class:`RigPlant`); the reduced plant runs in
-        NumPy.
-
-    Returns
-    -------
-    RigPlant or pipeline.rig.reduced.ReducedPlant
-        ``"full"``: the full model of Sec. 3 (Eq. 19-23); ``"reduced"``: the reduced model
-        of Eq. 24-26. Both offer ``functions``, ``rest_state``, ``atol_vector``, ``tip``,
-        ``tip_velocity``, ``pitch`` and ``friction_force``.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 19-26.
-    """
-    if rig.model == "reduced":
-        from pipeline.rig.reduced import ReducedPlant
-
-        return ReducedPlant(rig, v1, v2)
-    return RigPlant(rig, v1, v2, compiled=compiled)
-
-
-@dataclass(frozen=True)
-class RigRun:
-    """One rig experiment: the logged channels and the truth behind them.
-
-    Logged channels (what the rig's recorder holds), at the log instants:
-
-    Attributes
-    ----------
-    t : ndarray, shape (n,)
-        Log instants ``t_ref[0] + k sample_time`` [s].
-    q : ndarray, shape (n,)
-        Laser reading of the tip displacement [m]: noise, quantisation, range clipping,
-        anti-aliasing FIR and decimation; saturates at ``+-sensor_range``.
-    v1, v2 : ndarray, shape (n,)
-        Voltage monitors of DE 1 and DE 2 [V] (applied voltage plus noise, decimated).
-    r1, r2 : ndarray, shape (n,)
-        Reference voltages at the log instants [V] (the DAC sample holding there).
-    q_true : ndarray, shape (n,)
-        Noise-free tip displacement [m] (Eq. 16).
-    q_dot_true : ndarray, shape (n,)
-        Tip velocity [m/s].
-    phi_true : ndarray, shape (n,)
-        Pitch angle of the upper frame [rad] (Eq. 1).
-    x_true : ndarray, shape (n, n_states)
-        Plant states: ``[q_m, q_m_dot, q_eps, z]`` (``10 + n_friction``) for the full plant,
-        ``[q, q_dot, q_eps, z]`` (``4 + n_friction``) for the reduced one.
-    F_friction : ndarray, shape (n,)
-        Friction force on the tip [N].
-    v1_applied, v2_applied : ndarray, shape (n,)
-        Voltages at the DEs, the drivers' outputs [V].
-    saturated : ndarray of bool, shape (n,)
-        ``|q_true|`` beyond the sensor range.
-    sample_time : float
-        Log interval [s].
-    seed : int
-        Seed of the sensor noise.
-    nfev : int
-        Right-hand-side evaluations of the plant integration.
-    njev : int
-        Jacobian evaluations.
-    success : bool
-        Whether every integration segment succeeded.
-    message : str
-        Messages of the integrator.
-    wall_time : float
-        Wall-clock time of :func:`simulate_rig` [s].
-    """
-
-    t: NDArray[np.float64]
-    q: NDArray[np.float64]
-    v1: NDArray[np.float64]
-    v2: NDArray[np.float64]
-    r1: NDArray[np.float64]
-    r2: NDArray[np.float64]
-    q_true: NDArray[np.float64]
-    q_dot_true: NDArray[np.float64]
-    phi_true: NDArray[np.float64]
-    x_true: NDArray[np.float64]
-    F_friction: NDArray[np.float64]
-    v1_applied: NDArray[np.float64]
-    v2_applied: NDArray[np.float64]
-    saturated: NDArray[np.bool_]
-    sample_time: float
-    seed: int
-    nfev: int
-    njev: int
-    success: bool
-    message: str
-    wall_time: float
-
-
-def _decimate(y: NDArray[np.float64], factor: int) -> NDArray[np.float64]:
-    """Zero-phase FIR decimation (Hamming-window sinc, 20 factor + 1 taps)."""
-    return y if factor == 1 else decimate(y, factor, ftype="fir", zero_phase=True)
-
-
-def simulate_rig(
-    rig: RigParams,
-    t_ref: ArrayLike,
-    r1: ArrayLike,
-    r2: ArrayLike,
-    *,
-    sample_time: float,
-    seed: int,
-    side: int = -1,
-    method: str = "Radau",
-    rtol: float = 1e-4,
-    atol: float = 1e-8,
-    step_threshold: float = 0.1 * V_MAX,
-    compiled: bool = True,
-) -> RigRun:
-    """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
-
-    1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
-       voltages (:class:`~pipeline.rig.drivers.DriverOutput`; they do not depend on the mechanics).
-    2. The plant (:func:`make_plant`: :class:`RigPlant`, or the reduced plant of
-       :mod:`pipeline.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
-       ``side`` (equilibrium at v = 0, :func:`~pipeline.physics.dynamics.well_state`, or the
-       stable zero of the reduced ``f(q)``; relaxed creep, unloaded friction) and is
-       integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
-       split at the reference steps larger than ``step_threshold``, with output on the
-       internal grid ``sample_time / oversample``.
-    3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
-       ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
-       noise. Every channel is decimated to ``sample_time`` by a zero-phase FIR
-       (:func:`scipy.signal.decimate`); the record is simulated ``11 sample_time`` beyond
-       both ends (at rest before, reference held after) so the filter sees no edge. The
-       laser reading is clipped again after the filter: when the true ``q`` leaves the
-       range the logged value saturates at ``+-sensor_range`` (flagged in ``saturated``).
-
-    Parameters
-    ----------
-    rig : RigParams
-        Prototype and rig.
-    t_ref : array_like, shape (n_ref,)
-        Uniform DAC sample times [s]; sample ``k`` holds until ``t_ref[k] + hold``.
-    r1, r2 : array_like, shape (n_ref,)
-        Reference voltages of DE 1 (left) and DE 2 (right) [V].
-    sample_time : float
-        Log interval [s]; the log covers ``[t_ref[0], t_ref[0] + n_ref hold)``.
-    seed : int
-        Seed of the sensor and monitor noise.
-    side : {-1, +1}
-        Initial well: -1 left (the paper's experiments start at q = -10 mm), +1 right.
-    method : {"Radau", "BDF"}
-        Implicit :func:`solve_ivp` method; both use the plant's Jacobian.
-    rtol, atol : float
-        Integrator tolerances. ``atol`` [m] applies to the bending coordinates scaled to
-        metres (``q_m * [l^2, l^3, l^4]``) and to the friction deflections; the axial
-        coordinate ``u_0`` gets ``100 atol``, the velocities ``1e4 atol`` per second and the
-        creep strains ``100 atol`` [-]. The looser axial and velocity tolerances spare the
-        integrator the nanometre ringing of the stiff axial mode (about 400 Hz, undamped by
-        the beam) that every 1 ms voltage kink excites; it does not show in ``q``. With
-        the defaults the noise-free ``q`` stays within about 0.2-0.3 um of a solution with
-        ``rtol = 1e-8, atol = 1e-12`` on broad-band experiments with 3 kV switching (0.30
-        and 0.27 um on the 37.5 s identification and validation profiles); the
-        integrator takes about one step per DAC interval (the kinks of the driver output
-        limit the steps). Near a barrier crossing errors grow (the motion is unstable
-        there), so no tolerance bounds them in general. For the reduced plant ``atol``
-        applies to ``q`` and ``z``, ``100 atol`` to ``q_dot`` (per second) and the creep
-        strains (0.3 um from the tight solution on the identification profile, about 4 s).
-    step_threshold : float
-        Reference jumps larger than this [V] become integration breakpoints.
-    compiled : bool
-        Integrate the compiled plant (default) or the NumPy reference (``False``, several
-        times slower; the reduced plant always runs in NumPy). Their right-hand sides agree
-        to rounding, not bit for bit, so the integrator takes other steps: the two solutions
-        differ by the integration error.
-
-    Returns
-    -------
-    RigRun
-        The logged channels, the truth and the integration statistics.
-
-    Raises
-    ------
-    ValueError
-        If ``t_ref`` is not uniform, the shapes differ, ``sample_time`` is not positive or
-        longer than the record, ``side`` is not -1 or +1 or ``method`` unknown; from
-        :func:`~pipeline.physics.dynamics.well_state` if that well does not exist.
-
-    Warns
-    -----
-    DebistWarning
-        If a reference leaves ``[0, 3000]`` V and is clipped.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
-    """
-    start = time.perf_counter()
-    t_ref, hold = uniform_grid(t_ref)
-    r = np.stack([np.asarray(r1, dtype=float), np.asarray(r2, dtype=float)])
-    if r.shape != (2, t_ref.size):
-        raise ValueError(f"`r1`, `r2` must have the shape of `t_ref` {t_ref.shape}")
-    if not np.all(np.isfinite(r)):
-        raise ValueError("`r1`, `r2` must be finite")
-    if np.any(r < 0.0) or np.any(r > V_MAX):
-        warnings.warn(
-            f"simulate_rig: references within [{r.min():.6g}, {r.max():.6g}] V are clipped to "
-            f"[0, {V_MAX:g}] V",
-            DebistWarning,
-            stacklevel=2,
-        )
-        r = np.clip(r, 0.0, V_MAX)
-    if side not in (-1, 1):
-        raise ValueError(f"`side` must be -1 or +1, got {side!r}")
-    if method not in ("Radau", "BDF"):
-        raise ValueError(f"`method` must be 'Radau' or 'BDF', got {method!r}")
-    duration = t_ref.size * hold
-    if not (sample_time > 0 and sample_time <= duration):
-        raise ValueError(f"`sample_time` must be in (0, {duration}] s, got {sample_time!r}")
-    n_log = math.floor(duration / sample_time + 1e-9)
-    os_ = rig.oversample
-    dt = sample_time / os_
-    pad = _PAD_LOG * os_
-    t0 = float(t_ref[0])
-    j = np.arange(-pad, n_log * os_ + pad)
-    t_fine = t0 + j * dt
-    # reference held beyond its end for the padding
-    t_end = float(t_fine[-1])
-    n_ext = max(t_ref.size, math.ceil((t_end - t0) / hold) + 1)
-    t_ext = t0 + hold * np.arange(n_ext)
-    r_ext = np.concatenate([r, np.repeat(r[:, -1:], n_ext - t_ref.size, axis=1)], axis=1)
-    drivers = [
-        DriverOutput(t_ext, r_ext[i], tau=rig.driver_tau, slew=rig.driver_slew) for i in range(2)
-    ]
-    plant = make_plant(rig, drivers[0], drivers[1], compiled=compiled)
-    x_rest = plant.rest_state(side)
-    atol_v = plant.atol_vector(atol)
-    jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
-    breaks = [t0 + (k + 1) * hold for k in jumps]
-    t_run = t_fine[t_fine >= t0]
-    fun, jac = plant.functions()
-    sol = solve_segments(
-        fun, (t0, t_end), x_rest, t_run, breaks, method=method, jac=jac, rtol=rtol, atol=atol_v
-    )
-    X = np.full((t_run.size, plant.n_states), np.nan)  # NaN beyond a failure
-    X[: sol.t.size] = sol.y
-    X_all = np.concatenate([np.repeat(x_rest[None, :], pad, axis=0), X])  # at rest before
-    q_fine = plant.tip(X_all)
-    v_fine = np.stack([d.values(t_fine) for d in drivers])
-    rng = np.random.default_rng(seed)
-    y = q_fine + rng.normal(0.0, rig.sensor_noise, q_fine.size)
-    if rig.sensor_resolution > 0:
-        y = np.round(y / rig.sensor_resolution) * rig.sensor_resolution
-    y = np.clip(y, -rig.sensor_range, rig.sensor_range)
-    mon = v_fine + rng.normal(0.0, rig.monitor_noise, v_fine.shape)
-    log = slice(_PAD_LOG, _PAD_LOG + n_log)
-    q_log = np.clip(_decimate(y, os_)[log], -rig.sensor_range, rig.sensor_range)
-    mon_log = np.stack([_decimate(m, os_)[log] for m in mon])
-    idx = pad + os_ * np.arange(n_log)  # log instants on the internal grid
-    t_log = t_fine[idx]
-    X_log = X_all[idx]
-    k_ref = np.clip(np.floor((t_log - t0) / hold + 1e-9).astype(int), 0, t_ref.size - 1)
-    q_true = q_fine[idx]
-    return RigRun(
-        t=t_log,
-        q=q_log,
-        v1=mon_log[0],
-        v2=mon_log[1],
-        r1=r[0, k_ref],
-        r2=r[1, k_ref],
-        q_true=q_true,
-        q_dot_true=plant.tip_velocity(X_log),
-        phi_true=plant.pitch(X_log),
-        x_true=X_log,
-        F_friction=plant.friction_force(X_log),
-        v1_applied=v_fine[0, idx],
-        v2_applied=v_fine[1, idx],
-        saturated=np.abs(q_true) > rig.sensor_range,
-        sample_time=float(sample_time),
-        seed=int(seed),
-        nfev=sol.nfev,
-        njev=sol.njev,
-        success=sol.success,
-        message=sol.message,
-        wall_time=time.perf_counter() - start,
-    )
-
-
-def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float64]]:
-    """Return the prototype's true characteristic curves in the identified model's convention.
-
-    From the reduced model of the rig's prototype (:func:`pipeline.physics.reduced.
-    reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
-    ``dz_1``, ``dz_2`` is included), and the actuation force at the switching voltage from
-    the full model's static force-displacement curves (Fig. 4). Friction, the drivers and
-    the sensors are not part of these curves: they are what an identification of Eq. 37
-    cannot represent.
-
-    The two gains differ because the DE force is not of the separable form
-    ``g_i(q) v_i^2`` of Eq. 26/37 for the full model: the DEs' pull bends the beam off the
-    v = 0 path, so at ``V_MAX`` = 3 kV the holding-force change is 72 % of
-    ``1/2 dC_i/dq V_MAX^2`` near q = 0 and 95-100 % in the wells (Table 1 prototype).
-    ``g1``, ``g2`` are the small-signal gains (sub-threshold excitation), ``g1_vmax``,
-    ``g2_vmax`` the secants the switching pulses see.
-
-    Parameters
-    ----------
-    rig : RigParams
-        Rig parameters (uses ``prototype``).
-    q_grid : array_like, shape (n,)
-        Tip displacements [m], increasing, spacing at most ~0.5 mm (continuation).
-
-    Returns
-    -------
-    dict[str, ndarray]
-        Each of shape (n,): ``"q"`` [m]; ``"f"`` restoring force at v = 0 [N] with
-        ``m_q q_ddot + d q_dot + f(q) = g_1 v_1^2 + g_2 v_2^2`` (Eq. 26, 37); ``"c"``
-        ``= f / q`` [N/m] (Eq. 33; for an asymmetric prototype ``f(0) != 0`` and ``c`` has a
-        pole at q = 0, use ``f``); ``"k"`` ``= df/dq`` [N/m]; ``"g1"``, ``"g2"``
-        ``= 1/2 dC_i/dq`` [N/V^2] (docs/interpretation.md item 8); ``"g1_vmax"``, ``"g2_vmax"``
-        ``= (F(q; 0) - F(q; v_i = V_MAX)) / V_MAX^2`` [N/V^2] with ``F`` the static holding
-        force of the full model (Fig. 4); ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch
-        angle along the static path [rad].
-
-    Notes
-    -----
-    For ``rig.model = "reduced"`` the curves are the reduced plant's own, exact in the form
-    of Eq. 37 (:func:`pipeline.rig.reduced.reduced_true_curves`: the same keys, ``g1_vmax =
-    g1``, ``g2_vmax = g2``, plus ``dm_q``, ``k1``, ``k2``).
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
-    """
-    if rig.model == "reduced":
-        from pipeline.rig.reduced import reduced_true_curves
-
-        return reduced_true_curves(rig, q_grid)
-    c = reduced_curves(rig.prototype, q_grid)
-    F0 = force_displacement(rig.prototype, c.q).F
-    secant = [
-        (F0 - force_displacement(rig.prototype, c.q, **{f"v{i}": V_MAX}).F) / V_MAX**2
-        for i in (1, 2)
-    ]
-    return {
-        "q": c.q,
-        "f": c.f,
-        "c": c.c,
-        "k": c.k,
-        "g1": c.g1,
-        "g2": c.g2,
-        "g1_vmax": secant[0],
-        "g2_vmax": secant[1],
-        "m_q": c.m_q,
-        "d": c.d,
-        "phi": c.phi,
-    }

@@ -11,7 +11,7 @@ like :class:`pipeline.physics.freerun.AnalyticalModel`:
 
 with the same tip friction ``F_fr`` as the full plant (the Maxwell-slip elements act on the
 tip displacement ``q``, which is the reduced coordinate), the same HV drivers and the same
-sensors (:func:`pipeline.rig.plant.simulate_rig` runs both plants). Its DE force is exactly
+sensors (:func:`pipeline.rig.run.simulate_rig` runs both plants). Its DE force is exactly
 ``g_i(q) v_i^2`` with ``g_i = 1/2 dC_i/dq``, so the curves an identification of Eq. 37 should
 recover are known exactly (:func:`reduced_true_curves`). What Eq. 37 does not represent is the
 position-dependent mass (``m_q`` varies by about 13 % over +-25 mm; the term
@@ -429,7 +429,7 @@ def truth_attrs(rig: RigParams, curves: dict[str, NDArray[np.float64]]) -> dict[
     rig : RigParams
         Rig parameters.
     curves : dict of str to ndarray
-        The true curves (:func:`pipeline.rig.plant.true_curves`), with ``"q"`` and ``"m_q"``.
+        The true curves (:func:`pipeline.rig.run.true_curves`), with ``"q"`` and ``"m_q"``.
 
     Returns
     -------

@@ -23,7 +23,7 @@ class RigResult:
     outputs : dict
         ``<experiment>.mat`` (:class:`pipeline.artifacts.FileWriter` of the MAT writer) and
         ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment; its
-        ``curves`` group holds the true curves (:func:`pipeline.rig.plant.true_curves`) with
+        ``curves`` group holds the true curves (:func:`pipeline.rig.run.true_curves`) with
         the plant ``model`` and the mass they are per in its attributes
         (:func:`pipeline.rig.reduced.truth_attrs`).
     summary : dict
@@ -73,8 +73,8 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
         run_experiments,
         truth_tree,
     )
-    from pipeline.rig.plant import true_curves
     from pipeline.rig.reduced import truth_attrs
+    from pipeline.rig.run import true_curves
 
     cfg = RigConfig.from_dict(section, physics)
     runs, curves = run_experiments(
