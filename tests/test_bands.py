@@ -158,3 +158,31 @@ def test_an_input_never_applied_is_not_identified_there(bistable_record):
     assert not frame.g2_identified.to_numpy()[right].any()
     assert frame.g1_identified.to_numpy()[right].any()
     assert intervals["g2"] and all(b <= 0.005 for _, b in intervals["g2"])
+
+
+def test_an_input_applied_only_in_transit_is_not_identified(bistable_record):
+    """g1 with v_1 applied only where the beam moves fast (a transit) is unidentified.
+
+    Along a transit q_dot is a function of q, so g_1 h(v_1) is not separated from c(q) q and
+    d(q) z there; the same record with v_1 kept at the quasi-static samples marks g1.
+    """
+    from pipeline.identify.excitation import quasi_static
+
+    slow = quasi_static(bistable_record["q_dot"])
+    assert 0.2 < slow.mean() < 0.95  # both kinds of samples are present
+    marked = {}
+    for name, keep in (("transit", ~slow), ("quasi-static", slow)):
+        rec = dict(bistable_record)
+        v = rec["v"].copy()
+        v[:, 0] = np.where(keep, v[:, 0], 0.0)
+        rec["v"] = v
+        cur = bistable_truth(rec["q"])
+        rec["q_ddot"] = (cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2
+                         - cur["c"] * rec["q"] - cur["d"] * rec["q_dot"])  # fmt: skip
+        records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=5)
+        cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100)
+        model, diag = fit_rbf_model(records, cfg)
+        frame, _ = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
+        marked[name] = int(frame.g1_identified.sum())
+    assert marked["transit"] == 0
+    assert marked["quasi-static"] > 20

@@ -371,6 +371,7 @@ def curves_frame(model, diag, records, *, min_support: float, band_tolerance: fl
     ----------
     Masoud & Maas 2025, Eq. 37-40 (curves), Fig. 14.
     """
+    from pipeline.identify.excitation import quasi_static
     from pipeline.identify.terms import input_map
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
@@ -400,9 +401,13 @@ def curves_frame(model, diag, records, *, min_support: float, band_tolerance: fl
         "restoring": support_weights(grid, q, sigma),
         "d": support_weights(grid, q, sigma, np.abs(q_dot) > MOVING_FRACTION * rms),
     }
+    # g_i counts the samples where v_i was applied while the beam was quasi-static: along a
+    # switching transit q_dot is a function of q, so c(q) q, d(q) z and g_i(q) h(v_i) enter
+    # Eq. 40 as one function of q there and the transit alone does not separate g_i.
+    slow = np.concatenate([quasi_static(r.q_dot) for r in records])
     for j in range(model.n_inputs):
         active = np.abs(hv[:, j]) > ACTIVE_FRACTION * np.max(np.abs(hv[:, j]))
-        support[f"g{j + 1}"] = support_weights(grid, q, sigma, active)
+        support[f"g{j + 1}"] = support_weights(grid, q, sigma, active & slow)
     bands = curve_bands(
         point, maps, diag.theta, diag.theta_boot, support, min_support, band_tolerance
     )

@@ -48,10 +48,12 @@ from pipeline.identify.terms import RBF_TERMS, input_map
 if TYPE_CHECKING:  # the fit module may import this one
     from pipeline.identify.fit import Record
 
-__all__ = ["ExcitationReport", "check_excitation"]
+__all__ = ["FAST_FACTOR", "ExcitationReport", "check_excitation", "quasi_static"]
 
 #: Robust standard deviation of a zero-mean normal sample from the median of its magnitude.
 _MEDIAN_TO_SD = 1.4826
+#: Quasi-static threshold of :func:`quasi_static` in robust scales of |q_dot|.
+FAST_FACTOR = 3.0
 #: A line is resolved if its band is at most this fraction of its frequency (else it is
 #: the low-frequency end of a broad spectrum, e.g. the slow switching between the wells).
 _LINE_RESOLVED = 0.5
@@ -151,7 +153,7 @@ def check_excitation(
     min_samples: int = 10,
     active_fraction: float = 0.1,
     moving_fraction: float = 0.1,
-    fast_factor: float = 3.0,
+    fast_factor: float = FAST_FACTOR,
     quasi_static_fraction: float = 0.05,
     bin_width: float | None = None,
     power_fraction: float = 0.95,
@@ -277,7 +279,7 @@ def check_excitation(
     q_dot = np.concatenate([np.asarray(r.q_dot, dtype=float) for r in records])
     v = np.vstack([np.asarray(r.v, dtype=float).reshape(len(r.q), -1) for r in records])
     hv = input_map(v, input_map_kind)
-    slow = np.concatenate([_calm(r.q_dot, fast_factor) for r in records])
+    slow = np.concatenate([quasi_static(r.q_dot, fast_factor) for r in records])
 
     rms = float(np.sqrt(np.mean(q_dot**2))) if q_dot.size else 0.0
     masks = {"total": np.ones(q.size, dtype=bool), "moving": np.abs(q_dot) > moving_fraction * rms}
@@ -379,9 +381,27 @@ def _validate(
             raise WorkflowError(f"`{name}` must be positive, got {value!r}")
 
 
-def _calm(x: np.ndarray, fast_factor: float) -> np.ndarray:
-    """Flag the quasi-static samples of one record: ``|x|`` within ``fast_factor`` robust scales."""
-    x = np.abs(np.asarray(x, dtype=float))
+def quasi_static(q_dot: np.ndarray, fast_factor: float = FAST_FACTOR) -> np.ndarray:
+    """Flag the quasi-static samples of one record.
+
+    A sample is quasi-static when ``|q_dot|`` is within ``fast_factor`` robust scales of the
+    record's speed: 1.4826 times the median of ``|q_dot|`` (the normal-consistent median
+    absolute value; Rousseeuw & Croux 1993, J. Am. Stat. Assoc. 88, 1273-1283), but at least
+    1 % of its largest ``|q_dot|``. A switching transit between the wells is not quasi-static.
+
+    Parameters
+    ----------
+    q_dot : ndarray, shape (n,)
+        Velocity of one record [unit of q / s].
+    fast_factor : float, optional
+        Threshold in robust scales (default :data:`FAST_FACTOR`).
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True where the sample is quasi-static.
+    """
+    x = np.abs(np.asarray(q_dot, dtype=float))
     if x.size == 0:
         return np.zeros(0, dtype=bool)
     scale = max(_MEDIAN_TO_SD * float(np.median(x)), 0.01 * float(np.max(x)))
