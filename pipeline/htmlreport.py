@@ -31,7 +31,7 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
-from pipeline.report import equilibrium_kind
+from pipeline.report import equilibrium_kind, switching_note
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -397,6 +397,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         rows.append([r.get("model", ""), volts, _num(r.get("q")), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
         text = f"{_num(r['v_switch'])} V" if r.get("v_switch") is not None else r.get("reason")
+        text += switching_note(r)
         label = f"switching, input {r.get('input')}"
         rows.append([r.get("model", ""), label, "", text, "", "", ""])
     return {"verdict": design.get("verdict", ""), "reason": design.get("reason", ""), "rows": rows}
@@ -497,6 +498,7 @@ def _switching(design: Mapping[str, Any] | None) -> str:
             continue
         value = r.get("v_switch")
         text = f"{value:.0f}" if not _missing(value) else "none"
+        text += " (not identified)" if not _missing(value) and r.get("identified") is False else ""
         parts.append(f"v{r.get('input')}: {text}")
     return ", ".join(parts) or "-"
 

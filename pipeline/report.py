@@ -373,6 +373,32 @@ def equilibrium_kind(row: dict[str, Any]) -> str:
     return kind
 
 
+def switching_note(row: dict[str, Any]) -> str:
+    """Return the caveat of one switching-voltage row, or ``""`` when the data support it.
+
+    The identified model's switching voltage of input i rests on the restoring force and
+    ``g_i`` between its well and the fold where the well vanishes; where either is not
+    identified there (:func:`pipeline.identify.design.mark_switching`) the number is the
+    model's, not the data's, and the row says so.
+
+    Parameters
+    ----------
+    row : dict
+        One row of the identify summary's ``design.switching``.
+
+    Returns
+    -------
+    str
+        ``" (not identified: g<i> or the restoring force between the well and the fold)"``
+        or ``""``.
+    """
+    value = row.get("v_switch")
+    if row.get("identified") is False and value is not None and value == value:  # not NaN
+        i = row.get("input")
+        return f" (not identified: g{i} or the restoring force between the well and the fold)"
+    return ""
+
+
 def design_table(summary: dict[str, Any]) -> Table | None:
     """Tabulate the identified model's equilibria and switching voltages (and the analytical).
 
@@ -420,6 +446,6 @@ def design_table(summary: dict[str, Any]) -> Table | None:
     for r in design["switching"]:
         unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
         text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]
-        text = escape(text)
+        text = escape(text + switching_note(r))
         table.add_row(r["model"], f"switching, input {r['input']}", "", text, "", "", "")
     return table

@@ -92,3 +92,35 @@ def test_equilibria_where_the_curves_are_not_identified_are_marked():
     assert equilibrium_kind(rows[0]) == "well"
     assert equilibrium_kind(rows[1]) == "saddle (not identified at q*)"
     assert equilibrium_kind(rows[2]) == "well (not identified at q*)"
+
+
+def test_switching_voltages_where_g_is_not_identified_are_marked():
+    """A switching voltage rests on the restoring force and g_i from the well to the fold."""
+    import pandas as pd
+
+    from pipeline.identify.design import mark_switching
+    from pipeline.report import switching_note
+
+    q = np.linspace(-0.016, 0.016, 33)  # 1 mm grid
+    curves = pd.DataFrame({
+        "q": q,
+        "restoring_identified": True,
+        "g1_identified": (q >= -0.0105) & (q <= -0.0055),  # covers well -0.010 .. fold -0.006
+        "g2_identified": (q >= 0.0075) & (q <= 0.0115),  # misses the fold at 0.006
+    })  # fmt: skip
+    sw = pd.DataFrame({
+        "model": ["rbf", "rbf", "rbf", "analytical"],
+        "input": [1, 2, 1, 1],
+        "v_switch": [1300.0, 1500.0, np.nan, 1424.0],
+        "q_well": [-0.010, 0.010, -0.010, -0.0102],
+        "q_fold": [-0.006, 0.006, np.nan, -0.0056],
+    })  # fmt: skip
+    out = mark_switching(sw, curves)
+    assert out["identified"].tolist() == [True, False, False, True]
+    rows = out.assign(v_switch=[1300.0, 1500.0, None, 1424.0]).to_dict(orient="records")
+    assert switching_note(rows[0]) == ""
+    assert switching_note(rows[1]).startswith(" (not identified: g2")
+    assert switching_note(rows[2]) == ""  # no number, nothing to caveat
+    # the restoring force matters too
+    curves["restoring_identified"] = np.abs(q) > 0.007
+    assert mark_switching(sw, curves)["identified"].tolist() == [False, False, False, True]

@@ -241,3 +241,55 @@ def mark_identified(
     out = equilibria.assign(identified=np.array(flags, dtype=bool))
     out.attrs = dict(equilibria.attrs)
     return out
+
+
+def mark_switching(switching: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """Say of each switching voltage of the identified model whether the data support it.
+
+    Input i switches the beam out of the well it pushes against at the voltage where that
+    well meets the saddle (:func:`pipeline.identify.stability.switching_voltages`): the
+    number rests on the restoring force ``c(q) q + F_0`` and on ``g_i`` over the q interval
+    the well travels as v_i rises, from ``q_well`` (at rest) to ``q_fold`` (where it
+    vanishes). It is a result of the data only where both curves are identified over that
+    whole interval (their masks of :func:`pipeline.identify.bands.curves_frame`); a
+    profile that applies v_i only at full voltage (whose transits do not separate ``g_i``
+    from ``c(q) q``) leaves it unidentified. The analytical model's rows count as
+    identified; a row without a switching voltage is not.
+
+    Parameters
+    ----------
+    switching : pandas.DataFrame
+        :func:`~pipeline.identify.stability.switching_voltages` rows with a ``model``
+        column: ``input``, ``v_switch`` [V], ``q_well``, ``q_fold`` [unit of q].
+    curves : pandas.DataFrame
+        ``q``, ``restoring_identified`` and ``g<i>_identified`` on the model's grid.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``switching`` with a boolean ``identified`` column (its ``attrs`` kept).
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 3.3 (switching condition), Eq. 37.
+    """
+    grid = curves["q"].to_numpy()
+    restoring = curves["restoring_identified"].to_numpy(dtype=bool)
+    flags = []
+    for _, row in switching.iterrows():
+        if row.get("model", "rbf") != "rbf":
+            flags.append(True)
+            continue
+        ends = (row.get("q_well"), row.get("q_fold"))
+        column = f"g{int(row['input'])}_identified"
+        if pd.isna(row.get("v_switch")) or any(pd.isna(e) for e in ends) or column not in curves:
+            flags.append(False)
+            continue
+        lo, hi = min(ends), max(ends)
+        span = (grid >= lo) & (grid <= hi)
+        span[int(np.argmin(np.abs(grid - lo))) : int(np.argmin(np.abs(grid - hi))) + 1] = True
+        ok = restoring & curves[column].to_numpy(dtype=bool)
+        flags.append(bool(lo >= grid[0] and hi <= grid[-1] and ok[span].all()))
+    out = switching.assign(identified=np.array(flags, dtype=bool))
+    out.attrs = dict(switching.attrs)
+    return out

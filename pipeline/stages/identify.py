@@ -79,7 +79,12 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         For an invalid section.
     """
     from pipeline.identify.bands import curves_frame, static_frame
-    from pipeline.identify.design import design_numbers, held_levels, mark_identified
+    from pipeline.identify.design import (
+        design_numbers,
+        held_levels,
+        mark_identified,
+        mark_switching,
+    )
     from pipeline.identify.refine import refine_config, refine_model
     from pipeline.identify.terms import PHYSICS_TERMS
 
@@ -118,6 +123,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         band_tolerance=cfg.band_tolerance,
     )  # fmt: skip
     design["equilibria"] = mark_identified(design["equilibria"], curves, design["static"])
+    design["switching"] = mark_switching(design["switching"], curves)
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
