@@ -353,7 +353,10 @@ def reduced_curves(
     """
     q_grid = np.asarray(q_grid, dtype=float)
     q_max = max(25e-3, float(np.max(np.abs(q_grid))) if q_grid.size else 0.0)
-    return fit_reduced(params, q_max=q_max, b=b).curves(q_grid)
+    # b only when given: lru_cache keys on the keywords as passed, so that this call and
+    # fit_reduced(params, q_max=...) elsewhere (the analytical model) share one fit
+    model = fit_reduced(params, q_max=q_max) if b is None else fit_reduced(params, q_max=q_max, b=b)
+    return model.curves(q_grid)
 
 
 @dataclass(frozen=True)

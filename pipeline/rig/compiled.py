@@ -6,8 +6,8 @@ tests check that both agree) as nopython functions of plain arrays: the full mod
 :mod:`pipeline.physics.compiled` (packed by :func:`~pipeline.physics.compiled.pack_model`),
 the Maxwell-slip elements (:func:`pack_friction`) and the drivers' piecewise analytic output
 (:attr:`DriverOutput.table <pipeline.rig.drivers.DriverOutput.table>`). One call evaluates
-the whole right-hand side or Jacobian, drivers included, for
-:func:`scipy.integrate.solve_ivp`.
+the whole right-hand side or Jacobian, drivers included, for :func:`scipy.integrate.odeint`
+(or ``solve_ivp``).
 
 The Python-facing kernels are cached on disk and close over :data:`STAMP`, the sha256 of
 the physics modules they call (numba's cache does not see changes in other files; see

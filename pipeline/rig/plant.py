@@ -18,9 +18,10 @@ The "real" prototype that the virtual rig measures is the full dynamic model of
 The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: the state of
 :class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
 elements. :func:`pipeline.rig.run.simulate_rig` integrates it with
-:func:`scipy.integrate.solve_ivp` (Radau with the analytic Jacobian) behind the drivers and
-sensors; :func:`pipeline.rig.run.true_curves` gives the characteristic curves an
-identification should recover. The right-hand side and Jacobian run compiled
+:func:`scipy.integrate.odeint` (ODEPACK's LSODA with the analytic Jacobian; or
+:func:`scipy.integrate.solve_ivp`'s Radau) behind the drivers and sensors;
+:func:`pipeline.rig.run.true_curves` gives the characteristic curves an identification should
+recover. The right-hand side and Jacobian run compiled
 (:mod:`pipeline.rig.compiled`, numba, drivers included); the NumPy implementation of
 :class:`RigPlant` is the reference they are tested against (``compiled=False``).
 
@@ -133,7 +134,7 @@ class RigPlant:
         return self._kernels
 
     def functions(self) -> tuple:
-        """Return ``(rhs, jac)`` for :func:`scipy.integrate.solve_ivp`.
+        """Return ``(rhs, jac)`` for :func:`scipy.integrate.odeint` or ``solve_ivp``.
 
         Returns
         -------
@@ -162,25 +163,30 @@ class RigPlant:
         """
         return np.concatenate([well_state(self.rig.prototype, side), np.zeros(self.n_friction)])
 
-    def atol_vector(self, atol: float) -> NDArray[np.float64]:
-        """Absolute tolerances of the states for ``solve_ivp`` (see :mod:`pipeline.rig.run`).
+    def atol_vector(self, atol: float, positions: float | None = None) -> NDArray[np.float64]:
+        """Absolute tolerances of the states for the integrator (see :mod:`pipeline.rig.run`).
 
         Parameters
         ----------
         atol : float
-            Tolerance of the bending coordinates scaled to metres and of ``z`` [m].
+            Base tolerance [m]: of the bending coordinates scaled to metres and of ``z``
+            unless ``positions`` is given.
+        positions : float, optional
+            Tolerance of the bending coordinates scaled to metres and of ``z`` [m]; default
+            ``atol``.
 
         Returns
         -------
         ndarray, shape (n_states,)
-            ``atol`` for the bending coordinates and ``z``, ``100 atol`` for ``u_0`` and
-            the creep strains, ``1e4 atol`` per second for the velocities.
+            ``positions`` for the bending coordinates and ``z``, ``100 atol`` for ``u_0``
+            and the creep strains, ``1e4 atol`` per second for the velocities.
         """
+        pos = atol if positions is None else positions
         scale = ritz_basis(self.rig.prototype.l).scale
-        tol_x = np.array([atol, atol, atol, 100.0 * atol])
+        tol_x = np.array([pos, pos, pos, 100.0 * atol])
         return np.concatenate(
             [tol_x / scale, 1e4 * atol / scale, np.full(2, 100.0 * atol),
-             np.full(self.n_friction, atol)]
+             np.full(self.n_friction, pos)]
         )  # fmt: skip
 
     def tip(self, x: ArrayLike) -> NDArray[np.float64]:

@@ -252,7 +252,7 @@ class ReducedPlant:
         return J
 
     def functions(self, compiled: bool = True):
-        """Return ``(rhs, jac)`` for :func:`scipy.integrate.solve_ivp`.
+        """Return ``(rhs, jac)`` for :func:`scipy.integrate.odeint` or ``solve_ivp``.
 
         Parameters
         ----------
@@ -298,21 +298,23 @@ class ReducedPlant:
         x0[0] = max(roots, key=abs)
         return x0
 
-    def atol_vector(self, atol: float) -> NDArray[np.float64]:
-        """Absolute tolerances of the states for ``solve_ivp``.
+    def atol_vector(self, atol: float, positions: float | None = None) -> NDArray[np.float64]:
+        """Absolute tolerances of the states for the integrator (see :mod:`pipeline.rig.run`).
 
         Parameters
         ----------
         atol : float
-            Tolerance of the positions ``q`` and ``z`` [m].
+            Base tolerance [m]: of ``q`` and ``z`` unless ``positions`` is given.
+        positions : float, optional
+            Tolerance of the positions ``q`` and ``z`` [m]; default ``atol``.
 
         Returns
         -------
         ndarray, shape (n_states,)
-            ``atol`` for ``q`` and ``z``, ``100 atol`` per second for ``q_dot`` and
+            ``positions`` for ``q`` and ``z``, ``100 atol`` per second for ``q_dot`` and
             ``100 atol`` [-] for the creep strains.
         """
-        out = np.full(self.n_states, float(atol))
+        out = np.full(self.n_states, float(atol if positions is None else positions))
         out[1:4] = 100.0 * atol
         return out
 

@@ -4,7 +4,8 @@
 :class:`pipeline.rig.plant.RigPlant` or the reduced one of
 :class:`pipeline.rig.reduced.ReducedPlant`) through the HV drivers
 (:class:`pipeline.rig.drivers.DriverOutput`), integrates it with
-:func:`scipy.integrate.solve_ivp` and records what the rig's sensors see: the laser with
+:func:`scipy.integrate.odeint` (ODEPACK's LSODA; or :func:`scipy.integrate.solve_ivp`'s
+Radau or BDF) and records what the rig's sensors see: the laser with
 white noise, quantisation and a finite range, sampled ``oversample`` times faster than the log
 and decimated by a zero-phase FIR (the rig's anti-aliasing), and noisy voltage monitors
 (:class:`RigRun`, with the noise-free truth). :func:`true_curves` gives the characteristic
@@ -13,6 +14,7 @@ curves an identification should recover.
 References
 ----------
 Masoud & Maas 2025, Eq. 19-26, 33, 37, Sec. 5.1 (3 kV converters, laser sensor, 10 ms log).
+Hindmarsh 1983 (ODEPACK); Petzold 1983 (LSODA); see :mod:`pipeline.physics.segments`.
 """
 
 from __future__ import annotations
@@ -29,17 +31,24 @@ from scipy.signal import decimate
 from pipeline.errors import DebistWarning
 from pipeline.physics.params import V_MAX
 from pipeline.physics.reduced import reduced_curves
-from pipeline.physics.segments import solve_segments
+from pipeline.physics.segments import ODEINT, solve_segments
 from pipeline.physics.statics import force_displacement
 from pipeline.rig.drivers import DriverOutput, uniform_grid
 from pipeline.rig.params import RigParams
 from pipeline.rig.plant import RigPlant
 
-__all__ = ["RigRun", "make_plant", "simulate_rig", "true_curves"]
+__all__ = ["METHODS", "TOLERANCES", "RigRun", "make_plant", "simulate_rig", "true_curves"]
 
 #: Log samples simulated beyond each end of the record so that the zero-phase FIR of the
 #: decimation (half length 10 log samples, :func:`scipy.signal.decimate`) has no edge effect.
 _PAD_LOG = 11
+#: Integrators of :func:`simulate_rig`: ODEPACK's LSODA (:func:`scipy.integrate.odeint`,
+#: compiled step loop) and the implicit :func:`scipy.integrate.solve_ivp` methods.
+METHODS = (ODEINT, "Radau", "BDF")
+#: Per method: the default ``rtol`` and the factor on ``atol`` for the positions (bending
+#: coordinates, friction deflections), chosen for the same accuracy of ``q`` (see
+#: :func:`simulate_rig`).
+TOLERANCES = {ODEINT: (1e-8, 0.3), "Radau": (1e-4, 1.0), "BDF": (1e-4, 1.0)}
 
 
 def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
@@ -158,8 +167,8 @@ def simulate_rig(
     sample_time: float,
     seed: int,
     side: int = -1,
-    method: str = "Radau",
-    rtol: float = 1e-4,
+    method: str = "odeint",
+    rtol: float | None = None,
     atol: float = 1e-8,
     step_threshold: float = 0.1 * V_MAX,
     compiled: bool = True,
@@ -172,9 +181,11 @@ def simulate_rig(
        :mod:`pipeline.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
        ``side`` (equilibrium at v = 0, :func:`~pipeline.physics.dynamics.well_state`, or the
        stable zero of the reduced ``f(q)``; relaxed creep, unloaded friction) and is
-       integrated by :func:`scipy.integrate.solve_ivp` (Radau, approximate Jacobian),
-       split at the reference steps larger than ``step_threshold``, with output on the
-       internal grid ``sample_time / oversample``.
+       integrated with the plant's (approximate) Jacobian by LSODA
+       (:func:`scipy.integrate.odeint`, its step loop compiled in Fortran) or by
+       :func:`scipy.integrate.solve_ivp` (Radau, BDF), split at the reference steps larger
+       than ``step_threshold`` (:func:`~pipeline.physics.segments.solve_segments`), with
+       output on the internal grid ``sample_time / oversample``.
     3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
        ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
        noise. Every channel is decimated to ``sample_time`` by a zero-phase FIR
@@ -197,23 +208,43 @@ def simulate_rig(
         Seed of the sensor and monitor noise.
     side : {-1, +1}
         Initial well: -1 left (the paper's experiments start at q = -10 mm), +1 right.
-    method : {"Radau", "BDF"}
-        Implicit :func:`solve_ivp` method; both use the plant's Jacobian.
-    rtol, atol : float
-        Integrator tolerances. ``atol`` [m] applies to the bending coordinates scaled to
-        metres (``q_m * [l^2, l^3, l^4]``) and to the friction deflections; the axial
-        coordinate ``u_0`` gets ``100 atol``, the velocities ``1e4 atol`` per second and the
-        creep strains ``100 atol`` [-]. The looser axial and velocity tolerances spare the
-        integrator the nanometre ringing of the stiff axial mode (about 400 Hz, undamped by
-        the beam) that every 1 ms voltage kink excites; it does not show in ``q``. With
-        the defaults the noise-free ``q`` stays within about 0.2-0.3 um of a solution with
-        ``rtol = 1e-8, atol = 1e-12`` on broad-band experiments with 3 kV switching (0.30
-        and 0.27 um on the 37.5 s identification and validation profiles); the
-        integrator takes about one step per DAC interval (the kinks of the driver output
-        limit the steps). Near a barrier crossing errors grow (the motion is unstable
-        there), so no tolerance bounds them in general. For the reduced plant ``atol``
-        applies to ``q`` and ``z``, ``100 atol`` to ``q_dot`` (per second) and the creep
-        strains (0.3 um from the tight solution on the identification profile, about 4 s).
+    method : {"odeint", "Radau", "BDF"}
+        ``"odeint"`` (default): ODEPACK's LSODA through :func:`scipy.integrate.odeint`
+        (stiff BDF here, the step loop in Fortran, one Python call per right-hand side or
+        Jacobian); ``"Radau"``, ``"BDF"``: :func:`scipy.integrate.solve_ivp`, stepping in
+        Python. All use the plant's Jacobian.
+    rtol : float, optional
+        Relative tolerance; default per method (:data:`TOLERANCES`): 1e-8 for LSODA, 1e-4
+        for Radau and BDF.
+    atol : float
+        Absolute tolerance [m] of the bending coordinates scaled to metres (``q_m * [l^2,
+        l^3, l^4]``) and of the friction deflections (LSODA: ``0.3 atol``, see below); the
+        axial coordinate ``u_0`` gets ``100 atol``, the velocities ``1e4 atol`` per second
+        and the creep strains ``100 atol`` [-]. The looser axial and velocity tolerances
+        spare the integrator the nanometre ringing of the stiff axial mode (about 400 Hz,
+        undamped by the beam) that every 1 ms voltage kink excites; it does not show in
+        ``q``. For the reduced plant the positions are ``q`` and ``z``, and ``q_dot`` (per
+        second) and the creep strains get ``100 atol``.
+
+        The methods need different settings for the same accuracy. scipy's Radau (order 5)
+        controls the error with an embedded estimate of order 3 (Hairer & Wanner IV.8),
+        which overestimates it: at ``rtol = 1e-4`` the noise-free ``q`` stays within
+        0.2-0.4 um of a tight solution (LSODA at ``rtol = 1e-10, atol = 1e-14``: 2 nm from
+        ``1e-9, 1e-13``, 0.5 nm from Radau at ``1e-7, 1e-11`` on 5 s of switching) on
+        broad-band experiments with 3 kV switching (0.39 and 0.44 um on the 37.5 s
+        identification and validation profiles), about one step per DAC interval. LSODA's
+        estimate is that of the BDF formula it steps with, and the driver output has a
+        kink at every changed DAC sample (25000 in 37.5 s) that the multistep formulas
+        carry across: at ``rtol = 1e-4`` it is 50 um off. It holds Radau's agreement with
+        ``rtol = 1e-8`` and the positions at ``0.3 atol`` (3 nm): on six 15 s broad-band
+        experiments at most 0.24 um, 0.14 um at the 99th percentile, against 0.43 and
+        0.15 um for Radau at ``rtol = 1e-4``; the positions at ``atol`` give 0.87 um, all
+        tolerances at ``0.3 atol`` cost 40 % more. It takes about twice Radau's
+        right-hand-side evaluations at a fraction of its cost per step (about 4x faster,
+        ``benchmarks/bench_rig.py``). Near a barrier crossing errors grow (the motion is
+        unstable there), so no tolerance bounds them in general. The reduced plant with the
+        defaults: 0.37 um (LSODA) and 0.23 um (Radau) from the tight solution on the
+        identification profile.
     step_threshold : float
         Reference jumps larger than this [V] become integration breakpoints.
     compiled : bool
@@ -241,7 +272,12 @@ def simulate_rig(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
+    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005;
+    Hindmarsh, A. C. (1983), ODEPACK, a systematized collection of ODE solvers, IMACS Trans.
+    Sci. Comput. 1, 55-64; Petzold, L. (1983), Automatic selection of methods for solving
+    stiff and nonstiff systems of ordinary differential equations, SIAM J. Sci. Stat.
+    Comput. 4(1), 136-148; Hairer & Wanner, Solving ODEs II, Sec. IV.8 (Radau IIA error
+    estimate).
     """
     start = time.perf_counter()
     t_ref, hold = uniform_grid(t_ref)
@@ -260,8 +296,10 @@ def simulate_rig(
         r = np.clip(r, 0.0, V_MAX)
     if side not in (-1, 1):
         raise ValueError(f"`side` must be -1 or +1, got {side!r}")
-    if method not in ("Radau", "BDF"):
-        raise ValueError(f"`method` must be 'Radau' or 'BDF', got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"`method` must be one of {', '.join(METHODS)}, got {method!r}")
+    rtol_default, pos_factor = TOLERANCES[method]
+    rtol = rtol_default if rtol is None else rtol
     duration = t_ref.size * hold
     if not (sample_time > 0 and sample_time <= duration):
         raise ValueError(f"`sample_time` must be in (0, {duration}] s, got {sample_time!r}")
@@ -282,7 +320,7 @@ def simulate_rig(
     ]
     plant = make_plant(rig, drivers[0], drivers[1], compiled=compiled)
     x_rest = plant.rest_state(side)
-    atol_v = plant.atol_vector(atol)
+    atol_v = plant.atol_vector(atol, pos_factor * atol)
     jumps = np.flatnonzero(np.any(np.abs(np.diff(r_ext, axis=1)) > step_threshold, axis=0))
     breaks = [t0 + (k + 1) * hold for k in jumps]
     t_run = t_fine[t_fine >= t0]
