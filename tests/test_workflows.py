@@ -101,7 +101,7 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
     rbf_id, rbf_val = table.loc[("rbf", "identification")], table.loc[("rbf", "validation")]
     for key, bound in PAPER_TABLE2_RBF.items():
         assert rbf_id[key] <= bound, key
-    assert rbf_val.nrmse_q <= 0.041
+    assert rbf_val.nrmse_q <= 0.01  # unseen validation with the shipped settings
     for ds in ("identification", "validation"):
         assert table.loc[("rbf", ds)].nrmse_q < table.loc[("analytical", ds)].nrmse_q
     # the identified restoring force c(q) q + F_0 against the truth over the visited bins
