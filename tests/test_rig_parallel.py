@@ -8,9 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import progress
+from pipeline import forking, progress
 from pipeline.errors import WorkflowError
-from pipeline.rig import experiment
+from pipeline.forking import fork_workers
 from pipeline.rig.experiment import RigConfig, run_experiment, run_experiments
 
 SECTION = {
@@ -30,7 +30,7 @@ def cfg() -> RigConfig:
 
 def test_parallel_runs_equal_serial_runs(cfg, monkeypatch):
     """Each worker's run is the serial run bit for bit; ``meanwhile`` runs in the parent."""
-    if experiment._experiment_workers(2) < 2:
+    if fork_workers(2) < 2:
         pytest.skip("one core or no fork here: run_experiments runs serially")
     seen = []
     with progress.listening(lambda task, done, total: seen.append((task, done, total))):
@@ -50,11 +50,11 @@ def test_parallel_runs_equal_serial_runs(cfg, monkeypatch):
 def test_no_children_from_a_daemonic_worker(monkeypatch):
     """Inside a Dask or multiprocessing worker (daemonic) the experiments run serially."""
     monkeypatch.setattr(
-        experiment.multiprocessing, "current_process", lambda: SimpleNamespace(daemon=True)
+        forking.multiprocessing, "current_process", lambda: SimpleNamespace(daemon=True)
     )
-    assert experiment._experiment_workers(4) == 1
+    assert fork_workers(4) == 1
     monkeypatch.undo()
-    assert experiment._experiment_workers(1) == 1
+    assert fork_workers(1) == 1
 
 
 def test_a_failing_worker_raises_the_experiments_error():

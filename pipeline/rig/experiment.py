@@ -33,8 +33,6 @@ Masoud & Maas 2025, Sec. 5.1 (rig), Fig. 11a (identification profile).
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import field
@@ -53,6 +51,7 @@ from pydantic import (
 from pipeline import progress
 from pipeline.config import CONFIG, ConfigValueError, config_from_section
 from pipeline.errors import WorkflowError
+from pipeline.forking import fork_context, fork_workers
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.dspace import Channel, recording
 from pipeline.rig.params import RigParams
@@ -269,21 +268,6 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
     )  # fmt: skip
 
 
-def _experiment_workers(n: int) -> int:
-    """Count the processes for ``n`` experiments: one per core, 1 where fork is unsafe.
-
-    A daemonic process (a Dask or multiprocessing worker, which already runs in parallel
-    with its peers) may not start children, and only POSIX ``fork`` starts a child without
-    importing the library again (``spawn`` costs more than one short experiment saves).
-    """
-    if n < 2 or multiprocessing.current_process().daemon:
-        return 1
-    if "fork" not in multiprocessing.get_all_start_methods():
-        return 1
-    return max(1, min(n, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                      else (os.cpu_count() or 1)))  # fmt: skip
-
-
 def _run_unobserved(cfg: RigConfig, name: str) -> RigRun:
     """:func:`run_experiment` in a child process, with the parent's progress listener muted.
 
@@ -302,8 +286,9 @@ def run_experiments(
     The experiments are independent (each starts at rest with its own seeds), so they run
     in forked worker processes (:class:`concurrent.futures.ProcessPoolExecutor`), one per
     core; each result is the same as a serial run's (the same deterministic computation in
-    another process). Serially inside a daemonic worker (``debist batch`` already runs one
-    prototype per worker) and on platforms without ``fork``.
+    another process). Serially where :func:`pipeline.forking.fork_workers` says forking is
+    unsafe (inside a daemonic worker: ``debist batch`` already runs one prototype per worker;
+    outside the main thread; on platforms without ``fork``).
 
     Parameters
     ----------
@@ -332,7 +317,7 @@ def run_experiments(
     """
     names = list(cfg.experiments)
     task = "rig: experiments"
-    workers = _experiment_workers(len(names))
+    workers = fork_workers(len(names))
     other = None
     if workers == 1:
         runs = {}
@@ -341,8 +326,7 @@ def run_experiments(
             runs[name] = run_experiment(cfg, name)
         progress.report(task, len(names), len(names))
         return runs, (meanwhile() if meanwhile is not None else None)
-    context = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(workers, mp_context=fork_context()) as pool:
         futures = {pool.submit(_run_unobserved, cfg, name): name for name in names}
         progress.report(task, 0, len(names))
         if meanwhile is not None:

@@ -23,7 +23,6 @@ import pandas as pd
 
 from pipeline import artifacts, outdir
 from pipeline.errors import ArtifactError
-from pipeline.fileformats import png_bytes
 from pipeline.htmlreport import (
     FIGURE_GROUPS,
     REPORT_FILE,
@@ -32,6 +31,7 @@ from pipeline.htmlreport import (
     render_report,
 )
 from pipeline.registry import stage as registry_stage
+from pipeline.render import FigureJob, render_pngs
 from pipeline.report_figures import (
     dynamic_window,
     excitation_figure,
@@ -163,14 +163,13 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
     roles = {d["name"]: d["role"] for d in inputs.datasets}
     order = [d["name"] for d in inputs.datasets if d["name"] in inputs.tables]
     order += sorted(set(inputs.tables) - set(order))
-    excitation = []
+    jobs: dict[str, list[tuple[str, FigureJob]]] = {"excitation": [], "free_run": []}
     for name in order:
         if roles.get(name) == "estimation" and name in inputs.derivs:
             table = inputs.tables[name]
-            fig = excitation_figure(table, inputs.derivs[name], name, _unit(table))
+            args = (table, inputs.derivs[name][["q_dot", "q_ddot"]], name, _unit(table))
             caption = f"Fig. 11a: estimation record '{name}': q, q_dot, q_ddot and the inputs v_i"
-            excitation.append((caption, png_bytes(fig, REPORT_DPI)))
-    free_run = []
+            jobs["excitation"].append((caption, FigureJob(excitation_figure, args, dpi=REPORT_DPI)))
     for name in order:
         runs = inputs.runs.get(name) or {}
         if not runs or name not in inputs.derivs:
@@ -180,7 +179,9 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
         window = dynamic_window(deriv["t"].to_numpy(), deriv["q_ddot"].to_numpy(), cfg.zoom_window)
         scores = {r["model"]: r.get("nrmse_q") for r in nrmse if r.get("dataset") == name}
         unit = _unit(inputs.tables[name]) if name in inputs.tables else "m"
-        fig = free_run_figure(measured, runs, window, name, unit, scores)
+        runs = {model: run[["q_sim"]] for model, run in runs.items()}
+        args = (measured, runs, window, name, unit, scores)
+        job = FigureJob(free_run_figure, args, dpi=REPORT_DPI)
         what = (
             "Fig. 12, estimation data"
             if roles.get(name) == "estimation"
@@ -191,9 +192,11 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
             f"{', '.join(runs)}; middle: Fig. 13, the {cfg.zoom_window:g} s window with the "
             "largest q_ddot RMS; bottom: the errors"
         )
-        free_run.append((caption, png_bytes(fig, REPORT_DPI)))
-    figures["excitation"] = excitation
-    figures["free_run"] = free_run
+        jobs["free_run"].append((caption, job))
+    # the figures are drawn in parallel processes: the same PNG bytes as one after the other
+    pngs = iter(render_pngs([job for group in jobs.values() for _, job in group]))
+    for group, items in jobs.items():
+        figures[group] = [(caption, next(pngs)) for caption, _ in items]
     datasets = []
     for d in inputs.datasets:
         t = inputs.tables[d["name"]]["t"] if d["name"] in inputs.tables else None

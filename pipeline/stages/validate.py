@@ -14,6 +14,7 @@ from pipeline.datasets import validation_datasets
 from pipeline.identify import RBFModel
 from pipeline.identify.stability import model_is_stable
 from pipeline.physics_stages import analytical_for
+from pipeline.render import FigureJob, render_pngs
 from pipeline.stages import StageInputs, StageOutput
 from pipeline.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
 
@@ -34,16 +35,27 @@ class ValidateResult:
         NRMSE and RMS per data set and model.
     simulated : dict of str to pandas.DataFrame
         Measured and simulated trajectories per data set.
-    figures : dict of str to matplotlib.figure.Figure
-        Measured vs simulated q per data set.
+    plots : dict of str to pipeline.render.FigureJob
+        Measured vs simulated q per data set, to draw (:func:`pipeline.plots.free_run_figure`).
     sim_time : float
         Wall time of the free runs [s].
     """
 
     table: pd.DataFrame
     simulated: dict[str, pd.DataFrame]
-    figures: dict[str, Any]
+    plots: dict[str, FigureJob]
     sim_time: float = 0.0
+
+    @property
+    def figures(self) -> dict[str, Any]:
+        """The figures of :attr:`plots`, drawn on each access.
+
+        Returns
+        -------
+        dict of str to matplotlib.figure.Figure
+            Per data set.
+        """
+        return {name: job.figure() for name, job in self.plots.items()}
 
 
 def run_validate(
@@ -113,18 +125,21 @@ def run_validate(
         if not stable:
             table = mark_unstable(table, name, reason)
     units = {ds.name: ds.q_unit for ds in datasets}
-    figures = {
-        name: free_run_figure(
-            sim,
-            name,
-            table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
-            cfg.init_samples,
-            units[name],
-            cfg.report_unit,
+    plots = {
+        name: FigureJob(
+            free_run_figure,
+            (
+                sim[["t", "q", "q_sim"]],
+                name,
+                table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
+                cfg.init_samples,
+                units[name],
+                cfg.report_unit,
+            ),
         )
         for name, sim in simulated.items()
     }
-    return ValidateResult(table, simulated, figures, sim_time)
+    return ValidateResult(table, simulated, plots, sim_time)
 
 
 def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
@@ -170,8 +185,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError
         As :func:`run_validate`.
     """
-    from pipeline.artifacts import Figure
-
     tree = ctx.read_h5("identify", "model.h5")
     model = RBFModel.from_tree(tree)
     ls = tree.get("equation_error")
@@ -187,7 +200,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     )
     outputs: dict[str, Any] = {"nrmse.parquet": res.table}
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
-    outputs.update({f"plots/{n}.png": Figure(f) for n, f in res.figures.items()})
+    # drawn in parallel processes: the same PNG bytes as one after the other
+    pngs = render_pngs(list(res.plots.values()))
+    outputs.update({f"plots/{n}.png": png for n, png in zip(res.plots, pngs, strict=True)})
     summary = {
         "table": res.table.to_dict(orient="records"),
         "published": list(section.get("published", [])),

@@ -1,0 +1,61 @@
+"""How many forked worker processes a stage may start for independent pieces of work.
+
+The rig's experiments and the stages' figures are independent pieces of CPU-bound work that
+a stage can hand to worker processes (:class:`concurrent.futures.ProcessPoolExecutor` with
+the POSIX ``fork`` start method, so a child starts without importing the library again).
+:func:`fork_workers` is the one policy for both: one process per core, and none where
+forking is unsafe or pointless.
+
+References
+----------
+Python documentation, :mod:`concurrent.futures` (ProcessPoolExecutor) and
+:mod:`multiprocessing` (start methods; "Contexts and start methods": forking a
+multithreaded process is problematic).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+
+__all__ = ["fork_context", "fork_workers"]
+
+
+def fork_workers(n: int) -> int:
+    """Count the processes for ``n`` independent jobs: one per core, 1 where forking is unsafe.
+
+    A daemonic process (a Dask or multiprocessing worker, which already runs in parallel
+    with its peers) may not start children; only POSIX ``fork`` starts a child without
+    importing the library again (``spawn`` costs more than a short job saves); outside the
+    main thread (``debist batch`` with threads) another thread may hold a lock that a forked
+    child could never take.
+
+    Parameters
+    ----------
+    n : int
+        Number of jobs.
+
+    Returns
+    -------
+    int
+        Processes to use, the calling one included: ``min(n, cores)``, or 1.
+    """
+    if n < 2 or multiprocessing.current_process().daemon:
+        return 1
+    if threading.current_thread() is not threading.main_thread():
+        return 1
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(n, cores or 1))
+
+
+def fork_context():
+    """Return the ``fork`` multiprocessing context (check :func:`fork_workers` first).
+
+    Returns
+    -------
+    multiprocessing.context.ForkContext
+    """
+    return multiprocessing.get_context("fork")

@@ -1,0 +1,125 @@
+"""Figures drawn and rendered to PNG bytes, several at a time in forked processes.
+
+A stage that writes several figures (the validate stage's free runs, the report's Fig. 11a,
+12, 13 and 15) spends most of its time in matplotlib's layout and Agg rendering, on one
+core. :func:`render_pngs` draws the figures of a list in worker processes, one per core:
+each figure is drawn and rendered by the same code in a copy of the same process (POSIX
+``fork``), so its bytes are those of a serial rendering (:func:`pipeline.fileformats.
+png_bytes`). Where forking is unsafe or pointless the figures are rendered here, one after
+the other (:func:`pipeline.forking.fork_workers`).
+
+References
+----------
+Python documentation, :mod:`concurrent.futures` (ProcessPoolExecutor) and
+:mod:`multiprocessing` (start methods); matplotlib documentation, "Embedding in a web
+application server" (``matplotlib.figure.Figure`` without pyplot).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+from pipeline.fileformats import png_bytes
+from pipeline.forking import fork_context, fork_workers
+
+__all__ = ["FigureJob", "render_pngs"]
+
+
+@dataclass(frozen=True)
+class FigureJob:
+    """A figure to draw and render: ``draw(*args, **kwargs)`` at ``dpi``.
+
+    Parameters
+    ----------
+    draw : callable
+        A module-level function that returns a ``matplotlib.figure.Figure`` (it is sent
+        to a worker process by reference).
+    args : tuple, optional
+        Its positional arguments (picklable).
+    kwargs : mapping, optional
+        Its keyword arguments (picklable).
+    dpi : int, optional
+        Resolution of the PNG [dots per inch].
+    """
+
+    draw: Callable[..., Any]
+    args: tuple = ()
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+    dpi: int = 110
+
+    def figure(self) -> Any:
+        """Draw the figure.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        return self.draw(*self.args, **dict(self.kwargs))
+
+    def png(self) -> bytes:
+        """Draw the figure and render it to PNG bytes (:func:`pipeline.fileformats.png_bytes`).
+
+        Returns
+        -------
+        bytes
+            The PNG file.
+        """
+        return png_bytes(self.figure(), self.dpi)
+
+
+def _render(job: FigureJob) -> tuple[bytes, list[tuple[str, type[Warning], str, int]]]:
+    """Render a job in a worker; its warnings travel back with the bytes (see _replay)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        png = job.png()
+    return png, [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
+
+
+def _replay(result: tuple[bytes, list[tuple[str, type[Warning], str, int]]]) -> bytes:
+    """Issue a worker's warnings here, as a serial rendering would have, and return its bytes."""
+    png, caught = result
+    for message, category, filename, lineno in caught:
+        warnings.warn_explicit(message, category, filename, lineno)
+    return png
+
+
+def render_pngs(jobs: Sequence[FigureJob]) -> list[bytes]:
+    """Draw and render figures to PNG bytes, in forked worker processes where that is safe.
+
+    This process renders the first ``ceil(n / workers)`` figures while ``workers - 1``
+    forked processes render the rest (one process per core).
+
+    Parameters
+    ----------
+    jobs : sequence of FigureJob
+        The figures.
+
+    Returns
+    -------
+    list of bytes
+        The PNG files, in the order of ``jobs``; the same bytes as ``job.png()`` here.
+
+    Raises
+    ------
+    Exception
+        What drawing a figure raised (re-raised from the worker; a worker's warnings are
+        issued here).
+
+    References
+    ----------
+    Python documentation, :class:`concurrent.futures.ProcessPoolExecutor`.
+    """
+    jobs = list(jobs)
+    workers = fork_workers(len(jobs))
+    if workers == 1:
+        return [job.png() for job in jobs]
+    import matplotlib.figure  # noqa: F401  (imported once here, inherited by the workers)
+
+    mine = -(-len(jobs) // workers)
+    with ProcessPoolExecutor(workers - 1, mp_context=fork_context()) as pool:
+        theirs = pool.map(_render, jobs[mine:])
+        return [job.png() for job in jobs[:mine]] + [_replay(r) for r in theirs]
