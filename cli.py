@@ -364,6 +364,9 @@ def _report(runner, manifests, ran: set[str]) -> None:
             console.print(design)
         for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
+        line = report.auto_line(manifests["identify"].summary)
+        if line:
+            console.print(escape(line), style="yellow" if "undecided" in line else None)
     last = "compare" if "compare" in manifests else "validate"
     if "compare" in manifests:
         s = manifests["compare"].summary

@@ -373,6 +373,43 @@ def equilibrium_kind(row: dict[str, Any]) -> str:
     return kind
 
 
+def auto_line(summary: dict[str, Any]) -> str:
+    """Describe the hyper-parameter search of ``[identify.auto]`` in one line (or ``""``).
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``auto`` entry).
+
+    Returns
+    -------
+    str
+        The chosen setting, the number of candidates and folds, the best mean score with its
+        standard error; when the folds disagree (``undecided``) a warning that the choice
+        is not supported by the estimation data.
+    """
+    auto = summary.get("auto")
+    if not auto:
+        return ""
+    chosen = ", ".join(f"{k} = {v!r}" for k, v in auto["chosen"].items())
+    best = auto["candidates"][auto["best"]]
+    score = (
+        f"best held-out NRMSE(q) {100 * best['mean']:.3g} % +- {100 * best['se']:.2g} %"
+        if best["mean"] is not None and best["se"] is not None
+        else "no candidate scored"
+    )
+    line = (
+        f"hyper-parameters: {chosen}, chosen among {auto['n_candidates']} candidates by "
+        f"blocked {auto['folds']}-fold cross-validation ({score}; identify/autotune.parquet)"
+    )
+    if auto.get("undecided"):
+        line += (
+            ": undecided, the folds disagree (one lost a switch?), so the one-standard-error "
+            "rule admits nearly every candidate; the estimation data do not support the choice"
+        )
+    return line
+
+
 def switching_note(row: dict[str, Any]) -> str:
     """Return the caveat of one switching-voltage row, or ``""`` when the data support it.
 

@@ -12,6 +12,7 @@ from scipy.integrate import solve_ivp
 from pipeline.errors import IdentificationError, WorkflowError
 from pipeline.identify import IdentifyConfig, RBFBasis, RBFModel, Record
 from pipeline.identify.autotune import (
+    auto_settings,
     autotune_figure,
     blocked_folds,
     one_standard_error,
@@ -257,3 +258,49 @@ def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypa
     assert res.chosen == {"M": 8, "sigma_n": 1.0, "smoothing": 0.0}
     # the sweep of sigma_n ran at the M found by the first sweep
     assert set(res.table.loc[res.table["sigma_n"] != 0.5, "M"]) == {8}
+
+
+def test_the_auto_table_is_checked_when_the_workflow_is_read():
+    """[identify.auto] errors name the table, the key and the value, on one line."""
+    ok = IdentifyConfig.from_dict({"auto": {"M": [6, 8], "sigma_n": 1.0, "folds": 3}})
+    assert auto_settings(ok) == ({"M": [6, 8], "sigma_n": [1.0]}, 3)
+    for table, message in (
+        ({"Q": [1]}, r"\[identify.auto\]: unknown key 'Q'"),
+        ({"M": [8, 1]}, r"\[identify.auto\]: the setting \{'M': 1\}.*greater than or equal to 2"),
+        ({"M": [8], "folds": 1}, r"\[identify.auto\] folds: expected an integer >= 2, got 1"),
+        ({"auto": [None]}, r"unknown key 'auto'"),
+        ({}, r"\[identify.auto\] is empty"),
+    ):
+        with pytest.raises(WorkflowError, match=message) as info:
+            IdentifyConfig.from_dict({"auto": table})
+        assert "\n" not in str(info.value)
+
+
+def test_the_identify_stage_fits_the_searched_setting_and_reports_the_search(in_class_record):
+    """With [identify.auto] the stage's model is the fit at the chosen setting (the same
+    model as a plain fit at that setting), and the summary carries the search."""
+    from pipeline.report import auto_line
+    from pipeline.stages.identify import UNDECIDED_SE, run_identify, undecided
+
+    rec = in_class_record
+    t = np.arange(rec.q.size) * rec.dt
+    frame = pd.DataFrame({"t": t, "q": rec.q, "v1": rec.v[:, 0], "v2": rec.v[:, 1]})
+    frame.attrs.update(role="estimation", units={"q": "m", "t": "s", "v1": "V", "v2": "V"})
+    deriv = pd.DataFrame({"q_dot": rec.q_dot, "q_ddot": rec.q_ddot})
+    deriv.attrs["dt"] = rec.dt
+    section = {**_BASE, "q_range": list(_BASE["q_range"]), "backbone": list(_BASE["backbone"])}
+    section["min_support"] = 10  # the excitation check's sample count
+    res = run_identify({"sim": frame}, {"sim": deriv}, {**section, "auto": {"M": [4, 8]}})
+    assert res.search is not None and res.search.chosen == {"M": 8}
+    assert res.model.basis.M == 8
+    plain = run_identify({"sim": frame}, {"sim": deriv}, {**section, "M": 8})
+    np.testing.assert_array_equal(res.model.theta_c, plain.model.theta_c)
+    auto = res.summary["auto"]
+    json.dumps(auto, allow_nan=False)
+    assert auto["chosen"] == {"M": 8} and auto["n_candidates"] == 2
+    best = res.search.table.loc[res.search.best]
+    assert auto["undecided"] == (best["se"] > UNDECIDED_SE * best["mean"]) == undecided(res.search)
+    line = auto_line(res.summary)
+    assert line.startswith("hyper-parameters: M = 8, chosen among 2 candidates")
+    assert ("undecided" in line) == auto["undecided"]
+    assert "hyper-parameters" in res.timings and "auto" not in plain.summary

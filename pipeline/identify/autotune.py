@@ -70,6 +70,7 @@ __all__ = [
     "PARSIMONY",
     "AutoResult",
     "Fold",
+    "auto_settings",
     "autotune_figure",
     "blocked_folds",
     "one_standard_error",
@@ -298,9 +299,11 @@ def _candidate_cfg(base: IdentifyConfig, setting: Mapping[str, Any]) -> Identify
     try:
         return replace(base, **dict(setting), bootstrap=0)
     except ValueError as exc:  # pydantic.ValidationError and ConfigValueError
+        errors = getattr(exc, "errors", None)
+        reason = errors()[0]["msg"] if callable(errors) and errors() else str(exc)
         raise WorkflowError(
             f"[identify] hyper-parameter grid: the setting {dict(setting)!r} is not a valid "
-            f"configuration: {exc}"
+            f"configuration: {reason}"
         ) from None
 
 
@@ -412,7 +415,7 @@ def _column(values: list[Any]) -> list[Any] | np.ndarray:
 
 
 def _check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[str, list]:
-    known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap"}
+    known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap", "auto", "refine"}
     out = {}
     if not grid:
         raise WorkflowError("[identify] hyper-parameter grid is empty")
@@ -428,6 +431,40 @@ def _check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict
             _candidate_cfg(base, {key: v})  # refuse an invalid value before any fit
         out[key] = values
     return out
+
+
+def auto_settings(cfg: IdentifyConfig) -> tuple[dict[str, list], int]:
+    """Read the ``[identify.auto]`` table of a configuration: the candidate grid and the folds.
+
+    Parameters
+    ----------
+    cfg : IdentifyConfig
+        A configuration whose ``auto`` is a table of candidate lists per field (a single
+        value counts as a list of one) and optionally ``folds`` (an integer >= 2, default 4).
+
+    Returns
+    -------
+    grid : dict of str to list
+        Candidates per field, each checked to make a valid configuration.
+    folds : int
+        Blocks per record.
+
+    Raises
+    ------
+    WorkflowError
+        For an empty grid, an unknown field, an invalid candidate value or an invalid
+        ``folds``, naming ``[identify.auto]``.
+    """
+    table = dict(cfg.auto or {})
+    folds = table.pop("folds", 4)
+    if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
+        raise WorkflowError(f"[identify.auto] folds: expected an integer >= 2, got {folds!r}")
+    try:
+        grid = _check_grid(replace(cfg, auto=None), table)
+    except WorkflowError as exc:
+        text = str(exc).replace("[identify] hyper-parameter grid", "[identify.auto]")
+        raise WorkflowError(text) from None
+    return grid, int(folds)
 
 
 def select_hyperparameters(

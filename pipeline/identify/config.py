@@ -78,6 +78,12 @@ class IdentifyConfig:
         ``[identify.refine]``: refine the least-squares parameters by minimising the
         windowed free-run error on the estimation data (see
         :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
+    auto : dict or None
+        ``[identify.auto]``: choose hyper-parameters by blocked cross-validation of the
+        free-run error on the estimation records before the fit
+        (:func:`pipeline.identify.autotune.auto_settings`): candidate lists per field, e.g.
+        ``{"M": [6, 8, 10], "sigma_n": [0.5, 1.0]}``, and optionally ``folds`` (default 4);
+        absent: the values given are used.
     smoothing : float or "gcv"
         Weight lambda of a second-difference penalty on each RBF curve's weights
         (:mod:`pipeline.identify.regularise`; dimensionless, on the column-scaled weights);
@@ -132,6 +138,10 @@ class IdentifyConfig:
         dict[str, Any] | bool | None,
         Field(description="a table of [identify.refine] settings, true or false"),
     ] = None
+    auto: Annotated[
+        dict[str, Any] | None,
+        Field(description="a table of candidate lists, e.g. M = [6, 8, 10], and folds"),
+    ] = None
     smoothing: Annotated[
         Annotated[float, Field(ge=0, allow_inf_nan=False)] | Literal["gcv"],
         Field(description='a weight >= 0 or "gcv"'),
@@ -174,6 +184,10 @@ class IdentifyConfig:
             from pipeline.identify.refine import refine_config
 
             refine_config(self.refine)
+        if self.auto is not None:
+            from pipeline.identify.autotune import auto_settings
+
+            auto_settings(self)
 
     @classmethod
     def from_dict(

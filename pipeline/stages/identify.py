@@ -36,11 +36,14 @@ class IdentifyResult:
     equation_error_model : RBFModel or None
         The least-squares model before simulation-error refinement.
     timings : dict of str to float
-        Wall times [s]: ``fit`` (least squares with the T_z search) and ``refine``.
+        Wall times [s]: ``fit`` (least squares with the T_z search), ``refine`` and
+        ``hyper-parameters`` (the search of ``[identify.auto]``).
     design : dict of str to pandas.DataFrame
         Equilibria and switching voltages (:func:`pipeline.identify.design.design_numbers`)
         and the static force at the held input levels with bands and masks (``static``,
         :func:`pipeline.identify.bands.static_frame`).
+    search : pipeline.identify.autotune.AutoResult or None
+        The hyper-parameter search of ``[identify.auto]`` (None without it).
     """
 
     model: RBFModel
@@ -50,6 +53,7 @@ class IdentifyResult:
     equation_error_model: RBFModel | None = None
     timings: dict[str, float] = field(default_factory=dict)
     design: dict[str, pd.DataFrame] = field(default_factory=dict)
+    search: Any = None
 
 
 def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
@@ -78,6 +82,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     WorkflowError
         For an invalid section.
     """
+    from pipeline.identify.autotune import auto_settings, select_hyperparameters
     from pipeline.identify.bands import curves_frame, static_frame
     from pipeline.identify.design import (
         design_numbers,
@@ -92,13 +97,20 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     if section.get("m_q") == "physics":
         section["m_q"] = physics_mass(physics)
     cfg = IdentifyConfig.from_dict(section)
-    t0 = time.perf_counter()
     records = estimation_records(tables, derivs)
     if set(PHYSICS_TERMS) & set(cfg.backbone):
         cfg = replace(cfg, prior=physics_prior(physics, records))
+    search = None
+    if cfg.auto is not None:  # [identify.auto]: the grid's choice replaces the given values
+        grid, folds = auto_settings(cfg)
+        search = select_hyperparameters(records, replace(cfg, auto=None), grid, folds=folds)
+        cfg = replace(cfg, auto=None, **search.chosen)
     excitation = _excitation(records, cfg, tables)
+    t_fit = time.perf_counter()
     model, diag = fit_rbf_model(records, cfg)
-    timings = {"fit": time.perf_counter() - t0}
+    timings = {"fit": time.perf_counter() - t_fit}
+    if search is not None:
+        timings["hyper-parameters"] = search.seconds
     ls_model, refine = model, None
     rcfg = refine_config(cfg.refine)
     if rcfg is not None:
@@ -151,7 +163,40 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "constraints": list(cfg.constraints),
         "units": _units(tables, cfg),
     }
-    return IdentifyResult(model, diag, curves, summary, ls_model, timings, design)
+    if search is not None:
+        summary["auto"] = {**search.to_summary(), "undecided": undecided(search)}
+    return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
+
+
+#: The search is undecided when the best candidate's standard error across the folds exceeds
+#: this fraction of its mean score: its folds disagree (typically one lost a switch).
+UNDECIDED_SE = 0.5
+
+
+def undecided(search) -> bool:
+    """Say whether a hyper-parameter search's folds disagree too much to support its choice.
+
+    Parameters
+    ----------
+    search : pipeline.identify.autotune.AutoResult
+        The search.
+
+    Returns
+    -------
+    bool
+        True when the best candidate's standard error of the fold scores exceeds
+        :data:`UNDECIDED_SE` of their mean (or the mean is not finite): the folds disagree,
+        e.g. one held-out block of a bistable record lost a switch, and the
+        one-standard-error rule then admits every candidate.
+
+    References
+    ----------
+    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
+    Sec. 7.10 (the standard error of a K-fold estimate).
+    """
+    row = search.table.loc[search.best]
+    mean, se = float(row["mean"]), float(row["se"])
+    return not np.isfinite(mean) or not np.isfinite(se) or se > UNDECIDED_SE * mean
 
 
 def _excitation(records, cfg: IdentifyConfig, tables):
@@ -221,7 +266,9 @@ def execute(ctx: StageInputs) -> StageOutput:
         ``model.h5`` (the model, its fit diagnostics and, after refinement, the
         equation-error model), ``curves.parquet`` and ``plots/curves.png`` (Fig. 14, with
         the analytical curves when the workflow has ``[physics]``), ``equilibria.parquet``,
-        ``switching.parquet`` and ``static.parquet`` (the static force at the held levels).
+        ``switching.parquet`` and ``static.parquet`` (the static force at the held levels);
+        with ``[identify.auto]`` ``autotune.parquet`` and ``plots/autotune.png`` (the
+        search's table and figure).
 
     Raises
     ------
@@ -244,6 +291,11 @@ def execute(ctx: StageInputs) -> StageOutput:
     figure = Figure(curves_figure(res.curves, analytical, unit, summary_units(res.summary)))
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
+    if res.search is not None:
+        from pipeline.identify.autotune import autotune_figure
+
+        outputs["autotune.parquet"] = res.search.table
+        outputs["plots/autotune.png"] = Figure(autotune_figure(res.search))
     return StageOutput(outputs, res.summary, res.timings)
 
 
