@@ -31,7 +31,7 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
-from pipeline.report import equilibrium_kind, switching_note
+from pipeline.report import auto_line, equilibrium_kind, switching_note
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -223,6 +223,7 @@ the mean of q (a model is only useful below it).</p>
 {% else %}<p>None.</p>{% endif %}
 
 <h2 id="s8">{{ sections[7] }}</h2>
+{% if auto %}<p>{{ auto }}</p>{% endif %}
 {{ show(figures.study, "Not run (add a [study] section).") }}
 
 <h2 id="s9">{{ sections[8] }}</h2>
@@ -461,6 +462,7 @@ def render_report(run: dict[str, Any]) -> str:
         model=_model_rows(identify) if identify else [],
         design=_design(identify),
         warnings=(identify.get("excitation") or {}).get("warnings", []),
+        auto=auto_line(identify) if identify else "",
         figures=figures,
         equations=run.get("equations"),
         digest=run.get("digest"),

@@ -275,3 +275,29 @@ def test_batch_index_lists_only_identified_wells():
     ]
     assert _wells({"equilibria": rows}) == "-10.5, 11.3 mm (+1 not identified)"
     assert _wells({"equilibria": rows[:1]}) == "-10.5 mm"
+
+
+def test_an_undecided_hyper_parameter_search_says_so(run):
+    """The [identify.auto] line is on the page, with 'undecided' when the folds disagree."""
+    import copy
+
+    from pipeline.report import auto_line
+
+    assert "hyper-parameters:" not in render_report(run)
+    run = copy.deepcopy(run)
+    candidates = [
+        {"settings": {"M": m}, "mean": mean, "se": se}
+        for m, mean, se in ((6, 0.107, 0.098), (8, 0.11, 0.09))
+    ]
+    auto = {"chosen": {"M": 6}, "best": 0, "folds": 4, "n_candidates": 2,
+            "candidates": candidates, "undecided": True}  # fmt: skip
+    run["identify"]["auto"] = auto
+    html = render_report(run)
+    line = auto_line(run["identify"])
+    assert line.startswith("hyper-parameters: M = 6, chosen among 2 candidates by blocked 4-fold")
+    assert "10.7 % +- 9.8 %" in line and "undecided" in line
+    assert f"<p>{line}</p>" in html
+    study = html.index(SECTIONS[7])
+    assert html.index("hyper-parameters:") > study  # in the hyper-parameter search section
+    auto["undecided"] = False
+    assert "undecided" not in auto_line(run["identify"])

@@ -63,6 +63,13 @@ IMAGES = (
         "Fig. 11b: NRMSE of the free run over the RBF grid (number of centres M, width sigma_n)",
     ),
     ("study", "alpha.png", "study", "Fig. 11c: NRMSE of the free run over TVRegDiff's alpha"),
+    (
+        "identify",
+        "plots/autotune.png",
+        "study",
+        "[identify.auto]: held-out free-run NRMSE of each candidate by blocked cross-validation "
+        "(Fig. 11b, 11c generalised), with the one-standard-error bound and the choice",
+    ),
     ("analyze", None, "analyze", "Design analysis"),
 )
 
