@@ -184,6 +184,20 @@ def _progress_console() -> Console | None:
     return Console(stderr=True) if terminal and _level["value"] >= 0 else None
 
 
+def _bar_columns(label) -> tuple:
+    """Return the columns of every progress bar: ``label``, bar, done/total, elapsed, time left."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return (label, BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TextColumn("left"),
+            TimeRemainingColumn())  # fmt: skip
+
+
 class _Display:
     """Progress reports (:mod:`pipeline.progress`) drawn as rich progress bars, one per task.
 
@@ -203,22 +217,10 @@ class _Display:
     """
 
     def __init__(self, target: Console):
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
+        from rich.progress import Progress, TextColumn
 
         self.bars = Progress(
-            TextColumn("{task.description}", markup=False),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TextColumn("left"),
-            TimeRemainingColumn(),
+            *_bar_columns(TextColumn("{task.description}", markup=False)),
             console=target,
             transient=True,
             redirect_stdout=sys.stdout.isatty(),  # stage lines above the bars, not through them
@@ -726,14 +728,7 @@ def batch(
 
     Ends with a summary table, one row per workflow file, also after failures.
     """
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    from rich.progress import Progress, TextColumn
     from rich.table import Table
 
     from pipeline.batch import expand_workflows, run_batch, summary_table, write_index
@@ -741,15 +736,8 @@ def batch(
     selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
         files = expand_workflows(paths)
-        columns = (
-            TextColumn("batch: workflows"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TextColumn("left"),
-            TimeRemainingColumn(),
-        )
         target = _progress_console()
+        columns = _bar_columns(TextColumn("batch: workflows"))
         with Progress(*columns, console=target, transient=True, disable=target is None) as bar:
             task = bar.add_task("batch", total=len(files))
             results = run_batch(
