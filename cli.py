@@ -368,7 +368,8 @@ def _report(runner, manifests, ran: set[str]) -> None:
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
         line = report.auto_line(manifests["identify"].summary)
         if line:
-            console.print(escape(line), style="yellow" if "undecided" in line else None)
+            warn = manifests["identify"].summary["auto"].get("undecided")
+            console.print(escape(line), style="yellow" if warn else None)
     last = "compare" if "compare" in manifests else "validate"
     if "compare" in manifests:
         s = manifests["compare"].summary

@@ -1,4 +1,4 @@
-"""Figures of the hyper-parameter studies (Masoud & Maas 2025, Fig. 11b and 11c).
+"""Figures of the hyper-parameter studies and searches (Masoud & Maas 2025, Fig. 11b and 11c).
 
 Pure plotting: each function takes a study table from :mod:`pipeline.studies` and
 returns a matplotlib figure; saving is the caller's (the artifacts module).
@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["WINDOW_SAMPLES", "alpha_figure", "grid_figure"]
+__all__ = ["WINDOW_SAMPLES", "alpha_figure", "autotune_figure", "grid_figure"]
 
 #: Samples of the estimation record shown in the alpha-study figure (Fig. 11c).
 WINDOW_SAMPLES = 400
@@ -230,4 +230,88 @@ def alpha_figure(
     for a in alpha[bad.to_numpy()]:
         for ax in (ax_n, ax_e, ax_r):
             ax.axvline(a, color="0.6", ls=":", lw=1)
+    return fig
+
+
+def autotune_figure(result) -> Any:
+    """Draw the cross-validation score against the candidates (Fig. 11b, 11c generalised).
+
+    The x axis is ``M`` when the grid varies it (else the first varied parameter); one line
+    per setting of the other grid parameters, with one-standard-error bars. The dashed line
+    is the one-standard-error bound, the ring the chosen candidate; failed or diverged
+    candidates are crosses at the top edge.
+
+    Parameters
+    ----------
+    result : pipeline.identify.autotune.AutoResult
+        Output of :func:`pipeline.identify.autotune.select_hyperparameters`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One axis: mean NRMSE(q) of the held-out blocks [%] against the x parameter.
+
+    References
+    ----------
+    Masoud & Maas 2025, Fig. 11b, 11c (validation error against M and sigma_n).
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.transforms import blended_transform_factory
+
+    table = result.table
+    keys = list(result.settings[0]) if result.settings else ["M"]
+    varied = [k for k in keys if len({repr(s[k]) for s in result.settings}) > 1] or keys
+    x_key = "M" if "M" in varied else varied[0]
+    others = [k for k in varied if k != x_key]
+    xs = [s[x_key] for s in result.settings]
+    numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
+    labels = sorted({repr(x) for x in xs}) if not numeric else []
+
+    def pos(x: Any) -> float:
+        return float(x) if numeric else float(labels.index(repr(x)))
+
+    fig = Figure(figsize=(8, 5))
+    ax = fig.subplots()
+    groups: dict[str, list[int]] = {}
+    for i, s in enumerate(result.settings):
+        label = ", ".join(f"{k} = {s[k]!r}" for k in others) or "score"
+        groups.setdefault(label, []).append(i)
+    top = blended_transform_factory(ax.transData, ax.transAxes)
+    failed = False
+    for label, rows in groups.items():
+        rows = sorted(rows, key=lambda i: pos(result.settings[i][x_key]))
+        ok = [i for i in rows if np.isfinite(table.loc[i, "mean"])]
+        if ok:
+            ax.errorbar(
+                [pos(result.settings[i][x_key]) for i in ok],
+                [100 * table.loc[i, "mean"] for i in ok],
+                yerr=[100 * table.loc[i, "se"] for i in ok],
+                marker="o", ms=4, capsize=3, lw=1, label=label,
+            )  # fmt: skip
+        for i in rows:
+            if not np.isfinite(table.loc[i, "mean"]):
+                failed = True
+                ax.plot(pos(result.settings[i][x_key]), 0.97, "x", color="tab:red",
+                        transform=top, clip_on=False)  # fmt: skip
+    c = int(table.index[table["chosen"]][0])
+    ax.plot(pos(result.settings[c][x_key]), 100 * table.loc[c, "mean"], "o", ms=13, mfc="none",
+            mec="k", mew=1.5, label="chosen (one-standard-error rule)")  # fmt: skip
+    ax.axhline(100 * result.threshold, color="0.4", ls="--", lw=1, label="best + 1 SE")
+    if failed:
+        ax.plot([], [], "x", color="tab:red", label="fit failed / diverged")
+    finite = table["mean"][np.isfinite(table["mean"])]
+    if len(finite) and finite.max() > 10 * finite.min() > 0:
+        ax.set_yscale("log")
+    if not numeric:
+        ax.set_xticks(range(len(labels)), labels)
+    ax.set_xlabel(x_key)
+    ax.set_ylabel("held-out free-run NRMSE(q) [%]")
+    ax.set_title(
+        f"blocked {result.folds}-fold cross-validation ({result.strategy}, "
+        f"{len(result.settings)} candidates)\nchosen: "
+        + ", ".join(f"{k} = {v!r}" for k, v in result.chosen.items()),
+        fontsize=9,
+    )
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
     return fig

@@ -13,11 +13,11 @@ from pipeline.errors import IdentificationError, WorkflowError
 from pipeline.identify import IdentifyConfig, RBFBasis, RBFModel, Record
 from pipeline.identify.autotune import (
     auto_settings,
-    autotune_figure,
     blocked_folds,
     one_standard_error,
     select_hyperparameters,
 )
+from pipeline.study_plots import autotune_figure
 
 
 def _reference_choice(rows: list[dict]) -> int:
@@ -279,8 +279,9 @@ def test_the_auto_table_is_checked_when_the_workflow_is_read():
 def test_the_identify_stage_fits_the_searched_setting_and_reports_the_search(in_class_record):
     """With [identify.auto] the stage's model is the fit at the chosen setting (the same
     model as a plain fit at that setting), and the summary carries the search."""
+    from pipeline.identify.autotune import UNDECIDED_SE, undecided
     from pipeline.report import auto_line
-    from pipeline.stages.identify import UNDECIDED_SE, run_identify, undecided
+    from pipeline.stages.identify import run_identify
 
     rec = in_class_record
     t = np.arange(rec.q.size) * rec.dt

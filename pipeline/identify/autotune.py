@@ -71,12 +71,15 @@ __all__ = [
     "AutoResult",
     "Fold",
     "auto_settings",
-    "autotune_figure",
     "blocked_folds",
     "one_standard_error",
     "select_hyperparameters",
+    "undecided",
 ]
 
+#: The search is undecided when the best candidate's standard error across the folds exceeds
+#: this fraction of its mean score: its folds disagree (typically one lost a switch).
+UNDECIDED_SE = 0.5
 #: Largest cartesian product of the grid evaluated whole; larger grids are swept.
 MAX_PRODUCT = 40
 #: Parsimony order of the table's columns: (column, ascending) -- most parsimonious first.
@@ -246,7 +249,8 @@ class AutoResult:
         dict
             ``chosen``, ``strategy``, ``folds``, ``best``, ``threshold``, ``n_candidates``
             and ``candidates``: per row its settings, ``n_params``, ``lambda``, ``mean``,
-            ``se``, ``folds`` (list), ``status``, ``message``. No wall time (reproducible).
+            ``se``, ``folds`` (list), ``status``, ``message``; ``undecided``
+            (:func:`undecided`). No wall time (reproducible).
         """
         k = self.folds
         rows = []
@@ -271,6 +275,7 @@ class AutoResult:
             "threshold": _num(self.threshold),
             "n_candidates": len(rows),
             "candidates": rows,
+            "undecided": undecided(self),
         }
 
 
@@ -618,85 +623,27 @@ def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
     return pd.DataFrame(data)
 
 
-def autotune_figure(result: AutoResult) -> Any:
-    """Draw the cross-validation score against the candidates (Fig. 11b, 11c generalised).
-
-    The x axis is ``M`` when the grid varies it (else the first varied parameter); one line
-    per setting of the other grid parameters, with one-standard-error bars. The dashed line
-    is the one-standard-error bound, the ring the chosen candidate; failed or diverged
-    candidates are crosses at the top edge.
+def undecided(search: AutoResult) -> bool:
+    """Say whether a hyper-parameter search's folds disagree too much to support its choice.
 
     Parameters
     ----------
-    result : AutoResult
-        Output of :func:`select_hyperparameters`.
+    search : AutoResult
+        The search.
 
     Returns
     -------
-    matplotlib.figure.Figure
-        One axis: mean NRMSE(q) of the held-out blocks [%] against the x parameter.
+    bool
+        True when the best candidate's standard error of the fold scores exceeds
+        :data:`UNDECIDED_SE` of their mean (or the mean is not finite): the folds disagree,
+        e.g. one held-out block of a bistable record lost a switch, and the
+        one-standard-error rule then admits every candidate.
 
     References
     ----------
-    Masoud & Maas 2025, Fig. 11b, 11c (validation error against M and sigma_n).
+    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
+    Sec. 7.10 (the standard error of a K-fold estimate).
     """
-    from matplotlib.figure import Figure
-    from matplotlib.transforms import blended_transform_factory
-
-    table = result.table
-    keys = list(result.settings[0]) if result.settings else ["M"]
-    varied = [k for k in keys if len({repr(s[k]) for s in result.settings}) > 1] or keys
-    x_key = "M" if "M" in varied else varied[0]
-    others = [k for k in varied if k != x_key]
-    xs = [s[x_key] for s in result.settings]
-    numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
-    labels = sorted({repr(x) for x in xs}) if not numeric else []
-
-    def pos(x: Any) -> float:
-        return float(x) if numeric else float(labels.index(repr(x)))
-
-    fig = Figure(figsize=(8, 5))
-    ax = fig.subplots()
-    groups: dict[str, list[int]] = {}
-    for i, s in enumerate(result.settings):
-        label = ", ".join(f"{k} = {s[k]!r}" for k in others) or "score"
-        groups.setdefault(label, []).append(i)
-    top = blended_transform_factory(ax.transData, ax.transAxes)
-    failed = False
-    for label, rows in groups.items():
-        rows = sorted(rows, key=lambda i: pos(result.settings[i][x_key]))
-        ok = [i for i in rows if np.isfinite(table.loc[i, "mean"])]
-        if ok:
-            ax.errorbar(
-                [pos(result.settings[i][x_key]) for i in ok],
-                [100 * table.loc[i, "mean"] for i in ok],
-                yerr=[100 * table.loc[i, "se"] for i in ok],
-                marker="o", ms=4, capsize=3, lw=1, label=label,
-            )  # fmt: skip
-        for i in rows:
-            if not np.isfinite(table.loc[i, "mean"]):
-                failed = True
-                ax.plot(pos(result.settings[i][x_key]), 0.97, "x", color="tab:red",
-                        transform=top, clip_on=False)  # fmt: skip
-    c = int(table.index[table["chosen"]][0])
-    ax.plot(pos(result.settings[c][x_key]), 100 * table.loc[c, "mean"], "o", ms=13, mfc="none",
-            mec="k", mew=1.5, label="chosen (one-standard-error rule)")  # fmt: skip
-    ax.axhline(100 * result.threshold, color="0.4", ls="--", lw=1, label="best + 1 SE")
-    if failed:
-        ax.plot([], [], "x", color="tab:red", label="fit failed / diverged")
-    finite = table["mean"][np.isfinite(table["mean"])]
-    if len(finite) and finite.max() > 10 * finite.min() > 0:
-        ax.set_yscale("log")
-    if not numeric:
-        ax.set_xticks(range(len(labels)), labels)
-    ax.set_xlabel(x_key)
-    ax.set_ylabel("held-out free-run NRMSE(q) [%]")
-    ax.set_title(
-        f"blocked {result.folds}-fold cross-validation ({result.strategy}, "
-        f"{len(result.settings)} candidates)\nchosen: "
-        + ", ".join(f"{k} = {v!r}" for k, v in result.chosen.items()),
-        fontsize=9,
-    )
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    return fig
+    row = search.table.loc[search.best]
+    mean, se = float(row["mean"]), float(row["se"])
+    return not np.isfinite(mean) or not np.isfinite(se) or se > UNDECIDED_SE * mean

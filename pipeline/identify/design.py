@@ -286,8 +286,7 @@ def mark_switching(switching: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFram
             flags.append(False)
             continue
         lo, hi = min(ends), max(ends)
-        span = (grid >= lo) & (grid <= hi)
-        span[int(np.argmin(np.abs(grid - lo))) : int(np.argmin(np.abs(grid - hi))) + 1] = True
+        span = slice(int(np.argmin(np.abs(grid - lo))), int(np.argmin(np.abs(grid - hi))) + 1)
         ok = restoring & curves[column].to_numpy(dtype=bool)
         flags.append(bool(lo >= grid[0] and hi <= grid[-1] and ok[span].all()))
     out = switching.assign(identified=np.array(flags, dtype=bool))

@@ -164,39 +164,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "units": _units(tables, cfg),
     }
     if search is not None:
-        summary["auto"] = {**search.to_summary(), "undecided": undecided(search)}
+        summary["auto"] = search.to_summary()
     return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
-
-
-#: The search is undecided when the best candidate's standard error across the folds exceeds
-#: this fraction of its mean score: its folds disagree (typically one lost a switch).
-UNDECIDED_SE = 0.5
-
-
-def undecided(search) -> bool:
-    """Say whether a hyper-parameter search's folds disagree too much to support its choice.
-
-    Parameters
-    ----------
-    search : pipeline.identify.autotune.AutoResult
-        The search.
-
-    Returns
-    -------
-    bool
-        True when the best candidate's standard error of the fold scores exceeds
-        :data:`UNDECIDED_SE` of their mean (or the mean is not finite): the folds disagree,
-        e.g. one held-out block of a bistable record lost a switch, and the
-        one-standard-error rule then admits every candidate.
-
-    References
-    ----------
-    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
-    Sec. 7.10 (the standard error of a K-fold estimate).
-    """
-    row = search.table.loc[search.best]
-    mean, se = float(row["mean"]), float(row["se"])
-    return not np.isfinite(mean) or not np.isfinite(se) or se > UNDECIDED_SE * mean
 
 
 def _excitation(records, cfg: IdentifyConfig, tables):
@@ -292,7 +261,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
-        from pipeline.identify.autotune import autotune_figure
+        from pipeline.study_plots import autotune_figure
 
         outputs["autotune.parquet"] = res.search.table
         outputs["plots/autotune.png"] = Figure(autotune_figure(res.search))
