@@ -1,0 +1,187 @@
+"""Shared pieces of every export: provenance, the model's constants, the curve table, literals.
+
+References
+----------
+Masoud & Maas 2025, Eq. 37 (the term table); NumPy ``numpy.interp`` (the table semantics).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline import __version__
+from pipeline.errors import ArtifactError
+from pipeline.termtable import BASE_GAUSS
+
+__all__ = ["CURVE_POINTS", "ExportInfo", "curve_table"]
+
+#: Grid points of the characteristic-curve lookup table (as ``curves.parquet``).
+CURVE_POINTS = 201
+
+
+@dataclass(frozen=True)
+class ExportInfo:
+    """Provenance written into the header comment of every exported file.
+
+    Attributes
+    ----------
+    workflow : str
+        The workflow's name.
+    run_digest : str or None
+        The run digest (:func:`pipeline.outdir.run_digest`); None when a stage of the
+        workflow has not run.
+    identify_manifest : str or None
+        sha256 of ``identify/manifest.json`` (names the identified model even without a
+        run digest).
+    identified : dict of str to list
+        Per curve (``restoring``, ``d``, ``g1`` ...) the q intervals ``[a, b]`` [m] where
+        ``curves.parquet`` marks it identified; empty when unknown.
+    version : str
+        debist's version.
+    """
+
+    workflow: str = ""
+    run_digest: str | None = None
+    identify_manifest: str | None = None
+    identified: dict[str, list[list[float]]] = field(default_factory=dict)
+    version: str = __version__
+
+
+def _arrays(model) -> dict[str, Any]:
+    """Collect the constants of the exported model from its term table."""
+    tm = model.table_model()
+    t = tm.table
+    lag = float(model.T_z) > 0
+    return {
+        "n_inputs": t.n_inputs,
+        "n_states": 3 if lag else 2,
+        "lag": lag,
+        "T_z": float(model.T_z),
+        "m_q": float(tm.mass[0]),
+        "v_c": float(t.coulomb_velocity),
+        "input_map": t.input_map,
+        "q_range": (float(model.q_range[0]), float(model.q_range[1])),
+        "max_step": 1.5 * float(model.T_z) if lag else np.inf,
+        "clipped": bool(np.isfinite(t.base_lo[t.base_kind == BASE_GAUSS]).any()),
+        "base_kind": t.base_kind.tolist(),
+        "base_centre": t.base_centre.tolist(),
+        "base_width": t.base_width.tolist(),
+        "base_lo": t.base_lo.tolist(),
+        "base_hi": t.base_hi.tolist(),
+        "base_table": t.base_table.tolist(),
+        "table_q": t.table_q.tolist(),
+        "tables": t.tables.tolist(),
+        "term_names": list(t.names),
+        "term_base": t.term_base.tolist(),
+        "term_qpow": t.term_qpow.tolist(),
+        "term_skind": t.term_skind.tolist(),
+        "term_spow": t.term_spow.tolist(),
+        "term_hpow": t.term_hpow.tolist(),
+        "weights": tm.weights[0].tolist(),
+    }
+
+
+def curve_table(model, n: int = CURVE_POINTS) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """Tabulate the characteristic curves on the model's q range.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    n : int, optional
+        Grid points.
+
+    Returns
+    -------
+    q : ndarray, shape (n,)
+        Ascending grid over ``model.q_range`` [m].
+    names : list of str
+        ``restoring`` (``c(q) q + F_0`` [N], the static force at v = 0), ``d`` [N s/m],
+        ``g1`` .. ``gN`` [N/V^2 when h = v^2]; per unit mass when ``m_q = 1``.
+    values : ndarray, shape (2 + n_inputs, n)
+        The curves on the grid.
+
+    Raises
+    ------
+    ArtifactError
+        If the model's ``q_range`` is empty.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40, Fig. 14.
+    """
+    lo, hi = (float(x) for x in model.q_range)
+    if not hi > lo:
+        raise ArtifactError(f"the model's q_range {model.q_range} is empty: nothing to tabulate")
+    q = np.linspace(lo, hi, n)
+    cur = model.curves(q)
+    rows = [cur["cq"] + float(model.backbone.get("F_0", 0.0)), cur["d"]]
+    rows += [cur["g"][:, j] for j in range(model.n_inputs)]
+    names = ["restoring", "d", *[f"g{j + 1}" for j in range(model.n_inputs)]]
+    return q, names, np.asarray(rows)
+
+
+def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str]) -> list[str]:
+    """Lines of the header comment shared by every format (without comment markers)."""
+    lo, hi = arr["q_range"]
+    hmap = "v^2" if arr["input_map"] == "v2" else "v"
+    lag = arr["lag"]
+    state = "[q, q_dot, z]" if lag else "[q, q_dot]"
+    lines = [
+        "The identified model of debist (Masoud & Maas 2025, Eq. 37):",
+        "  m_q q'' = sum_k w_k term_k(q, s, h),  h_i = h(v_i) = " + hmap,
+        "  friction state z' = (q_dot - z) / T_z, s = z"
+        if arr["lag"]
+        else "  T_z = 0: no friction state, s = q_dot",
+        f"State x = {state}" + ("; start with z = q_dot (the filter at rest)." if lag else "."),
+        f"Inputs v [V] (n = {arr['n_inputs']}); mapped inputs h [V^2 or V].",
+        "Units: q [m], q_dot [m/s], t and dt [s], v [V]; forces [N] with",
+        f"  m_q = {arr['m_q']!r} (per unit mass [m/s^2] when m_q = 1).",
+        f"Valid q range (estimation data): [{lo!r}, {hi!r}] m; outside it the",
+        "  Gaussian bases are held at the range's edge and the tables at their ends."
+        if arr["clipped"]
+        else "  Gaussian bases decay (not clipped) and the tables hold their end values.",
+    ]
+    if info.identified:
+        for name in names:
+            if name in info.identified:
+                spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in info.identified[name])
+                lines.append(f"Curve {name} identified (95 % band) on q in: {spans or 'none'} m")
+    if arr["lag"]:
+        lines.append(
+            f"RK4 is stable for dt <= 1.5 T_z = {arr['max_step']!r} s; "
+            "split longer sample times into sub-steps."
+        )
+    lines += [
+        "rk4_step: one classical RK4 step with the inputs linear between v0 (at t) and",
+        "  v1 (at t + dt), as debist's free run (substeps = 1, interpolation = linear).",
+        f"Curves table: {len(names)} curves ({', '.join(names)}) on {CURVE_POINTS} points,",
+        "  interpolated linearly, held outside the grid.",
+        f"Workflow: {info.workflow or 'n/a'}",
+        f"Run digest: {info.run_digest or 'n/a (not every stage of the workflow has run)'}",
+        f"identify/manifest.json sha256: {info.identify_manifest or 'n/a'}",
+        f"Generated by debist {info.version} (debist export); do not edit.",
+    ]
+    return lines
+
+
+def _literal(x: float, infinity: str) -> str:
+    """Format a double that round-trips (``repr``), ``infinity`` (signed) for infinities."""
+    x = float(x)
+    if np.isnan(x):
+        raise ArtifactError("the model has a NaN constant: it cannot be exported")
+    if np.isinf(x):
+        return infinity if x > 0 else f"-{infinity}"
+    return repr(x)
+
+
+def _fill(template: str, fields: dict[str, str]) -> str:
+    """Replace every ``@NAME@`` of a template (C braces make ``str.format`` awkward)."""
+    for key, value in fields.items():
+        template = template.replace(f"@{key}@", value)
+    if "@" in template:
+        raise AssertionError(f"unfilled field in template: {template[template.index('@') :][:40]}")
+    return template
