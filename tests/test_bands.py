@@ -7,6 +7,7 @@ from conftest import bistable_truth
 from pipeline.identify import IdentifyConfig, Record, fit_rbf_model
 from pipeline.identify.bands import (
     block_bootstrap,
+    curve_bands,
     curve_maps,
     curves_frame,
     identified_intervals,
@@ -110,6 +111,41 @@ def test_identified_intervals_are_the_runs_of_the_mask():
     mask = np.array([1, 1, 0, 0, 1, 1, 1, 0, 0, 0, 1], dtype=bool)
     assert identified_intervals(q, mask) == [[0.0, 0.1], [0.4, 0.6], [1.0, 1.0]]
     assert identified_intervals(q, np.zeros(11, bool)) == []
+
+
+def test_a_systematic_bound_widens_each_band_edge_in_quadrature():
+    rng = np.random.default_rng(5)
+    m, p, B = 7, 3, 400
+    maps = {"restoring": rng.standard_normal((m, p)), "d": rng.standard_normal((m, p))}
+    theta = rng.standard_normal(p)
+    boot = theta + 0.1 * rng.standard_normal((B, p))
+    point = {name: a @ theta for name, a in maps.items()}
+    support = {name: np.full(m, 100.0) for name in maps}
+    plain = curve_bands(point, maps, theta, boot, support, 1.0, 10.0)
+    wide = curve_bands(point, maps, theta, boot, support, 1.0, 10.0, {"restoring": 0.3})
+    # independent computation: the percentile reach of each edge, then sqrt(reach^2 + 0.3^2)
+    dev = (boot - theta) @ maps["restoring"].T
+    down, up = -np.percentile(dev, 2.5, axis=0), np.percentile(dev, 97.5, axis=0)
+    assert np.all(down > 0) and np.all(up > 0)
+    value = point["restoring"]
+    np.testing.assert_allclose(wide["restoring_lo"], value - np.sqrt(down**2 + 0.09), rtol=1e-12)
+    np.testing.assert_allclose(wide["restoring_hi"], value + np.sqrt(up**2 + 0.09), rtol=1e-12)
+    np.testing.assert_allclose(plain["restoring_lo"], value - down, rtol=1e-12)
+    # a curve without a bound keeps its bootstrap band
+    np.testing.assert_array_equal(wide["d_lo"], plain["d_lo"])
+    np.testing.assert_array_equal(wide["d_hi"], plain["d_hi"])
+
+
+def test_the_restoring_band_holds_the_coulomb_level(bistable_record):
+    """With a Coulomb term the restoring band reaches at least |F_c| to each side."""
+    records = _records(bistable_record, noise=0.01, seed=3)
+    cfg = _cfg(backbone=["coulomb"], bootstrap=100, bootstrap_seed=1)
+    model, diag = fit_rbf_model(records, cfg)
+    F_c = abs(model.backbone["F_c"])
+    assert F_c > 0
+    frame, _ = curves_frame(model, diag, records, min_support=1.0, band_tolerance=10.0)
+    assert np.all(frame.restoring - frame.restoring_lo >= F_c * (1 - 1e-12))
+    assert np.all(frame.restoring_hi - frame.restoring >= F_c * (1 - 1e-12))
 
 
 def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistable_record):

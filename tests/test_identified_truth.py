@@ -115,15 +115,19 @@ def test_marked_region_covers_the_wells_and_the_excited_intervals(staircase, nam
         )
 
 
-@pytest.mark.xfail(
+_G_BIAS = pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
-    reason="the block-bootstrap bands measure the noise, not the bias that the plant's "
-    "friction, DE creep and q-dependent mass leave in Eq. 37: the truth lies inside the 95 % "
-    "band at 84 % (restoring), 25 % (g1), 37 % (g2) of the marked points; the bands would "
-    "have to be 1.1x, 3.1x, 3.4x wider",
+    reason="the plant's q-dependent mass and DE creep, which Eq. 37 lacks, bias g_i by up to 9 % "
+    "of its range, which no resampling of one record sees: the truth lies inside the 95 % band "
+    "at 25 % (g1) and 37 % (g2) of the marked points (70 / 74 % with both taken out of the "
+    "plant; 18 / 36 % with the friction taken out instead)",
 )
-@pytest.mark.parametrize("name", list(CURVES))
+
+
+@pytest.mark.parametrize(
+    "name", ["restoring", pytest.param("g1", marks=_G_BIAS), pytest.param("g2", marks=_G_BIAS)]
+)
 def test_truth_inside_the_95_percent_band_where_marked(staircase, name):
     curves, true, _ = staircase
     marked = curves[f"{name}_identified"].to_numpy()
