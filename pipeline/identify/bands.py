@@ -536,6 +536,7 @@ def static_frame(
         model.coulomb_velocity, model.prior,
     )  # fmt: skip
     q = np.concatenate([r.q for r in records])
+    bound = {"F": friction_bound(model)}
     frames, intervals = [], []
     for k, level in enumerate(levels):
         h = input_map(np.asarray(level, dtype=float)[None, :], model.input_map)[0]
@@ -544,7 +545,7 @@ def static_frame(
         support = support_weights(grid, q, model.basis.sigma, at_level(records, level))
         band = curve_bands(
             {"F": point}, {"F": linear}, diag.theta, diag.theta_boot, {"F": support},
-            min_support, band_tolerance, {"F": friction_bound(model)},
+            min_support, band_tolerance, bound,
         )  # fmt: skip
         frame = {"level": np.full(n, k)}
         frame.update({f"v{j + 1}": np.full(n, float(level[j])) for j in range(h.size)})
