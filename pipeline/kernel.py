@@ -10,9 +10,15 @@ physics prior, the SINDy polynomials) or the tabulated curves of the analytical 
 (Eq. 26), so one kernel integrates them all and "the same simulator for every model" holds by
 construction.
 
+A batch of more trajectories than threads runs in lockstep blocks, one per thread
+(:func:`_lockstep`): each right-hand side evaluates one basis, factor or term for the whole
+block, so the table's structure is read once per block and the products vectorise, with each
+trajectory's arithmetic in the order of the one-trajectory integrator (the same numbers).
+
 Every model reaches the kernel as three flat arrays: floats ``fp``, integers ``ip`` and a
 layout ``lay`` of sizes and offsets (:class:`KernelArrays`); the right-hand sides are inlined
-into the integrator. Both keep numba's reference counting out of the inner loop (every array
+into the one-trajectory integrator (a lockstep block calls its own once per stage for the
+whole block). Both keep numba's reference counting out of the inner loop (every array
 argument of a call that is not inlined costs two atomic updates).
 
 References
@@ -25,6 +31,7 @@ documentation: ``njit``, ``cache=True``, ``prange``).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -42,7 +49,8 @@ CHUNK = 50_000
 (_K, _J, _U, _H, _NI, _QMAX, _BW, _BM, _BT, _G, _SQUARE, _LAG,
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
- _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _N_LAYOUT) = range(36)  # fmt: skip
+ _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
+ _N_LAYOUT) = range(38)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -112,7 +120,9 @@ def table_arrays(model) -> KernelArrays:
     The terms are grouped by their factors other than the basis (power of q, velocity factor,
     input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_(j in g) w_j
     b_j(q)``, so each right-hand side evaluates every basis, velocity factor and monomial
-    once, then one product per term and three per group.
+    once, then one product per term and three per group. The table's part of the arrays is
+    built once per :class:`pipeline.termtable.TermTable` (the refinement changes only the
+    weights, masses and T_z).
 
     Parameters
     ----------
@@ -123,9 +133,29 @@ def table_arrays(model) -> KernelArrays:
     -------
     KernelArrays
     """
+    fixed = _TABLE_PARTS.get(model.table)
+    if fixed is None:
+        fixed = _TABLE_PARTS[model.table] = _table_part(model.table)
+    fp_t, ip, lay_t, order, n_work = fixed
+    lay = lay_t.copy()
+    lay[_BW], lay[_BM], lay[_BT] = model.weights.shape[0], model.mass.size, model.T_z.size
+    lay[_LAG] = int(model.lag)
+    weights = np.ascontiguousarray(model.weights[:, order], dtype=np.float64)
+    lay[_P_W] = fp_t.size
+    lay[_P_MASS] = lay[_P_W] + weights.size
+    lay[_P_TZ] = lay[_P_MASS] + model.mass.size
+    fp = np.concatenate([fp_t, weights.ravel(), np.ravel(model.mass), np.ravel(model.T_z)])
+    return KernelArrays(KIND_TABLE, model.n_states, fp.astype(np.float64), ip, lay, n_work, order)
+
+
+#: The table's part of the kernel arrays, per term table (weakly: dropped with the table).
+_TABLE_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """Floats, integers, layout, term order and scratch size of a term table's structure."""
     from pipeline.termtable import INPUT_MAP_CODES
 
-    t = model.table
     n_in = t.n_inputs
     s_codes = np.stack([t.term_skind, t.term_spow], axis=1).reshape(-1, 2)
     s_unique, s_index = np.unique(s_codes, axis=0, return_inverse=True)
@@ -141,19 +171,13 @@ def table_arrays(model) -> KernelArrays:
     lay[_K], lay[_J], lay[_U], lay[_H], lay[_NI] = K, t.n_terms, len(s_unique), len(h_unique), n_in
     lay[_NG] = G
     lay[_QMAX] = int(t.term_qpow.max()) if t.n_terms else 0
-    lay[_BW], lay[_BM], lay[_BT] = model.weights.shape[0], model.mass.size, model.T_z.size
     lay[_G] = t.table_q.size
     lay[_SQUARE] = int(INPUT_MAP_CODES[t.input_map] == 0)
-    lay[_LAG] = int(model.lag)
     lay[_P_CENTRE] = pack.floats(t.base_centre)
     lay[_P_WIDTH] = pack.floats(t.base_width)
     lay[_P_LO] = pack.floats(t.base_lo)
     lay[_P_HI] = pack.floats(t.base_hi)
     lay[_P_TQ] = pack.floats(t.table_q)
-    lay[_P_TAB] = pack.floats(tables)
-    lay[_P_W] = pack.floats(model.weights[:, order])
-    lay[_P_MASS] = pack.floats(model.mass)
-    lay[_P_TZ] = pack.floats(model.T_z)
     lay[_P_VC] = pack.floats([t.coulomb_velocity])
     lay[_I_BKIND] = pack.ints(t.base_kind)
     lay[_I_BTAB] = pack.ints(t.base_table)
@@ -171,9 +195,19 @@ def table_arrays(model) -> KernelArrays:
     step = (grid[-1] - grid[0]) / max(grid.size - 1, 1)
     regular = grid[0] + step * np.arange(grid.size)
     lay[_UNIFORM] = int(grid.size > 1 and np.allclose(grid, regular, rtol=0, atol=1e-9 * step))
+    lay[_P_INVSTEP] = pack.floats([1.0 / step if step > 0 else 0.0])
+    # per grid point: every table's value, then the slope of every table on the interval that
+    # starts there (as numpy.interp computes it), so one interpolation reads one cache line
+    T = tables.shape[0]
+    rows = np.zeros((grid.size, 2 * T))
+    rows[:, :T] = tables.T
+    if grid.size > 1:
+        rows[:-1, T:] = (np.diff(tables, axis=1) / np.diff(grid)).T
+    lay[_NT] = T
+    lay[_P_TAB] = pack.floats(rows)
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
-    return KernelArrays(KIND_TABLE, model.n_states, fp, ip, lay, n_work, order)
+    return fp, ip, lay, order, n_work
 
 
 def _continues(t, k: int, n: int, spacing: float) -> bool:
@@ -263,20 +297,21 @@ def _gauss_run(q, fp, lay, W, w_k, k0, n):  # pragma: no cover - compiled
     qc = qc if qc < hi else hi
     sigma = fp[lay[_P_WIDTH] + k0]
     delta = fp[lay[_P_SPACING] + k0] / sigma
-    u = (qc - fp[lay[_P_CENTRE] + k0]) / sigma
-    m = math.floor(u / delta + 0.5)
+    u = (qc - fp[lay[_P_CENTRE] + k0]) * (1.0 / sigma)
+    m = math.floor(u * (sigma / fp[lay[_P_SPACING] + k0]) + 0.5)
     m = 0 if m < 0 else (n - 1 if m > n - 1 else m)
     du = u - m * delta
     step = math.exp(-delta * delta)
     p = math.exp(-0.5 * du * du)
     W[w_k + k0 + m] = p
-    r = math.exp(delta * du - 0.5 * delta * delta)
+    r_up = math.exp(delta * du - 0.5 * delta * delta)
+    r = r_up
     pk = p
     for k in range(m + 1, n):
         pk = pk * r if pk > _TINY else 0.0
         W[w_k + k0 + k] = pk
         r *= step
-    r = math.exp(-delta * du - 0.5 * delta * delta)
+    r = step / r_up  # exp(-delta du - delta^2 / 2)
     pk = p
     for k in range(m - 1, -1, -1):
         pk = pk * r if pk > _TINY else 0.0
@@ -289,8 +324,8 @@ def _table_interval(q, fp, lay):  # pragma: no cover - compiled
     """Interval i of the table grid with grid[i] <= q < grid[i + 1] (q inside the grid)."""
     GQ = lay[_G]
     tq = lay[_P_TQ]
-    if lay[_UNIFORM] == 1:
-        i = int((q - fp[tq]) / ((fp[tq + GQ - 1] - fp[tq]) / (GQ - 1)))
+    if lay[_UNIFORM] == 1:  # the nearest guess, then corrected: the exact interval
+        i = int((q - fp[tq]) * fp[lay[_P_INVSTEP]])
         i = 0 if i < 0 else (GQ - 2 if i > GQ - 2 else i)
         if q < fp[tq + i]:
             i -= 1
@@ -321,7 +356,7 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
         lay[_I_GSIDX],
         lay[_I_GHIDX],
     )
-    GQ, tq, o_tab = lay[_G], lay[_P_TQ], lay[_P_TAB]
+    GQ, tq, o_tab, NT = lay[_G], lay[_P_TQ], lay[_P_TAB], lay[_NT]
     w_k, w_hv = 0, K
     w_qp = w_hv + NI
     w_sf = w_qp + QMAX + 1
@@ -349,16 +384,16 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
                 wk = fp[o_width + k]
                 W[w_k + k] = math.exp(-(dq * dq) / (2.0 * wk * wk))
         else:  # tabulated: linear interpolation, held outside (numpy.interp)
-            tab = o_tab + ip[o_tab_row + k] * GQ
+            tab = o_tab + ip[o_tab_row + k]
             if q <= fp[tq]:
                 W[w_k + k] = fp[tab]
             elif q >= fp[tq + GQ - 1]:
-                W[w_k + k] = fp[tab + GQ - 1]
+                W[w_k + k] = fp[tab + (GQ - 1) * 2 * NT]
             else:
                 if t_i < 0:  # one interval for all tables (one grid)
                     t_i = _table_interval(q, fp, lay)
-                slope = (fp[tab + t_i + 1] - fp[tab + t_i]) / (fp[tq + t_i + 1] - fp[tq + t_i])
-                W[w_k + k] = slope * (q - fp[tq + t_i]) + fp[tab + t_i]
+                at = tab + t_i * 2 * NT
+                W[w_k + k] = fp[at + NT] * (q - fp[tq + t_i]) + fp[at]
     W[w_qp] = 1.0
     for a in range(1, QMAX + 1):
         W[w_qp + a] = W[w_qp + a - 1] * q
@@ -430,8 +465,8 @@ def _grad_table(x, b, fp, ip, lay, W, V, tv):  # pragma: no cover - compiled
                 V[k] = -(q - fp[lay[_P_CENTRE] + k]) / (wk * wk) * W[w_k + k]
         elif kind == 2 and fp[tq] < q < fp[tq + GQ - 1]:
             i = _table_interval(q, fp, lay)
-            tab = o_tab + ip[lay[_I_BTAB] + k] * GQ
-            V[k] = (fp[tab + i + 1] - fp[tab + i]) / (fp[tq + i + 1] - fp[tq + i])
+            NT = lay[_NT]
+            V[k] = fp[o_tab + i * 2 * NT + NT + ip[lay[_I_BTAB] + k]]
     V[v_qp] = 0.0
     for a in range(1, QMAX + 1):
         V[v_qp + a] = a * W[w_qp + a - 1]
@@ -602,6 +637,249 @@ def _trajectory_call(
     """:func:`_trajectory` behind a call boundary (see :func:`_integrate_parallel`)."""
     _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
                 acc, dead, b)  # fmt: skip
+
+
+# ------------------------------------------------------------- lockstep batches of one table model
+
+
+@nb.njit(cache=True)
+def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compiled
+    """Every basis of the table at the q of each trajectory of a lockstep block (W[k, c])."""
+    K = lay[_K]
+    GQ, tq, o_tab = lay[_G], lay[_P_TQ], lay[_P_TAB]
+    o_kind, o_run = lay[_I_BKIND], lay[_I_RUN]
+    tables = False
+    for k in range(K):
+        tables = tables or ip[o_kind + k] == 2
+    if tables:  # one interval for all tables (one grid); -1 below it, -2 above
+        q_first, q_last = fp[tq], fp[tq + GQ - 1]
+        for c in range(nb_):
+            q = XT[0, c]
+            if q <= q_first:
+                Ti[c] = -1
+            elif q >= q_last:
+                Ti[c] = -2
+            else:
+                i = _table_interval(q, fp, lay)
+                Ti[c] = i
+                Tq[c] = q - fp[tq + i]
+    for k in range(K):
+        kind = ip[o_kind + k]
+        run = ip[o_run + k]
+        if kind == 0:
+            for c in range(nb_):
+                Wk[k, c] = 1.0
+        elif kind == 1 and run > 1:
+            lo, hi = fp[lay[_P_LO] + k], fp[lay[_P_HI] + k]
+            sigma = fp[lay[_P_WIDTH] + k]
+            delta = fp[lay[_P_SPACING] + k] / sigma
+            inv_sigma, inv_delta = 1.0 / sigma, sigma / fp[lay[_P_SPACING] + k]
+            centre = fp[lay[_P_CENTRE] + k]
+            step = math.exp(-delta * delta)
+            for c in range(nb_):  # the recurrence of _gauss_run, per trajectory
+                q = XT[0, c]
+                qc = q if q > lo else lo
+                qc = qc if qc < hi else hi
+                u = (qc - centre) * inv_sigma
+                m = math.floor(u * inv_delta + 0.5)
+                m = 0 if m < 0 else (run - 1 if m > run - 1 else m)
+                du = u - m * delta
+                p = math.exp(-0.5 * du * du)
+                Wk[k + m, c] = p
+                r_up = math.exp(delta * du - 0.5 * delta * delta)
+                r = r_up
+                pk = p
+                for i in range(m + 1, run):
+                    pk = pk * r if pk > _TINY else 0.0
+                    Wk[k + i, c] = pk
+                    r *= step
+                r = step / r_up
+                pk = p
+                for i in range(m - 1, -1, -1):
+                    pk = pk * r if pk > _TINY else 0.0
+                    Wk[k + i, c] = pk
+                    r *= step
+        elif kind == 1 and run == 1:
+            lo, hi = fp[lay[_P_LO] + k], fp[lay[_P_HI] + k]
+            centre, wk = fp[lay[_P_CENTRE] + k], fp[lay[_P_WIDTH] + k]
+            for c in range(nb_):
+                q = XT[0, c]
+                qc = q if q > lo else lo
+                qc = qc if qc < hi else hi
+                dq = qc - centre
+                Wk[k, c] = math.exp(-(dq * dq) / (2.0 * wk * wk))
+        elif kind == 2:  # tabulated: linear interpolation, held outside (numpy.interp)
+            NT = lay[_NT]
+            tab = o_tab + ip[lay[_I_BTAB] + k]
+            y_first, y_last = fp[tab], fp[tab + (GQ - 1) * 2 * NT]
+            for c in range(nb_):
+                t_i = Ti[c]
+                if t_i >= 0:
+                    at = tab + t_i * 2 * NT
+                    Wk[k, c] = fp[at + NT] * Tq[c] + fp[at]
+                else:
+                    Wk[k, c] = y_first if t_i == -1 else y_last
+
+
+@nb.njit(cache=True)
+def _rhs_table_lock(
+    XT, fine, bidx, nb_, js, D, row, fp, ip, lay, work, Ti, wts, mass, tz
+):  # pragma: no cover - compiled
+    """:func:`_rhs_table` for a block of trajectories at once (rows of ``work`` over the block).
+
+    Every loop over the block runs one term, basis or factor for all trajectories, so the
+    table's structure is read once per block and the products vectorise; the arithmetic of
+    each trajectory is that of :func:`_rhs_table`, in the same order (the same numbers).
+    """
+    K, U, H, NI, QMAX, G = lay[_K], lay[_U], lay[_H], lay[_NI], lay[_QMAX], lay[_NG]
+    w_hv = K
+    w_qp = w_hv + NI
+    w_sf = w_qp + QMAX + 1
+    w_hm = w_sf + U
+    w_s = w_hm + H
+    w_in = w_s + 1
+    w_acc = w_in + 1
+    w_tq = w_acc + 1
+    lag = lay[_LAG] == 1
+    for c in range(nb_):
+        work[w_s, c] = XT[2, c] if lag and tz[c] > 0.0 else XT[1, c]
+    _bases_lock(XT, fp, ip, lay, work, Ti, work[w_tq], nb_)
+    for c in range(nb_):
+        work[w_qp, c] = 1.0
+    for a in range(1, QMAX + 1):
+        for c in range(nb_):
+            work[w_qp + a, c] = work[w_qp + a - 1, c] * XT[0, c]
+    vc = fp[lay[_P_VC]]
+    o_sun = lay[_I_SUNIQ]
+    for u in range(U):
+        skind = ip[o_sun + 2 * u]
+        if skind == 2:
+            for c in range(nb_):
+                work[w_sf + u, c] = math.tanh(work[w_s, c] / vc)
+        else:
+            for c in range(nb_):
+                work[w_sf + u, c] = 1.0
+            for _ in range(ip[o_sun + 2 * u + 1] if skind == 1 else 0):
+                for c in range(nb_):
+                    work[w_sf + u, c] *= work[w_s, c]
+    square = lay[_SQUARE] == 1
+    for i in range(NI):
+        for c in range(nb_):
+            vi = fine[bidx[c], js, i]
+            work[w_hv + i, c] = vi * vi if square else vi
+    o_hun = lay[_I_HUNIQ]
+    for u in range(H):
+        for c in range(nb_):
+            work[w_hm + u, c] = 1.0
+        for i in range(NI):
+            for _ in range(ip[o_hun + u * NI + i]):
+                for c in range(nb_):
+                    work[w_hm + u, c] *= work[w_hv + i, c]
+    o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
+    o_gq, o_gs, o_gh = lay[_I_GQPOW], lay[_I_GSIDX], lay[_I_GHIDX]
+    for c in range(nb_):
+        work[w_acc, c] = 0.0
+    for g in range(G):
+        for c in range(nb_):
+            work[w_in, c] = 0.0
+        for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+            k = ip[o_tk + m]
+            for c in range(nb_):
+                work[w_in, c] += wts[m, c] * work[k, c]
+        r_q, r_s, r_h = w_qp + ip[o_gq + g], w_sf + ip[o_gs + g], w_hm + ip[o_gh + g]
+        for c in range(nb_):
+            factor = work[r_q, c] * work[r_s, c] * work[r_h, c]
+            work[w_acc, c] += work[w_in, c] * factor
+    for c in range(nb_):
+        a = work[w_acc, c] / mass[c]
+        D[row, 0, c] = XT[1, c]
+        D[row, 1, c] = a
+        if lag:
+            D[row, 2, c] = (XT[1, c] - XT[2, c]) / tz[c] if tz[c] > 0.0 else 0.0
+
+
+@nb.njit(cache=True)
+def _lockstep(
+    fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, bidx
+):  # pragma: no cover - compiled
+    """RK4 steps k0 .. k1 - 1 of the trajectories ``bidx`` of a table model, in lockstep.
+
+    The block advances sample by sample together; a trajectory that has diverged or ended
+    is held at the origin (its results are not stored), so every trajectory gets exactly the
+    numbers of :func:`_trajectory`.
+    """
+    S = states.shape[2]
+    nb_ = bidx.size
+    K, U, H, NI, QMAX, J = lay[_K], lay[_U], lay[_H], lay[_NI], lay[_QMAX], lay[_J]
+    X = np.zeros((S, nb_))
+    XT = np.empty((S, nb_))
+    D = np.zeros((4, S, nb_))
+    work = np.empty((K + NI + QMAX + 1 + U + H + 4, nb_))
+    Ti = np.empty(nb_, dtype=np.int64)
+    wts = np.empty((max(J, 1), nb_))
+    mass = np.empty(nb_)
+    tz = np.empty(nb_)
+    L = np.empty(nb_, dtype=np.int64)
+    n_max = 0
+    for c in range(nb_):
+        b = bidx[c]
+        w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * J
+        for m in range(J):
+            wts[m, c] = fp[w0 + m]
+        mass[c] = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+        tz[c] = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
+        L[c] = lengths[b]
+        n_max = max(n_max, L[c])
+        if dead[b] < 0 and k0 < L[c]:
+            for i in range(S):
+                X[i, c] = states[b, k0, i]
+    for k in range(k0, min(k1, n_max)):
+        stepping = False
+        for c in range(nb_):
+            stepping = stepping or (dead[bidx[c]] < 0 and k < L[c] - 1)
+        for s in range(ns if stepping else 1):
+            j = (k * ns + s) * 2
+            for stage in range(4 if stepping else 1):
+                f = 0.0 if stage == 0 else (h if stage == 3 else 0.5 * h)
+                js = j if stage == 0 else (j + 2 if stage == 3 else j + 1)
+                for i in range(S):
+                    for c in range(nb_):
+                        XT[i, c] = X[i, c] if stage == 0 else X[i, c] + f * D[stage - 1, i, c]
+                _rhs_table_lock(XT, fine, bidx, nb_, js, D, stage, fp, ip, lay, work, Ti, wts,
+                                mass, tz)  # fmt: skip
+                if stage == 0 and s == 0:
+                    for c in range(nb_):
+                        if dead[bidx[c]] < 0 and k < L[c]:
+                            acc[bidx[c], k] = D[0, 1, c]
+            if stepping:
+                for i in range(S):
+                    for c in range(nb_):
+                        incr = D[0, i, c] + 2.0 * D[1, i, c] + 2.0 * D[2, i, c] + D[3, i, c]
+                        X[i, c] = X[i, c] + (h / 6.0) * incr
+        for c in range(nb_):
+            b = bidx[c]
+            if dead[b] < 0 and k < L[c] - 1:
+                ok = abs(X[0, c]) <= q_limit
+                for i in range(S):
+                    ok = ok and math.isfinite(X[i, c])
+                if ok:
+                    for i in range(S):
+                        states[b, k + 1, i] = X[i, c]
+                    continue
+                dead[b] = k + 1
+            for i in range(S):  # diverged or ended: held at the origin from now on
+                X[i, c] = 0.0
+
+
+@nb.njit(cache=True, parallel=True)
+def _lockstep_parallel(
+    fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, bidx, bounds
+):  # pragma: no cover - compiled
+    """:func:`_lockstep` on numba's threads, one block ``bidx[bounds[i]:bounds[i + 1]]`` each."""
+    for ip_ in nb.prange(bounds.size - 1):
+        i = np.int64(ip_)
+        _lockstep(fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead,
+                  bidx[bounds[i] : bounds[i + 1]])  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -856,13 +1134,25 @@ def free_run(
     fine = np.ascontiguousarray(fine, dtype=np.float64)
     h = float(dt) / int(substeps)
     step = n if progress is None else CHUNK
-    integrate = (
-        _integrate_parallel if B > 1 and nb.config.NUMBA_NUM_THREADS > 1 else _integrate_serial
-    )
+    threads = nb.get_num_threads()
+    if arrays.kind == KIND_TABLE and threads < B:
+        # blocks of similar length, one per thread, each integrated in lockstep
+        bidx = np.argsort(-lengths, kind="stable").astype(np.int64)
+        bounds = np.linspace(0, B, threads + 1).round().astype(np.int64)
+
+        def integrate(k0: int, k1: int) -> None:
+            _lockstep_parallel(arrays.fp, arrays.ip, arrays.lay, fine, lengths, h, int(substeps),
+                               float(q_limit), k0, k1, states, acc, dead, bidx, bounds)  # fmt: skip
+    else:
+        run = _integrate_parallel if B > 1 and threads > 1 else _integrate_serial
+
+        def integrate(k0: int, k1: int) -> None:
+            run(arrays.kind, arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine, lengths, h,
+                int(substeps), float(q_limit), k0, k1, states, acc, dead)  # fmt: skip
+
     for k0 in range(0, n, step):
         k1 = min(k0 + step, n)
-        integrate(arrays.kind, arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine, lengths, h,
-                   int(substeps), float(q_limit), k0, k1, states, acc, dead)  # fmt: skip
+        integrate(k0, k1)
         if progress is not None:
             progress(k1, n)
     for b in range(B):

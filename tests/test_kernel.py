@@ -107,6 +107,50 @@ def test_a_diverging_model_diverges_at_the_same_sample_in_both_engines():
     assert_same(ref, new)
 
 
+@pytest.fixture
+def two_threads():
+    """Numba's threads set to 2 (at most), so that a batch of more runs in lockstep blocks."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    yield numba.get_num_threads()
+    numba.set_num_threads(before)
+
+
+def test_a_lockstep_batch_of_uneven_diverging_runs_equals_both_references(two_threads, monkeypatch):
+    """More trajectories than threads run in lockstep blocks: uneven lengths, runs that
+    diverge at different samples and progress chunks change no number."""
+    monkeypatch.setattr(kernel, "CHUNK", 450)
+    model = rbf_model(damping=-3.0)  # negative damping: runs leave the wells, some after a chunk
+    lengths = [2000, 1300, 700, 2000, 1700, 900, 2000, 450, 1100]
+    levels = [1500.0, 100.0, 1500.0, 100.0, 1200.0, 100.0, 1500.0, 1500.0, 100.0]
+    records = [
+        inputs(n, 20 + i, level=lv) for i, (n, lv) in enumerate(zip(lengths, levels, strict=True))
+    ]
+    q0 = np.array([0.009, 0.0, 0.003, 0.0, -0.009, 0.0, 0.0, 0.009, 0.0])
+    assert len(records) > two_threads
+    with progress.listening(lambda *_: None):  # chunked: the blocks resume between chunks
+        ref, new = both(model, records, q0, np.zeros(len(records)), substeps=2, q_limit=0.05)
+    died = [r.diverged_at for r in ref if r.diverged]
+    assert len(set(died)) >= 3 and max(died) > kernel.CHUNK  # at different samples and chunks
+    assert not all(r.diverged for r in ref)
+    assert_same(ref, new)
+    for i, rec in enumerate(records):  # bit for bit the numbers of one trajectory at a time
+        one = simulate(model, [rec], DT, q0[i : i + 1], np.zeros(1), substeps=2, q_limit=0.05)
+        np.testing.assert_array_equal(new[i].states, one[0].states)
+        np.testing.assert_array_equal(new[i].q_ddot, one[0].q_ddot)
+
+
+def test_a_lockstep_batch_of_sindy_models_with_linear_input(two_threads):
+    model = sindy_model()
+    records = [inputs(600 + 100 * i, 30 + i) for i in range(5)]
+    q0 = np.linspace(-0.01, 0.01, 5)
+    ref, new = both(model, records, q0, np.zeros(5), substeps=3, interpolation="linear")
+    assert np.ptp(ref[0].q) > 1e-4
+    assert_same(ref, new)
+
+
 def test_the_term_table_columns_are_the_terms_of_eq_37_written_out():
     """Each regressor column against its expression written out with NumPy (Eq. 37-40)."""
     model = rbf_model()
