@@ -285,26 +285,41 @@ def spline_arrays(x: np.ndarray, c: np.ndarray, relax: float, kbar: float) -> Ke
 
 
 @nb.njit(cache=True, inline="always")
+def _gauss_constants(fp, lay, k0):  # pragma: no cover - compiled
+    """Read a run's clipping bounds, first centre, 1 / sigma, delta = spacing / sigma, 1 / delta."""
+    sigma = fp[lay[_P_WIDTH] + k0]
+    spacing = fp[lay[_P_SPACING] + k0]
+    return (fp[lay[_P_LO] + k0], fp[lay[_P_HI] + k0], fp[lay[_P_CENTRE] + k0], 1.0 / sigma,
+            spacing / sigma, sigma / spacing)  # fmt: skip
+
+
+@nb.njit(cache=True, inline="always")
+def _gauss_nearest(q, lo, hi, centre, inv_sigma, delta, inv_delta, n):  # pragma: no cover
+    """Start the recurrence of :func:`_gauss_run` at the centre m nearest to q (clipped).
+
+    Returns m, phi_m and the first upward ratio.
+    """
+    qc = q if q > lo else lo
+    qc = qc if qc < hi else hi
+    u = (qc - centre) * inv_sigma
+    m = math.floor(u * inv_delta + 0.5)
+    m = 0 if m < 0 else (n - 1 if m > n - 1 else m)
+    du = u - m * delta
+    return m, math.exp(-0.5 * du * du), math.exp(delta * du - 0.5 * delta * delta)
+
+
+@nb.njit(cache=True, inline="always")
 def _gauss_run(q, fp, lay, W, w_k, k0, n):  # pragma: no cover - compiled
     """phi_k = exp(-(q - xi_k)^2 / (2 sigma^2)) of n equidistant centres by recurrence.
 
     From the centre m nearest to q, phi_{k+1} = phi_k r_k with r_{k+1} = r_k exp(-delta^2)
-    (delta = spacing / sigma), and likewise downwards: three exponentials for the whole run.
+    (delta = spacing / sigma), and likewise downwards (the first ratio downwards is
+    exp(-delta^2) / r_m): two exponentials for the whole run, besides exp(-delta^2).
     """
-    lo = fp[lay[_P_LO] + k0]
-    hi = fp[lay[_P_HI] + k0]
-    qc = q if q > lo else lo
-    qc = qc if qc < hi else hi
-    sigma = fp[lay[_P_WIDTH] + k0]
-    delta = fp[lay[_P_SPACING] + k0] / sigma
-    u = (qc - fp[lay[_P_CENTRE] + k0]) * (1.0 / sigma)
-    m = math.floor(u * (sigma / fp[lay[_P_SPACING] + k0]) + 0.5)
-    m = 0 if m < 0 else (n - 1 if m > n - 1 else m)
-    du = u - m * delta
+    lo, hi, centre, inv_sigma, delta, inv_delta = _gauss_constants(fp, lay, k0)
     step = math.exp(-delta * delta)
-    p = math.exp(-0.5 * du * du)
+    m, p, r_up = _gauss_nearest(q, lo, hi, centre, inv_sigma, delta, inv_delta, n)
     W[w_k + k0 + m] = p
-    r_up = math.exp(delta * du - 0.5 * delta * delta)
     r = r_up
     pk = p
     for k in range(m + 1, n):
@@ -670,23 +685,12 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
             for c in range(nb_):
                 Wk[k, c] = 1.0
         elif kind == 1 and run > 1:
-            lo, hi = fp[lay[_P_LO] + k], fp[lay[_P_HI] + k]
-            sigma = fp[lay[_P_WIDTH] + k]
-            delta = fp[lay[_P_SPACING] + k] / sigma
-            inv_sigma, inv_delta = 1.0 / sigma, sigma / fp[lay[_P_SPACING] + k]
-            centre = fp[lay[_P_CENTRE] + k]
+            lo, hi, centre, inv_sigma, delta, inv_delta = _gauss_constants(fp, lay, k)
             step = math.exp(-delta * delta)
             for c in range(nb_):  # the recurrence of _gauss_run, per trajectory
-                q = XT[0, c]
-                qc = q if q > lo else lo
-                qc = qc if qc < hi else hi
-                u = (qc - centre) * inv_sigma
-                m = math.floor(u * inv_delta + 0.5)
-                m = 0 if m < 0 else (run - 1 if m > run - 1 else m)
-                du = u - m * delta
-                p = math.exp(-0.5 * du * du)
+                m, p, r_up = _gauss_nearest(XT[0, c], lo, hi, centre, inv_sigma, delta, inv_delta,
+                                            run)  # fmt: skip
                 Wk[k + m, c] = p
-                r_up = math.exp(delta * du - 0.5 * delta * delta)
                 r = r_up
                 pk = p
                 for i in range(m + 1, run):
