@@ -50,7 +50,7 @@ CHUNK = 50_000
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
  _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
- _N_LAYOUT) = range(38)  # fmt: skip
+ _TABLES, _N_LAYOUT) = range(39)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -144,8 +144,9 @@ def table_arrays(model) -> KernelArrays:
     lay[_P_W] = fp_t.size
     lay[_P_MASS] = lay[_P_W] + weights.size
     lay[_P_TZ] = lay[_P_MASS] + model.mass.size
-    fp = np.concatenate([fp_t, weights.ravel(), np.ravel(model.mass), np.ravel(model.T_z)])
-    return KernelArrays(KIND_TABLE, model.n_states, fp.astype(np.float64), ip, lay, n_work, order)
+    parts = [fp_t, weights.ravel(), np.ravel(model.mass), np.ravel(model.T_z)]
+    fp = np.concatenate(parts, dtype=np.float64)
+    return KernelArrays(KIND_TABLE, model.n_states, fp, ip, lay, n_work, order)
 
 
 #: The table's part of the kernel arrays, per term table (weakly: dropped with the table).
@@ -204,6 +205,7 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     if grid.size > 1:
         rows[:-1, T:] = (np.diff(tables, axis=1) / np.diff(grid)).T
     lay[_NT] = T
+    lay[_TABLES] = int(np.any(t.base_kind == 2))
     lay[_P_TAB] = pack.floats(rows)
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
@@ -663,10 +665,7 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
     K = lay[_K]
     GQ, tq, o_tab = lay[_G], lay[_P_TQ], lay[_P_TAB]
     o_kind, o_run = lay[_I_BKIND], lay[_I_RUN]
-    tables = False
-    for k in range(K):
-        tables = tables or ip[o_kind + k] == 2
-    if tables:  # one interval for all tables (one grid); -1 below it, -2 above
+    if lay[_TABLES] == 1:  # one interval for all tables (one grid); -1 below it, -2 above
         q_first, q_last = fp[tq], fp[tq + GQ - 1]
         for c in range(nb_):
             q = XT[0, c]
