@@ -41,17 +41,24 @@ def _zeros(q, f):
 
 
 @pytest.fixture(scope="module")
-def staircase(tmp_path_factory):
-    """One run of the staircase workflow: the curves, the truth on their grid, the regions."""
+def staircase_out(tmp_path_factory):
+    """The output directory of one run of the staircase workflow."""
+    out = tmp_path_factory.mktemp("staircase")
+    result = CliRunner().invoke(app, ["run", str(WORKFLOW), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def staircase(staircase_out):
+    """The staircase run's curves, the truth on their grid, the regions."""
     import tomllib
 
     from pipeline import artifacts
     from pipeline.rig.experiment import RigConfig
     from pipeline.rig.profiles import make_profile
 
-    out = tmp_path_factory.mktemp("staircase")
-    result = CliRunner().invoke(app, ["run", str(WORKFLOW), "--out", str(out)])
-    assert result.exit_code == 0, result.output
+    out = staircase_out
     curves = pd.read_parquet(out / "identify/curves.parquet")
     truth = artifacts.read_h5(out / "rig/identification_truth.h5")["curves"]
     log = pd.read_parquet(out / "ingest/identification.parquet")
@@ -118,10 +125,13 @@ def test_marked_region_covers_the_wells_and_the_excited_intervals(staircase, nam
 _G_BIAS = pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
-    reason="the plant's q-dependent mass and DE creep, which Eq. 37 lacks, bias g_i by up to 9 % "
-    "of its range, which no resampling of one record sees: the truth lies inside the 95 % band "
-    "at 25 % (g1) and 37 % (g2) of the marked points (70 / 74 % with both taken out of the "
-    "plant; 18 / 36 % with the friction taken out instead)",
+    reason="a resampling band covers the model class's best approximation, not a truth outside "
+    "it: the plant's q-dependent inertia and DE creep, which Eq. 37 lacks, bias g_i by 3.5 % of "
+    "its range (median where marked; test_the_g_error_is_bias_from_the_dynamics_eq37_lacks), "
+    "about 1.5-2 band half-widths, so the truth lies inside the 95 % band at 25 % (g1) and 37 % "
+    "(g2) of the marked points. Even a fit to the plant's noise-free true states with its "
+    "inertia, creep and friction forces removed exactly holds the truth at only 70 / 80 %: the "
+    "RBF approximation bias is then larger than the band",
 )
 
 
@@ -134,3 +144,66 @@ def test_truth_inside_the_95_percent_band_where_marked(staircase, name):
     lo, hi = curves[f"{name}_lo"].to_numpy(), curves[f"{name}_hi"].to_numpy()
     inside = ((lo <= true[name]) & (true[name] <= hi))[marked]
     assert inside.mean() >= COVERAGE, f"{name}: truth inside the band at {inside.mean():.0%}"
+
+
+def _unmodelled_force(out: Path, n: int, m_q: float) -> np.ndarray:
+    """The reduced plant's forces that Eq. 37 with a constant ``m_q`` lacks, along the log [N].
+
+    From the rig's true states (``rig/identification_truth.h5``) and the plant's own tables:
+    ``(m_q(q) - m_q) q_ddot + 1/2 m_q'(q) q_dot^2`` (the position-dependent inertia) plus
+    ``k_bar (k_1(q) q_eps,1 + k_2(q) q_eps,2)`` (the DE creep), with ``q_ddot`` from the
+    plant's equation of motion at the true states and drive voltages.
+    """
+    from pipeline import artifacts
+    from pipeline.physics.params import PrototypeParams
+    from pipeline.rig.reduced import CURVES, reduced_tables
+
+    truth = artifacts.read_h5(out / "rig/identification_truth.h5")
+    states = truth["states"]
+    prototype = PrototypeParams(**truth["prototype"]["attrs"])
+    x = states["x"]
+    assert x.shape[0] == n  # the log is on the plant's sample grid
+    cv = dict(zip(CURVES, np.moveaxis(reduced_tables(prototype)(x[:, 0]), -1, 0), strict=True))
+    q_dot = x[:, 1]
+    creep = prototype.V_DE * prototype.Y_MW * (cv["k1"] * x[:, 2] + cv["k2"] * x[:, 3])
+    inertia_q = 0.5 * cv["dm_q"] * q_dot**2
+    force = cv["g1"] * states["v1"] ** 2 + cv["g2"] * states["v2"] ** 2 - cv["d"] * q_dot
+    q_ddot = (force - cv["f"] - inertia_q - creep + states["F_friction"]) / cv["m_q"]
+    return (cv["m_q"] - m_q) * q_ddot + inertia_q + creep
+
+
+def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase, staircase_out):
+    """Why the g_i bands miss the truth: bias from the plant's dynamics, which no band sees.
+
+    The band is a resampling band: it covers the best approximation of the model class, not
+    a truth outside it (Wasserman 2006, All of Nonparametric Statistics, Sec. 5.7). Adding
+    the plant's own inertia and creep forces (which Eq. 37 lacks) to the regression output,
+    an independent re-identification with the same settings, cuts the g_i error where marked
+    by a factor of about 6 (measured: 3.5 -> 0.6 % and 3.6 -> 0.6 % of the range, medians),
+    while the median error of the workflow's g_i exceeds the median band half-width.
+    """
+    import tomllib
+
+    from pipeline.physics.params import PrototypeParams
+    from pipeline.physics_stages import physics_mass
+    from pipeline.stages.identify import run_identify
+
+    curves, true, _ = staircase
+    out = staircase_out
+    workflow = tomllib.loads(WORKFLOW.read_text())
+    tables = {"identification": pd.read_parquet(out / "ingest/identification.parquet")}
+    deriv = pd.read_parquet(out / "differentiate/identification.parquet")
+    physics = PrototypeParams(**workflow["physics"])
+    m_q = physics_mass(physics)  # the workflow's m_q = "physics"
+    corrected = deriv.copy()  # m_q q_ddot plus the missing forces: the output of Eq. 40
+    corrected["q_ddot"] = deriv["q_ddot"] + _unmodelled_force(out, len(deriv), m_q) / m_q
+    corrected.attrs = dict(deriv.attrs)
+    res = run_identify(tables, {"identification": corrected}, workflow["identify"], physics)
+    for name in ("g1", "g2"):
+        marked = curves[f"{name}_identified"].to_numpy()
+        span = np.ptp(true[name])
+        before = np.median(np.abs(curves[name].to_numpy() - true[name])[marked]) / span
+        after = np.median(np.abs(res.curves[name].to_numpy() - true[name])[marked]) / span
+        half = np.median((curves[f"{name}_hi"] - curves[f"{name}_lo"]).to_numpy()[marked]) / 2
+        assert before > half / span, f"{name}: median error {before:.1%} within the band"
+        assert after <= before / 3, f"{name}: {before:.1%} -> {after:.1%} of its range"
