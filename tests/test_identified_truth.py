@@ -149,27 +149,33 @@ def test_truth_inside_the_95_percent_band_where_marked(staircase, name):
 def _unmodelled_force(out: Path, n: int, m_q: float) -> np.ndarray:
     """The reduced plant's forces that Eq. 37 with a constant ``m_q`` lacks, along the log [N].
 
-    From the rig's true states (``rig/identification_truth.h5``) and the plant's own tables:
+    From the rig's true states (``rig/identification_truth.h5``) and the plant itself
+    (:class:`pipeline.rig.reduced.ReducedPlant` of the workflow's ``[rig]``):
     ``(m_q(q) - m_q) q_ddot + 1/2 m_q'(q) q_dot^2`` (the position-dependent inertia) plus
-    ``k_bar (k_1(q) q_eps,1 + k_2(q) q_eps,2)`` (the DE creep), with ``q_ddot`` from the
-    plant's equation of motion at the true states and drive voltages.
+    ``k_bar (k_1(q) q_eps,1 + k_2(q) q_eps,2)`` (the DE creep), with ``q_ddot`` the plant's
+    right-hand side at the true states and drive voltages.
     """
-    from pipeline import artifacts
-    from pipeline.physics.params import PrototypeParams
-    from pipeline.rig.reduced import CURVES, reduced_tables
+    import tomllib
 
-    truth = artifacts.read_h5(out / "rig/identification_truth.h5")
-    states = truth["states"]
-    prototype = PrototypeParams(**truth["prototype"]["attrs"])
-    x = states["x"]
+    from pipeline import artifacts
+    from pipeline.rig.experiment import RigConfig
+    from pipeline.rig.reduced import ReducedPlant
+
+    states = artifacts.read_h5(out / "rig/identification_truth.h5")["states"]
+    t, x = states["t"], states["x"]
     assert x.shape[0] == n  # the log is on the plant's sample grid
-    cv = dict(zip(CURVES, np.moveaxis(reduced_tables(prototype)(x[:, 0]), -1, 0), strict=True))
-    q_dot = x[:, 1]
-    creep = prototype.V_DE * prototype.Y_MW * (cv["k1"] * x[:, 2] + cv["k2"] * x[:, 3])
-    inertia_q = 0.5 * cv["dm_q"] * q_dot**2
-    force = cv["g1"] * states["v1"] ** 2 + cv["g2"] * states["v2"] ** 2 - cv["d"] * q_dot
-    q_ddot = (force - cv["f"] - inertia_q - creep + states["F_friction"]) / cv["m_q"]
-    return (cv["m_q"] - m_q) * q_ddot + inertia_q + creep
+    workflow = tomllib.loads(WORKFLOW.read_text())
+    rig = RigConfig.from_dict(workflow["rig"], workflow["physics"]).rig
+    plant = ReducedPlant(rig, lambda s: np.interp(s, t, states["v1"]),
+                         lambda s: np.interp(s, t, states["v2"]))  # fmt: skip
+    k_bar = rig.prototype.V_DE * rig.prototype.Y_MW  # Eq. 26
+    out_force = np.empty(n)
+    for k in range(n):
+        m, dm, _, _, _, _, k1, k2 = plant.curves(x[k, 0]).tolist()
+        q_ddot = plant.rhs(t[k], x[k])[1]
+        creep = k_bar * (k1 * x[k, 2] + k2 * x[k, 3])
+        out_force[k] = (m - m_q) * q_ddot + 0.5 * dm * x[k, 1] ** 2 + creep
+    return out_force
 
 
 def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase, staircase_out):
