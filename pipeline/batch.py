@@ -433,8 +433,8 @@ def run_batch(
         ``rich.progress`` bar).
     progress : bool, optional
         Show a console progress bar: ``dask.diagnostics.ProgressBar`` for ``"threads"``
-        and ``"synchronous"``, and a bar of the same format, advanced as workflows
-        finish, on a cluster.
+        and ``"synchronous"``, and a ``rich.progress`` bar of the same format, advanced
+        as workflows finish, on a cluster.
 
     Returns
     -------
@@ -599,16 +599,16 @@ def _died(allowed_failures: int) -> str:
     )
 
 
-def _draw_progress(done: int, total: int, elapsed: float, width: int = 40) -> None:
-    """Draw the console bar of ``dask.diagnostics.ProgressBar`` on stdout."""
-    from dask.utils import format_time
+def _console_bar(total: int, enabled: bool) -> Any:
+    """Build a ``rich.progress`` bar on stdout in the format of ``dask.diagnostics.ProgressBar``."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    frac = done / total
-    bar = "#" * int(width * frac)
-    end = "\n" if done == total else ""
-    msg = f"\r[{bar:<{width}}] | {int(100 * frac)}% Completed | {format_time(elapsed)}{end}"
-    sys.stdout.write(msg)
-    sys.stdout.flush()
+    columns = (BarColumn(), TextColumn("| {task.percentage:>3.0f}% Completed |"),
+               TimeElapsedColumn())  # fmt: skip
+    bar = Progress(*columns, console=Console(file=sys.stdout), disable=not enabled)
+    bar.add_task("batch", total=total)
+    return bar
 
 
 def _run_on_cluster(
@@ -627,8 +627,8 @@ def _run_on_cluster(
             "a batch on worker processes needs the dask.distributed package, a dependency "
             f"of debist that is missing here: {_INSTALL_HINT}"
         ) from None
-    t_start = time.perf_counter()
     with contextlib.ExitStack() as stack:
+        bar = stack.enter_context(_console_bar(len(args), progress))
         if address:
             try:
                 client = stack.enter_context(Client(address, set_as_default=False))
@@ -675,8 +675,7 @@ def _run_on_cluster(
                     worker=exc.last_worker.address if killed else "",
                 )
             future.release()
-            if progress:
-                _draw_progress(len(results), len(args), time.perf_counter() - t_start)
+            bar.advance(bar.task_ids[0])
             if on_done is not None:
                 on_done(results[i])
             submit_to_idle_workers()
