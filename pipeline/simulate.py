@@ -272,6 +272,7 @@ def simulate(
     q_limit: float = np.inf,
     engine: str = "compiled",
     progress: Callable[[int, int], None] | None = None,
+    x0: np.ndarray | None = None,
 ) -> list[SimulationResult]:
     """Simulate a model in free run, driven by measured inputs, from measured initial states.
 
@@ -301,6 +302,9 @@ def simulate(
         Called as ``progress(done, total)`` [samples] while the compiled engine integrates
         long records (between chunks of :data:`pipeline.kernel.CHUNK` samples); default:
         report to the listener of :mod:`pipeline.progress` as task "free run", if any.
+    x0 : ndarray, shape (B, n_states), optional
+        Whole initial states (e.g. a friction state estimated from the record); default
+        ``model.initial_state(q0, q_dot0)``.
 
     Returns
     -------
@@ -341,10 +345,13 @@ def simulate(
         prepared = prepare_inputs(inputs, ns, interpolation)
     if progress is None:
         progress = _progress.reporter("free run")
+    if x0 is None:
+        x0 = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
+    x0 = np.atleast_2d(np.asarray(x0, dtype=float))
     if engine == "compiled" and hasattr(model, "kernel_arrays"):
-        return _integrate_compiled(model, prepared, dt, q0, q_dot0, q_limit, progress)
+        return _integrate_compiled(model, prepared, dt, x0, q_limit, progress)
     with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected and reported below
-        return _integrate(model, prepared, dt, q0, q_dot0, q_limit)
+        return _integrate(model, prepared, dt, x0, q_limit)
 
 
 def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
@@ -370,26 +377,25 @@ def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
     return out
 
 
-def _integrate_compiled(model, prepared, dt, q0, q_dot0, q_limit, progress):
+def _integrate_compiled(model, prepared, dt, x0, q_limit, progress):
     """Integrate with the compiled kernel over the prepared input grid (see :func:`simulate`)."""
     from pipeline.kernel import free_run
 
-    x0 = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
     lengths = np.asarray(prepared.lengths, dtype=np.int64)
     states, acc, dead = free_run(
         model.kernel_arrays(), prepared.values, lengths, dt, prepared.substeps,
-        np.atleast_2d(x0), q_limit, progress,
+        x0, q_limit, progress,
     )  # fmt: skip
     return _results(states, acc, dead, prepared.lengths, prepared.substeps)
 
 
-def _integrate(model, prepared: FineInputs, dt, q0, q_dot0, q_limit) -> list[SimulationResult]:
+def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationResult]:
     """Integrate with NumPy over the prepared input grid (see :func:`simulate`)."""
     ns = prepared.substeps
     h = dt / ns
     fine, lengths = prepared.values, prepared.lengths
     B, n = fine.shape[0], max(lengths)
-    x = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
+    x = x0
     states = np.full((B, n, model.n_states), np.nan)
     acc = np.full((B, n), np.nan)
     states[:, 0] = x

@@ -164,6 +164,13 @@ class ValidateConfig:
     engine : {"compiled", "numpy"}
         Free-run engine: the compiled kernel (:mod:`pipeline.kernel`, default) or the NumPy
         reference; the same scheme and the same numbers to rounding.
+    predict_steps : int
+        Horizon k [samples] of the k-step-ahead NRMSE scored beside the free run (each
+        sample's prediction restarted from the measured state k samples earlier, as
+        MATLAB's ``predict``); 0: no prediction scores and no residual analysis.
+    resid_lags : int
+        Largest lag [samples] of the residual analysis of the one-step prediction errors
+        (autocorrelation and cross-correlation with each input, as MATLAB's ``resid``).
 
     Raises
     ------
@@ -180,6 +187,8 @@ class ValidateConfig:
     published: Annotated[tuple[PublishedResult, ...], AsTuple] = ()
     analytical: bool = False
     engine: Literal["compiled", "numpy"] = "compiled"
+    predict_steps: NonNegativeInt = 10
+    resid_lags: PositiveInt = 25
 
     def __post_init__(self) -> None:
         if self.report_unit is not None and lookup_unit(self.report_unit) is None:

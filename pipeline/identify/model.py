@@ -230,6 +230,36 @@ class RBFModel:
         q_dot0 = np.asarray(q_dot0, dtype=float)
         return np.stack([q0, q_dot0, q_dot0], axis=-1)
 
+    def measured_states(self, q: np.ndarray, q_dot: np.ndarray, dt: float) -> np.ndarray:
+        """States ``[q, q_dot, z]`` along a measured record, z filtered from the velocity.
+
+        A prediction restarted at sample k needs the friction state the model would have
+        there; z = q_dot (:meth:`initial_state`) holds only at rest. Here z is the measured
+        velocity passed through the model's own filter z' = (q_dot - z) / T_z from the
+        record's start (:func:`pipeline.identify.friction.friction_state`), as the
+        regression of Eq. 40 builds it.
+
+        Parameters
+        ----------
+        q, q_dot : ndarray, shape (n,)
+            Measured position [unit of q] and velocity [unit of q / s].
+        dt : float
+            Sample time [s].
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37.
+        """
+        from pipeline.identify.friction import friction_state
+
+        q = np.asarray(q, dtype=float)
+        q_dot = np.asarray(q_dot, dtype=float)
+        return np.stack([q, q_dot, friction_state(q_dot, dt, self.T_z)], axis=-1)
+
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """State derivative for the free-run simulator.
 

@@ -14,6 +14,7 @@ from pipeline.datasets import validation_datasets
 from pipeline.identify import RBFModel
 from pipeline.identify.stability import model_is_stable
 from pipeline.physics_stages import analytical_for
+from pipeline.prediction import prediction_table
 from pipeline.render import FigureJob, render_pngs
 from pipeline.stages import StageInputs, StageOutput
 from pipeline.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
@@ -39,12 +40,16 @@ class ValidateResult:
         Measured vs simulated q per data set, to draw (:func:`pipeline.plots.free_run_figure`).
     sim_time : float
         Wall time of the free runs [s].
+    residuals : pandas.DataFrame or None
+        The residual analysis's correlations (:func:`pipeline.prediction.prediction_table`),
+        None with ``predict_steps = 0``.
     """
 
     table: pd.DataFrame
     simulated: dict[str, pd.DataFrame]
     plots: dict[str, FigureJob]
     sim_time: float = 0.0
+    residuals: pd.DataFrame | None = None
 
     @property
     def figures(self) -> dict[str, Any]:
@@ -116,6 +121,19 @@ def run_validate(
             simulated[ds] = simulated[ds].assign(
                 **{f"{col}_{name}": run[col].to_numpy() for col in SIM_COLUMNS}
             )
+    residuals = None
+    if cfg.predict_steps:
+        scored = [
+            prediction_table(
+                m, name, datasets, k=cfg.predict_steps, max_lag=cfg.resid_lags,
+                substeps=cfg.substeps, interpolation=cfg.input_interpolation,
+                q_limit=q_limit, engine=cfg.engine,
+            )
+            for m, name in [(model, "rbf"), *others]
+        ]  # fmt: skip
+        scores = pd.concat([s for s, _ in scored], ignore_index=True)
+        table = table.merge(scores, on=["dataset", "model"], how="left", validate="one_to_one")
+        residuals = pd.concat([c for _, c in scored], ignore_index=True)
     table["reason"] = ""
     q_est, qd_est = estimation_motion(tables, derivs)
     for other, name in [(model, "rbf"), *others]:
@@ -139,7 +157,7 @@ def run_validate(
         )
         for name, sim in simulated.items()
     }
-    return ValidateResult(table, simulated, plots, sim_time)
+    return ValidateResult(table, simulated, plots, sim_time, residuals)
 
 
 def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
@@ -199,6 +217,8 @@ def execute(ctx: StageInputs) -> StageOutput:
         ctx.physics(),
     )
     outputs: dict[str, Any] = {"nrmse.parquet": res.table}
+    if res.residuals is not None:
+        outputs["residuals.parquet"] = res.residuals
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
     # drawn in parallel processes: the same PNG bytes as one after the other
     pngs = render_pngs(list(res.plots.values()))

@@ -1,0 +1,413 @@
+"""k-step-ahead prediction and residual analysis: the checks of MATLAB's ``predict`` and ``resid``.
+
+A free run (Eq. 41's simulation) shows what a model does on its own; a control engineer also
+asks how well it predicts a short horizon from a known state, and whether what it leaves
+unexplained is noise. Both are computed here for any model the free-run simulator takes:
+
+- :func:`k_step_prediction` restarts the model from the measured state (q and the
+  differentiate stage's q_dot) at every sample and integrates ``k`` samples ahead with the
+  same RK4 scheme and input interpolation as the free run (:func:`pipeline.simulate.simulate`,
+  the windows batched); ``k = 1`` gives the one-step prediction errors.
+- :func:`residual_analysis` tests those errors: their autocorrelation (whiteness, with the
+  Ljung-Box portmanteau statistic) and their cross-correlation with each input, each with
+  99 % confidence limits.
+
+The identified models have no noise model, so the predictor's state is the measured one: the
+one-step errors hold the sensor noise and the derivative estimate's error as well as the
+model's. The cross-correlation with the inputs is then the test of the dynamics (a model
+that misses an input's effect leaves errors correlated with that input); the autocorrelation
+says whether the errors are noise or structure (Ljung 1999, Sec. 16.6).
+
+References
+----------
+Ljung, L., System Identification: Theory for the User, 2nd ed., Prentice Hall 1999,
+Sec. 16.6 (residual analysis) and Sec. 7.3 (k-step-ahead predictors).
+Ljung, G. M. & Box, G. E. P., On a measure of lack of fit in time series models,
+Biometrika 65(2), 1978, 297-303.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from pipeline.errors import WorkflowError
+from pipeline.simulate import FineInputs, FreeRunModel, prepare_inputs, simulate, substeps_needed
+from pipeline.validate import DataSet, nrmse
+
+__all__ = [
+    "RESIDUAL_CONFIDENCE",
+    "ResidualAnalysis",
+    "k_step_prediction",
+    "prediction_table",
+    "residual_analysis",
+]
+
+#: Confidence level of the residual tests' limits and of the Ljung-Box test (as ``resid``).
+RESIDUAL_CONFIDENCE = 0.99
+#: At most this many restarted windows per record; longer records are sampled evenly.
+MAX_WINDOWS = 20000
+
+
+def k_step_prediction(
+    model: FreeRunModel,
+    q: np.ndarray,
+    q_dot: np.ndarray,
+    v: np.ndarray,
+    dt: float,
+    k: int,
+    *,
+    substeps: int = 2,
+    interpolation: str = "bandlimited",
+    q_limit: float = np.inf,
+    engine: str = "compiled",
+    max_windows: int = MAX_WINDOWS,
+) -> np.ndarray:
+    """Predict q ``k`` samples ahead from the measured state at every sample.
+
+    Each window starts from the model's states along the record: its
+    ``measured_states(q, q_dot, dt)`` where it has one (the identified model's friction
+    state filtered from the measured velocity), else ``initial_state(q, q_dot)``.
+
+    Parameters
+    ----------
+    model : FreeRunModel
+        The model (identified, SINDy, analytical).
+    q, q_dot : ndarray, shape (n,)
+        Measured position [unit of q] and its derivative [unit of q / s] (the
+        differentiate stage's), the state each window restarts from.
+    v : ndarray, shape (n, n_inputs)
+        Inputs [V] (or the input's unit).
+    dt : float
+        Sample time [s].
+    k : int
+        Prediction horizon [samples], ``>= 1``.
+    substeps, interpolation, q_limit, engine
+        As :func:`pipeline.simulate.simulate` (the validate stage's settings).
+    max_windows : int, optional
+        Most restarts per record; a longer record restarts at evenly spaced samples
+        (then ``k >= 2``; with ``k = 1`` every sample is kept so that the errors are
+        consecutive, as the residual analysis needs).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``q_hat(j | j - k)`` [unit of q]: the prediction of sample ``j`` made at sample
+        ``j - k``; NaN for ``j < k``, for samples that start no window and after a
+        window diverged.
+
+    Raises
+    ------
+    WorkflowError
+        If ``k < 1``, the record is not longer than ``k`` samples or the shapes differ.
+
+    References
+    ----------
+    Ljung 1999, Sec. 7.3 (k-step-ahead prediction); the scheme of
+    :func:`pipeline.simulate.simulate` (classical RK4 with sub-steps).
+
+    Examples
+    --------
+    A model that holds its velocity predicts a ramp exactly:
+
+    >>> class Ramp:
+    ...     n_states = 2
+    ...     def initial_state(self, q0, q_dot0):
+    ...         return np.stack([q0, q_dot0], axis=-1)
+    ...     def rhs(self, x, v):
+    ...         return np.stack([x[:, 1], 0 * x[:, 1]], axis=1), 0 * x[:, 1]
+    ...     def max_step(self):
+    ...         return np.inf
+    >>> t = np.arange(6) * 0.1
+    >>> q_hat = k_step_prediction(Ramp(), 2 * t, np.full(6, 2.0), np.zeros((6, 1)), 0.1, 2)
+    >>> np.round(q_hat, 12).tolist()[2:]
+    [0.4, 0.6, 0.8, 1.0]
+    """
+    q = np.asarray(q, dtype=float)
+    q_dot = np.asarray(q_dot, dtype=float)
+    v = np.asarray(v, dtype=float)
+    k = int(k)
+    n = q.size
+    if k < 1:
+        raise WorkflowError(f"the prediction horizon k must be >= 1 sample, got {k}")
+    if q_dot.shape != q.shape or v.shape[0] != n:
+        raise WorkflowError(f"shapes differ: q {q.shape}, q_dot {q_dot.shape}, v {v.shape}")
+    if n <= k:
+        raise WorkflowError(f"a record of {n} samples is too short for {k}-step prediction")
+    starts = np.arange(n - k)
+    if k > 1 and starts.size > max_windows:
+        starts = np.unique(np.linspace(0, n - k - 1, max_windows).astype(np.int64))
+    ns = substeps_needed(model, dt, substeps)
+    fine = prepare_inputs([v], ns, interpolation).values[0]
+    step = 2 * ns  # fine-grid points per sample interval
+    span = k * step + 1
+    idx = starts[:, None] * step + np.arange(span)[None, :]
+    windows = FineInputs(np.ascontiguousarray(fine[idx]), [k + 1] * starts.size, ns)
+    if hasattr(model, "measured_states"):  # e.g. the friction state filtered from q_dot
+        x0 = model.measured_states(q, q_dot, dt)[starts]
+    else:
+        x0 = model.initial_state(q[starts], q_dot[starts])
+    runs = simulate(
+        model,
+        windows,
+        dt,
+        q[starts],
+        q_dot[starts],
+        substeps=ns,
+        q_limit=q_limit,
+        engine=engine,
+        progress=lambda done, total: None,
+        x0=x0,
+    )
+    out = np.full(n, np.nan)
+    out[starts + k] = [run.q[-1] for run in runs]
+    return out
+
+
+@dataclass(frozen=True)
+class ResidualAnalysis:
+    """Autocorrelation and input cross-correlation of prediction errors, with their limits.
+
+    Attributes
+    ----------
+    n : int
+        Residual samples used (finite ones).
+    lags : ndarray, shape (L + 1,)
+        Lags 0..L of the autocorrelation [samples].
+    autocorr : ndarray, shape (L + 1,)
+        Normalised autocorrelation ``r_ee(tau) / r_ee(0)``; 1 at lag 0.
+    auto_limit : float
+        Its 99 % limit ``z / sqrt(n)`` for white errors (``z = 2.58``).
+    ljung_box_p : float
+        p-value of the Ljung-Box statistic over lags 1..L (white errors: large; below
+        0.01 the errors are not white at the 99 % level).
+    cross_lags : ndarray, shape (2 L + 1,)
+        Lags -L..L of the cross-correlation [samples]; positive: the input leads.
+    crosscorr : ndarray, shape (n_inputs, 2 L + 1)
+        Normalised cross-correlation of the errors with each input (its mean removed).
+    cross_limit : ndarray, shape (n_inputs,)
+        Each input's 99 % limit under independence, ``z sqrt(sum_k rho_e(k) rho_u(k) / n)``
+        (Bartlett's variance; ``z / sqrt(n)`` for white errors or a white input); NaN for
+        a constant input.
+    """
+
+    n: int
+    lags: np.ndarray
+    autocorr: np.ndarray
+    auto_limit: float
+    ljung_box_p: float
+    cross_lags: np.ndarray
+    crosscorr: np.ndarray
+    cross_limit: np.ndarray
+
+    @property
+    def white(self) -> bool:
+        """Whether the errors pass the Ljung-Box test at the 99 % level."""
+        return bool(self.ljung_box_p >= 1.0 - RESIDUAL_CONFIDENCE)
+
+    @property
+    def cross_outside(self) -> np.ndarray:
+        """Share of lags, per input, whose cross-correlation lies outside its limit.
+
+        Returns
+        -------
+        ndarray, shape (n_inputs,)
+            Between 0 and 1; NaN for a constant input.
+        """
+        with np.errstate(invalid="ignore"):
+            out = np.mean(np.abs(self.crosscorr) > self.cross_limit[:, None], axis=1)
+        return np.where(np.isfinite(self.cross_limit), out, np.nan)
+
+
+def _correlation(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
+    """Biased normalised cross-correlation ``r_ab(tau)``, tau = -max_lag..max_lag.
+
+    ``r_ab(tau) = sum_t a(t) b(t - tau) / (n s_a s_b)`` (Ljung 1999, Eq. 16.61), both
+    means removed; ``a(t)`` against ``b`` ``tau`` samples earlier.
+    """
+    n = a.size
+    a = a - a.mean()
+    b = b - b.mean()
+    scale = n * np.sqrt(np.mean(a * a) * np.mean(b * b))
+    full = np.correlate(a, b, mode="full")  # index n - 1 + tau: sum_t a(t) b(t - tau)
+    mid = n - 1
+    return full[mid - max_lag : mid + max_lag + 1] / scale
+
+
+def residual_analysis(errors: np.ndarray, v: np.ndarray, max_lag: int = 25) -> ResidualAnalysis:
+    """Test prediction errors for whiteness and for correlation with the inputs.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (n,)
+        One-step prediction errors ``q - q_hat(. | . - 1)`` [unit of q]; NaN samples (no
+        prediction) are dropped with the inputs at the same samples.
+    v : ndarray, shape (n, n_inputs)
+        Inputs at the same samples.
+    max_lag : int, optional
+        Largest lag L [samples] (MATLAB's ``resid`` uses 25).
+
+    Returns
+    -------
+    ResidualAnalysis
+
+    Raises
+    ------
+    WorkflowError
+        If fewer than ``4 max_lag`` finite errors remain, or the errors are constant.
+
+    References
+    ----------
+    Ljung 1999, Sec. 16.6 (Eq. 16.61-16.63: the correlation estimates and their
+    confidence limits); Ljung & Box 1978 (the portmanteau statistic
+    ``Q = n (n + 2) sum_tau r(tau)^2 / (n - tau)``, chi-square with L degrees of freedom);
+    Bartlett's formula for the variance of a cross-correlation between independent series
+    (Box, Jenkins & Reinsel, Time Series Analysis, 4th ed. 2008, Sec. 11.1.3).
+
+    Examples
+    --------
+    White noise passes; its own input is far outside the limits:
+
+    >>> rng = np.random.default_rng(0)
+    >>> e = rng.standard_normal(2000)
+    >>> res = residual_analysis(e, rng.standard_normal((2000, 1)))
+    >>> res.white, bool(res.cross_outside[0] < 0.05)
+    (True, True)
+    >>> bool(residual_analysis(e[1:], e[:-1, None]).cross_outside[0] > 0)
+    True
+    """
+    errors = np.asarray(errors, dtype=float)
+    v = np.asarray(v, dtype=float).reshape(errors.size, -1)
+    keep = np.isfinite(errors) & np.all(np.isfinite(v), axis=1)
+    e, u = errors[keep], v[keep]
+    n = e.size
+    max_lag = int(max_lag)
+    if n < 4 * max_lag:
+        raise WorkflowError(
+            f"residual analysis needs at least {4 * max_lag} finite prediction errors "
+            f"for {max_lag} lags, got {n}"
+        )
+    if np.ptp(e) == 0:
+        raise WorkflowError("the prediction errors are constant: no residual analysis")
+    z = float(stats.norm.ppf(0.5 + RESIDUAL_CONFIDENCE / 2))
+    r_ee = _correlation(e, e, max_lag)[max_lag:]
+    tau = np.arange(1, max_lag + 1)
+    q_stat = n * (n + 2) * np.sum(r_ee[1:] ** 2 / (n - tau))
+    p = float(stats.chi2.sf(q_stat, df=max_lag))
+    cross = np.full((u.shape[1], 2 * max_lag + 1), np.nan)
+    limit = np.full(u.shape[1], np.nan)
+    rho_e = _correlation(e, e, max_lag)
+    for i in range(u.shape[1]):
+        if np.ptp(u[:, i]) == 0:
+            continue
+        cross[i] = _correlation(e, u[:, i], max_lag)
+        rho_u = _correlation(u[:, i], u[:, i], max_lag)
+        limit[i] = z * np.sqrt(max(float(np.sum(rho_e * rho_u)), 1.0) / n)
+    return ResidualAnalysis(
+        n=n,
+        lags=np.arange(max_lag + 1),
+        autocorr=r_ee,
+        auto_limit=z / np.sqrt(n),
+        ljung_box_p=p,
+        cross_lags=np.arange(-max_lag, max_lag + 1),
+        crosscorr=cross,
+        cross_limit=limit,
+    )
+
+
+def prediction_table(
+    model: FreeRunModel,
+    model_name: str,
+    datasets: Sequence[DataSet],
+    *,
+    k: int,
+    max_lag: int,
+    substeps: int,
+    interpolation: str,
+    q_limit: float,
+    engine: str,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Score a model's k-step predictions and test its one-step errors on every data set.
+
+    Parameters
+    ----------
+    model : FreeRunModel
+        The model.
+    model_name : str
+        Its row label ("rbf", "sindy", ...).
+    datasets : sequence of pipeline.validate.DataSet
+        Measured data with the differentiate stage's ``q_dot``.
+    k : int
+        Horizon of the k-step NRMSE [samples], ``>= 1``.
+    max_lag : int
+        Largest lag of the residual correlations [samples].
+    substeps, interpolation, q_limit, engine
+        The free run's settings (``[validate]``), so that prediction and free run use one
+        scheme.
+
+    Returns
+    -------
+    scores : pandas.DataFrame
+        One row per data set: ``dataset, model, k_steps, nrmse_q_k`` (Eq. 41 over the
+        predicted samples), ``resid_white`` (Ljung-Box at 99 %), ``resid_ljung_box_p``,
+        ``resid_cross_outside`` (the largest share, over the inputs, of lags outside the
+        99 % limits); NaN / None where a data set is too short to test.
+    correlations : pandas.DataFrame
+        Long table ``dataset, model, series ("autocorr" or "cross_v<i>"), lag [samples],
+        r, limit`` for the figures of the residual check.
+
+    References
+    ----------
+    Ljung 1999, Sec. 7.3 and 16.6; Masoud & Maas 2025, Eq. 41.
+    """
+    rows, curves = [], []
+    for ds in datasets:
+        row = {"dataset": ds.name, "model": model_name, "k_steps": int(k)}
+        settings = dict(
+            substeps=substeps, interpolation=interpolation, q_limit=q_limit, engine=engine
+        )
+        q_k = k_step_prediction(model, ds.q, ds.q_dot, ds.v, ds.dt, k, **settings)
+        m = np.isfinite(q_k)
+        row["nrmse_q_k"] = nrmse(ds.q[m], q_k[m]) if m.sum() > 1 and np.ptp(ds.q[m]) else np.nan
+        q_1 = (
+            q_k if k == 1 else k_step_prediction(model, ds.q, ds.q_dot, ds.v, ds.dt, 1, **settings)
+        )
+        try:
+            res = residual_analysis(ds.q - q_1, ds.v, max_lag)
+        except WorkflowError:  # too short or constant: no test, said by the NaN
+            row.update(resid_white=None, resid_ljung_box_p=np.nan, resid_cross_outside=np.nan)
+        else:
+            outside = res.cross_outside
+            row.update(
+                resid_white=res.white,
+                resid_ljung_box_p=res.ljung_box_p,
+                resid_cross_outside=float(np.nanmax(outside))
+                if np.isfinite(outside).any()
+                else np.nan,
+            )
+            series = [("autocorr", res.lags, res.autocorr, res.auto_limit)]
+            series += [
+                (f"cross_v{i + 1}", res.cross_lags, r, lim)
+                for i, (r, lim) in enumerate(zip(res.crosscorr, res.cross_limit, strict=True))
+            ]
+            curves += [
+                pd.DataFrame(
+                    {
+                        "dataset": ds.name,
+                        "model": model_name,
+                        "series": name,
+                        "lag": lags,
+                        "r": r,
+                        "limit": lim,
+                    }
+                )
+                for name, lags, r, lim in series
+            ]
+        rows.append(row)
+    columns = ["dataset", "model", "series", "lag", "r", "limit"]
+    corr = pd.concat(curves, ignore_index=True) if curves else pd.DataFrame(columns=columns)
+    return pd.DataFrame(rows), corr
