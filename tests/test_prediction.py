@@ -6,6 +6,7 @@ from scipy import linalg, stats
 
 from pipeline.errors import WorkflowError
 from pipeline.prediction import _correlation, k_step_prediction, residual_analysis
+from pipeline.simulate import simulate
 
 
 class Oscillator:
@@ -197,3 +198,27 @@ def test_the_true_plant_predicts_its_own_record_to_integration_error(bistable_re
         "cross_v1": 51,
         "cross_v2": 51,
     }
+
+
+def test_restarts_carry_the_friction_state_of_the_record_not_z_equal_q_dot():
+    from conftest import example_rbf_model, excitation
+
+    model = example_rbf_model(T_z=0.05, prior=False)
+    dt = 0.002
+    t = np.arange(0, 3.0, dt)
+    v = excitation(t)
+    (run,) = simulate(model, [v], dt, np.array([-0.008]), np.array([0.0]), substeps=4)
+    z = model.measured_states(run.q, run.q_dot, dt)[:, 2]
+    assert np.max(np.abs(z - run.states[:, 2])) < 1e-3 * np.ptp(run.states[:, 2])
+    q_hat = k_step_prediction(model, run.q, run.q_dot, v, dt, 25, substeps=4)
+    err = np.nanmax(np.abs(q_hat - run.q)) / np.ptp(run.q)
+    assert err < 1e-4
+
+    class AtRest:  # the same model restarted with z = q_dot
+        n_states = model.n_states
+        initial_state = staticmethod(model.initial_state)
+        rhs = staticmethod(model.rhs)
+        max_step = staticmethod(model.max_step)
+
+    q_rest = k_step_prediction(AtRest(), run.q, run.q_dot, v, dt, 25, substeps=4)
+    assert np.nanmax(np.abs(q_rest - run.q)) / np.ptp(run.q) > 10 * err

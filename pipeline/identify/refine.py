@@ -253,7 +253,10 @@ def refine_model(
     n_fixed = model.n_inputs if identify_mass else 0  # the known input gains
     term_param = [names.index(n) for n in terms] + [-1] * n_fixed
     signs = [-1.0 if identify_mass else term_sign(n) for n in terms] + [1.0] * n_fixed
-    x_start = np.stack([q0, qd0, qd0], axis=1)
+    # each window starts from the model's states along its record: the friction state is the
+    # measured velocity filtered by z' = (q_dot - z) / T_z, not q_dot (true only at rest)
+    z_rec = [model.measured_states(r.q, r.q_dot, dt)[:, 2] for r in records]
+    x_start = np.stack([q0, qd0, np.array([z_rec[i][s] for i, s in picks])], axis=1)
     lengths = np.full(W, L)
     last: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
