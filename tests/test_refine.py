@@ -116,3 +116,30 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     assert res.full_rms_refined < res.full_rms_ls  # better in free run, but unstable
     assert "unstable" in res.message and "negative damping" in res.message
     assert len(calls) == 1 and calls[0][0] == calls[0][1] > 1000  # q and q_dot of the records
+
+
+def test_fitted_windows_never_touch_the_held_out_blocks_that_judge_them():
+    from pipeline.identify.refine import _held_out, _windows
+
+    rcfg = RefineConfig(windows=30, length=100, holdout=3)
+    recs = [Record(f"r{k}", np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 1)), 0.01)
+            for k, n in enumerate([2000, 1300, 90])]  # fmt: skip
+    fit, test = _windows(recs, rcfg)
+    assert 15 <= len(fit) < 30 and test
+    for i, s in fit:
+        assert not _held_out(recs[i].q.size, rcfg)[s : s + 100].any()
+    for i, s in test:
+        assert _held_out(recs[i].q.size, rcfg)[s : s + 100].all()
+    # blocks of 200 samples, every third held out: [400, 600), [1000, 1200), ... of each record
+    assert sorted({(i, s // 200) for i, s in test}) == [(0, 2), (0, 5), (0, 8), (1, 2), (1, 5)]
+    assert all(i != 2 for i, _ in fit + test)  # shorter than one window
+    fit0, test0 = _windows(recs, RefineConfig(windows=30, length=100, holdout=0))
+    assert len(fit0) == 30 and not test0
+
+
+def test_the_held_out_blocks_decide_and_their_errors_are_reported(bistable):
+    *_, res = bistable
+    assert res.holdout_windows > 0
+    assert np.isfinite(res.holdout_rms_ls) and np.isfinite(res.holdout_rms_refined)
+    if res.accepted:
+        assert res.holdout_rms_refined < res.holdout_rms_ls

@@ -5,15 +5,18 @@ the derivatives are noisy and is not what the model is used for. This module
 refines the same parameters (RBF weights, backbone, optionally T_z) by
 minimising the *free-run simulation* error over windows of the estimation data,
 each started from the measured state (windowed free runs, a simple form of
-multiple shooting). Test data are never used. The refined model is accepted only
-if its free run over the whole estimation records is not worse than the
-least-squares model's, so refinement never increases that error.
+multiple shooting). Test data are never used. Every few blocks of each estimation
+record are held out of the fit (blocked cross-validation); the refined model is
+accepted only if its windowed free-run error on those blocks falls and its free run
+over the whole estimation records is not worse than the least-squares model's, so
+refinement never increases that error and is not kept for fitting what it was fitted on.
 
 References
 ----------
 Ljung, System Identification (1999), Sec. 7.3 (output-error methods); Bock &
 Plitt (1984) and Ribeiro et al. (2020) on multiple shooting for simulation-error
-fitting.
+fitting; Bergmeir & Benitez, Inf. Sci. 191 (2012), on blocked cross-validation of
+time-series models.
 """
 
 from __future__ import annotations
@@ -60,6 +63,11 @@ class RefineConfig:
         Also refine T_z (when the model has a friction lag, T_z > 0).
     ftol : float
         Relative cost decrease below which the optimiser stops.
+    holdout : int
+        Every ``holdout``-th block of each estimation record (blocks two windows long) is
+        held out: no fitted window touches it, and the refinement is kept only if its
+        windowed free-run error there falls (blocked cross-validation); 0: no held-out
+        blocks, judged on the whole estimation records only.
 
     Raises
     ------
@@ -75,6 +83,7 @@ class RefineConfig:
     interpolation: Literal["bandlimited", "linear"] = "bandlimited"
     refine_T_z: bool = True
     ftol: PositiveFloat = 1e-6
+    holdout: Annotated[int, Field(ge=0)] = 4
 
 
 @dataclass(frozen=True)
@@ -91,6 +100,11 @@ class RefineResult:
         RMS free-run error over the windows before and after [unit of q].
     full_rms_ls, full_rms_refined : float
         RMS free-run error over the whole estimation records [unit of q].
+    holdout_rms_ls, holdout_rms_refined : float
+        RMS free-run error over the windows of the held-out blocks [unit of q] (NaN
+        without held-out blocks).
+    holdout_windows : int
+        Windows in the held-out blocks.
     nfev : int
         Cost evaluations used.
     message : str
@@ -108,6 +122,9 @@ class RefineResult:
     nfev: int
     message: str
     seconds: float
+    holdout_rms_ls: float = float("nan")
+    holdout_rms_refined: float = float("nan")
+    holdout_windows: int = 0
 
 
 def _theta_model(
@@ -165,19 +182,64 @@ def _theta_model(
     return TableModel(table, weights, mass, tz)
 
 
+def _held_out(n: int, rcfg: RefineConfig) -> np.ndarray:
+    """Mask of the samples of a record of ``n`` samples that lie in held-out blocks."""
+    held = np.zeros(n, dtype=bool)
+    if rcfg.holdout:
+        block = 2 * rcfg.length
+        held = (np.arange(n) // block) % rcfg.holdout == rcfg.holdout - 1
+    return held
+
+
 def _windows(records: Sequence[Record], rcfg: RefineConfig):
-    """Evenly spread windows (record index, start) over the estimation records."""
-    spans = [(i, r.q.size - rcfg.length) for i, r in enumerate(records) if r.q.size > rcfg.length]
+    """Fitted and held-out windows, each a list of (record index, start).
+
+    ``windows`` starts are spread evenly over the records; those whose window touches a
+    held-out block are dropped from the fit. The held-out windows tile each held-out block
+    at half-window steps.
+    """
+    L = rcfg.length
+    spans = [(i, r.q.size - L) for i, r in enumerate(records) if r.q.size > L]
     total = sum(s for _, s in spans)
     if total <= 0:
-        return []
+        return [], []
     picks = np.linspace(0, total - 1, rcfg.windows).astype(int)
-    out, offset = [], 0
+    fit, test, offset = [], [], 0
     for i, span in spans:
-        for p in picks[(picks >= offset) & (picks < offset + span)]:
-            out.append((i, int(p - offset)))
+        held = _held_out(records[i].q.size, rcfg)
+        covered = np.convolve(held, np.ones(L, dtype=int), mode="valid")[:span]  # per start
+        fit += [
+            (i, int(p - offset))
+            for p in picks[(picks >= offset) & (picks < offset + span)]
+            if not covered[p - offset]
+        ]
+        inside = np.flatnonzero(covered == L)
+        test += [(i, int(s)) for s in inside if (s - inside[0]) % max(L // 2, 1) == 0]
         offset += span
-    return out
+    return fit, test
+
+
+def _window_rms(model: RBFModel, records, picks, rcfg: RefineConfig, q_limit: float) -> float:
+    """RMS free-run error over windows restarted from the model's states along the records."""
+    if not picks:
+        return float("nan")
+    L, dt = rcfg.length, records[0].dt
+    states = [model.measured_states(r.q, r.q_dot, dt) for r in records]
+    runs = simulate(
+        model,
+        [records[i].v[s : s + L] for i, s in picks],
+        dt,
+        np.array([records[i].q[s] for i, s in picks]),
+        np.array([records[i].q_dot[s] for i, s in picks]),
+        substeps=rcfg.substeps,
+        interpolation=rcfg.interpolation,
+        q_limit=q_limit,
+        x0=np.stack([states[i][s] for i, s in picks]),
+    )
+    err = np.concatenate(
+        [run.q - records[i].q[s : s + L] for run, (i, s) in zip(runs, picks, strict=True)]
+    )
+    return float(np.sqrt(np.mean(err**2))) if np.all(np.isfinite(err)) else float("nan")
 
 
 def refine_model(
@@ -222,7 +284,7 @@ def refine_model(
     _check_memory(model, diag, records, rcfg)
     t_start = time.perf_counter()
     dt = records[0].dt
-    picks = _windows(records, rcfg)
+    picks, held = _windows(records, rcfg)
     if not picks:
         return _rejected(model, records, rcfg, "records shorter than one window", t_start)
     L = rcfg.length
@@ -309,8 +371,17 @@ def refine_model(
         theta, diag.columns, model.basis, cfg, model.n_inputs, T_z, model.q_range
     )
     full_ls, full_ref = (_full_rms(m, records, rcfg, q_limit) for m in (model, refined))
+    held_ls, held_ref = (_window_rms(m, records, held, rcfg, q_limit) for m in (model, refined))
     accepted = bool(np.isfinite(full_ref) and full_ref <= full_ls)
     message = str(sol.message)
+    if not accepted:
+        message = "rejected: the free run over the estimation records got worse"
+    elif held and not (np.isfinite(held_ref) and held_ref < held_ls):
+        accepted = False
+        message = (
+            f"rejected: the windows of the held-out estimation blocks got worse "
+            f"({held_ls:.4g} -> {held_ref:.4g} RMS)"
+        )
     if accepted:
         from pipeline.identify.stability import model_is_stable
 
@@ -328,6 +399,9 @@ def refine_model(
         nfev=int(sol.nfev),
         message=message,
         seconds=time.perf_counter() - t_start,
+        holdout_rms_ls=held_ls,
+        holdout_rms_refined=held_ref,
+        holdout_windows=len(held),
     )
 
 

@@ -122,6 +122,9 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "window_rms_simulation_error": res.window_rms_refined,
             "full_rms_equation_error": res.full_rms_ls,
             "full_rms_simulation_error": res.full_rms_refined,
+            "holdout_rms_equation_error": res.holdout_rms_ls,
+            "holdout_rms_simulation_error": res.holdout_rms_refined,
+            "holdout_windows": res.holdout_windows,
             "nfev": res.nfev,
             "message": res.message,
         }
