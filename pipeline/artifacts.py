@@ -444,6 +444,9 @@ def write_stage(
         nothing is written, moved or deleted).
     TypeError
         If an output has no writer. Nothing is left behind in that case.
+    OutputDirError
+        If an output name is not a relative path inside the stage folder (absolute,
+        ``..``, a NUL byte): every write resolves inside the output folder.
     """
     final = Path(stage_dir)
     foreign = foreign_files(final)
@@ -460,7 +463,7 @@ def write_stage(
             json.loads(canonical_json(dict(summary or {}))), indent=2, sort_keys=True
         )
         for rel, value in [*sorted(outputs.items()), (SUMMARY, summary_json + "\n")]:
-            path = tmp / rel
+            path = _inside(tmp, rel)
             write_output(value, path)
             hashes[rel] = sha256_file(path)
         manifest = Manifest(
@@ -483,6 +486,22 @@ def write_stage(
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return Manifest(**{**asdict(manifest), "summary": json.loads(summary_json)})
+
+
+def _inside(folder: Path, rel: str) -> Path:
+    """``folder / rel`` if it stays inside ``folder`` (relative, no ``..``), else refuse it."""
+    parts = Path(rel).parts
+    path = folder / rel
+    if (
+        not parts
+        or Path(rel).is_absolute()
+        or any(p in ("..", ".") or "\x00" in p for p in parts)
+        or not path.resolve().is_relative_to(folder.resolve())
+    ):
+        raise OutputDirError(
+            f"output {rel!r} would be written outside its stage folder '{folder}': refused"
+        )
+    return path
 
 
 @contextmanager

@@ -36,6 +36,7 @@ from pipeline.identify.config import IdentifyConfig
 from pipeline.identify.terms import PHYSICS_TERMS
 from pipeline.ingest.spec import OPTION_KEYS, IngestSpec
 from pipeline.ingest.units import UNITS
+from pipeline.names import check_file_name
 from pipeline.physics.params import PrototypeParams
 from pipeline.validate import ValidateConfig
 
@@ -190,6 +191,7 @@ def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
 
     cfg = RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
     for name, exp in cfg.experiments.items():
+        check_file_name(name, "[rig.experiments] experiment name")  # rig/<name>.mat
         try:
             make_profile(exp.profile, **exp.profile_kwargs())
         except WorkflowError as exc:
@@ -204,6 +206,7 @@ def _datasets(
     experiments = sorted(rig.experiments) if rig is not None else []
     out = {}
     for name, table in raw.get("datasets", {}).items():
+        check_file_name(name, "[datasets] data set name")  # it becomes ingest/<name>.parquet
         where = f"[datasets.{name}]"
         if not isinstance(table, Mapping):
             raise WorkflowError(f"[datasets] {name}: expected a table, got {table!r}")

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import WorkflowError
+from pipeline.names import check_file_name
 from pipeline.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
@@ -180,9 +181,12 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     name = head.name if head.name is not None else path.stem
     base = path.parent
     if output_dir:
-        out = _output_dir(Path(output_dir), "output folder (--out)")
-    else:
-        out = _output_dir(base / (head.output_dir or f"runs/{name}"), "[workflow] output_dir")
+        out = _output_dir(Path(output_dir).expanduser(), "output folder (--out)")
+    elif head.output_dir:
+        out = _output_dir(base / Path(head.output_dir).expanduser(), "[workflow] output_dir")
+    else:  # the name becomes a folder name: runs/<name>
+        check_file_name(name, f"{path}: [workflow] name (no output_dir given)")
+        out = _output_dir(base / "runs" / name, "[workflow] output_dir")
     datasets = []
     for ds_name, (entry, _) in checked.datasets.items():
         table = raw["datasets"][ds_name]

@@ -23,6 +23,7 @@ from typing import Any
 import tomli_w
 
 from pipeline.errors import WorkflowError
+from pipeline.names import check_file_name
 from pipeline.physics.params import PrototypeParams
 from pipeline.rig.fleet import make_fleet
 from pipeline.rig.params import RigParams
@@ -65,8 +66,9 @@ def fleet_workflows(
     Raises
     ------
     WorkflowError
-        If the template has no ``[rig]`` section or an invalid one, or ``n``/``scatter``
-        are invalid.
+        If the template has no ``[rig]`` section or an invalid one, ``n``/``scatter``
+        are invalid, or its name is not a plain file name
+        (:func:`pipeline.names.check_file_name`).
     FleetError
         If the scatter leaves too few working prototypes.
 
@@ -82,6 +84,7 @@ def fleet_workflows(
     nominal = RigParams.from_dict({**rig.get("plant", {}), "prototype": prototype})
     members = make_fleet(n, seed=seed, nominal=nominal, scatter=scatter)
     name = template.get("workflow", {}).get("name", "fleet")
+    check_file_name(name, "[workflow] name of the fleet template")  # <name>-<k>.toml
     width = max(3, len(str(n - 1)))
     out: dict[str, str] = {}
     for k, member in enumerate(members):
