@@ -1,0 +1,197 @@
+"""Calibrate the identified curves' bands and masks against the virtual rig's known truth.
+
+For each plant (the full Ritz model of ``workflows/paper-experiment.toml`` and the reduced
+model of ``workflows/paper-experiment-reduced.toml``) a fleet of prototypes is generated
+(``debist fleet``), run with debist's defaults (``debist batch``), and every curve that
+debist marks identified is compared with the truth the rig wrote
+(``rig/identification_truth.h5``):
+
+- error where marked: the largest and the median |identified - true| over the marked grid
+  points, as % of the true curve's range over the grid;
+- coverage: the share of marked points whose band ``[<curve>_lo, <curve>_hi]`` holds the
+  truth, pooled over the fleet.
+
+Curves: the restoring force ``c(q) q + F_0`` against the truth ``f``, the damping ``d``
+against the plant's ``d`` (the identified d multiplies the friction state z, the plant's the
+velocity: they agree only where z ~ q_dot), and the input gains ``g_i`` against
+``g_i = 1/2 dC_i/dq`` (reduced plant only: the full plant's DE force is not separable in the
+form of Eq. 37; there the static force at each held input level, ``identify/static.parquet``,
+is compared with the full model's force-displacement curve at that level, Fig. 4). The unseen
+free-run NRMSE(q) of every member's ``rbf`` row (and ``narx`` where present) is listed too.
+
+Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
+
+    python benchmarks/calibrate_bands.py --size 10 --seed 1 --workers 2 --dir /tmp/cal
+
+It prints a Markdown table per plant and writes ``<dir>/calibration.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANTS = {
+    "full": ROOT / "workflows" / "paper-experiment.toml",
+    "reduced": ROOT / "workflows" / "paper-experiment-reduced.toml",
+}
+TRUTH_KEY = {"restoring": "f", "d": "d", "g1": "g1", "g2": "g2"}
+
+
+def _debist(*args: str) -> None:
+    cmd = [sys.executable, str(ROOT / "cli.py"), *args]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode not in (0, 1):  # 1: some member failed, reported below
+        raise SystemExit(f"{' '.join(cmd)} exited {done.returncode}:\n{done.stderr[-2000:]}")
+
+
+def _member_outputs(folder: Path) -> list[tuple[Path, Path]]:
+    """(workflow file, output folder) of every fleet member."""
+    out = []
+    for wf in sorted(folder.glob("*.toml")):
+        raw = tomllib.loads(wf.read_text())
+        out.append((wf, (wf.parent / raw["workflow"]["output_dir"]).resolve()))
+    return out
+
+
+def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
+    from pipeline.fileformats import read_h5
+
+    curves = pd.read_parquet(run / "identify" / "curves.parquet")
+    truth = read_h5(run / "rig" / "identification_truth.h5")["curves"]
+    q = curves.q.to_numpy()
+    rows = []
+    names = ["restoring", "d"] + (["g1", "g2"] if plant == "reduced" else [])
+    for name in names:
+        true = np.interp(q, truth["q"], truth[TRUTH_KEY[name]])
+        marked = curves[f"{name}_identified"].to_numpy()
+        est, lo, hi = (curves[c].to_numpy() for c in (name, f"{name}_lo", f"{name}_hi"))
+        rows.append(_score(name, true, est, lo, hi, marked))
+    if plant == "full":
+        rows += _static_rows(wf, run)
+    return rows
+
+
+def _static_rows(wf: Path, run: Path) -> list[dict]:
+    from pipeline.physics.statics import force_displacement
+    from pipeline.rig.experiment import RigConfig
+
+    raw = tomllib.loads(wf.read_text())
+    static = pd.read_parquet(run / "identify" / "static.parquet")
+    prototype = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).rig.prototype
+    rows = []
+    for _, part in static.groupby("level"):
+        marked = part.F_identified.to_numpy()
+        if not marked.any():
+            continue
+        v1, v2 = part[["v1", "v2"]].iloc[0]
+        full = force_displacement(prototype, part.q.to_numpy(), v1=v1, v2=v2)
+        ok = np.asarray(full.converged)
+        rows.append(
+            _score(
+                "static F", full.F[ok], part.F.to_numpy()[ok], part.F_lo.to_numpy()[ok],
+                part.F_hi.to_numpy()[ok], marked[ok],
+            )
+        )  # fmt: skip
+    return rows
+
+
+def _score(name, true, est, lo, hi, marked) -> dict:
+    span = float(np.ptp(true))
+    err = np.abs(est - true)[marked] / span if marked.any() else np.array([])
+    inside = ((true >= lo) & (true <= hi))[marked]
+    return {
+        "curve": name,
+        "marked": int(marked.sum()),
+        "max_error": float(err.max()) if err.size else np.nan,
+        "median_error": float(np.median(err)) if err.size else np.nan,
+        "inside": int(inside.sum()),
+    }
+
+
+def calibrate(plant: str, size: int, seed: int, workers: int, folder: Path) -> dict:
+    """Run one fleet and score it; returns the summary (see the module docstring)."""
+    fleet = folder / plant
+    if not any(fleet.glob("*.toml")):
+        _debist("fleet", str(PLANTS[plant]), "--size", str(size), "--seed", str(seed),
+                "--dir", str(fleet))  # fmt: skip
+    members = _member_outputs(fleet)
+    _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
+    rows, nrmse = [], []
+    for wf, run in members:
+        if not (run / "identify" / "curves.parquet").exists():
+            nrmse.append({"member": wf.stem, "model": "rbf", "nrmse_q": np.nan, "failed": True})
+            continue
+        rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant)]
+        table = pd.read_parquet(run / "compare" / "nrmse.parquet")
+        for _, r in table[table.role == "validation"].iterrows():
+            nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": float(r.nrmse_q)})
+    scores = pd.DataFrame(rows)
+    summary = (
+        scores.groupby("curve")
+        .agg(marked=("marked", "sum"), inside=("inside", "sum"),
+             max_error=("max_error", "max"), median_error=("median_error", "median"))
+        .assign(coverage=lambda s: s.inside / s.marked)
+    )  # fmt: skip
+    return {
+        "plant": plant,
+        "size": size,
+        "seed": seed,
+        "curves": summary.reset_index().to_dict(orient="records"),
+        "members": scores.to_dict(orient="records"),
+        "nrmse": nrmse,
+    }
+
+
+def _markdown(result: dict) -> str:
+    lines = [
+        f"**{result['plant']} plant**, fleet of {result['size']} (seed {result['seed']})",
+        "",
+        "| curve | marked points | max / median error where marked | band holds the truth |",
+        "|---|---|---|---|",
+    ]
+    for c in result["curves"]:
+        lines.append(
+            f"| {c['curve']} | {c['marked']} | {100 * c['max_error']:.1f} / "
+            f"{100 * c['median_error']:.1f} % | {100 * c['coverage']:.0f} % |"
+        )
+    nr = pd.DataFrame(result["nrmse"])
+    if not nr.empty:
+        lines += ["", "| model | unseen NRMSE(q): median | max | members |", "|---|---|---|---|"]
+        for model, g in nr.groupby("model"):
+            lines.append(
+                f"| {model} | {100 * g.nrmse_q.median():.2f} % | {100 * g.nrmse_q.max():.2f} % "
+                f"| {g.nrmse_q.notna().sum()} |"
+            )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """Parse the arguments, calibrate each plant, print and save the tables."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--size", type=int, default=10)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--dir", type=Path, required=True)
+    p.add_argument("--plants", default="full,reduced")
+    args = p.parse_args()
+    sys.path.insert(0, str(ROOT))
+    results = [
+        calibrate(plant, args.size, args.seed, args.workers, args.dir)
+        for plant in args.plants.split(",")
+    ]
+    for r in results:
+        print(_markdown(r), end="\n\n")
+    (args.dir / "calibration.json").write_text(json.dumps(results, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
