@@ -6,6 +6,7 @@ sequence (2000 steps; 400 under Octave, whose loops are slow) must agree with
 tables with ``RBFModel.curves``.
 """
 
+import ast
 import ctypes
 import functools
 import importlib.util
@@ -22,6 +23,7 @@ from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.export import (
     C_FILES,
     MATLAB_FILE,
+    MATLAB_NAME_FILE,
     PYTHON_FILE,
     ExportInfo,
     c_sources,
@@ -261,10 +263,14 @@ def test_header_states_provenance_and_range():
         version="9.9.9",
     )
     files = {**c_sources(model, info), **python_source(model, info), **matlab_source(model, info)}
-    assert set(files) == {*C_FILES, PYTHON_FILE, MATLAB_FILE}
-    for text in files.values():
+    assert set(files) == {*C_FILES, PYTHON_FILE, MATLAB_FILE, MATLAB_NAME_FILE}
+    # the workflow's name is free text: a string literal, never in a comment
+    assert 'const char DEBIST_WORKFLOW[] = "proto-7";' in files[C_FILES[1]]
+    assert "WORKFLOW = 'proto-7'" in files[PYTHON_FILE]
+    assert "name = 'proto-7';" in files[MATLAB_NAME_FILE]
+    for text in (files[f] for f in (*C_FILES, PYTHON_FILE, MATLAB_FILE)):
         head = text[:3000]
-        for needle in ("proto-7", "ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
+        for needle in ("ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
             assert needle in head
         assert "restoring identified" in head and "[-0.011, 0.0095]" in head
         assert "q [m]" in head and "v [V]" in head and "[s]" in head
@@ -277,7 +283,7 @@ def test_export_files_and_errors():
     model = rbf_model()
     assert set(export_files(model, "c")) == set(C_FILES)
     assert set(export_files(model, "python")) == {PYTHON_FILE}
-    assert set(export_files(model, "matlab")) == {MATLAB_FILE}
+    assert set(export_files(model, "matlab")) == {MATLAB_FILE, MATLAB_NAME_FILE}
     with pytest.raises(WorkflowError, match="fortran"):
         export_files(model, "fortran")
     bad = rbf_model(T_z=0.0)
@@ -345,7 +351,9 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     export = tmp_path / "out/export"
     header = (export / C_FILES[0]).read_text()
     sha = artifacts.manifest_digest(tmp_path / "out/identify")
-    assert sha in header and "export-check" in header
+    assert (
+        sha in header and 'DEBIST_WORKFLOW[] = "export-check"' in (export / C_FILES[1]).read_text()
+    )
     assert "restoring identified" in header  # intervals from curves.parquet
 
     before = (export / C_FILES[1]).read_bytes()
@@ -383,7 +391,8 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     code, out = invoke("export", wf, "--format", "matlab", "--dest", tmp_path / "m")
     assert code == 0, out
     text = (tmp_path / "m" / MATLAB_FILE).read_text()
-    assert sha in text and "export-check" in text and f"[{model.q_range[0]!r}," in text
+    assert sha in text and f"[{model.q_range[0]!r}," in text
+    assert "name = 'export-check';" in (tmp_path / "m" / MATLAB_NAME_FILE).read_text()
     if OCTAVE is not None:
         q_m, _ = run_octave(tmp_path / "m", v, q0, dt, 2)
         assert_close_q(q_m, ref.q)
@@ -393,3 +402,62 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
         fh.write(b"\0")
     code, out = invoke("export", wf, "--force")
     assert code == 1 and "model.h5" in out and "stale" in out
+
+
+#: Workflow names that try to break out of a comment, docstring, literal or template field.
+HOSTILE_NAMES = [
+    '"""\nimport pathlib; pathlib.Path("PWNED").touch()\n"""',
+    '*/ int evil = 1; /* \\ ??/ "q" @N_TERMS@',
+    "x\nsystem('touch PWNED')\n% '' '",
+    "\u00e9t\u00e9 \u2028 \U0001f600 \t\r\n\x0b end",
+    "",
+]
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_hostile_workflow_names_are_escaped_in_every_export(tmp_path, name):
+    model, v, _ = free_run("lag+prior")
+    info = ExportInfo(workflow=name, run_digest="ab" * 32)
+    x0 = np.array([0.004, 0.0, 0.0])
+    v0, v1 = v[0].tolist(), v[1].tolist()
+
+    # Python: importing runs nothing, and the name comes back exactly
+    (tmp_path / PYTHON_FILE).write_text(python_source(model, info)[PYTHON_FILE], encoding="utf-8")
+    probe = (
+        "import debist_model as m, numpy as np, sys; sys.stdout.write(repr((m.WORKFLOW, "
+        f"m.rk4_step(np.array({x0.tolist()!r}), {v0!r}, {v1!r}, {DT!r}).tolist())))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True
+    )
+    got_name, got_step = ast.literal_eval(done.stdout)
+    assert got_name == name
+    assert not (tmp_path / "PWNED").exists()
+
+    # C: compiles warning-free, and the literal holds the name's UTF-8 bytes
+    if CC is not None:
+        dll = build_c(tmp_path, model, info)
+        raw = (ctypes.c_char * (len(name.encode()) + 1)).in_dll(dll, "DEBIST_WORKFLOW")
+        assert bytes(raw)[:-1] == name.encode() and bytes(raw)[-1:] == b"\0"
+        x = x0.copy()
+        dll.debist_rk4_step(ptr(x), ptr(v[0].copy()), ptr(v[1].copy()), DT)
+        np.testing.assert_array_equal(x, got_step)
+
+    # MATLAB: the function file parses and runs in Octave and returns the name's code units
+    files = matlab_source(model, info)
+    for fname, text in files.items():
+        (tmp_path / fname).write_text(text, encoding="utf-8")
+    assert "PWNED" not in files[MATLAB_FILE]
+    if OCTAVE is not None:
+        script = (
+            "n = debist_model_workflow(); printf('%d ', double(n)); printf('\\n');"
+            f"x = debist_model([{float(x0[0])!r}; 0; 0], [{v0[0]!r}; {v0[1]!r}], "
+            f"[{v1[0]!r}; {v1[1]!r}], {DT!r}); printf('%.17g ', x);"
+        )
+        out = subprocess.run(
+            [OCTAVE, "--no-gui", "--quiet", "--eval", script],
+            cwd=tmp_path, capture_output=True, text=True, check=True,
+        ).stdout.split("\n")  # fmt: skip
+        assert [int(c) for c in out[0].split()] == list(name.encode())  # Octave: UTF-8 chars
+        np.testing.assert_allclose([float(s) for s in out[1].split()], got_step, rtol=1e-13)
+    assert not (tmp_path / "PWNED").exists()

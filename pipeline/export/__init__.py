@@ -24,7 +24,7 @@ from __future__ import annotations
 from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.export.c import C_FILES, c_sources
 from pipeline.export.common import CURVE_POINTS, ExportInfo, curve_table
-from pipeline.export.matlab import MATLAB_FILE, matlab_source
+from pipeline.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
 from pipeline.export.python import PYTHON_FILE, python_source
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "C_FILES",
     "FORMATS",
     "MATLAB_FILE",
+    "MATLAB_NAME_FILE",
     "PYTHON_FILE",
     "ExportInfo",
     "c_sources",

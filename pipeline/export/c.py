@@ -13,7 +13,7 @@ import textwrap
 from pipeline.export.common import ExportInfo, _arrays, _describe, _fill, _literal, curve_table
 from pipeline.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
 
-__all__ = ["C_FILES", "c_sources"]
+__all__ = ["C_FILES", "c_sources", "c_string"]
 
 #: File names of the C export (header, source).
 C_FILES = ("debist_model.h", "debist_model.c")
@@ -22,6 +22,34 @@ C_FILES = ("debist_model.h", "debist_model.c")
 def _c_num(x: float) -> str:
     """Format a C double literal (``HUGE_VAL`` for infinities)."""
     return _literal(x, "HUGE_VAL")
+
+
+def c_string(text: str) -> str:
+    r"""Return a C99 string literal of ``text`` (UTF-8 bytes; anything but plain ASCII escaped).
+
+    Printable ASCII other than ``"``, ``\``, ``?`` and ``@`` stays as it is; every other
+    byte becomes a three-digit octal escape, so no character of ``text`` can end the
+    literal, continue a line or form a trigraph (ISO/IEC 9899:1999, 6.4.4.4, 6.4.5,
+    5.2.1.1), and none can be taken for a field of the export's template (``@``).
+
+    Parameters
+    ----------
+    text : str
+        Any text (e.g. a workflow name).
+
+    Returns
+    -------
+    str
+        The literal, quotes included.
+
+    Examples
+    --------
+    >>> print(c_string('a*/"b\n??/'))
+    "a*/\042b\012\077\077/"
+    """
+    safe = set(range(0x20, 0x7F)) - {ord(c) for c in '"\\?@'}  # @: the template's marker
+    body = "".join(chr(b) if b in safe else f"\\{b:03o}" for b in text.encode("utf-8"))
+    return f'"{body}"'
 
 
 def _c_array(ctype: str, name: str, values, fmt=_c_num) -> str:
@@ -56,6 +84,8 @@ void debist_deriv(const double x[], const double h[], double dx[]);
 void debist_rk4_step(double x[], const double v0[], const double v1[], double dt);
 /* out[DEBIST_N_CURVES] = restoring(q), d(q), g_1(q)..g_N(q) from the lookup table. */
 void debist_curves(double q, double out[]);
+/* The name of the workflow the model was identified by (UTF-8, NUL-terminated). */
+extern const char DEBIST_WORKFLOW[];
 
 #ifdef __cplusplus
 }
@@ -83,6 +113,8 @@ _C_SOURCE = """
 @TERMS@
  */
 @CONSTANTS@
+
+const char DEBIST_WORKFLOW[] = @WORKFLOW@;
 
 /* numpy.interp: linear inside the grid, end values held outside. */
 static double interp(double x, const double *xp, const double *fp, int n)
@@ -209,7 +241,7 @@ def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
     info = info or ExportInfo()
     arr = _arrays(model)
     cq, names, cval = curve_table(model)
-    head = _c_comment(_describe(info, arr, names))
+    head = _c_comment(_describe(info, arr, names, "DEBIST_WORKFLOW"))
     n_in, n_x = arr["n_inputs"], arr["n_states"]
     lo, hi = arr["q_range"]
     lines = {
@@ -257,6 +289,7 @@ def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
         "V_C": f"({_c_num(arr['v_c'])})",
         "TERMS": "\n".join(f" *   {j:3d} {name}" for j, name in enumerate(arr["term_names"])),
         "CONSTANTS": const.rstrip("\n"),
+        "WORKFLOW": c_string(info.workflow),
         "HMAP": "v[i] * v[i]" if arr["input_map"] == "v2" else "v[i]",
         "S_LINE": s_line,
         "BASE_GAUSS": str(BASE_GAUSS),

@@ -14,10 +14,72 @@ import textwrap
 from pipeline.export.common import ExportInfo, _arrays, _describe, _fill, _literal, curve_table
 from pipeline.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
 
-__all__ = ["MATLAB_FILE", "matlab_source"]
+__all__ = ["MATLAB_FILE", "MATLAB_NAME_FILE", "m_string", "matlab_source"]
 
 #: File name of the MATLAB export (the function's name is the file's).
 MATLAB_FILE = "debist_model.m"
+#: The function file that returns the workflow's name (a char array).
+MATLAB_NAME_FILE = "debist_model_workflow.m"
+#: Characters a MATLAB literal carries as they are; every other one becomes a char code.
+_M_PLAIN = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 _.,:;()+=/-")
+
+
+def m_string(text: str) -> str:
+    r"""Return a MATLAB char-array expression of ``text`` that no character can break out of.
+
+    Runs of letters, digits, spaces and ``_.,:;()+=/-`` are quoted as they are; other ASCII
+    characters (quotes, ``%``, line breaks, control characters) are written as
+    ``char([...])`` of their codes, and non-ASCII text as
+    ``native2unicode(uint8([...]), 'UTF-8')`` of its UTF-8 bytes, which gives the same
+    characters in MATLAB (UTF-16 chars) and in Octave (UTF-8 chars) (MathWorks,
+    "native2unicode"; GNU Octave manual, "Character Arrays").
+
+    Parameters
+    ----------
+    text : str
+        Any text (e.g. a workflow name).
+
+    Returns
+    -------
+    str
+        A MATLAB expression of class char, ``''`` for the empty text.
+
+    Examples
+    --------
+    >>> print(m_string("it's 3 kV\n"))
+    ['it', char([39]), 's 3 kV', char([10])]
+    >>> print(m_string("\u00e9"))
+    native2unicode(uint8([195 169]), 'UTF-8')
+    """
+    parts: list[str] = []
+    run, kind = "", None  # the current run and its kind: plain, ascii, utf8
+    for ch in text:
+        new = "plain" if ch in _M_PLAIN else "ascii" if ord(ch) < 128 else "utf8"
+        if new != kind and run:
+            parts.append(_m_part(run, kind))
+            run = ""
+        run, kind = run + ch, new
+    if run:
+        parts.append(_m_part(run, kind))
+    if not parts:
+        return "''"
+    return parts[0] if len(parts) == 1 else f"[{', '.join(parts)}]"
+
+
+def _m_part(run: str, kind: str | None) -> str:
+    if kind == "plain":
+        return f"'{run}'"
+    if kind == "ascii":
+        return f"char([{' '.join(str(ord(c)) for c in run)}])"
+    return f"native2unicode(uint8([{' '.join(map(str, run.encode('utf-8')))}]), 'UTF-8')"
+
+
+_M_NAME = """function name = debist_model_workflow()
+%DEBIST_MODEL_WORKFLOW The name of the workflow debist_model.m was identified by.
+%   name = debist_model_workflow() returns it as a char row (as written in the workflow).
+name = @NAME@;
+end
+"""
 
 
 def _m_num(x) -> str:
@@ -208,7 +270,8 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     info = info or ExportInfo()
     arr = _arrays(model)
     cq, names, cval = curve_table(model)
-    describe = "".join(f"%   {line}".rstrip() + "\n" for line in _describe(info, arr, names))
+    lines = _describe(info, arr, names, "returned by debist_model_workflow()")
+    describe = "".join(f"%   {line}".rstrip() + "\n" for line in lines)
     lag = arr["lag"]
     n_in, n_x = arr["n_inputs"], arr["n_states"]
     has_tables = BASE_TABLE in arr["base_kind"]
@@ -258,4 +321,7 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
         "Z_LINE": f"    dx(3) = (x(2) - s) / ({_m_num(arr['T_z'])});\n" if lag else "",
         "CURVES": curves.rstrip("\n"),
     }
-    return {MATLAB_FILE: _fill(_M_MAIN, fields)}
+    return {
+        MATLAB_FILE: _fill(_M_MAIN, fields),
+        MATLAB_NAME_FILE: _M_NAME.replace("@NAME@", m_string(info.workflow)),
+    }

@@ -65,7 +65,7 @@ def python_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     info = info or ExportInfo()
     arr = _arrays(model)
     cq, names, cval = curve_table(model)
-    doc = "\n".join(_describe(info, arr, names)).replace("\\", "/")
+    doc = "\n".join(_describe(info, arr, names, "WORKFLOW"))
     n_in, J = arr["n_inputs"], len(arr["weights"])
     G = len(arr["table_q"])
 
@@ -86,6 +86,7 @@ def python_source(model, info: ExportInfo | None = None) -> dict[str, str]:
 import numpy as np
 
 INF = float("inf")
+WORKFLOW = {info.workflow!r}
 N_STATES = {arr["n_states"]}
 N_INPUTS = {n_in}
 M_Q = {arr["m_q"]!r}
