@@ -547,6 +547,7 @@ def status(
                 runner.wf.output_dir,
                 workflow=runner.wf.name,
                 workflow_dir=runner.wf.path.parent,
+                workflow_file=runner.wf.path,
                 sources=[d.source for d in runner.wf.datasets if not d.rig],
                 stages=STAGES,
             )

@@ -54,12 +54,23 @@ HOLDER = ".debist.lock.json"
 OWN_FILES = frozenset({MARKER, LOCK, HOLDER})
 
 
-def _marker_workflow(out: Path) -> str | None:
+def _marker(out: Path) -> dict:
     try:
         data = json.loads((out / MARKER).read_text(encoding="utf-8"))
-        return str(data["workflow"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _marker_workflow(out: Path) -> str | None:
+    name = _marker(out).get("workflow")
+    return None if name is None else str(name)
+
+
+def _marker_file(out: Path) -> Path | None:
+    """The workflow file the marker names (stored relative to the folder), resolved."""
+    rel = _marker(out).get("workflow_file")
+    return (out / rel).resolve() if isinstance(rel, str) else None
 
 
 def _debist_layout(out: Path, stages: Sequence[str]) -> bool:
@@ -82,8 +93,13 @@ def check_output_dir(
     workflow_dir: str | os.PathLike,
     sources: Sequence[str | os.PathLike] = (),
     stages: Sequence[str] = (),
+    workflow_file: str | os.PathLike | None = None,
 ) -> None:
     """Refuse an output folder debist must not write into (nothing is created).
+
+    An output folder belongs to the workflow *file* that made it (its marker records the
+    file's path relative to the folder, so a project moved as a whole keeps its runs), not
+    to a ``[workflow] name``, which two different workflows may share.
 
     Parameters
     ----------
@@ -98,13 +114,16 @@ def check_output_dir(
     stages : sequence of str
         The stage names of debist (to recognise an unmarked output folder of an earlier
         version).
+    workflow_file : path-like, optional
+        The workflow file (absolute): the folder's owner.
 
     Raises
     ------
     OutputDirError
         If ``out`` is the file system root, the home folder, the workflow's folder, holds
-        a data source, is a file, is marked for another workflow, or exists, is not empty
-        and is not debist's.
+        a data source, is a file, is marked for another workflow file (or, for a marker
+        of an older debist that names no file, another workflow name), or exists, is not
+        empty and is not debist's.
     """
     out = Path(out)
     places = {Path(out.anchor): "the file system root", Path.home().resolve(): "your home folder"}
@@ -125,8 +144,15 @@ def check_output_dir(
     if not out.is_dir():
         return
     owner = _marker_workflow(out)
+    owner_file = _marker_file(out)
     if (out / MARKER).exists():
-        if owner != workflow:
+        mine = Path(workflow_file).resolve() if workflow_file is not None else None
+        if owner_file is not None and mine is not None and owner_file != mine:
+            raise OutputDirError(
+                f"output folder '{out}' belongs to the workflow file '{owner_file}' (see its "
+                f"{MARKER}), not '{mine}': give this workflow its own output_dir"
+            )
+        if owner_file is None and owner != workflow:
             raise OutputDirError(
                 f"output folder '{out}' belongs to workflow {owner!r} (see its {MARKER}), not "
                 f"{workflow!r}: give this workflow its own output_dir"
@@ -143,7 +169,13 @@ def check_output_dir(
         )
 
 
-def claim_output_dir(out: str | os.PathLike, *, workflow: str, **places) -> None:
+def claim_output_dir(
+    out: str | os.PathLike,
+    *,
+    workflow: str,
+    workflow_file: str | os.PathLike | None = None,
+    **places,
+) -> None:
     """Check an output folder (:func:`check_output_dir`), create it and mark it as debist's.
 
     Parameters
@@ -152,6 +184,8 @@ def claim_output_dir(out: str | os.PathLike, *, workflow: str, **places) -> None
         The output folder (absolute).
     workflow : str
         The workflow's name, recorded in the marker.
+    workflow_file : path-like, optional
+        The workflow file (absolute), recorded relative to ``out`` as the owner.
     **places
         ``workflow_dir``, ``sources`` and ``stages`` of :func:`check_output_dir`.
 
@@ -161,12 +195,14 @@ def claim_output_dir(out: str | os.PathLike, *, workflow: str, **places) -> None
         As :func:`check_output_dir`.
     """
     out = Path(out)
-    check_output_dir(out, workflow=workflow, **places)
+    check_output_dir(out, workflow=workflow, workflow_file=workflow_file, **places)
     out.mkdir(parents=True, exist_ok=True)
-    if _marker_workflow(out) != workflow:
+    record = {"debist": "output folder", "workflow": workflow}
+    if workflow_file is not None:
+        record["workflow_file"] = os.path.relpath(Path(workflow_file).resolve(), out.resolve())
+    if _marker(out) != record:
         tmp = out / f"{MARKER}.tmp-{os.getpid()}"
-        text = json.dumps({"debist": "output folder", "workflow": workflow}, indent=2)
-        tmp.write_text(text + "\n", encoding="utf-8")
+        tmp.write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
         os.replace(tmp, out / MARKER)
 
 
@@ -286,7 +322,8 @@ def is_locked(out: str | os.PathLike) -> bool:
     Returns
     -------
     bool
-        True while a writer holds it (false for a missing folder).
+        True while a writer holds it (false for a missing folder, and for a lock file this
+        process cannot open for writing: a run archived on read-only media).
     """
     from filelock import FileLock, Timeout
 
@@ -298,6 +335,8 @@ def is_locked(out: str | os.PathLike) -> bool:
         lock.acquire()
     except Timeout:
         return True
+    except OSError:  # read-only media or no write permission: nobody writes there through us
+        return False
     lock.release()
     return False
 

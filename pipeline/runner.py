@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -24,6 +25,7 @@ from typing import Any
 from pipeline import artifacts, outdir, registry
 from pipeline.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
 from pipeline.faults import fault_point
+from pipeline.fileformats import write_output
 from pipeline.fingerprint import code_fingerprint
 from pipeline.workflow import Workflow
 
@@ -164,6 +166,16 @@ def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
     if stage in ("identify", "validate") and physics:
         return {**wf.section(stage), **physics}
     return wf.section(stage)
+
+
+def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
+    """Keys whose values differ between a stage config and a manifest's, with the values."""
+    canon = artifacts.canonical_json
+    out = []
+    for k in sorted(set(config) | set(recorded)):
+        if canon(config.get(k)) != canon(recorded.get(k)):
+            out.append(f"{k} ({canon(recorded.get(k))} -> {canon(config.get(k))})")
+    return out
 
 
 class Runner:
@@ -313,6 +325,7 @@ class Runner:
     def _places(self) -> dict[str, Any]:
         return {
             "workflow_dir": self.wf.path.parent,
+            "workflow_file": self.wf.path,
             "sources": [d.source for d in self.wf.datasets if not d.rig],
             "stages": STAGES,
         }
@@ -662,19 +675,83 @@ class Runner:
                 problems.append(f"'{entry}': extra stage folder (not a stage of this workflow)")
         for stage in mine:
             problems += self._verify_stage(stage)
+        if not problems:
+            problems += self._verify_ingest()
         if digest is not None and not problems:
+            quoted = digest.strip().lower()
             actual = self.digest()
-            if actual != digest.strip().lower():
-                ups = {u for s in mine for u in self._upstream(s)}
-                last = [
-                    f"'{self.wf.stage_dir(s) / artifacts.MANIFEST}'" for s in mine if s not in ups
-                ]
-                problems.append(
-                    f"'{out}': run digest {actual} differs from the quoted {digest.strip()}; the "
-                    "chain holds, so the changed manifest is that of a last stage: "
-                    + ", ".join(last)
-                )
+            if actual != quoted:
+                problems.append(self._explain_digest(quoted, actual))
         return problems
+
+    def _explain_digest(self, quoted: str, actual: str | None) -> str:
+        """Say where a run departs from a quoted digest, by rerunning its workflow elsewhere.
+
+        The digest hashes the stage manifests in order, so it implies every manifest only
+        through a run that produces it: the workflow is rerun from its sources into a
+        temporary folder (stages are deterministic), and when that rerun gives the quoted
+        digest, the first stage whose manifest differs from the rerun's is the one changed.
+        """
+        with tempfile.TemporaryDirectory(prefix="debist-verify-") as tmp:
+            fresh = Runner(replace(self.wf, output_dir=Path(tmp) / "run"))
+            fresh.run()
+            again = fresh.digest()
+            first = next(
+                (
+                    s
+                    for s in self.stages()
+                    if artifacts.manifest_digest(self.wf.stage_dir(s))
+                    != artifacts.manifest_digest(fresh.wf.stage_dir(s))
+                ),
+                None,
+            )
+        out = self.wf.output_dir
+        if again == quoted and first is not None:
+            return (
+                f"'{self.wf.stage_dir(first) / artifacts.MANIFEST}': stage '{first}' differs from "
+                f"the run the quoted digest {quoted} names (a rerun of this workflow from its "
+                f"sources gives that digest; this run's is {actual})"
+            )
+        if again == actual:
+            return (
+                f"'{out}': the quoted digest {quoted} is not this run's: the run is intact and "
+                f"a rerun from its sources gives its digest {actual}; the quoted one names "
+                "another run (other sources, workflow or library versions)"
+            )
+        return (
+            f"'{out}': the quoted digest {quoted} matches neither this run ({actual}) nor a "
+            f"rerun of this workflow from its sources ({again}); the first stage that differs "
+            f"from the rerun is '{first}'"
+        )
+
+    def _verify_ingest(self) -> list[str]:
+        """Re-read the sources and compare with the ingest artifacts (they must be identical).
+
+        Ingest is where measured data enter; its outputs are a pure function of the
+        sources and the workflow, cheap to recompute. A table edited and re-signed with
+        consistent hashes and keys is found here, without a digest.
+        """
+        sdir = self.wf.stage_dir("ingest")
+        manifest = artifacts.read_manifest(sdir)
+        if manifest is None or "ingest" not in self.stages():
+            return []
+        module = importlib.import_module(registry.stage("ingest").module)
+        result = module.execute(self)
+        with tempfile.TemporaryDirectory(prefix="debist-verify-") as tmp:
+            fresh = {}
+            for rel, value in result.outputs.items():
+                target = Path(tmp) / rel
+                write_output(value, target)
+                fresh[rel] = artifacts.sha256_file(target)
+        differ = sorted(
+            rel for rel in set(fresh) | set(manifest.outputs) - {artifacts.SUMMARY}
+            if fresh.get(rel) != manifest.outputs.get(rel)
+        )  # fmt: skip
+        return [
+            f"'{sdir / rel}': differs from what the sources give now (re-read from the data "
+            "sources of the workflow)"
+            for rel in differ
+        ]
 
     def _verify_stage(self, stage: str) -> list[str]:
         sdir = self.wf.stage_dir(stage)
@@ -688,6 +765,11 @@ class Runner:
         problems = [f"'{sdir / c}'" for c in artifacts.changed_outputs(sdir, manifest)]
         if manifest.stage != stage or manifest.expected_key() != manifest.key:
             problems.append(f"'{path}': edited (its key does not match its own fields)")
+        changed = _changed_keys(stage_config(self.wf, stage), manifest.config)
+        if changed:
+            problems.append(
+                f"'{path}': the workflow changed since this run: [{stage}] {', '.join(changed)}"
+            )
         for up in self._upstream(stage):
             recorded = manifest.upstream.get(up)
             actual = artifacts.manifest_digest(self.wf.stage_dir(up))

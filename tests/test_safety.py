@@ -193,8 +193,21 @@ def test_folder_of_another_workflow_is_refused(project):
     other.write_text(WORKFLOW.replace('name = "safety"', 'name = "other"'))
     before = hashes(project / "out")
     code, out = invoke("run", other)
-    assert code == 2 and "belongs to workflow 'safety'" in out
+    assert code == 2 and "belongs to the workflow file" in out and "wf.toml" in out
     assert hashes(project / "out") == before
+
+
+def test_another_workflow_file_with_the_same_name_is_refused_too(project):
+    twin = project / "twin.toml"  # same [workflow] name "safety", another file
+    twin.write_text(WORKFLOW.replace("[differentiate]", "[differentiate]\n# another workflow"))
+    before = hashes(project / "out")
+    code, out = invoke("run", twin)
+    assert code == 2 and "belongs to the workflow file" in out and "twin.toml" in out
+    assert hashes(project / "out") == before
+    # the owner itself, edited, still runs into its own folder
+    (project / "wf.toml").write_text((project / "wf.toml").read_text() + "\n# edited\n")
+    code, out = invoke("run", project / "wf.toml")
+    assert code == 0, out
 
 
 def test_failed_first_run_leaves_no_folder(fresh):
@@ -421,7 +434,7 @@ def test_only_the_digest_catches_a_consistent_edit_of_the_last_stage(project):
     _tamper_summary_and_hash(project / "out")
     assert invoke("verify", project / "wf.toml")[0] == 0  # internally consistent
     code, out = invoke("verify", project / "wf.toml", "--digest", digest)
-    assert code == 3 and "differs from the quoted" in out and "compare/manifest.json" in out
+    assert code == 3 and "compare/manifest.json': stage 'compare' differs from the run" in out
 
 
 def test_run_prints_only_what_the_hashes_vouch_for(project):

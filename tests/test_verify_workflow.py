@@ -1,0 +1,139 @@
+"""`debist verify` checks a run against the workflow as it is now, and places a wrong digest."""
+
+import dataclasses
+import json
+import shutil
+
+import pandas as pd
+import pytest
+from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
+from typer.testing import CliRunner
+
+from cli import app
+from pipeline import artifacts
+
+STAGES = ["ingest", "differentiate", "identify", "validate", "compare"]
+
+
+def invoke(*args):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, " ".join(result.output.split())
+
+
+def digest_of(text):
+    return text.split("run digest: ")[1].split()[0]
+
+
+@pytest.fixture(scope="module")
+def template(tmp_path_factory, bistable_record):
+    """One complete run of the synthetic workflow (M = 8), and its digest."""
+    root = tmp_path_factory.mktemp("verify")
+    write_rig_csv(root, bistable_record)
+    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    code, out = invoke("run", root / "wf.toml")
+    assert code == 0, out
+    return root, digest_of(out)
+
+
+@pytest.fixture
+def project(template, tmp_path):
+    root, digest = template
+    shutil.copytree(root, tmp_path / "p")
+    return tmp_path / "p", digest
+
+
+def resign(out, stage):
+    """Re-sign a stage's manifest after its outputs were edited, and the chain after it."""
+    later = STAGES[STAGES.index(stage) :]
+    for name in later:
+        sdir = out / name
+        m = artifacts.read_manifest(sdir)
+        outputs = {rel: artifacts.sha256_file(sdir / rel) for rel in m.outputs}
+        ups = {u: artifacts.manifest_digest(out / u) for u in m.upstream}
+        inputs = dict(m.inputs)
+        for key in inputs:
+            up, _, rel = key.partition("/")
+            if up in STAGES and rel:
+                inputs[key] = artifacts.sha256_file(out / up / rel)
+        m = dataclasses.replace(m, outputs=outputs, upstream=ups, inputs=inputs)
+        m = dataclasses.replace(m, key=m.expected_key())
+        (sdir / artifacts.MANIFEST).write_text(m.to_json())
+
+
+def test_a_changed_workflow_fails_verify_and_names_the_key(project):
+    root, _ = project
+    wf = root / "wf.toml"
+    wf.write_text(wf.read_text().replace("M = 8", "M = 6"))
+    code, out = invoke("verify", wf)
+    assert code == 3
+    assert "the workflow changed since this run: [identify] M (8 -> 6)" in out
+
+
+def test_stage_folders_copied_from_a_run_with_another_setting_fail_without_a_digest(
+    project, tmp_path
+):
+    root, _ = project
+    other = tmp_path / "other"
+    other.mkdir()
+    shutil.copy(root / "rig.csv", other / "rig.csv")
+    (other / "wf.toml").write_text((root / "wf.toml").read_text().replace("M = 8", "M = 6"))
+    code, out = invoke("run", other / "wf.toml")
+    assert code == 0, out
+    for stage in ("identify", "validate", "compare"):
+        shutil.rmtree(root / "out" / stage)
+        shutil.copytree(other / "out" / stage, root / "out" / stage)
+    code, out = invoke("verify", root / "wf.toml")
+    assert code == 3 and "[identify] M (6 -> 8)" in out, out
+
+
+def test_edited_and_resigned_ingest_tables_fail_without_a_digest(project):
+    root, _ = project
+    path = root / "out" / "ingest" / "estimation.parquet"
+    table = pd.read_parquet(path)
+    table["q"] *= 1.01
+    table.to_parquet(path)
+    resign(root / "out", "ingest")
+    code, out = invoke("verify", root / "wf.toml")
+    assert code == 3
+    assert "estimation.parquet': differs from what the sources give now" in out
+    assert "check.parquet" not in out  # the untouched table is not blamed
+
+
+def test_a_digest_names_the_first_stage_that_departs_from_it(project):
+    root, digest = project
+    path = root / "out" / "validate" / "nrmse.parquet"
+    table = pd.read_parquet(path)
+    table["nrmse_q"] *= 0.5  # a better-looking result, re-signed with a consistent chain
+    table.to_parquet(path)
+    resign(root / "out", "validate")
+    code, out = invoke("verify", root / "wf.toml")
+    assert code == 0, out  # the chain holds: only the digest can tell
+    code, out = invoke("verify", root / "wf.toml", "--digest", digest)
+    assert code == 3
+    assert "stage 'validate' differs from the run the quoted digest" in out
+    assert "report" not in out and "'compare'" not in out
+
+
+def test_a_wrong_digest_on_an_intact_run_is_not_called_a_changed_manifest(project):
+    root, digest = project
+    wrong = "0" * 64
+    code, out = invoke("verify", root / "wf.toml", "--digest", wrong)
+    assert code == 3
+    assert "is not this run's: the run is intact" in out and digest in out
+    code, out = invoke("verify", root / "wf.toml", "--digest", digest)
+    assert code == 0, out
+
+
+def test_verify_works_on_a_run_whose_lock_file_cannot_be_opened(project, monkeypatch):
+    import filelock
+
+    root, _ = project
+
+    def refuse(self, *a, **k):
+        raise PermissionError(30, "Read-only file system")
+
+    monkeypatch.setattr(filelock.BaseFileLock, "acquire", refuse)
+    (root / "out" / ".debist.lock").touch()
+    code, out = invoke("verify", root / "wf.toml")
+    assert code == 0, out
+    assert json.loads((root / "out" / ".debist-output.json").read_text())["workflow_file"]
