@@ -30,7 +30,14 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
 
-from pipeline.errors import DebistError, Interrupted, VerificationError, WorkflowError, exit_code
+from pipeline.errors import (
+    DebistError,
+    Interrupted,
+    VerificationError,
+    WorkflowError,
+    exit_code,
+    os_error_line,
+)
 
 
 class _Commands(TyperGroup):
@@ -145,6 +152,9 @@ def _guard() -> Iterator[None]:
         yield
     except DebistError as exc:
         err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(exit_code(exc)) from None
+    except OSError as exc:  # the file system said no: read-only, full, permissions
+        err.print(f"[red]error:[/red] {escape(os_error_line(exc))}")
         raise typer.Exit(exit_code(exc)) from None
     except KeyboardInterrupt as exc:
         what = str(exc) if isinstance(exc, Interrupted) else "interrupted"

@@ -78,6 +78,7 @@ __all__ = [
     "read_manifest",
     "read_parquet",
     "read_summary",
+    "remove_tree",
     "sha256_file",
     "stage_key",
     "write_stage",
@@ -446,9 +447,15 @@ def write_stage(
         If an output has no writer. Nothing is left behind in that case.
     OutputDirError
         If an output name is not a relative path inside the stage folder (absolute,
-        ``..``, a NUL byte): every write resolves inside the output folder.
+        ``..``, a NUL byte): every write resolves inside the output folder; or the stage
+        folder is a symbolic link.
     """
     final = Path(stage_dir)
+    if final.is_symlink():
+        raise OutputDirError(
+            f"stage folder '{final}' is a symbolic link (to '{os.readlink(final)}'): debist "
+            "writes its stages only as real folders inside the output folder; remove the link"
+        )
     foreign = foreign_files(final)
     if foreign:
         raise OutputDirError(_foreign_message(final, foreign))
@@ -533,17 +540,32 @@ def _signals_held() -> Iterator[None]:
                 signal.raise_signal(s)
 
 
+def remove_tree(path: str | os.PathLike) -> None:
+    """Remove a folder debist wrote, or a symbolic link or file in its place (never a target).
+
+    Parameters
+    ----------
+    path : path-like
+        A stage folder, a swap leftover, or a link that replaced one.
+    """
+    path = Path(path)
+    if path.is_symlink() or not path.is_dir():
+        path.unlink(missing_ok=True)
+    else:
+        shutil.rmtree(path)
+
+
 def _swap_into_place(tmp: Path, final: Path, stage: str) -> None:
     with _signals_held():
         old = None
-        if final.exists():
+        if os.path.lexists(final):
             old = final.parent / f".{final.name}.old-{secrets.token_hex(6)}"
             os.replace(final, old)
             fault_point(f"swap:{stage}:moved-old")
         os.replace(tmp, final)
         fault_point(f"swap:{stage}:moved-new")
         if old is not None:
-            shutil.rmtree(old)
+            remove_tree(old)
 
 
 def _foreign_message(folder: Path, files: Sequence[str]) -> str:

@@ -8,6 +8,8 @@ channel or the parameter and echo the offending value.
 
 from __future__ import annotations
 
+import os
+
 
 class DebistError(Exception):
     """Base class of every error raised by debist."""
@@ -85,6 +87,7 @@ EXIT_CODES: tuple[tuple[type[BaseException], int], ...] = (
     (VerificationError, 3),
     (WorkflowError, 2),
     (DebistError, 1),
+    (OSError, 2),  # read-only or full disk, permissions: the environment, not the data
 )
 #: Exit code after SIGINT (Ctrl-C): 128 + 2, the shell convention.
 EXIT_SIGINT = 130
@@ -104,7 +107,8 @@ def exit_code(exc: BaseException) -> int:
     -------
     int
         3 when verification failed, 2 for a bad workflow, bad arguments or a refused
-        output directory, lock or memory budget, 1 when a stage failed on its data, 130
+        output directory, lock or memory budget or an OS error (read-only or full disk,
+        permissions), 1 when a stage failed on its data, 130
         after SIGINT and 143 after SIGTERM (see :class:`Interrupted`); 1 for anything else.
 
     Examples
@@ -120,6 +124,35 @@ def exit_code(exc: BaseException) -> int:
         if isinstance(exc, cls):
             return code
     return 1
+
+
+def os_error_line(exc: OSError) -> str:
+    """Describe an OS error in one line: what the system said, its errno name, the paths.
+
+    Parameters
+    ----------
+    exc : OSError
+        E.g. ``OSError(errno.ENOSPC, "No space left on device", "/out/x.parquet")``.
+
+    Returns
+    -------
+    str
+        ``"No space left on device [ENOSPC]: '/out/x.parquet'; nothing of the unfinished
+        stage was kept"``.
+
+    Examples
+    --------
+    >>> import errno
+    >>> os_error_line(OSError(errno.EROFS, "Read-only file system", "/mnt/run"))
+    "Read-only file system [EROFS]: '/mnt/run'; nothing of the unfinished stage was kept"
+    """
+    import errno
+
+    what = exc.strerror or str(exc)
+    name = errno.errorcode.get(exc.errno or -1)
+    paths = [p for p in (exc.filename, exc.filename2) if p is not None]
+    where = ": " + " -> ".join(f"'{os.fsdecode(p)}'" for p in paths) if paths else ""
+    return f"{what}{f' [{name}]' if name else ''}{where}; nothing of the unfinished stage was kept"
 
 
 class Interrupted(KeyboardInterrupt):

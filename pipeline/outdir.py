@@ -68,7 +68,7 @@ def _marker_workflow(out: Path) -> str | None:
 
 
 def _marker_file(out: Path) -> Path | None:
-    """The workflow file the marker names (stored relative to the folder), resolved."""
+    """Return the workflow file the marker names (stored relative to the folder), resolved."""
     rel = _marker(out).get("workflow_file")
     return (out / rel).resolve() if isinstance(rel, str) else None
 
@@ -352,12 +352,15 @@ def leftovers(output_dir: str | os.PathLike) -> list[Path]:
     Returns
     -------
     list of pathlib.Path
-        The ``.<stage>.tmp-*`` and ``.<stage>.old-*`` folders, sorted by name.
+        The ``.<stage>.tmp-*`` and ``.<stage>.old-*`` folders (or links in their place,
+        dangling ones too), sorted by name.
     """
     root = Path(output_dir)
     if not root.is_dir():
         return []
-    return sorted(p for p in root.iterdir() if p.is_dir() and SWAP_FOLDER.match(p.name))
+    return sorted(
+        p for p in root.iterdir() if (p.is_dir() or p.is_symlink()) and SWAP_FOLDER.match(p.name)
+    )
 
 
 def describe_leftover(path: str | os.PathLike) -> str:
@@ -409,20 +412,20 @@ def recover(output_dir: str | os.PathLike) -> list[str]:
     found = leftovers(output_dir)
     olds = sorted(
         (p for p in found if SWAP_FOLDER.match(p.name)["kind"] == "old"),
-        key=lambda p: p.stat().st_mtime,
+        key=lambda p: p.lstat().st_mtime,
         reverse=True,
     )
     for path in olds:
         final = path.parent / SWAP_FOLDER.match(path.name)["stage"]
-        if not final.exists():
+        if not os.path.lexists(final) and not path.is_symlink():
             os.replace(path, final)
             done.append(f"restored '{final.name}' from '{path.name}' (an interrupted swap)")
         else:
-            shutil.rmtree(path)
+            artifacts.remove_tree(path)
             done.append(f"removed '{path.name}' (replaced outputs of an interrupted swap)")
     for path in found:
         if SWAP_FOLDER.match(path.name)["kind"] == "tmp":
-            shutil.rmtree(path)
+            artifacts.remove_tree(path)
             done.append(f"removed '{path.name}' (unfinished outputs of an interrupted run)")
     return done
 

@@ -108,6 +108,8 @@ class Workflow:
 
 def _resolve(path: Path, what: str) -> Path:
     """Return the absolute path with symbolic links resolved, or say why it cannot be."""
+    if "\x00" in str(path):
+        raise WorkflowError(f"{what} {str(path)!r} holds a NUL byte: not a path")
     try:
         return path.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop (RuntimeError before 3.13)
@@ -197,6 +199,11 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
             source = _resolve(base / entry.source, f"{where} file")
             if source.is_dir():
                 raise WorkflowError(f"{where} '{source}' is a directory, not a rig-log file")
+            if source.exists() and not source.is_file():
+                raise WorkflowError(
+                    f"{where} '{source}' is not a regular file (a device, pipe or socket), "
+                    "not a rig-log file"
+                )
             if not source.is_file():
                 raise WorkflowError(f"{where} file '{source}' does not exist")
         overrides = {k: v for k, v in table.items() if k not in ("source", "role", "rig")}
