@@ -507,19 +507,32 @@ def fleet(
         "fleet"
     ),
 ) -> None:
-    """Write one workflow per prototype of a seeded fleet around TEMPLATE's rig (for batch)."""
+    """Write one workflow per prototype of a seeded fleet around TEMPLATE's rig (for batch).
+
+    Each prototype's rig experiments are run once and its logs checked by TEMPLATE's own
+    ingest; a draw whose logs fail (e.g. the beam overshoots the laser's range) is skipped
+    and said so, and the next draw is taken.
+    """
     import tomllib
 
     from pipeline import artifacts
-    from pipeline.rig.fleet_workflows import fleet_workflows
+    from pipeline.fleetrun import viable_fleet
 
     with _guard():
         try:
             raw = tomllib.loads(template.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
             raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
-        files = fleet_workflows(raw, template.resolve().parent, folder, size, seed=seed)
+        existing = [p for p in folder.glob("*.toml")] if folder.is_dir() else []
+        if existing:
+            raise WorkflowError(
+                f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
+                "--dir (debist never overwrites them)"
+            )
+        files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
         paths = artifacts.write_text_files(folder, files)
+    for name, why in rejected.items():
+        console.print(f"skipped {escape(name)}: its log fails the template's ingest: {escape(why)}")
     console.print(
         f"wrote {len(paths)} workflows to {escape(str(folder))}; run them with: debist batch "
         f"{escape(str(folder))}"

@@ -53,3 +53,36 @@ def test_template_without_rig_is_refused(tmp_path):
         app, ["fleet", str(ROOT / "workflows" / "silverbox.toml"), "--dir", str(tmp_path / "f")]
     )
     assert result.exit_code == 2 and "[rig]" in result.output
+
+
+def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_path, monkeypatch):
+    from pipeline import fleetrun
+
+    raw = tomllib.loads(TEMPLATE.read_text())
+    calls = []
+
+    def problem(text, folder, label):
+        calls.append(label)
+        return "laser at its range limit" if label.endswith("-001") else None
+
+    monkeypatch.setattr(fleetrun, "_ingest_problem", problem)
+    files, rejected = fleetrun.viable_fleet(raw, TEMPLATE.parent, tmp_path, 3, seed=4)
+    name = raw["workflow"]["name"]
+    assert list(files) == [f"{name}-000.toml", f"{name}-002.toml", f"{name}-003.toml"]
+    assert rejected == {f"{name}-001": "laser at its range limit"}
+    assert calls == [f"{name}-00{k}" for k in range(4)]  # stops once the fleet is full
+    # a kept member is the same prototype as in the unchecked fleet
+    assert files[f"{name}-002.toml"] == render(tmp_path / "x", n=9, seed=4)[f"{name}-002.toml"]
+
+
+def test_a_fleet_whose_logs_all_fail_ingest_is_refused_with_the_reason(tmp_path):
+    from pipeline.fleetrun import viable_fleet
+    from pipeline.rig.fleet import FleetError
+
+    raw = tomllib.loads(TEMPLATE.read_text())
+    for exp in raw["rig"]["experiments"].values():
+        exp["duration"] = 8.0
+    raw["ingest"]["q"]["range"] = [-2, 2]  # [mm]: every well lies outside
+    with pytest.raises(FleetError, match=r"only 0 of 3 .* range limit"):
+        viable_fleet(raw, TEMPLATE.parent, tmp_path, 1, seed=0)
+    assert not list(tmp_path.glob("*.toml"))  # the scratch workflows are gone
