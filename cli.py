@@ -76,6 +76,16 @@ _level = {"value": 0}
 WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        "-S",
+        metavar="KEY=VALUE",
+        help="Change one setting of the workflow for this command, e.g. identify.M=8 "
+        "(repeatable; checked like the file; the manifests record the values used).",
+    ),
+]
 WaitOpt = Annotated[
     bool,
     typer.Option(
@@ -169,11 +179,11 @@ def _on_sigterm(signum: int, _frame: object) -> None:
     raise Interrupted(signum)
 
 
-def _runner(workflow: Path, out: Path | None, wait: bool = False):
+def _runner(workflow: Path, out: Path | None, wait: bool = False, sets: list[str] | None = None):
     from pipeline.runner import Runner
     from pipeline.workflow import load_workflow
 
-    return Runner(load_workflow(workflow, out), wait=wait)
+    return Runner(load_workflow(workflow, out, sets or None), wait=wait)
 
 
 def _essential(text: str) -> None:
@@ -402,9 +412,10 @@ def _run(
     out: Path | None,
     wait: bool,
     select: dict[str, str | None] | None = None,
+    sets: list[str] | None = None,
 ) -> None:
     with _guard():
-        runner = _runner(workflow, out, wait)
+        runner = _runner(workflow, out, wait, sets)
         if select is not None:
             listed = select["stages"]
             names = (
@@ -445,13 +456,16 @@ def run(
     until: Annotated[
         str | None, typer.Option("--until", help="Run up to and including this stage.")
     ] = None,
+    sets: SetOpt = None,
 ) -> None:
     """Run every stage of WORKFLOW, skipping those that are up to date; print the run digest.
 
     --stages, or --from and --until, run a part of the workflow (no digest then); a stage
-    whose upstream stage outside the part is missing or stale is refused (exit 2).
+    whose upstream stage outside the part is missing or stale is refused (exit 2). --set
+    changes a setting for this run only (verify and status then need the same --set).
     """
-    _run(workflow, None, force, out, wait, {"stages": stages, "start": start, "until": until})
+    select = {"stages": stages, "start": start, "until": until}
+    _run(workflow, None, force, out, wait, select, sets)
 
 
 def _stage_command(name: str, help_text: str, command: str | None = None) -> None:
@@ -556,13 +570,14 @@ def status(
         ),
     ] = False,
     out: OutOpt = None,
+    sets: SetOpt = None,
 ) -> None:
     """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
     from pipeline import outdir
     from pipeline.runner import STAGES
 
     with _guard():
-        runner = _runner(workflow, out)
+        runner = _runner(workflow, out, sets=sets)
         states = runner.status()
         warning = ""
         try:
@@ -602,19 +617,59 @@ def verify(
         ),
     ] = None,
     out: OutOpt = None,
+    sets: SetOpt = None,
 ) -> None:
     """Re-hash every artifact and check the chain of manifests; exit 3 naming any problem.
 
-    With --digest, the manifests must also be exactly those of the quoted run.
+    The run is checked against the workflow as it is now (with any --set): a setting that
+    changed since the run, a source that changed, or ingest tables that the sources no
+    longer give are problems. With --digest, the manifests must also be exactly those of
+    the quoted run; a mismatch names the first stage that departs from it.
     """
     with _guard():
-        problems = _runner(workflow, out).verify(digest)
+        problems = _runner(workflow, out, sets=sets).verify(digest)
         if problems:
             for p in problems:
                 err.print(f"[red]problem:[/red] {escape(p)}")
             raise typer.Exit(exit_code(VerificationError(problems)))
     what = "the quoted digest, " if digest else ""
     console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
+
+
+@app.command()
+def diff(
+    run_a: Annotated[Path, typer.Argument(metavar="RUN_A", help="Output folder of a run.")],
+    run_b: Annotated[Path, typer.Argument(metavar="RUN_B", help="Output folder of another.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
+) -> None:
+    """Show the settings and the NRMSE rows that differ between two runs (reads only)."""
+    from rich.table import Table
+
+    from pipeline.rundiff import diff_runs
+
+    with _guard():
+        found = diff_runs(run_a, run_b)
+    if as_json:
+        typer.echo(json.dumps(found, indent=2, default=str))
+        return
+    if not found["config"] and not found["nrmse"]:
+        console.print("the two runs have the same settings and NRMSE")
+        return
+    if found["config"]:
+        table = Table("stage", "setting", str(run_a), str(run_b), title="settings that differ")
+        for r in found["config"]:
+            table.add_row(r["stage"], r["key"], escape(str(r["a"])), escape(str(r["b"])))
+        console.print(table)
+    if found["nrmse"]:
+        table = Table("data set", "model", "metric", "A", "B", "B - A", title="NRMSE that differs")
+
+        def fmt(x):
+            return "-" if x is None else f"{x:.3f}"
+
+        for r in found["nrmse"]:
+            table.add_row(r["dataset"], r["model"], r["metric"], fmt(r["a"]), fmt(r["b"]),
+                          fmt(r["change"]))  # fmt: skip
+        console.print(table)
 
 
 @app.command()

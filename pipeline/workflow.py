@@ -34,8 +34,10 @@ A minimal workflow::
 
 from __future__ import annotations
 
+import json
 import os
 import tomllib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -137,6 +139,13 @@ def _read(path: Path) -> dict[str, Any]:
         raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
 
 
+def _toml_value(value: Any) -> str:
+    """One value as TOML text (for a ``{"identify.M": 8}`` override)."""
+    import tomli_w
+
+    return tomli_w.dumps({"v": value}).partition("=")[2].strip()
+
+
 def _output_dir(path: Path, what: str) -> Path:
     """Resolve an output folder and refuse one that is (or lies inside) a file."""
     out = _resolve(path, what)
@@ -150,7 +159,66 @@ def _output_dir(path: Path, what: str) -> Path:
     return out
 
 
-def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Workflow:
+def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """Parse ``KEY=VALUE`` settings (``debist run --set``) into a nested table.
+
+    ``KEY`` is a TOML dotted key (``identify.M``, ``datasets."run.2".role``) and ``VALUE`` a
+    TOML value (``8``, ``[4, 6]``, ``"auto"``); a value that is not valid TOML is taken as
+    a string (``differentiate.method=spectral``).
+
+    Parameters
+    ----------
+    items : sequence of str
+        The settings, in order (a later one wins).
+
+    Returns
+    -------
+    dict
+        Nested tables, e.g. ``{"identify": {"M": 8}}``.
+
+    Raises
+    ------
+    WorkflowError
+        If an item has no ``=`` or its key is not a TOML key.
+
+    Examples
+    --------
+    >>> parse_overrides(["identify.M=8", "differentiate.method=spectral"])
+    {'identify': {'M': 8}, 'differentiate': {'method': 'spectral'}}
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise WorkflowError(f"--set {item!r}: expected KEY=VALUE, e.g. identify.M=8")
+        try:
+            table = tomllib.loads(f"{key.strip()} = {value.strip()}")
+        except tomllib.TOMLDecodeError:
+            try:
+                table = tomllib.loads(f"{key.strip()} = {json.dumps(value.strip())}")
+            except tomllib.TOMLDecodeError as exc:
+                raise WorkflowError(
+                    f"--set {item!r}: {key.strip()!r} is not a key: {exc}"
+                ) from None
+        _merge(out, table)
+    return out
+
+
+def _merge(base: dict[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
+    """Merge nested tables into ``base`` in place (values of ``extra`` win)."""
+    for key, value in extra.items():
+        if isinstance(value, Mapping) and isinstance(base.get(key), dict):
+            _merge(base[key], value)
+        else:
+            base[key] = dict(value) if isinstance(value, Mapping) else value
+    return base
+
+
+def load_workflow(
+    path: str | Path,
+    output_dir: str | Path | None = None,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+) -> Workflow:
     """Read a workflow file and check every section before any stage runs.
 
     Parameters
@@ -159,6 +227,10 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
         The TOML file.
     output_dir : path-like, optional
         Overrides ``[workflow] output_dir``.
+    overrides : mapping or sequence of str, optional
+        Settings that replace the file's, checked by the same schema: ``{"identify.M": 8}``
+        (dotted keys), nested tables, or ``["identify.M=8"]`` (:func:`parse_overrides`).
+        The stages see the merged workflow, so their manifests record the values used.
 
     Returns
     -------
@@ -175,6 +247,12 @@ def load_workflow(path: str | Path, output_dir: str | Path | None = None) -> Wor
     """
     path = _resolve(Path(path), "workflow file")
     raw = _read(path)
+    if overrides:
+        if isinstance(overrides, Mapping):
+            items = [f"{k}={_toml_value(v)}" for k, v in overrides.items()]
+        else:
+            items = list(overrides)
+        _merge(raw, parse_overrides(items))
     try:
         checked = check_workflow(raw)
     except WorkflowError as exc:  # keep the class (a ResourceError stays one)

@@ -1,0 +1,113 @@
+"""Two runs side by side: the settings and the NRMSE rows that differ (dvc's params/metrics diff).
+
+Reads only the runs' manifests (the resolved configuration each stage ran with) and their
+NRMSE tables (``compare/nrmse.parquet``, else ``validate/nrmse.parquet``).
+
+References
+----------
+dvc's ``params diff`` and ``metrics diff`` (https://dvc.org/doc/command-reference); Masoud &
+Maas 2025, Eq. 41 (NRMSE).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from pipeline import artifacts
+from pipeline.errors import WorkflowError
+from pipeline.registry import names
+
+__all__ = ["NRMSE_COLUMNS", "diff_runs"]
+
+#: NRMSE columns compared, each reported in percent.
+NRMSE_COLUMNS = ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot", "nrmse_q_k")
+
+
+def _flat(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(_flat(value, f"{name}."))
+        else:
+            out[name] = value
+    return out
+
+
+def _nrmse(run: Path) -> pd.DataFrame | None:
+    for stage in ("compare", "validate"):
+        path = run / stage / "nrmse.parquet"
+        if path.is_file():
+            return artifacts.read_parquet(path)
+    return None
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return artifacts.canonical_json(a) == artifacts.canonical_json(b)
+
+
+def diff_runs(run_a: str | Path, run_b: str | Path) -> dict[str, list[dict[str, Any]]]:
+    """Compare two output folders: settings per stage and NRMSE per data set and model.
+
+    Parameters
+    ----------
+    run_a, run_b : path-like
+        Output folders of two runs (``[workflow] output_dir``).
+
+    Returns
+    -------
+    dict
+        ``"config"``: rows ``{stage, key, a, b}`` for every setting that differs (a stage
+        only one run has shows ``key = "(stage)"``); ``"nrmse"``: rows ``{dataset, model,
+        metric, a, b, change}`` with the NRMSE in percent [%] (None where a run lacks the
+        row), for every value that differs.
+
+    Raises
+    ------
+    WorkflowError
+        If a folder does not exist or holds no stage manifest.
+    """
+    runs = [Path(run_a), Path(run_b)]
+    for run in runs:
+        if not run.is_dir() or not any((run / s / artifacts.MANIFEST).is_file() for s in names()):
+            raise WorkflowError(f"'{run}' is not an output folder of a debist run (no manifests)")
+    config = []
+    for stage in names():
+        found = [artifacts.read_manifest(run / stage) for run in runs]
+        if all(m is None for m in found):
+            continue
+        if any(m is None for m in found):
+            config.append(
+                {"stage": stage, "key": "(stage)", "a": found[0] is not None,
+                 "b": found[1] is not None}
+            )  # fmt: skip
+            continue
+        a, b = (_flat(m.config) for m in found)
+        for key in sorted(set(a) | set(b)):
+            if not _same(a.get(key), b.get(key)):
+                config.append({"stage": stage, "key": key, "a": a.get(key), "b": b.get(key)})
+    tables = [_nrmse(run) for run in runs]
+    rows = []
+    if all(t is not None for t in tables):
+        keyed = [
+            {(r["dataset"], r["model"]): r for r in t.to_dict(orient="records")} for t in tables
+        ]
+        for dataset, model in sorted(set(keyed[0]) | set(keyed[1])):
+            for metric in NRMSE_COLUMNS:
+                va, vb = (k.get((dataset, model), {}).get(metric) for k in keyed)
+                va, vb = (None if v is None or pd.isna(v) else 100 * float(v) for v in (va, vb))
+                if va == vb:  # both absent, or equal
+                    continue
+                change = vb - va if va is not None and vb is not None else None
+                rows.append(
+                    {"dataset": dataset, "model": model, "metric": f"{metric} [%]",
+                     "a": va, "b": vb, "change": change}
+                )  # fmt: skip
+    return {"config": config, "nrmse": rows}
