@@ -179,5 +179,9 @@ class DebistWarning(UserWarning):
     """Base class of debist's warnings (non-convergence, clipped inputs, ...)."""
 
 
+class UnitMismatchWarning(DebistWarning):
+    """A file declares another unit of the same quantity than the workflow: converted from it."""
+
+
 class ConvergenceWarning(DebistWarning):
     """An iterative method stopped before meeting its tolerance; the result says so too."""

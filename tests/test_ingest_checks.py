@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.errors import RigLogError
+from pipeline.errors import RigLogError, UnitMismatchWarning
 from pipeline.ingest import IngestSpec, detect_format, load_rig_log
 from pipeline.ingest.checks import find_gaps, split_segments
 from pipeline.ingest.detect import sniff_format
@@ -259,10 +259,20 @@ def test_parquet_by_name_and_column(tmp_path):
     assert df.attrs["channels"] == {"t": "time", "q": "laser", "v1": "v_DE1"}
 
 
-def test_parquet_declared_unit_is_checked(tmp_path):
+def test_a_declared_unit_of_the_same_quantity_wins_over_the_workflow_and_is_said(tmp_path):
+    plain = tmp_path / "kv.parquet"
+    pq.write_table(with_units(parquet_table(), {"v_DE1": "kV"}), plain)
+    (in_kv,) = load_rig_log(plain, IngestSpec.from_dict(PARQUET))
+    table = parquet_table()  # the same voltages recorded in V, the workflow still says kV
+    volts = table.set_column(2, "v_DE1", pa.array(table.column(2).to_numpy() * 1000.0))
     path = tmp_path / "units.parquet"
-    pq.write_table(with_units(parquet_table(), {"v_DE1": "V"}), path)
-    with pytest.raises(RigLogError, match=r"units.parquet', channel 'v_DE1': wrong units"):
+    pq.write_table(with_units(volts, {"v_DE1": "V"}), path)
+    with pytest.warns(UnitMismatchWarning, match=r"units.parquet: channel 'v_DE1'.*declares 'V'"):
+        (in_v,) = load_rig_log(path, IngestSpec.from_dict(PARQUET))
+    np.testing.assert_allclose(in_v["v1"], in_kv["v1"], rtol=1e-15)
+    assert in_v.attrs["units"]["v1"] == "V"
+    with pytest.raises(RigLogError, match=r"channel 'v_DE1': wrong units.*another quantity"):
+        pq.write_table(with_units(volts, {"v_DE1": "mm"}), path)
         load_rig_log(path, IngestSpec.from_dict(PARQUET))
 
 
@@ -278,9 +288,10 @@ def test_parquet_timestamp_time_column(tmp_path):
     # seconds since the epoch in float64: a resolution of about 0.24 us
     np.testing.assert_allclose(np.diff(df["t"]), 0.002, atol=5e-7)
     assert df["t"].iloc[0] == pytest.approx(1735689600.0)
-    section = {**PARQUET, "time": {"name": "time", "unit": "ms"}}
-    with pytest.raises(RigLogError, match="wrong units for `time`"):
-        load_rig_log(path, IngestSpec.from_dict(section))
+    section = {**PARQUET, "time": {"name": "time", "unit": "ms"}}  # the stamps are the truth
+    with pytest.warns(UnitMismatchWarning, match="says `time.unit` = 'ms'"):
+        (again,) = load_rig_log(path, IngestSpec.from_dict(section))
+    np.testing.assert_array_equal(again["t"], df["t"])
 
 
 def test_truncated_parquet(tmp_path):

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from pipeline.errors import ResourceError, RigLogError
+from pipeline.errors import ResourceError, RigLogError, UnitMismatchWarning
 from pipeline.ingest import IngestSpec, load_rig_log, read_raw
 from pipeline.ingest.channels import map_channels
 from pipeline.ingest.mat import interpret_mat, read_mat
@@ -196,14 +196,17 @@ def test_mat73_decoder_matches_pymatreader_on_n_by_2_variables(tmp_path):
 
 
 @pytest.mark.parametrize("version", ["v5", "v73"])
-def test_dspace_wrong_units(fixtures, version):
+def test_dspace_declared_unit_wins_over_the_workflow(fixtures, version):
     section = {**DSPACE, "v1": {"regex": "v_DE1$", "unit": "V"}}
-    with pytest.raises(RigLogError, match="wrong units") as info:
+    with pytest.warns(UnitMismatchWarning) as info:
+        (df,) = load(fixtures[version], **section)
+    message = str(info[0].message)
+    assert fixtures[version].name in message and f"channel '{DE1}'" in message
+    assert "declares 'kV'" in message and "`v1.unit` = 'V'" in message
+    assert df["v1"].max() == 3000.0  # [V], from the declared kV
+    section["v1"] = {"regex": "v_DE1$", "unit": "mm"}
+    with pytest.raises(RigLogError, match=r"wrong units.*another quantity"):
         load(fixtures[version], **section)
-    message = str(info.value)
-    assert fixtures[version].name in message
-    assert f"channel '{DE1}'" in message
-    assert "declares 'kV'" in message and "says 'V'" in message
 
 
 @pytest.mark.parametrize("version", ["v5", "v73"])
@@ -326,8 +329,9 @@ def test_dspace_time_spec_selects_and_checks_the_raster(fixtures):
     (df,) = load(fixtures["v5"], **section)
     assert len(df) == gen.N_FAST
     section["time"] = {"regex": "Task 1", "unit": "ms"}
-    with pytest.raises(RigLogError, match=r"channel 'Periodic Task 1': wrong units for `time`"):
-        load(fixtures["v5"], **section)
+    with pytest.warns(UnitMismatchWarning, match=r"channel 'Periodic Task 1'.*`time.unit`"):
+        (again,) = load(fixtures["v5"], **section)
+    np.testing.assert_array_equal(again["t"], df["t"])
     section["time"] = {"name": "Periodic Task 2"}
     with pytest.raises(RigLogError, match=r"`q` is on time base 'Periodic Task 1'"):
         load(fixtures["v5"], **section)

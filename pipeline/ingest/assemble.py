@@ -35,7 +35,9 @@ from pipeline.ingest.channels import Mapped
 from pipeline.ingest.checks import (
     check_enough,
     check_finite,
+    check_plausible,
     check_sample_time,
+    check_scale_jump,
     check_time,
     find_gaps,
     gap_error,
@@ -45,6 +47,7 @@ from pipeline.ingest.checks import (
 )
 from pipeline.ingest.resample import resample_segment, uniform_grid
 from pipeline.ingest.spec import IngestSpec, ResampleSpec
+from pipeline.ingest.units import lookup_unit
 from pipeline.ingest.validity import cut_faults, fault_mask
 
 __all__ = ["Segment", "assemble", "to_frame"]
@@ -95,6 +98,16 @@ def _resample(
     return t_new, v_new
 
 
+def _check_values(c, values: np.ndarray, t: np.ndarray, index: np.ndarray, path: Path) -> None:
+    """Plausible magnitudes for every channel; q keeps one scale."""
+    entry = lookup_unit(c.unit)
+    quantity = entry.quantity if entry is not None else None
+    check_plausible(values, t, index, role=c.role, quantity=quantity, unit=c.unit,
+                    channel=c.source, path=path)  # fmt: skip
+    if c.role == "q":
+        check_scale_jump(values, t, index, role="q", channel=c.source, path=path)
+
+
 def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
     n = mapped.columns[0].values.size
     start, stop = slice_range(n, spec.sample_slice, path=path)
@@ -113,6 +126,7 @@ def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:
     check_time(t, index, channel=t_name, path=path)
     for j, c in enumerate(mapped.columns):
         check_finite(values[:, j], t, index, role=c.role, channel=c.source, path=path)
+        _check_values(c, values[:, j], t, index, path)
     if mapped.time is not None and spec.sample_time is not None:
         check_sample_time(t, spec.sample_time, channel=t_name, path=path, resolution=resolution)
     elif mapped.file_time is not None and spec.sample_time is not None:
@@ -186,7 +200,9 @@ def _mixed_bases(
     pieces = []
     for c in mapped.columns:
         t = bases[c.base].values
-        check_finite(c.values, t, np.arange(t.size), role=c.role, channel=c.source, path=path)
+        idx = np.arange(t.size)
+        check_finite(c.values, t, idx, role=c.role, channel=c.source, path=path)
+        _check_values(c, c.values, t, idx, path)
         fault_mask(t, c.values[:, None], np.arange(t.size), (c,), spec, path=path, split=False)
         what = f"`{c.role}` ('{c.source}')"
         resolution = bases[c.base].resolution

@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RigLogError
+from pipeline.errors import RigLogError, UnitMismatchWarning
 from pipeline.ingest.checks import printed_resolution
 from pipeline.ingest.raw import RawChannel, RawLog
 from pipeline.ingest.spec import ChannelSpec, IngestSpec
@@ -313,12 +314,25 @@ def _convert(
     key = "time" if spec.role == "t" else spec.role
     declared = canonical_unit(channel.unit) if channel.unit and channel.unit.strip() else None
     if spec.unit is not None and declared is not None and not _same_unit(declared, spec.unit):
-        raise RigLogError(
-            f"wrong units for `{key}`: the file declares '{channel.unit}', the ingest spec "
-            f"says '{spec.unit}'; fix `{key}.unit` (or `{key}.scale`)",
-            path=log.path,
-            channel=channel.name,
+        said, truth = lookup_unit(spec.unit), lookup_unit(declared)
+        if said is None or truth is None or said.si != truth.si:
+            raise RigLogError(
+                f"wrong units for `{key}`: the file declares '{channel.unit}', the ingest spec "
+                f"says '{spec.unit}', another quantity; fix `{key}.unit` (or `{key}.scale`)",
+                path=log.path,
+                channel=channel.name,
+            )
+        # the file's declared unit is the truth: convert from it (pint's factor), and keep the
+        # workflow's unit for its limits (`range`) and the messages
+        warnings.warn(
+            f"{log.path}: channel '{channel.name}': the file declares '{channel.unit}', the "
+            f"workflow says `{key}.unit` = '{spec.unit}'; converted from the file's unit",
+            UnitMismatchWarning,
+            stacklevel=2,
         )
+        scale = 1.0 if spec.scale is None else spec.scale
+        values = to_float(channel, log) * (truth.factor * scale)
+        return values, spec.si_unit or truth.si, said.factor * scale, spec.unit
     unit = spec.unit if spec.unit is not None else declared
     if unit is None and spec.role == "t" and log.rasters:
         unit = "s"  # a recording's time base without a declared unit is in seconds

@@ -173,6 +173,170 @@ def check_finite(
         )
 
 
+#: Largest magnitude [SI] a channel of each quantity may take before ingest calls it absurd:
+#: orders of magnitude beyond any bench rig debist serves (a 1e308 or a unit slip is caught,
+#: a real reading never). Quantities not listed are not bounded here; `range` bounds them.
+PLAUSIBLE = {
+    "length": 100.0,  # [m]
+    "angle": 1e4,  # [rad], ~1600 turns
+    "voltage": 1e6,  # [V]
+    "force": 1e7,  # [N]
+    "acceleration": 1e6,  # [m/s^2], ~1e5 g
+    "pressure": 1e10,  # [Pa]
+    "current": 1e5,  # [A]
+}
+#: Decades of a unit slip that :func:`check_scale_jump` looks for (mm <-> m, um <-> m).
+SCALE_DECADES = (3, 6)
+#: Samples on each side of a candidate slip whose median level must confirm it.
+_SLIP_WINDOW = 50
+
+
+def check_plausible(
+    values: np.ndarray,
+    t: np.ndarray,
+    index: np.ndarray,
+    *,
+    role: str,
+    quantity: str | None,
+    unit: str,
+    channel: str,
+    path: Path,
+) -> None:
+    """Raise on a value beyond the physical plausibility of its quantity (:data:`PLAUSIBLE`).
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_samples,)
+        The channel in SI units (finite).
+    t : ndarray, shape (n_samples,) [s]
+        Its time, for the message.
+    index : ndarray of int, shape (n_samples,)
+        File sample index of each value.
+    role, channel : str
+        Canonical column and source channel name.
+    quantity : str or None
+        What the channel measures (``"length"``, ``"voltage"`` ...); None: not checked.
+    unit : str
+        The SI unit of ``values``, for the message.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        Naming the first such sample, its time and value, the limit and the count.
+    """
+    limit = PLAUSIBLE.get(quantity or "")
+    if limit is None or values.size == 0:
+        return
+    bad = np.flatnonzero(np.abs(values) > limit)
+    if bad.size:
+        i = int(bad[0])
+        raise RigLogError(
+            f"`{role}` = {values[i]:.6g} {unit} at sample {index[i]} (t = {_t(t[i])}) is beyond "
+            f"any plausible {quantity} (|{role}| <= {limit:g} {unit}); {bad.size} such "
+            "sample(s): a sensor error code, a unit slip or a corrupt file",
+            path=path,
+            channel=channel,
+        )
+
+
+def check_scale_jump(
+    values: np.ndarray, t: np.ndarray, index: np.ndarray, *, role: str, channel: str, path: Path
+) -> None:
+    """Raise where a channel's scale jumps by 10^3 or 10^6 (a unit slip inside the record).
+
+    A sample ``k`` is a slip when ``values[k] / values[k-1]`` is within 20 % of 10^d (or
+    10^-d, d in :data:`SCALE_DECADES`, same sign) and the median magnitude of the
+    :data:`_SLIP_WINDOW` samples after it differs from that of the ones before by the
+    same power of ten within a factor 3. A motion moves continuously, so neighbouring
+    samples of a real record never differ by three decades at the same sign while both
+    sides keep their level.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_samples,)
+        The channel in SI units (finite).
+    t, index : ndarray, shape (n_samples,)
+        Time [s] and file sample index, for the message.
+    role, channel : str
+        Canonical column and source channel name.
+    path : Path
+        For messages.
+
+    Raises
+    ------
+    RigLogError
+        Naming the sample, its time, both values and the factor.
+
+    Examples
+    --------
+    >>> q = np.r_[np.full(60, 10.0), np.full(60, 0.01)] + np.arange(120) * 1e-6
+    >>> check_scale_jump(q, np.arange(120.0), np.arange(120), role="q", channel="x",
+    ...                  path=Path("log.csv"))
+    Traceback (most recent call last):
+    ...
+    pipeline.errors.RigLogError: file 'log.csv', channel 'x': `q` changes scale by 10^-3 ...
+    """
+    x = np.asarray(values, dtype=float)
+    if x.size < 2 * _SLIP_WINDOW:
+        return
+    a, b = x[:-1], x[1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where((a != 0) & (np.sign(a) == np.sign(b)), b / a, np.nan)
+        decades = np.log10(np.abs(ratio))
+    for d in SCALE_DECADES:
+        for sign in (1, -1):
+            near = np.flatnonzero(np.abs(decades - sign * d) < np.log10(1.2))
+            for k in near + 1:
+                lo, hi = max(k - _SLIP_WINDOW, 0), min(k + _SLIP_WINDOW, x.size)
+                before, after = np.median(np.abs(x[lo:k])), np.median(np.abs(x[k:hi]))
+                if before == 0 or after == 0:
+                    continue
+                if abs(np.log10(after / before) - sign * d) < np.log10(3.0):
+                    raise RigLogError(
+                        f"`{role}` changes scale by 10^{sign * d} at sample {index[k]} "
+                        f"(t = {_t(t[k])}): {x[k - 1]:.6g} then {x[k]:.6g}, and the levels "
+                        "around it differ by the same factor: a unit slip inside the record "
+                        "(e.g. mm and m); fix the log or cut it with `slice`/`time_window`",
+                        path=path,
+                        channel=channel,
+                    )
+
+
+def check_varies(
+    values: np.ndarray, *, role: str, unit: str, channel: str, path: Path, where: str = ""
+) -> None:
+    """Raise when a channel holds one value throughout (nothing to identify from it).
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_samples,)
+        The channel in SI units.
+    role, channel : str
+        Canonical column and source channel name.
+    unit : str
+        The SI unit, for the message.
+    path : Path
+        For messages.
+    where : str, optional
+        Which part of the record (e.g. ``"segment at t = 3 s"``).
+
+    Raises
+    ------
+    RigLogError
+        With the constant value and the number of samples.
+    """
+    if values.size and np.ptp(values) == 0:
+        part = f" in the {where}" if where else ""
+        raise RigLogError(
+            f"`{role}` is constant ({values[0]:.6g} {unit}) over all {values.size} samples"
+            f"{part}: a stuck or disconnected sensor; there is no motion to identify",
+            path=path,
+            channel=channel,
+        )
+
+
 def check_time(t: np.ndarray, index: np.ndarray, *, channel: str, path: Path) -> None:
     """Raise unless the time is finite and strictly increasing.
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -175,9 +176,18 @@ def _excitation(records, cfg: IdentifyConfig, tables):
     """Run the excitation check on the estimation records (warnings in the data's unit)."""
     from pipeline.identify.basis import RBFBasis
     from pipeline.identify.excitation import check_excitation
+    from pipeline.ingest.checks import check_varies
     from pipeline.validate import report_factor
 
     q = np.concatenate([r.q for r in records])
+    if np.ptp(q) == 0:  # nothing moved: a data error of the logs, named as such
+        frame = next(t for t in tables.values() if t.attrs.get("role") == "estimation")
+        check_varies(
+            q, role="q", unit=frame.attrs.get("units", {}).get("q", "m"),
+            channel=frame.attrs.get("channels", {}).get("q", "q"),
+            path=Path(str(frame.attrs.get("source", "?"))),
+            where="estimation data sets (" + ", ".join(r.name for r in records) + ")",
+        )  # fmt: skip
     lo, hi = cfg.q_range or (float(q.min()), float(q.max()))
     basis = RBFBasis.equidistant(lo, hi, cfg.M, cfg.sigma_n, cfg.outside)
     unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
