@@ -28,7 +28,7 @@ import click
 import typer
 from rich.console import Console
 from rich.markup import escape
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
 
 from pipeline.errors import (
     DebistError,
@@ -40,12 +40,40 @@ from pipeline.errors import (
 )
 
 
+class _Command(TyperCommand):
+    """A command whose usage line names its arguments plainly (``WORKFLOW``, not ``{WORKFLOW}``)."""
+
+    def collect_usage_pieces(self, ctx: click.Context) -> list[str]:
+        """Return the usage pieces without Typer's braces around required arguments."""
+        pieces = super().collect_usage_pieces(ctx)
+        return [p[1:-1] if p.startswith("{") and p.endswith("}") else p for p in pieces]
+
+
+#: Global options also accepted after the command (``debist run -q WF``).
+_GLOBAL_FLAGS = frozenset({"-q", "--quiet", "-v", "--verbose"})
+
+
 class _Commands(TyperGroup):
     """The command group, listing each command with its whole first paragraph of help.
 
     Click cuts the listing at the first period or at the terminal width, which would drop
-    the sections and units of a help line (``Eq. 37`` ends a "sentence").
+    the sections and units of a help line (``Eq. 37`` ends a "sentence"). Global flags
+    given after the command are moved before it, so ``debist run -q WF`` works.
     """
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        """Move ``-q``/``-v`` after the command name in front of it, then parse as Click does."""
+        head, rest, command = [], [], False
+        for i, arg in enumerate(args):
+            if arg == "--":
+                rest += args[i:]
+                break
+            if command and arg in _GLOBAL_FLAGS:
+                head.append(arg)
+                continue
+            command = command or arg in self.commands
+            rest.append(arg)
+        return super().parse_args(ctx, head + rest)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         """Write the Commands section (see :meth:`click.Group.format_commands`)."""
@@ -73,7 +101,7 @@ err = Console(stderr=True, soft_wrap=True)
 #: Output level set by the global options: -1 with ``-q``, 1 with ``-v``, else 0.
 _level = {"value": 0}
 
-WorkflowArg = Annotated[Path, typer.Argument(help="Workflow TOML file.")]
+WorkflowArg = Annotated[Path, typer.Argument(metavar="WORKFLOW", help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
 SetOpt = Annotated[
@@ -435,7 +463,7 @@ def _run(
             )
 
 
-@app.command()
+@app.command(cls=_Command)
 def run(
     workflow: WorkflowArg,
     force: ForceOpt = False,
@@ -475,7 +503,7 @@ def _stage_command(name: str, help_text: str, command: str | None = None) -> Non
         _run(workflow, [name], force, out, wait)
 
     command_fn.__doc__ = help_text
-    app.command(command or name)(command_fn)
+    app.command(command or name, cls=_Command)(command_fn)
 
 
 _stage_command(
@@ -512,7 +540,7 @@ _stage_command(
 )
 
 
-@app.command()
+@app.command(cls=_Command)
 def fleet(
     template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
     size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
@@ -558,7 +586,7 @@ _stage_command(
 )
 
 
-@app.command()
+@app.command(cls=_Command)
 def status(
     workflow: WorkflowArg,
     as_json: Annotated[
@@ -606,7 +634,7 @@ def status(
         console.print(f"[yellow]{escape(warning)}[/yellow]")
 
 
-@app.command()
+@app.command(cls=_Command)
 def verify(
     workflow: WorkflowArg,
     digest: Annotated[
@@ -636,7 +664,7 @@ def verify(
     console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
 
 
-@app.command()
+@app.command(cls=_Command)
 def diff(
     run_a: Annotated[Path, typer.Argument(metavar="RUN_A", help="Output folder of a run.")],
     run_b: Annotated[Path, typer.Argument(metavar="RUN_B", help="Output folder of another.")],
@@ -672,7 +700,7 @@ def diff(
         console.print(table)
 
 
-@app.command()
+@app.command(cls=_Command)
 def report(
     workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
 ) -> None:
@@ -703,7 +731,7 @@ class ExportFormat(StrEnum):
     python = "python"
 
 
-@app.command()
+@app.command(cls=_Command)
 def export(
     workflow: WorkflowArg,
     fmt: Annotated[
@@ -792,7 +820,7 @@ AddressOpt = Annotated[
 ]
 
 
-@app.command()
+@app.command(cls=_Command)
 def batch(
     paths: Annotated[
         list[str],
@@ -836,7 +864,7 @@ def batch(
     failed = int((frame.status == "failed").sum())
     table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
     columns = ("workflow file", "name", "status", "seconds", "ran", "skipped")
-    for column in (*columns, "RBF NRMSE(q)", "error"):
+    for column in (*columns, "RBF NRMSE(q)", "error / note"):
         justify = "right" if column == "seconds" else "left"
         table.add_column(column, overflow="fold", justify=justify)
     for row in frame.itertuples(index=False):
@@ -850,7 +878,7 @@ def batch(
             str(row.ran),
             str(row.skipped),
             escape(row.rbf_nrmse_q),
-            escape(where + row.error),
+            escape("; ".join(x for x in (where + row.error, row.note) if x)),
         )
     console.print(table)
     index = write_index(results)

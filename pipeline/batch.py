@@ -52,7 +52,7 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -135,6 +135,9 @@ class BatchResult:
     worker : str
         ``"<host>:<pid>"`` of the process that ran the workflow; the address of the last
         Dask worker for a workflow whose worker processes died.
+    worker_deaths : int
+        Worker processes that died while running it (each followed by a retry on a fresh
+        one while the scheduler allows; read from the scheduler's task story).
     """
 
     path: Path
@@ -148,6 +151,16 @@ class BatchResult:
     outputs: dict[str, dict[str, str]] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
     worker: str = ""
+    worker_deaths: int = 0
+
+    @property
+    def note(self) -> str:
+        """What else happened: worker processes that died under it and the retries."""
+        if not self.worker_deaths:
+            return ""
+        times = "once" if self.worker_deaths == 1 else f"{self.worker_deaths} times"
+        end = "retried on a fresh one" if self.ok else "retried, then given up"
+        return f"its worker process died {times} (killed or out of memory); {end}"
 
     @property
     def file(self) -> str:
@@ -589,6 +602,21 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
         yield stack.enter_context(Client(cluster, set_as_default=False))
 
 
+def _deaths(client: Any, key: str) -> int:
+    """Worker deaths under a task: its scheduler transitions from processing to released.
+
+    A batch gives each worker one workflow at a time, so a task released while processing
+    lost its worker (``distributed``'s ``handle-worker-cleanup``); 0 if the story is lost.
+    """
+    try:
+        story = client.story(key)
+    except Exception:  # an older scheduler or a forgotten key: nothing to report
+        return 0
+    return sum(
+        1 for entry in story if entry[0] == "scheduler" and entry[2:4] == ("processing", "released")
+    )
+
+
 def _died(allowed_failures: int) -> str:
     """Describe the error of a workflow whose worker processes died (``KilledWorker``)."""
     times = allowed_failures + 1
@@ -660,7 +688,7 @@ def _run_on_cluster(
         for future in running:
             i, t_submit = submitted.pop(future.key)
             try:
-                results[i] = future.result()
+                results[i] = replace(future.result(), worker_deaths=_deaths(client, future.key))
             except Exception as exc:  # the task never returned: its workers died, ...
                 path = Path(args[i][0])
                 name, output_dir = headers.get(path, (path.stem, None))
@@ -673,6 +701,7 @@ def _run_on_cluster(
                     error=_died(exc.allowed_failures) if killed else _describe(exc),
                     output_dir=output_dir,
                     worker=exc.last_worker.address if killed else "",
+                    worker_deaths=_deaths(client, future.key),
                 )
             future.release()
             bar.advance(bar.task_ids[0])
@@ -699,14 +728,15 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
         Columns ``file`` (the workflow file relative to the current directory, see
         :func:`display_path`), ``name`` (``[workflow] name``, which workflows may share),
         ``status``, ``seconds`` [s], ``ran`` and ``skipped`` (numbers of stages),
-        ``failed_stage``, ``error``, ``path`` (absolute) and ``rbf_nrmse_q``: the free-run
+        ``failed_stage``, ``error``, ``note`` (:attr:`BatchResult.note`: worker deaths
+        and retries), ``path`` (absolute) and ``rbf_nrmse_q``: the free-run
         NRMSE(q) of the identified model per data set (``"name: value"``, empty without a
         validation table), in the order of ``results``.
     """
     import pandas as pd
 
     columns = ["file", "name", "status", "seconds", "ran", "skipped", "failed_stage", "error"]
-    columns += ["path", "rbf_nrmse_q"]
+    columns += ["note", "path", "rbf_nrmse_q"]
     rows = [
         {
             "file": r.file,
@@ -717,6 +747,7 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
             "skipped": len(r.skipped),
             "failed_stage": r.failed_stage,
             "error": r.error,
+            "note": r.note,
             "path": str(r.path),
             "rbf_nrmse_q": ", ".join(
                 f"{row['dataset']}: {100 * row['nrmse_q']:.2f} %"
@@ -778,6 +809,7 @@ def write_index(
                 design=r.summary.get("design"),
                 q_unit=r.summary.get("q_unit", "m"),
                 link=link,
+                note=r.note,
             )
         )
     return write_page(folder / INDEX_FILE, render_index(rows))

@@ -17,6 +17,9 @@ Points passed by debist:
   folder, nothing is swapped yet;
 * ``stage:<stage>:start``: a stage is about to run (used to kill a batch worker).
 
+With ``DEBIST_FAULT_ONCE`` naming a file, a point fires only in the process that creates
+that file first (a worker killed once, whose retry then runs through).
+
 Without ``DEBIST_FAULT`` a point costs one dictionary lookup.
 
 References
@@ -30,10 +33,12 @@ from __future__ import annotations
 import os
 import signal
 
-__all__ = ["ENV", "fault_point"]
+__all__ = ["ENV", "ONCE", "fault_point"]
 
 #: The environment variable that lists the points.
 ENV = "DEBIST_FAULT"
+#: The environment variable naming a file whose creation lets a point fire once only.
+ONCE = "DEBIST_FAULT_ONCE"
 
 
 def fault_point(point: str, workflow: str | None = None) -> None:
@@ -57,4 +62,10 @@ def fault_point(point: str, workflow: str | None = None) -> None:
         item, _, sig = item.strip().partition("=")
         name, _, only = item.partition("@")
         if name == point and (not only or only == workflow):
+            marker = os.environ.get(ONCE)
+            if marker:
+                try:
+                    os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+                except FileExistsError:
+                    return  # fired already
             os.kill(os.getpid(), getattr(signal, f"SIG{sig or 'KILL'}"))

@@ -298,7 +298,7 @@ report.</p>
 <tr><td class="text">{% if r.link %}<a href="{{ r.link }}">{{ r.name }}</a>{% else %}{{ r.name }}\
 {% endif %}</td><td class="text">{{ r.file }}</td>
 <td class="text{% if r.status != 'done' %} bad{% endif %}">{{ r.status }}{% if r.error %}: \
-{{ r.error }}{% endif %}</td>
+{{ r.error }}{% endif %}{% if r.note %} ({{ r.note }}){% endif %}</td>
 {% for d in datasets %}<td>{{ r.nrmse.get(d, "-") }}</td>{% endfor %}
 <td>{{ r.wells }}</td><td class="text">{{ r.switching }}</td></tr>
 {% endfor %}
@@ -515,6 +515,7 @@ def index_row(
     design: Mapping[str, Any] | None = None,
     q_unit: str = "m",
     link: str | None = None,
+    note: str = "",
 ) -> dict[str, Any]:
     """One prototype's row of the batch index page.
 
@@ -537,6 +538,8 @@ def index_row(
         SI unit of q (wells in m are shown in mm).
     link : str, optional
         Relative URL of its report page (None: no report).
+    note : str, optional
+        What else happened to the run (a worker process that died and a retry).
 
     Returns
     -------
@@ -562,6 +565,7 @@ def index_row(
         "file": file,
         "status": status,
         "error": error,
+        "note": note,
         "nrmse": scores,
         "wells": _wells(design, q_unit),
         "switching": _switching(design),

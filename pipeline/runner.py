@@ -22,6 +22,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from threadpoolctl import threadpool_limits
+
 from pipeline import artifacts, outdir, registry
 from pipeline.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
 from pipeline.faults import fault_point
@@ -370,9 +372,10 @@ class Runner:
                 ]
             return "missing", [Reason("never_run", "never run")]
         ups = [u for u in self._upstream(stage) if u in rerun]
-        if ups:
-            return "stale", [Reason("upstream_stale", f"upstream '{ups[-1]}' will rerun")]
         reasons = self._stale_reasons(stage, manifest)
+        if ups:  # its own reasons too: "config changed (M)" is not hidden by the upstream's
+            own = [r for r in reasons if r.kind not in ("upstream_changed", "input_changed")]
+            return "stale", [Reason("upstream_stale", f"upstream '{ups[-1]}' will rerun"), *own]
         return ("stale", reasons) if reasons else ("up to date", [])
 
     def _stale_reasons(self, stage: str, manifest: artifacts.Manifest) -> list[Reason]:
@@ -609,7 +612,10 @@ class Runner:
             fault_point(f"stage:{stage}:start", self.wf.name)
             t0 = time.perf_counter()
             module = importlib.import_module(registry.stage(stage).module)
-            result = module.execute(self)
+            # one BLAS thread, as in a batch's worker processes: a multi-threaded BLAS sums
+            # in another order, and a run's bytes must not depend on where it ran
+            with threadpool_limits(limits=1, user_api="blas"):
+                result = module.execute(self)
             seconds = time.perf_counter() - t0
             code, versions = self._code(stage)
             manifests[stage] = artifacts.write_stage(

@@ -124,8 +124,9 @@ def test_status_json_is_an_object_per_stage_with_structured_reasons(project):
         {"kind": "artifact_modified", "detail": "outputs modified: check.parquet (modified)"}
     ]
     assert status["differentiate"]["state"] == "stale"
-    assert status["differentiate"]["reasons"] == [
-        {"kind": "upstream_stale", "detail": "upstream 'ingest' will rerun"}
+    assert status["differentiate"]["reasons"] == [  # its own change is not hidden
+        {"kind": "upstream_stale", "detail": "upstream 'ingest' will rerun"},
+        {"kind": "config_changed", "detail": "config changed (alpha)"},
     ]
     # the human form keeps the words
     code, out = invoke("status", wf)
