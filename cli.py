@@ -421,7 +421,10 @@ def _report(runner, manifests, ran: set[str]) -> None:
     last = "compare" if "compare" in manifests else "validate"
     if "compare" in manifests:
         s = manifests["compare"].summary
-        console.print(f"SINDy ({s['n_params']} terms): {s['equations']}", soft_wrap=True)
+        console.print(f"SINDy ({s['n_params']} terms):")
+        for equation in str(s["equations"]).splitlines():  # a term per line, not one long line
+            for line in report.wrap_equation(equation):
+                console.print(f"  {escape(line)}", soft_wrap=True)
     if last in manifests:
         summary = manifests[last].summary
         console.print(report.nrmse_table(summary["table"]))

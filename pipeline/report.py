@@ -8,6 +8,7 @@ which no hash covers, are not printed here.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 from rich.markup import escape
@@ -486,3 +487,34 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         text = escape(text + switching_note(r))
         table.add_row(r["model"], f"switching, input {r['input']}", "", text, "", "", "")
     return table
+
+
+def wrap_equation(equation: str, indent: str = "    ") -> list[str]:
+    """Split an equation ``lhs = t1 + t2 - t3 ...`` into one line per term, signs kept.
+
+    Parameters
+    ----------
+    equation : str
+        One equation as SINDy prints it (terms joined by `` + `` and `` - ``).
+    indent : str, optional
+        Put before every term line.
+
+    Returns
+    -------
+    list of str
+        ``["lhs =", "    1.9e-01", "    + 1.4e+02 q", "    - 1.0e+01 q_dot", ...]``.
+
+    Examples
+    --------
+    >>> wrap_equation("q_ddot = 2.0 + 3.5e-01 q - 1.0e+00 q_dot")
+    ['q_ddot =', '    2.0', '    + 3.5e-01 q', '    - 1.0e+00 q_dot']
+    """
+    lhs, sep, rhs = equation.partition(" = ")
+    if not sep:
+        return [equation]
+    pieces = re.split(r" ([+-]) (?=[0-9.])", rhs)
+    lines = [f"{lhs} =", indent + pieces[0]]
+    lines += [
+        f"{indent}{sign} {term}" for sign, term in zip(pieces[1::2], pieces[2::2], strict=True)
+    ]
+    return lines
