@@ -154,7 +154,7 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
         for name in names:
             if name in info.identified:
                 spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in info.identified[name])
-                lines.append(f"Curve {name} identified (95 % band) on q in: {spans or 'none'} m")
+                lines.append(f"Curve {name} identified on q in: {spans or 'none'} m")
     if arr["lag"]:
         lines.append(
             f"RK4 is stable for dt <= 1.5 T_z = {arr['max_step']!r} s; "

@@ -30,6 +30,7 @@ from pipeline.htmlreport import (
     ReportConfig,
     render_report,
 )
+from pipeline.identify.bands import BAND_LABEL
 from pipeline.registry import stage as registry_stage
 from pipeline.render import FigureJob, render_pngs
 from pipeline.report_figures import (
@@ -53,7 +54,7 @@ IMAGES = (
         "identify",
         "plots/curves.png",
         "identify",
-        "Fig. 14: identified curves with their 95 % bands (grey where not identified), "
+        f"Fig. 14: identified curves with their {BAND_LABEL} (grey where not identified), "
         "dashed: the analytical model's",
     ),
     (
