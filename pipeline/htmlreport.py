@@ -143,7 +143,15 @@ _TEMPLATE = """<!DOCTYPE html>
 body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 0 auto; padding: 0.8rem;
        line-height: 1.4; color: #111; background: #fff; }
 h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc; }
-.scroll { overflow-x: auto; }
+.scroll { overflow-x: auto; background:
+  linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
+  linear-gradient(to left, #fff 30%, rgba(255,255,255,0)) right / 2rem 100% no-repeat local,
+  radial-gradient(farthest-side at 0 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) left / .8rem 100%
+    no-repeat scroll,
+  radial-gradient(farthest-side at 100% 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) right / .8rem 100%
+    no-repeat scroll; }
+.scrollnote { display: none; font-size: 0.8rem; color: #555; }
+@media (max-width: 40rem) { .scrollnote { display: block; } }
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
 th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; }
 th:first-child, td.text { text-align: left; }
@@ -163,7 +171,7 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 <h2 id="s1">{{ sections[0] }}</h2>
 <p>Workflow <strong>{{ workflow }}</strong></p>
 {% if datasets %}
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>data set</th><th>role</th><th>source</th><th>samples</th><th>duration [s]</th></tr>
 {% for d in datasets %}
 <tr><td class="text">{{ d.name }}</td><td class="text">{{ d.role }}</td>
@@ -179,7 +187,7 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 {% if nrmse %}
 <p>NRMSE of the free run (Eq. 41); the last number is that of the trivial model that predicts
 the mean of q (a model is only useful below it).</p>
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>model</th><th>data set</th>{% for h in nrmse_heads %}<th>NRMSE {{ h }}</th>{% endfor %}
 <th>NRMSE q, mean baseline</th><th>status / note</th></tr>
 {% for r in nrmse %}
@@ -188,6 +196,22 @@ the mean of q (a model is only useful below it).</p>
 <td>{{ r.baseline }}</td><td class="text">{{ r.note }}</td></tr>
 {% endfor %}
 </table></div>
+{% if checks %}
+<p>The checks of MATLAB's <code>predict</code> and <code>resid</code>: NRMSE of the prediction
+k samples ahead from the measured state (the friction state filtered from q_dot), and the
+one-step prediction errors tested for whiteness (Ljung-Box at 99 %) and for correlation with
+each input (share of lags 0-25 outside the 99 % limits; a model that misses an input's effect
+leaves its errors correlated with it).</p>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
+<tr><th>model</th><th>data set</th><th>k [samples]</th><th>NRMSE q, k-step</th>
+<th>one-step errors white (Ljung-Box p)</th>
+<th>lags outside the input cross-correlation limits</th></tr>
+{% for r in checks %}
+<tr><td class="text">{{ r.model }}</td><td class="text">{{ r.dataset }}</td><td>{{ r.k }}</td>
+<td>{{ r.nrmse_k }}</td><td class="text">{{ r.white }}</td><td>{{ r.cross }}</td></tr>
+{% endfor %}
+</table></div>
+{% endif %}
 {% else %}<p>Not run.</p>{% endif %}
 
 <h2 id="s4">{{ sections[3] }}</h2>
@@ -195,7 +219,7 @@ the mean of q (a model is only useful below it).</p>
 
 <h2 id="s5">{{ sections[4] }}</h2>
 {% if model %}
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>quantity</th><th>value</th></tr>
 {% for label, value in model %}
 <tr><td class="text">{{ label }}</td><td>{{ value }}</td></tr>
@@ -207,7 +231,7 @@ the mean of q (a model is only useful below it).</p>
 <h2 id="s6">{{ sections[5] }}</h2>
 {% if design %}
 <p>Identified model: {{ design.verdict }}{% if design.reason %} ({{ design.reason }}){% endif %}</p>
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>model</th><th>inputs [V]</th><th>q* [m]</th><th>kind</th><th>f_n [Hz]</th><th>zeta</th>
 <th>barrier</th></tr>
 {% for r in design.rows %}
@@ -240,14 +264,14 @@ the mean of q (a model is only useful below it).</p>
 (in the workflow's folder; add <code>--digest</code> with the run digest that
 <code>debist run</code> printed, which covers this page's manifest too).</p>{% endif %}
 {% if stages %}
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>stage</th><th>stage key</th><th>manifest sha256</th></tr>
 {% for s in stages %}<tr><td class="text">{{ s.name }}</td><td class="text"><code>{{ s.key }}</code>
 </td><td class="text"><code>{{ s.manifest }}</code></td></tr>{% endfor %}
 </table></div>
 {% endif %}
 {% if versions %}
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>library</th><th>version</th></tr>
 {% for lib, v in versions %}<tr><td class="text">{{ lib }}</td><td class="text">{{ v }}</td></tr>
 {% endfor %}
@@ -278,7 +302,15 @@ _INDEX = """<!DOCTYPE html>
 body { font-family: system-ui, sans-serif; max-width: 72rem; margin: 0 auto; padding: 0.8rem;
        line-height: 1.4; color: #111; background: #fff; }
 h1 { font-size: 1.5rem; }
-.scroll { overflow-x: auto; }
+.scroll { overflow-x: auto; background:
+  linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
+  linear-gradient(to left, #fff 30%, rgba(255,255,255,0)) right / 2rem 100% no-repeat local,
+  radial-gradient(farthest-side at 0 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) left / .8rem 100%
+    no-repeat scroll,
+  radial-gradient(farthest-side at 100% 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) right / .8rem 100%
+    no-repeat scroll; }
+.scrollnote { display: none; font-size: 0.8rem; color: #555; }
+@media (max-width: 40rem) { .scrollnote { display: block; } }
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
 th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
 th:first-child, td.text { text-align: left; }
@@ -290,7 +322,7 @@ td.bad { color: #a00; font-weight: bold; }
 <p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
 (Eq. 41), its wells at rest and its switching voltages. Each name links to the prototype's
 report.</p>
-<div class="scroll"><table>
+<p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>prototype</th><th>workflow file</th><th>status</th>
 {% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
 <th>wells q* at rest</th><th>switching voltages [V]</th></tr>
@@ -366,10 +398,48 @@ def _nrmse_rows(rows: list[dict[str, Any]]) -> tuple[list[str], list[dict[str, A
     return [h for _, h in keys], out
 
 
+def _check_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, str]]:
+    """Rows of the prediction and residual checks (validate's ``nrmse_q_k``, ``resid_*``)."""
+    out = []
+    for r in rows:
+        if r.get("k_steps") is None or _missing(r.get("k_steps")):
+            continue
+        white, p = r.get("resid_white"), r.get("resid_ljung_box_p")
+        cross = r.get("resid_cross_outside")
+        out.append(
+            {
+                "model": str(r.get("model", "")),
+                "dataset": str(r.get("dataset", "")),
+                "k": str(int(r["k_steps"])),
+                "nrmse_k": "-" if _missing(r.get("nrmse_q_k")) else f"{100 * r['nrmse_q_k']:.2f} %",
+                "white": "not tested"
+                if white is None or _missing(p)
+                else f"{'yes' if white else 'no'} (p = {p:.2g})",
+                "cross": "-" if _missing(cross) else f"{100 * cross:.0f} %",
+            }
+        )
+    return out
+
+
 def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
-    """Quantity/value rows of the identified model (Eq. 37-40)."""
-    rows = [("T_z [s]", _num(summary.get("T_z"))), ("m_q", _num(summary.get("m_q")))]
-    rows += [(f"backbone {k}", _num(v)) for k, v in (summary.get("backbone") or {}).items()]
+    """Quantity/value rows of the identified model (Eq. 37-40), every one with its unit.
+
+    The backbone's coefficients are basis coefficients of the fit (the RBF sums add to
+    them), not the physics of the beam: they are labelled so, with their units.
+    """
+    from pipeline.report import summary_units
+
+    units = summary_units(summary)
+    rows = [
+        ("T_z [s]", _num(summary.get("T_z"))),
+        (f"m_q [{units['mass']}]", _num(summary.get("m_q"))),
+    ]
+    for key, value in (summary.get("backbone") or {}).items():
+        unit = units.get(key)
+        if isinstance(unit, list):
+            unit = ", ".join(dict.fromkeys(unit))
+        label = f"backbone coefficient {key} (a basis term, not a physical constant)"
+        rows.append((f"{label} [{unit or '?'}]", _num(value)))
     for label, key in (
         ("condition number", "condition"),
         ("nonzero parameters", "n_params"),
@@ -379,7 +449,7 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             rows.append((label, _num(summary[key])))
     for name, spans in (summary.get("identified") or {}).items():
         text = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans) or "nowhere"
-        rows.append((f"{name} identified on q in [m]", text))
+        rows.append((f"{name} identified on q in [{units['q']}]", text))
     return rows
 
 
@@ -459,6 +529,7 @@ def render_report(run: dict[str, Any]) -> str:
         datasets=run.get("datasets") or [],
         nrmse_heads=heads,
         nrmse=nrmse,
+        checks=_check_rows(run.get("nrmse") or []),
         model=_model_rows(identify) if identify else [],
         design=_design(identify),
         warnings=(identify.get("excitation") or {}).get("warnings", []),

@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pipeline.report_figures import dynamic_window
+
 
 def free_run_figure(
     sim: pd.DataFrame,
@@ -15,6 +17,7 @@ def free_run_figure(
     init_samples: int = 0,
     unit: str = "m",
     report_unit: str | None = None,
+    q_ddot: np.ndarray | None = None,
 ) -> Any:
     """Measured vs simulated position, a zoom and the error, as in Fig. 12, 13 and 15 of the paper.
 
@@ -33,12 +36,16 @@ def free_run_figure(
     report_unit : str, optional
         Unit the axes show q in (``[validate] report_unit``, e.g. ``"mm"``); the data are
         converted for display only. None: ``unit``.
+    q_ddot : ndarray, shape (n,), optional
+        The measured acceleration [unit/s^2]: the zoom is the 200-sample window where its
+        RMS is largest (:func:`pipeline.report_figures.dynamic_window`, as in the report);
+        default the second difference of the measured q.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Three axes: the whole record, a zoom of 200 samples in its middle, the error; q
-        and the error in ``report_unit``.
+        Three axes: the whole record, a zoom of 200 samples on its most dynamic part, the
+        error; q and the error in ``report_unit``.
 
     Raises
     ------
@@ -51,10 +58,12 @@ def free_run_figure(
 
     factor, unit = report_factor(unit, report_unit)
     q, q_sim = factor * sim["q"].to_numpy(), factor * sim["q_sim"].to_numpy()
-    fig = Figure(figsize=(9, 7))
+    fig = Figure(figsize=(10.5, 7), layout="constrained")
     ax1, ax_zoom, ax2 = fig.subplots(3, 1, height_ratios=(2, 2, 1))
     t = sim["t"].to_numpy()
-    mid = slice(max(t.size // 2 - 100, 0), min(t.size // 2 + 100, t.size))
+    accel = np.gradient(np.gradient(q)) if q_ddot is None else np.asarray(q_ddot, float)
+    dt = float(t[1] - t[0]) if t.size > 1 else 1.0
+    mid = slice(*dynamic_window(t, accel, 200 * dt))
     for ax, s in ((ax1, slice(None)), (ax_zoom, mid)):
         ax.plot(t[s], q[s], color="0.2", lw=0.8, label="measured")
         ax.plot(
@@ -66,7 +75,8 @@ def free_run_figure(
             label=f"{row['model']} free run",
         )
         ax.set_ylabel(f"q [{unit}]")
-    ax1.legend(loc="upper right", fontsize=8)
+    ax1.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
+    ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)
     ax_zoom.set_title(f"zoom: t = {t[mid][0]:.3g} ... {t[mid][-1]:.3g} s", fontsize=9)
     ax1.set_title(
         f"{name}: NRMSE(q) = {100 * row['nrmse_q']:.2f} %, "
@@ -79,7 +89,6 @@ def free_run_figure(
     if init_samples:
         for ax in (ax1, ax2):
             ax.axvspan(t[0], t[min(init_samples, t.size - 1)], color="0.85", zorder=0)
-    fig.tight_layout()
     return fig
 
 
@@ -123,9 +132,12 @@ def curves_figure(
     """
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(9, 8))
+    fig = Figure(figsize=(10.5, 8), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    q = curves["q"].to_numpy()
+    q_scale, unit = (1e3, "mm") if unit == "m" else (1.0, unit)  # q in mm, as the report
+    q = q_scale * curves["q"].to_numpy()
+    if analytical is not None:
+        analytical = analytical.assign(q=q_scale * analytical["q"].to_numpy())
     inputs = sorted(c for c in curves.columns if c[:1] == "g" and c[1:].isdigit())
     panels = [
         (axes[0], [("restoring", 1.0, "tab:blue")], "restoring force c(q) q + F_0"),
@@ -136,12 +148,17 @@ def curves_figure(
             "dC_i/dq = 2 g_i(q)",
         ),
     ]
+    labels = ["", "", ""]
     if units is not None:
         gains = sorted(set(units["g_0"])) or ["1"]
-        labels = (units["force"], units["d_v"], ", ".join(gains))
-        for ax, label in zip(axes, labels, strict=True):
-            ax.set_ylabel(f"[{label}]")
-    for ax, series, title in panels:
+        labels = [units["force"], units["d_v"], ", ".join(gains)]
+    for i, (ax, series, title) in enumerate(panels):
+        # a power of ten in the label, not matplotlib's offset text over the title
+        decade = _decade(curves, series, analytical)
+        series = [(name, factor / 10.0**decade, color) for name, factor, color in series]
+        label = labels[i] if not decade else f"10^{decade} {labels[i]}".strip()
+        ax.set_ylabel(f"[{label}]" if label else "")
+        ax.ticklabel_format(axis="y", useOffset=False, style="plain")
         for name, factor, color in series:
             y = factor * curves[name].to_numpy()
             ident = curves[f"{name}_identified"].to_numpy()
@@ -163,21 +180,37 @@ def curves_figure(
                 )
         _limit_to_identified(ax, curves, series, analytical)
         ax.set_title(title + " (grey: not identified)", fontsize=9)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     axes[-1].set_xlabel(f"q [{unit}]")
     return fig
 
 
-def _limit_to_identified(ax, curves, series, analytical) -> None:
-    """Scale the y axis to the identified parts (bands where unsupported can be huge)."""
+def _panel_values(curves, series, analytical) -> np.ndarray:
+    """Return what a panel must show: every curve, bands where identified, the analytical."""
     values = []
     for name, factor, _ in series:
         ident = curves[f"{name}_identified"].to_numpy()
-        for key in (name, f"{name}_lo", f"{name}_hi"):
+        values.append(factor * curves[name].to_numpy())
+        for key in (f"{name}_lo", f"{name}_hi"):
             values.append(factor * curves[key].to_numpy()[ident])
         if analytical is not None and name in analytical:
             values.append(factor * analytical[name].to_numpy())
     values = np.concatenate(values) if values else np.empty(0)
+    return values[np.isfinite(values)]
+
+
+def _decade(curves, series, analytical) -> int:
+    """Power of ten to show a panel's values in (0 between 1e-2 and 1e4)."""
+    values = _panel_values(curves, series, analytical)
+    top = float(np.max(np.abs(values))) if values.size else 0.0
+    if top == 0 or 1e-2 <= top < 1e4:
+        return 0
+    return int(np.floor(np.log10(top)))
+
+
+def _limit_to_identified(ax, curves, series, analytical) -> None:
+    """Scale the y axis to the curves and the identified bands (unsupported bands can be huge)."""
+    values = _panel_values(curves, series, analytical)
     values = values[np.isfinite(values)]
     if values.size:
         lo, hi = float(values.min()), float(values.max())

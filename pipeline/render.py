@@ -49,7 +49,7 @@ class FigureJob:
     draw: Callable[..., Any]
     args: tuple = ()
     kwargs: Mapping[str, Any] = field(default_factory=dict)
-    dpi: int = 110
+    dpi: int = 160
 
     def figure(self) -> Any:
         """Draw the figure.

@@ -183,7 +183,7 @@ def free_run_figure(
     t = measured["t"].to_numpy()
     q = factor * measured["q"].to_numpy()
     a, b = window
-    fig = Figure(figsize=(9, 7.5), layout="constrained")
+    fig = Figure(figsize=(10.5, 7.5), layout="constrained")
     full, zoom, err = fig.subplots(3, 1, height_ratios=(2, 2, 1.2))
     for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
         ax.plot(t[part], q[part], color="0.15", lw=0.9, label="measured")
@@ -203,7 +203,7 @@ def free_run_figure(
             fontsize=9,
         )
     full.set_title(f"{name}: measured and free-run q", fontsize=10)
-    full.legend(fontsize=7, loc="upper right")
+    full.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     for ax in (full, zoom):
         ax.set_ylabel(f"q [{label}]", fontsize=8)
     err.set_ylabel(f"error [{label}]", fontsize=8)

@@ -181,7 +181,9 @@ def test_sections_numbers_and_verdicts(run):
     assert analytical[2:6] == ["diverged"] * 4
     # identified model, design and warnings
     model = {r[0]: r[1] for r in parser.rows if len(r) == 2}
-    assert model["T_z [s]"] == "0.0625" and model["backbone k_3"] == "1.985e+04"
+    assert model["T_z [s]"] == "0.0625"
+    k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/m^3]"
+    assert model[k_3] == "1.985e+04" and model["m_q [kg]"]
     assert model["restoring identified on q in [m]"] == "[-0.016, -0.00384], [0.00096, 0.016]"
     assert model["g1 identified on q in [m]"] == "nowhere"
     assert any(r[:4] == ["rbf", "0, 0", "-0.009516", "well"] for r in parser.rows)
@@ -301,3 +303,21 @@ def test_an_undecided_hyper_parameter_search_says_so(run):
     assert html.index("hyper-parameters:") > study  # in the hyper-parameter search section
     auto["undecided"] = False
     assert "undecided" not in auto_line(run["identify"])
+
+
+def test_prediction_and_residual_checks_are_tabulated_with_their_verdicts():
+    from pipeline.htmlreport import _check_rows
+
+    rows = [
+        {"model": "rbf", "dataset": "a", "k_steps": 10, "nrmse_q_k": 0.0031,
+         "resid_white": False, "resid_ljung_box_p": 1e-12, "resid_cross_outside": 0.157},
+        {"model": "rbf", "dataset": "b", "k_steps": 10, "nrmse_q_k": float("nan"),
+         "resid_white": None, "resid_ljung_box_p": float("nan"), "resid_cross_outside": None},
+        {"model": "sindy", "dataset": "a", "nrmse_q": 0.1},  # no prediction scores: no row
+    ]  # fmt: skip
+    assert _check_rows(rows) == [
+        {"model": "rbf", "dataset": "a", "k": "10", "nrmse_k": "0.31 %",
+         "white": "no (p = 1e-12)", "cross": "16 %"},
+        {"model": "rbf", "dataset": "b", "k": "10", "nrmse_k": "-", "white": "not tested",
+         "cross": "-"},
+    ]  # fmt: skip

@@ -43,7 +43,7 @@ from pipeline.stages import StageInputs, StageOutput
 __all__ = ["ReportInputs", "ReportResult", "execute", "gather_run", "run_report"]
 
 #: Resolution of the report's own figures [dots per inch] (small pages, phone-readable).
-REPORT_DPI = 90
+REPORT_DPI = 180
 #: Stages whose free runs (``simulated/<data set>.parquet``) the report draws, and the
 #: model each holds.
 SIMULATED = (("validate", "rbf"), ("compare", "sindy"))

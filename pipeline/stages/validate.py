@@ -153,6 +153,7 @@ def run_validate(
                 cfg.init_samples,
                 units[name],
                 cfg.report_unit,
+                derivs[name]["q_ddot"].to_numpy(),
             ),
         )
         for name, sim in simulated.items()
