@@ -232,8 +232,8 @@ leaves its errors correlated with it).</p>
 {% if design %}
 <p>Identified model: {{ design.verdict }}{% if design.reason %} ({{ design.reason }}){% endif %}</p>
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
-<tr><th>model</th><th>inputs [V]</th><th>q* [m]</th><th>kind</th><th>f_n [Hz]</th><th>zeta</th>
-<th>barrier</th></tr>
+<tr><th>model</th><th>inputs [{{ design.inputs }}]</th><th>q* [{{ design.q_unit }}]</th>
+<th>kind</th><th>f_n [Hz]</th><th>zeta</th><th>barrier [{{ design.barrier }}]</th></tr>
 {% for r in design.rows %}
 <tr>{% for c in r %}<td{% if loop.index in (1, 4) %} class="text"{% endif %}>{{ c }}</td>
 {% endfor %}</tr>
@@ -458,6 +458,10 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     design = summary.get("design")
     if not design:
         return None
+    from pipeline.report import summary_units
+
+    units = summary_units(summary)
+    scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14
     rows = []
     for r in design.get("equilibria", []):
         if r.get("level", 0) != 0 and not r.get("static_stable"):
@@ -465,13 +469,22 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         well = bool(r.get("static_stable"))
         small = [_num(r.get(k)) if well else "" for k in ("f_n", "zeta", "barrier")]
-        rows.append([r.get("model", ""), volts, _num(r.get("q")), equilibrium_kind(r), *small])
+        q = r.get("q")
+        q = scale * q if isinstance(q, int | float) else q
+        rows.append([r.get("model", ""), volts, _num(q), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
         text = f"{_num(r['v_switch'])} V" if r.get("v_switch") is not None else r.get("reason")
         text += switching_note(r)
         label = f"switching, input {r.get('input')}"
         rows.append([r.get("model", ""), label, "", text, "", "", ""])
-    return {"verdict": design.get("verdict", ""), "reason": design.get("reason", ""), "rows": rows}
+    return {
+        "verdict": design.get("verdict", ""),
+        "reason": design.get("reason", ""),
+        "rows": rows,
+        "q_unit": q_unit,
+        "inputs": ", ".join(dict.fromkeys(units["inputs"])) or "V",
+        "barrier": units["barrier"],
+    }
 
 
 def _data_uri(name: str, data: bytes) -> str:

@@ -186,7 +186,8 @@ def test_sections_numbers_and_verdicts(run):
     assert model[k_3] == "1.985e+04" and model["m_q [kg]"]
     assert model["restoring identified on q in [m]"] == "[-0.016, -0.00384], [0.00096, 0.016]"
     assert model["g1 identified on q in [m]"] == "nowhere"
-    assert any(r[:4] == ["rbf", "0, 0", "-0.009516", "well"] for r in parser.rows)
+    assert any(r[:4] == ["rbf", "0, 0", "-9.516", "well"] for r in parser.rows)  # q* [mm]
+    assert "<th>q* [mm]</th>" in html
     assert any(r[3] == "1976 V" for r in parser.rows if len(r) == 7)
     assert "the well persists up to v_max = 3018.48 V" in html
     assert "g1: input 1 is never active" in html
