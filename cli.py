@@ -891,8 +891,16 @@ def batch(
         raise typer.Exit(1)
 
 
+def _warning_line(message, category, *_args, **_kwargs) -> str:
+    """One line per warning: its class and message, not the source line that raised it."""
+    return f"warning ({category.__name__}): {message}\n"
+
+
 def main() -> None:
     """Entry point of the ``debist`` console script (SIGTERM stops as cleanly as Ctrl-C)."""
+    import warnings
+
+    warnings.formatwarning = _warning_line
     signal.signal(signal.SIGTERM, _on_sigterm)
     app()
 

@@ -79,3 +79,21 @@ def test_a_motionless_q_is_a_data_error_naming_file_and_channel(project):
     assert "channel 'laser'" in out and "rig.csv" in out
     assert "`q` is constant (0.001 m)" in out and "estimation data sets (estimation)" in out
     assert "operating range" not in out
+
+
+def test_a_laser_error_code_beyond_the_ild2300_range_is_refused_without_a_range(project):
+    """The channel names a known sensor: its documented +-25 mm is the default `range`."""
+    from pipeline.errors import DebistWarning
+
+    def rename(log):
+        log.rename(columns={"laser": "ILD2300 distance"}, inplace=True)
+        log.loc[1500:1504, "ILD2300 distance"] = 262.14  # an error code for 5 samples
+
+    edit_log(project, rename)
+    wf = project / "wf.toml"
+    wf.write_text(wf.read_text().replace('name = "laser"', 'name = "ILD2300 distance"'))
+    with pytest.warns(DebistWarning, match=r"ILD2300.*no `range`"):
+        code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 1
+    assert "channel 'ILD2300 distance'" in out and "range limit 25 mm" in out
+    assert not (project / "out" / "ingest").exists()

@@ -512,6 +512,6 @@ def test_editing_the_rig_leaves_the_data_stages_up_to_date(tmp_path):
 
 def test_editing_the_identification_reruns_identify_and_what_follows(tmp_path):
     changed = _edited(tmp_path, "identify/fit.py", lambda t: t + "\n# edited\n")
-    assert changed == ["compare", "identify", "study", "validate"]
+    assert changed == ["compare", "identify", "report", "study", "validate"]
     closure = module_closure("pipeline.stages.differentiate", ROOT)
     assert "pipeline.identify.fit" not in closure and "pipeline.differentiate" in closure

@@ -3,7 +3,9 @@
 A sensor fault is a run of samples of one channel that cannot be a measurement:
 
 - **range**: a sample at or beyond a limit of the channel's ``range = [lo, hi]`` (given in
-  the recorded unit). A laser triangulation sensor outputs its range limit when the target
+  the recorded unit; when the workflow gives none and the channel's name names a known
+  sensor, its documented range, :mod:`pipeline.ingest.sensors`, with a warning saying
+  so). A laser triangulation sensor outputs its range limit when the target
   leaves the measuring range; a saturated amplifier sits at its rail. The limits are
   converted to SI with the channel's own factor (so a sample recorded exactly at the
   limit compares equal) and compared with a margin of :data:`RANGE_ULPS` units in the last
@@ -28,14 +30,16 @@ recorded, values and limits in the recorded unit.
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import RigLogError
+from pipeline.errors import DebistWarning, RigLogError
 from pipeline.ingest.channels import Column
+from pipeline.ingest.sensors import default_range
 from pipeline.ingest.spec import ChannelSpec, IngestSpec
 
 __all__ = [
@@ -120,7 +124,12 @@ def _unit(column: Column) -> str:
     return f" {column.file_unit}" if column.file_unit else ""
 
 
-def find_faults(values: np.ndarray, column: Column, spec: ChannelSpec) -> list[Fault]:
+def find_faults(
+    values: np.ndarray,
+    column: Column,
+    spec: ChannelSpec,
+    default: tuple[float, float, str] | None = None,
+) -> list[Fault]:
     """Find the range and stuck faults of one channel.
 
     Parameters
@@ -131,6 +140,10 @@ def find_faults(values: np.ndarray, column: Column, spec: ChannelSpec) -> list[F
         For its role, ``gain`` (recorded -> SI factor) and recorded unit.
     spec : ChannelSpec
         For ``range`` and ``stuck``.
+    default : tuple, optional
+        ``(lo, hi, note)``: the range used when ``spec.range`` is None (a known sensor's
+        documented range, :func:`pipeline.ingest.sensors.default_range`), in the recorded
+        unit; ``note`` goes into the fault's detail.
 
     Returns
     -------
@@ -147,8 +160,11 @@ def find_faults(values: np.ndarray, column: Column, spec: ChannelSpec) -> list[F
     """
     faults = []
     bad = np.zeros(values.size, dtype=bool)
-    if spec.range is not None:
-        lo, hi = spec.range
+    limits, note = spec.range, ""
+    if limits is None and default is not None:
+        limits, note = default[:2], f" ({default[2]})"
+    if limits is not None:
+        lo, hi = limits
         for limit, upper in ((lo, False), (hi, True)):
             limit_si = limit * column.gain  # the conversion of the samples themselves
             margin = RANGE_ULPS * np.spacing(abs(limit_si))
@@ -157,7 +173,7 @@ def find_faults(values: np.ndarray, column: Column, spec: ChannelSpec) -> list[F
             else:
                 side = values <= limit_si + margin
             bad |= side
-            detail = f"the range limit {limit:g}{_unit(column)}"
+            detail = f"the range limit {limit:.6g}{_unit(column)}{note}"
             faults += [Fault("range", int(a), int(b), detail) for a, b in _runs(side)]
     k = stuck_length(values, column.role, spec.stuck)
     if k >= 2 and values.size >= k:
@@ -232,7 +248,18 @@ def fault_mask(
     channel_specs = {c.role: c for c in spec.channels}
     mask = np.zeros(t.size, dtype=bool)
     for j, column in enumerate(columns):
-        faults = find_faults(values[:, j], column, channel_specs[column.role])
+        cspec = channel_specs[column.role]
+        default = None
+        if cspec.range is None:
+            default = default_range(column.source, column.unit, column.gain)
+            if default is not None:
+                warnings.warn(
+                    f"file '{path}', channel '{column.source}': `{column.role}` range "
+                    f"{default[0]:.6g} to {default[1]:.6g}{_unit(column)}: {default[2]}",
+                    DebistWarning,
+                    stacklevel=2,
+                )
+        faults = find_faults(values[:, j], column, cspec, default)
         if not faults:
             continue
         if spec.faults == "error" or not split:
