@@ -133,16 +133,9 @@ class ReportConfig:
         return config_from_section(cls, section, where)
 
 
-_TEMPLATE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>debist report: {{ workflow }}</title>
-<style>
-body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 0 auto; padding: 0.8rem;
-       line-height: 1.4; color: #111; background: #fff; }
-h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc; }
+#: The tables' style of the report and the batch index: one place (wide tables scroll with an
+#: edge shadow, and a note says so on a phone-sized screen).
+_TABLE_CSS = """\
 .scroll { overflow-x: auto; background:
   linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
   linear-gradient(to left, #fff 30%, rgba(255,255,255,0)) right / 2rem 100% no-repeat local,
@@ -153,9 +146,23 @@ h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc;
 .scrollnote { display: none; font-size: 0.8rem; color: #555; }
 @media (max-width: 40rem) { .scrollnote { display: block; } }
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
-th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; }
+th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
 th:first-child, td.text { text-align: left; }
 td.bad { color: #a00; font-weight: bold; }
+"""
+
+
+_TEMPLATE = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>debist report: {{ workflow }}</title>
+<style>
+body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 0 auto; padding: 0.8rem;
+       line-height: 1.4; color: #111; background: #fff; }
+h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc; }
+/*TABLE_CSS*/
 img { width: 100%; height: auto; }
 figure { margin: 0.5rem 0; }
 nav a { margin-right: 0.6rem; white-space: nowrap; }
@@ -302,19 +309,7 @@ _INDEX = """<!DOCTYPE html>
 body { font-family: system-ui, sans-serif; max-width: 72rem; margin: 0 auto; padding: 0.8rem;
        line-height: 1.4; color: #111; background: #fff; }
 h1 { font-size: 1.5rem; }
-.scroll { overflow-x: auto; background:
-  linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
-  linear-gradient(to left, #fff 30%, rgba(255,255,255,0)) right / 2rem 100% no-repeat local,
-  radial-gradient(farthest-side at 0 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) left / .8rem 100%
-    no-repeat scroll,
-  radial-gradient(farthest-side at 100% 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) right / .8rem 100%
-    no-repeat scroll; }
-.scrollnote { display: none; font-size: 0.8rem; color: #555; }
-@media (max-width: 40rem) { .scrollnote { display: block; } }
-table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
-th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
-th:first-child, td.text { text-align: left; }
-td.bad { color: #a00; font-weight: bold; }
+/*TABLE_CSS*/
 </style>
 </head>
 <body>
@@ -339,6 +334,8 @@ report.</p>
 </html>
 """
 
+_TEMPLATE = _TEMPLATE.replace("/*TABLE_CSS*/\n", _TABLE_CSS)
+_INDEX = _INDEX.replace("/*TABLE_CSS*/\n", _TABLE_CSS)
 _ENV = jinja2.Environment(autoescape=True, trim_blocks=True, lstrip_blocks=True)
 
 

@@ -157,3 +157,24 @@ def write_rig_csv(folder, rec) -> None:
             "v_right": rec["v"][:, 1] * 1e-3,
         }
     ).to_csv(folder / "rig.csv", index=False)
+
+
+def invoke_cli(*args) -> tuple[int, str]:
+    """Run the ``debist`` CLI in-process: exit code and the output (stdout and stderr)."""
+    from typer.testing import CliRunner
+
+    from cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, result.output
+
+
+@pytest.fixture(scope="session")
+def synthetic_run(tmp_path_factory, bistable_record):
+    """One complete run of the synthetic workflow (``out/``), and its run digest; copy it."""
+    root = tmp_path_factory.mktemp("synthetic-run")
+    write_rig_csv(root, bistable_record)
+    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    code, out = invoke_cli("run", root / "wf.toml")
+    assert code == 0, out
+    return root, out.split("run digest: ")[1].split()[0]

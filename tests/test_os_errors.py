@@ -6,35 +6,20 @@ import shutil
 from pathlib import Path
 
 import pytest
-from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
-from typer.testing import CliRunner
+from conftest import invoke_cli
 
-from cli import app
 from pipeline import artifacts, outdir
 
-
-def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, result.output
+invoke = invoke_cli
 
 
 def error_lines(out):
     return [line for line in out.splitlines() if line.startswith("error:")]
 
 
-@pytest.fixture(scope="module")
-def template(tmp_path_factory, bistable_record):
-    root = tmp_path_factory.mktemp("oserr")
-    write_rig_csv(root, bistable_record)
-    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
-    code, out = invoke("run", root / "wf.toml")
-    assert code == 0, out
-    return root
-
-
 @pytest.fixture
-def project(template, tmp_path):
-    shutil.copytree(template, tmp_path / "p")
+def project(synthetic_run, tmp_path):
+    shutil.copytree(synthetic_run[0], tmp_path / "p")
     return tmp_path / "p"
 
 

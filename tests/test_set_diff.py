@@ -4,28 +4,21 @@ import json
 import shutil
 
 import pytest
-from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
-from typer.testing import CliRunner
+from conftest import invoke_cli
 
-from cli import app
 from pipeline import artifacts
 from pipeline.errors import WorkflowError
 from pipeline.workflow import load_workflow, parse_overrides
 
 
 def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, " ".join(result.output.split())
+    code, out = invoke_cli(*args)
+    return code, " ".join(out.split())
 
 
-@pytest.fixture(scope="module")
-def base(tmp_path_factory, bistable_record):
-    root = tmp_path_factory.mktemp("setdiff")
-    write_rig_csv(root, bistable_record)
-    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
-    code, out = invoke("run", root / "wf.toml")
-    assert code == 0, out
-    return root
+@pytest.fixture
+def base(synthetic_run):
+    return synthetic_run[0]
 
 
 def test_overrides_parse_as_toml_with_a_string_fallback_and_are_checked(tmp_path, base):

@@ -6,38 +6,21 @@ import shutil
 
 import pandas as pd
 import pytest
-from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
-from typer.testing import CliRunner
+from conftest import invoke_cli
 
-from cli import app
 from pipeline import artifacts
 
 STAGES = ["ingest", "differentiate", "identify", "validate", "compare"]
 
 
 def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, " ".join(result.output.split())
-
-
-def digest_of(text):
-    return text.split("run digest: ")[1].split()[0]
-
-
-@pytest.fixture(scope="module")
-def template(tmp_path_factory, bistable_record):
-    """One complete run of the synthetic workflow (M = 8), and its digest."""
-    root = tmp_path_factory.mktemp("verify")
-    write_rig_csv(root, bistable_record)
-    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
-    code, out = invoke("run", root / "wf.toml")
-    assert code == 0, out
-    return root, digest_of(out)
+    code, out = invoke_cli(*args)
+    return code, " ".join(out.split())
 
 
 @pytest.fixture
-def project(template, tmp_path):
-    root, digest = template
+def project(synthetic_run, tmp_path):
+    root, digest = synthetic_run
     shutil.copytree(root, tmp_path / "p")
     return tmp_path / "p", digest
 
