@@ -658,7 +658,10 @@ def verify(
     the quoted run; a mismatch names the first stage that departs from it.
     """
     with _guard():
-        problems = _runner(workflow, out, sets=sets).verify(digest)
+        runner = _runner(workflow, out, sets=sets)
+        problems = runner.verify(digest)
+        for note in runner.version_notes():  # a note, not a failure
+            err.print(f"[yellow]note:[/yellow] {escape(note)} (a rerun may give other bytes)")
         if problems:
             for p in problems:
                 err.print(f"[red]problem:[/red] {escape(p)}")

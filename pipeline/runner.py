@@ -690,6 +690,32 @@ class Runner:
                 problems.append(self._explain_digest(quoted, actual))
         return problems
 
+    def version_notes(self) -> list[str]:
+        """Libraries installed now in other versions than those that made the run's stages.
+
+        Not a failure (the artifacts verify by their hashes), but a rerun may give other
+        bytes, so ``verify`` says it.
+
+        Returns
+        -------
+        list of str
+            One line per stage and library, e.g. ``"identify: numpy 2.3.5 made it, 2.4.6
+            installed"``.
+        """
+        notes = []
+        for stage in self.stages():
+            try:
+                manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
+            except ArtifactError:
+                continue
+            if manifest is None:
+                continue
+            _, now = self._code(stage)
+            for lib, made in sorted(manifest.versions.items()):
+                if now.get(lib, made) != made:
+                    notes.append(f"{stage}: {lib} {made} made it, {now[lib]} installed now")
+        return notes
+
     def _explain_digest(self, quoted: str, actual: str | None) -> str:
         """Say where a run departs from a quoted digest, by rerunning its workflow elsewhere.
 

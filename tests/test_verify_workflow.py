@@ -120,3 +120,16 @@ def test_verify_works_on_a_run_whose_lock_file_cannot_be_opened(project, monkeyp
     code, out = invoke("verify", root / "wf.toml")
     assert code == 0, out
     assert json.loads((root / "out" / ".debist-output.json").read_text())["workflow_file"]
+
+
+def test_verify_notes_library_versions_that_differ_from_the_run(project):
+    root, _ = project
+    path = root / "out" / "identify" / artifacts.MANIFEST
+    m = artifacts.read_manifest(root / "out" / "identify")
+    m = dataclasses.replace(m, versions={**m.versions, "numpy": "0.0.1"})
+    m = dataclasses.replace(m, key=m.expected_key())
+    path.write_text(m.to_json())
+    resign(root / "out", "validate")  # the chain after identify follows its new manifest
+    code, out = invoke("verify", root / "wf.toml")
+    assert code == 0, out  # a note, not a failure
+    assert "note: identify: numpy 0.0.1 made it" in out and "installed now" in out
