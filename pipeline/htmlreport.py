@@ -31,7 +31,7 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
-from pipeline.report import auto_line, equilibrium_kind, switching_note
+from pipeline.report import auto_line, equilibrium_kind, switching_note, verdict
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -196,7 +196,7 @@ pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
 the mean of q (a model is only useful below it).</p>
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>model</th><th>data set</th>{% for h in nrmse_heads %}<th>NRMSE {{ h }}</th>{% endfor %}
-<th>NRMSE q, mean baseline</th><th>status / note</th></tr>
+<th>NRMSE q, mean baseline</th><th>verdict</th></tr>
 {% for r in nrmse %}
 <tr><td class="text">{{ r.model }}</td><td class="text">{{ r.dataset }}</td>
 {% for c in r.cells %}<td{% if c.bad %} class="bad"{% endif %}>{{ c.text }}</td>{% endfor %}
@@ -362,13 +362,13 @@ def _nrmse_rows(rows: list[dict[str, Any]]) -> tuple[list[str], list[dict[str, A
     out = []
     for r in rows:
         status = r.get("status") or "ok"
-        verdict = status if status != "ok" else "diverged"
+        failure = status if status != "ok" else "diverged"
         failed = status != "ok" or bool(r.get("diverged"))
         cells = []
         for key, _ in keys:
             value = r.get(key)
             if failed or _missing(value):
-                text = verdict if failed or value is not None else "-"
+                text = failure if failed or value is not None else "-"
                 cells.append({"text": text, "bad": text != "-"})
             else:
                 cells.append({"text": f"{100 * value:.2f} %", "bad": False})
@@ -379,10 +379,8 @@ def _nrmse_rows(rows: list[dict[str, Any]]) -> tuple[list[str], list[dict[str, A
             note = f"{status}: {reason}" if reason else status
         elif failed:
             note = "diverged: left twice the estimation range"
-        elif not _missing(base) and not _missing(r.get("nrmse_q")) and r["nrmse_q"] >= base:
-            note = "not better than the mean: q is not predicted"
         else:
-            note = ""
+            note = verdict(r, rows)
         out.append(
             {
                 "model": r.get("model", ""),
@@ -640,7 +638,8 @@ def index_row(
         elif r.get("diverged") or _missing(value):
             scores[r["dataset"]] = "diverged"
         else:
-            scores[r["dataset"]] = f"{100 * value:.2f} %"
+            word = verdict(r, list(nrmse))
+            scores[r["dataset"]] = f"{100 * value:.2f} %" + ("" if word == "ok" else f" ({word})")
     return {
         "name": name,
         "file": file,

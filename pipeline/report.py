@@ -228,28 +228,81 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     cols += [f"NRMSE({k.removeprefix('nrmse_')})" for k in keys] + ["RMS(q)"]
     for col in cols + (["params"] if params else []):
         table.add_column(col, justify="left" if col in ("data set", "role", "model") else "right")
-    table.add_column("note")
+    table.add_column("verdict")
     for r in rows:
         status = r.get("status") or "diverged"
         failed = status if status != "ok" else "diverged"
         pct = [(failed if math.isnan(r[k]) else f"{100 * r[k]:.2f} %") for k in keys]
         extra = [str(r["n_params"])] if params else []
         rms_cell = failed if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
-        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, _note(r))
+        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, verdict(r, rows))
     return table
 
 
-def _note(row: dict[str, Any]) -> str:
-    """Word the warning of an NRMSE row: unstable, diverged, or not better than the mean."""
+#: A free run whose NRMSE(q) exceeds this share of the mean's is called poor (a lost switch
+#: of a bistable beam leaves about half of the mean's error).
+POOR_SHARE = 0.5
+
+
+def _num_or_nan(value: Any) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return out
+
+
+def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> str:
+    """Word the verdict of an NRMSE row (Eq. 41), never empty.
+
+    Parameters
+    ----------
+    row : dict
+        A row of ``nrmse.parquet`` (``nrmse_q``, ``nrmse_q_baseline``, ``status``,
+        ``reason``, ``diverged``, ``model``, ``dataset``).
+    rows : list of dict, optional
+        The whole table: a row is also called worse than another model whose free run of
+        the same data set has a lower NRMSE(q).
+
+    Returns
+    -------
+    str
+        ``"unstable: ..."``, ``"diverged: ..."``, ``"not better than the mean ..."``,
+        ``"poor: ..."`` (above :data:`POOR_SHARE` of the mean's NRMSE), ``"worse than
+        <model> (x %)"``, or ``"ok"``; the last two may combine.
+
+    Examples
+    --------
+    >>> verdict({"nrmse_q": 0.201, "nrmse_q_baseline": 0.230, "status": "ok"})
+    'poor: 87 % of the mean baseline error (a lost switch?)'
+    >>> rows = [{"model": "rbf", "dataset": "a", "nrmse_q": 0.02, "nrmse_q_baseline": 0.3},
+    ...         {"model": "narx", "dataset": "a", "nrmse_q": 0.01, "nrmse_q_baseline": 0.3}]
+    >>> verdict(rows[0], rows), verdict(rows[1], rows)
+    ('worse than narx (1.00 %)', 'ok')
+    """
     if row.get("status") == "unstable":
         return f"unstable: {row.get('reason', '')}"
-    base = row.get("nrmse_q_baseline")
-    value = row.get("nrmse_q")
-    if base is None or value is None or math.isnan(value):
-        return "diverged: left twice the estimation range" if row.get("diverged") else ""
-    if value >= base:
+    base = _num_or_nan(row.get("nrmse_q_baseline"))
+    value = _num_or_nan(row.get("nrmse_q"))
+    if math.isnan(value):
+        return "diverged: left twice the estimation range" if row.get("diverged") else "not scored"
+    if not math.isnan(base) and value >= base:
         return f"not better than the mean (NRMSE {100 * base:.1f} %): q is not predicted"
-    return ""
+    words = []
+    if not math.isnan(base) and value > POOR_SHARE * base:
+        words.append(
+            f"poor: {100 * value / base:.0f} % of the mean baseline error (a lost switch?)"
+        )
+    better = [
+        (_num_or_nan(r.get("nrmse_q")), r.get("model"))
+        for r in rows or []
+        if r.get("dataset") == row.get("dataset") and r.get("model") != row.get("model")
+    ]
+    better = [(v, m) for v, m in better if v < value]
+    if better:
+        v, m = min(better)
+        words.append(f"worse than {m} ({100 * v:.2f} %)")
+    return "; ".join(words) or "ok"
 
 
 def published_table(
