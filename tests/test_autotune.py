@@ -245,7 +245,7 @@ def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypa
     around the best so far, evaluates 5 + 2 + 2 = 9 distinct settings."""
     import pipeline.identify.autotune as autotune
 
-    def fake(records, cfg, fold_list, substeps):
+    def fake(records, cfg, fold_list, substeps, window):
         score = abs(cfg.M - 8) + abs(cfg.sigma_n - 1.0) + (cfg.smoothing or 0.0)
         return {"scores": np.full(len(fold_list), 0.01 + score), "lambda": 0.0,
                 "status": "ok", "message": ""}  # fmt: skip
@@ -263,7 +263,7 @@ def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypa
 def test_the_auto_table_is_checked_when_the_workflow_is_read():
     """[identify.auto] errors name the table, the key and the value, on one line."""
     ok = IdentifyConfig.from_dict({"auto": {"M": [6, 8], "sigma_n": 1.0, "folds": 3}})
-    assert auto_settings(ok) == ({"M": [6, 8], "sigma_n": [1.0]}, 3)
+    assert auto_settings(ok) == ({"M": [6, 8], "sigma_n": [1.0]}, {"folds": 3, "window": 300})
     for table, message in (
         ({"Q": [1]}, r"\[identify.auto\]: unknown key 'Q'"),
         ({"M": [8, 1]}, r"\[identify.auto\]: the setting \{'M': 1\}.*greater than or equal to 2"),

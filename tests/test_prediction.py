@@ -222,3 +222,51 @@ def test_restarts_carry_the_friction_state_of_the_record_not_z_equal_q_dot():
 
     q_rest = k_step_prediction(AtRest(), run.q, run.q_dot, v, dt, 25, substeps=4)
     assert np.nanmax(np.abs(q_rest - run.q)) / np.ptp(run.q) > 10 * err
+
+
+def test_restarted_windows_of_a_free_run_repeat_it_sample_for_sample(bistable_record):
+    """Windows restarted from a free run's own states, with the inputs interpolated over the
+    whole record, are that free run's stretches (the same arithmetic)."""
+    from pipeline.prediction import restarted_runs
+    from pipeline.validate import DataSet
+
+    rec, n = bistable_record, 3000
+    (run,) = simulate(
+        Truth(), [rec["v"][:n]], rec["dt"], rec["q"][:1], rec["q_dot"][:1], substeps=2,
+        engine="numpy",
+    )  # fmt: skip
+    own = DataSet("own", "validation", rec["t"][:n], run.q, run.q_dot, run.q_ddot,
+                  rec["v"][:n], "m")  # fmt: skip
+    windows = [(0, 0, 300), (0, 450, 1200), (0, 2990, 3000), (0, 1500, 1502)]
+    outs = restarted_runs(Truth(), [own], windows, rec["dt"], substeps=2, engine="numpy")
+    assert [o.size for o in outs] == [300, 750, 10, 2]
+    for (_, a, b), out in zip(windows, outs, strict=True):
+        np.testing.assert_allclose(out, run.q[a:b], rtol=0, atol=1e-15)
+    with pytest.raises(WorkflowError, match=r"window \(0, 2999, 3001\) is not inside"):
+        restarted_runs(Truth(), [own], [(0, 2999, 3001)], rec["dt"])
+
+
+def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bistable_record):
+    """The multiple-shooting score of [identify.auto]: a model whose input gain is too weak to
+    switch misses the record after its first lost switch in one free run, but only the
+    windows that hold a switch when every window restarts from the measured state."""
+    from pipeline.prediction import restarted_runs
+    from pipeline.validate import DataSet, nrmse
+
+    class Weak(Truth):
+        def rhs(self, x, v):
+            return super().rhs(x, 0.6 * v)
+
+    rec = bistable_record
+    ds = DataSet("rec", "validation", rec["t"], rec["q"], rec["q_dot"], rec["q_ddot"],
+                 rec["v"], "m")  # fmt: skip
+    n, dt = rec["q"].size, rec["dt"]
+    (free,) = simulate(Weak(), [rec["v"]], dt, rec["q"][:1], rec["q_dot"][:1], engine="numpy")
+    wells = np.sign(rec["q"])
+    assert np.mean(np.sign(free.q) != wells) > 0.2  # the weak model loses the switches
+    windows = [(0, s, min(s + 500, n)) for s in range(0, n - 1, 500)]
+    runs = restarted_runs(Weak(), [ds], windows, dt, engine="numpy")
+    windowed = nrmse(rec["q"][: sum(r.size for r in runs)], np.concatenate(runs))
+    assert windowed < 0.5 * nrmse(rec["q"], free.q)
+    lost = [np.any(np.sign(r) != wells[a:b]) for r, (_, a, b) in zip(runs, windows, strict=True)]
+    assert 0 < sum(lost) < 0.5 * len(windows)  # only windows that hold a switch lose it

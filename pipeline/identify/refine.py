@@ -39,6 +39,7 @@ from pipeline.identify.fit import FitDiagnostics, Record, assemble_model
 from pipeline.identify.model import RBFModel
 from pipeline.identify.terms import term_sign, term_table
 from pipeline.kernel import free_run_sensitivity
+from pipeline.prediction import restarted_runs
 from pipeline.simulate import check_free_run, prepare_inputs, simulate
 from pipeline.termtable import TableModel
 
@@ -223,21 +224,18 @@ def _window_rms(model: RBFModel, records, picks, rcfg: RefineConfig, q_limit: fl
     """RMS free-run error over windows restarted from the model's states along the records."""
     if not picks:
         return float("nan")
-    L, dt = rcfg.length, records[0].dt
-    states = [model.measured_states(r.q, r.q_dot, dt) for r in records]
-    runs = simulate(
+    L = rcfg.length
+    runs = restarted_runs(
         model,
-        [records[i].v[s : s + L] for i, s in picks],
-        dt,
-        np.array([records[i].q[s] for i, s in picks]),
-        np.array([records[i].q_dot[s] for i, s in picks]),
+        records,
+        [(i, s, s + L) for i, s in picks],
+        records[0].dt,
         substeps=rcfg.substeps,
         interpolation=rcfg.interpolation,
         q_limit=q_limit,
-        x0=np.stack([states[i][s] for i, s in picks]),
     )
     err = np.concatenate(
-        [run.q - records[i].q[s : s + L] for run, (i, s) in zip(runs, picks, strict=True)]
+        [run - records[i].q[s : s + L] for run, (i, s) in zip(runs, picks, strict=True)]
     )
     return float(np.sqrt(np.mean(err**2))) if np.all(np.isfinite(err)) else float("nan")
 

@@ -103,8 +103,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         cfg = replace(cfg, prior=physics_prior(physics, records))
     search = None
     if cfg.auto is not None:  # [identify.auto]: the grid's choice replaces the given values
-        grid, folds = auto_settings(cfg)
-        search = select_hyperparameters(records, replace(cfg, auto=None), grid, folds=folds)
+        grid, options = auto_settings(cfg)
+        search = select_hyperparameters(records, replace(cfg, auto=None), grid, **options)
         cfg = replace(cfg, auto=None, **search.chosen)
     excitation = _excitation(records, cfg, tables)
     t_fit = time.perf_counter()
