@@ -31,7 +31,7 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
-from pipeline.report import auto_line, equilibrium_kind, switching_note, verdict
+from pipeline.report import auto_line, equilibrium_kind, switching_note, switching_word, verdict
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -238,9 +238,13 @@ leaves its errors correlated with it).</p>
 <h2 id="s6">{{ sections[5] }}</h2>
 {% if design %}
 <p>Identified model: {{ design.verdict }}{% if design.reason %} ({{ design.reason }}){% endif %}</p>
+<p>Equilibria and switching levels ({{ design.title }}); at each well the total damping d(q*),
+the tangent stiffness k* = dF/dq and the small-signal natural frequency
+f_n = sqrt(k*/m_q)/(2 pi).</p>
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>model</th><th>inputs [{{ design.inputs }}]</th><th>q* [{{ design.q_unit }}]</th>
-<th>kind</th><th>f_n [Hz]</th><th>zeta</th><th>barrier [{{ design.barrier }}]</th></tr>
+<th>kind</th><th>d(q*) [{{ design.damping }}]</th><th>k* [{{ design.stiffness }}]</th>
+<th>f_n [Hz]</th><th>zeta</th><th>barrier [{{ design.barrier }}]</th></tr>
 {% for r in design.rows %}
 <tr>{% for c in r %}<td{% if loop.index in (1, 4) %} class="text"{% endif %}>{{ c }}</td>
 {% endfor %}</tr>
@@ -463,16 +467,22 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
             continue
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         well = bool(r.get("static_stable"))
-        small = [_num(r.get(k)) if well else "" for k in ("f_n", "zeta", "barrier")]
+        small = [_num(r.get(k)) if well else "" for k in ("d", "k", "f_n", "zeta", "barrier")]
         q = r.get("q")
         q = scale * q if isinstance(q, int | float) else q
         rows.append([r.get("model", ""), volts, _num(q), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
-        text = f"{_num(r['v_switch'])} V" if r.get("v_switch") is not None else r.get("reason")
+        unit = dict(enumerate(units["inputs"], 1)).get(r.get("input"), "V")
+        value = r.get("v_switch")
+        text = f"{_num(value)} {unit}" if value is not None else r.get("reason")
         text += switching_note(r)
-        label = f"switching, input {r.get('input')}"
-        rows.append([r.get("model", ""), label, "", text, "", "", ""])
+        label = f"{switching_word(units, r.get('input', 0))}, input {r.get('input')}"
+        rows.append([r.get("model", ""), label, "", text, *[""] * 5])
+    analytical = any(r.get("model") == "analytical" for r in design.get("equilibria", []))
     return {
+        "title": "identified beside analytical" if analytical else "identified",
+        "damping": units["damping"],
+        "stiffness": units["stiffness"],
         "verdict": design.get("verdict", ""),
         "reason": design.get("reason", ""),
         "rows": rows,

@@ -124,7 +124,8 @@ def curves_figure(
     -------
     matplotlib.figure.Figure
         Three axes: restoring force ``c(q) q + F_0``, damping ``d(q)`` and
-        ``dC_i/dq = 2 g_i(q)``.
+        ``dC_i/dq = 2 g_i(q)`` for DE voltage inputs with ``h = v^2``
+        (:func:`pipeline.report.de_inputs`), else ``g_i(q)`` in its own unit.
 
     References
     ----------
@@ -139,13 +140,19 @@ def curves_figure(
     if analytical is not None:
         analytical = analytical.assign(q=q_scale * analytical["q"].to_numpy())
     inputs = sorted(c for c in curves.columns if c[:1] == "g" and c[1:].isdigit())
+    # 2 g_i is a capacitance gradient only for DE voltages with h = v^2 (Eq. 33); any other
+    # input (an acceleration, a force) shows its gain g_i in its own unit
+    from pipeline.report import de_inputs
+
+    de = units is None or de_inputs(units)
+    gain = 2.0 if de else 1.0
     panels = [
         (axes[0], [("restoring", 1.0, "tab:blue")], "restoring force c(q) q + F_0"),
         (axes[1], [("d", 1.0, "tab:green")], "damping d(q)"),
         (
             axes[2],
-            [(g, 2.0, color) for g, color in zip(inputs, ("tab:red", "tab:purple"), strict=False)],
-            "dC_i/dq = 2 g_i(q)",
+            [(g, gain, c) for g, c in zip(inputs, ("tab:red", "tab:purple"), strict=False)],
+            "dC_i/dq = 2 g_i(q)" if de else "input gain g_i(q) of h(u_i)",
         ),
     ]
     labels = ["", "", ""]

@@ -14,14 +14,16 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
-#: How identified quantities are labelled in reports (summary key -> label).
+#: How identified quantities are labelled in reports (summary key -> label). The backbone's
+#: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the
+#: physical damping, stiffness and frequency at each well are in the equilibria table.
 PARAMETER_LABELS = {
     "m_q": "mass m_q",
-    "d_v": "viscous friction d_v",
+    "d_v": "backbone coefficient d_v (a basis term; the damping d(q*) is in the equilibria)",
     "F_c": "Coulomb friction F_c",
     "F_0": "offset force F_0",
-    "k_1": "linear spring k_1",
-    "k_3": "cubic spring k_3",
+    "k_1": "backbone coefficient k_1 (a basis term; the stiffness k* is in the equilibria)",
+    "k_3": "backbone coefficient k_3 (a basis term)",
     "s_c": "scale of the analytical c(q) q, s_c",
     "s_d": "scale of the analytical d(q), s_d",
 }
@@ -83,9 +85,11 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
     -------
     dict
         ``q``, ``force``, ``mass`` (``"kg"`` or ``"1"``), ``barrier`` (F q), ``inputs``
-        (one unit per input), ``g_0`` and ``s_g`` (one unit per input) and one unit per
-        scalar backbone parameter (``k_1``, ``k_3``, ``d_v``, ``F_c``, ``F_0``, ``s_c``,
-        ``s_d``).
+        (one unit per input), ``quantities`` (the quantity each input's unit measures:
+        ``"voltage"``, ``"acceleration"``, ``"force"``, ...; ``"input"`` when unknown),
+        ``input_map`` (``"v2"`` or ``"v"``), ``g_0`` and ``s_g`` (one unit per input),
+        ``stiffness`` (F/q) and ``damping`` (F s/q) and one unit per scalar backbone
+        parameter (``k_1``, ``k_3``, ``d_v``, ``F_c``, ``F_0``, ``s_c``, ``s_d``).
 
     References
     ----------
@@ -112,10 +116,66 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         mass="1" if per_mass else "kg",
         barrier=_energy(unit("F*q")),
         inputs=[pretty_unit(v) for v in inputs],
+        quantities=[_quantity(v) for v in inputs],
+        input_map=given.get("input_map", "v2"),
+        stiffness=unit("F/q"),
+        damping=unit("F*s/q"),
         g_0=[unit("F/h", v) for v in inputs],
         s_g=["1"] * n_inputs,
     )
     return out
+
+
+def _quantity(unit: str) -> str:
+    """Return the quantity an input's unit measures (``"voltage"``, ``"acceleration"``)."""
+    from pipeline.ingest.units import lookup_unit
+
+    found = lookup_unit(unit)
+    return found.quantity if found is not None and found.quantity[:1] != "[" else "input"
+
+
+def de_inputs(units: dict[str, Any]) -> bool:
+    """Whether the inputs are DE voltages with ``h = v^2``, so ``g_i = 1/2 dC_i/dq``.
+
+    Parameters
+    ----------
+    units : dict
+        :func:`summary_units` of the identify summary.
+
+    Returns
+    -------
+    bool
+        True when every input is a voltage and the input map is ``v^2`` (Eq. 33, 37): only
+        then is ``2 g_i`` a capacitance gradient ``dC_i/dq`` [F/m] and a switching level a
+        voltage.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 18, 33, 37.
+    """
+    kinds = units.get("quantities") or []
+    return units.get("input_map", "v2") == "v2" and bool(kinds) and set(kinds) == {"voltage"}
+
+
+def switching_word(units: dict[str, Any], i: int) -> str:
+    """Name the switching level of input ``i`` by its input's quantity.
+
+    Parameters
+    ----------
+    units : dict
+        :func:`summary_units` of the identify summary.
+    i : int
+        The input, 1-based.
+
+    Returns
+    -------
+    str
+        ``"switching voltage"``, ``"switching acceleration"``, ``"switching force"`` ...,
+        or ``"switching level"`` when the quantity is unknown.
+    """
+    kinds = units.get("quantities") or []
+    kind = kinds[i - 1] if 0 < i <= len(kinds) else "input"
+    return f"switching {kind if kind != 'input' else 'level'}"
 
 
 def _energy(unit: str) -> str:
@@ -167,7 +227,11 @@ def identify_table(summary: dict[str, Any]) -> Table:
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))
         elif key in ("g_0", "s_g") and any(value):
-            label = "input gain" if key == "g_0" else "scale of the analytical g_i,"
+            label = (
+                "backbone coefficient (a basis term; g_i(q) in Fig. 14)"
+                if key == "g_0"
+                else "scale of the analytical g_i,"
+            )
             rows += [
                 (f"{label} {key},{i + 1}", units[key][i], v, f"{key}_{i + 1}")
                 for i, v in enumerate(value)
@@ -512,15 +576,22 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         return None
     units = summary_units(summary)
     inputs = sorted(set(units["inputs"])) or ["V"]
+    analytical = any(r.get("model") == "analytical" for r in design["equilibria"])
+    title = "Equilibria and switching (identified" + (" beside analytical)" if analytical else ")")
     table = Table(
-        title="Equilibria and switching (identified beside analytical)",
-        caption=escape(f"identified model: {design['verdict']} ({design['reason']})"),
+        title=title,
+        caption=escape(
+            f"identified model: {design['verdict']} ({design['reason']}); at each well the "
+            "total damping d(q*), the tangent stiffness k* = dF/dq and f_n = sqrt(k*/m_q)/(2 pi)"
+        ),
     )
     cols = (
         "model",
         f"inputs [{', '.join(inputs)}]",
         f"q* [{units['q']}]",
         "kind",
+        f"d(q*) [{units['damping']}]",
+        f"k* [{units['stiffness']}]",
         "f_n [Hz]",
         "zeta [1]",
         f"barrier [{units['barrier']}]",
@@ -532,13 +603,14 @@ def design_table(summary: dict[str, Any]) -> Table | None:
             continue  # at held levels only the wells
         volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         well = bool(r["static_stable"])
-        small = [_fmt(r[k]) if well else "" for k in ("f_n", "zeta", "barrier")]
+        small = [_fmt(r.get(k)) if well else "" for k in ("d", "k", "f_n", "zeta", "barrier")]
         table.add_row(r["model"], volts, _fmt(r["q"]), equilibrium_kind(r), *small)
     for r in design["switching"]:
         unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
         text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]
         text = escape(text + switching_note(r))
-        table.add_row(r["model"], f"switching, input {r['input']}", "", text, "", "", "")
+        label = f"{switching_word(units, r['input'])}, input {r['input']}"
+        table.add_row(r["model"], label, "", text, *[""] * 5)
     return table
 
 

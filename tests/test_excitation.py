@@ -182,9 +182,7 @@ def test_counts_match_independent_count():
         v = rng.uniform(-100, 100, (n, 2)) * (rng.random((n, 2)) < 0.4)
         recs.append(Record(f"r{k}", q, qd, np.zeros(n), v, 0.01))
     basis = RBFBasis.equidistant(-1.0, 1.0, M=5, sigma_n=0.6)
-    rep = check_excitation(
-        recs, basis, "v", min_samples=8, active_fraction=0.3, moving_fraction=0.5
-    )
+    rep = check_excitation(recs, basis, "v", min_samples=8, off_fraction=0.3, moving_fraction=0.5)
     q = np.concatenate([r.q for r in recs])
     qd = np.concatenate([r.q_dot for r in recs])
     h = np.vstack([r.v for r in recs])  # h(v) = v
@@ -229,7 +227,8 @@ def test_merged_intervals_and_zero_input():
 @pytest.mark.parametrize(
     ("kw", "match"),
     [
-        ({"active_fraction": 1.5}, "active_fraction"),
+        ({"off_fraction": 1.5}, "off_fraction"),
+        ({"noise_factor": 0.0}, "noise_factor"),
         ({"power_fraction": 1.0}, "power_fraction"),
         ({"min_samples": 0}, "min_samples"),
         ({"bin_width": -1.0}, "bin_width"),

@@ -188,7 +188,8 @@ def test_sections_numbers_and_verdicts(run):
     assert model["g1 identified on q in [m]"] == "nowhere"
     assert any(r[:4] == ["rbf", "0, 0", "-9.516", "well"] for r in parser.rows)  # q* [mm]
     assert "<th>q* [mm]</th>" in html
-    assert any(r[3] == "1976 V" for r in parser.rows if len(r) == 7)
+    assert any(r[3] == "1976 V" for r in parser.rows if len(r) == 9)  # d(q*), k* added
+    assert any(r[1] == "switching voltage, input 1" for r in parser.rows if len(r) == 9)
     assert "the well persists up to v_max = 3018.48 V" in html
     assert "g1: input 1 is never active" in html
     # provenance

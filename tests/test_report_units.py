@@ -46,9 +46,9 @@ def test_identified_model_in_newtons_when_m_q_is_a_mass(data):
     text = _render(identify_table(summary))
     for row in (
         "mass m_q [kg]",
-        "linear spring k_1 [N/m]",
-        "cubic spring k_3 [N/m^3]",
-        "viscous friction d_v [N s/m]",
+        "backbone coefficient k_1 (a basis term; the stiffness k* is in the equilibria) [N/m]",
+        "backbone coefficient k_3 (a basis term) [N/m^3]",
+        "backbone coefficient d_v (a basis term; the damping d(q*) is in the equilibria) [N s/m]",
         "offset force F_0 [N]",
         "T_z [s]",
     ):
@@ -56,6 +56,7 @@ def test_identified_model_in_newtons_when_m_q_is_a_mass(data):
     assert "per unit mass" not in text
     design = _render(design_table(summary))
     assert "q* [m]" in design and "inputs [V]" in design and "barrier [J]" in design
+    assert "d(q*) [N s/m]" in design and "k* [N/m]" in design
 
 
 def test_identified_model_per_unit_mass_in_accelerations(data):
@@ -65,9 +66,9 @@ def test_identified_model_per_unit_mass_in_accelerations(data):
     text = _render(identify_table(summary))
     for row in (
         "mass m_q [1]",
-        "linear spring k_1 [1/s^2]",
-        "cubic spring k_3 [1/m^2/s^2]",
-        "viscous friction d_v [1/s]",
+        "k_1 (a basis term; the stiffness k* is in the equilibria) [1/s^2]",
+        "k_3 (a basis term) [1/m^2/s^2]",
+        "d_v (a basis term; the damping d(q*) is in the equilibria) [1/s]",
         "offset force F_0 [m/s^2]",
         "forces in m/s^2",
     ):
@@ -105,7 +106,7 @@ def test_input_gain_rows_in_force_per_mapped_input():
         "backbone": {"k_1": 1.0, "g_0": [35.15]},
         "units": {"q": "m", "v1": "V", "input_map": "v", "per_unit_mass": False},
     }
-    assert "input gain g_0,1 [N/V]" in _render(identify_table(summary))
+    assert "(a basis term; g_i(q) in Fig. 14) g_0,1 [N/V]" in _render(identify_table(summary))
 
 
 def test_validation_plot_shows_q_in_the_report_unit(data):

@@ -29,10 +29,13 @@ error falls to 0.6 % (tests/test_identified_truth.py).
 
 A curve is *identified* at ``q`` where (1) the data support it: the Gaussian-weighted number
 of estimation samples near ``q`` (the kernel of Eq. 38, width sigma) is at least
-``min_support``, counting for ``g_i`` only samples where input ``i`` is active (``h(v_i)``
-above 10 % of its largest value) and for ``d`` only samples in motion (``|q_dot|`` above
-10 % of its RMS); and (2) the band is narrow: its width is at most ``band_tolerance`` times
-the range of the curve over the supported points.
+``min_support``, counting for ``g_i`` only quasi-static samples where input ``i`` excites
+the beam, sub-threshold levels included (:func:`pipeline.identify.excitation.input_active`:
+``v_i`` clearly off its own off level, not just above a share of its largest value that only
+the switching pulses reach) and for ``d`` only samples in motion (``|q_dot|`` above 10 % of
+its RMS); and (2) the band is narrow: its width is at most ``band_tolerance`` times
+the scale of the curve over the supported points (the larger of its range and its largest
+magnitude there).
 
 References
 ----------
@@ -62,8 +65,6 @@ MEASURED_COVERAGE = {"restoring": "21-31 %", "d": "10-11 %", "static F": "18 %"}
 #: How a band is labelled wherever it is shown: what it is, and what it was measured to hold.
 BAND_LABEL = "bootstrap band (nominal 95 %; holds the truth at only 10-31 % on the virtual rig)"
 
-#: Input activity threshold: h(v_i) above this fraction of its maximum counts as "applied".
-ACTIVE_FRACTION = 0.1
 #: Motion threshold for d: |q_dot| above this fraction of its RMS.
 MOVING_FRACTION = 0.1
 #: Names of the terms that are linear in the friction state z (the damping curve d).
@@ -272,7 +273,11 @@ def block_bootstrap(
 
 
 def support_weights(
-    grid: np.ndarray, q: np.ndarray, sigma: float, mask: np.ndarray | None = None
+    grid: np.ndarray,
+    q: np.ndarray,
+    sigma: float,
+    mask: np.ndarray | None = None,
+    reach: float = np.inf,
 ) -> np.ndarray:
     """Gaussian-weighted number of samples near each grid point (Eq. 38 kernel).
 
@@ -286,12 +291,18 @@ def support_weights(
         Kernel width [unit of q].
     mask : ndarray of bool, shape (n,), optional
         Samples that count.
+    reach : float, optional
+        Samples farther than this from a grid point do not count there [unit of q]; default
+        all count. With ``reach = sigma`` a point is supported only by samples within the
+        reach of one RBF (:meth:`RBFBasis.support`): thousands of samples in a well then
+        cannot lend their Gaussian tails to an interval the data never visited.
 
     Returns
     -------
     ndarray, shape (m,)
-        ``sum_s exp(-(grid - q_s)^2 / (2 sigma^2))`` over the counted samples, with the
-        samples binned at about sigma / 8 (memory independent of the record length).
+        ``sum_s exp(-(grid - q_s)^2 / (2 sigma^2))`` over the counted samples within
+        ``reach``, with the samples binned at about sigma / 8 (memory independent of the
+        record length; a bin counts when its centre is within ``reach``).
     """
     qs = np.asarray(q, dtype=float)
     if mask is not None:
@@ -300,7 +311,8 @@ def support_weights(
     mids = 0.5 * (edges[:-1] + edges[1:])
     if qs.size == 0:
         return np.zeros(np.size(grid))
-    return np.exp(-((grid[:, None] - mids[None, :]) ** 2) / (2 * sigma**2)) @ counts
+    dist = np.abs(np.asarray(grid, dtype=float)[:, None] - mids[None, :])
+    return np.where(dist <= reach, np.exp(-(dist**2) / (2 * sigma**2)), 0.0) @ counts
 
 
 def curve_bands(
@@ -330,7 +342,10 @@ def curve_bands(
     min_support : float
         Smallest supported weight.
     band_tolerance : float
-        Largest band width relative to the curve's range over the supported points.
+        Largest band width relative to the curve's scale over the supported points: the
+        larger of its range and its largest magnitude there (a gain ``g_i`` of one sign
+        that hardly varies has a small range but is identified when its band is narrow
+        against its magnitude).
     systematic : dict of str to float, optional
         Per curve a bound of its systematic error (unit of the curve), added to each side
         of the bootstrap band in quadrature (:func:`friction_bound`); default none.
@@ -357,8 +372,10 @@ def curve_bands(
             bound = float(systematic.get(name, 0.0))
             lo = value - _widen(-np.percentile(dev, 2.5, axis=0), bound)
             hi = value + _widen(np.percentile(dev, 97.5, axis=0), bound)
+            # the curve's scale: its range or, for a one-signed flat curve such as a gain
+            # g_i (range near 0, magnitude not), its largest magnitude where supported
             span = np.ptp(value[ok]) if ok.any() else 0.0
-            span = span if span > 0 else float(np.max(np.abs(value[ok]), initial=0.0))
+            span = max(span, float(np.max(np.abs(value[ok]), initial=0.0)))
             ident = ok & (hi - lo <= band_tolerance * span) & (span > 0)
         cols[f"{name}_lo"], cols[f"{name}_hi"], cols[f"{name}_identified"] = lo, hi, ident
     return pd.DataFrame(cols)
@@ -439,8 +456,7 @@ def curves_frame(model, diag, records, *, min_support: float, band_tolerance: fl
     ----------
     Masoud & Maas 2025, Eq. 37-40 (curves), Fig. 14.
     """
-    from pipeline.identify.excitation import quasi_static
-    from pipeline.identify.terms import input_map
+    from pipeline.identify.excitation import input_active, quasi_static
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)
@@ -462,20 +478,25 @@ def curves_frame(model, diag, records, *, min_support: float, band_tolerance: fl
     )
     q = np.concatenate([r.q for r in records])
     q_dot = np.concatenate([r.q_dot for r in records])
-    hv = input_map(np.vstack([r.v for r in records]), model.input_map)
+    active = input_active(np.vstack([r.v for r in records]))
     rms = float(np.sqrt(np.mean(q_dot**2)))
     sigma = model.basis.sigma
-    support = {
-        "restoring": support_weights(grid, q, sigma),
-        "d": support_weights(grid, q, sigma, np.abs(q_dot) > MOVING_FRACTION * rms),
-    }
-    # g_i counts the samples where v_i was applied while the beam was quasi-static: along a
-    # switching transit q_dot is a function of q, so c(q) q, d(q) z and g_i(q) h(v_i) enter
-    # Eq. 40 as one function of q there and the transit alone does not separate g_i.
+    # Each curve counts the samples that inform it, within one RBF width (a point's value
+    # is a blend of the centres within about sigma): the restoring force where the beam
+    # rests or moves slowly (below; a transit alone does not separate it from d(q) z), d
+    # where it moves.
     slow = np.concatenate([quasi_static(r.q_dot) for r in records])
+    support = {
+        "restoring": support_weights(grid, q, sigma, slow, reach=sigma),
+        "d": support_weights(grid, q, sigma, np.abs(q_dot) > MOVING_FRACTION * rms, sigma),
+    }
+    # g_i counts the samples where v_i excites the beam (sub-threshold levels included: they
+    # inform g_i wherever g_i h(v_i) stands above the regression's noise) while the beam is
+    # quasi-static: along a switching transit q_dot is a function of q, so c(q) q, d(q) z and
+    # g_i(q) h(v_i) enter Eq. 40 as one function of q there and the transit alone does not
+    # separate g_i.
     for j in range(model.n_inputs):
-        active = np.abs(hv[:, j]) > ACTIVE_FRACTION * np.max(np.abs(hv[:, j]))
-        support[f"g{j + 1}"] = support_weights(grid, q, sigma, active & slow)
+        support[f"g{j + 1}"] = support_weights(grid, q, sigma, active[:, j] & slow, sigma)
     bands = curve_bands(
         point, maps, diag.theta, diag.theta_boot, support, min_support, band_tolerance,
         {"restoring": friction_bound(model)},

@@ -48,12 +48,25 @@ from pipeline.identify.terms import RBF_TERMS, input_map
 if TYPE_CHECKING:  # the fit module may import this one
     from pipeline.identify.fit import Record
 
-__all__ = ["FAST_FACTOR", "ExcitationReport", "check_excitation", "quasi_static"]
+__all__ = [
+    "FAST_FACTOR",
+    "NOISE_FACTOR",
+    "OFF_FRACTION",
+    "ExcitationReport",
+    "check_excitation",
+    "input_active",
+    "quasi_static",
+]
 
 #: Robust standard deviation of a zero-mean normal sample from the median of its magnitude.
 _MEDIAN_TO_SD = 1.4826
 #: Quasi-static threshold of :func:`quasi_static` in robust scales of |q_dot|.
 FAST_FACTOR = 3.0
+#: An input is "off" near zero: within this fraction of its largest magnitude (the channel's own
+#: scale), and "active" where it stands out of its off level by more than this fraction too.
+OFF_FRACTION = 0.03
+#: ... and by more than this many robust standard deviations of the off level's noise.
+NOISE_FACTOR = 6.0
 #: A line is resolved if its band is at most this fraction of its frequency (else it is
 #: the low-frequency end of a broad spectrum, e.g. the slow switching between the wells).
 _LINE_RESOLVED = 0.5
@@ -151,7 +164,8 @@ def check_excitation(
     *,
     rbf: Sequence[str] = RBF_TERMS,
     min_samples: int = 10,
-    active_fraction: float = 0.1,
+    off_fraction: float = OFF_FRACTION,
+    noise_factor: float = NOISE_FACTOR,
     moving_fraction: float = 0.1,
     fast_factor: float = FAST_FACTOR,
     quasi_static_fraction: float = 0.05,
@@ -169,9 +183,10 @@ def check_excitation(
     1. *Coverage per centre.* Samples with ``|q - xi_k| <= sigma`` (as
        :meth:`RBFBasis.support`) are counted in total, in motion (``|q_dot|`` above
        ``moving_fraction`` of the pooled RMS of ``q_dot``), with input ``i`` active
-       (``|h(v_i)|`` above ``active_fraction`` of its pooled maximum) and with every input
-       inactive; the effective counts weight each sample by ``exp(-(q - xi_k)^2 /
-       (2 sigma^2))`` (Eq. 38, without clipping). Centre ``k`` supports ``c`` if
+       (:func:`input_active` on the pooled inputs: ``v_i`` clearly off its own off level,
+       sub-threshold levels included) and with every input inactive; the effective
+       counts weight each sample by ``exp(-(q - xi_k)^2 / (2 sigma^2))`` (Eq. 38, without
+       clipping). Centre ``k`` supports ``c`` if
        ``n_total >= min_samples``, ``d`` if ``n_moving >= min_samples`` and ``g_i`` if
        ``n_input<i>_active >= min_samples``.
     2. *Frequency content.* Per record, the Welch PSD (Hann window, ``nperseg`` samples,
@@ -210,9 +225,12 @@ def check_excitation(
         these only. The table always has every column.
     min_samples : int, optional
         Fewest samples within one width of a centre for a supported curve.
-    active_fraction : float, optional
-        Input ``i`` is active where ``|h(v_i)|`` exceeds this fraction of its largest value
-        over all records, in [0, 1).
+    off_fraction : float, optional
+        Off band and activity floor of :func:`input_active`, a fraction of ``max |v_i|``
+        over all records, in (0, 1).
+    noise_factor : float, optional
+        Activity threshold of :func:`input_active` in robust standard deviations of the
+        input's off-level noise.
     moving_fraction : float, optional
         A sample is in motion where ``|q_dot|`` exceeds this fraction of the RMS of
         ``q_dot`` over all records.
@@ -244,7 +262,8 @@ def check_excitation(
     WorkflowError
         If there are no records, the records disagree in their number of inputs, a
         record's lengths differ or its ``dt`` is not positive, a setting is out of range
-        or ``input_map_kind`` is unknown.
+        (``off_fraction``, ``noise_factor`` as :func:`input_active`) or ``input_map_kind``
+        is unknown.
 
     References
     ----------
@@ -265,7 +284,6 @@ def check_excitation(
     """
     _validate(
         records,
-        active_fraction,
         moving_fraction,
         power_fraction,
         quasi_static_fraction,
@@ -285,7 +303,7 @@ def check_excitation(
     masks = {"total": np.ones(q.size, dtype=bool), "moving": np.abs(q_dot) > moving_fraction * rms}
     masks["quasi_static"] = slow
     hmax = np.abs(hv).max(axis=0) if hv.size else np.zeros(n_inputs)
-    active = (np.abs(hv) > active_fraction * hmax) & (hmax > 0)
+    active = input_active(v, off_fraction=off_fraction, noise_factor=noise_factor)
     masks["inactive"] = ~active.any(axis=1)
     for j in range(n_inputs):
         masks[f"input{j + 1}_active"] = active[:, j]
@@ -312,7 +330,8 @@ def check_excitation(
     settings = {
         "input_map": input_map_kind,
         "min_samples": int(min_samples),
-        "active_fraction": float(active_fraction),
+        "off_fraction": float(off_fraction),
+        "noise_factor": float(noise_factor),
         "moving_fraction": float(moving_fraction),
         "fast_factor": float(fast_factor),
         "quasi_static_fraction": float(quasi_static_fraction),
@@ -339,7 +358,6 @@ def check_excitation(
 
 def _validate(
     records,
-    active_fraction,
     moving_fraction,
     power_fraction,
     qs_fraction,
@@ -365,7 +383,6 @@ def _validate(
                 f"({len(r.q)}, {len(r.q_dot)}, {np.asarray(r.v).shape[0]})"
             )
     for name, value, hi_open in (
-        ("active_fraction", active_fraction, True),
         ("moving_fraction", moving_fraction, True),
         ("quasi_static_fraction", qs_fraction, False),
     ):
@@ -406,6 +423,85 @@ def quasi_static(q_dot: np.ndarray, fast_factor: float = FAST_FACTOR) -> np.ndar
         return np.zeros(0, dtype=bool)
     scale = max(_MEDIAN_TO_SD * float(np.median(x)), 0.01 * float(np.max(x)))
     return x <= fast_factor * scale
+
+
+def input_active(
+    v: np.ndarray,
+    *,
+    off_fraction: float = OFF_FRACTION,
+    noise_factor: float = NOISE_FACTOR,
+) -> np.ndarray:
+    """Flag the samples at which each input excites the beam, sub-threshold levels included.
+
+    ``g_i`` of Eq. 37 multiplies ``h(v_i)``: a sample informs ``g_i(q)`` wherever
+    ``g_i(q) h(v_i)`` is not negligible against the noise of the regression (Eq. 40), not
+    only where the input switches the beam. A threshold relative to the largest ``h(v_i)``
+    (e.g. 10 %: 0.95 kV of a 3 kV pulse) discards exactly the sub-threshold excitation
+    (0.2-1 kV) a profile holds to identify ``g_i`` near the wells. So the input's activity is
+    decided against its own off level, from the data:
+
+    1. *Off level.* The samples with ``|v_i|`` at most ``off_fraction`` of its largest
+       magnitude are the candidates for "off"; their median ``v_off`` is the off level and
+       ``s = 1.4826 median |v_i - v_off|`` over them its noise (the normal-consistent median
+       absolute deviation; Rousseeuw & Croux 1993). Without such samples ``v_off = s = 0``.
+    2. *Active.* ``|v_i - v_off| > max(noise_factor s, off_fraction max|v_i|)``: clearly
+       above the channel's noise, and above a floor at the channel's own scale, which keeps
+       a driver's offset or leakage from counting (20 V of a 1.8 kV channel does not). At
+       the defaults and ``h = v^2`` the floor is 0.09 % of the largest ``h`` (90 V of a
+       3 kV maximum); 0.2 kV of a 3 kV maximum (0.44 % of the largest ``h``) counts.
+
+    The decision is made on ``v`` (the logged channel), so it holds for any input map: for
+    ``h = v^2`` and ``h = v`` alike the force ``g_i h(v_i)`` is non-zero exactly where
+    ``v_i`` leaves zero. An input that is zero throughout is never active.
+
+    Parameters
+    ----------
+    v : ndarray, shape (n, n_inputs)
+        Input channels of the pooled estimation records [V, or the input's own unit].
+    off_fraction : float, optional
+        Off band and activity floor as a fraction of ``max |v_i|``, in (0, 1).
+    noise_factor : float, optional
+        Activity threshold in robust standard deviations of the off level's noise (> 0).
+
+    Returns
+    -------
+    ndarray of bool, shape (n, n_inputs)
+        True where input ``i`` is active.
+
+    Raises
+    ------
+    WorkflowError
+        If ``off_fraction`` is not in (0, 1) or ``noise_factor`` is not positive.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40 (``g_i(q) h(v_i)``), Fig. 11a (switching pulses and
+    sub-threshold excitation); P. J. Rousseeuw & C. Croux, J. Am. Stat. Assoc. 88,
+    1273-1283, 1993 (the MAD).
+
+    Examples
+    --------
+    >>> v = np.array([[0.5], [-0.4], [0.3], [200.0], [3000.0], [0.0]])
+    >>> input_active(v)[:, 0].tolist()
+    [False, False, False, True, True, False]
+    """
+    if not 0.0 < off_fraction < 1.0:
+        raise WorkflowError(f"`off_fraction` must lie in (0, 1), got {off_fraction!r}")
+    if not (np.isfinite(noise_factor) and noise_factor > 0):
+        raise WorkflowError(f"`noise_factor` must be positive, got {noise_factor!r}")
+    v = np.asarray(v, dtype=float)
+    v = v.reshape(v.shape[0], -1)
+    out = np.zeros(v.shape, dtype=bool)
+    for j in range(v.shape[1]):
+        x = v[:, j]
+        peak = float(np.max(np.abs(x), initial=0.0))
+        if not peak > 0:
+            continue
+        off = x[np.abs(x) <= off_fraction * peak]
+        level = float(np.median(off)) if off.size else 0.0
+        noise = _MEDIAN_TO_SD * float(np.median(np.abs(off - level))) if off.size else 0.0
+        out[:, j] = np.abs(x - level) > max(noise_factor * noise, off_fraction * peak)
+    return out
 
 
 def _coverage(q, basis, masks, min_samples, n_inputs) -> pd.DataFrame:
@@ -572,7 +668,9 @@ def _warnings(table, basis, rbf, n_inputs, hmax, transient, spectra, single, set
             if idle:
                 out.append(
                     f"{g}: input {j + 1} is never active (fewer than {n_min} samples with "
-                    f"|h(v_{j + 1})| above {100 * settings['active_fraction']:g} % of its maximum) "
+                    f"v_{j + 1} off its off level by more than {settings['noise_factor']:g} "
+                    f"robust standard deviations of its noise and "
+                    f"{100 * settings['off_fraction']:g} % of its maximum) "
                     f"for q in {fmt(idle)}: {g} there is not identified"
                 )
     if transient:
