@@ -114,16 +114,49 @@ def _score(name, true, est, lo, hi, marked) -> dict:
         "max_error": float(err.max()) if err.size else np.nan,
         "median_error": float(np.median(err)) if err.size else np.nan,
         "inside": int(inside.sum()),
+        "lacking": _lacking(true, est, lo, hi, marked).tolist(),
     }
 
 
-def calibrate(plant: str, size: int, seed: int, workers: int, folder: Path) -> dict:
+def _lacking(true, est, lo, hi, marked) -> np.ndarray:
+    """Per marked point, the half-width the band lacks to hold the truth, in quadrature.
+
+    As a fraction of the estimate's scale over the marked points (the larger of its range and
+    its largest magnitude; the stage takes it over the supported points, a superset, so the
+    calibrated term is, if anything, wider there): ``sqrt(err^2 - reach^2)`` where the band's
+    reach toward the truth falls short of the error ``err``, else 0
+    (:func:`pipeline.identify.bands.curve_bands` adds the term as ``hypot(reach, term)``).
+    """
+    if not marked.any():
+        return np.array([])
+    e, t = est[marked], true[marked]
+    scale = max(float(np.ptp(e)), float(np.max(np.abs(e))))
+    reach = np.maximum(np.where(t > e, hi[marked] - e, e - lo[marked]), 0.0)
+    err = np.abs(t - e)
+    return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / scale
+
+
+def _set_model_error(members: list[tuple[Path, Path]], on: bool) -> None:
+    """Write ``[identify] model_error`` into every member's workflow file."""
+    import tomli_w
+
+    for wf, _ in members:
+        raw = tomllib.loads(wf.read_text())
+        if raw.setdefault("identify", {}).get("model_error", True) != on:
+            raw["identify"]["model_error"] = on
+            wf.write_text(tomli_w.dumps(raw))
+
+
+def calibrate(
+    plant: str, size: int, seed: int, workers: int, folder: Path, model_error: bool = True
+) -> dict:
     """Run one fleet and score it; returns the summary (see the module docstring)."""
     fleet = folder / plant
     if not any(fleet.glob("*.toml")):
         _debist("fleet", str(PLANTS[plant]), "--size", str(size), "--seed", str(seed),
                 "--dir", str(fleet))  # fmt: skip
     members = _member_outputs(fleet)
+    _set_model_error(members, model_error)
     _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
     rows, nrmse = [], []
     for wf, run in members:
@@ -135,17 +168,23 @@ def calibrate(plant: str, size: int, seed: int, workers: int, folder: Path) -> d
         for _, r in table[table.role == "validation"].iterrows():
             nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": float(r.nrmse_q)})
     scores = pd.DataFrame(rows)
+    lacking = scores.pop("lacking")
     summary = (
         scores.groupby("curve")
         .agg(marked=("marked", "sum"), inside=("inside", "sum"),
              max_error=("max_error", "max"), median_error=("median_error", "median"))
         .assign(coverage=lambda s: s.inside / s.marked)
     )  # fmt: skip
+    pooled = {
+        name: np.concatenate([np.asarray(x, float) for x in lacking[scores.curve == name]])
+        for name in summary.index
+    }
     return {
         "plant": plant,
         "size": size,
         "seed": seed,
         "curves": summary.reset_index().to_dict(orient="records"),
+        "lacking": {k: v.tolist() for k, v in pooled.items()},
         "members": scores.to_dict(orient="records"),
         "nrmse": nrmse,
     }
@@ -174,6 +213,25 @@ def _markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
+#: Curves of the calibration -> key of :data:`pipeline.identify.bands.MODEL_ERROR`.
+GROUPS = {"restoring": "restoring", "d": "d", "g1": "g", "g2": "g", "static F": "F"}
+
+
+def _model_error_table(results: list[dict]) -> str:
+    """The 95th percentile of the lacking half-width per curve group, pooled over the plants."""
+    pooled: dict[str, list[float]] = {}
+    for r in results:
+        for name, values in r["lacking"].items():
+            pooled.setdefault(GROUPS[name], []).extend(values)
+    lines = ["| curve | marked points | model error (95th percentile, fraction of scale) |",
+             "|---|---|---|"]  # fmt: skip
+    table = {}
+    for key, values in pooled.items():
+        table[key] = round(float(np.percentile(values, 95)), 3) if values else 0.0
+        lines.append(f"| {key} | {len(values)} | {table[key]} |")
+    return "\n".join([*lines, "", f"MODEL_ERROR = {table}"])
+
+
 def main() -> None:
     """Parse the arguments, calibrate each plant, print and save the tables."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -182,14 +240,21 @@ def main() -> None:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--dir", type=Path, required=True)
     p.add_argument("--plants", default="full,reduced")
+    p.add_argument(
+        "--model-error", choices=("on", "off"), default="on",
+        help="off: bootstrap-only bands, and print the model-error term they lack",
+    )  # fmt: skip
     args = p.parse_args()
     sys.path.insert(0, str(ROOT))
+    on = args.model_error == "on"
     results = [
-        calibrate(plant, args.size, args.seed, args.workers, args.dir)
+        calibrate(plant, args.size, args.seed, args.workers, args.dir, on)
         for plant in args.plants.split(",")
     ]
     for r in results:
         print(_markdown(r), end="\n\n")
+    if not on:  # what the bootstrap bands lack: MODEL_ERROR of pipeline/identify/bands.py
+        print(_model_error_table(results))
     (args.dir / "calibration.json").write_text(json.dumps(results, indent=1, default=float))
 
 

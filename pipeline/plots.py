@@ -100,8 +100,9 @@ def curves_figure(
 ) -> Any:
     """Draw the identified curves with their bootstrap bands, as Fig. 14 of the paper.
 
-    The bands are nominal 95 % block-bootstrap bands of the estimation scatter; they do not
-    cover the model's bias (:data:`pipeline.identify.bands.BAND_LABEL`).
+    The bands are those of ``curves.parquet``: the block bootstrap of the estimation scatter
+    with, by default, the model error calibrated on the virtual rig
+    (:func:`pipeline.identify.bands.band_label` says what they hold).
 
     Where a curve is not identified (``<name>_identified`` false) it is drawn thin and grey
     over its band; identified parts are drawn in colour.
@@ -171,9 +172,7 @@ def curves_figure(
             ident = curves[f"{name}_identified"].to_numpy()
             lo = factor * curves[f"{name}_lo"].to_numpy()
             hi = factor * curves[f"{name}_hi"].to_numpy()
-            ax.fill_between(
-                q, lo, hi, color=color, alpha=0.2, lw=0, label=f"{name}: bootstrap band"
-            )
+            ax.fill_between(q, lo, hi, color=color, alpha=0.2, lw=0, label=f"{name}: band")
             ax.plot(q, y, color="0.6", lw=0.8)
             ax.plot(q, np.where(ident, y, np.nan), color=color, lw=1.6, label=f"{name} identified")
             if analytical is not None and name in analytical:

@@ -136,6 +136,43 @@ def test_a_systematic_bound_widens_each_band_edge_in_quadrature():
     np.testing.assert_array_equal(wide["d_hi"], plain["d_hi"])
 
 
+def test_the_model_error_term_widens_each_band_by_its_share_of_the_curves_scale():
+    """MODEL_ERROR's fractions scale with each curve's scale (range, or largest magnitude for
+    a flat one-signed curve) and join the bootstrap reach and a systematic bound in
+    quadrature; g1, g2 read the "g" entry; a curve without an entry keeps its band."""
+    from pipeline.identify.bands import MODEL_ERROR, band_label
+
+    rng = np.random.default_rng(6)
+    m, p, B = 9, 3, 400
+    maps = {n: rng.standard_normal((m, p)) for n in ("restoring", "d", "g1")}
+    maps["g1"] = 0.01 * maps["g1"] + np.array([1.0, 0.0, 0.0])  # flat, one-signed
+    theta = np.array([2.0, 0.5, -0.3])
+    boot = theta + 0.05 * rng.standard_normal((B, p))
+    point = {n: a @ theta for n, a in maps.items()}
+    support = {n: np.full(m, 100.0) for n in maps}
+    table = {"restoring": 0.1, "g": 0.2}
+    plain = curve_bands(point, maps, theta, boot, support, 1.0, 10.0)
+    wide = curve_bands(point, maps, theta, boot, support, 1.0, 10.0, {"restoring": 0.3}, table)
+    for name, frac, extra in (("restoring", 0.1, 0.3), ("g1", 0.2, 0.0)):
+        value = point[name]
+        scale = max(np.ptp(value), np.max(np.abs(value)))
+        dev = (boot - theta) @ maps[name].T
+        down, up = -np.percentile(dev, 2.5, axis=0), np.percentile(dev, 97.5, axis=0)
+        assert np.all(down > 0) and np.all(up > 0)
+        term = np.hypot(extra, frac * scale)
+        np.testing.assert_allclose(wide[f"{name}_lo"], value - np.hypot(down, term), rtol=1e-12)
+        np.testing.assert_allclose(wide[f"{name}_hi"], value + np.hypot(up, term), rtol=1e-12)
+    g1 = point["g1"]
+    assert np.max(np.abs(g1)) > 10 * np.ptp(g1)  # its scale is its magnitude, not its range
+    np.testing.assert_array_equal(wide["d_lo"], plain["d_lo"])
+    # a term wider than half the tolerance leaves nothing identified
+    none = curve_bands(point, maps, theta, boot, support, 1.0, 0.3, None, {"restoring": 0.16})
+    assert not none["restoring_identified"].any()
+    assert curve_bands(point, maps, theta, boot, support, 1.0, 0.3)["restoring_identified"].all()
+    assert set(MODEL_ERROR) == {"restoring", "d", "g", "F"}
+    assert band_label(True).startswith("95 % band") and "bootstrap band" in band_label(False)
+
+
 def test_the_restoring_band_holds_the_coulomb_level(bistable_record):
     """With a Coulomb term the restoring band reaches at least |F_c| to each side."""
     records = _records(bistable_record, noise=0.01, seed=3)

@@ -100,6 +100,11 @@ class IdentifyConfig:
     band_tolerance : float
         A curve is identified where its band is at most this fraction of its range (and
         the data support it; :mod:`pipeline.identify.bands`).
+    model_error : bool
+        Add the model error calibrated on the virtual rig
+        (:data:`pipeline.identify.bands.MODEL_ERROR`) to the bootstrap bands, so that they
+        hold the truth at their measured coverage; false: bootstrap-only bands (the
+        estimation scatter alone).
     prior : PhysicsPrior or None
         The analytical model's curves for the ``physics_*`` terms; set by the identify
         stage from the workflow's ``[physics]`` section, not a workflow key.
@@ -150,6 +155,7 @@ class IdentifyConfig:
     bootstrap: NonNegativeInt = 200
     bootstrap_seed: NonNegativeInt = 0
     band_tolerance: PositiveFloat = 0.2
+    model_error: bool = True
     prior: Any = None
 
     def __post_init__(self) -> None:

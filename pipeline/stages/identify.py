@@ -84,7 +84,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         For an invalid section.
     """
     from pipeline.identify.autotune import auto_settings, select_hyperparameters
-    from pipeline.identify.bands import curves_frame, static_frame
+    from pipeline.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
     from pipeline.identify.design import (
         design_numbers,
         held_levels,
@@ -130,13 +130,15 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "message": res.message,
         }
         timings["refine"] = res.seconds
+    model_error = MODEL_ERROR if cfg.model_error else None
     curves, identified = curves_frame(
-        model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance
-    )
+        model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance,
+        model_error=model_error,
+    )  # fmt: skip
     design = design_numbers(model, records, physics)
     design["static"], static = static_frame(
         model, diag, records, held_levels(records), min_support=cfg.min_support,
-        band_tolerance=cfg.band_tolerance,
+        band_tolerance=cfg.band_tolerance, model_error=model_error,
     )  # fmt: skip
     design["equilibria"] = mark_identified(design["equilibria"], curves, design["static"])
     design["switching"] = mark_switching(design["switching"], curves)
@@ -155,6 +157,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "refine": refine,
         "identified": identified,
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
+        "bands": {"label": band_label(cfg.model_error), "model_error": model_error or {}},
         "smoothing": diag.smoothing,
         "excitation": excitation.to_summary(),
         "design": {

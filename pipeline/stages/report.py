@@ -30,7 +30,7 @@ from pipeline.htmlreport import (
     ReportConfig,
     render_report,
 )
-from pipeline.identify.bands import BAND_LABEL
+from pipeline.identify.bands import BOOTSTRAP_LABEL
 from pipeline.registry import stage as registry_stage
 from pipeline.render import FigureJob, render_pngs
 from pipeline.report_figures import (
@@ -54,7 +54,7 @@ IMAGES = (
         "identify",
         "plots/curves.png",
         "identify",
-        f"Fig. 14: identified curves with their {BAND_LABEL} (grey where not identified), "
+        "Fig. 14: identified curves with their {band} (grey where not identified), "
         "dashed: the analytical model's",
     ),
     (
@@ -281,6 +281,9 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
         for r in rels:
             if r in outputs:
                 text = caption if rel is not None else f"{caption}: {r}"
+                # the identify stage says what its bands are (older runs: bootstrap bands)
+                band = summaries["identify"].get("bands", {}) if stage == "identify" else {}
+                text = text.replace("{band}", band.get("label", BOOTSTRAP_LABEL))
                 data = _read_png(wf.stage_dir(stage), r, manifests[stage])
                 images.setdefault(group, []).append((text, data))
     versions: dict[str, set[str]] = {}
