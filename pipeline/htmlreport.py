@@ -135,7 +135,7 @@ class ReportConfig:
 
 #: The tables' style of the report and the batch index: one place (wide tables scroll with an
 #: edge shadow, and a note says so on a phone-sized screen; numbers never wrap: a wrapped
-#: "-1.351e-13" reads as two numbers).
+#: "-1.351e-13" reads as two numbers; the verdict after a number, in a ``note`` span, does).
 _TABLE_CSS = """\
 .scroll { overflow-x: auto; background:
   linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
@@ -149,6 +149,7 @@ _TABLE_CSS = """\
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
 th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
 td:not(.text) { white-space: nowrap; }
+td .note { white-space: normal; }
 th:first-child, td.text { text-align: left; }
 td.bad { color: #a00; font-weight: bold; }
 """
@@ -320,6 +321,8 @@ h1 { font-size: 1.5rem; }
 <p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
 (Eq. 41), its wells at rest and its switching voltages. Each name links to the prototype's
 report.</p>
+{% macro cell(text) %}{% set head, sep, tail = text.partition(" (") %}{{ head }}\
+{% if sep %}<span class="note"> ({{ tail }}</span>{% endif %}{% endmacro %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>prototype</th><th>workflow file</th><th>status</th>
 {% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
@@ -329,8 +332,8 @@ report.</p>
 {% endif %}</td><td class="text">{{ r.file }}</td>
 <td class="text{% if r.status != 'done' %} bad{% endif %}">{{ r.status }}{% if r.error %}: \
 {{ r.error }}{% endif %}{% if r.note %} ({{ r.note }}){% endif %}</td>
-{% for d in datasets %}<td>{{ r.nrmse.get(d, "-") }}</td>{% endfor %}
-<td>{{ r.wells }}</td><td class="text">{{ r.switching }}</td></tr>
+{% for d in datasets %}<td>{{ cell(r.nrmse.get(d, "-")) }}</td>{% endfor %}
+<td>{{ cell(r.wells) }}</td><td class="text">{{ r.switching }}</td></tr>
 {% endfor %}
 </table></div>
 </body>

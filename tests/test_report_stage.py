@@ -302,7 +302,8 @@ return {
   imgs: [...document.images].map((i) => ({complete: i.complete, natural: i.naturalWidth,
     css: i.getBoundingClientRect().width, right: i.getBoundingClientRect().right})),
   wrapped: [...document.querySelectorAll("td:not(.text)")].filter((td) => {
-    const r = document.createRange(); r.selectNodeContents(td);
+    const r = document.createRange(); if (!td.firstChild) return false;
+    r.selectNodeContents(td.firstChild);  // the number; a verdict after it may wrap
     return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size > 1; })
     .map((td) => td.textContent),
   cut: [...document.querySelectorAll("h1, h2, p, figcaption, nav, li")]
