@@ -10,6 +10,7 @@ import re
 import shutil
 from html import unescape
 from html.parser import HTMLParser
+from importlib.util import find_spec
 
 import numpy as np
 import pandas as pd
@@ -338,6 +339,11 @@ def chrome(tmp_path, width):
     return driver
 
 
+@pytest.mark.skipif(
+    CHROMIUM is None or CHROMEDRIVER is None,
+    reason="Chromium or its driver is absent (apt-get install chromium chromium-driver)",
+)
+@pytest.mark.skipif(find_spec("selenium") is None, reason="selenium is not installed")
 @pytest.mark.parametrize("width", [1366, 400])
 def test_chromium_lays_the_report_out_at_desktop_and_phone_width(synthetic_run, tmp_path, width):
     """Headless Chromium at 1366 and 400 px: nothing overflows the page, wide tables scroll in
