@@ -134,7 +134,8 @@ class ReportConfig:
 
 
 #: The tables' style of the report and the batch index: one place (wide tables scroll with an
-#: edge shadow, and a note says so on a phone-sized screen).
+#: edge shadow, and a note says so on a phone-sized screen; numbers never wrap: a wrapped
+#: "-1.351e-13" reads as two numbers; the verdict after a number, in a ``note`` span, does).
 _TABLE_CSS = """\
 .scroll { overflow-x: auto; background:
   linear-gradient(to right, #fff 30%, rgba(255,255,255,0)) left / 2rem 100% no-repeat local,
@@ -144,9 +145,11 @@ _TABLE_CSS = """\
   radial-gradient(farthest-side at 100% 50%, rgba(0,0,0,.3), rgba(0,0,0,0)) right / .8rem 100%
     no-repeat scroll; }
 .scrollnote { display: none; font-size: 0.8rem; color: #555; }
-@media (max-width: 40rem) { .scrollnote { display: block; } }
+@media (max-width: 40rem) { .scrollnote { display: block; } td.text { min-width: 6rem; } }
 table { border-collapse: collapse; margin: 0.5rem 0; font-size: 0.9rem; }
 th, td { border: 1px solid #ccc; padding: 0.2rem 0.4rem; text-align: right; vertical-align: top; }
+td:not(.text) { white-space: nowrap; }
+td .note { white-space: normal; }
 th:first-child, td.text { text-align: left; }
 td.bad { color: #a00; font-weight: bold; }
 """
@@ -163,10 +166,10 @@ body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 0 auto; pad
        line-height: 1.4; color: #111; background: #fff; }
 h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; border-bottom: 1px solid #ccc; }
 /*TABLE_CSS*/
-img { width: 100%; height: auto; }
+img { max-width: 100%; height: auto; }
 figure { margin: 0.5rem 0; }
 nav a { margin-right: 0.6rem; white-space: nowrap; }
-pre, code { white-space: pre-wrap; word-break: break-all; font-size: 0.85rem; }
+pre, code { white-space: pre-wrap; overflow-wrap: anywhere; font-size: 0.85rem; }
 @media print { body { max-width: none; } nav { display: none; }
                figure, table { page-break-inside: avoid; } }
 </style>
@@ -296,7 +299,8 @@ covered by <code>report/manifest.json</code>.</p>
 
 _MACROS = """{% macro show(items, empty) %}
 {% for f in items %}
-<figure><img src="{{ f.uri }}" alt="{{ f.caption }}"><figcaption>{{ f.caption }}</figcaption>
+<figure><img src="{{ f.uri }}" width="{{ f.width }}" alt="{{ f.caption }}">
+<figcaption>{{ f.caption }}</figcaption>
 </figure>
 {% endfor %}
 {% if not items and empty %}<p>{{ empty }}</p>{% endif %}
@@ -321,6 +325,8 @@ h1 { font-size: 1.5rem; }
 <p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
 (Eq. 41), its wells at rest and its switching voltages. Each name links to the prototype's
 report.</p>
+{% macro cell(text) %}{% set head, sep, tail = text.partition(" (") %}{{ head }}\
+{% if sep %}<span class="note"> ({{ tail }}</span>{% endif %}{% endmacro %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>prototype</th><th>workflow file</th><th>status</th>
 {% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
@@ -330,8 +336,8 @@ report.</p>
 {% endif %}</td><td class="text">{{ r.file }}</td>
 <td class="text{% if r.status != 'done' %} bad{% endif %}">{{ r.status }}{% if r.error %}: \
 {{ r.error }}{% endif %}{% if r.note %} ({{ r.note }}){% endif %}</td>
-{% for d in datasets %}<td>{{ r.nrmse.get(d, "-") }}</td>{% endfor %}
-<td>{{ r.wells }}</td><td class="text">{{ r.switching }}</td></tr>
+{% for d in datasets %}<td>{{ cell(r.nrmse.get(d, "-")) }}</td>{% endfor %}
+<td>{{ cell(r.wells) }}</td><td class="text">{{ r.switching }}</td></tr>
 {% endfor %}
 </table></div>
 </body>
@@ -498,6 +504,11 @@ def _data_uri(name: str, data: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
+def _shown_width(data: bytes) -> int:
+    """Half a PNG's pixel width (its IHDR chunk): the CSS width that shows it at 2x."""
+    return max(1, int.from_bytes(data[16:20], "big") // 2)
+
+
 def render_report(run: dict[str, Any]) -> str:
     """Render one self-contained HTML page of a run.
 
@@ -532,7 +543,7 @@ def render_report(run: dict[str, Any]) -> str:
     heads, nrmse = _nrmse_rows(run.get("nrmse") or [])
     figures = {
         group: [
-            {"caption": caption, "uri": _data_uri(caption, data)}
+            {"caption": caption, "uri": _data_uri(caption, data), "width": _shown_width(data)}
             for caption, data in (run.get("figures") or {}).get(group, [])
         ]
         for group in FIGURE_GROUPS

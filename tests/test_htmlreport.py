@@ -228,6 +228,28 @@ def test_figures_go_to_their_sections(run):
             assert heads[k] < at < (heads[k + 1] if k + 1 < len(heads) else len(html)), caption
 
 
+def test_figures_are_shown_at_most_at_half_their_pixel_width_and_numbers_do_not_wrap(run):
+    """A figure of N px is given width N/2 (CSS px, shrunk further by max-width: 100%): 2x
+    sharp on a HiDPI screen; the verdict after an index number may wrap, the number not."""
+    html = render_report(run)
+    widths = re.findall(r'<img src="data:image/png;base64,([^"]+)" width="(\d+)"', html)
+    assert len(widths) == 6
+    for data, width in widths:
+        png = base64.b64decode(data)
+        assert int(width) == int.from_bytes(png[16:20], "big") // 2 > 0
+    assert "img { max-width: 100%; height: auto; }" in html
+    assert "td:not(.text) { white-space: nowrap; }" in html
+    row = index_row("p", "p.toml", "done", design={"equilibria": [
+        {"model": "rbf", "level": 0, "static_stable": True, "q": -0.01},
+        {"model": "rbf", "level": 0, "static_stable": True, "q": 0.01, "identified": False},
+    ]})  # fmt: skip
+    row["nrmse"] = {"unseen": "16.72 % (poor: 69 % of the mean error)"}
+    page = render_index([row])
+    assert '<td>16.72 %<span class="note"> (poor: 69 % of the mean error)</span></td>' in page
+    assert '<td>-10 mm<span class="note"> (+1 not identified)</span></td>' in page
+    assert "td .note { white-space: normal; }" in page
+
+
 def test_missing_stages_are_left_out(run):
     html = render_report({"workflow": "only-ingest", "stages": {"ingest": ("1" * 64, "2" * 64)}})
     parse(html)

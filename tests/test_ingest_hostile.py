@@ -86,7 +86,7 @@ def test_a_laser_error_code_beyond_the_ild2300_range_is_refused_without_a_range(
     from pipeline.errors import DebistWarning
 
     def rename(log):
-        log.rename(columns={"laser": "ILD2300 distance"}, inplace=True)
+        log.insert(1, "ILD2300 distance", log.pop("laser"))  # same column, the sensor's name
         log.loc[1500:1504, "ILD2300 distance"] = 262.14  # an error code for 5 samples
 
     edit_log(project, rename)

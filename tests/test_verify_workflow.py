@@ -56,13 +56,17 @@ def test_stage_folders_copied_from_a_run_with_another_setting_fail_without_a_dig
     project, tmp_path
 ):
     root, _ = project
+    wf = root / "wf.toml"
+    wf.write_text(wf.read_text() + "\n[report]\n")  # the report stage is copied too
+    code, out = invoke("run", wf)
+    assert code == 0 and "Running stage 'identify'" not in out, out
     other = tmp_path / "other"
     other.mkdir()
     shutil.copy(root / "rig.csv", other / "rig.csv")
-    (other / "wf.toml").write_text((root / "wf.toml").read_text().replace("M = 8", "M = 6"))
+    (other / "wf.toml").write_text(wf.read_text().replace("M = 8", "M = 6"))
     code, out = invoke("run", other / "wf.toml")
     assert code == 0, out
-    for stage in ("identify", "validate", "compare"):
+    for stage in ("identify", "validate", "compare", "report"):
         shutil.rmtree(root / "out" / stage)
         shutil.copytree(other / "out" / stage, root / "out" / stage)
     code, out = invoke("verify", root / "wf.toml")

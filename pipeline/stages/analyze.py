@@ -107,10 +107,11 @@ def execute(ctx: StageInputs) -> StageOutput:
         As :func:`run_analyze`.
     """
     from pipeline.artifacts import Figure, H5Tree
+    from pipeline.fileformats import REPORT_DPI
     from pipeline.physics.params import PrototypeParams
 
     params = ctx.physics() or PrototypeParams.from_dict({})
     res = run_analyze(params, ctx.section("analyze"))
     outputs: dict[str, Any] = {"statics.h5": H5Tree(res.tree)}
-    outputs.update({f"{n}.png": Figure(f) for n, f in res.figures.items()})
+    outputs.update({f"{n}.png": Figure(f, REPORT_DPI) for n, f in res.figures.items()})
     return StageOutput(outputs, res.summary)

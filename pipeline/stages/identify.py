@@ -261,6 +261,7 @@ def execute(ctx: StageInputs) -> StageOutput:
         As :func:`run_identify`.
     """
     from pipeline.artifacts import Figure, H5Tree
+    from pipeline.fileformats import REPORT_DPI
     from pipeline.plots import curves_figure
     from pipeline.report import summary_units
 
@@ -273,14 +274,16 @@ def execute(ctx: StageInputs) -> StageOutput:
     physics = ctx.physics()
     analytical = analytical_curves(physics, res.model) if physics is not None else None
     unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
-    figure = Figure(curves_figure(res.curves, analytical, unit, summary_units(res.summary)))
+    figure = Figure(
+        curves_figure(res.curves, analytical, unit, summary_units(res.summary)), REPORT_DPI
+    )
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
         from pipeline.study_plots import autotune_figure
 
         outputs["autotune.parquet"] = res.search.table
-        outputs["plots/autotune.png"] = Figure(autotune_figure(res.search))
+        outputs["plots/autotune.png"] = Figure(autotune_figure(res.search), REPORT_DPI)
     return StageOutput(outputs, res.summary, res.timings)
 
 

@@ -23,6 +23,7 @@ import pandas as pd
 
 from pipeline import artifacts, outdir
 from pipeline.errors import ArtifactError
+from pipeline.fileformats import REPORT_DPI
 from pipeline.htmlreport import (
     FIGURE_GROUPS,
     REPORT_FILE,
@@ -42,8 +43,6 @@ from pipeline.stages import StageInputs, StageOutput
 
 __all__ = ["ReportInputs", "ReportResult", "execute", "gather_run", "run_report"]
 
-#: Resolution of the report's own figures [dots per inch] (small pages, phone-readable).
-REPORT_DPI = 180
 #: Stages whose free runs (``simulated/<data set>.parquet``) the report draws, and the
 #: model each holds.
 SIMULATED = (("validate", "rbf"), ("compare", "sindy"))

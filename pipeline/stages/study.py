@@ -69,6 +69,7 @@ def execute(ctx: StageInputs) -> StageOutput:
         As :func:`run_study`.
     """
     from pipeline.artifacts import Figure
+    from pipeline.fileformats import REPORT_DPI
 
     results = run_study(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("study")
@@ -76,6 +77,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     outputs: dict[str, Any] = {}
     for name, (table, figure) in results.items():
         outputs[f"{name}.parquet"] = table
-        outputs[f"{name}.png"] = Figure(figure)
+        outputs[f"{name}.png"] = Figure(figure, REPORT_DPI)  # shown in the report
     summary = {name: table.to_dict(orient="records") for name, (table, _) in results.items()}
     return StageOutput(outputs, summary)
