@@ -87,9 +87,7 @@ BAND_LABEL = (
 )
 #: The label of a bootstrap-only band (``[identify] model_error = false``): its measured coverage
 #: on the calibration fleet (``--seed 1``, both plants, 2026-11-22).
-BOOTSTRAP_LABEL = (
-    "bootstrap band (nominal 95 %; holds the truth at only 5-19 % on the virtual rig)"
-)
+BOOTSTRAP_LABEL = "bootstrap band (nominal 95 %; holds the truth at only 5-19 % on the virtual rig)"
 
 
 def band_label(model_error: bool) -> str:
