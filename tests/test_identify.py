@@ -334,6 +334,10 @@ def test_creep_config_and_model_tree(bistable_record):
     with pytest.raises(WorkflowError, match=r"\[identify\] creep_bounds: expected \[lo, hi\]"):
         IdentifyConfig.from_dict({"creep_bounds": [5.0, 1.0]})
     assert IdentifyConfig.from_dict({}).creep is False
+    from pipeline.preflight import identify_columns
+
+    plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
+    assert identify_columns(IdentifyConfig.from_dict({"creep": "search"}), 2)[0] == plain_cols + 10
     plain, _ = _fit(bistable_record)
     assert "creep" not in plain.to_tree()["model"] and plain.n_states == 3
     model, _ = _fit(bistable_record, creep=2.0)
