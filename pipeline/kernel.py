@@ -50,7 +50,7 @@ CHUNK = 50_000
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
  _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
- _TABLES, _N_LAYOUT) = range(39)  # fmt: skip
+ _TABLES, _NC, _I_CBASE, _P_CRATE, _N_LAYOUT) = range(42)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -207,6 +207,10 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     lay[_NT] = T
     lay[_TABLES] = int(np.any(t.base_kind == 2))
     lay[_P_TAB] = pack.floats(rows)
+    # creep states w_k' = b_(creep_base[k])(q) q_dot - lambda w_k (Eq. 26), after q, q_dot, z
+    lay[_NC] = t.n_creep
+    lay[_I_CBASE] = pack.ints(t.creep_base if t.n_creep else [0])
+    lay[_P_CRATE] = pack.floats([t.creep_rate])
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
     return fp, ip, lay, order, n_work
@@ -380,6 +384,7 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     w_hm = w_sf + U
     tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
     lag = lay[_LAG] == 1
+    c0 = 3 if lag else 2  # first creep state
     q = x[0]
     q_dot = x[1]
     s = x[2] if lag and tz > 0.0 else q_dot
@@ -419,6 +424,8 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
         skind = ip[o_sun + 2 * u]
         if skind == 2:
             W[w_sf + u] = math.tanh(s / vc)
+        elif skind == 3:  # creep state w_k, k in the power's place
+            W[w_sf + u] = x[c0 + ip[o_sun + 2 * u + 1]]
         else:
             val = 1.0
             if skind == 1:
@@ -448,6 +455,10 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     d[row, 1] = acc
     if lag:
         d[row, 2] = (q_dot - x[2]) / tz if tz > 0.0 else 0.0
+    rate = fp[lay[_P_CRATE]]
+    o_cb = lay[_I_CBASE]
+    for i in range(lay[_NC]):
+        d[row, c0 + i] = W[w_k + ip[o_cb + i]] * q_dot - rate * x[c0 + i]
     return acc
 
 
@@ -744,6 +755,7 @@ def _rhs_table_lock(
     w_acc = w_in + 1
     w_tq = w_acc + 1
     lag = lay[_LAG] == 1
+    c0 = 3 if lag else 2  # first creep state
     for c in range(nb_):
         work[w_s, c] = XT[2, c] if lag and tz[c] > 0.0 else XT[1, c]
     _bases_lock(XT, fp, ip, lay, work, Ti, work[w_tq], nb_)
@@ -759,6 +771,10 @@ def _rhs_table_lock(
         if skind == 2:
             for c in range(nb_):
                 work[w_sf + u, c] = math.tanh(work[w_s, c] / vc)
+        elif skind == 3:  # creep state w_k, k in the power's place
+            r_w = c0 + ip[o_sun + 2 * u + 1]
+            for c in range(nb_):
+                work[w_sf + u, c] = XT[r_w, c]
         else:
             for c in range(nb_):
                 work[w_sf + u, c] = 1.0
@@ -799,6 +815,12 @@ def _rhs_table_lock(
         D[row, 1, c] = a
         if lag:
             D[row, 2, c] = (XT[1, c] - XT[2, c]) / tz[c] if tz[c] > 0.0 else 0.0
+    rate = fp[lay[_P_CRATE]]
+    o_cb = lay[_I_CBASE]
+    for i in range(lay[_NC]):
+        k = ip[o_cb + i]
+        for c in range(nb_):
+            D[row, c0 + i, c] = work[k, c] * XT[1, c] - rate * XT[c0 + i, c]
 
 
 @nb.njit(cache=True)
@@ -1056,6 +1078,8 @@ def free_run_sensitivity(
     """
     if arrays.kind != KIND_TABLE:
         raise ValueError("sensitivities are computed for term-table models only")
+    if arrays.lay[_NC] > 0:
+        raise ValueError("sensitivities of models with creep states are not implemented")
     B, n = fine.shape[0], int(np.max(lengths))
     J = int(arrays.lay[_J])
     order = arrays.term_order

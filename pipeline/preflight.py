@@ -203,7 +203,7 @@ def identify_columns(cfg: Any, n_inputs: int) -> tuple[int, int]:
     Parameters
     ----------
     cfg : IdentifyConfig
-        The ``[identify]`` settings (``M``, ``rbf``, ``backbone``, ``m_q``).
+        The ``[identify]`` settings (``M``, ``rbf``, ``backbone``, ``m_q``, ``creep``).
     n_inputs : int
         Number of inputs v_1..v_N.
 
@@ -227,6 +227,7 @@ def _columns(cfg: Any, n_inputs: int) -> tuple[int, int, int]:
     """All columns, force columns (the left-hand block) and z columns."""
     M, rbf, backbone, identify_mass = _terms(cfg)
     force = M * (("c" in rbf) + ("d" in rbf)) + sum(b in backbone for b in _FORCE_SCALARS)
+    force += M * (getattr(cfg, "creep", False) is not False)  # creep[i] (Eq. 26)
     z_cols = M * ("d" in rbf) + sum(b in backbone for b in _Z_TERMS)
     if identify_mass:
         return 1 + force, 1 + force, z_cols

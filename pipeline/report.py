@@ -223,6 +223,8 @@ def identify_table(summary: dict[str, Any]) -> Table:
     if published:
         table.add_column("published", justify="right")
     rows = [("T_z", "s", summary["T_z"], None), ("mass m_q", units["mass"], summary["m_q"], "m_q")]
+    if "creep_rate" in summary:  # Eq. 26's Y_MW / eta_MW, identified with the creep term
+        rows.append(("creep rate lambda", "1/s", summary["creep_rate"], None))
     for key, value in summary["backbone"].items():
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))

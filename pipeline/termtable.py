@@ -7,9 +7,13 @@ A *term table* describes the acceleration of a one-coordinate model as a weighte
 where ``b_j`` is one of a few *bases* of q (the constant 1, a Gaussian RBF with its centre,
 width and clipping range, or a table interpolated linearly and held outside its grid), ``S_j``
 is 1, ``s^k`` or ``tanh(s / v_c)`` of the velocity-like variable ``s`` (the friction state z
-of Eq. 37, or q_dot), and ``h_i = h(v_i)`` are the mapped inputs. The RBF model of Eq. 37 with
-its backbone and physics prior, and the SINDy polynomials, are such tables; the same arrays
-give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
+of Eq. 37, or q_dot), or a *creep state* ``w_k``, and ``h_i = h(v_i)`` are the mapped inputs.
+The creep states are first-order filters of a basis times the velocity,
+``w_k' = b_(creep_base[k])(q) q_dot - lambda w_k`` with one relaxation rate lambda [1/s]: the
+Maxwell creep of the DEs (Masoud & Maas 2025, Eq. 26) with k_i(q) written in the basis, so that
+the creep force ``sum_k c_k w_k`` is linear in its weights once lambda is fixed. The RBF model
+of Eq. 37 with its backbone and physics prior, and the SINDy polynomials, are such tables; the
+same arrays give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
 right-hand side (:class:`TableModel`) and the compiled one (:mod:`pipeline.kernel`), so the
 fitted, the reference-simulated and the compiled-simulated model are one object.
 
@@ -31,6 +35,7 @@ __all__ = [
     "BASE_ONE",
     "BASE_TABLE",
     "INPUT_MAP_CODES",
+    "S_CREEP",
     "S_ONE",
     "S_POW",
     "S_TANH",
@@ -40,8 +45,8 @@ __all__ = [
 
 #: Basis kinds: the constant 1, a Gaussian RBF (Eq. 38), a tabulated curve.
 BASE_ONE, BASE_GAUSS, BASE_TABLE = 0, 1, 2
-#: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``.
-S_ONE, S_POW, S_TANH = 0, 1, 2
+#: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``, creep state ``w_k`` (k in ``spow``).
+S_ONE, S_POW, S_TANH, S_CREEP = 0, 1, 2, 3
 #: Input maps h(v) by code: ``"v2"`` is v^2 (DE actuators, Eq. 37), ``"v"`` is v.
 INPUT_MAP_CODES = {"v2": 0, "v": 1}
 
@@ -82,17 +87,23 @@ class TermTable:
         Power ``a_j >= 0`` of q.
     term_skind, term_spow : ndarray of int, shape (J,)
         Velocity factor of each term (:data:`S_ONE`, :data:`S_POW` with power ``term_spow``,
-        :data:`S_TANH`).
+        :data:`S_TANH`, :data:`S_CREEP` with creep state ``term_spow``).
     term_hpow : ndarray of int, shape (J, n_inputs)
         Powers ``c_ji >= 0`` of the mapped inputs.
     input_map : {"v2", "v"}
         h(v) = v^2 [V^2] or v [V].
     coulomb_velocity : float
         v_c of the ``tanh`` factor [unit of q / s].
+    creep_base : ndarray of int, shape (C,)
+        Basis of each creep state, ``w_k' = b_(creep_base[k])(q) q_dot - lambda w_k``
+        [unit of q] (empty: no creep states).
+    creep_rate : float
+        The creep states' relaxation rate lambda = Y_MW / eta_MW [1/s].
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37-40 (RBF terms); Brunton, Proctor & Kutz 2016 (library).
+    Masoud & Maas 2025, Eq. 26 (creep), 37-40 (RBF terms); Brunton, Proctor & Kutz 2016
+    (library).
     """
 
     names: tuple[str, ...]
@@ -111,6 +122,13 @@ class TermTable:
     term_hpow: np.ndarray
     input_map: str = "v2"
     coulomb_velocity: float = 1.0
+    creep_base: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    creep_rate: float = 0.0
+
+    @property
+    def n_creep(self) -> int:
+        """Number of creep states C."""
+        return int(self.creep_base.size)
 
     @property
     def n_terms(self) -> int:
@@ -150,7 +168,9 @@ class TermTable:
                 out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
 
-    def columns(self, q: np.ndarray, s: np.ndarray, hv: np.ndarray) -> np.ndarray:
+    def columns(
+        self, q: np.ndarray, s: np.ndarray, hv: np.ndarray, w: np.ndarray | None = None
+    ) -> np.ndarray:
         """Evaluate every term: the regressor columns (without weights and mass).
 
         Parameters
@@ -161,6 +181,9 @@ class TermTable:
             The velocity-like variable (friction state z or q_dot) [unit of q / s].
         hv : array_like, shape (n, n_inputs)
             Mapped inputs h(v_i).
+        w : array_like, shape (n, C), optional
+            The creep states [unit of q] (:func:`pipeline.identify.friction.creep_states`
+            along a record); default 0 (at rest), so creep terms vanish.
 
         Returns
         -------
@@ -182,6 +205,13 @@ class TermTable:
         tanh = self.term_skind == S_TANH
         if tanh.any():
             out[:, tanh] *= np.tanh(s / self.coulomb_velocity)[:, None]
+        creep = np.flatnonzero(self.term_skind == S_CREEP)
+        if creep.size:
+            states = self.term_spow[creep]
+            if w is None:
+                out[:, creep] = 0.0
+            else:
+                out[:, creep] *= np.asarray(w, dtype=float).reshape(q.size, -1)[:, states]
         for i in range(self.n_inputs):
             for p in np.unique(self.term_hpow[:, i]):
                 if p:
@@ -208,6 +238,8 @@ class TermTable:
             self.term_hpow[keep],
             self.input_map,
             self.coulomb_velocity,
+            self.creep_base,
+            self.creep_rate,
         )
 
 
@@ -223,15 +255,25 @@ class TermTableBuilder:
         h(v).
     coulomb_velocity : float
         v_c [unit of q / s].
+    creep_rate : float
+        Relaxation rate lambda of the creep states [1/s].
     """
 
     n_inputs: int
     input_map: str = "v2"
     coulomb_velocity: float = 1.0
+    creep_rate: float = 0.0
     _bases: list[tuple] = field(default_factory=list)
     _tables: list[np.ndarray] = field(default_factory=list)
     _table_q: np.ndarray | None = None
     _terms: list[tuple] = field(default_factory=list)
+    _creep: list[int] = field(default_factory=list)
+
+    def creep(self, base: int) -> int:
+        """Index of the creep state ``w' = b(q) q_dot - lambda w`` of basis ``base`` (shared)."""
+        if base not in self._creep:
+            self._creep.append(int(base))
+        return self._creep.index(base)
 
     def one(self) -> int:
         """Index of the constant basis."""
@@ -295,6 +337,8 @@ class TermTableBuilder:
             term_hpow=_int([t[5] for t in terms], (len(terms), self.n_inputs)),
             input_map=self.input_map,
             coulomb_velocity=float(self.coulomb_velocity),
+            creep_base=_int(self._creep),
+            creep_rate=float(self.creep_rate),
         )
 
 
@@ -302,8 +346,9 @@ class TermTableBuilder:
 class TableModel:
     """A term table with weights per trajectory, as a free-run model of either engine.
 
-    States ``[q, q_dot, z]`` when ``lag`` (z' = (q_dot - z) / T_z, and z = q_dot where
-    ``T_z = 0``), else ``[q, q_dot]`` with ``s = q_dot``.
+    States ``[q, q_dot, z, w_1..w_C]`` when ``lag`` (z' = (q_dot - z) / T_z, and z = q_dot
+    where ``T_z = 0``), else ``[q, q_dot, w_1..w_C]`` with ``s = q_dot``; the creep states
+    ``w_k' = b_k(q) q_dot - lambda w_k`` only when the table has them (``C > 0``).
 
     Parameters
     ----------
@@ -320,7 +365,7 @@ class TableModel:
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37 (z' = (q' - z) / T_z).
+    Masoud & Maas 2025, Eq. 26 (creep states), Eq. 37 (z' = (q' - z) / T_z).
     """
 
     table: TermTable
@@ -336,19 +381,23 @@ class TableModel:
 
     @property
     def n_states(self) -> int:
-        """3 with the friction state, else 2."""
-        return 3 if self.lag else 2
+        """2, plus 1 with the friction state, plus the creep states C."""
+        return (3 if self.lag else 2) + self.table.n_creep
 
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
-        """States at ``q0``, ``q_dot0`` with the friction filter at rest (z = q_dot)."""
+        """States at ``q0``, ``q_dot0`` with the friction filter at rest (z = q_dot), w = 0."""
         q0, q_dot0 = np.asarray(q0, float), np.asarray(q_dot0, float)
         cols = [q0, q_dot0, q_dot0] if self.lag else [q0, q_dot0]
+        cols += [np.zeros_like(q0)] * self.table.n_creep
         return np.stack(cols, axis=-1)
 
     def max_step(self) -> float:
-        """Largest stable RK4 step of the friction filter [s] (inf without a lag)."""
+        """Largest stable RK4 step of the friction and creep filters [s] (inf without them)."""
         positive = self.T_z[self.T_z > 0]
-        return float(1.5 * positive.min()) if self.lag and positive.size else np.inf
+        out = float(1.5 * positive.min()) if self.lag and positive.size else np.inf
+        if self.table.n_creep and self.table.creep_rate > 0:
+            out = min(out, 1.5 / self.table.creep_rate)
+        return out
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel (:func:`pipeline.kernel.table_arrays`)."""
@@ -366,8 +415,14 @@ class TableModel:
             z_dot = np.where(lagged, (q_dot - s) / np.where(lagged, tz, 1.0), 0.0)
         else:
             s = q_dot
-        cols = self.table.columns(q, s, self.table.map_inputs(v))
+        c0 = 3 if self.lag else 2
+        w = x[:, c0:] if self.table.n_creep else None
+        cols = self.table.columns(q, s, self.table.map_inputs(v), w)
         acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
         acc = acc / np.broadcast_to(self.mass, q.shape)
         derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
+        if self.table.n_creep:
+            b = self.table.bases(q)[:, self.table.creep_base]
+            w_dot = b * q_dot[:, None] - self.table.creep_rate * w
+            return np.column_stack([*derivs, w_dot]), acc
         return np.stack(derivs, axis=1), acc

@@ -69,8 +69,13 @@ def bistable_record():
     return {"t": t, "dt": dt, "q": q, "q_dot": q_dot, "q_ddot": q_ddot, "v": v}
 
 
-def example_rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0, input_map="v2"):
-    """An RBF model with backbone, physics prior (tabulated curves) and friction lag (seeded)."""
+def example_rbf_model(
+    T_z=0.02, outside="clip", prior=True, damping=5.0, input_map="v2", creep_rate=0.0
+):
+    """An RBF model with backbone, physics prior (tabulated curves) and friction lag (seeded).
+
+    With ``creep_rate`` [1/s] > 0 it has the DE creep of Eq. 26 too (seeded weights ~100 N/m).
+    """
     from pipeline.identify.basis import RBFBasis
     from pipeline.identify.model import RBFModel
     from pipeline.identify.terms import PhysicsPrior
@@ -103,6 +108,8 @@ def example_rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0, input_m
         {k: (v * scale if k in ("g_0", "s_g") else v) for k, v in backbone.items()},
         (-0.012, 0.012),
         pri if prior else None,
+        creep_rate,
+        np.random.default_rng(3).normal(0, 20, M) + 100.0 if creep_rate > 0 else None,
     )
 
 

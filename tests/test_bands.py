@@ -259,3 +259,20 @@ def test_an_input_applied_only_in_transit_is_not_identified(bistable_record):
         marked[name] = int(frame.g1_identified.sum())
     assert marked["transit"] == 0
     assert marked["quasi-static"] > 20
+
+
+def test_creep_columns_enter_the_bootstrap_and_vanish_from_the_static_curves(bistable_record):
+    """With creep the bootstrap resamples the creep columns like any other; the curve maps
+    (the static curves, at rest: w = 0) still give the model's curves."""
+    backbone = ["linear_spring", "cubic_spring", "viscous", "offset"]
+    cfg = _cfg(backbone=backbone, bootstrap=20, creep=2.0)
+    model, diag = fit_rbf_model(_records(bistable_record, noise=1.0), cfg)
+    creep = [i for i, n in enumerate(diag.columns) if n.startswith("creep[")]
+    assert len(creep) == 10 and diag.theta_boot.shape == (20, len(diag.columns))
+    assert np.all(np.std(diag.theta_boot[:, creep], axis=0) > 0)
+    q = np.linspace(*model.q_range, 41)
+    maps = curve_maps(diag.columns, q, model.basis, 2, "v2", model.coulomb_velocity, model.prior)
+    assert np.all(maps["restoring"][:, creep] == 0.0)
+    restoring = model.curves(q)["cq"] + model.backbone["F_0"]
+    err = np.max(np.abs(maps["restoring"] @ diag.theta - restoring))
+    assert err <= 1e-12 * np.max(np.abs(restoring))

@@ -461,3 +461,11 @@ def test_hostile_workflow_names_are_escaped_in_every_export(tmp_path, name):
         assert [int(c) for c in out[0].split()] == list(name.encode())  # Octave: UTF-8 chars
         np.testing.assert_allclose([float(s) for s in out[1].split()], got_step, rtol=1e-13)
     assert not (tmp_path / "PWNED").exists()
+
+
+@pytest.mark.parametrize("fmt", ["c", "matlab", "python"])
+def test_export_of_a_model_with_creep_is_refused(fmt):
+    """The exports do not carry the creep states of Eq. 26 yet: a clear error, no code."""
+    model = example_rbf_model(creep_rate=3.7)
+    with pytest.raises(WorkflowError, match="export of a model with creep"):
+        export_files(model, fmt)

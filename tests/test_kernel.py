@@ -28,9 +28,9 @@ def inputs(n, seed, level=1500.0, n_in=2):
     )
 
 
-def rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0):
-    """The shared example model (conftest): backbone, prior and friction lag."""
-    return example_rbf_model(T_z, outside, prior, damping)
+def rbf_model(T_z=0.02, outside="clip", prior=True, damping=5.0, creep_rate=0.0):
+    """The shared example model (conftest): backbone, prior, friction lag (and creep)."""
+    return example_rbf_model(T_z, outside, prior, damping, creep_rate=creep_rate)
 
 
 def sindy_model():
@@ -71,6 +71,36 @@ def test_rbf_model_with_backbone_and_prior(substeps, interpolation, T_z, outside
     assert not any(r.diverged for r in ref)
     assert np.ptp(ref[0].q) > 1e-3  # it moves
     assert_same(ref, new)
+
+
+@pytest.mark.parametrize(("T_z", "substeps"), [(0.02, 1), (0.0, 3)])
+def test_rbf_model_with_creep_states_in_both_engines_and_its_term_table(T_z, substeps):
+    """The creep of Eq. 26 as M extra states w_j' = phi_j(q) q_dot - lambda w_j: the model's
+    own rhs, its term table's NumPy rhs and the compiled kernel agree to 1e-12."""
+    model = rbf_model(T_z, creep_rate=3.7)
+    assert model.n_states == 13 and model.kernel_arrays().n_states == 13
+    records = [inputs(1500, 0), inputs(900, 1)]
+    q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
+    ref, new = both(model, records, q0, qd0, substeps=substeps)
+    table = simulate(model.table_model(), records, DT, q0, qd0, engine="numpy", substeps=substeps)
+    assert_same(ref, new, tol=1e-12)
+    assert_same(ref, table, tol=1e-12)
+    w = ref[0].states[:, 3:]
+    assert np.all(w[0] == 0.0) and np.max(np.abs(w)) > 1e-3  # at rest, then it creeps
+    plain = simulate(rbf_model(T_z), records, DT, q0, qd0, substeps=substeps)
+    assert np.max(np.abs(plain[0].q - ref[0].q)) > 1e-3  # the creep force matters
+
+
+def test_a_lockstep_batch_of_creep_models_equals_one_trajectory_at_a_time(two_threads):
+    model = rbf_model(creep_rate=3.7)
+    records = [inputs(500 + 150 * i, 40 + i) for i in range(5)]
+    q0 = np.linspace(-0.01, 0.01, 5)
+    ref, new = both(model, records, q0, np.zeros(5), substeps=2)
+    assert len(records) > two_threads
+    assert_same(ref, new, tol=1e-12)
+    for i, rec in enumerate(records):
+        one = simulate(model, [rec], DT, q0[i : i + 1], np.zeros(1), substeps=2)
+        np.testing.assert_array_equal(new[i].states, one[0].states)
 
 
 def test_sindy_polynomials_with_input_products():

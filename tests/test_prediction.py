@@ -270,3 +270,31 @@ def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bis
     assert windowed < 0.5 * nrmse(rec["q"], free.q)
     lost = [np.any(np.sign(r) != wells[a:b]) for r, (_, a, b) in zip(runs, windows, strict=True)]
     assert 0 < sum(lost) < 0.5 * len(windows)  # only windows that hold a switch lose it
+
+
+def test_restarts_carry_the_creep_states_of_the_record():
+    """A model with creep (Eq. 26): measured_states filters w_j from q, q_dot like z, so a
+    restarted window continues the free run; restarted at rest (w = 0) it does not."""
+    from conftest import example_rbf_model, excitation
+
+    model = example_rbf_model(T_z=0.05, prior=False, creep_rate=3.7)
+    dt = 0.002
+    t = np.arange(0, 3.0, dt)
+    v = excitation(t)
+    (run,) = simulate(model, [v], dt, np.array([-0.008]), np.array([0.0]), substeps=4)
+    x = model.measured_states(run.q, run.q_dot, dt)
+    assert x.shape == (t.size, 13)
+    w, w_run = x[:, 3:], run.states[:, 3:]
+    assert np.max(np.abs(w - w_run)) < 1e-3 * np.ptp(w_run)
+    q_hat = k_step_prediction(model, run.q, run.q_dot, v, dt, 25, substeps=4)
+    err = np.nanmax(np.abs(q_hat - run.q)) / np.ptp(run.q)
+    assert err < 1e-4
+
+    class AtRest:  # the same model restarted with z = q_dot and w = 0
+        n_states = model.n_states
+        initial_state = staticmethod(model.initial_state)
+        rhs = staticmethod(model.rhs)
+        max_step = staticmethod(model.max_step)
+
+    q_rest = k_step_prediction(AtRest(), run.q, run.q_dot, v, dt, 25, substeps=4)
+    assert np.nanmax(np.abs(q_rest - run.q)) / np.ptp(run.q) > 10 * err

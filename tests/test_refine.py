@@ -143,3 +143,15 @@ def test_the_held_out_blocks_decide_and_their_errors_are_reported(bistable):
     assert np.isfinite(res.holdout_rms_ls) and np.isfinite(res.holdout_rms_refined)
     if res.accepted:
         assert res.holdout_rms_refined < res.holdout_rms_ls
+
+
+def test_refinement_with_creep_is_refused_not_computed_wrong(bistable_record):
+    """The forward sensitivities lack the creep states: config and refine_model refuse."""
+    with pytest.raises(WorkflowError, match=r"\[identify\.refine\] with creep is not supported"):
+        IdentifyConfig.from_dict({"creep": "search", "refine": True})
+    rec = bistable_record
+    cfg = IdentifyConfig.from_dict({"M": 10, "T_z": 0.0, "creep": 2.0, "max_condition": 1e10})
+    records = [Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])]
+    model, diag = fit_rbf_model(records, cfg)
+    with pytest.raises(WorkflowError, match=r"\[identify\.refine\] with creep is not supported"):
+        refine_model(model, diag, records, cfg, refine_config(True))

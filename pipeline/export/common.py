@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from pipeline import __version__
-from pipeline.errors import ArtifactError
+from pipeline.errors import ArtifactError, WorkflowError
 from pipeline.termtable import BASE_GAUSS
 
 __all__ = ["CURVE_POINTS", "ExportInfo", "curve_table"]
@@ -51,7 +51,18 @@ class ExportInfo:
 
 
 def _arrays(model) -> dict[str, Any]:
-    """Collect the constants of the exported model from its term table."""
+    """Collect the constants of the exported model from its term table.
+
+    Raises
+    ------
+    WorkflowError
+        If the model has the creep states of Eq. 26 (not exported yet).
+    """
+    if getattr(model, "has_creep", False):
+        raise WorkflowError(
+            "export of a model with creep ([identify] creep, the M creep states of Eq. 26) "
+            "is not supported yet: identify it with creep = false to export it"
+        )
     tm = model.table_model()
     t = tm.table
     lag = float(model.T_z) > 0

@@ -324,7 +324,7 @@ def _candidate_cfg(base: IdentifyConfig, setting: Mapping[str, Any]) -> Identify
 
 
 def _n_params(cfg: IdentifyConfig, n_inputs: int) -> int:
-    force, inputs = column_names(cfg.rbf, cfg.backbone, cfg.M, n_inputs)
+    force, inputs = column_names(cfg.rbf, cfg.backbone, cfg.M, n_inputs, cfg.creep is not False)
     return len(force) + len(inputs) + (cfg.m_q == "identify")
 
 

@@ -14,6 +14,8 @@ from pipeline.identify.terms import check_terms
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'
+#: Workflow-facing description of ``creep`` (its type is a union).
+_CREEP = 'false, a relaxation rate > 0 [1/s] or "search"'
 #: Workflow-facing description of ``m_q``; ``"physics"`` is resolved by the identify stage.
 _M_Q = 'a mass > 0 [kg], "identify", or "physics" (with a [physics] section)'
 
@@ -47,6 +49,15 @@ class IdentifyConfig:
         0 fixes z = q_dot.
     T_z_bounds : tuple of float or None
         Search interval [s]; default [dt, 100 dt] of the estimation data.
+    creep : False, float or "search"
+        The DEs' Maxwell creep (Masoud & Maas 2025, Eq. 26) as an identified force term:
+        ``sum_j creep_j w_j`` with the creep states w_j' = phi_j(q) q_dot - lambda w_j
+        (k_bar_i constant, k_i(q) in the RBF basis), weights by the same least squares.
+        A number fixes the relaxation rate lambda = Y_MW / eta_MW [1/s]; ``"search"`` finds
+        it by a bounded search like T_z; false (default): Eq. 37 without creep.
+    creep_bounds : tuple of float or None
+        Search interval of lambda [1/s]; default [1 / (duration of the longest estimation
+        record), 1 / (10 dt)].
     m_q : float or "identify"
         Generalised mass [kg]; 1 identifies the curves per unit mass. With
         "identify", ``input_gain`` must fix the input gains instead. In a workflow,
@@ -130,6 +141,14 @@ class IdentifyConfig:
         AsTuple,
         Field(description="[lo, hi] [s] with 0 < lo < hi"),
     ] = None
+    creep: Annotated[
+        Literal[False] | PositiveFloat | Literal["search"], Field(description=_CREEP)
+    ] = False
+    creep_bounds: Annotated[
+        tuple[PositiveFloat, PositiveFloat] | None,
+        AsTuple,
+        Field(description="[lo, hi] [1/s] with 0 < lo < hi"),
+    ] = None
     m_q: Annotated[PositiveFloat | Literal["identify"], Field(description=_M_Q)] = 1.0
     input_gain: Annotated[tuple[FiniteFloat, ...] | None, AsTuple] = None
     coulomb_velocity: PositiveFloat = 1e-3
@@ -167,6 +186,9 @@ class IdentifyConfig:
         bounds = self.T_z_bounds
         if bounds is not None and not bounds[0] < bounds[1]:
             raise ConfigValueError("T_z_bounds", "[lo, hi] [s] with 0 < lo < hi", list(bounds))
+        bounds = self.creep_bounds
+        if bounds is not None and not bounds[0] < bounds[1]:
+            raise ConfigValueError("creep_bounds", "[lo, hi] [1/s] with 0 < lo < hi", list(bounds))
         gains = {"input_gain", "physics_gain"} & set(self.backbone)
         if self.m_q == "identify":
             if self.input_gain is None or "g" in self.rbf or gains:
@@ -186,6 +208,12 @@ class IdentifyConfig:
                 raise ConfigValueError(
                     "constraints", "statements like 'd >= 0', 'g1 >= 0', 'g2 <= 0'", text
                 )
+        if self.refine and self.creep is not False:
+            raise ConfigValueError(
+                "refine",
+                message="[identify.refine] with creep is not supported yet (the forward "
+                "sensitivities lack the creep states): set creep = false or drop the refinement",
+            )
         if self.refine:
             from pipeline.identify.refine import refine_config
 

@@ -11,7 +11,7 @@ from pipeline import preflight
 from pipeline.errors import IdentificationError
 from pipeline.identify.basis import RBFBasis
 from pipeline.identify.config import IdentifyConfig
-from pipeline.identify.friction import friction_state
+from pipeline.identify.friction import creep_states, friction_state
 from pipeline.identify.model import RBFModel
 from pipeline.identify.terms import PHYSICS_TERMS, force_columns, input_columns, input_map
 
@@ -66,6 +66,9 @@ class FitDiagnostics:
         Samples within one width of each centre.
     T_z_trace : ndarray, shape (k, 2)
         (T_z [s], relative residual) of every outer-loop evaluation.
+    creep_trace : ndarray, shape (k, 2)
+        (lambda [1/s], relative residual) of every evaluation of the creep rate's search
+        (empty without ``creep = "search"``).
     theta : ndarray, shape (p,)
         The least-squares parameters, in the order of ``columns``.
     column_norms : ndarray, shape (p,)
@@ -99,6 +102,7 @@ class FitDiagnostics:
     block: int = 0
     smoothing: float = 0.0
     gcv_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+    creep_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -140,13 +144,15 @@ def _system(
     z_all: Sequence[np.ndarray],
     basis: RBFBasis,
     cfg: IdentifyConfig,
+    w_all: Sequence[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Stack regressor rows Psi and outputs y of all records (Eq. 40)."""
+    """Stack regressor rows Psi and outputs y of all records (Eq. 40; creep columns w_all)."""
     rows, ys = [], []
     names: list[str] = []
-    for r, z in zip(records, z_all, strict=True):
+    for i, (r, z) in enumerate(zip(records, z_all, strict=True)):
+        w = None if w_all is None else w_all[i]
         F, f_names = force_columns(
-            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior
+            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w
         )
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
@@ -232,6 +238,12 @@ def fit_rbf_model(
     equation error over log T_z with a bounded scalar search (Brent) and also
     evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
 
+    With ``cfg.creep`` the force side also has the creep columns w_j (the filtered
+    phi_j(q) q_dot, :func:`pipeline.identify.friction.creep_states`) at the relaxation rate
+    lambda; ``creep = "search"`` finds lambda by the same bounded search over log lambda
+    (variable projection of the creep columns), alternating twice with the T_z search when
+    that is searched too (T_z without creep, lambda, T_z with creep, lambda).
+
     Parameters
     ----------
     records : sequence of Record
@@ -258,7 +270,7 @@ def fit_rbf_model(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37-40 and Sec. 4.2 (LS with T_z outer loop).
+    Masoud & Maas 2025, Eq. 26 (creep), 37-40 and Sec. 4.2 (LS with T_z outer loop).
     """
     records = _trimmed(records, cfg.trim)
     n_in = records[0].v.shape[1]
@@ -272,15 +284,29 @@ def fit_rbf_model(
         _check_inputs(records, cfg)
 
     uses_z = "d" in cfg.rbf or bool(set(_Z_TERMS) & set(cfg.backbone))
+    dt = min(r.dt for r in records)
+    T_z_bounds = cfg.T_z_bounds or (dt, 100.0 * dt)
     if cfg.T_z != "search" or not uses_z:
         T_z = float(cfg.T_z) if cfg.T_z != "search" else 0.0
         trace = np.empty((0, 2))
     else:
-        dt = min(r.dt for r in records)
-        T_z, trace = _search_T_z(records, basis, cfg, cfg.T_z_bounds or (dt, 100.0 * dt))
+        T_z, trace = _search_T_z(records, basis, cfg, T_z_bounds)
+    rate, creep_trace = 0.0, np.empty((0, 2))
+    if cfg.creep == "search":
+        duration = max((r.q.size - 1) * r.dt for r in records)
+        bounds = cfg.creep_bounds or (1.0 / duration, 0.1 / dt)
+        rate, creep_trace = _search_creep(records, basis, cfg, bounds, T_z)
+        if cfg.T_z == "search" and uses_z:  # once more, each with the other's estimate
+            w_all = _creep_columns(records, basis, rate)
+            T_z, trace_2 = _search_T_z(records, basis, cfg, T_z_bounds, w_all)
+            rate, creep_2 = _search_creep(records, basis, cfg, bounds, T_z)
+            trace, creep_trace = np.vstack([trace, trace_2]), np.vstack([creep_trace, creep_2])
+    elif cfg.creep:
+        rate = float(cfg.creep)
 
     z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
-    psi, y, names = _system(records, z_all, basis, cfg)
+    w_all = _creep_columns(records, basis, rate) if rate > 0 else None
+    psi, y, names = _system(records, z_all, basis, cfg, w_all)
     theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
     estimator, gcv_trace = _estimator(psi, y, names, cfg)
     if not estimator.plain:
@@ -288,7 +314,7 @@ def fit_rbf_model(
         Q, R = np.linalg.qr(psi / scale)
         theta = estimator.solve(R, Q.T @ y) / scale
         resid = y - psi @ theta
-    model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range)
+    model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
         from pipeline.identify.bands import block_bootstrap
@@ -314,8 +340,51 @@ def fit_rbf_model(
         block=block,
         smoothing=estimator.lam,
         gcv_trace=gcv_trace,
+        creep_trace=creep_trace,
     )
     return model, diag
+
+
+def _creep_columns(records: Sequence[Record], basis: RBFBasis, rate: float) -> list[np.ndarray]:
+    """Return the creep states w_j (n, M) of every record at the relaxation rate [1/s]."""
+    return [creep_states(basis(r.q), r.q_dot, r.dt, rate) for r in records]
+
+
+def _search_creep(records, basis, cfg, bounds, T_z):
+    """Bounded search of the creep rate lambda by variable projection (as :func:`_search_T_z`).
+
+    Only the creep columns depend on lambda: every other column (with z at ``T_z``) is
+    factorised once and projected out; each evaluation solves the small least squares of the
+    projected creep columns for the relative equation error, minimised over log lambda.
+
+    Returns lambda [1/s] and the trace (lambda, relative residual), shape (k, 2).
+    """
+    z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
+    a_fixed, y, _ = _system(records, z_all, basis, cfg)
+    Q, _ = np.linalg.qr(a_fixed)
+    y_perp = y - Q @ (Q.T @ y)
+    trace: list[tuple[float, float]] = []
+
+    def cost(rate: float) -> float:
+        w_all = _creep_columns(records, basis, rate)
+        cols = [_prefilter(w, r, cfg) for r, w in zip(records, w_all, strict=True)]
+        B = np.vstack(cols)
+        B_perp = B - Q @ (Q.T @ B)
+        coef, *_ = np.linalg.lstsq(B_perp, y_perp, rcond=None)
+        value = float(np.linalg.norm(y_perp - B_perp @ coef) / np.linalg.norm(y))
+        trace.append((rate, value))
+        return value
+
+    from scipy.optimize import minimize_scalar
+
+    lo, hi = bounds
+    res = minimize_scalar(
+        lambda s: cost(float(np.exp(s))),
+        bounds=(np.log(lo), np.log(hi)),
+        method="bounded",
+        options={"xatol": 1e-3},
+    )
+    return float(np.exp(res.x)), np.array(trace, dtype=float)
 
 
 def _estimator(psi, y, names, cfg: IdentifyConfig):
@@ -340,17 +409,18 @@ def _estimator(psi, y, names, cfg: IdentifyConfig):
     return Estimator(penalty, lam, lower, upper), trace
 
 
-def _search_T_z(records, basis, cfg, bounds):
+def _search_T_z(records, basis, cfg, bounds, w_all=None):
     """Bounded search of T_z by variable projection (Masoud & Maas 2025, Sec. 4.2).
 
     Only the friction columns (those multiplied by z) depend on T_z: the other
-    columns are factorised once (QR) and projected out, so each evaluation of the
-    relative equation error solves a small least-squares problem.
+    columns (with the creep columns ``w_all`` when given) are factorised once (QR) and
+    projected out, so each evaluation of the relative equation error solves a small
+    least-squares problem.
     """
     zero = [np.zeros_like(r.q) for r in records]
     fixed_cfg = replace(cfg, rbf=tuple(t for t in cfg.rbf if t != "d"))
     fixed_cfg = replace(fixed_cfg, backbone=tuple(b for b in cfg.backbone if b not in _Z_TERMS))
-    a_fixed, y, _ = _system(records, zero, basis, fixed_cfg)
+    a_fixed, y, _ = _system(records, zero, basis, fixed_cfg, w_all)
     Q, _ = np.linalg.qr(a_fixed)
     y_perp = y - Q @ (Q.T @ y)
     z_rbf = ("d",) if "d" in cfg.rbf else ()
@@ -390,8 +460,8 @@ def _search_T_z(records, basis, cfg, bounds):
 _Z_TERMS = ("viscous", "coulomb", "physics_damping")
 
 
-def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
-    """Map the parameter vector back onto the model's curves and backbone."""
+def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0) -> RBFModel:
+    """Map the parameter vector back onto the model's curves, backbone and creep weights."""
     value = dict(zip(names, theta, strict=True))
     M = basis.M
     vec = lambda prefix: np.array([value.get(f"{prefix}[{i}]", 0.0) for i in range(M)])  # noqa: E731
@@ -433,4 +503,6 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range) -> RBFModel:
         backbone=backbone,
         q_range=(float(q_range[0]), float(q_range[1])),
         prior=cfg.prior if uses_prior else None,
+        creep_rate=float(creep_rate),
+        theta_creep=vec("creep") if creep_rate > 0 else None,
     )

@@ -61,3 +61,52 @@ def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:
     zi = lfiltic(b, den, y=[q_dot[0]], x=[q_dot[0]])
     z, _ = lfilter(b, den, q_dot, zi=zi)
     return z
+
+
+def creep_states(phi: np.ndarray, q_dot: np.ndarray, dt: float, rate: float) -> np.ndarray:
+    """Filter ``phi_j(q) q_dot`` through w_j' = phi_j(q) q_dot - lambda w_j: the creep states.
+
+    The creep of the DEs (Masoud & Maas 2025, Eq. 26, q_eps' = k(q) q' - (Y_MW/eta_MW) q_eps)
+    with k(q) written in the RBF basis: ``w_j = z_j / lambda`` where z_j is ``phi_j q_dot``
+    through the friction filter of :func:`friction_state` with ``T_z = 1 / lambda`` (the same
+    exact first-order-hold discretisation, started at rest relative to its input, which is
+    w = 0 for a record that starts at rest).
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n, M)
+        The basis along the record, phi_j(q) (:class:`pipeline.identify.basis.RBFBasis`).
+    q_dot : ndarray, shape (n,)
+        Velocity [unit of q / s].
+    dt : float
+        Sample time [s].
+    rate : float
+        Relaxation rate lambda = Y_MW / eta_MW [1/s], > 0.
+
+    Returns
+    -------
+    ndarray, shape (n, M)
+        The creep states w_j [unit of q].
+
+    Raises
+    ------
+    ValueError
+        If ``dt <= 0`` or ``rate <= 0``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26 (Maxwell creep), Eq. 37 (the friction filter).
+
+    Examples
+    --------
+    A constant input settles at phi q_dot / lambda:
+
+    >>> w = creep_states(np.ones((4, 1)), np.full(4, 2.0), dt=0.01, rate=4.0)
+    >>> w[:, 0].tolist()
+    [0.5, 0.5, 0.5, 0.5]
+    """
+    if not rate > 0:
+        raise ValueError(f"`rate` must be positive, got {rate!r}")
+    u = np.asarray(phi, dtype=float) * np.asarray(q_dot, dtype=float)[:, None]
+    cols = [friction_state(col, dt, 1.0 / rate) for col in u.T]
+    return np.stack(cols, axis=1) / rate if cols else u.copy()

@@ -22,7 +22,10 @@ class RBFModel:
     The fitted form of Eq. 37 with optional physical backbone: the curves are
     the RBF sums of Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 +
     k_3 q^2 + s_c c_phys``, ``d = Phi theta_d + d_v + s_d d_phys``,
-    ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``).
+    ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``). With creep (``creep_rate > 0``) the
+    force side has the DEs' creep of Eq. 26 too, ``+ sum_j theta_creep,j w_j`` with the
+    creep states ``w_j' = phi_j(q) q' - lambda w_j`` (lambda = ``creep_rate``); the state is
+    then ``[q, q_dot, z, w_1..w_M]``.
 
     Parameters
     ----------
@@ -50,6 +53,10 @@ class RBFModel:
         Range of q in the estimation data [unit of q].
     prior : PhysicsPrior or None
         The analytical model's curves ``c_phys, d_phys, g_phys`` when the backbone uses them.
+    creep_rate : float
+        Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; 0: no creep.
+    theta_creep : ndarray, shape (M,) or None
+        Weights of the creep force sum_j theta_creep,j w_j [N per unit of q] (with creep).
 
     Notes
     -----
@@ -73,8 +80,18 @@ class RBFModel:
     backbone: dict[str, Any] = field(default_factory=dict)
     q_range: tuple[float, float] = (0.0, 0.0)
     prior: PhysicsPrior | None = None
+    creep_rate: float = 0.0
+    theta_creep: np.ndarray | None = None
 
-    n_states = 3
+    @property
+    def has_creep(self) -> bool:
+        """Whether the model has the creep states (``creep_rate > 0``)."""
+        return self.creep_rate > 0
+
+    @property
+    def n_states(self) -> int:
+        """3 (``[q, q_dot, z]``), plus M creep states with creep."""
+        return 3 + (self.basis.M if self.has_creep else 0)
 
     def curves(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Evaluate the identified characteristic curves.
@@ -107,7 +124,9 @@ class RBFModel:
         """Stacked RBF weights, shape (M, 2 + n_inputs): columns c, d, g_1..g_N."""
         return np.column_stack([self.theta_c, self.theta_d, self.theta_g.T])
 
-    def accel(self, q: np.ndarray, z: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def accel(
+        self, q: np.ndarray, z: np.ndarray, v: np.ndarray, creep: np.ndarray | None = None
+    ) -> np.ndarray:
         """Acceleration of Eq. 37 solved for q''.
 
         Parameters
@@ -118,6 +137,8 @@ class RBFModel:
             Friction states [unit of q / s].
         v : ndarray, shape (B, n_inputs)
             Inputs [V].
+        creep : ndarray, shape (B, M), optional
+            Creep states w [unit of q] (models with creep); default 0 (at rest).
 
         Returns
         -------
@@ -138,6 +159,8 @@ class RBFModel:
             force = force - bb["F_0"]
         if bb.get("F_c", 0.0):
             force = force - bb["F_c"] * np.tanh(z / self.coulomb_velocity)
+        if self.has_creep and creep is not None:
+            force = force - np.asarray(creep, dtype=float) @ self.theta_creep
         return force / self.m_q
 
     def parameters(self) -> tuple[list[str], np.ndarray]:
@@ -164,6 +187,9 @@ class RBFModel:
 
         add("c", self.theta_c)
         add("d", self.theta_d)
+        if self.has_creep:  # every creep state, so that the state vector is [q, q_dot, z, w]
+            names.extend(f"creep[{k}]" for k in range(M))
+            values.extend(np.asarray(self.theta_creep, dtype=float).tolist())
         for j in range(self.n_inputs):
             add(f"g{j + 1}", self.theta_g[j])
         bb = self.backbone
@@ -188,7 +214,8 @@ class RBFModel:
         -------
         TableModel
             Terms of :meth:`parameters`, weights ``-theta`` (force side) or ``+theta``
-            (inputs), mass ``m_q``, this ``T_z``, with the friction state z.
+            (inputs), mass ``m_q``, this ``T_z``, with the friction state z (and the creep
+            states with their rate lambda).
 
         References
         ----------
@@ -199,8 +226,9 @@ class RBFModel:
 
         names, values = self.parameters()
         table = term_table(
-            names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior
-        )
+            names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior,
+            creep_rate=self.creep_rate,
+        )  # fmt: skip
         signs = np.array([term_sign(n) for n in names])
         return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
 
@@ -215,7 +243,9 @@ class RBFModel:
         return table_arrays(self.table_model())
 
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
-        """State ``[q, q_dot, z]`` at rest relative to the friction filter (z = q_dot).
+        """State ``[q, q_dot, z, w]`` at rest relative to the friction filter (z = q_dot).
+
+        The creep states (with creep) start at rest, w = 0.
 
         Parameters
         ----------
@@ -224,11 +254,14 @@ class RBFModel:
 
         Returns
         -------
-        ndarray, shape (B, 3)
+        ndarray, shape (B, n_states)
         """
         q0 = np.asarray(q0, dtype=float)
         q_dot0 = np.asarray(q_dot0, dtype=float)
-        return np.stack([q0, q_dot0, q_dot0], axis=-1)
+        cols = [q0, q_dot0, q_dot0]
+        if self.has_creep:
+            cols += [np.zeros_like(q0)] * self.basis.M
+        return np.stack(cols, axis=-1)
 
     def measured_states(self, q: np.ndarray, q_dot: np.ndarray, dt: float) -> np.ndarray:
         """States ``[q, q_dot, z]`` along a measured record, z filtered from the velocity.
@@ -237,7 +270,8 @@ class RBFModel:
         there; z = q_dot (:meth:`initial_state`) holds only at rest. Here z is the measured
         velocity passed through the model's own filter z' = (q_dot - z) / T_z from the
         record's start (:func:`pipeline.identify.friction.friction_state`), as the
-        regression of Eq. 40 builds it.
+        regression of Eq. 40 builds it. The creep states likewise filter phi_j(q) q_dot
+        (:func:`pipeline.identify.friction.creep_states`).
 
         Parameters
         ----------
@@ -248,31 +282,35 @@ class RBFModel:
 
         Returns
         -------
-        ndarray, shape (n, 3)
+        ndarray, shape (n, n_states)
 
         References
         ----------
-        Masoud & Maas 2025, Eq. 37.
+        Masoud & Maas 2025, Eq. 26, 37.
         """
-        from pipeline.identify.friction import friction_state
+        from pipeline.identify.friction import creep_states, friction_state
 
         q = np.asarray(q, dtype=float)
         q_dot = np.asarray(q_dot, dtype=float)
-        return np.stack([q, q_dot, friction_state(q_dot, dt, self.T_z)], axis=-1)
+        out = np.stack([q, q_dot, friction_state(q_dot, dt, self.T_z)], axis=-1)
+        if self.has_creep:
+            w = creep_states(self.basis(q), q_dot, dt, self.creep_rate)
+            out = np.concatenate([out, w], axis=1)
+        return out
 
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """State derivative for the free-run simulator.
 
         Parameters
         ----------
-        x : ndarray, shape (B, 3)
-            States ``[q, q_dot, z]``.
+        x : ndarray, shape (B, n_states)
+            States ``[q, q_dot, z, w_1..w_M]`` (w with creep only).
         v : ndarray, shape (B, n_inputs)
             Inputs [V].
 
         Returns
         -------
-        x_dot : ndarray, shape (B, 3)
+        x_dot : ndarray, shape (B, n_states)
         q_ddot : ndarray, shape (B,)
             The acceleration (second column of ``x_dot``).
         """
@@ -282,17 +320,25 @@ class RBFModel:
             z = q_dot
         else:
             z_dot = (q_dot - z) / self.T_z
-        a = self.accel(q, z, v)
-        return np.stack([q_dot, a, z_dot], axis=1), a
+        if not self.has_creep:
+            a = self.accel(q, z, v)
+            return np.stack([q_dot, a, z_dot], axis=1), a
+        w = x[:, 3:]
+        a = self.accel(q, z, v, w)
+        w_dot = self.basis(q) * q_dot[:, None] - self.creep_rate * w
+        return np.column_stack([q_dot, a, z_dot, w_dot]), a
 
     def max_step(self) -> float:
-        """Largest stable RK4 step for the friction filter [s] (inf when T_z = 0)."""
-        return np.inf if self.T_z == 0 else 1.5 * self.T_z
+        """Largest stable RK4 step for the friction and creep filters [s] (inf without)."""
+        out = np.inf if self.T_z == 0 else 1.5 * self.T_z
+        return min(out, 1.5 / self.creep_rate) if self.has_creep else out
 
     @property
     def n_params(self) -> int:
         """Number of nonzero parameters."""
         vals = [self.theta_c, self.theta_d, self.theta_g.ravel()]
+        if self.has_creep:  # the weights and lambda
+            vals += [np.asarray(self.theta_creep, dtype=float), np.array([self.creep_rate])]
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
         # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
@@ -312,6 +358,12 @@ class RBFModel:
             backbone["s_g"] = np.asarray(self.backbone["s_g"], dtype=float)
         if self.prior is not None:
             backbone["prior"] = self.prior.to_tree()
+        model: dict[str, Any] = {}
+        if self.has_creep:  # only then: a model without creep keeps its bytes
+            model["creep"] = {
+                "attrs": {"creep_rate": self.creep_rate, "equation": "Masoud & Maas 2025, Eq. 26"},
+                "theta_creep": np.asarray(self.theta_creep, dtype=float),
+            }
         return {
             "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
             "model": {
@@ -331,6 +383,7 @@ class RBFModel:
                 "theta_d": self.theta_d,
                 "theta_g": self.theta_g,
                 "backbone": backbone,
+                **model,
             },
         }
 
@@ -354,6 +407,7 @@ class RBFModel:
         if "s_g" in m["backbone"]:
             backbone["s_g"] = np.asarray(m["backbone"]["s_g"], dtype=float)
         prior = m["backbone"].get("prior")
+        creep = m.get("creep")
         return cls(
             basis=RBFBasis(np.asarray(m["xi"], float), float(a["sigma"]), str(a["outside"])),
             input_map=str(a["input_map"]),
@@ -371,4 +425,6 @@ class RBFModel:
             else PhysicsPrior(
                 **{k: np.asarray(prior[k], dtype=float) for k in ("q", "c", "d", "g")}
             ),
+            creep_rate=0.0 if creep is None else float(creep["attrs"]["creep_rate"]),
+            theta_creep=None if creep is None else np.asarray(creep["theta_creep"], float),
         )

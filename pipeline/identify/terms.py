@@ -20,7 +20,7 @@ import numpy as np
 
 from pipeline.errors import WorkflowError
 from pipeline.identify.basis import RBFBasis
-from pipeline.termtable import S_POW, S_TANH, TermTable, TermTableBuilder
+from pipeline.termtable import S_CREEP, S_POW, S_TANH, TermTable, TermTableBuilder
 
 #: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
 RBF_TERMS = ("c", "d", "g")
@@ -148,7 +148,7 @@ def check_terms(rbf: Sequence[str], backbone: Sequence[str]) -> None:
 
 
 def column_names(
-    rbf: Sequence[str], backbone: Sequence[str], M: int, n_inputs: int
+    rbf: Sequence[str], backbone: Sequence[str], M: int, n_inputs: int, creep: bool = False
 ) -> tuple[list[str], list[str]]:
     """Names of the regressor columns of Eq. 40 with the backbone, in their order.
 
@@ -160,6 +160,9 @@ def column_names(
         Number of RBF centres.
     n_inputs : int
         Number of inputs.
+    creep : bool, optional
+        Whether the model has the creep force ``sum_i creep[i] w_i`` (Eq. 26 in the RBF
+        basis: ``creep[i]`` after the ``d[i]``).
 
     Returns
     -------
@@ -180,6 +183,8 @@ def column_names(
         force += [f"c[{i}]" for i in range(M)]
     if "d" in rbf:
         force += [f"d[{i}]" for i in range(M)]
+    if creep:
+        force += [f"creep[{i}]" for i in range(M)]
     force += [name for name in backbone if name in _FORCE_SCALARS or name in _PHYSICS_FORCE]
     inputs: list[str] = []
     if "g" in rbf:
@@ -199,6 +204,7 @@ def force_columns(
     backbone: Sequence[str],
     coulomb_velocity: float,
     prior: PhysicsPrior | None = None,
+    w: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
 
@@ -216,11 +222,15 @@ def force_columns(
         v_c of the smoothed Coulomb term [unit of q / s].
     prior : PhysicsPrior, optional
         The analytical model's curves (needed by the ``physics_*`` terms).
+    w : ndarray, shape (n, M), optional
+        The creep states along the record [unit of q]
+        (:func:`pipeline.identify.friction.creep_states`); given: the creep columns
+        ``creep[i]`` = w_i follow the ``d[i]``.
 
     Returns
     -------
     columns : ndarray, shape (n, p_F)
-        ``[Phi q, Phi z, q, q^3, z, tanh(z/v_c), 1, c_phys q, d_phys z]`` restricted to
+        ``[Phi q, Phi z, W, q, q^3, z, tanh(z/v_c), 1, c_phys q, d_phys z]`` restricted to
         active terms (:func:`term_table`, the one definition of the terms).
     names : list of str
         One name per column (:func:`column_names`).
@@ -231,9 +241,9 @@ def force_columns(
         If a ``physics_*`` term is active without ``prior``.
     """
     q = np.asarray(q, dtype=float)
-    names, _ = column_names(rbf, backbone, basis.M, 1)
+    names, _ = column_names(rbf, backbone, basis.M, 1, creep=w is not None)
     table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
-    return table.columns(q, z, np.zeros((q.size, 1))), names
+    return table.columns(q, z, np.zeros((q.size, 1)), w), names
 
 
 def input_columns(
@@ -314,6 +324,7 @@ def term_table(
     input_map_kind: str,
     coulomb_velocity: float,
     prior: PhysicsPrior | None = None,
+    creep_rate: float = 0.0,
 ) -> TermTable:
     """Build the term library of Eq. 37: one term per regressor column name, as a term table.
 
@@ -328,7 +339,8 @@ def term_table(
         ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), the backbone
         names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
         tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``physics_spring``
-        (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)).
+        (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
+        ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26).
     basis : RBFBasis
         Centres and width (Eq. 38-39); ``outside = "clip"`` holds q at the range's edge.
     n_inputs : int
@@ -339,6 +351,9 @@ def term_table(
         v_c [unit of q / s].
     prior : PhysicsPrior, optional
         The analytical curves of the ``physics_*`` terms.
+    creep_rate : float, optional
+        Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; with ``creep[i]``
+        names every centre gets its creep state (state i has basis Phi_i).
 
     Returns
     -------
@@ -355,11 +370,15 @@ def term_table(
     Masoud & Maas 2025, Eq. 37-40.
     """
     lo, hi = (basis.xi[0], basis.xi[-1]) if basis.outside == "clip" else (-np.inf, np.inf)
-    build = TermTableBuilder(n_inputs, input_map_kind, coulomb_velocity)
+    build = TermTableBuilder(n_inputs, input_map_kind, coulomb_velocity, creep_rate)
     prior_base: dict[str, int] = {}
 
     def gauss(k: int) -> int:
         return build.gauss(basis.xi[k], basis.sigma, lo, hi)  # shared by c, d, g of centre k
+
+    if any(name.startswith("creep[") for name in names):
+        for k in range(basis.M):  # creep state k filters Phi_k q_dot, whichever terms are kept
+            build.creep(gauss(k))
 
     def tabulated(key: str, column: np.ndarray) -> int:
         if key not in prior_base:
@@ -379,6 +398,8 @@ def term_table(
                 build.term(name, gauss(k), qpow=1)
             elif rbf == "d":
                 build.term(name, gauss(k), skind=S_POW, spow=1)
+            elif rbf == "creep":
+                build.term(name, build.one(), skind=S_CREEP, spow=k)
             elif rbf.startswith("g") and rbf[1:].isdigit():
                 build.term(name, gauss(k), hpow=h(int(rbf[1:]) - 1))
             else:

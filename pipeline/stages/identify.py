@@ -160,6 +160,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "bands": {"label": band_label(cfg.model_error), "model_error": model_error or {}},
         "smoothing": diag.smoothing,
         "excitation": excitation.to_summary(),
+        **({"creep_rate": model.creep_rate} if model.has_creep else {}),
         "design": {
             "verdict": design["equilibria"].attrs["verdict"],
             "reason": design["equilibria"].attrs["reason"],
@@ -234,6 +235,7 @@ def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
         "T_z_trace": diag.T_z_trace,
         **({} if diag.theta_boot is None else {"theta_boot": diag.theta_boot}),
         **({"gcv_trace": diag.gcv_trace} if diag.gcv_trace.size else {}),
+        **({"creep_trace": diag.creep_trace} if diag.creep_trace.size else {}),
     }
 
 
