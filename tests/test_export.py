@@ -202,7 +202,7 @@ fclose(fid);
     return np.loadtxt(folder / "q.txt"), curves
 
 
-@pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave-cli)")
+@pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave)")
 @pytest.mark.parametrize("key", list(MODELS))
 def test_matlab_export_matches_free_run_in_octave(tmp_path, key):
     model, v, ref = free_run(key)
