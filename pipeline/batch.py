@@ -131,7 +131,7 @@ class BatchResult:
         when it was considered, which includes the RBF rows, else the validate
         stage's), when one of those stages was considered; ``"design"``, the identified
         model's equilibria and switching voltages (the identify summary's), and
-        ``"q_unit"``, the SI unit of q.
+        ``"q_unit"``, the SI unit of q, and ``"input_units"``, the SI unit of each input.
     worker : str
         ``"<host>:<pid>"`` of the process that ran the workflow; the address of the last
         Dask worker for a workflow whose worker processes died.
@@ -372,7 +372,11 @@ def run_workflow_item(
             break
     if "identify" in manifests and manifests["identify"].summary.get("design"):
         summary["design"] = manifests["identify"].summary["design"]
-        summary["q_unit"] = manifests["identify"].summary.get("units", {}).get("q", "m")
+        units = manifests["identify"].summary.get("units", {})
+        summary["q_unit"] = units.get("q", "m")
+        summary["input_units"] = [
+            units[k] for k in sorted(units) if k[:1] == "v" and k[1:].isdigit()
+        ]
     return BatchResult(
         path=path,
         name=name,
@@ -808,6 +812,7 @@ def write_index(
                 nrmse=r.summary.get("nrmse", []),
                 design=r.summary.get("design"),
                 q_unit=r.summary.get("q_unit", "m"),
+                input_units=r.summary.get("input_units", ()),
                 link=link,
                 note=r.note,
             )

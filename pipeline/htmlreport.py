@@ -323,14 +323,14 @@ h1 { font-size: 1.5rem; }
 <body>
 <h1>debist batch: {{ rows|length }} prototypes, {{ failed }} failed</h1>
 <p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
-(Eq. 41), its wells at rest and its switching voltages. Each name links to the prototype's
-report.</p>
+(Eq. 41), its wells at rest and its switching levels (in each input's unit). Each name links
+to the prototype's report.</p>
 {% macro cell(text) %}{% set head, sep, tail = text.partition(" (") %}{{ head }}\
 {% if sep %}<span class="note"> ({{ tail }}</span>{% endif %}{% endmacro %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>prototype</th><th>workflow file</th><th>status</th>
 {% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
-<th>wells q* at rest</th><th>switching voltages [V]</th></tr>
+<th>wells q* at rest</th><th>switching levels</th></tr>
 {% for r in rows %}
 <tr><td class="text">{% if r.link %}<a href="{{ r.link }}">{{ r.name }}</a>{% else %}{{ r.name }}\
 {% endif %}</td><td class="text">{{ r.file }}</td>
@@ -592,16 +592,17 @@ def _wells(design: Mapping[str, Any] | None, unit: str = "m") -> str:
     return ", ".join(f"{factor * q:.4g}" for q in wells) + f" {label}" + note
 
 
-def _switching(design: Mapping[str, Any] | None) -> str:
-    """Return the identified model's switching voltage per input (or "none")."""
+def _switching(design: Mapping[str, Any] | None, units: Sequence[str] = ()) -> str:
+    """Return the identified model's switching level per input with its unit (or "none")."""
     parts = []
     for r in (design or {}).get("switching", []):
         if r.get("model") != "rbf":
             continue
-        value = r.get("v_switch")
-        text = f"{value:.0f}" if not _missing(value) else "none"
+        value, i = r.get("v_switch"), int(r.get("input", 0))
+        unit = units[i - 1] if 0 < i <= len(units) else "V"
+        text = f"{value:.4g} {unit}" if not _missing(value) else "none"
         text += " (not identified)" if not _missing(value) and r.get("identified") is False else ""
-        parts.append(f"v{r.get('input')}: {text}")
+        parts.append(f"v{i}: {text}")
     return ", ".join(parts) or "-"
 
 
@@ -614,6 +615,7 @@ def index_row(
     nrmse: Sequence[Mapping[str, Any]] = (),
     design: Mapping[str, Any] | None = None,
     q_unit: str = "m",
+    input_units: Sequence[str] = (),
     link: str | None = None,
     note: str = "",
 ) -> dict[str, Any]:
@@ -633,9 +635,11 @@ def index_row(
         Rows of its NRMSE table (the validate or compare summary's ``table``); the
         ``rbf`` rows are shown (NRMSE dimensionless, Eq. 41).
     design : dict, optional
-        The identify summary's ``design`` (equilibria [SI] and switching voltages [V]).
+        The identify summary's ``design`` (equilibria and switching levels [SI]).
     q_unit : str, optional
         SI unit of q (wells in m are shown in mm).
+    input_units : sequence of str, optional
+        SI unit of each input (the switching levels are shown in it; V where not given).
     link : str, optional
         Relative URL of its report page (None: no report).
     note : str, optional
@@ -646,7 +650,8 @@ def index_row(
     dict
         The row for :func:`render_index`: ``nrmse`` maps data set to a percentage text
         (``"unstable"``, ``"diverged"`` instead where that is the verdict), ``wells`` the
-        wells at rest with their unit, ``switching`` the switching voltage per input [V].
+        wells at rest with their unit, ``switching`` the switching level per input with its
+        unit.
     """
     scores = {}
     for r in nrmse:
@@ -669,7 +674,7 @@ def index_row(
         "note": note,
         "nrmse": scores,
         "wells": _wells(design, q_unit),
-        "switching": _switching(design),
+        "switching": _switching(design, input_units),
         "link": link,
     }
 

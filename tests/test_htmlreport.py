@@ -273,7 +273,10 @@ def test_index_rows_and_page(run):
         index_row("proto-1", "fleet/proto-1.toml", "failed", error="IdentificationError: x < y"),
     ]  # fmt: skip
     assert rows[0]["nrmse"] == {"unseen": "1.13 %"}  # the identified model's rows only
-    assert rows[0]["wells"] == "-9.516 mm" and rows[0]["switching"] == "v1: 1976, v2: none"
+    assert rows[0]["wells"] == "-9.516 mm" and rows[0]["switching"] == "v1: 1976 V, v2: none"
+    # the switching level in its input's own unit (an acceleration input)
+    accel = index_row("a", "a.toml", "done", design=design, input_units=["m/s**2", "V"])
+    assert accel["switching"] == "v1: 1976 m/s**2, v2: none"
     assert index_row("x", "x.toml", "done", design=design, q_unit="V")["wells"] == "-0.009516 V"
     assert rows[1]["wells"] == "-" and rows[1]["link"] is None
     html = render_index(rows)
@@ -283,7 +286,7 @@ def test_index_rows_and_page(run):
     table = [r for r in parser.rows if len(r) == 6]
     assert table[0][0] == "prototype" and table[0][3] == "NRMSE(q) unseen"
     assert table[1] == ["proto-0", "fleet/proto-0.toml", "done", "1.13 %", "-9.516 mm",
-                        "v1: 1976, v2: none"]  # fmt: skip
+                        "v1: 1976 V, v2: none"]  # fmt: skip
     assert table[2][3] == "-"
     assert "http" not in html and "<script" not in html
 
