@@ -31,7 +31,14 @@ from pydantic import PositiveFloat
 
 from pipeline.config import CONFIG, config_from_section
 from pipeline.errors import ArtifactError
-from pipeline.report import auto_line, equilibrium_kind, switching_note, switching_word, verdict
+from pipeline.report import (
+    auto_line,
+    equilibrium_kind,
+    not_modelled,
+    switching_note,
+    switching_word,
+    verdict,
+)
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -377,7 +384,9 @@ def _nrmse_rows(rows: list[dict[str, Any]]) -> tuple[list[str], list[dict[str, A
         cells = []
         for key, _ in keys:
             value = r.get(key)
-            if failed or _missing(value):
+            if not_modelled(r, key):
+                cells.append({"text": "n/a", "bad": False})
+            elif failed or _missing(value):
                 text = failure if failed or value is not None else "-"
                 cells.append({"text": text, "bad": text != "-"})
             else:

@@ -298,11 +298,31 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     for r in rows:
         status = r.get("status") or "diverged"
         failed = status if status != "ok" else "diverged"
-        pct = [(failed if math.isnan(r[k]) else f"{100 * r[k]:.2f} %") for k in keys]
+        pct = [
+            ("n/a" if not_modelled(r, k) else failed if math.isnan(r[k]) else f"{100 * r[k]:.2f} %")
+            for k in keys
+        ]
         extra = [str(r["n_params"])] if params else []
         rms_cell = failed if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
         table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, verdict(r, rows))
     return table
+
+
+#: Models that predict q only (a NARX model): their velocity and acceleration columns are "n/a".
+OUTPUT_ONLY = ("narx",)
+
+
+def not_modelled(row: dict[str, Any], key: str) -> bool:
+    """Whether column ``key`` of an NRMSE row is one its model does not predict.
+
+    Examples
+    --------
+    >>> not_modelled({"model": "narx"}, "nrmse_q_dot")
+    True
+    >>> not_modelled({"model": "rbf"}, "nrmse_q_dot")
+    False
+    """
+    return row.get("model") in OUTPUT_ONLY and key in ("nrmse_q_dot", "nrmse_q_ddot")
 
 
 #: A free run whose NRMSE(q) exceeds this share of the mean's is called poor (a lost switch

@@ -392,8 +392,10 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     compare = None
     if "compare" in raw:
         sindy = {"input_map": raw.get("identify", {}).get("input_map", "v2"), **raw["compare"]}
+        from pipeline.narx import NarxConfig
         from pipeline.sindy import SindyConfig
 
+        NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
         compare = SindyConfig.from_dict(sindy, "[compare]")
     study = _study(raw, specs) if "study" in raw else None
     analyze = None

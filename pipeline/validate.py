@@ -430,6 +430,47 @@ def validate_model(
             ),
         )
         results.update({ds.name: sim for ds, sim in zip(group, sims, strict=True)})
+    return score_free_runs(model_name, datasets, results, cfg, phi)
+
+
+def score_free_runs(
+    model_name: str,
+    datasets: Sequence[DataSet],
+    results: Mapping[str, SimulationResult],
+    cfg: ValidateConfig,
+    phi: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[pd.DataFrame, dict[str, pd.DataFrame]]:
+    """Score free runs against the measurements (Eq. 41): the rows of the NRMSE table.
+
+    Parameters
+    ----------
+    model_name : str
+        The rows' model label.
+    datasets : sequence of DataSet
+        The measured data sets.
+    results : mapping of str to SimulationResult
+        The free run of each data set (by name); NaN after a divergence. A model that
+        predicts only q (a NARX model) gives NaN ``q_dot`` and ``q_ddot``: their NRMSE is
+        then NaN, "not modelled".
+    cfg : ValidateConfig
+        ``init_samples`` (samples not scored) and ``report_unit``.
+    phi : callable, optional
+        As :func:`validate_model`.
+
+    Returns
+    -------
+    table, simulated
+        As :func:`validate_model`.
+
+    Raises
+    ------
+    WorkflowError
+        If the report unit does not fit q.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
+    """
     rows, simulated = [], {}
     for ds in datasets:
         sim = results[ds.name]

@@ -1,8 +1,16 @@
-"""The compare stage: SINDy on the same data and derivatives, free-run with the same simulator."""
+"""The compare stage: SINDy and a polynomial NARX model beside the identified model.
+
+SINDy is fitted on the same data and derivatives and run free with the same simulator; the
+NARX model (:mod:`pipeline.narx`), a discrete-time black box, is chosen and fitted on the
+estimation records and run free on every data set from its first measured samples. Both
+join the NRMSE table of Eq. 41, so every row's verdict says whether the physics-informed
+model beats them.
+"""
 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -38,6 +46,8 @@ class CompareResult:
     timings : dict of str to float
         Wall times [s] of the fit and of the free runs (not reproducible, hence kept out
         of the hashed artifacts).
+    narx : NarxModel or None
+        The NARX peer (None when disabled or not installed).
     """
 
     model: Any
@@ -45,6 +55,7 @@ class CompareResult:
     simulated: dict[str, pd.DataFrame]
     summary: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    narx: Any = None
 
 
 def run_compare(
@@ -78,9 +89,12 @@ def run_compare(
     ----------
     Brunton, Proctor & Kutz 2016 (SINDy); Masoud & Maas 2025, Eq. 41.
     """
+    from pipeline.narx import NarxConfig
     from pipeline.sindy import SindyConfig, fit_sindy
 
-    cfg = SindyConfig.from_dict(dict(section["sindy"]))
+    sindy_section = dict(section["sindy"])
+    ncfg = NarxConfig.from_dict(sindy_section.pop("narx", None))
+    cfg = SindyConfig.from_dict(sindy_section)
     vcfg = ValidateConfig.from_dict(section["validate"])
     records = estimation_records(tables, derivs)
     progress.report("compare: SINDy fit", 0, 1)
@@ -103,10 +117,74 @@ def run_compare(
     )
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
-    combined = pd.concat([rbf_table, table], ignore_index=True)
     summary = {"equations": model.equations, "n_params": model.n_params}
     timings = {"fit": model.fit_time, "simulate": sim_time}
-    return CompareResult(model, combined, simulated, summary, timings)
+    narx, parts = None, [rbf_table, table]
+    if ncfg.enabled:
+        t0 = time.perf_counter()
+        phi = analytical.phi if analytical else None
+        narx, narx_table = _narx_rows(
+            records, datasets, cfg.input_map, ncfg, vcfg, q_limit, phi, simulated
+        )
+        parts.append(narx_table)
+        timings["narx"] = time.perf_counter() - t0
+        summary["narx"] = _narx_summary(narx)
+    combined = pd.concat(parts, ignore_index=True)
+    return CompareResult(model, combined, simulated, summary, timings, narx)
+
+
+def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated):
+    """Fit the NARX peer and score its free runs; its runs join ``simulated`` as ``q_sim_narx``.
+
+    Without SysIdentPy, or when no candidate structure survives, the rows say so (status)
+    with NaN numbers: the peer is never silently missing.
+    """
+    from pipeline.errors import DebistWarning, IdentificationError
+    from pipeline.narx import NARX_MISSING, fit_narx, narx_available
+    from pipeline.simulate import SimulationResult
+    from pipeline.validate import score_free_runs
+
+    status, narx = None, None
+    if not narx_available():
+        status = NARX_MISSING
+    else:
+        progress.report("compare: NARX", 0, 1)
+        try:
+            narx = fit_narx([r.q for r in records], [r.v for r in records], input_map, ncfg,
+                            q_limit)  # fmt: skip
+        except IdentificationError as exc:
+            status = f"not identified: {exc}"
+        progress.report("compare: NARX", 1, 1)
+    if narx is None:
+        warnings.warn(f"compare: the NARX peer is {status}", DebistWarning, stacklevel=2)
+        nan = float("nan")
+        rows = [{"dataset": ds.name, "role": ds.role, "model": "narx", "n_samples": ds.q.size,
+                 "nrmse_q": nan, "nrmse_q_dot": nan, "nrmse_q_ddot": nan, "rms_q": nan,
+                 "diverged": False, "status": status} for ds in datasets]  # fmt: skip
+        return None, pd.DataFrame(rows).assign(n_params=0)
+    results = {}
+    for ds in datasets:
+        q_sim, at = narx.simulate(ds.q, ds.v)
+        nan = np.full(ds.q.size, np.nan)  # a NARX model predicts q only
+        results[ds.name] = SimulationResult(q_sim, nan, nan, q_sim[:, None], at >= 0, at, 0)
+    table, runs = score_free_runs("narx", datasets, results, vcfg, phi)
+    for name, run in runs.items():
+        simulated[name] = simulated[name].assign(q_sim_narx=run["q_sim"].to_numpy())
+    return narx, table.assign(n_params=narx.n_params)
+
+
+def _narx_summary(narx) -> dict[str, Any]:
+    """Summarise the NARX peer's structure and search for the stage summary (NaN as None)."""
+    if narx is None:
+        return {}
+    search = narx.candidates.replace([np.inf], np.nan)
+    return {
+        "degree": narx.degree,
+        "lag": narx.lag,
+        "input_map": narx.input_map,
+        "n_params": narx.n_params,
+        "candidates": search.astype(object).where(search.notna(), None).to_dict(orient="records"),
+    }
 
 
 def _input_units(tables, v) -> list[str]:
@@ -127,8 +205,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     Returns
     -------
     StageOutput
-        ``sindy.h5``, ``nrmse.parquet`` (RBF and SINDy rows) and
-        ``simulated/<table>.parquet``; summary: the equations and the combined table.
+        ``sindy.h5``, ``narx.h5`` (with the NARX peer), ``nrmse.parquet`` (RBF, SINDy and
+        NARX rows) and ``simulated/<table>.parquet`` (SINDy's free run, NARX's as
+        ``q_sim_narx``); summary: the equations, the NARX structure and the combined table.
 
     Raises
     ------
@@ -148,6 +227,8 @@ def execute(ctx: StageInputs) -> StageOutput:
         "sindy.h5": H5Tree(res.model.to_tree()),
         "nrmse.parquet": res.table,
     }
+    if res.narx is not None:
+        outputs["narx.h5"] = H5Tree(res.narx.to_tree())
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
     summary = {
         **res.summary,
