@@ -110,10 +110,38 @@ class NarxConfig:
         return config_from_section(cls, {} if section is None else section, where)
 
 
+def _sysidentpy():
+    """Import the parts of SysIdentPy used here, keeping matplotlib's settings unchanged.
+
+    Importing SysIdentPy sets matplotlib's global ``axes.spines.right`` and
+    ``axes.spines.top`` to False (``sysidentpy.utils.plotting``), which would make every
+    figure debist draws later in the process differ by whether a NARX model was fitted
+    before it (a batch member's bytes against its solo run's). The import runs inside
+    ``matplotlib.rc_context``, which restores the settings.
+
+    Returns
+    -------
+    tuple
+        ``(FROLS, Polynomial, LeastSquares)``.
+
+    Raises
+    ------
+    ImportError
+        Without SysIdentPy (the ``narx`` extra).
+    """
+    import matplotlib
+
+    with matplotlib.rc_context():
+        from sysidentpy.basis_function import Polynomial
+        from sysidentpy.model_structure_selection import FROLS
+        from sysidentpy.parameter_estimation import LeastSquares
+    return FROLS, Polynomial, LeastSquares
+
+
 def narx_available() -> bool:
     """Whether SysIdentPy (the ``narx`` extra) can be imported."""
     try:
-        import sysidentpy  # noqa: F401
+        _sysidentpy()
     except ImportError:
         return False
     return True
@@ -224,7 +252,7 @@ def _frols_class():
     and scores the nested prefixes by the same least squares and the same criterion, which
     gives the same values (``tests/test_narx.py`` compares them).
     """
-    from sysidentpy.model_structure_selection import FROLS
+    FROLS = _sysidentpy()[0]
 
     class NestedFROLS(FROLS):
         def information_criterion(self, x, y):
@@ -243,9 +271,7 @@ def _frols_class():
 
 
 def _estimator(degree: int, lag: int, n_inputs: int, cfg: NarxConfig):
-    from sysidentpy.basis_function import Polynomial
-    from sysidentpy.parameter_estimation import LeastSquares
-
+    _, Polynomial, LeastSquares = _sysidentpy()
     return _frols_class()(
         order_selection=True,
         n_info_values=cfg.n_info_values,

@@ -59,11 +59,9 @@ def test_the_structure_comes_from_the_estimation_data_only():
 
 def test_the_nested_information_criterion_equals_sysidentpy_s_own():
     """One FROLS pass scores every model size as SysIdentPy's per-size reruns do."""
-    from sysidentpy.basis_function import Polynomial
-    from sysidentpy.model_structure_selection import FROLS
-    from sysidentpy.parameter_estimation import LeastSquares
+    from pipeline.narx import _estimator, _sysidentpy
 
-    from pipeline.narx import _estimator
+    FROLS, Polynomial, LeastSquares = _sysidentpy()  # never a bare import: see the next test
 
     rng = np.random.default_rng(7)
     n = 800
@@ -83,6 +81,18 @@ def test_the_nested_information_criterion_equals_sysidentpy_s_own():
     np.testing.assert_allclose(ours.info_values, ref.info_values, rtol=1e-12)
     np.testing.assert_array_equal(ours.final_model, ref.final_model)
     np.testing.assert_allclose(ours.theta, ref.theta, rtol=1e-12)
+
+
+def test_fitting_a_narx_model_leaves_matplotlib_s_settings_alone():
+    """SysIdentPy sets global matplotlib settings on import; debist's figures (and so its
+    artifacts' bytes) must not depend on whether a NARX model was fitted earlier."""
+    import matplotlib
+
+    before = dict(matplotlib.rcParams)
+    y, u = _narx_record(300, 6)
+    fit_narx([y], [u], "v", NarxConfig(degree=(2,), lags=(1,)), q_limit=100.0)
+    after = dict(matplotlib.rcParams)
+    assert {k: after[k] for k in before if str(before[k]) != str(after[k])} == {}
 
 
 def test_a_diverging_free_run_is_cut_at_the_limit():

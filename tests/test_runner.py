@@ -41,7 +41,7 @@ def test_run_skip_status_and_downstream_only_rerun(project):
     assert set(table.dataset) == {"estimation", "check"}
     assert (table.nrmse_q < 0.05).all()  # free run of the identified model within 5 % of the range
     both = pd.read_parquet(project / "out/compare/nrmse.parquet")
-    assert sorted(both.model.unique()) == ["rbf", "sindy"] and len(both) == 4
+    assert sorted(both.model.unique()) == ["narx", "rbf", "sindy"] and len(both) == 6
     assert (both.n_params > 0).all()
     assert "SINDy (" in out and "q_ddot =" in out
     ingest = pd.read_parquet(project / "out/ingest/estimation.parquet")

@@ -43,7 +43,7 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
     again = run("silverbox.toml", tmp_path)  # its time: benchmarks, not a test
     assert again.count("up to date, skipping") == out.count("done") == 7  # report included
     both = pd.read_parquet(tmp_path / "compare/nrmse.parquet")
-    assert set(both.model) == {"rbf", "rbf-ls", "sindy"}
+    assert set(both.model) == {"narx", "rbf", "rbf-ls", "sindy"}
 
 
 @pytest.mark.slow
@@ -59,6 +59,9 @@ def test_emps_identifies_mass_and_friction_near_idim(tmp_path):
     assert table.loc["validation", "rms_unit"] == "mm"
     assert 0 < table.loc["validation", "rms_q"] < 50
     assert "Free-run validation" in out
+    both = pd.read_parquet(tmp_path / "compare/nrmse.parquet").set_index(["model", "dataset"])
+    for ds in ("estimation", "validation"):  # the black-box peer, and the physics beating it
+        assert both.loc[("rbf", ds)].nrmse_q < both.loc[("narx", ds)].nrmse_q
 
 
 # Table 2 of Masoud & Maas 2025, the RBF model on its identification data (NRMSE, Eq. 41)
@@ -101,6 +104,7 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
     assert rbf_val.nrmse_q <= 0.01  # unseen validation with the shipped settings
     for ds in ("identification", "validation"):
         assert table.loc[("rbf", ds)].nrmse_q < table.loc[("analytical", ds)].nrmse_q
+        assert table.loc[("rbf", ds)].nrmse_q < table.loc[("narx", ds)].nrmse_q  # measured
     # the identified restoring force c(q) q + F_0 against the truth over the visited bins
     f_id = identified["cq"] + model.backbone["F_0"]
     f_true = truth["f"]
