@@ -337,6 +337,7 @@ to the prototype's report.</p>
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>prototype</th><th>workflow file</th><th>status</th>
 {% for d in datasets %}<th>NRMSE(q) {{ d }}</th>{% endfor %}
+{% for d in narx_datasets %}<th>NARX NRMSE(q) {{ d }}</th>{% endfor %}
 <th>wells q* at rest</th><th>switching levels</th></tr>
 {% for r in rows %}
 <tr><td class="text">{% if r.link %}<a href="{{ r.link }}">{{ r.name }}</a>{% else %}{{ r.name }}\
@@ -344,6 +345,7 @@ to the prototype's report.</p>
 <td class="text{% if r.status != 'done' %} bad{% endif %}">{{ r.status }}{% if r.error %}: \
 {{ r.error }}{% endif %}{% if r.note %} ({{ r.note }}){% endif %}</td>
 {% for d in datasets %}<td>{{ cell(r.nrmse.get(d, "-")) }}</td>{% endfor %}
+{% for d in narx_datasets %}<td>{{ cell(r.narx.get(d, "-")) }}</td>{% endfor %}
 <td>{{ cell(r.wells) }}</td><td class="text">{{ r.switching }}</td></tr>
 {% endfor %}
 </table></div>
@@ -615,6 +617,24 @@ def _switching(design: Mapping[str, Any] | None, units: Sequence[str] = ()) -> s
     return ", ".join(parts) or "-"
 
 
+def _index_scores(nrmse: Sequence[Mapping[str, Any]], model: str) -> dict[str, str]:
+    """One model's NRMSE(q) per data set as index cells: a percentage with its verdict."""
+    scores = {}
+    for r in nrmse:
+        if r.get("model") != model:
+            continue
+        status_r = r.get("status") or "ok"
+        value = r.get("nrmse_q")
+        if status_r != "ok":
+            scores[r["dataset"]] = status_r
+        elif r.get("diverged") or _missing(value):
+            scores[r["dataset"]] = "diverged"
+        else:
+            word = verdict(r, list(nrmse))
+            scores[r["dataset"]] = f"{100 * value:.2f} %" + ("" if word == "ok" else f" ({word})")
+    return scores
+
+
 def index_row(
     name: str,
     file: str,
@@ -642,7 +662,8 @@ def index_row(
         The error of a failed run.
     nrmse : sequence of dict, optional
         Rows of its NRMSE table (the validate or compare summary's ``table``); the
-        ``rbf`` rows are shown (NRMSE dimensionless, Eq. 41).
+        ``rbf`` rows are shown, and the ``narx`` rows (the black-box peer) beside them
+        (NRMSE dimensionless, Eq. 41).
     design : dict, optional
         The identify summary's ``design`` (equilibria and switching levels [SI]).
     q_unit : str, optional
@@ -658,23 +679,13 @@ def index_row(
     -------
     dict
         The row for :func:`render_index`: ``nrmse`` maps data set to a percentage text
-        (``"unstable"``, ``"diverged"`` instead where that is the verdict), ``wells`` the
+        (``"unstable"``, ``"diverged"`` instead where that is the verdict; ``narx`` the
+        same for the NARX peer), ``wells`` the
         wells at rest with their unit, ``switching`` the switching level per input with its
         unit.
     """
-    scores = {}
-    for r in nrmse:
-        if r.get("model") != "rbf":
-            continue
-        status_r = r.get("status") or "ok"
-        value = r.get("nrmse_q")
-        if status_r != "ok":
-            scores[r["dataset"]] = status_r
-        elif r.get("diverged") or _missing(value):
-            scores[r["dataset"]] = "diverged"
-        else:
-            word = verdict(r, list(nrmse))
-            scores[r["dataset"]] = f"{100 * value:.2f} %" + ("" if word == "ok" else f" ({word})")
+    scores = _index_scores(nrmse, "rbf")
+    narx = _index_scores(nrmse, "narx")
     return {
         "name": name,
         "file": file,
@@ -682,6 +693,7 @@ def index_row(
         "error": error,
         "note": note,
         "nrmse": scores,
+        "narx": narx,
         "wells": _wells(design, q_unit),
         "switching": _switching(design, input_units),
         "link": link,
@@ -706,10 +718,14 @@ def render_index(rows: Sequence[Mapping[str, Any]]) -> str:
     Jinja2 documentation, "API" (autoescaping).
     """
     datasets: list[str] = []
+    narx: list[str] = []
     for r in rows:
         datasets += [d for d in r["nrmse"] if d not in datasets]
+        narx += [d for d in r.get("narx", {}) if d not in narx]
     failed = sum(r["status"] != "done" for r in rows)
-    return _ENV.from_string(_INDEX).render(rows=rows, datasets=datasets, failed=failed)
+    return _ENV.from_string(_INDEX).render(
+        rows=rows, datasets=datasets, narx_datasets=narx, failed=failed
+    )
 
 
 def write_page(path: str | os.PathLike, html: str) -> Path:

@@ -289,6 +289,12 @@ def test_index_rows_and_page(run):
                         "v1: 1976 V, v2: none"]  # fmt: skip
     assert table[2][3] == "-"
     assert "http" not in html and "<script" not in html
+    # the NARX peer's column beside the identified model's, with the verdict it earns
+    peer = [*run["nrmse"], {**run["nrmse"][0], "model": "narx", "nrmse_q": 0.005}]
+    row = index_row("p", "p.toml", "done", nrmse=peer, design=design)
+    assert row["narx"] == {"unseen": "0.50 %"} and "worse than narx" in row["nrmse"]["unseen"]
+    html = render_index([row])
+    assert "<th>NARX NRMSE(q) unseen</th>" in html and "0.50 %" in html
 
 
 def test_batch_index_lists_only_identified_wells():
