@@ -350,41 +350,67 @@ def _creep_columns(records: Sequence[Record], basis: RBFBasis, rate: float) -> l
     return [creep_states(basis(r.q), r.q_dot, r.dt, rate) for r in records]
 
 
-def _search_creep(records, basis, cfg, bounds, T_z):
-    """Bounded search of the creep rate lambda by variable projection (as :func:`_search_T_z`).
+def _projected_search(a_fixed, y, columns, bounds, xatol):
+    """Minimise the equation error over one time constant by variable projection.
 
-    Only the creep columns depend on lambda: every other column (with z at ``T_z``) is
-    factorised once and projected out; each evaluation solves the small least squares of the
-    projected creep columns for the relative equation error, minimised over log lambda.
+    Only the columns ``columns(p)`` depend on the scalar ``p``; the fixed columns
+    ``a_fixed`` are factorised once (QR) and projected out, so each evaluation solves the
+    small least squares of the projected varying columns for the relative residual
+    ``|y_perp - B_perp c| / |y|``, minimised over ``log p`` in ``bounds`` (Golub & Pereyra
+    1973, separable least squares; Masoud & Maas 2025, Sec. 4.2 for T_z).
 
-    Returns lambda [1/s] and the trace (lambda, relative residual), shape (k, 2).
+    Returns
+    -------
+    p : float
+        The minimiser.
+    value : float
+        The relative residual there.
+    cost : callable
+        The relative residual of any ``p`` (appends to the trace).
+    trace : list of (float, float)
+        Every evaluation ``(p, relative residual)``.
     """
-    z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
-    a_fixed, y, _ = _system(records, z_all, basis, cfg)
+    from scipy.optimize import minimize_scalar
+
     Q, _ = np.linalg.qr(a_fixed)
     y_perp = y - Q @ (Q.T @ y)
     trace: list[tuple[float, float]] = []
 
-    def cost(rate: float) -> float:
-        w_all = _creep_columns(records, basis, rate)
-        cols = [_prefilter(w, r, cfg) for r, w in zip(records, w_all, strict=True)]
-        B = np.vstack(cols)
+    def cost(p: float) -> float:
+        B = columns(p)
         B_perp = B - Q @ (Q.T @ B)
         coef, *_ = np.linalg.lstsq(B_perp, y_perp, rcond=None)
         value = float(np.linalg.norm(y_perp - B_perp @ coef) / np.linalg.norm(y))
-        trace.append((rate, value))
+        trace.append((p, value))
         return value
-
-    from scipy.optimize import minimize_scalar
 
     lo, hi = bounds
     res = minimize_scalar(
         lambda s: cost(float(np.exp(s))),
         bounds=(np.log(lo), np.log(hi)),
         method="bounded",
-        options={"xatol": 1e-3},
+        options={"xatol": xatol},
     )
-    return float(np.exp(res.x)), np.array(trace, dtype=float)
+    return float(np.exp(res.x)), float(res.fun), cost, trace
+
+
+def _search_creep(records, basis, cfg, bounds, T_z):
+    """Bounded search of the creep rate lambda by variable projection (as :func:`_search_T_z`).
+
+    Only the creep columns depend on lambda: every other column (with z at ``T_z``) is
+    projected out (:func:`_projected_search`).
+
+    Returns lambda [1/s] and the trace (lambda, relative residual), shape (k, 2).
+    """
+    z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
+    a_fixed, y, _ = _system(records, z_all, basis, cfg)
+
+    def columns(rate: float) -> np.ndarray:
+        w_all = _creep_columns(records, basis, rate)
+        return np.vstack([_prefilter(w, r, cfg) for r, w in zip(records, w_all, strict=True)])
+
+    rate, _, _, trace = _projected_search(a_fixed, y, columns, bounds, 1e-3)
+    return rate, np.array(trace, dtype=float)
 
 
 def _estimator(psi, y, names, cfg: IdentifyConfig):
@@ -421,13 +447,10 @@ def _search_T_z(records, basis, cfg, bounds, w_all=None):
     fixed_cfg = replace(cfg, rbf=tuple(t for t in cfg.rbf if t != "d"))
     fixed_cfg = replace(fixed_cfg, backbone=tuple(b for b in cfg.backbone if b not in _Z_TERMS))
     a_fixed, y, _ = _system(records, zero, basis, fixed_cfg, w_all)
-    Q, _ = np.linalg.qr(a_fixed)
-    y_perp = y - Q @ (Q.T @ y)
     z_rbf = ("d",) if "d" in cfg.rbf else ()
     z_backbone = tuple(b for b in cfg.backbone if b in _Z_TERMS)
-    trace: list[tuple[float, float]] = []
 
-    def cost(T_z: float) -> float:
+    def columns(T_z: float) -> np.ndarray:
         cols = []
         for r in records:
             z = friction_state(r.q_dot, r.dt, T_z)
@@ -435,24 +458,10 @@ def _search_T_z(records, basis, cfg, bounds, w_all=None):
                 r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity, prior=cfg.prior
             )
             cols.append(_prefilter(F, r, cfg))
-        B = np.vstack(cols)
-        B_perp = B - Q @ (Q.T @ B)
-        coef, *_ = np.linalg.lstsq(B_perp, y_perp, rcond=None)
-        value = float(np.linalg.norm(y_perp - B_perp @ coef) / np.linalg.norm(y))
-        trace.append((T_z, value))
-        return value
+        return np.vstack(cols)
 
-    lo, hi = bounds
-    from scipy.optimize import minimize_scalar
-
-    res = minimize_scalar(
-        lambda s: cost(float(np.exp(s))),
-        bounds=(np.log(lo), np.log(hi)),
-        method="bounded",
-        options={"xatol": 1e-2},
-    )
-    T_z = float(np.exp(res.x))
-    if cost(0.0) <= res.fun:
+    T_z, value, cost, trace = _projected_search(a_fixed, y, columns, bounds, 1e-2)
+    if cost(0.0) <= value:
         T_z = 0.0
     return T_z, np.array(trace, dtype=float)
 
