@@ -200,6 +200,24 @@ def test_the_true_plant_predicts_its_own_record_to_integration_error(bistable_re
     }
 
 
+def _restart_errors(model, run, v, dt):
+    """Worst 25-step prediction error (share of q's range) of a model restarted from the
+    record's own states (``measured_states``), and of the same model restarted at rest
+    (``initial_state``: z = q_dot, creep states 0)."""
+
+    class AtRest:
+        n_states = model.n_states
+        initial_state = staticmethod(model.initial_state)
+        rhs = staticmethod(model.rhs)
+        max_step = staticmethod(model.max_step)
+
+    errors = []
+    for m in (model, AtRest()):
+        q_hat = k_step_prediction(m, run.q, run.q_dot, v, dt, 25, substeps=4)
+        errors.append(np.nanmax(np.abs(q_hat - run.q)) / np.ptp(run.q))
+    return tuple(errors)
+
+
 def test_restarts_carry_the_friction_state_of_the_record_not_z_equal_q_dot():
     from conftest import example_rbf_model, excitation
 
@@ -210,18 +228,9 @@ def test_restarts_carry_the_friction_state_of_the_record_not_z_equal_q_dot():
     (run,) = simulate(model, [v], dt, np.array([-0.008]), np.array([0.0]), substeps=4)
     z = model.measured_states(run.q, run.q_dot, dt)[:, 2]
     assert np.max(np.abs(z - run.states[:, 2])) < 1e-3 * np.ptp(run.states[:, 2])
-    q_hat = k_step_prediction(model, run.q, run.q_dot, v, dt, 25, substeps=4)
-    err = np.nanmax(np.abs(q_hat - run.q)) / np.ptp(run.q)
+    err, err_rest = _restart_errors(model, run, v, dt)
     assert err < 1e-4
-
-    class AtRest:  # the same model restarted with z = q_dot
-        n_states = model.n_states
-        initial_state = staticmethod(model.initial_state)
-        rhs = staticmethod(model.rhs)
-        max_step = staticmethod(model.max_step)
-
-    q_rest = k_step_prediction(AtRest(), run.q, run.q_dot, v, dt, 25, substeps=4)
-    assert np.nanmax(np.abs(q_rest - run.q)) / np.ptp(run.q) > 10 * err
+    assert err_rest > 10 * err
 
 
 def test_restarted_windows_of_a_free_run_repeat_it_sample_for_sample(bistable_record):
@@ -286,15 +295,6 @@ def test_restarts_carry_the_creep_states_of_the_record():
     assert x.shape == (t.size, 13)
     w, w_run = x[:, 3:], run.states[:, 3:]
     assert np.max(np.abs(w - w_run)) < 1e-3 * np.ptp(w_run)
-    q_hat = k_step_prediction(model, run.q, run.q_dot, v, dt, 25, substeps=4)
-    err = np.nanmax(np.abs(q_hat - run.q)) / np.ptp(run.q)
+    err, err_rest = _restart_errors(model, run, v, dt)
     assert err < 1e-4
-
-    class AtRest:  # the same model restarted with z = q_dot and w = 0
-        n_states = model.n_states
-        initial_state = staticmethod(model.initial_state)
-        rhs = staticmethod(model.rhs)
-        max_step = staticmethod(model.max_step)
-
-    q_rest = k_step_prediction(AtRest(), run.q, run.q_dot, v, dt, 25, substeps=4)
-    assert np.nanmax(np.abs(q_rest - run.q)) / np.ptp(run.q) > 10 * err
+    assert err_rest > 10 * err
