@@ -30,9 +30,9 @@ import time
 
 import numpy as np
 
-from pipeline.rig.params import RigParams
-from pipeline.rig.profiles import identification_profile
-from pipeline.rig.run import simulate_rig
+from debist.rig.params import RigParams
+from debist.rig.profiles import identification_profile
+from debist.rig.run import simulate_rig
 
 DEFAULT = "LSODA rtol 1e-8, compiled"
 RADAU = "Radau rtol 1e-4, compiled"
@@ -50,10 +50,10 @@ _FIRST_CALL = """
 import time
 t0 = time.perf_counter()
 import numpy as np
-from pipeline.physics.dynamics import well_state
-from pipeline.rig.drivers import DriverOutput
-from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigPlant
+from debist.physics.dynamics import well_state
+from debist.rig.drivers import DriverOutput
+from debist.rig.params import RigParams
+from debist.rig.plant import RigPlant
 rig = RigParams()
 t = np.arange(10) * 1e-3
 d = [DriverOutput(t, np.full(10, 1e3), tau=rig.driver_tau, slew=rig.driver_slew) for i in (0, 1)]

@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import PhysicsPrior
-from pipeline.simulate import prepare_inputs, simulate
-from pipeline.sindy import SindyModel
-from pipeline.termtable import TableModel
+from debist.identify.basis import RBFBasis
+from debist.identify.model import RBFModel
+from debist.identify.terms import PhysicsPrior
+from debist.simulate import prepare_inputs, simulate
+from debist.sindy import SindyModel
+from debist.termtable import TableModel
 
 DT = 0.01
 
@@ -138,7 +138,7 @@ def compile_times() -> tuple[float, float]:
     code = (
         "import time, numpy as np; t = time.perf_counter();"
         "import sys; sys.path.insert(0, 'benchmarks'); import bench_simulate as b;"
-        "from pipeline.simulate import simulate;"
+        "from debist.simulate import simulate;"
         "simulate(b.rbf_model(), [b._inputs(50, 0)], 0.01, np.zeros(1), np.zeros(1));"
         "print(time.perf_counter() - t)"
     )

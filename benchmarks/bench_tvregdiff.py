@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 from scipy import signal
 
-from pipeline.differentiate import tvregdiff
+from debist.differentiate import tvregdiff
 
 DT = 0.01
 ITERATIONS = 10

@@ -63,7 +63,7 @@ def _member_outputs(folder: Path) -> list[tuple[Path, Path]]:
 
 
 def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
-    from pipeline.fileformats import read_h5
+    from debist.fileformats import read_h5
 
     curves = pd.read_parquet(run / "identify" / "curves.parquet")
     truth = read_h5(run / "rig" / "identification_truth.h5")["curves"]
@@ -81,8 +81,8 @@ def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
 
 
 def _static_rows(wf: Path, run: Path) -> list[dict]:
-    from pipeline.physics.statics import force_displacement
-    from pipeline.rig.experiment import RigConfig
+    from debist.physics.statics import force_displacement
+    from debist.rig.experiment import RigConfig
 
     raw = tomllib.loads(wf.read_text())
     static = pd.read_parquet(run / "identify" / "static.parquet")
@@ -125,7 +125,7 @@ def _lacking(true, est, lo, hi, marked) -> np.ndarray:
     its largest magnitude; the stage takes it over the supported points, a superset, so the
     calibrated term is, if anything, wider there): ``sqrt(err^2 - reach^2)`` where the band's
     reach toward the truth falls short of the error ``err``, else 0
-    (:func:`pipeline.identify.bands.curve_bands` adds the term as ``hypot(reach, term)``).
+    (:func:`debist.identify.bands.curve_bands` adds the term as ``hypot(reach, term)``).
     """
     if not marked.any():
         return np.array([])
@@ -213,7 +213,7 @@ def _markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
-#: Curves of the calibration -> key of :data:`pipeline.identify.bands.MODEL_ERROR`.
+#: Curves of the calibration -> key of :data:`debist.identify.bands.MODEL_ERROR`.
 GROUPS = {"restoring": "restoring", "d": "d", "g1": "g", "g2": "g", "static F": "F"}
 
 

@@ -1,8 +1,8 @@
 """debist: rig logs of bistable dielectric-elastomer actuators to validated dynamic models.
 
 The library behind the ``debist`` command line. Every stage is a pure function in
-one of the sub-packages; file input and output live in :mod:`pipeline.artifacts`
-and the readers of :mod:`pipeline.ingest`.
+one of the sub-packages; file input and output live in :mod:`debist.artifacts`
+and the readers of :mod:`debist.ingest`.
 
 References
 ----------

@@ -5,7 +5,7 @@ Every stage's configuration is a frozen pydantic dataclass built with :data:`CON
 no ``inf`` or ``nan``). Range constraints are pydantic ``Field`` constraints; rules that
 involve several fields live in ``__post_init__`` and raise :class:`ConfigValueError`.
 :func:`config_from_section` builds one from a workflow section and turns pydantic's
-:class:`~pydantic.ValidationError` into a one-line :class:`~pipeline.errors.WorkflowError`::
+:class:`~pydantic.ValidationError` into a one-line :class:`~debist.errors.WorkflowError`::
 
     [identify] M: expected an integer, got 'ten'
     [compare] unknown key 'degre'; did you mean 'degree'? (known keys: degree, ...)
@@ -28,7 +28,7 @@ from typing import Annotated, Any, TypeVar
 import pydantic
 from pydantic import BeforeValidator, ConfigDict, Field
 
-from pipeline.errors import WorkflowError
+from debist.errors import WorkflowError
 
 __all__ = [
     "CONFIG",
@@ -392,11 +392,11 @@ def config_from_section(
 
     Examples
     --------
-    >>> from pipeline.sindy import SindyConfig
+    >>> from debist.sindy import SindyConfig
     >>> config_from_section(SindyConfig, {"degree": "3"}, "[compare]")
     Traceback (most recent call last):
     ...
-    pipeline.errors.WorkflowError: [compare] degree: expected an integer, got '3'
+    debist.errors.WorkflowError: [compare] degree: expected an integer, got '3'
     """
     label = where if callable(where) else (lambda _key, w=where: w)
     if not isinstance(section, Mapping):

@@ -1,13 +1,13 @@
 """Validation data sets built from the stages' tables (what every free run is scored on).
 
-Shared by the validate, compare and study stages and by :mod:`pipeline.studies`, so that
+Shared by the validate, compare and study stages and by :mod:`debist.studies`, so that
 no stage imports another stage.
 """
 
 from __future__ import annotations
 
-from pipeline.stages.tables import input_columns
-from pipeline.validate import DataSet
+from debist.stages.tables import input_columns
+from debist.validate import DataSet
 
 __all__ = ["validation_datasets"]
 

@@ -27,12 +27,17 @@ __all__ = ["code_fingerprint", "module_closure"]
 
 #: The package whose modules are followed; imports of other packages are libraries,
 #: recorded by version in the stage key instead.
-PACKAGE = "pipeline"
-_ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = "debist"
+#: The package's own folder. Its name need not be ``debist``: in a checkout and in an
+#: editable install the source folder is ``pipeline/``, mapped to the import name ``debist``.
+_ROOT = Path(__file__).resolve().parent
 
 
 def _module_file(name: str, root: Path = _ROOT) -> Path | None:
-    base = root.joinpath(*name.split("."))
+    head, *rest = name.split(".")
+    if head != PACKAGE:
+        return None
+    base = root.joinpath(*rest)
     if (base / "__init__.py").is_file():
         return base / "__init__.py"
     path = base.with_suffix(".py")
@@ -102,9 +107,9 @@ def module_closure(module: str, root: str | os.PathLike | None = None) -> tuple[
     Parameters
     ----------
     module : str
-        Absolute module name, e.g. ``"pipeline.stages.identify"``.
+        Absolute module name, e.g. ``"debist.stages.identify"``.
     root : path-like, optional
-        The folder that holds the package (default: where this module is installed).
+        The package's own folder, whatever its name (default: the folder of this module).
 
     Returns
     -------
@@ -118,9 +123,9 @@ def module_closure(module: str, root: str | os.PathLike | None = None) -> tuple[
 
     Examples
     --------
-    >>> "pipeline.rig.plant" in module_closure("pipeline.stages.identify")
+    >>> "debist.rig.plant" in module_closure("debist.stages.identify")
     False
-    >>> "pipeline.identify.fit" in module_closure("pipeline.stages.identify")
+    >>> "debist.identify.fit" in module_closure("debist.stages.identify")
     True
     """
     base = _ROOT if root is None else Path(root).resolve()
@@ -146,13 +151,14 @@ def code_fingerprint(module: str, root: str | os.PathLike | None = None) -> str:
     module : str
         Absolute module name (a stage's module).
     root : path-like, optional
-        The folder that holds the package (default: where this module is installed).
+        The package's own folder, whatever its name (default: the folder of this module).
 
     Returns
     -------
     str
-        64 hexadecimal characters over the relative paths and bytes of
-        :func:`module_closure`, in sorted order; computed once per process.
+        64 hexadecimal characters over the module names and source bytes of
+        :func:`module_closure`, in sorted order (names, not paths, so a checkout, an
+        editable install and a wheel give the same fingerprint); computed once per process.
 
     Raises
     ------
@@ -168,6 +174,6 @@ def _fingerprint(module: str, root: Path) -> str:
     for name in module_closure(module, root):
         path = _module_file(name, root)
         assert path is not None  # module_closure only returns existing modules
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(name.encode() + b"\0")
         digest.update(path.read_bytes() + b"\0")
     return digest.hexdigest()

@@ -1,6 +1,6 @@
 """A fleet whose every member's logs pass the template's own ingest.
 
-:func:`pipeline.rig.fleet.make_fleet` keeps prototypes that are bistable and switchable by
+:func:`debist.rig.fleet.make_fleet` keeps prototypes that are bistable and switchable by
 their statics; whether a prototype's *recording* is usable is a property of the rig run: a
 member that overshoots past the laser's range, for instance, logs samples at the range limit,
 which the template's ingest refuses as sensor faults. :func:`viable_fleet` therefore runs the
@@ -16,11 +16,11 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from pipeline.errors import DebistError
-from pipeline.rig.fleet import FleetError
-from pipeline.rig.fleet_workflows import fleet_workflows
-from pipeline.runner import Runner
-from pipeline.workflow import load_workflow
+from debist.errors import DebistError
+from debist.rig.fleet import FleetError
+from debist.rig.fleet_workflows import fleet_workflows
+from debist.runner import Runner
+from debist.workflow import load_workflow
 
 __all__ = ["viable_fleet"]
 
@@ -68,7 +68,7 @@ def viable_fleet(
     seed : int
         Seed of the scatter.
     scatter : mapping, optional
-        Spreads (:data:`pipeline.rig.fleet.DEFAULT_SCATTER`).
+        Spreads (:data:`debist.rig.fleet.DEFAULT_SCATTER`).
 
     Returns
     -------
@@ -82,7 +82,7 @@ def viable_fleet(
     FleetError
         If fewer than ``size`` of ``size * (1 + EXTRA_DRAWS)`` draws pass.
     WorkflowError
-        As :func:`pipeline.rig.fleet_workflows.fleet_workflows`.
+        As :func:`debist.rig.fleet_workflows.fleet_workflows`.
 
     References
     ----------

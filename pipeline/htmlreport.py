@@ -1,7 +1,7 @@
 """One self-contained HTML report of a workflow run: tables, figures and provenance.
 
 :func:`render_report` turns the results of a run (the stages' summaries, figures and
-provenance, gathered by the report stage :mod:`pipeline.stages.report` from hashed
+provenance, gathered by the report stage :mod:`debist.stages.report` from hashed
 artifacts only) into one HTML page without any external URL or script: figures as base64
 data URIs, readable on a phone, printable. The page is the report stage's artifact
 (``<output_dir>/report/report.html``), covered by its manifest and checked by ``debist
@@ -29,9 +29,9 @@ import jinja2
 import pydantic
 from pydantic import PositiveFloat
 
-from pipeline.config import CONFIG, config_from_section
-from pipeline.errors import ArtifactError
-from pipeline.report import (
+from debist.config import CONFIG, config_from_section
+from debist.errors import ArtifactError
+from debist.report import (
     auto_line,
     equilibrium_kind,
     not_modelled,
@@ -135,7 +135,7 @@ class ReportConfig:
         >>> ReportConfig.from_dict({"zoom_window": 0})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [report] zoom_window: expected a number > 0, got 0
+        debist.errors.WorkflowError: [report] zoom_window: expected a number > 0, got 0
         """
         return config_from_section(cls, section, where)
 
@@ -443,7 +443,7 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     The backbone's coefficients are basis coefficients of the fit (the RBF sums add to
     them), not the physics of the beam: they are labelled so, with their units.
     """
-    from pipeline.report import summary_units
+    from debist.report import summary_units
 
     units = summary_units(summary)
     rows = [
@@ -474,7 +474,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     design = summary.get("design")
     if not design:
         return None
-    from pipeline.report import summary_units
+    from debist.report import summary_units
 
     units = summary_units(summary)
     scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14
@@ -526,7 +526,7 @@ def render_report(run: dict[str, Any]) -> str:
     Parameters
     ----------
     run : dict
-        As :func:`pipeline.stages.report.run_report` builds it: ``workflow`` (name),
+        As :func:`debist.stages.report.run_report` builds it: ``workflow`` (name),
         ``datasets`` (list of dicts with ``name``, ``role``, ``source``,
         ``samples``, ``duration`` [s]), ``identify`` (the identify summary, or None),
         ``nrmse`` (rows of the validate/compare summary's ``table``; NRMSE dimensionless,
@@ -748,7 +748,7 @@ def write_page(path: str | os.PathLike, html: str) -> Path:
     POSIX ``rename(2)``: the new file replaces the old one in one step, so a reader never
     sees half a page.
     """
-    from pipeline import artifacts
+    from debist import artifacts
 
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)

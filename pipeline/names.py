@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 
-from pipeline.errors import WorkflowError
+from debist.errors import WorkflowError
 
 __all__ = ["MAX_LENGTH", "check_file_name", "is_file_name"]
 
@@ -79,7 +79,7 @@ def check_file_name(name: object, where: str) -> str:
     >>> check_file_name("../../victim", "[datasets]")
     Traceback (most recent call last):
     ...
-    pipeline.errors.WorkflowError: [datasets] '../../victim': a name that becomes a file name ...
+    debist.errors.WorkflowError: [datasets] '../../victim': a name that becomes a file name ...
     """
     if is_file_name(name):
         return str(name)

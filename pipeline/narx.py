@@ -44,10 +44,10 @@ import pandas as pd
 import pydantic
 from pydantic import Field, PositiveInt
 
-from pipeline.config import CONFIG, AsTuple, config_from_section
-from pipeline.errors import DebistWarning, IdentificationError
-from pipeline.identify.terms import input_map as apply_input_map
-from pipeline.validate import nrmse
+from debist.config import CONFIG, AsTuple, config_from_section
+from debist.errors import DebistWarning, IdentificationError
+from debist.identify.terms import input_map as apply_input_map
+from debist.validate import nrmse
 
 __all__ = ["NARX_MISSING", "NarxConfig", "NarxModel", "fit_narx", "narx_available"]
 

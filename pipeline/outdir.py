@@ -26,9 +26,9 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from pipeline import artifacts
-from pipeline.artifacts import SWAP_FOLDER
-from pipeline.errors import OutputDirError, RunLockedError
+from debist import artifacts
+from debist.artifacts import SWAP_FOLDER
+from debist.errors import OutputDirError, RunLockedError
 
 __all__ = [
     "HOLDER",

@@ -1,8 +1,8 @@
 """The analytical model's parts in identification and validation: backbone curves, m_q, phi(q).
 
 Pure functions: parameters and data in, results out. The stages that use the physics model
-as a whole (the design analysis, the virtual rig) are :mod:`pipeline.stages.analyze` and
-:mod:`pipeline.stages.rig`.
+as a whole (the design analysis, the virtual rig) are :mod:`debist.stages.analyze` and
+:mod:`debist.stages.rig`.
 
 References
 ----------
@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.errors import WorkflowError
+from debist.errors import WorkflowError
 
 if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
-    from pipeline.identify import Record
-    from pipeline.validate import DataSet, ValidateConfig
+    from debist.identify import Record
+    from debist.validate import DataSet, ValidateConfig
 
 __all__ = ["analytical_for", "physics_mass", "physics_prior"]
 
@@ -39,7 +39,7 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
 
     Returns
     -------
-    pipeline.identify.terms.PhysicsPrior
+    debist.identify.terms.PhysicsPrior
 
     Raises
     ------
@@ -50,8 +50,8 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33.
     """
-    from pipeline.identify.terms import PHYSICS_TERMS, PhysicsPrior
-    from pipeline.physics.reduced import reduced_curves
+    from debist.identify.terms import PHYSICS_TERMS, PhysicsPrior
+    from debist.physics.reduced import reduced_curves
 
     if physics is None:
         raise WorkflowError(
@@ -87,7 +87,7 @@ def physics_mass(physics) -> float:
     ----------
     Masoud & Maas 2025, Eq. 26 (a constant m_q).
     """
-    from pipeline.physics.reduced import reduced_curves
+    from debist.physics.reduced import reduced_curves
 
     if physics is None:
         raise WorkflowError("[identify] m_q = 'physics' needs a [physics] section")
@@ -108,7 +108,7 @@ def analytical_for(physics, datasets: Sequence[DataSet], cfg: ValidateConfig):
 
     Returns
     -------
-    pipeline.physics.freerun.AnalyticalModel or None
+    debist.physics.freerun.AnalyticalModel or None
         None without ``[physics]``.
 
     Raises
@@ -131,6 +131,6 @@ def analytical_for(physics, datasets: Sequence[DataSet], cfg: ValidateConfig):
                 f"[physics] describes a DE prototype (q [m], inputs v1, v2 [V]); data set "
                 f"'{ds.name}' has q in {ds.q_unit!r} and {ds.v.shape[1]} input(s)"
             )
-    from pipeline.physics.freerun import analytical_model
+    from debist.physics.freerun import analytical_model
 
     return analytical_model(physics)

@@ -2,7 +2,7 @@
 
 Every function that builds arrays whose size a workflow key controls calls one of the
 checks below first, so that a setting such as ``[identify] M = 100000`` is refused in
-microseconds with a :class:`~pipeline.errors.ResourceError` (a ``WorkflowError``, exit
+microseconds with a :class:`~debist.errors.ResourceError` (a ``WorkflowError``, exit
 code 2) that names the key and the estimate, instead of ending in the kernel's
 out-of-memory killer. The estimates count the float64 arrays the code builds, copy by
 copy (see each function's Notes), and take the largest of a stage's phases.
@@ -31,7 +31,7 @@ from typing import Any
 
 import psutil
 
-from pipeline.errors import ResourceError, WorkflowError
+from debist.errors import ResourceError, WorkflowError
 
 __all__ = [
     "BUDGET_ENV",
@@ -210,14 +210,14 @@ def identify_columns(cfg: Any, n_inputs: int) -> tuple[int, int]:
     Returns
     -------
     columns : int
-        Regressor columns (the names :func:`pipeline.identify.fit_rbf_model` reports).
+        Regressor columns (the names :func:`debist.identify.fit_rbf_model` reports).
     z_columns : int
         Those that depend on the friction state z (re-built in every T_z evaluation).
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 40; :func:`pipeline.identify.terms.force_columns` and
-    :func:`~pipeline.identify.terms.input_columns` (one column per name).
+    Masoud & Maas 2025, Eq. 40; :func:`debist.identify.terms.force_columns` and
+    :func:`~debist.identify.terms.input_columns` (one column per name).
     """
     p, _, p_z = _columns(cfg, n_inputs)
     return p, p_z
@@ -242,7 +242,7 @@ def _solve_elements(rows: int, cols: int) -> int:
 
 
 def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = None) -> int:
-    """Estimate the peak memory of :func:`pipeline.identify.fit_rbf_model`.
+    """Estimate the peak memory of :func:`debist.identify.fit_rbf_model`.
 
     Parameters
     ----------
@@ -405,7 +405,7 @@ def check_identify_config(cfg: Any, n_inputs: int) -> None:
 def free_run_bytes(
     lengths: Sequence[int], n_inputs: int, n_states: int, substeps: int, batch_extra: int = 0
 ) -> int:
-    """Estimate the peak memory of :func:`pipeline.simulate.simulate` [bytes].
+    """Estimate the peak memory of :func:`debist.simulate.simulate` [bytes].
 
     Parameters
     ----------
@@ -457,7 +457,7 @@ def refine_bytes(
     M: int,
     n_states: int = 3,
 ) -> int:
-    """Estimate the peak memory of :func:`pipeline.identify.refine.refine_model` [bytes].
+    """Estimate the peak memory of :func:`debist.identify.refine.refine_model` [bytes].
 
     Parameters
     ----------
@@ -506,7 +506,7 @@ def refine_bytes(
 
 
 def sindy_bytes(rows: int, n_features: int) -> int:
-    """Estimate the peak memory of :func:`pipeline.sindy.fit_sindy` [bytes].
+    """Estimate the peak memory of :func:`debist.sindy.fit_sindy` [bytes].
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 
 The runner, the CLI and batch read the stage graph from here. A stage's module holds its
 pure ``run_<stage>`` function and the ``execute(ctx)`` adapter the runner calls; the stage's
-key hashes that module's import closure (:func:`pipeline.fingerprint.code_fingerprint`) and
+key hashes that module's import closure (:func:`debist.fingerprint.code_fingerprint`) and
 the versions of the libraries listed here, so a change elsewhere leaves it up to date.
 
 References
@@ -53,7 +53,7 @@ class StageDef:
 STAGES: tuple[StageDef, ...] = (
     StageDef(
         "rig",
-        "pipeline.stages.rig",
+        "debist.stages.rig",
         (),
         ("numpy", "scipy", "h5py"),
         "Virtual rig: dSPACE MAT logs and truth files per experiment.",
@@ -61,42 +61,42 @@ STAGES: tuple[StageDef, ...] = (
     ),
     StageDef(
         "ingest",
-        "pipeline.stages.ingest",
+        "debist.stages.ingest",
         (),
         (*_BASE, "h5py"),
         "Rig logs to canonical tables.",
     ),
     StageDef(
         "differentiate",
-        "pipeline.stages.differentiate",
+        "debist.stages.differentiate",
         ("ingest",),
         _BASE,
         "q_dot and q_ddot (TVRegDiff or the configured differentiator).",
     ),
     StageDef(
         "identify",
-        "pipeline.stages.identify",
+        "debist.stages.identify",
         ("ingest", "differentiate"),
         (*_BASE, "h5py"),
         "The RBF model of Eq. 37-40 by least squares with the T_z search.",
     ),
     StageDef(
         "validate",
-        "pipeline.stages.validate",
+        "debist.stages.validate",
         ("ingest", "differentiate", "identify"),
         (*_BASE, "h5py", "matplotlib"),
         "Free runs on every data set: NRMSE table and plots.",
     ),
     StageDef(
         "compare",
-        "pipeline.stages.compare",
+        "debist.stages.compare",
         ("ingest", "differentiate", "validate"),
         (*_BASE, "h5py", "pysindy", "scikit-learn"),
         "SINDy on the same data, derivatives and simulator.",
     ),
     StageDef(
         "study",
-        "pipeline.stages.study",
+        "debist.stages.study",
         ("ingest", "differentiate"),
         (*_BASE, "matplotlib"),
         "Sensitivity studies: RBF grid (Fig. 11b) and TVRegDiff alpha (Fig. 11c).",
@@ -104,7 +104,7 @@ STAGES: tuple[StageDef, ...] = (
     ),
     StageDef(
         "analyze",
-        "pipeline.stages.analyze",
+        "debist.stages.analyze",
         (),
         ("numpy", "scipy", "h5py", "matplotlib"),
         "Design analysis of Section 3: statics.h5 and Fig. 3-7.",
@@ -112,7 +112,7 @@ STAGES: tuple[StageDef, ...] = (
     ),
     StageDef(
         "report",
-        "pipeline.stages.report",
+        "debist.stages.report",
         ("ingest", "differentiate", "identify", "validate", "compare", "study", "analyze"),
         (*_BASE, "jinja2", "matplotlib"),
         "One self-contained HTML page of the run (Table 2, Fig. 11-15, provenance).",

@@ -1,7 +1,7 @@
 """Terminal reports of a workflow's results: rich tables built from the stages' summaries.
 
 Every number printed comes from a stage's ``summary.json``, read only after its sha256 was
-checked against the stage's manifest (:func:`pipeline.artifacts.read_summary`); wall times,
+checked against the stage's manifest (:func:`debist.artifacts.read_summary`); wall times,
 which no hash covers, are not printed here.
 """
 
@@ -59,7 +59,7 @@ def pretty_unit(expression: str) -> str:
     ----------
     pint, unit formatting (https://pint.readthedocs.io).
     """
-    from pipeline.ingest.units import registry
+    from debist.ingest.units import registry
 
     unit = registry().parse_units(expression.replace("^", "**"))
     text = format(unit, "~C").replace("**", "^").replace("*", " ")
@@ -128,7 +128,7 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
 
 def _quantity(unit: str) -> str:
     """Return the quantity an input's unit measures (``"voltage"``, ``"acceleration"``)."""
-    from pipeline.ingest.units import lookup_unit
+    from debist.ingest.units import lookup_unit
 
     found = lookup_unit(unit)
     return found.quantity if found is not None and found.quantity[:1] != "[" else "input"
@@ -180,7 +180,7 @@ def switching_word(units: dict[str, Any], i: int) -> str:
 
 def _energy(unit: str) -> str:
     """``"J"`` for a unit of energy with factor 1 (``N m``), else the unit as given."""
-    from pipeline.ingest.units import lookup_unit
+    from debist.ingest.units import lookup_unit
 
     found = lookup_unit(unit.replace(" ", "*"))
     return "J" if found is not None and found.si == "J" and found.factor == 1.0 else unit
@@ -495,7 +495,7 @@ def equilibrium_kind(row: dict[str, Any]) -> str:
     """Describe one equilibrium row: well, well with negative damping, or saddle.
 
     A row the data do not support (``identified`` false: the force curve it sits on is not
-    identified at ``q*``, :func:`pipeline.identify.design.mark_identified`) says so.
+    identified at ``q*``, :func:`debist.identify.design.mark_identified`) says so.
 
     Parameters
     ----------
@@ -555,7 +555,7 @@ def switching_note(row: dict[str, Any]) -> str:
 
     The identified model's switching voltage of input i rests on the restoring force and
     ``g_i`` between its well and the fold where the well vanishes; where either is not
-    identified there (:func:`pipeline.identify.design.mark_switching`) the number is the
+    identified there (:func:`debist.identify.design.mark_switching`) the number is the
     model's, not the data's, and the row says so.
 
     Parameters

@@ -18,9 +18,9 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline import artifacts
-from pipeline.errors import WorkflowError
-from pipeline.registry import names
+from debist import artifacts
+from debist.errors import WorkflowError
+from debist.registry import names
 
 __all__ = ["NRMSE_COLUMNS", "diff_runs"]
 

@@ -6,7 +6,7 @@ hashes and its upstream manifests, and its outputs still hash to the manifest. `
 skips such stages; anything else is rerun, and so is everything downstream whose inputs
 change as a result.
 
-Before a run writes anything it checks the output folder (:mod:`pipeline.outdir`: its
+Before a run writes anything it checks the output folder (:mod:`debist.outdir`: its
 owner, forbidden places, foreign files in stage folders), takes the folder's lock and
 resolves the leftovers of an interrupted run. ``status`` and ``verify`` only read.
 """
@@ -24,12 +24,12 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from pipeline import artifacts, outdir, registry
-from pipeline.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
-from pipeline.faults import fault_point
-from pipeline.fileformats import write_output
-from pipeline.fingerprint import code_fingerprint
-from pipeline.workflow import Workflow
+from debist import artifacts, outdir, registry
+from debist.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
+from debist.faults import fault_point
+from debist.fileformats import write_output
+from debist.fingerprint import code_fingerprint
+from debist.workflow import Workflow
 
 #: Stage names in execution order.
 STAGES = registry.names()
@@ -106,7 +106,7 @@ def physics_params(wf: Workflow):
 
     Returns
     -------
-    pipeline.physics.params.PrototypeParams
+    debist.physics.params.PrototypeParams
         Table 1 updated by the section's keys [SI].
 
     Raises
@@ -114,7 +114,7 @@ def physics_params(wf: Workflow):
     WorkflowError
         On an unknown key or an invalid value.
     """
-    from pipeline.physics.params import PrototypeParams
+    from debist.physics.params import PrototypeParams
 
     return PrototypeParams.from_dict(wf.section("physics"))
 
@@ -183,7 +183,7 @@ def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]
 class Runner:
     """Executes, inspects and verifies the stages of one workflow.
 
-    Implements :class:`pipeline.stages.StageInputs` for the stages it runs.
+    Implements :class:`debist.stages.StageInputs` for the stages it runs.
 
     Parameters
     ----------
@@ -263,12 +263,12 @@ class Runner:
         }
 
     def read_h5(self, stage: str, rel: str) -> dict[str, Any]:
-        """Read an HDF5 artifact of an upstream stage (see :mod:`pipeline.artifacts`)."""
+        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
 
     def read_parquet(self, stage: str, rel: str) -> Any:
-        """Read a Parquet artifact of an upstream stage (see :mod:`pipeline.artifacts`)."""
+        """Read a Parquet artifact of an upstream stage (see :mod:`debist.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
 

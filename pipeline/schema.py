@@ -1,12 +1,12 @@
 """The workflow schema: every section of a parsed workflow file checked before any stage runs.
 
 :func:`check_workflow` builds each section's typed configuration, the same classes the
-stages build (:mod:`pipeline.config`), from the parsed TOML, merged the way the stages
+stages build (:mod:`debist.config`), from the parsed TOML, merged the way the stages
 merge them (a data set's ingest is ``[ingest]`` updated by its own keys, ``[compare]``
 takes ``input_map`` from ``[identify]``, ``[study.identify]`` updates ``[identify]``), so
 a workflow that loads has no wrong type, unknown key or out-of-range value left for a
 stage to trip over. The first problem found is raised as a one-line
-:class:`~pipeline.errors.WorkflowError`::
+:class:`~debist.errors.WorkflowError`::
 
     [identify] M: expected an integer, got 'ten'
     [datasets.estimation] source: expected a string, got 5
@@ -27,25 +27,25 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import pydantic
 
-from pipeline import preflight
-from pipeline.config import CONFIG, config_from_section, unknown_key_message
-from pipeline.differentiate import CONFIGS
-from pipeline.differentiate.tvregdiff_method import TVRegDiffConfig
-from pipeline.errors import WorkflowError
-from pipeline.identify.config import IdentifyConfig
-from pipeline.identify.terms import PHYSICS_TERMS
-from pipeline.ingest.spec import OPTION_KEYS, IngestSpec
-from pipeline.ingest.units import UNITS
-from pipeline.names import check_file_name
-from pipeline.physics.params import PrototypeParams
-from pipeline.validate import ValidateConfig
+from debist import preflight
+from debist.config import CONFIG, config_from_section, unknown_key_message
+from debist.differentiate import CONFIGS
+from debist.differentiate.tvregdiff_method import TVRegDiffConfig
+from debist.errors import WorkflowError
+from debist.identify.config import IdentifyConfig
+from debist.identify.terms import PHYSICS_TERMS
+from debist.ingest.spec import OPTION_KEYS, IngestSpec
+from debist.ingest.units import UNITS
+from debist.names import check_file_name
+from debist.physics.params import PrototypeParams
+from debist.validate import ValidateConfig
 
 if TYPE_CHECKING:  # the modules of optional sections are imported when a workflow has them
-    from pipeline.htmlreport import ReportConfig
-    from pipeline.physics.analysis import AnalyzeConfig
-    from pipeline.rig.experiment import RigConfig
-    from pipeline.sindy import SindyConfig
-    from pipeline.studies import StudyConfig
+    from debist.htmlreport import ReportConfig
+    from debist.physics.analysis import AnalyzeConfig
+    from debist.rig.experiment import RigConfig
+    from debist.sindy import SindyConfig
+    from debist.studies import StudyConfig
 
 __all__ = [
     "DATALESS",
@@ -133,7 +133,7 @@ class CheckedWorkflow:
         Each data set with its merged ingest, in file order.
     differentiate : object
         ``[differentiate]``: the config of its ``method`` (see
-        :data:`pipeline.differentiate.CONFIGS`).
+        :data:`debist.differentiate.CONFIGS`).
     identify : IdentifyConfig
         ``[identify]`` (``m_q = "physics"`` stands in as 1 kg: the stage resolves it).
     validate : ValidateConfig
@@ -186,8 +186,8 @@ def _tables(raw: Mapping[str, Any]) -> None:
 def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
     if "rig" not in raw:
         return None
-    from pipeline.rig.experiment import RigConfig
-    from pipeline.rig.profiles import make_profile
+    from debist.rig.experiment import RigConfig
+    from debist.rig.profiles import make_profile
 
     cfg = RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
     for name, exp in cfg.experiments.items():
@@ -336,7 +336,7 @@ def _study(
             f"{diff['method']!r} (give a [study.differentiate] table)"
         )
     dcfg = _differentiate(diff, where)
-    from pipeline.studies import StudyConfig
+    from debist.studies import StudyConfig
 
     return StudyConfig.from_dict(study), icfg, dcfg
 
@@ -377,7 +377,7 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     >>> check_workflow({"physics": {}, "compare": {"degre": 2}})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    pipeline.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
+    debist.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
     """
     _tables(raw)
     head = config_from_section(WorkflowHead, raw.get("workflow", {}), "[workflow]")
@@ -392,20 +392,20 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     compare = None
     if "compare" in raw:
         sindy = {"input_map": raw.get("identify", {}).get("input_map", "v2"), **raw["compare"]}
-        from pipeline.narx import NarxConfig
-        from pipeline.sindy import SindyConfig
+        from debist.narx import NarxConfig
+        from debist.sindy import SindyConfig
 
         NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
         compare = SindyConfig.from_dict(sindy, "[compare]")
     study = _study(raw, specs) if "study" in raw else None
     analyze = None
     if "analyze" in raw:
-        from pipeline.physics.analysis import AnalyzeConfig
+        from debist.physics.analysis import AnalyzeConfig
 
         analyze = AnalyzeConfig.from_dict(raw["analyze"])
     report = None
     if "report" in raw:
-        from pipeline.htmlreport import ReportConfig
+        from debist.htmlreport import ReportConfig
 
         report = ReportConfig.from_dict(raw["report"])
     return CheckedWorkflow(

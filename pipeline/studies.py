@@ -25,17 +25,17 @@ import pandas as pd
 import pydantic
 from pydantic import BeforeValidator, Field, PositiveFloat
 
-from pipeline import preflight, progress
-from pipeline.config import CONFIG, config_from_section
-from pipeline.datasets import validation_datasets
-from pipeline.differentiate import TVRegDiffConfig
-from pipeline.errors import IdentificationError, WorkflowError
-from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
-from pipeline.records import estimation_records
-from pipeline.stages.differentiate import run_differentiate
-from pipeline.stages.tables import input_columns
-from pipeline.study_plots import alpha_figure, grid_figure
-from pipeline.validate import DataSet, ValidateConfig, validate_model
+from debist import preflight, progress
+from debist.config import CONFIG, config_from_section
+from debist.datasets import validation_datasets
+from debist.differentiate import TVRegDiffConfig
+from debist.errors import IdentificationError, WorkflowError
+from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
+from debist.records import estimation_records
+from debist.stages.differentiate import run_differentiate
+from debist.stages.tables import input_columns
+from debist.study_plots import alpha_figure, grid_figure
+from debist.validate import DataSet, ValidateConfig, validate_model
 
 __all__ = [
     "StudyConfig",
@@ -76,7 +76,7 @@ class StudyConfig:
         TVRegDiff regularisation weights of the first derivative (Fig. 11c), each
         ``> 0``, in the units of the data: ``alpha`` scales with the unit of q
         (q in m needs 1e-3 times the value for q in mm, see
-        :class:`~pipeline.differentiate.TVRegDiffConfig`). The defaults span the
+        :class:`~debist.differentiate.TVRegDiffConfig`). The defaults span the
         project's default ``1e-5`` for q in metres (the paper's 0.01 for mm)
         by two decades below and one above.
     free_run : bool
@@ -276,9 +276,9 @@ def rbf_grid_study(
         Their derivatives ``t, q, q_hat, q_dot [m/s], q_ddot [m/s^2]`` with
         ``attrs['dt']`` [s] (the differentiation stage's output).
     identify_section : mapping
-        The ``[identify]`` section (see :class:`~pipeline.identify.IdentifyConfig`).
+        The ``[identify]`` section (see :class:`~debist.identify.IdentifyConfig`).
     validate_section : mapping
-        The ``[validate]`` section (see :class:`~pipeline.validate.ValidateConfig`).
+        The ``[validate]`` section (see :class:`~debist.validate.ValidateConfig`).
     cfg : StudyConfig
         The grids, ``free_run`` and ``max_samples``.
 

@@ -1,6 +1,6 @@
 """Figures of the hyper-parameter studies and searches (Masoud & Maas 2025, Fig. 11b and 11c).
 
-Pure plotting: each function takes a study table from :mod:`pipeline.studies` and
+Pure plotting: each function takes a study table from :mod:`debist.studies` and
 returns a matplotlib figure; saving is the caller's (the artifacts module).
 """
 
@@ -243,8 +243,8 @@ def autotune_figure(result) -> Any:
 
     Parameters
     ----------
-    result : pipeline.identify.autotune.AutoResult
-        Output of :func:`pipeline.identify.autotune.select_hyperparameters`.
+    result : debist.identify.autotune.AutoResult
+        Output of :func:`debist.identify.autotune.select_hyperparameters`.
 
     Returns
     -------

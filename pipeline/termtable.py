@@ -14,7 +14,7 @@ Maxwell creep of the DEs (Masoud & Maas 2025, Eq. 26) with k_i(q) written in the
 the creep force ``sum_k c_k w_k`` is linear in its weights once lambda is fixed. The RBF model
 of Eq. 37 with its backbone and physics prior, and the SINDy polynomials, are such tables; the
 same arrays give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
-right-hand side (:class:`TableModel`) and the compiled one (:mod:`pipeline.kernel`), so the
+right-hand side (:class:`TableModel`) and the compiled one (:mod:`debist.kernel`), so the
 fitted, the reference-simulated and the compiled-simulated model are one object.
 
 References
@@ -182,7 +182,7 @@ class TermTable:
         hv : array_like, shape (n, n_inputs)
             Mapped inputs h(v_i).
         w : array_like, shape (n, C), optional
-            The creep states [unit of q] (:func:`pipeline.identify.friction.creep_states`
+            The creep states [unit of q] (:func:`debist.identify.friction.creep_states`
             along a record); default 0 (at rest), so creep terms vanish.
 
         Returns
@@ -400,8 +400,8 @@ class TableModel:
         return out
 
     def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:func:`pipeline.kernel.table_arrays`)."""
-        from pipeline.kernel import table_arrays
+        """Arrays of the compiled free-run kernel (:func:`debist.kernel.table_arrays`)."""
+        from debist.kernel import table_arrays
 
         return table_arrays(self)
 

@@ -12,11 +12,11 @@ import pydantic
 from pydantic import FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 from typing_extensions import TypedDict
 
-from pipeline import progress
-from pipeline.config import CONFIG, AsTuple, ConfigValueError, config_from_section
-from pipeline.errors import WorkflowError
-from pipeline.ingest.units import lookup_unit
-from pipeline.simulate import FreeRunModel, SimulationResult, simulate
+from debist import progress
+from debist.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.errors import WorkflowError
+from debist.ingest.units import lookup_unit
+from debist.simulate import FreeRunModel, SimulationResult, simulate
 
 
 def nrmse(y_meas: np.ndarray, y_calc: np.ndarray) -> float:
@@ -162,7 +162,7 @@ class ValidateConfig:
         the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
         in metres and the two DE voltages as inputs.
     engine : {"compiled", "numpy"}
-        Free-run engine: the compiled kernel (:mod:`pipeline.kernel`, default) or the NumPy
+        Free-run engine: the compiled kernel (:mod:`debist.kernel`, default) or the NumPy
         reference; the same scheme and the same numbers to rounding.
     predict_steps : int
         Horizon k [samples] of the k-step-ahead NRMSE scored beside the free run (each
@@ -316,7 +316,7 @@ def mark_unstable(table: pd.DataFrame, model_name: str, reason: str) -> pd.DataF
     model_name : str
         The model whose rows are marked.
     reason : str
-        Why (:func:`pipeline.identify.stability.model_is_stable`).
+        Why (:func:`debist.identify.stability.model_is_stable`).
 
     Returns
     -------
@@ -383,7 +383,7 @@ def validate_model(
     ----------
     Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
     """
-    from pipeline.simulate import check_free_run
+    from debist.simulate import check_free_run
 
     fit_min = 4  # samples the cubic of initial_state needs; as many must remain to score
     by_dt: dict[float, list[DataSet]] = {}

@@ -76,9 +76,9 @@ def example_rbf_model(
 
     With ``creep_rate`` [1/s] > 0 it has the DE creep of Eq. 26 too (seeded weights ~100 N/m).
     """
-    from pipeline.identify.basis import RBFBasis
-    from pipeline.identify.model import RBFModel
-    from pipeline.identify.terms import PhysicsPrior
+    from debist.identify.basis import RBFBasis
+    from debist.identify.model import RBFModel
+    from debist.identify.terms import PhysicsPrior
 
     rng = np.random.default_rng(1)
     M = 10
@@ -170,7 +170,7 @@ def invoke_cli(*args) -> tuple[int, str]:
     """Run the ``debist`` CLI in-process: exit code and the output (stdout and stderr)."""
     from typer.testing import CliRunner
 
-    from cli import app
+    from debist.cli import app
 
     result = CliRunner().invoke(app, [str(a) for a in args])
     return result.exit_code, result.output

@@ -9,15 +9,15 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.errors import IdentificationError, WorkflowError
-from pipeline.identify import IdentifyConfig, RBFBasis, RBFModel, Record
-from pipeline.identify.autotune import (
+from debist.errors import IdentificationError, WorkflowError
+from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record
+from debist.identify.autotune import (
     auto_settings,
     blocked_folds,
     one_standard_error,
     select_hyperparameters,
 )
-from pipeline.study_plots import autotune_figure
+from debist.study_plots import autotune_figure
 
 
 def _reference_choice(rows: list[dict]) -> int:
@@ -243,7 +243,7 @@ def test_the_grid_is_checked_before_any_fit(in_class_record):
 def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypatch):
     """5 x 3 x 3 = 45 settings exceed the product limit: one sweep per parameter, each
     around the best so far, evaluates 5 + 2 + 2 = 9 distinct settings."""
-    import pipeline.identify.autotune as autotune
+    import debist.identify.autotune as autotune
 
     def fake(records, cfg, fold_list, substeps, window):
         score = abs(cfg.M - 8) + abs(cfg.sigma_n - 1.0) + (cfg.smoothing or 0.0)
@@ -279,9 +279,9 @@ def test_the_auto_table_is_checked_when_the_workflow_is_read():
 def test_the_identify_stage_fits_the_searched_setting_and_reports_the_search(in_class_record):
     """With [identify.auto] the stage's model is the fit at the chosen setting (the same
     model as a plain fit at that setting), and the summary carries the search."""
-    from pipeline.identify.autotune import UNDECIDED_SE, undecided
-    from pipeline.report import auto_line
-    from pipeline.stages.identify import run_identify
+    from debist.identify.autotune import UNDECIDED_SE, undecided
+    from debist.report import auto_line
+    from debist.stages.identify import run_identify
 
     rec = in_class_record
     t = np.arange(rec.q.size) * rec.dt

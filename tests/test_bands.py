@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from conftest import bistable_truth
 
-from pipeline.identify import IdentifyConfig, Record, fit_rbf_model
-from pipeline.identify.bands import (
+from debist.identify import IdentifyConfig, Record, fit_rbf_model
+from debist.identify.bands import (
     block_bootstrap,
     curve_bands,
     curve_maps,
@@ -140,7 +140,7 @@ def test_the_model_error_term_widens_each_band_by_its_share_of_the_curves_scale(
     """MODEL_ERROR's fractions scale with each curve's scale (range, or largest magnitude for
     a flat one-signed curve) and join the bootstrap reach and a systematic bound in
     quadrature; g1, g2 read the "g" entry; a curve without an entry keeps its band."""
-    from pipeline.identify.bands import MODEL_ERROR, band_label
+    from debist.identify.bands import MODEL_ERROR, band_label
 
     rng = np.random.default_rng(6)
     m, p, B = 9, 3, 400
@@ -239,7 +239,7 @@ def test_an_input_applied_only_in_transit_is_not_identified(bistable_record):
     Along a transit q_dot is a function of q, so g_1 h(v_1) is not separated from c(q) q and
     d(q) z there; the same record with v_1 kept at the quasi-static samples marks g1.
     """
-    from pipeline.identify.excitation import quasi_static
+    from debist.identify.excitation import quasi_static
 
     slow = quasi_static(bistable_record["q_dot"])
     assert 0.2 < slow.mean() < 0.95  # both kinds of samples are present

@@ -7,7 +7,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from cli import app
+from debist.cli import app
 
 #: A bracketed word as the help texts write them: a section, a key path or a unit.
 BRACKETED = re.compile(r"\[[A-Za-z0-9_.*/^]+\]")

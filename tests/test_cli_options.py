@@ -7,7 +7,7 @@ import pytest
 from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
-from cli import app
+from debist.cli import app
 
 
 def test_version_prints_the_installed_version_and_exits():

@@ -10,9 +10,8 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from rich.console import Console
 from typer.testing import CliRunner
 
-import cli
-from pipeline import progress
-from pipeline.physics.segments import solve_segments
+from debist import cli, progress
+from debist.physics.segments import solve_segments
 
 REFINE = """
 [identify.refine]

@@ -7,7 +7,7 @@ import pytest
 from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
-from cli import app
+from debist.cli import app
 
 #: The stages of the synthetic workflow, in order (it has no optional sections).
 STAGES = ["ingest", "differentiate", "identify", "validate", "compare"]

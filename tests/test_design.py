@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from test_stability import F_MAX, K1, K3, M_Q, G, double_well
 
-from pipeline.identify import Record
-from pipeline.identify.design import analytical_as_eq37, design_numbers, held_levels
-from pipeline.physics.params import PrototypeParams
+from debist.identify import Record
+from debist.identify.design import analytical_as_eq37, design_numbers, held_levels
+from debist.physics.params import PrototypeParams
 
 
 def _record(v, dt=0.01):
@@ -69,8 +69,8 @@ def test_equilibria_where_the_curves_are_not_identified_are_marked():
     """An equilibrium on an unidentified part of its force curve is flagged, not vouched for."""
     import pandas as pd
 
-    from pipeline.identify.design import mark_identified
-    from pipeline.report import equilibrium_kind
+    from debist.identify.design import mark_identified
+    from debist.report import equilibrium_kind
 
     q = np.linspace(-0.01, 0.01, 21)
     curves = pd.DataFrame({"q": q, "restoring_identified": np.abs(q) > 0.004})
@@ -98,8 +98,8 @@ def test_switching_voltages_where_g_is_not_identified_are_marked():
     """A switching voltage rests on the restoring force and g_i from the well to the fold."""
     import pandas as pd
 
-    from pipeline.identify.design import mark_switching
-    from pipeline.report import switching_note
+    from debist.identify.design import mark_switching
+    from debist.report import switching_note
 
     q = np.linspace(-0.016, 0.016, 33)  # 1 mm grid
     curves = pd.DataFrame({

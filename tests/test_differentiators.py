@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.differentiate import (
+from debist.differentiate import (
     CONFIGS,
     DIFFERENTIATORS,
     Derivatives,
@@ -27,8 +27,8 @@ from pipeline.differentiate import (
     spectral_derivatives,
     tvregdiff_derivatives,
 )
-from pipeline.differentiate.spectral import lowpass_gain
-from pipeline.errors import ConvergenceWarning, WorkflowError
+from debist.differentiate.spectral import lowpass_gain
+from debist.errors import ConvergenceWarning, WorkflowError
 
 DT, N = 0.01, 1000
 T = np.arange(N) * DT
@@ -63,7 +63,7 @@ ERROR_BOUNDS = [
 ]
 
 
-@pytest.mark.filterwarnings("ignore::pipeline.errors.ConvergenceWarning")
+@pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
 @pytest.mark.parametrize(("method", "params", "sigma", "part", "bounds"), ERROR_BOUNDS)
 def test_error_bounds_on_noisy_sines(method, params, sigma, part, bounds):
     x = X + sigma * np.random.default_rng(42).standard_normal(N)
@@ -72,7 +72,7 @@ def test_error_bounds_on_noisy_sines(method, params, sigma, part, bounds):
     assert np.all(np.less_equal(errors, bounds)), f"{method} {params} sigma={sigma}: {errors}"
 
 
-@pytest.mark.filterwarnings("ignore::pipeline.errors.ConvergenceWarning")
+@pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
 @pytest.mark.parametrize("method", sorted(DIFFERENTIATORS))
 def test_every_method_honours_the_contract(method):
     f = DIFFERENTIATORS[method]
@@ -157,7 +157,7 @@ def test_savgol_is_exact_for_a_cubic(window, polyorder):
 
 
 def test_tvregdiff_method_matches_two_passes_and_reports():
-    from pipeline.differentiate import tvregdiff
+    from debist.differentiate import tvregdiff
 
     x = X + 1e-3 * np.random.default_rng(1).standard_normal(N)
     cfg = TVRegDiffConfig(alpha=1e-4, ep=1e-6, iterations=5, alpha2=1e-3, iterations2=3)
@@ -197,7 +197,7 @@ def _noisy_motion(seed: int, noise: float):
 
 def test_auto_alpha_takes_the_largest_alpha_where_the_residual_levels_off():
     """The choice follows the documented rule, recomputed here from fixed-alpha runs."""
-    from pipeline.differentiate.tvregdiff_method import AUTO_GRID_MM, AUTO_SLOPE
+    from debist.differentiate.tvregdiff_method import AUTO_GRID_MM, AUTO_SLOPE
 
     _, x, _ = _noisy_motion(5, 20e-6)
     auto = TVRegDiffConfig(alpha="auto", ep=1e-6, unit="mm", iterations=10)
@@ -220,7 +220,7 @@ def test_auto_alpha_takes_the_largest_alpha_where_the_residual_levels_off():
 @pytest.mark.parametrize("noise", [5e-6, 20e-6, 50e-6])
 def test_auto_alpha_velocity_error_is_near_the_best_of_the_grid(noise):
     """Against the true derivative (which the rule never sees), auto is within 1.25x the best."""
-    from pipeline.differentiate.tvregdiff_method import AUTO_GRID_MM
+    from debist.differentiate.tvregdiff_method import AUTO_GRID_MM
 
     _, x, q_dot = _noisy_motion(6, noise)
     inner = slice(50, -50)
@@ -377,11 +377,11 @@ def test_tvregdiff_method_unit_scaling(c):
     "module",
     sorted(
         m.name
-        for m in pkgutil.iter_modules(importlib.import_module("pipeline.differentiate").__path__)
+        for m in pkgutil.iter_modules(importlib.import_module("debist.differentiate").__path__)
     ),
 )
 def test_docstring_examples_run(module):
-    mod = importlib.import_module(f"pipeline.differentiate.{module}")
+    mod = importlib.import_module(f"debist.differentiate.{module}")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)

@@ -1,4 +1,4 @@
-"""The excitation check before identification (pipeline.identify.excitation)."""
+"""The excitation check before identification (debist.identify.excitation)."""
 
 import doctest
 import json
@@ -9,10 +9,10 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
-from pipeline.errors import WorkflowError
-from pipeline.identify import RBFBasis, Record
-from pipeline.identify import excitation as excitation_module
-from pipeline.identify.excitation import check_excitation
+from debist.errors import WorkflowError
+from debist.identify import RBFBasis, Record
+from debist.identify import excitation as excitation_module
+from debist.identify.excitation import check_excitation
 
 # --- (a) Duffing oscillator q'' + 2 zeta w q' + w^2 q + k3 q^3 = u(t) -------------------------
 

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from conftest import example_rbf_model, write_rig_csv
 
-from pipeline.errors import ArtifactError, WorkflowError
-from pipeline.export import (
+from debist.errors import ArtifactError, WorkflowError
+from debist.export import (
     C_FILES,
     MATLAB_FILE,
     MATLAB_NAME_FILE,
@@ -32,8 +32,8 @@ from pipeline.export import (
     matlab_source,
     python_source,
 )
-from pipeline.identify.model import RBFModel
-from pipeline.simulate import simulate
+from debist.identify.model import RBFModel
+from debist.simulate import simulate
 
 DT = 0.01
 N = 2000
@@ -330,8 +330,8 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     import pandas as pd
     from typer.testing import CliRunner
 
-    from cli import app
-    from pipeline import artifacts
+    from debist import artifacts
+    from debist.cli import app
 
     def invoke(*args):
         result = CliRunner().invoke(app, [str(a) for a in args])

@@ -5,7 +5,7 @@ The staircase workflow (workflows/paper-experiment-staircase.toml) run on the fu
 force is not of the separable form ``g_i(q) v_i^2`` of Eq. 37). At every input level the data
 hold, the identified static force ``c(q) q + F_0 - sum_i g_i(q) v_i^2``
 (``identify/static.parquet``) must match the full model's static force-displacement curve at
-that level (:func:`pipeline.physics.statics.force_displacement`, the continuation of Fig. 4,
+that level (:func:`debist.physics.statics.force_displacement`, the continuation of Fig. 4,
 of the rig's prototype) within 10 % of that curve's range wherever debist marks it
 identified; the marked region must not be trivially small, and each level must really be
 held in the log (computed here from the logged voltages, not from debist's output).
@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from cli import app
+from debist.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-staircase.toml"
@@ -32,7 +32,7 @@ RESOLUTION = 0.02  # of the largest voltage: two voltages within it are one leve
 @pytest.fixture(scope="module")
 def full_rig_run(tmp_path_factory):
     """The staircase workflow on the full-model rig: static.parquet, the log, the prototype."""
-    from pipeline.rig.experiment import RigConfig
+    from debist.rig.experiment import RigConfig
 
     text = WORKFLOW.read_text()
     reduced = 'model = "reduced"'
@@ -65,7 +65,7 @@ def _longest_hold(log: pd.DataFrame, level: np.ndarray) -> float:
 
 @pytest.mark.slow
 def test_static_force_matches_the_full_model_where_marked(full_rig_run):
-    from pipeline.physics.statics import force_displacement
+    from debist.physics.statics import force_displacement
 
     static, log, prototype = full_rig_run
     levels = static.groupby("level")

@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from cli import app
+from debist.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-staircase.toml"
@@ -76,9 +76,9 @@ def _curves_and_truth(out: Path):
     """The run's curves, the truth on their grid, the regions."""
     import tomllib
 
-    from pipeline import artifacts
-    from pipeline.rig.experiment import RigConfig
-    from pipeline.rig.profiles import make_profile
+    from debist import artifacts
+    from debist.rig.experiment import RigConfig
+    from debist.rig.profiles import make_profile
 
     curves = pd.read_parquet(out / "identify/curves.parquet")
     truth = artifacts.read_h5(out / "rig/identification_truth.h5")["curves"]
@@ -119,7 +119,7 @@ def test_identified_curves_match_the_truth_where_marked(staircase, staircase_boo
     """Within 10 % of the truth's range wherever marked, with either band (the model-error
     term only takes marks away: this workflow's band_tolerance = 0.1 is below twice every
     curve's MODEL_ERROR, so its shipped bands mark nothing, which the test checks)."""
-    from pipeline.identify.bands import MODEL_ERROR
+    from debist.identify.bands import MODEL_ERROR
 
     curves, true, _ = staircase if bands == "shipped" else staircase_boot
     marked = curves[f"{name}_identified"].to_numpy()
@@ -158,8 +158,8 @@ def test_the_gains_are_not_marked_with_their_model_error(staircase):
     """The gains' calibrated model error (MODEL_ERROR["g"] of their scale, from the bias that
     creep and inertia leave in Eq. 37) exceeds half the band tolerance: nowhere identified,
     and the band says how far off they may be."""
-    from pipeline.identify.bands import MODEL_ERROR
-    from pipeline.identify.config import IdentifyConfig
+    from debist.identify.bands import MODEL_ERROR
+    from debist.identify.config import IdentifyConfig
 
     tolerance = IdentifyConfig().band_tolerance
     assert MODEL_ERROR["g"] > tolerance / 2
@@ -203,16 +203,16 @@ def _unmodelled_force(out: Path, n: int, m_q: float) -> np.ndarray:
     """The reduced plant's forces that Eq. 37 with a constant ``m_q`` lacks, along the log [N].
 
     From the rig's true states (``rig/identification_truth.h5``) and the plant itself
-    (:class:`pipeline.rig.reduced.ReducedPlant` of the workflow's ``[rig]``):
+    (:class:`debist.rig.reduced.ReducedPlant` of the workflow's ``[rig]``):
     ``(m_q(q) - m_q) q_ddot + 1/2 m_q'(q) q_dot^2`` (the position-dependent inertia) plus
     ``k_bar (k_1(q) q_eps,1 + k_2(q) q_eps,2)`` (the DE creep), with ``q_ddot`` the plant's
     right-hand side at the true states and drive voltages.
     """
     import tomllib
 
-    from pipeline import artifacts
-    from pipeline.rig.experiment import RigConfig
-    from pipeline.rig.reduced import ReducedPlant
+    from debist import artifacts
+    from debist.rig.experiment import RigConfig
+    from debist.rig.reduced import ReducedPlant
 
     states = artifacts.read_h5(out / "rig/identification_truth.h5")["states"]
     t, x = states["t"], states["x"]
@@ -243,9 +243,9 @@ def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase_boot, stairc
     """
     import tomllib
 
-    from pipeline.physics.params import PrototypeParams
-    from pipeline.physics_stages import physics_mass
-    from pipeline.stages.identify import run_identify
+    from debist.physics.params import PrototypeParams
+    from debist.physics_stages import physics_mass
+    from debist.stages.identify import run_identify
 
     curves, true, _ = staircase_boot
     out = staircase_out

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 from conftest import bistable_truth
 
-from pipeline.errors import IdentificationError, WorkflowError
-from pipeline.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
-from pipeline.identify.friction import friction_state
-from pipeline.identify.terms import force_columns, input_columns, input_map
+from debist.errors import IdentificationError, WorkflowError
+from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
+from debist.identify.friction import friction_state
+from debist.identify.terms import force_columns, input_columns, input_map
 
 
 def test_basis_is_eq38_with_equidistant_centres():
@@ -309,7 +309,7 @@ def test_creep_states_are_the_filter_of_eq_26_discretised_exactly():
     """w' = phi q_dot - lambda w (first-order hold): exact for a piecewise linear input."""
     from scipy.integrate import solve_ivp
 
-    from pipeline.identify.friction import creep_states
+    from debist.identify.friction import creep_states
 
     dt, rate = 0.01, 3.7
     t = np.arange(0, 2.0, dt)
@@ -334,7 +334,7 @@ def test_creep_config_and_model_tree(bistable_record):
     with pytest.raises(WorkflowError, match=r"\[identify\] creep_bounds: expected \[lo, hi\]"):
         IdentifyConfig.from_dict({"creep_bounds": [5.0, 1.0]})
     assert IdentifyConfig.from_dict({}).creep is False
-    from pipeline.preflight import identify_columns
+    from debist.preflight import identify_columns
 
     plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
     assert identify_columns(IdentifyConfig.from_dict({"creep": "search"}), 2)[0] == plain_cols + 10

@@ -5,14 +5,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline import artifacts
-from pipeline.errors import WorkflowError
-from pipeline.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
-from pipeline.physics.freerun import AnalyticalModel
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.reduced import fit_reduced
-from pipeline.physics_stages import physics_prior
-from pipeline.simulate import simulate
+from debist import artifacts
+from debist.errors import WorkflowError
+from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
+from debist.physics.freerun import AnalyticalModel
+from debist.physics.params import PrototypeParams
+from debist.physics.reduced import fit_reduced
+from debist.physics_stages import physics_prior
+from debist.simulate import simulate
 
 P = PrototypeParams.paper()
 PHYSICS = ["physics_spring", "physics_damping", "physics_gain"]
@@ -84,8 +84,8 @@ def test_physics_terms_need_physics(record):
 
 
 def test_m_q_physics_is_the_analytical_mass_at_zero():
-    from pipeline.physics.reduced import reduced_curves
-    from pipeline.physics_stages import physics_mass
+    from debist.physics.reduced import reduced_curves
+    from debist.physics_stages import physics_mass
 
     assert physics_mass(P) == pytest.approx(float(reduced_curves(P, np.array([0.0])).m_q[0]))
     assert 0.040 < physics_mass(P) < 0.041  # tip mass 40 g plus the beam's share

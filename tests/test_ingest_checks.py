@@ -13,11 +13,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.errors import RigLogError, UnitMismatchWarning
-from pipeline.ingest import IngestSpec, detect_format, load_rig_log
-from pipeline.ingest.checks import find_gaps, split_segments
-from pipeline.ingest.detect import sniff_format
-from pipeline.ingest.resample import resample_segment
+from debist.errors import RigLogError, UnitMismatchWarning
+from debist.ingest import IngestSpec, detect_format, load_rig_log
+from debist.ingest.checks import find_gaps, split_segments
+from debist.ingest.detect import sniff_format
+from debist.ingest.resample import resample_segment
 
 SECTION = {
     "time": {"name": "t", "unit": "s"},

@@ -7,9 +7,9 @@ import gzip
 import numpy as np
 import pytest
 
-from pipeline.errors import RigLogError, WorkflowError
-from pipeline.ingest import IngestSpec, load_rig_log, read_raw
-from pipeline.ingest.text import detect_decimal, detect_dialect
+from debist.errors import RigLogError, WorkflowError
+from debist.ingest import IngestSpec, load_rig_log, read_raw
+from debist.ingest.text import detect_decimal, detect_dialect
 
 SECTION = {
     "time": {"name": "t", "unit": "s"},

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from pipeline.errors import RigLogError, WorkflowError, exit_code
-from pipeline.ingest import IngestSpec, load_rig_log
+from debist.errors import RigLogError, WorkflowError, exit_code
+from debist.ingest import IngestSpec, load_rig_log
 
 N = 400
 DT = 0.01

@@ -13,11 +13,11 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from pipeline.errors import ResourceError, RigLogError, UnitMismatchWarning
-from pipeline.ingest import IngestSpec, load_rig_log, read_raw
-from pipeline.ingest.channels import map_channels
-from pipeline.ingest.mat import interpret_mat, read_mat
-from pipeline.ingest.mat73 import load_mat73
+from debist.errors import ResourceError, RigLogError, UnitMismatchWarning
+from debist.ingest import IngestSpec, load_rig_log, read_raw
+from debist.ingest.channels import map_channels
+from debist.ingest.mat import interpret_mat, read_mat
+from debist.ingest.mat73 import load_mat73
 
 REPO_DATA = Path(__file__).resolve().parents[1] / "data"
 DATA = Path(__file__).resolve().parent / "data"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from pipeline.errors import RigLogError, WorkflowError
-from pipeline.ingest import ChannelSpec, IngestSpec, load_rig_log
+from debist.errors import RigLogError, WorkflowError
+from debist.ingest import ChannelSpec, IngestSpec, load_rig_log
 
 N = 200
 SECTION = {

@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.errors import RigLogError
-from pipeline.ingest import IngestSpec, load_rig_log, read_raw
+from debist.errors import RigLogError
+from debist.ingest import IngestSpec, load_rig_log, read_raw
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 DATA = Path(__file__).resolve().parent / "data"

@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import pipeline.ingest as ingest
-from pipeline.errors import RigLogError, WorkflowError
-from pipeline.ingest import IngestSpec, load_rig_log
-from pipeline.ingest.checks import printed_resolution, time_rtol
-from pipeline.ingest.resample import resample_segment
-from pipeline.ingest.units import UNITS, lookup_unit
-from pipeline.stages.ingest import run_ingest
-from pipeline.workflow import DatasetSpec
+import debist.ingest as ingest
+from debist.errors import RigLogError, WorkflowError
+from debist.ingest import IngestSpec, load_rig_log
+from debist.ingest.checks import printed_resolution, time_rtol
+from debist.ingest.resample import resample_segment
+from debist.ingest.units import UNITS, lookup_unit
+from debist.stages.ingest import run_ingest
+from debist.workflow import DatasetSpec
 
 G0 = 9.80665  # [m/s^2] standard gravity (CGPM 1901)
 

@@ -1,7 +1,7 @@
 """Identified masks that mean it: a curve is identified where the data inform it (issue 23).
 
 For ``g_i`` that is wherever input ``i`` excites the beam, its sub-threshold levels included
-(:func:`pipeline.identify.excitation.input_active`), not only where it switches the beam; and
+(:func:`debist.identify.excitation.input_active`), not only where it switches the beam; and
 nowhere the data never visited with input ``i`` on.
 """
 
@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.identify.excitation import input_active
+from debist.errors import WorkflowError
+from debist.identify.excitation import input_active
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment.toml"
@@ -108,9 +108,9 @@ def test_g_stays_unmarked_where_its_input_was_never_on(paper_until_identify):
     there beyond one RBF width (no sample with v_1 on informs it), and still marked left."""
     import tomllib
 
-    from pipeline.identify.basis import RBFBasis
-    from pipeline.physics.params import PrototypeParams
-    from pipeline.stages.identify import run_identify
+    from debist.identify.basis import RBFBasis
+    from debist.physics.params import PrototypeParams
+    from debist.stages.identify import run_identify
 
     out = paper_until_identify
     wf = tomllib.loads(WORKFLOW.read_text())

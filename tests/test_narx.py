@@ -6,10 +6,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
-from pipeline.report import not_modelled, verdict
-from pipeline.validate import nrmse
+from debist.errors import WorkflowError
+from debist.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
+from debist.report import not_modelled, verdict
+from debist.validate import nrmse
 
 pytestmark = pytest.mark.skipif(not narx_available(), reason="SysIdentPy (debist[narx]) absent")
 
@@ -59,7 +59,7 @@ def test_the_structure_comes_from_the_estimation_data_only():
 
 def test_the_nested_information_criterion_equals_sysidentpy_s_own():
     """One FROLS pass scores every model size as SysIdentPy's per-size reruns do."""
-    from pipeline.narx import _estimator, _sysidentpy
+    from debist.narx import _estimator, _sysidentpy
 
     FROLS, Polynomial, LeastSquares = _sysidentpy()  # never a bare import: see the next test
 
@@ -125,10 +125,10 @@ def test_verdicts_name_narx_and_its_unmodelled_columns_are_not_divergence():
 
 def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     """The stage never drops the peer silently: its rows carry the reason and NaN numbers."""
-    import pipeline.narx as narx_module
-    from pipeline.records import Record
-    from pipeline.stages.compare import _narx_rows
-    from pipeline.validate import DataSet, ValidateConfig
+    import debist.narx as narx_module
+    from debist.records import Record
+    from debist.stages.compare import _narx_rows
+    from debist.validate import DataSet, ValidateConfig
 
     monkeypatch.setattr(narx_module, "narx_available", lambda: False)
     rec = bistable_record

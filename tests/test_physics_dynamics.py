@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pipeline.physics.dynamics import FullModel, mode_analysis, simulate, well_state
-from pipeline.physics.energy import potential
-from pipeline.physics.kinematics import ritz_basis, stretches, vertical_displacement
-from pipeline.physics.params import V_MAX, PrototypeParams
+from debist.physics.dynamics import FullModel, mode_analysis, simulate, well_state
+from debist.physics.energy import potential
+from debist.physics.kinematics import ritz_basis, stretches, vertical_displacement
+from debist.physics.params import V_MAX, PrototypeParams
 
 P = PrototypeParams.paper()
 S = ritz_basis(P.l).scale
@@ -130,7 +130,7 @@ def test_switching_and_first_mode_dominance():
     assert res.phi == pytest.approx(np.arctan(res.qm @ ritz_basis(P.l).S), rel=1e-14)
 
 
-# --- compiled kernels (pipeline.physics.compiled) against the NumPy reference ----------------
+# --- compiled kernels (debist.physics.compiled) against the NumPy reference ----------------
 
 P_ASYM = P.replace(dz_1=0.15e-3, dz_2=-0.05e-3)
 
@@ -152,7 +152,7 @@ def models(params, v1, v2, F=None):
 
 @pytest.mark.parametrize("params", [P, P_ASYM], ids=["paper", "asymmetric"])
 def test_compiled_generated_terms_equal_the_python_ones_bit_for_bit(params):
-    from pipeline.physics import _generated, compiled
+    from debist.physics import _generated, compiled
 
     model = FullModel(params, lambda t: 0.0, lambda t: 0.0)
     for seed in range(5):
@@ -208,7 +208,7 @@ def test_compiled_kernels_are_cached_under_the_hash_of_the_generated_code():
     import inspect
     from pathlib import Path
 
-    from pipeline.physics import _generated, compiled
+    from debist.physics import _generated, compiled
 
     digest = hashlib.sha256(Path(inspect.getfile(_generated)).read_bytes()).hexdigest()
     assert digest == compiled.STAMP

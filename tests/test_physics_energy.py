@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pipeline.physics import _generated
-from pipeline.physics.energy import capacitances, energy_parts, potential
-from pipeline.physics.kinematics import (
+from debist.physics import _generated
+from debist.physics.energy import capacitances, energy_parts, potential
+from debist.physics.kinematics import (
     de_lengths,
     deflection,
     pitch_angle,
@@ -16,7 +16,7 @@ from pipeline.physics.kinematics import (
     tip_slope,
     vertical_displacement,
 )
-from pipeline.physics.params import PrototypeParams
+from debist.physics.params import PrototypeParams
 
 P = PrototypeParams.paper()
 SCALE = ritz_basis(P.l).scale
@@ -251,7 +251,7 @@ def test_mirror_symmetry_with_mirrored_offsets():
 
 def test_scalar_gradient_hessian_equals_the_vectorised_potential():
     """The generated scalar path of the Newton solves agrees with potential() state by state."""
-    from pipeline.physics.energy import scalar_gradient_hessian
+    from debist.physics.energy import scalar_gradient_hessian
 
     x = random_states(3, seed=21)
     b = np.array([21e-3, 22e-3, 23e-3])

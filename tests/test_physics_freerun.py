@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.physics.freerun import AnalyticalModel
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.reduced import fit_reduced, simulate_reduced
-from pipeline.physics_stages import analytical_for
-from pipeline.simulate import simulate
-from pipeline.validate import DataSet, ValidateConfig, validate_model
+from debist.errors import WorkflowError
+from debist.physics.freerun import AnalyticalModel
+from debist.physics.params import PrototypeParams
+from debist.physics.reduced import fit_reduced, simulate_reduced
+from debist.physics_stages import analytical_for
+from debist.simulate import simulate
+from debist.validate import DataSet, ValidateConfig, validate_model
 
 P = PrototypeParams.paper()
 DT = 1e-3

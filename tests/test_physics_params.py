@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.physics.params import V_MAX, PrototypeParams
+from debist.errors import WorkflowError
+from debist.physics.params import V_MAX, PrototypeParams
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULES = ["params", "kinematics", "energy", "statics", "prestrain", "dynamics", "reduced", "plots"]
@@ -75,14 +75,14 @@ def test_not_a_table():
 
 @pytest.mark.parametrize("name", MODULES)
 def test_docstring_examples_run(name):
-    mod = importlib.import_module(f"pipeline.physics.{name}")
+    mod = importlib.import_module(f"debist.physics.{name}")
     result = doctest.testmod(mod, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0
 
 
 @pytest.mark.parametrize("name", MODULES)
 def test_public_api_has_numpydoc_sections(name):
-    mod = importlib.import_module(f"pipeline.physics.{name}")
+    mod = importlib.import_module(f"debist.physics.{name}")
     for item in mod.__all__:
         obj = getattr(mod, item)
         doc = inspect.getdoc(obj) or ""

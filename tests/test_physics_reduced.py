@@ -3,16 +3,16 @@
 import numpy as np
 import pytest
 
-from pipeline.physics.kinematics import pitch_angle, ritz_basis
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.reduced import (
+from debist.physics.kinematics import pitch_angle, ritz_basis
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.reduced import (
     _nrmse,
     compare_full_reduced,
     fit_reduced,
     reduced_curves,
     switching_profile,
 )
-from pipeline.physics.statics import force_displacement
+from debist.physics.statics import force_displacement
 
 P = PrototypeParams.paper()
 Q = np.linspace(-20e-3, 20e-3, 81)

@@ -3,16 +3,16 @@
 import numpy as np
 import pytest
 
-from pipeline.physics.energy import potential
-from pipeline.physics.kinematics import ritz_basis
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.prestrain import (
+from debist.physics.energy import potential
+from debist.physics.kinematics import ritz_basis
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.prestrain import (
     equilibrium_branches,
     pitchfork_zb,
     prestrain_sweep,
     switching_limit_zb,
 )
-from pipeline.physics.statics import (
+from debist.physics.statics import (
     FORCE_STATES,
     StaticsError,
     equilibria,

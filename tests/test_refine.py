@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.identify import IdentifyConfig, Record, fit_rbf_model
-from pipeline.identify.refine import RefineConfig, refine_config, refine_model
-from pipeline.simulate import simulate
+from debist.errors import WorkflowError
+from debist.identify import IdentifyConfig, Record, fit_rbf_model
+from debist.identify.refine import RefineConfig, refine_config, refine_model
+from debist.simulate import simulate
 
 
 def _noisy_records(rec, level, seed):
@@ -100,7 +100,7 @@ def test_refine_config_parsing():
 def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     """The Duffing refinement is accepted on its error; declared unstable (as a negatively
     damped well would be), the same refinement is rejected and the least squares kept."""
-    from pipeline.identify import stability
+    from debist.identify import stability
 
     calls = []
 
@@ -119,7 +119,7 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
 
 
 def test_fitted_windows_never_touch_the_held_out_blocks_that_judge_them():
-    from pipeline.identify.refine import _held_out, _windows
+    from debist.identify.refine import _held_out, _windows
 
     rcfg = RefineConfig(windows=30, length=100, holdout=3)
     recs = [Record(f"r{k}", np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 1)), 0.01)

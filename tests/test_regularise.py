@@ -1,14 +1,14 @@
-"""Regularised and sign-constrained least squares (pipeline.identify.regularise)."""
+"""Regularised and sign-constrained least squares (debist.identify.regularise)."""
 
 import numpy as np
 import pytest
 from conftest import bistable_truth
 from scipy.optimize import lsq_linear
 
-from pipeline.errors import WorkflowError
-from pipeline.identify import IdentifyConfig, Record, fit_rbf_model
-from pipeline.identify.bands import block_bootstrap
-from pipeline.identify.regularise import (
+from debist.errors import WorkflowError
+from debist.identify import IdentifyConfig, Record, fit_rbf_model
+from debist.identify.bands import block_bootstrap
+from debist.identify.regularise import (
     LAMBDA_GRID,
     Estimator,
     constraint_bounds,
@@ -101,9 +101,9 @@ def test_constrained_fit_is_the_bounded_least_squares(bistable_record):
     assert np.all(model.theta_g[1] <= 0) and np.all(model.theta_d >= 0)
     assert np.all(model.theta_g[0] >= 0) and model.backbone["d_v"] >= 0
     assert np.all(model.curves(np.linspace(-0.02, 0.02, 50))["g"][:, 1] <= 0)
-    from pipeline.identify.basis import RBFBasis
-    from pipeline.identify.fit import _system, _trimmed
-    from pipeline.identify.friction import friction_state
+    from debist.identify.basis import RBFBasis
+    from debist.identify.fit import _system, _trimmed
+    from debist.identify.friction import friction_state
 
     recs = _trimmed(records, 0)
     q_all = recs[0].q

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from pipeline import forking, render
-from pipeline.forking import fork_workers
-from pipeline.render import FigureJob, render_pngs
+from debist import forking, render
+from debist.forking import fork_workers
+from debist.render import FigureJob, render_pngs
 
 
 def _draw(seed: int, warn: bool = False) -> Figure:

@@ -19,15 +19,15 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from matplotlib.image import imread
 from typer.testing import CliRunner
 
-from cli import app
-from pipeline import artifacts, outdir
-from pipeline.errors import WorkflowError
-from pipeline.htmlreport import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
-from pipeline.report_figures import dynamic_window
-from pipeline.runner import Runner
-from pipeline.schema import check_workflow
-from pipeline.stages.report import ReportInputs, run_report
-from pipeline.workflow import load_workflow
+from debist import artifacts, outdir
+from debist.cli import app
+from debist.errors import WorkflowError
+from debist.htmlreport import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
+from debist.report_figures import dynamic_window
+from debist.runner import Runner
+from debist.schema import check_workflow
+from debist.stages.report import ReportInputs, run_report
+from debist.workflow import load_workflow
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 SHOWN = ["ingest", "differentiate", "identify", "validate", "compare"]
@@ -386,7 +386,7 @@ def test_chromium_lays_the_report_out_at_desktop_and_phone_width(synthetic_run, 
 
 def test_the_validate_stages_other_models_become_runs_of_their_own():
     """q_sim_<model> columns of validate's free runs are drawn as that model's run."""
-    from pipeline.stages.report import _split_runs
+    from debist.stages.report import _split_runs
 
     t = np.arange(5) * 0.01
     frame = pd.DataFrame({"t": t, "q": t, "q_sim": 2 * t, "q_dot_sim": t,

@@ -6,10 +6,10 @@ from rich.console import Console
 from test_stability import double_well
 from test_trust import DT, _tables
 
-from pipeline.report import design_table, identify_table, summary_units
-from pipeline.sindy import SindyConfig, fit_sindy
-from pipeline.stages.identify import run_identify
-from pipeline.stages.validate import run_validate
+from debist.report import design_table, identify_table, summary_units
+from debist.sindy import SindyConfig, fit_sindy
+from debist.stages.identify import run_identify
+from debist.stages.validate import run_validate
 
 SECTION = {
     "T_z": 0,

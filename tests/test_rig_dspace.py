@@ -11,11 +11,11 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from pipeline.ingest import IngestSpec, load_rig_log
-from pipeline.ingest.mat73 import load_mat73
-from pipeline.rig import dspace
-from pipeline.rig.dspace import Channel, recording, write_mat, write_recording
-from pipeline.rig.profiles import identification_profile
+from debist.ingest import IngestSpec, load_rig_log
+from debist.ingest.mat73 import load_mat73
+from debist.rig import dspace
+from debist.rig.dspace import Channel, recording, write_mat, write_recording
+from debist.rig.profiles import identification_profile
 
 CREATED = "Sat Nov 22 09:30:00 2025"
 FAST, SLOW = "Periodic Task 1", "Periodic Task 2"

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.statics import equilibria
-from pipeline.rig.fleet import FleetError, is_bistable_and_switchable, make_fleet
-from pipeline.rig.params import RigParams
+from debist.errors import WorkflowError
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.statics import equilibria
+from debist.rig.fleet import FleetError, is_bistable_and_switchable, make_fleet
+from debist.rig.params import RigParams
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +94,7 @@ def test_impossible_nominal_raises_fleet_error():
 
 
 def test_every_member_switches_in_the_rig(fleet):
-    from pipeline.rig.run import simulate_rig
+    from debist.rig.run import simulate_rig
 
     t = np.arange(4000) * 1e-3
     r1 = np.where((t >= 0.1) & (t < 1.1), V_MAX, 0.0)

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from pipeline.physics import segments
-from pipeline.physics.segments import solve_segments
-from pipeline.rig.params import RigParams
-from pipeline.rig.run import simulate_rig
+from debist.physics import segments
+from debist.physics.segments import solve_segments
+from debist.rig.params import RigParams
+from debist.rig.run import simulate_rig
 
 
 def step_input(t):

@@ -8,10 +8,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import forking, progress
-from pipeline.errors import WorkflowError
-from pipeline.forking import fork_workers
-from pipeline.rig.experiment import RigConfig, run_experiment, run_experiments
+from debist import forking, progress
+from debist.errors import WorkflowError
+from debist.forking import fork_workers
+from debist.rig.experiment import RigConfig, run_experiment, run_experiments
 
 SECTION = {
     "sample_time": 0.01,

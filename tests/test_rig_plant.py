@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.errors import DebistWarning, WorkflowError
-from pipeline.physics.dynamics import FullModel, well_state
-from pipeline.physics.kinematics import ritz_basis
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.statics import equilibria, force_displacement
-from pipeline.rig.drivers import DriverOutput
-from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigPlant
-from pipeline.rig.run import simulate_rig, true_curves
+from debist.errors import DebistWarning, WorkflowError
+from debist.physics.dynamics import FullModel, well_state
+from debist.physics.kinematics import ritz_basis
+from debist.physics.params import PrototypeParams
+from debist.physics.statics import equilibria, force_displacement
+from debist.rig.drivers import DriverOutput
+from debist.rig.params import RigParams
+from debist.rig.plant import RigPlant
+from debist.rig.run import simulate_rig, true_curves
 
 RIG = RigParams()
 L = ritz_basis(RIG.prototype.l).L
@@ -152,7 +152,7 @@ def test_driver_ramp_ending_inside_a_hold_interval_is_exact():
 
 
 def test_compiled_driver_equals_the_python_driver():
-    from pipeline.rig.compiled import driver_value
+    from debist.rig.compiled import driver_value
 
     rng = np.random.default_rng(8)
     t = 0.25 + np.arange(200) * 1e-3
@@ -277,9 +277,9 @@ def test_plant_kernels_are_cached_under_the_hash_of_the_physics_kernels():
     import inspect
     from pathlib import Path
 
-    from pipeline.physics import _generated
-    from pipeline.physics import compiled as physics_compiled
-    from pipeline.rig import compiled
+    from debist.physics import _generated
+    from debist.physics import compiled as physics_compiled
+    from debist.rig import compiled
 
     h = hashlib.sha256()
     for mod in (physics_compiled, _generated):

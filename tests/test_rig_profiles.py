@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from pipeline.errors import WorkflowError
-from pipeline.rig.profiles import (
+from debist.errors import WorkflowError
+from debist.rig.profiles import (
     PROFILES,
     V_LIMIT,
     Excitation,

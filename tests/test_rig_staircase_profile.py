@@ -1,12 +1,12 @@
-"""The staircase identification profile of the virtual rig (pipeline.rig.profiles)."""
+"""The staircase identification profile of the virtual rig (debist.rig.profiles)."""
 
 import itertools
 
 import numpy as np
 import pytest
 
-from pipeline.errors import WorkflowError
-from pipeline.rig.profiles import make_profile, staircase_profile
+from debist.errors import WorkflowError
+from debist.rig.profiles import make_profile, staircase_profile
 
 UNIT = np.sqrt([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])  # levels: v^2 in equal steps
 

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline import artifacts
-from pipeline.errors import WorkflowError
-from pipeline.runner import Runner
-from pipeline.workflow import load_workflow
+from debist import artifacts
+from debist.errors import WorkflowError
+from debist.runner import Runner
+from debist.workflow import load_workflow
 
 WORKFLOW = """
 [workflow]
@@ -131,7 +131,7 @@ def test_rig_workflow_errors(tmp_path):
     ],
 )
 def test_rig_section_errors_name_the_table(section, match):
-    from pipeline.rig.experiment import RigConfig
+    from debist.rig.experiment import RigConfig
 
     with pytest.raises(WorkflowError, match=match):
         RigConfig.from_dict(section, {})

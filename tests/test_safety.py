@@ -21,10 +21,10 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from cli import app
-from pipeline import artifacts, outdir
-from pipeline.fingerprint import code_fingerprint, module_closure
-from pipeline.registry import STAGES
+from debist import artifacts, outdir
+from debist.cli import app
+from debist.fingerprint import code_fingerprint, module_closure
+from debist.registry import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -87,7 +87,7 @@ def debist(*args, cwd, fault=None):
     if fault:
         env["DEBIST_FAULT"] = fault
     return subprocess.run(
-        [sys.executable, "-c", "import cli; cli.main()", *map(str, args)],
+        [sys.executable, "-m", "debist", *map(str, args)],
         cwd=cwd,
         env=env,
         capture_output=True,
@@ -310,7 +310,7 @@ def _wait_until_stopped(pid, timeout=120.0):
 
 def test_a_second_run_is_refused_naming_the_first_or_waits(project):
     env = {**os.environ, "DEBIST_FAULT": "stage:identify:start=STOP"}
-    cmd = [sys.executable, "-c", "import cli; cli.main()"]
+    cmd = [sys.executable, "-m", "debist"]
     first = subprocess.Popen(
         [*cmd, "run", "wf.toml", "--force"],
         cwd=project,
@@ -484,10 +484,8 @@ def test_manifests_are_byte_deterministic_and_the_same_in_two_clones(tmp_path):
 
 
 def _copy_package(tmp_path):
-    root = tmp_path / "src"
-    shutil.copytree(
-        ROOT / "pipeline", root / "pipeline", ignore=shutil.ignore_patterns("__pycache__")
-    )
+    root = tmp_path / "src" / "pipeline"
+    shutil.copytree(ROOT / "pipeline", root, ignore=shutil.ignore_patterns("__pycache__"))
     return root
 
 
@@ -499,7 +497,7 @@ def _edited(tmp_path, rel, edit):
     """Fingerprints of every stage for the package as it is and with one file edited."""
     before = _fingerprints(_copy_package(tmp_path / "before"))
     root = _copy_package(tmp_path / "after")
-    path = root / "pipeline" / rel
+    path = root / rel
     path.write_text(edit(path.read_text()))
     after = _fingerprints(root)
     return sorted(s for s in before if before[s] != after[s])
@@ -513,5 +511,5 @@ def test_editing_the_rig_leaves_the_data_stages_up_to_date(tmp_path):
 def test_editing_the_identification_reruns_identify_and_what_follows(tmp_path):
     changed = _edited(tmp_path, "identify/fit.py", lambda t: t + "\n# edited\n")
     assert changed == ["compare", "identify", "report", "study", "validate"]
-    closure = module_closure("pipeline.stages.differentiate", ROOT)
-    assert "pipeline.identify.fit" not in closure and "pipeline.differentiate" in closure
+    closure = module_closure("debist.stages.differentiate", ROOT / "pipeline")
+    assert "debist.identify.fit" not in closure and "debist.differentiate" in closure

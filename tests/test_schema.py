@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from cli import app
-from pipeline.config import config_from_section, unknown_key_message
-from pipeline.errors import WorkflowError
-from pipeline.schema import SECTIONS, check_workflow
-from pipeline.workflow import load_workflow
+from debist.cli import app
+from debist.config import config_from_section, unknown_key_message
+from debist.errors import WorkflowError
+from debist.schema import SECTIONS, check_workflow
+from debist.workflow import load_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -466,8 +466,8 @@ def test_unknown_key_message_suggests_only_close_keys():
 
 
 def test_config_from_section_message_format():
-    from pipeline.differentiate import SavGolConfig
-    from pipeline.validate import ValidateConfig
+    from debist.differentiate import SavGolConfig
+    from debist.validate import ValidateConfig
 
     def message(cls, section, where="[x]"):
         with pytest.raises(WorkflowError) as err:
@@ -491,13 +491,13 @@ def test_config_from_section_message_format():
 
 def test_literals_follow_the_registries():
     """Choices written as Literal types in the configs equal the constants they mirror."""
-    from pipeline.identify.config import IdentifyConfig
-    from pipeline.identify.terms import INPUT_MAPS
-    from pipeline.rig.dspace import MAT_VERSIONS
-    from pipeline.rig.experiment import ExperimentConfig
-    from pipeline.simulate import INTERPOLATIONS
-    from pipeline.sindy import OPTIMIZERS, SindyConfig
-    from pipeline.validate import ValidateConfig
+    from debist.identify.config import IdentifyConfig
+    from debist.identify.terms import INPUT_MAPS
+    from debist.rig.dspace import MAT_VERSIONS
+    from debist.rig.experiment import ExperimentConfig
+    from debist.simulate import INTERPOLATIONS
+    from debist.sindy import OPTIMIZERS, SindyConfig
+    from debist.validate import ValidateConfig
 
     def choices(cls, name):
         annotation = cls.__pydantic_fields__[name].annotation
@@ -514,8 +514,8 @@ def test_literals_follow_the_registries():
 def test_direct_construction_is_checked_too():
     from pydantic import ValidationError
 
-    from pipeline.identify.config import IdentifyConfig
-    from pipeline.physics.params import PrototypeParams
+    from debist.identify.config import IdentifyConfig
+    from debist.physics.params import PrototypeParams
 
     with pytest.raises(ValidationError):
         IdentifyConfig(M="ten")  # type: ignore[arg-type]

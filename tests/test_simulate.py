@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from pipeline.identify import RBFBasis, RBFModel
-from pipeline.simulate import simulate, upsample_inputs
-from pipeline.validate import initial_state, nrmse, rms
+from debist.identify import RBFBasis, RBFModel
+from debist.simulate import simulate, upsample_inputs
+from debist.validate import initial_state, nrmse, rms
 
 
 def oscillator(k1=(2 * np.pi * 3.0) ** 2, dv=2.0, T_z=0.0):

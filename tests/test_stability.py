@@ -1,4 +1,4 @@
-"""Stability and design numbers of identified and analytical models (pipeline.identify.stability).
+"""Stability and design numbers of identified and analytical models (debist.identify.stability).
 
 The identified models here have known curves: the cubic double well f(q) = k1 q + k3 q^3 with
 k1 < 0 (wells at +-sqrt(-k1/k3), stiffness -2 k1 there, barrier k1^2 / (4 k3), local maximum
@@ -10,10 +10,10 @@ squares.
 import numpy as np
 import pytest
 
-from pipeline.errors import DebistError
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.model import RBFModel
-from pipeline.identify.stability import (
+from debist.errors import DebistError
+from debist.identify.basis import RBFBasis
+from debist.identify.model import RBFModel
+from debist.identify.stability import (
     StabilityError,
     equilibria,
     model_is_stable,
@@ -21,7 +21,7 @@ from pipeline.identify.stability import (
     switching_voltages,
     verdict,
 )
-from pipeline.identify.terms import PhysicsPrior
+from debist.identify.terms import PhysicsPrior
 
 K1, K3, M_Q, D, G = -40.0, 4e5, 0.04, 0.5, 2e-8
 Q_RANGE = (-0.012, 0.012)

@@ -5,10 +5,10 @@ import pandas as pd
 import pytest
 from test_stability import double_well
 
-from pipeline.report import nrmse_table
-from pipeline.simulate import simulate
-from pipeline.stages.validate import run_validate
-from pipeline.validate import default_q_limit, nrmse
+from debist.report import nrmse_table
+from debist.simulate import simulate
+from debist.stages.validate import run_validate
+from debist.validate import default_q_limit, nrmse
 
 DT = 2e-3
 
@@ -82,7 +82,7 @@ def test_a_single_frequency_duffing_gets_the_excitation_warning_and_an_honest_ro
     is a number only if the identified damping at the well is positive, else 'unstable'."""
     from test_excitation import _duffing
 
-    from pipeline.stages.identify import run_identify
+    from debist.stages.identify import run_identify
 
     rec = _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=120.0)
     t = np.arange(rec.q.size) * rec.dt

@@ -11,16 +11,16 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 from scipy.sparse.linalg import spsolve
 
-from pipeline.differentiate import TVRegDiffResult, tv_functional, tvregdiff
-from pipeline.differentiate._tvr_solve import (
+from debist.differentiate import TVRegDiffResult, tv_functional, tvregdiff
+from debist.differentiate._tvr_solve import (
     large_bands,
     small_kkt,
     solve_large,
     solve_small,
 )
-from pipeline.errors import ConvergenceWarning
+from debist.errors import ConvergenceWarning
 
-quiet = pytest.mark.filterwarnings("ignore::pipeline.errors.ConvergenceWarning")
+quiet = pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
 
 
 # Dense operators written from Chartrand's definitions (reference only, small n).

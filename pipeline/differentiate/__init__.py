@@ -10,12 +10,12 @@ Chartrand, R. (2011). Numerical differentiation of noisy, nonsmooth data.
 ISRN Applied Mathematics 2011, 164564.
 """
 
-from pipeline.differentiate.base import CONFIGS, DIFFERENTIATORS, differentiate
-from pipeline.differentiate.result import Derivatives
-from pipeline.differentiate.savgol import SavGolConfig, savgol_derivatives
-from pipeline.differentiate.spectral import SpectralConfig, spectral_derivatives
-from pipeline.differentiate.tvregdiff import TVRegDiffResult, tv_functional, tvregdiff
-from pipeline.differentiate.tvregdiff_method import TVRegDiffConfig, tvregdiff_derivatives
+from debist.differentiate.base import CONFIGS, DIFFERENTIATORS, differentiate
+from debist.differentiate.result import Derivatives
+from debist.differentiate.savgol import SavGolConfig, savgol_derivatives
+from debist.differentiate.spectral import SpectralConfig, spectral_derivatives
+from debist.differentiate.tvregdiff import TVRegDiffResult, tv_functional, tvregdiff
+from debist.differentiate.tvregdiff_method import TVRegDiffConfig, tvregdiff_derivatives
 
 __all__ = [
     "CONFIGS",

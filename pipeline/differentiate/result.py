@@ -9,7 +9,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.config import config_from_section
+from debist.config import config_from_section
 
 __all__ = ["Derivatives", "check_int", "check_positive", "check_signal", "config_from_dict"]
 
@@ -29,7 +29,7 @@ class Derivatives:
     x_ddot : ndarray, shape (n,) [unit/s^2]
         Second derivative at the sample instants.
     method : str
-        Name of the method in :data:`pipeline.differentiate.DIFFERENTIATORS`.
+        Name of the method in :data:`debist.differentiate.DIFFERENTIATORS`.
     converged : bool
         False when an iterative method stopped before its tolerance (direct methods: True).
     info : dict
@@ -106,7 +106,7 @@ def config_from_dict(
     Parameters
     ----------
     cls : type
-        The method's config dataclass (a pydantic dataclass, see :mod:`pipeline.config`).
+        The method's config dataclass (a pydantic dataclass, see :mod:`debist.config`).
     params : mapping of str to value
         The parameters given in the workflow (without ``method``).
     method : str

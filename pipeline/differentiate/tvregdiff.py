@@ -8,7 +8,7 @@ with ``A`` an antiderivative operator and ``TV_ep`` a smoothed total variation, 
 lagged diffusivity: each iteration minimises the quadratic model of ``F`` around the
 current iterate. Chartrand's code solves that model inexactly with preconditioned
 conjugate gradients; here it is solved exactly, in O(n), as a banded system
-(see :mod:`pipeline.differentiate._tvr_solve`).
+(see :mod:`debist.differentiate._tvr_solve`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.differentiate._tvr_solve import solve_large, solve_small
-from pipeline.differentiate.result import check_int, check_positive
-from pipeline.errors import ConvergenceWarning
+from debist.differentiate._tvr_solve import solve_large, solve_small
+from debist.differentiate.result import check_int, check_positive
+from debist.errors import ConvergenceWarning
 
 __all__ = ["TVRegDiffResult", "tv_functional", "tvregdiff"]
 

@@ -12,10 +12,10 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
-from pipeline.config import CONFIG, ConfigValueError
-from pipeline.differentiate.result import Derivatives, check_signal, config_from_dict
-from pipeline.differentiate.tvregdiff import tvregdiff
-from pipeline.ingest.units import lookup_unit
+from debist.config import CONFIG, ConfigValueError
+from debist.differentiate.result import Derivatives, check_signal, config_from_dict
+from debist.differentiate.tvregdiff import tvregdiff
+from debist.ingest.units import lookup_unit
 
 
 def unit_factor(symbol: str) -> float | None:
@@ -214,7 +214,7 @@ def tvregdiff_derivatives(
 ) -> Derivatives:
     """Smoothed signal and two derivatives by TVRegDiff, applied twice.
 
-    ``x_dot`` is :func:`~pipeline.differentiate.tvregdiff.tvregdiff` of ``x``
+    ``x_dot`` is :func:`~debist.differentiate.tvregdiff.tvregdiff` of ``x``
     (``dx = dt``), ``x_ddot`` is ``tvregdiff`` of ``x_dot`` with the second-pass
     settings, both taken at the sample instants (``TVRegDiffResult.derivative``).
     ``x_hat`` is the cumulative trapezoid integral of ``x_dot`` plus the constant that

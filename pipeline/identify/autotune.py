@@ -9,7 +9,7 @@ free-run error, estimated on the estimation records alone by blocked cross-valid
 * each estimation record is cut into ``folds`` contiguous time blocks; fold ``k`` holds
   out block ``k`` of every record and fits on the rest, each record's remaining contiguous
   pieces becoming records of their own (every piece is trimmed by ``trim`` at both ends by
-  :func:`pipeline.identify.fit.fit_rbf_model`, which is also the gap between the training
+  :func:`debist.identify.fit.fit_rbf_model`, which is also the gap between the training
   rows and the held-out block; the low-pass of the filtered equation error runs per piece,
   so no held-out sample enters a training row through the filter);
 * the fitted model runs free on the held-out block in windows of ``window`` samples (default
@@ -20,7 +20,7 @@ free-run error, estimated on the estimation records alone by blocked cross-valid
   block, which had made every candidate's score 11 % +- 10 % on the paper experiment
   (Bock & Plitt 1984; Ribeiro et al., Automatica 121, 2020); a record's first and last
   ``trim`` samples are neither fitted nor scored;
-* a fit that raises :class:`~pipeline.errors.IdentificationError` (rank deficient, badly
+* a fit that raises :class:`~debist.errors.IdentificationError` (rank deficient, badly
   conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
   table says which;
 * the chosen setting is the most parsimonious one whose mean score is within one standard
@@ -66,11 +66,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline import progress as _progress
-from pipeline.errors import IdentificationError, WorkflowError
-from pipeline.identify.config import IdentifyConfig
-from pipeline.identify.fit import Record, fit_rbf_model
-from pipeline.identify.terms import column_names
+from debist import progress as _progress
+from debist.errors import IdentificationError, WorkflowError
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.terms import column_names
 
 __all__ = [
     "DEFAULT_WINDOW",
@@ -354,12 +354,12 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     """Mean NRMSE(q) of the held-out spans' restarted windows; (inf, True) if one diverged.
 
     Each span is tiled by windows of ``window`` samples, each run free from the measured
-    state at its start (:func:`pipeline.prediction.restarted_runs`); the span's score is
+    state at its start (:func:`debist.prediction.restarted_runs`); the span's score is
     NRMSE(q) (Eq. 41) of the windows' runs against the measurement, normalised by the span's
     range.
     """
-    from pipeline.prediction import restarted_runs
-    from pipeline.validate import default_q_limit, nrmse
+    from debist.prediction import restarted_runs
+    from debist.validate import default_q_limit, nrmse
 
     scores = []
     by_dt: dict[float, list[tuple[int, int, int]]] = {}
@@ -510,7 +510,7 @@ def select_hyperparameters(
     (:func:`blocked_folds`); per candidate and fold the model is fitted on the other blocks
     (each remaining contiguous piece a record, trimmed by ``trim``) and run free on the
     held-out block in windows of ``window`` samples, each restarted from the measured state
-    at its start (multiple shooting: :func:`pipeline.prediction.restarted_runs`); the fold's
+    at its start (multiple shooting: :func:`debist.prediction.restarted_runs`); the fold's
     score is NRMSE(q) of Eq. 41 of those runs (mean over the records). A failed fit or a
     diverged window scores ``inf``. The choice is the most parsimonious candidate within one
     standard error of the best mean (:func:`one_standard_error`; order :data:`PARSIMONY`).
@@ -527,7 +527,7 @@ def select_hyperparameters(
         Estimation records (never validation data).
     base_cfg : IdentifyConfig
         The configuration the candidates modify (``m_q`` a number, as
-        :func:`pipeline.identify.fit.fit_rbf_model` takes it).
+        :func:`debist.identify.fit.fit_rbf_model` takes it).
     grid : mapping of str to list
         Values per :class:`IdentifyConfig` field, e.g. ``{"M": [6, 8, 10, 12], "sigma_n":
         [0.5, 1.0], "lowpass": [None, 5.0, 10.0], "smoothing": [0.0, "gcv"]}``.
@@ -543,7 +543,7 @@ def select_hyperparameters(
         random (kept for a stable signature should a randomised strategy be added).
     progress : callable, optional
         Called as ``progress(done, total)`` [candidates]; default: the listener of
-        :mod:`pipeline.progress` (task "hyper-parameters"), if any.
+        :mod:`debist.progress` (task "hyper-parameters"), if any.
 
     Returns
     -------

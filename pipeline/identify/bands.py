@@ -36,7 +36,7 @@ the bootstrap bands alone (labelled with what they hold).
 A curve is *identified* at ``q`` where (1) the data support it: the Gaussian-weighted number
 of estimation samples near ``q`` (the kernel of Eq. 38, width sigma) is at least
 ``min_support``, counting for ``g_i`` only quasi-static samples where input ``i`` excites
-the beam, sub-threshold levels included (:func:`pipeline.identify.excitation.input_active`:
+the beam, sub-threshold levels included (:func:`debist.identify.excitation.input_active`:
 ``v_i`` clearly off its own off level, not just above a share of its largest value that only
 the switching pulses reach) and for ``d`` only samples in motion (``|q_dot|`` above 10 % of
 its RMS); and (2) the band is narrow: its width is at most ``band_tolerance`` times
@@ -62,8 +62,8 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.terms import PhysicsPrior, term_table
+from debist.identify.basis import RBFBasis
+from debist.identify.terms import PhysicsPrior, term_table
 
 #: Model-error half-width of each curve's band, as a fraction of the curve's scale (the larger
 #: of its range and its largest magnitude over the supported points): per curve the 95th
@@ -124,7 +124,7 @@ def curve_maps(
 ) -> dict[str, np.ndarray]:
     """Linear maps from the regression parameters to the characteristic curves.
 
-    Built from the term library (:func:`pipeline.identify.terms.term_table`): the restoring
+    Built from the term library (:func:`debist.identify.terms.term_table`): the restoring
     force is the force side at rest (``z = 0``, ``h(v) = 0``), the damping the terms linear
     in ``z`` at ``z = 1``, and ``g_j`` the input terms of input ``j`` at ``h(v_j) = 1``.
 
@@ -244,7 +244,7 @@ def block_bootstrap(
         Seed of the generator (:func:`numpy.random.default_rng`).
     block : int, optional
         Block length [rows]; default :func:`block_length` of the least-squares residuals.
-    estimator : pipeline.identify.regularise.Estimator, optional
+    estimator : debist.identify.regularise.Estimator, optional
         The estimator of the fit (penalty, bounds) when it is not plain least squares: each
         replicate then solves its weighted problem through the Cholesky factor of its Gram.
 
@@ -512,7 +512,7 @@ def curves_frame(
     ----------
     Masoud & Maas 2025, Eq. 37-40 (curves), Fig. 14.
     """
-    from pipeline.identify.excitation import input_active, quasi_static
+    from debist.identify.excitation import input_active, quasi_static
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)
@@ -583,7 +583,7 @@ def static_frame(
     Fig. 4). ``F`` is a linear map of the parameters like every curve, so it gets the
     bootstrap band of :func:`curve_bands`. It is *identified* at ``q`` where the data
     dwelt near ``q`` at that level (the Gaussian-weighted count of samples at the level,
-    :func:`pipeline.identify.design.at_level`, is at least ``min_support``; a switching
+    :func:`debist.identify.design.at_level`, is at least ``min_support``; a switching
     transit at the level passes too fast to count) and the band is narrow. Away from where
     the data held a level, ``g_i h(v_i)`` is an extrapolation in amplitude: a DE's force is
     of the separable form ``g_i(q) v_i^2`` only approximately (the full model's is not).
@@ -597,7 +597,7 @@ def static_frame(
     records : sequence of Record
         The estimation records (``q`` [m], ``v`` [V]).
     levels : sequence of sequence of float
-        Input vectors [V] (:func:`pipeline.identify.design.held_levels`).
+        Input vectors [V] (:func:`debist.identify.design.held_levels`).
     min_support, band_tolerance, model_error
         As :func:`curves_frame` (the static force reads ``model_error["F"]``).
     n : int
@@ -616,8 +616,8 @@ def static_frame(
     ----------
     Masoud & Maas 2025, Eq. 37, Fig. 4.
     """
-    from pipeline.identify.design import at_level
-    from pipeline.identify.terms import input_map
+    from debist.identify.design import at_level
+    from debist.identify.terms import input_map
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import WorkflowError
+from debist.errors import WorkflowError
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,9 @@ from typing import Annotated, Any, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat
 
-from pipeline.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
-from pipeline.errors import WorkflowError
-from pipeline.identify.terms import check_terms
+from debist.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
+from debist.errors import WorkflowError
+from debist.identify.terms import check_terms
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'
@@ -37,7 +37,7 @@ class IdentifyConfig:
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
         "input_gain", and with a ``[physics]`` section the analytical model's curves
         "physics_spring", "physics_damping", "physics_gain" (scaled; see
-        :class:`pipeline.identify.terms.PhysicsPrior`). With "clip" evaluation the
+        :class:`debist.identify.terms.PhysicsPrior`). With "clip" evaluation the
         model outside the estimation range is the backbone plus the RBF curves held at
         their edge values.
     input_map : {"v2", "v"}
@@ -88,16 +88,16 @@ class IdentifyConfig:
     refine : dict, bool or None
         ``[identify.refine]``: refine the least-squares parameters by minimising the
         windowed free-run error on the estimation data (see
-        :class:`pipeline.identify.refine.RefineConfig`); absent or false: no refinement.
+        :class:`debist.identify.refine.RefineConfig`); absent or false: no refinement.
     auto : dict or None
         ``[identify.auto]``: choose hyper-parameters by blocked cross-validation of the
         free-run error on the estimation records before the fit
-        (:func:`pipeline.identify.autotune.auto_settings`): candidate lists per field, e.g.
+        (:func:`debist.identify.autotune.auto_settings`): candidate lists per field, e.g.
         ``{"M": [6, 8, 10], "sigma_n": [0.5, 1.0]}``, and optionally ``folds`` (default 4);
         absent: the values given are used.
     smoothing : float or "gcv"
         Weight lambda of a second-difference penalty on each RBF curve's weights
-        (:mod:`pipeline.identify.regularise`; dimensionless, on the column-scaled weights);
+        (:mod:`debist.identify.regularise`; dimensionless, on the column-scaled weights);
         ``"gcv"`` chooses it by generalised cross-validation; 0 (default): the paper's plain
         least squares.
     constraints : tuple of str
@@ -105,15 +105,15 @@ class IdentifyConfig:
         on their weights (bounded least squares); empty by default.
     bootstrap : int
         Block-bootstrap replicates of the least squares for the curves' 95 % bands
-        (:mod:`pipeline.identify.bands`); 0: no bands, and no curve is marked identified.
+        (:mod:`debist.identify.bands`); 0: no bands, and no curve is marked identified.
     bootstrap_seed : int
         Seed of the bootstrap's random generator.
     band_tolerance : float
         A curve is identified where its band is at most this fraction of its range (and
-        the data support it; :mod:`pipeline.identify.bands`).
+        the data support it; :mod:`debist.identify.bands`).
     model_error : bool
         Add the model error calibrated on the virtual rig
-        (:data:`pipeline.identify.bands.MODEL_ERROR`) to the bootstrap bands, so that they
+        (:data:`debist.identify.bands.MODEL_ERROR`) to the bootstrap bands, so that they
         hold the truth at their measured coverage; false: bootstrap-only bands (the
         estimation scatter alone).
     prior : PhysicsPrior or None
@@ -201,7 +201,7 @@ class IdentifyConfig:
             raise ConfigValueError(
                 "rbf", message="the model needs an input term: 'g' in rbf or 'input_gain'"
             )
-        from pipeline.identify.regularise import CONSTRAINT
+        from debist.identify.regularise import CONSTRAINT
 
         for text in self.constraints:
             if CONSTRAINT.match(text) is None:
@@ -215,11 +215,11 @@ class IdentifyConfig:
                 "sensitivities lack the creep states): set creep = false or drop the refinement",
             )
         if self.refine:
-            from pipeline.identify.refine import refine_config
+            from debist.identify.refine import refine_config
 
             refine_config(self.refine)
         if self.auto is not None:
-            from pipeline.identify.autotune import auto_settings
+            from debist.identify.autotune import auto_settings
 
             auto_settings(self)
 
@@ -251,7 +251,7 @@ class IdentifyConfig:
         >>> IdentifyConfig.from_dict({"M": "ten"})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
+        debist.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
         """
         if isinstance(section, Mapping) and "prior" in section:
             label = where("prior") if callable(where) else where

@@ -2,7 +2,7 @@
 
 The equilibria of the identified model at rest and at the constant input levels the data
 hold, their stability, small-signal frequency and damping, the barriers and the static
-switching voltages (:mod:`pipeline.identify.stability`), and, with a ``[physics]``
+switching voltages (:mod:`debist.identify.stability`), and, with a ``[physics]``
 prototype, the same numbers of the analytical model, which is what a designer compares.
 
 References
@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.identify.stability import stability_table, switching_voltages
-from pipeline.physics.params import V_MAX
+from debist.identify.stability import stability_table, switching_voltages
+from debist.physics.params import V_MAX
 
 
 def _level_step(records: Sequence[Any], resolution: float) -> float:
@@ -114,7 +114,7 @@ def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.
     Returns
     -------
     dict of str to pandas.DataFrame
-        ``equilibria``: :func:`~pipeline.identify.stability.stability_table` rows with a
+        ``equilibria``: :func:`~debist.identify.stability.stability_table` rows with a
         ``model`` column (``"rbf"``, and ``"analytical"`` with ``physics``), the verdict in
         ``attrs``; ``switching``: the switching voltages, same ``model`` column (the
         identified model's up to the largest voltage in the data, the analytical model's up
@@ -169,9 +169,9 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33, 37.
     """
-    from pipeline.identify.model import RBFModel
-    from pipeline.identify.terms import PhysicsPrior
-    from pipeline.physics_stages import physics_mass, physics_prior
+    from debist.identify.model import RBFModel
+    from debist.identify.terms import PhysicsPrior
+    from debist.physics_stages import physics_mass, physics_prior
 
     prior = physics_prior(physics, records, n_grid=801)
     scale = model.m_q / physics_mass(physics)
@@ -191,8 +191,8 @@ def mark_identified(
 
     An equilibrium ``q*`` at rest lies where the restoring force ``c(q) q + F_0`` crosses
     zero; it is a result of the data only where that curve is identified (its
-    ``restoring_identified`` mask of :func:`pipeline.identify.bands.curves_frame`). At a
-    held input level the static force of that level (:func:`pipeline.identify.bands.
+    ``restoring_identified`` mask of :func:`debist.identify.bands.curves_frame`). At a
+    held input level the static force of that level (:func:`debist.identify.bands.
     static_frame`) must be identified at ``q*``. Elsewhere, e.g. a third "well" between the
     two where the data only pass in switching transits, the equilibrium is an artefact of
     the curve's unidentified part. The analytical model's rows are the designed model's
@@ -201,12 +201,12 @@ def mark_identified(
     Parameters
     ----------
     equilibria : pandas.DataFrame
-        :func:`pipeline.identify.stability.stability_table` rows with a ``model`` column,
+        :func:`debist.identify.stability.stability_table` rows with a ``model`` column,
         ``level``, ``v1..vN`` [V] and ``q`` [unit of q].
     curves : pandas.DataFrame
         ``q`` and ``restoring_identified`` on the model's grid.
     static : pandas.DataFrame
-        :func:`pipeline.identify.bands.static_frame` rows (``v1..vN``, ``q``,
+        :func:`debist.identify.bands.static_frame` rows (``v1..vN``, ``q``,
         ``F_identified``).
 
     Returns
@@ -247,11 +247,11 @@ def mark_switching(switching: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFram
     """Say of each switching voltage of the identified model whether the data support it.
 
     Input i switches the beam out of the well it pushes against at the voltage where that
-    well meets the saddle (:func:`pipeline.identify.stability.switching_voltages`): the
+    well meets the saddle (:func:`debist.identify.stability.switching_voltages`): the
     number rests on the restoring force ``c(q) q + F_0`` and on ``g_i`` over the q interval
     the well travels as v_i rises, from ``q_well`` (at rest) to ``q_fold`` (where it
     vanishes). It is a result of the data only where both curves are identified over that
-    whole interval (their masks of :func:`pipeline.identify.bands.curves_frame`); a
+    whole interval (their masks of :func:`debist.identify.bands.curves_frame`); a
     profile that applies v_i only at full voltage (whose transits do not separate ``g_i``
     from ``c(q) q``) leaves it unidentified. The analytical model's rows count as
     identified; a row without a switching voltage is not.
@@ -259,7 +259,7 @@ def mark_switching(switching: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFram
     Parameters
     ----------
     switching : pandas.DataFrame
-        :func:`~pipeline.identify.stability.switching_voltages` rows with a ``model``
+        :func:`~debist.identify.stability.switching_voltages` rows with a ``model``
         column: ``input``, ``v_switch`` [V], ``q_well``, ``q_fold`` [unit of q].
     curves : pandas.DataFrame
         ``q``, ``restoring_identified`` and ``g<i>_identified`` on the model's grid.

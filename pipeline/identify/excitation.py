@@ -20,7 +20,7 @@ rests on the inertia and damping of those transients alone.
 Units: the tables, intervals and ``sigma`` of the report are in the records' unit of q
 (SI, [m], as the records carry it); the warnings and :meth:`ExcitationReport.to_summary`
 are in a display unit given by ``unit_scale`` and ``unit_name`` (e.g. ``1e3, "mm"``, the
-factor of :func:`pipeline.validate.report_factor`).
+factor of :func:`debist.validate.report_factor`).
 
 References
 ----------
@@ -41,12 +41,12 @@ import numpy as np
 import pandas as pd
 from scipy.signal import welch
 
-from pipeline.errors import WorkflowError
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.terms import RBF_TERMS, input_map
+from debist.errors import WorkflowError
+from debist.identify.basis import RBFBasis
+from debist.identify.terms import RBF_TERMS, input_map
 
 if TYPE_CHECKING:  # the fit module may import this one
-    from pipeline.identify.fit import Record
+    from debist.identify.fit import Record
 
 __all__ = [
     "FAST_FACTOR",
@@ -273,7 +273,7 @@ def check_excitation(
 
     Examples
     --------
-    >>> from pipeline.identify import RBFBasis, Record
+    >>> from debist.identify import RBFBasis, Record
     >>> t = np.arange(0, 20.0, 0.01)
     >>> q = 0.01 * np.sin(2 * np.pi * 1.5 * t)
     >>> v = np.full((t.size, 1), 100.0)

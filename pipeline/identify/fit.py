@@ -7,13 +7,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pipeline import preflight
-from pipeline.errors import IdentificationError
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.config import IdentifyConfig
-from pipeline.identify.friction import creep_states, friction_state
-from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import PHYSICS_TERMS, force_columns, input_columns, input_map
+from debist import preflight
+from debist.errors import IdentificationError
+from debist.identify.basis import RBFBasis
+from debist.identify.config import IdentifyConfig
+from debist.identify.friction import creep_states, friction_state
+from debist.identify.model import RBFModel
+from debist.identify.terms import PHYSICS_TERMS, force_columns, input_columns, input_map
 
 
 @dataclass(frozen=True)
@@ -76,11 +76,11 @@ class FitDiagnostics:
     y_norm : float
         2-norm of the regression output.
     smoothing : float
-        The smoothness penalty's lambda used (0: none; :mod:`pipeline.identify.regularise`).
+        The smoothness penalty's lambda used (0: none; :mod:`debist.identify.regularise`).
     gcv_trace : ndarray, shape (k, 3)
         ``(lambda, GCV, tr H)`` of the GCV search (empty without it).
     theta_boot : ndarray, shape (B, p) or None
-        Block-bootstrap replicates of ``theta`` (:func:`pipeline.identify.bands.block_bootstrap`);
+        Block-bootstrap replicates of ``theta`` (:func:`debist.identify.bands.block_bootstrap`);
         None with ``bootstrap = 0``.
     block : int
         The bootstrap's block length [samples] (0 without bootstrap).
@@ -239,7 +239,7 @@ def fit_rbf_model(
     evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
 
     With ``cfg.creep`` the force side also has the creep columns w_j (the filtered
-    phi_j(q) q_dot, :func:`pipeline.identify.friction.creep_states`) at the relaxation rate
+    phi_j(q) q_dot, :func:`debist.identify.friction.creep_states`) at the relaxation rate
     lambda; ``creep = "search"`` finds lambda by the same bounded search over log lambda
     (variable projection of the creep columns), alternating twice with the T_z search when
     that is searched too (T_z without creep, lambda, T_z with creep, lambda).
@@ -266,7 +266,7 @@ def fit_rbf_model(
         ``lowpass`` is not below a record's Nyquist frequency.
     ResourceError
         If the least squares would need more memory than the budget
-        (:func:`pipeline.preflight.check_identify`), before anything is allocated.
+        (:func:`debist.preflight.check_identify`), before anything is allocated.
 
     References
     ----------
@@ -317,7 +317,7 @@ def fit_rbf_model(
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
-        from pipeline.identify.bands import block_bootstrap
+        from debist.identify.bands import block_bootstrap
 
         theta_boot, block = block_bootstrap(
             psi, y, [r.q.size for r in records], cfg.bootstrap, cfg.bootstrap_seed,
@@ -415,7 +415,7 @@ def _search_creep(records, basis, cfg, bounds, T_z):
 
 def _estimator(psi, y, names, cfg: IdentifyConfig):
     """Build the workflow's estimator: plain, smoothed (fixed or GCV lambda), constrained."""
-    from pipeline.identify.regularise import (
+    from debist.identify.regularise import (
         Estimator,
         constraint_bounds,
         gcv_lambda,

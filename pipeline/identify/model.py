@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.identify.basis import RBFBasis
-from pipeline.identify.terms import PhysicsPrior, input_map
+from debist.identify.basis import RBFBasis
+from debist.identify.terms import PhysicsPrior, input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")
@@ -169,7 +169,7 @@ class RBFModel:
         Returns
         -------
         names : list of str
-            Column names of the term library (:func:`pipeline.identify.terms.term_table`):
+            Column names of the term library (:func:`debist.identify.terms.term_table`):
             the RBF terms of every curve with a nonzero weight, then the backbone terms the
             model has.
         values : ndarray, shape (len(names),)
@@ -221,8 +221,8 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 37.
         """
-        from pipeline.identify.terms import term_sign, term_table
-        from pipeline.termtable import TableModel
+        from debist.identify.terms import term_sign, term_table
+        from debist.termtable import TableModel
 
         names, values = self.parameters()
         table = term_table(
@@ -233,12 +233,12 @@ class RBFModel:
         return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
 
     def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:mod:`pipeline.kernel`), built once."""
+        """Arrays of the compiled free-run kernel (:mod:`debist.kernel`), built once."""
         return self._kernel
 
     @cached_property
     def _kernel(self):
-        from pipeline.kernel import table_arrays
+        from debist.kernel import table_arrays
 
         return table_arrays(self.table_model())
 
@@ -269,9 +269,9 @@ class RBFModel:
         A prediction restarted at sample k needs the friction state the model would have
         there; z = q_dot (:meth:`initial_state`) holds only at rest. Here z is the measured
         velocity passed through the model's own filter z' = (q_dot - z) / T_z from the
-        record's start (:func:`pipeline.identify.friction.friction_state`), as the
+        record's start (:func:`debist.identify.friction.friction_state`), as the
         regression of Eq. 40 builds it. The creep states likewise filter phi_j(q) q_dot
-        (:func:`pipeline.identify.friction.creep_states`).
+        (:func:`debist.identify.friction.creep_states`).
 
         Parameters
         ----------
@@ -288,7 +288,7 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 26, 37.
         """
-        from pipeline.identify.friction import creep_states, friction_state
+        from debist.identify.friction import creep_states, friction_state
 
         q = np.asarray(q, dtype=float)
         q_dot = np.asarray(q_dot, dtype=float)
@@ -394,7 +394,7 @@ class RBFModel:
         Parameters
         ----------
         tree : dict
-            As returned by :meth:`to_tree` or :func:`pipeline.artifacts.read_h5`.
+            As returned by :meth:`to_tree` or :func:`debist.artifacts.read_h5`.
 
         Returns
         -------

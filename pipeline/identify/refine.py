@@ -32,17 +32,17 @@ import pydantic
 from pydantic import Field, PositiveFloat, PositiveInt
 from scipy.optimize import least_squares
 
-from pipeline import preflight, progress
-from pipeline.config import CONFIG, config_from_section
-from pipeline.errors import WorkflowError
-from pipeline.identify.config import IdentifyConfig
-from pipeline.identify.fit import FitDiagnostics, Record, assemble_model
-from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import term_sign, term_table
-from pipeline.kernel import free_run_sensitivity
-from pipeline.prediction import restarted_runs
-from pipeline.simulate import check_free_run, prepare_inputs, simulate
-from pipeline.termtable import TableModel
+from debist import preflight, progress
+from debist.config import CONFIG, config_from_section
+from debist.errors import WorkflowError
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import FitDiagnostics, Record, assemble_model
+from debist.identify.model import RBFModel
+from debist.identify.terms import term_sign, term_table
+from debist.kernel import free_run_sensitivity
+from debist.prediction import restarted_runs
+from debist.simulate import check_free_run, prepare_inputs, simulate
+from debist.termtable import TableModel
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
@@ -253,7 +253,7 @@ def refine_model(
     Parameters
     ----------
     model : RBFModel
-        The least-squares model of :func:`pipeline.identify.fit_rbf_model`.
+        The least-squares model of :func:`debist.identify.fit_rbf_model`.
     diag : FitDiagnostics
         Its diagnostics (parameter vector, column names and norms).
     records : sequence of Record
@@ -279,11 +279,11 @@ def refine_model(
     term would be as large as the regression output), so that the optimiser sees
     comparable variables. The Jacobian comes from the forward sensitivities of the
     windows' free runs, integrated with them by the compiled kernel
-    (:func:`pipeline.kernel.free_run_sensitivity`): the exact derivative of the discrete
+    (:func:`debist.kernel.free_run_sensitivity`): the exact derivative of the discrete
     free run, at the cost of about one run per window.
     Residuals are q_sim - q over each window, with diverged windows penalised.
     Before anything is allocated, settings whose batched simulations exceed the memory
-    budget are refused (``ResourceError``, :mod:`pipeline.preflight`).
+    budget are refused (``ResourceError``, :mod:`debist.preflight`).
     """
     if model.has_creep:
         raise WorkflowError(
@@ -392,7 +392,7 @@ def refine_model(
             f"({held_ls:.4g} -> {held_ref:.4g} RMS)"
         )
     if accepted:
-        from pipeline.identify.stability import model_is_stable
+        from debist.identify.stability import model_is_stable
 
         qd_all = np.concatenate([r.q_dot for r in records])
         stable, reason = model_is_stable(refined, q_all, q_dot=qd_all)
@@ -454,8 +454,8 @@ def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Recor
     Raises
     ------
     ResourceError
-        If :func:`pipeline.preflight.refine_bytes` for the window runs, or
-        :func:`pipeline.preflight.free_run_bytes` for the free runs over the whole records,
+        If :func:`debist.preflight.refine_bytes` for the window runs, or
+        :func:`debist.preflight.free_run_bytes` for the free runs over the whole records,
         exceeds the budget, naming the ``[identify.refine]`` keys.
 
     Notes

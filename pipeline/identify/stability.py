@@ -5,7 +5,7 @@ The identified model of Masoud & Maas 2025 (Eq. 37),
     m_q q'' + d(q) z + F_c tanh(z / v_c) + f(q) = sum_i g_i(q) h(v_i),   T_z z' = q' - z,
 
 with the restoring force ``f(q) = c(q) q + F_0`` (``c`` includes the backbone ``k_1 + k_3 q^2``
-and the scaled analytical curve, see :meth:`pipeline.identify.model.RBFModel.curves`), is at
+and the scaled analytical curve, see :meth:`debist.identify.model.RBFModel.curves`), is at
 rest where the static force
 
     F(q; v) = f(q) - sum_i g_i(q) h(v_i)
@@ -15,7 +15,7 @@ vanishes. For each constant input level this module finds those roots, their sti
 each well; per input the static switching voltage (the saddle-node where the well the input
 pushes out of merges with its saddle); a verdict on whether the model is stable where the data
 are. The analytical model's numbers come from the same functions, applied to the analytical
-reduced model written in the form of Eq. 37 (:func:`pipeline.identify.design.analytical_as_eq37`).
+reduced model written in the form of Eq. 37 (:func:`debist.identify.design.analytical_as_eq37`).
 
 Small-signal model
 ------------------
@@ -55,9 +55,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import quad
 from scipy.optimize import brentq, minimize_scalar
 
-from pipeline.errors import DebistError
-from pipeline.identify.model import RBFModel
-from pipeline.identify.terms import input_map
+from debist.errors import DebistError
+from debist.identify.model import RBFModel
+from debist.identify.terms import input_map
 
 __all__ = [
     "EquilibriumPoint",

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import WorkflowError
-from pipeline.identify.basis import RBFBasis
-from pipeline.termtable import S_CREEP, S_POW, S_TANH, TermTable, TermTableBuilder
+from debist.errors import WorkflowError
+from debist.identify.basis import RBFBasis
+from debist.termtable import S_CREEP, S_POW, S_TANH, TermTable, TermTableBuilder
 
 #: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
 RBF_TERMS = ("c", "d", "g")
@@ -224,7 +224,7 @@ def force_columns(
         The analytical model's curves (needed by the ``physics_*`` terms).
     w : ndarray, shape (n, M), optional
         The creep states along the record [unit of q]
-        (:func:`pipeline.identify.friction.creep_states`); given: the creep columns
+        (:func:`debist.identify.friction.creep_states`); given: the creep columns
         ``creep[i]`` = w_i follow the ``d[i]``.
 
     Returns
@@ -329,7 +329,7 @@ def term_table(
     """Build the term library of Eq. 37: one term per regressor column name, as a term table.
 
     The one definition of the model's terms: the regressor columns of Eq. 40
-    (:meth:`~pipeline.termtable.TermTable.columns`), the NumPy and the compiled right-hand
+    (:meth:`~debist.termtable.TermTable.columns`), the NumPy and the compiled right-hand
     sides and the refinement's parameters all come from it.
 
     Parameters

@@ -5,7 +5,7 @@ text, Parquet and ASAM MDF (MF4, with the optional asammdf).
 
 Public API::
 
-    from pipeline.ingest import IngestSpec, load_rig_log, RIG_LOG_FORMATS
+    from debist.ingest import IngestSpec, load_rig_log, RIG_LOG_FORMATS
     spec = IngestSpec.from_dict(section)            # WorkflowError on a bad key/value
     segments = load_rig_log(path, spec)             # list[pandas.DataFrame]
 
@@ -28,17 +28,17 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.ingest.assemble import assemble, to_frame
-from pipeline.ingest.cache import RawLogCache
-from pipeline.ingest.channels import map_channels
-from pipeline.ingest.detect import detect_format
-from pipeline.ingest.mat import read_mat
-from pipeline.ingest.mf4 import read_mf4
-from pipeline.ingest.parquet import read_parquet
-from pipeline.ingest.raw import RawLog
-from pipeline.ingest.spec import FORMATS, ChannelSpec, IngestSpec, ResampleSpec
-from pipeline.ingest.text import read_text
-from pipeline.ingest.units import UNITS
+from debist.ingest.assemble import assemble, to_frame
+from debist.ingest.cache import RawLogCache
+from debist.ingest.channels import map_channels
+from debist.ingest.detect import detect_format
+from debist.ingest.mat import read_mat
+from debist.ingest.mf4 import read_mf4
+from debist.ingest.parquet import read_parquet
+from debist.ingest.raw import RawLog
+from debist.ingest.spec import FORMATS, ChannelSpec, IngestSpec, ResampleSpec
+from debist.ingest.text import read_text
+from debist.ingest.units import UNITS
 
 __all__ = [
     "RIG_LOG_FORMATS",
@@ -69,7 +69,7 @@ def read_raw(path: Path, spec: IngestSpec) -> RawLog:
     Returns
     -------
     RawLog
-        The channels as stored (see :mod:`pipeline.ingest.raw`); useful to list what a
+        The channels as stored (see :mod:`debist.ingest.raw`); useful to list what a
         file holds before writing the channel mapping.
 
     Raises

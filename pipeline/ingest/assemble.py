@@ -6,9 +6,9 @@ Order of operations on a log whose channels share one sample index:
 2. ``slice`` (sample indices), then ``time_window`` (``start <= t < stop``);
 3. at least 3 samples left; time finite and strictly increasing; every channel finite;
    ``sample_time`` (if also given) equal to the median step of the time channel within
-   the time tolerance (:func:`pipeline.ingest.checks.time_rtol`), and so is that of an
+   the time tolerance (:func:`debist.ingest.checks.time_rtol`), and so is that of an
    unmapped time-named channel when the time is ``k * sample_time``; sensor faults (a
-   channel's ``range`` / ``stuck``, :mod:`pipeline.ingest.validity`) under
+   channel's ``range`` / ``stuck``, :mod:`debist.ingest.validity`) under
    ``faults = "error"``;
 4. gaps (a step > ``gap_tolerance * median(dt)``): error, or split into gap-free
    segments; under ``faults = "split"`` the faulty samples are cut out too; segments
@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RigLogError
-from pipeline.ingest.channels import Mapped
-from pipeline.ingest.checks import (
+from debist.errors import RigLogError
+from debist.ingest.channels import Mapped
+from debist.ingest.checks import (
     check_enough,
     check_finite,
     check_plausible,
@@ -45,10 +45,10 @@ from pipeline.ingest.checks import (
     split_segments,
     window_range,
 )
-from pipeline.ingest.resample import resample_segment, uniform_grid
-from pipeline.ingest.spec import IngestSpec, ResampleSpec
-from pipeline.ingest.units import lookup_unit
-from pipeline.ingest.validity import cut_faults, fault_mask
+from debist.ingest.resample import resample_segment, uniform_grid
+from debist.ingest.spec import IngestSpec, ResampleSpec
+from debist.ingest.units import lookup_unit
+from debist.ingest.validity import cut_faults, fault_mask
 
 __all__ = ["Segment", "assemble", "to_frame"]
 
@@ -233,7 +233,7 @@ def assemble(mapped: Mapped, spec: IngestSpec, path: Path) -> tuple[list[Segment
     Parameters
     ----------
     mapped : Mapped
-        From :func:`pipeline.ingest.channels.map_channels`.
+        From :func:`debist.ingest.channels.map_channels`.
     spec : IngestSpec
         The configuration.
     path : Path
@@ -249,7 +249,7 @@ def assemble(mapped: Mapped, spec: IngestSpec, path: Path) -> tuple[list[Segment
     Raises
     ------
     RigLogError
-        Any check of :mod:`pipeline.ingest.checks`, channels on different rasters without
+        Any check of :mod:`debist.ingest.checks`, channels on different rasters without
         ``resample`` (naming both), or a failed resampling.
     """
     if mapped.bases is None:

@@ -2,7 +2,7 @@
 
 Several data sets often cut one long recording (the Silverbox workflow reads four slices
 of one 105 MB CSV); parsing it four times costs minutes. :class:`RawLogCache` keeps the
-unmapped :class:`~pipeline.ingest.raw.RawLog` of a file for as long as data sets still
+unmapped :class:`~debist.ingest.raw.RawLog` of a file for as long as data sets still
 need it. The key is the resolved path, the file's modification time and size (a file
 rewritten in between is read again) and the read options of the ingest spec (``format``,
 ``delimiter``, ``decimal``, ``header``): two data sets reading one file with different
@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from pipeline.ingest.raw import RawLog
-    from pipeline.ingest.spec import IngestSpec
+    from debist.ingest.raw import RawLog
+    from debist.ingest.spec import IngestSpec
 
 __all__ = ["RawLogCache", "cache_key"]
 
@@ -63,7 +63,7 @@ class RawLogCache:
     Parameters
     ----------
     reader : callable
-        ``reader(path, spec) -> RawLog``, e.g. :func:`pipeline.ingest.read_raw`.
+        ``reader(path, spec) -> RawLog``, e.g. :func:`debist.ingest.read_raw`.
     sources : iterable of path-like, optional
         Every source the stage will read, one entry per data set: a log is dropped from
         memory after its last use. Without it logs are kept until the cache is dropped.

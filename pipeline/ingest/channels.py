@@ -1,9 +1,9 @@
 """Mapping of a rig log's channels to the canonical columns, with unit conversion to SI.
 
-Pure functions of a :class:`~pipeline.ingest.raw.RawLog` and an
-:class:`~pipeline.ingest.spec.IngestSpec`: select each channel (by exact name, regex,
+Pure functions of a :class:`~debist.ingest.raw.RawLog` and an
+:class:`~debist.ingest.spec.IngestSpec`: select each channel (by exact name, regex,
 column index, or a MAT variable and its column), convert it to float64 and to SI
-(``x * factor(unit) * scale``, the factor from pint, :mod:`pipeline.ingest.units`), check
+(``x * factor(unit) * scale``, the factor from pint, :mod:`debist.ingest.units`), check
 that the result is a quantity the column can hold, and attach it to its time base.
 """
 
@@ -17,11 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RigLogError, UnitMismatchWarning
-from pipeline.ingest.checks import printed_resolution
-from pipeline.ingest.raw import RawChannel, RawLog
-from pipeline.ingest.spec import ChannelSpec, IngestSpec
-from pipeline.ingest.units import (
+from debist.errors import RigLogError, UnitMismatchWarning
+from debist.ingest.checks import printed_resolution
+from debist.ingest.raw import RawChannel, RawLog
+from debist.ingest.spec import ChannelSpec, IngestSpec
+from debist.ingest.units import (
     EXAMPLES,
     canonical_unit,
     describe_quantities,
@@ -58,7 +58,7 @@ class Column:
         The recorded unit (the spec's or the file's), for messages.
     resolution : float
         Time columns: the rounding step of the recorded values in SI [s]
-        (:func:`pipeline.ingest.checks.printed_resolution` times ``|gain|``); 0 elsewhere.
+        (:func:`debist.ingest.checks.printed_resolution` times ``|gain|``); 0 elsewhere.
     """
 
     role: str

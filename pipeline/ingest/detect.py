@@ -29,7 +29,7 @@ from __future__ import annotations
 import gzip
 from pathlib import Path
 
-from pipeline.errors import RigLogError
+from debist.errors import RigLogError
 
 __all__ = ["HDF5_SIGNATURE", "detect_format", "sniff_format"]
 

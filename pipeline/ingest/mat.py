@@ -1,7 +1,7 @@
 """Reader of MATLAB MAT files: dSPACE ControlDesk recordings and plain variables.
 
 Two layouts are understood, in MAT v5/v7 (via :func:`scipy.io.loadmat`) and v7.3 (via
-h5py, :mod:`pipeline.ingest.mat73`) alike:
+h5py, :mod:`debist.ingest.mat73`) alike:
 
 dSPACE ControlDesk recording
     One top-level struct with the fields ``X`` and ``Y``. ``X(1..k)`` are the time bases
@@ -17,18 +17,18 @@ Plain variables
     variable, e.g. the EMPS benchmark's ``t``, ``qm``, ``vir`` (n x 1) and ``gtau`` (1 x 1).
 Matrix variables
     In any file, every numeric top-level variable (vectors and n x k matrices, samples in
-    rows) is also kept in :attr:`~pipeline.ingest.raw.RawLog.variables`, where a channel
+    rows) is also kept in :attr:`~debist.ingest.raw.RawLog.variables`, where a channel
     table ``{ var = "X3", column = 1 }`` selects one column, e.g. of a data set storing each
     channel as an n x 2 ``[t, value]`` matrix. v7.3 files store arrays transposed (an n x 2
-    matrix is an HDF5 data set of shape (2, n)); :mod:`~pipeline.ingest.mat73` transposes
+    matrix is an HDF5 data set of shape (2, n)); :mod:`~debist.ingest.mat73` transposes
     them back, so both versions give the same orientation.
 
 Before a v4/v5/v7 file is loaded, :func:`scipy.io.whosmat` lists each variable's shape
 and class without reading its data; a file whose variables declare more bytes than it
-can hold (its size times :data:`~pipeline.preflight.DEFLATE_MAX_RATIO`, since v7
+can hold (its size times :data:`~debist.preflight.DEFLATE_MAX_RATIO`, since v7
 variables may be zlib-compressed) is refused as truncated or forged, and the declared
 total is checked against the memory budget. v7.3 files are bounded the same way by
-:func:`~pipeline.ingest.mat73.load_mat73`.
+:func:`~debist.ingest.mat73.load_mat73`.
 
 References
 ----------
@@ -47,10 +47,10 @@ from typing import Any
 import numpy as np
 import scipy.io
 
-from pipeline.errors import DebistError, RigLogError
-from pipeline.ingest.mat73 import load_mat73
-from pipeline.ingest.raw import RawChannel, RawLog
-from pipeline.preflight import DEFLATE_MAX_RATIO, check_memory
+from debist.errors import DebistError, RigLogError
+from debist.ingest.mat73 import load_mat73
+from debist.ingest.raw import RawChannel, RawLog
+from debist.preflight import DEFLATE_MAX_RATIO, check_memory
 
 __all__ = ["check_declared", "interpret_mat", "read_mat"]
 
@@ -156,7 +156,7 @@ def _dspace(path: Path, fmt: str, var: str, rec: Mapping[str, Any]) -> RawLog:
 
 
 def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
-    """Turn the variables of a MAT file into a :class:`~pipeline.ingest.raw.RawLog`.
+    """Turn the variables of a MAT file into a :class:`~debist.ingest.raw.RawLog`.
 
     Parameters
     ----------
@@ -166,7 +166,7 @@ def interpret_mat(path: Path, fmt: str, variables: Mapping[str, Any]) -> RawLog:
         ``"mat-v5"``, ``"mat-v7.3"`` or ``"mat-v4"``.
     variables : dict
         Variable name -> value as given by ``loadmat(..., simplify_cells=True)`` or
-        :func:`~pipeline.ingest.mat73.load_mat73`.
+        :func:`~debist.ingest.mat73.load_mat73`.
 
     Returns
     -------
@@ -238,7 +238,7 @@ def check_declared(path: Path, fmt: str) -> int:
     Raises
     ------
     RigLogError
-        If they exceed the file size times :data:`~pipeline.preflight.DEFLATE_MAX_RATIO`
+        If they exceed the file size times :data:`~debist.preflight.DEFLATE_MAX_RATIO`
         (v5/v7, which may be compressed) or the file size (v4), naming the largest
         variable and its declared shape and size.
     ResourceError
@@ -286,7 +286,7 @@ def read_mat(path: Path, fmt: str) -> RawLog:
         The file.
     fmt : str
         ``"mat-v5"``, ``"mat-v4"`` or ``"mat-v7.3"`` as found by
-        :func:`~pipeline.ingest.detect.detect_format`.
+        :func:`~debist.ingest.detect.detect_format`.
 
     Returns
     -------
@@ -298,7 +298,7 @@ def read_mat(path: Path, fmt: str) -> RawLog:
     RigLogError
         The file is truncated or corrupt (the scipy / h5py exception is chained and
         quoted), declares more data than it can hold (:func:`check_declared`,
-        :func:`~pipeline.ingest.mat73.load_mat73`), or see :func:`interpret_mat`.
+        :func:`~debist.ingest.mat73.load_mat73`), or see :func:`interpret_mat`.
     ResourceError
         Its declared data exceed the memory budget (before it is read).
     """

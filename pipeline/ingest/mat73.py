@@ -1,7 +1,7 @@
 """Decoder of MATLAB v7.3 MAT files (HDF5 containers) into plain Python values.
 
 The result has the same shape as ``scipy.io.loadmat(path, simplify_cells=True)`` gives
-for a v5 file, so :mod:`pipeline.ingest.mat` interprets both alike: a struct becomes a
+for a v5 file, so :mod:`debist.ingest.mat` interprets both alike: a struct becomes a
 ``dict``, a struct array or a cell array a ``list``, a char array a ``str``, a numeric
 array a squeezed :class:`numpy.ndarray` in MATLAB's (column-major) orientation.
 
@@ -28,7 +28,7 @@ Before any data is read, :func:`load_mat73` walks the objects the decoder will v
 
 - a data set declares more bytes than can be stored for it: more than its allocated
   storage (``H5Dget_storage_size``) or the file when uncompressed, or more than
-  :data:`~pipeline.preflight.DEFLATE_MAX_RATIO` times its stored bytes when filtered
+  :data:`~debist.preflight.DEFLATE_MAX_RATIO` times its stored bytes when filtered
   (deflate cannot expand more), or its contiguous storage lies beyond the end of the
   file: a forged or truncated file (``RigLogError``);
 - the decoder would visit more than :data:`MAX_OBJECTS` objects, counting every path
@@ -36,7 +36,7 @@ Before any data is read, :func:`load_mat73` walks the objects the decoder will v
   times over decodes into an exponentially large tree), or read more than that many
   references, or a reference cycle (``RigLogError``);
 - the data it would read, counted per visit, exceeds the memory budget
-  (:func:`pipeline.preflight.check_memory`, ``ResourceError``).
+  (:func:`debist.preflight.check_memory`, ``ResourceError``).
 
 References
 ----------
@@ -55,8 +55,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pipeline.errors import RigLogError
-from pipeline.preflight import DEFLATE_MAX_RATIO, check_memory
+from debist.errors import RigLogError
+from debist.preflight import DEFLATE_MAX_RATIO, check_memory
 
 __all__ = ["MAX_OBJECTS", "load_mat73"]
 

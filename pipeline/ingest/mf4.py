@@ -2,7 +2,7 @@
 
 An MDF file holds channel groups; each group has a master channel (its time base, usually
 ``time`` in ``s``) and data channels sampled on it. The reader maps that onto the same
-:class:`~pipeline.ingest.raw.RawLog` as a dSPACE recording: one raster (time base) per
+:class:`~debist.ingest.raw.RawLog` as a dSPACE recording: one raster (time base) per
 channel group, every data channel tied to its group's raster, named by its MDF channel
 name and carrying its MDF unit. Channels are then selected by ``name`` or ``regex`` like
 ControlDesk block paths; a ``unit`` omitted in the ingest spec is the channel's own unit.
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import RigLogError
-from pipeline.ingest.raw import RawChannel, RawLog
+from debist.errors import RigLogError
+from debist.ingest.raw import RawChannel, RawLog
 
 __all__ = ["read_mf4"]
 

@@ -15,8 +15,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.errors import RigLogError
-from pipeline.ingest.raw import RawChannel, RawLog
+from debist.errors import RigLogError
+from debist.ingest.raw import RawChannel, RawLog
 
 __all__ = ["read_parquet"]
 

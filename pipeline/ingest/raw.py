@@ -1,8 +1,8 @@
 """The raw content of a rig log as the readers return it, before channel mapping.
 
-Every reader (:mod:`~pipeline.ingest.mat`, :mod:`~pipeline.ingest.text`,
-:mod:`~pipeline.ingest.parquet`, :mod:`~pipeline.ingest.mf4`) returns a :class:`RawLog`;
-:mod:`~pipeline.ingest.channels` maps it to the canonical table. Nothing here touches a file.
+Every reader (:mod:`~debist.ingest.mat`, :mod:`~debist.ingest.text`,
+:mod:`~debist.ingest.parquet`, :mod:`~debist.ingest.mf4`) returns a :class:`RawLog`;
+:mod:`~debist.ingest.channels` maps it to the canonical table. Nothing here touches a file.
 """
 
 from __future__ import annotations

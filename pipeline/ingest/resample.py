@@ -9,7 +9,7 @@ Two methods (key ``resample.method``):
     the two Nyquist frequencies) removes what the new rate cannot represent, and
     ``padtype = "line"`` keeps the ends free of the zero-padding transient. Needs a
     uniformly sampled input: every step within the time tolerance
-    (:func:`pipeline.ingest.checks.time_rtol`: the larger of 1e-6 and what the digits the
+    (:func:`debist.ingest.checks.time_rtol`: the larger of 1e-6 and what the digits the
     time is written with imply, at most 0.1 %) of the mean step, and a target step whose
     ratio to the mean step is a fraction with denominator <= 100 within the same
     tolerance. The mean step ``(t[-1] - t[0]) / (n - 1)`` is the estimate of the recorded
@@ -18,7 +18,7 @@ Two methods (key ``resample.method``):
     :func:`numpy.interp` on the new grid. No anti-aliasing: use it for upsampling, for
     jittery time bases, or with a target step much shorter than the signal's time scales.
 
-Resampling never crosses a gap: :func:`pipeline.ingest.load_rig_log` calls it once per
+Resampling never crosses a gap: :func:`debist.ingest.load_rig_log` calls it once per
 gap-free segment. The new grid starts at the segment's first time and ends at or before
 its last.
 """
@@ -29,15 +29,15 @@ from fractions import Fraction
 
 import numpy as np
 
-from pipeline.errors import RigLogError
-from pipeline.ingest.checks import TIME_RTOL_MAX, time_rtol
+from debist.errors import RigLogError
+from debist.ingest.checks import TIME_RTOL_MAX, time_rtol
 
 __all__ = ["MAX_DOWN", "UNIFORM_RTOL", "resample_segment", "uniform_grid"]
 
 #: Largest denominator of the polyphase ratio.
 MAX_DOWN = 100
 #: Largest relative deviation of a step from the mean step for "polyphase" (the bound of
-#: :func:`~pipeline.ingest.checks.time_rtol`, which gives the tolerance of a time base).
+#: :func:`~debist.ingest.checks.time_rtol`, which gives the tolerance of a time base).
 UNIFORM_RTOL = TIME_RTOL_MAX
 
 
@@ -86,7 +86,7 @@ def resample_segment(
         See the module docstring.
     resolution : float, optional
         [s] rounding step of the recorded time
-        (:func:`~pipeline.ingest.checks.printed_resolution` times the unit factor); 0 for
+        (:func:`~debist.ingest.checks.printed_resolution` times the unit factor); 0 for
         a time base written in full or computed.
 
     Returns
@@ -101,7 +101,7 @@ def resample_segment(
     RigLogError
         ``"polyphase"`` on a non-uniform time base, or with a ratio ``dt_out / dt_in``
         that is not a fraction with denominator <= :data:`MAX_DOWN` (both within
-        :func:`~pipeline.ingest.checks.time_rtol`; the message suggests ``"linear"``); no
+        :func:`~debist.ingest.checks.time_rtol`; the message suggests ``"linear"``); no
         file name here, the caller adds it.
 
     References

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from pipeline.ingest.units import lookup_unit
+from debist.ingest.units import lookup_unit
 
 __all__ = ["KNOWN_SENSORS", "KnownSensor", "default_range"]
 
@@ -47,7 +47,7 @@ class KnownSensor:
 
 
 #: Known sensors. The Micro-Epsilon optoNCDT ILD2300-50 measures 50 mm, i.e. +-25 mm about
-#: its mid-range, which is the rig's q = 0 (the virtual rig, :mod:`pipeline.rig`, names its
+#: its mid-range, which is the rig's q = 0 (the virtual rig, :mod:`debist.rig`, names its
 #: channel ``Model Root/Sensors/Laser/q`` and clips at ``RigParams.sensor_range`` = 25 mm).
 KNOWN_SENSORS: tuple[KnownSensor, ...] = (
     KnownSensor(

@@ -1,8 +1,8 @@
 """Configuration of the ingest stage: which file format, which channels, which checks.
 
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
-parsed from TOML) into frozen pydantic dataclasses (:mod:`pipeline.config`) and rejects
-anything it does not understand with a one-line :class:`~pipeline.errors.WorkflowError`
+parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.config`) and rejects
+anything it does not understand with a one-line :class:`~debist.errors.WorkflowError`
 naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
 Schema (every key optional unless marked required)::
@@ -31,13 +31,13 @@ column index, text and Parquet files) or ``var`` (a MAT file's numeric variable,
 ``column``: the 0-based column of an n x k matrix variable, rows being samples, e.g.
 ``q = { var = "X3", column = 1 }`` for the values of an n x 2 ``[t, value]`` variable), plus
 ``unit`` (any unit pint parses, e.g. ``"mm"``, ``"mm/s"``, ``"g0"``, ``"kV"``, ``"m/s^2"``,
-``"deg"``, ``"1"``; see :mod:`pipeline.ingest.units`), ``scale`` (extra factor) and ``si_unit``
+``"deg"``, ``"1"``; see :mod:`debist.ingest.units`), ``scale`` (extra factor) and ``si_unit``
 (the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration).
-The quantity of the result must suit the column (:func:`pipeline.ingest.units.role_quantities`):
+The quantity of the result must suit the column (:func:`debist.ingest.units.role_quantities`):
 the time a time, ``q`` a length, angle, dimensionless value or voltage, an input a voltage,
 acceleration, force, pressure, current, length or dimensionless value; ``q = { unit = "N" }`` or
 ``time = { unit = "mm" }`` is refused naming ``[ingest] q.unit``. Further keys are
-the sensor validity checks of :mod:`pipeline.ingest.validity`: ``range = [lo, hi]`` (in
+the sensor validity checks of :mod:`debist.ingest.validity`: ``range = [lo, hi]`` (in
 the recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
 identical consecutive samples are a fault; 0 turns the check off; default: 10 on ``q`` when
 it varies, none on other channels).
@@ -60,7 +60,7 @@ from pydantic import (
     PositiveFloat,
 )
 
-from pipeline.config import (
+from debist.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
@@ -68,8 +68,8 @@ from pipeline.config import (
     config_from_section,
     unknown_key_message,
 )
-from pipeline.errors import WorkflowError
-from pipeline.ingest.units import (
+from debist.errors import WorkflowError
+from debist.ingest.units import (
     EXAMPLES,
     canonical_unit,
     describe_quantities,
@@ -225,7 +225,7 @@ class ChannelSpec:
         saturation). None: no range check.
     stuck : int, optional
         [samples] ``k``: ``k`` or more identical consecutive samples are a stuck sensor;
-        0: no check. None: the default rule of :func:`pipeline.ingest.validity.stuck_length`
+        0: no check. None: the default rule of :func:`debist.ingest.validity.stuck_length`
         (10 on ``q`` when its median absolute step is > 0, no check elsewhere).
     var : str, optional
         Name of a numeric variable of a MAT file: a vector, or with ``column`` an n x k
@@ -246,7 +246,7 @@ class ChannelSpec:
 
     References
     ----------
-    pint (https://pint.readthedocs.io) parses the units, see :mod:`pipeline.ingest.units`.
+    pint (https://pint.readthedocs.io) parses the units, see :mod:`debist.ingest.units`.
     """
 
     role: str
@@ -345,11 +345,11 @@ class ChannelSpec:
         >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "bananas"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
+        debist.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
         >>> ChannelSpec.from_dict("t", {"name": "t", "unit": "mm"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... (length [m])
+        debist.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... (length [m])
         """
         key = "time" if role == "t" else role
         label = _label(where, key)
@@ -437,14 +437,14 @@ def _channel(key: str, table: object, where: Where, extra: bool) -> ChannelSpec:
         raise
 
 
-#: pydantic configuration of :class:`IngestSpec`: as :data:`~pipeline.config.CONFIG`, and
+#: pydantic configuration of :class:`IngestSpec`: as :data:`~debist.config.CONFIG`, and
 #: ``sample_slice`` may be given by its workflow key ``slice`` or by its name.
 _INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=_INGEST_CONFIG)
 class IngestSpec:
-    """Frozen configuration of :func:`pipeline.ingest.load_rig_log`.
+    """Frozen configuration of :func:`debist.ingest.load_rig_log`.
 
     Parameters
     ----------
@@ -477,7 +477,7 @@ class IngestSpec:
     decimal : {"auto", ".", ","}
         Text files: the decimal separator; ``"auto"`` detects ``","`` from numbers with a
         comma between digits when the delimiter is not a comma
-        (:func:`pipeline.ingest.text.detect_decimal`).
+        (:func:`debist.ingest.text.detect_decimal`).
     header : bool or None
         Text files: whether the first line holds the channel names; None = detect.
     faults : {"error", "split"}
@@ -581,7 +581,7 @@ class IngestSpec:
         >>> IngestSpec.from_dict({"smaple_time": 1e-3})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
+        debist.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
         """
         if not isinstance(section, Mapping):
             raise WorkflowError(f"{_label(where, '')} expected a table, got {section!r}")

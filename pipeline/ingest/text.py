@@ -48,9 +48,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.errors import RigLogError
-from pipeline.ingest.detect import is_gzip, open_binary
-from pipeline.ingest.raw import RawChannel, RawLog
+from debist.errors import RigLogError
+from debist.ingest.detect import is_gzip, open_binary
+from debist.ingest.raw import RawChannel, RawLog
 
 __all__ = [
     "TAIL_LINES",

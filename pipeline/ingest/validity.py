@@ -4,7 +4,7 @@ A sensor fault is a run of samples of one channel that cannot be a measurement:
 
 - **range**: a sample at or beyond a limit of the channel's ``range = [lo, hi]`` (given in
   the recorded unit; when the workflow gives none and the channel's name names a known
-  sensor, its documented range, :mod:`pipeline.ingest.sensors`, with a warning saying
+  sensor, its documented range, :mod:`debist.ingest.sensors`, with a warning saying
   so). A laser triangulation sensor outputs its range limit when the target
   leaves the measuring range; a saturated amplifier sits at its rail. The limits are
   converted to SI with the channel's own factor (so a sample recorded exactly at the
@@ -18,7 +18,7 @@ A sensor fault is a run of samples of one channel that cannot be a measurement:
   A run that is also a range fault is reported as a range fault.
 
 The data set's ``faults`` key chooses the policy: ``"error"`` raises a
-:class:`~pipeline.errors.RigLogError` naming the file, the channel, the first run's sample
+:class:`~debist.errors.RigLogError` naming the file, the channel, the first run's sample
 range, times and value; ``"split"`` removes every faulty sample (of any channel) from the
 table and keeps the segments in between, dropping those shorter than ``min_segment``
 exactly as gap splitting does (:func:`cut_faults`).
@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import DebistWarning, RigLogError
-from pipeline.ingest.channels import Column
-from pipeline.ingest.sensors import default_range
-from pipeline.ingest.spec import ChannelSpec, IngestSpec
+from debist.errors import DebistWarning, RigLogError
+from debist.ingest.channels import Column
+from debist.ingest.sensors import default_range
+from debist.ingest.spec import ChannelSpec, IngestSpec
 
 __all__ = [
     "RANGE_ULPS",
@@ -142,7 +142,7 @@ def find_faults(
         For ``range`` and ``stuck``.
     default : tuple, optional
         ``(lo, hi, note)``: the range used when ``spec.range`` is None (a known sensor's
-        documented range, :func:`pipeline.ingest.sensors.default_range`), in the recorded
+        documented range, :func:`debist.ingest.sensors.default_range`), in the recorded
         unit; ``note`` goes into the fault's detail.
 
     Returns
@@ -288,7 +288,7 @@ def cut_faults(
     faulty: np.ndarray,
     min_segment: int,
 ) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
-    """Remove faulty samples from the segments of :func:`~pipeline.ingest.checks.split_segments`.
+    """Remove faulty samples from the segments of :func:`~debist.ingest.checks.split_segments`.
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 Modules
 -------
 params
-    :class:`~pipeline.physics.params.PrototypeParams`, Table 1 and the geometry in SI units.
+    :class:`~debist.physics.params.PrototypeParams`, Table 1 and the geometry in SI units.
 kinematics
     Ritz approximation (Eq. 13), tip displacement, pitch angle, DE lengths (Eq. 1-6).
 energy

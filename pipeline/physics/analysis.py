@@ -21,18 +21,18 @@ import numpy as np
 import pydantic
 from pydantic import Field, PositiveFloat
 
-from pipeline.config import CONFIG, ConfigValueError, Interval, config_from_section
-from pipeline.physics.dynamics import ModeAnalysis, mode_analysis
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.prestrain import PrestrainSweep, prestrain_sweep
-from pipeline.physics.reduced import (
+from debist.config import CONFIG, ConfigValueError, Interval, config_from_section
+from debist.physics.dynamics import ModeAnalysis, mode_analysis
+from debist.physics.params import PrototypeParams
+from debist.physics.prestrain import PrestrainSweep, prestrain_sweep
+from debist.physics.reduced import (
     Comparison,
     ReducedCurves,
     compare_full_reduced,
     fit_reduced,
     switching_profile,
 )
-from pipeline.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
+from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
 
 __all__ = ["Analysis", "AnalyzeConfig", "analysis_figures", "analysis_tree", "run_analysis"]
 
@@ -113,7 +113,7 @@ class AnalyzeConfig:
         >>> AnalyzeConfig.from_dict({"n_b": 1})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [analyze] n_b: expected an integer >= 2, got 1
+        debist.errors.WorkflowError: [analyze] n_b: expected an integer >= 2, got 1
         """
         return config_from_section(cls, section, where)
 
@@ -287,7 +287,7 @@ def analysis_figures(result: Analysis) -> dict[str, Any]:
         ``fig3_prestrain``, ``fig4_force_displacement``, ``fig5_capacitance``,
         ``fig6a_modes``, ``fig7_full_vs_reduced`` and ``reduced_curves``.
     """
-    from pipeline.physics import plots
+    from debist.physics import plots
 
     return {
         "fig3_prestrain": plots.plot_prestrain_sweep(result.sweep),

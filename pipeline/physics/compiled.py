@@ -1,8 +1,8 @@
 """The full model's right-hand side and Jacobian compiled with numba (Eq. 19-23).
 
-The same equations as :class:`pipeline.physics.dynamics.FullModel` (its NumPy methods are the
+The same equations as :class:`debist.physics.dynamics.FullModel` (its NumPy methods are the
 reference; the tests check that both agree to rounding), as nopython functions of plain
-arrays: the generated potential-energy terms of :mod:`pipeline.physics._generated` compiled
+arrays: the generated potential-energy terms of :mod:`debist.physics._generated` compiled
 as they are, the mass, damping and creep matrices, and a Cholesky factorisation for the
 mass-matrix solves. A model reaches the kernels as one float array (:func:`pack_model`); the
 squared voltages and the tip force are arguments.
@@ -15,7 +15,7 @@ and solve the reference's equations to rounding (backward error ``1e-14``).
 Caching. The kernels are cached on disk (``cache=True``). numba invalidates a cached function
 when its own file changes, not when a function it calls from another file does; the
 Python-facing kernels therefore close over :data:`STAMP`, the sha256 of the source of
-:mod:`pipeline.physics._generated`, which numba hashes into the cache's index key, and the
+:mod:`debist.physics._generated`, which numba hashes into the cache's index key, and the
 helpers they call are not cached on their own. Kernels of other modules that call the
 helpers close over :func:`source_stamp` of this module and the generated one.
 
@@ -40,10 +40,10 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.physics import _generated
+from debist.physics import _generated
 
 if TYPE_CHECKING:
-    from pipeline.physics.dynamics import FullModel
+    from debist.physics.dynamics import FullModel
 
 __all__ = [
     "N_MODEL",
@@ -87,10 +87,10 @@ def source_stamp(*modules: ModuleType) -> str:
     return h.hexdigest()
 
 
-#: sha256 of :mod:`pipeline.physics._generated`; the cached kernels close over it.
+#: sha256 of :mod:`debist.physics._generated`; the cached kernels close over it.
 STAMP = source_stamp(_generated)
 
-#: The generated terms compiled as they are (see :mod:`pipeline.physics._generated`).
+#: The generated terms compiled as they are (see :mod:`debist.physics._generated`).
 grad_terms = nb.njit(cache=True)(_generated.grad_terms)
 hess_terms = nb.njit(cache=True)(_generated.hess_terms)
 
@@ -107,7 +107,7 @@ def pack_model(model: FullModel) -> NDArray[np.float64]:
     -------
     ndarray, shape (N_MODEL,)
         ``l, EI, EA, m g, a, a_0, e_x, -e_z + dz_1, e_z + dz_2, l_0, V_DE Y / 6, C_0 / 2``
-        (the constants of :mod:`pipeline.physics._generated`), ``b`` [m], ``m`` [kg],
+        (the constants of :mod:`debist.physics._generated`), ``b`` [m], ``m`` [kg],
         ``V_DE eta_v``, ``K_bar / K = V_DE Y_MW``, ``Y_MW / eta_MW`` [1/s], the constant
         parts ``M_0`` (16) and ``D_0`` (16) of the mass and damping matrices (row-major),
         the slope matrix ``P_1`` (9) and the tip map ``L`` (4).

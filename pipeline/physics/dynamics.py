@@ -16,7 +16,7 @@ State ``x = [q_m, q_m_dot, q_eps]`` with ``q_m = [q_2, q_3, q_4, u_0]`` and the 
 * ``K = [d lambda_3,1/dq_m, d lambda_3,2/dq_m]`` (4 x 2), ``K_bar = V_DE Y_MW K`` (Eq. 12, 19).
 
 :class:`FullModel` evaluates the right-hand side and Jacobian with the compiled kernels of
-:mod:`pipeline.physics.compiled` (numba, imported on first use); ``compiled=False`` selects
+:mod:`debist.physics.compiled` (numba, imported on first use); ``compiled=False`` selects
 the NumPy implementation here, the reference the kernels are tested against.
 
 References
@@ -32,12 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.physics import _generated
-from pipeline.physics.energy import HESS_INDEX, generated_constants
-from pipeline.physics.kinematics import de_lengths, deflection, pitch_angle, ritz_basis
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.segments import solve_segments
-from pipeline.physics.statics import equilibria
+from debist.physics import _generated
+from debist.physics.energy import HESS_INDEX, generated_constants
+from debist.physics.kinematics import de_lengths, deflection, pitch_angle, ritz_basis
+from debist.physics.params import PrototypeParams
+from debist.physics.segments import solve_segments
+from debist.physics.statics import equilibria
 
 __all__ = [
     "FullModel",
@@ -57,7 +57,7 @@ def _zero(t: float) -> float:
 
 def _kernels():
     """Return the compiled kernels (numba is imported on first use, not with this module)."""
-    from pipeline.physics import compiled
+    from debist.physics import compiled
 
     return compiled
 
@@ -77,7 +77,7 @@ class FullModel:
         Pre-strain screw position [m]; ``params.b`` if omitted.
     compiled : bool
         Evaluate :meth:`rhs` and :meth:`jac` with the compiled kernels of
-        :mod:`pipeline.physics.compiled` (default; the same equations, equal to the NumPy
+        :mod:`debist.physics.compiled` (default; the same equations, equal to the NumPy
         implementation to rounding, see there) or with NumPy (``False``, the reference).
 
     References
@@ -213,7 +213,7 @@ class FullModel:
             State ``[q_m, q_m_dot, q_eps]``.
         F_extra : float
             Horizontal tip force [N] added to ``F(t)``; a hook for forces that depend on
-            states outside the model (e.g. friction, :mod:`pipeline.rig.plant`).
+            states outside the model (e.g. friction, :mod:`debist.rig.plant`).
 
         Returns
         -------

@@ -10,7 +10,7 @@
   ``C_0 / lambda_3^2 = C_0 lambda_1``, docs/interpretation.md item 6). Eq. 11 is kept as
   printed (pure-shear form, resisting compression); equilibria with a slack DE
   (``lambda_1 < 1``) are filtered out by
-  :mod:`pipeline.physics.statics` (docs/interpretation.md item 5).
+  :mod:`debist.physics.statics` (docs/interpretation.md item 5).
 
 References
 ----------
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.physics.kinematics import de_lengths, ritz_basis, vertical_displacement
-from pipeline.physics.params import PrototypeParams
+from debist.physics.kinematics import de_lengths, ritz_basis, vertical_displacement
+from debist.physics.params import PrototypeParams
 
 __all__ = [
     "HESS_INDEX",
@@ -62,7 +62,7 @@ def generated_constants(params: PrototypeParams) -> tuple[float, ...]:
     -------
     tuple of float
         ``l, EI, EA, mg, a, a_0, e_x, -e_z + dz_1, e_z + dz_2, l_0, V_DE Y / 6, C_0 / 2``
-        (the order of :func:`pipeline.physics._generated.grad_terms`).
+        (the order of :func:`debist.physics._generated.grad_terms`).
 
     References
     ----------
@@ -85,7 +85,7 @@ def scalar_gradient_hessian(
     """Gradient and Hessian of ``U`` (Eq. 14) for a few states, from the generated scalar terms.
 
     The same equations as :func:`potential` (checked against it to 1e-10 in the tests), in
-    the SymPy-generated scalar code of :mod:`pipeline.physics._generated`: for one or a few
+    the SymPy-generated scalar code of :mod:`debist.physics._generated`: for one or a few
     states about ten times faster than the vectorised chain rule, whose NumPy calls on
     tiny arrays dominate a continuation of single Newton solves.
 
@@ -109,7 +109,7 @@ def scalar_gradient_hessian(
     ----------
     Masoud & Maas 2025, Eq. 9-11, 14, 15.
     """
-    from pipeline.physics import _generated
+    from debist.physics import _generated
 
     consts = generated_constants(params)
     n = qm.shape[0]
@@ -212,7 +212,7 @@ def potential(
 
     Examples
     --------
-    >>> from pipeline.physics.params import PrototypeParams
+    >>> from debist.physics.params import PrototypeParams
     >>> p = PrototypeParams.paper()
     >>> ev = potential([0.0, 0.0, 0.0, 0.0], p, order=0)
     >>> ev.lambda_1.round(3).tolist()

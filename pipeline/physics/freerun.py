@@ -1,8 +1,8 @@
 """The analytical reduced model (Eq. 26) as a free-run model for validation (Table 2).
 
 :class:`AnalyticalModel` tabulates the reduced model's curves once (``m_q, dm_q/dq, d, f, g_i,
-k_i`` of :class:`pipeline.physics.reduced.ReducedModel`) and interpolates them with cubic
-splines, so that the shared batched RK4 simulator (:mod:`pipeline.simulate`) runs it beside the
+k_i`` of :class:`debist.physics.reduced.ReducedModel`) and interpolates them with cubic
+splines, so that the shared batched RK4 simulator (:mod:`debist.simulate`) runs it beside the
 identified and SINDy models, driven by the measured voltages, with the same initial states and
 the same scoring. The tabulation grid is fine (default 0.025 mm); the interpolation error is far
 below the model's own error.
@@ -20,8 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.reduced import ReducedModel, fit_reduced
+from debist.physics.params import PrototypeParams
+from debist.physics.reduced import ReducedModel, fit_reduced
 
 __all__ = ["AnalyticalModel", "analytical_model"]
 
@@ -29,14 +29,14 @@ _CURVES = ("m_q", "dm_q", "d", "f", "g1", "g2", "k1", "k2", "phi")
 
 
 class AnalyticalModel:
-    """Reduced model of Eq. 26 with tabulated curves, for :func:`pipeline.simulate.simulate`.
+    """Reduced model of Eq. 26 with tabulated curves, for :func:`debist.simulate.simulate`.
 
     States ``x = [q, q_dot, q_eps,1, q_eps,2]`` [m, m/s, -, -]; inputs ``v = [v1, v2]`` [V].
 
     Parameters
     ----------
     model : ReducedModel
-        The fitted reduced model (:func:`pipeline.physics.reduced.fit_reduced`).
+        The fitted reduced model (:func:`debist.physics.reduced.fit_reduced`).
     n_grid : int, optional
         Points of the tabulation over the model's fit range.
 
@@ -115,7 +115,7 @@ class AnalyticalModel:
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel: the splines of all curves but phi."""
-        from pipeline.kernel import spline_arrays
+        from debist.kernel import spline_arrays
 
         return spline_arrays(self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar)
 

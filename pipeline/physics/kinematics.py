@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.physics.params import PrototypeParams
+from debist.physics.params import PrototypeParams
 
 __all__ = [
     "RitzBasis",

@@ -11,7 +11,7 @@ Interpretation of the printed values (see ``docs/interpretation.md``):
   eta = 3.64 MPa s (the text of Section 3.3 quotes eta_MW = 0.19 kPa s and Y_MW = 0.11 MPa
   as the initial values of the optimisation; Table 1 holds the optimised ones).
 * **rho** = 1.2 g/cm^3 from Table 1 (the text quotes 1.27 g/cm^3 for raw PETG).
-* The geometry follows item 1 (corrected Eq. 5); see :mod:`pipeline.physics.kinematics`.
+* The geometry follows item 1 (corrected Eq. 5); see :mod:`debist.physics.kinematics`.
 
 References
 ----------
@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping
 import pydantic
 from pydantic import FiniteFloat, NonNegativeFloat, PositiveFloat
 
-from pipeline.config import CONFIG, config_from_section
+from debist.config import CONFIG, config_from_section
 
 __all__ = ["V_MAX", "PrototypeParams"]
 
@@ -217,7 +217,7 @@ class PrototypeParams:
         >>> PrototypeParams.from_dict({"b": -0.024})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [physics] b: expected a number > 0, got -0.024
+        debist.errors.WorkflowError: [physics] b: expected a number > 0, got -0.024
         """
         return config_from_section(cls, section, where)
 

@@ -16,10 +16,10 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from pipeline.physics.dynamics import ModeAnalysis
-from pipeline.physics.prestrain import PrestrainSweep, equilibrium_branches
-from pipeline.physics.reduced import Comparison, ReducedCurves
-from pipeline.physics.statics import ForceCurve
+from debist.physics.dynamics import ModeAnalysis
+from debist.physics.prestrain import PrestrainSweep, equilibrium_branches
+from debist.physics.reduced import Comparison, ReducedCurves
+from debist.physics.statics import ForceCurve
 
 __all__ = [
     "plot_capacitance",
@@ -57,7 +57,7 @@ def plot_prestrain_sweep(sweep: PrestrainSweep) -> Figure:
     Parameters
     ----------
     sweep : PrestrainSweep
-        Result of :func:`pipeline.physics.prestrain.prestrain_sweep`.
+        Result of :func:`debist.physics.prestrain.prestrain_sweep`.
 
     Returns
     -------
@@ -106,7 +106,7 @@ def plot_force_displacement(curves: Sequence[ForceCurve], *, f_lim: float = 0.15
     Parameters
     ----------
     curves : sequence of ForceCurve
-        One curve per voltage state (:func:`pipeline.physics.statics.force_displacement`).
+        One curve per voltage state (:func:`debist.physics.statics.force_displacement`).
     f_lim : float
         Half range of the force axis [N].
 
@@ -178,7 +178,7 @@ def plot_comparison(cmp: Comparison) -> Figure:
     Parameters
     ----------
     cmp : Comparison
-        Result of :func:`pipeline.physics.reduced.compare_full_reduced`.
+        Result of :func:`debist.physics.reduced.compare_full_reduced`.
 
     Returns
     -------
@@ -218,7 +218,7 @@ def plot_modes(modes: ModeAnalysis) -> Figure:
     Parameters
     ----------
     modes : ModeAnalysis
-        Result of :func:`pipeline.physics.dynamics.mode_analysis`.
+        Result of :func:`debist.physics.dynamics.mode_analysis`.
 
     Returns
     -------
@@ -252,7 +252,7 @@ def plot_reduced_curves(curves: ReducedCurves) -> Figure:
     Parameters
     ----------
     curves : ReducedCurves
-        Result of :func:`pipeline.physics.reduced.reduced_curves`.
+        Result of :func:`debist.physics.reduced.reduced_curves`.
 
     Returns
     -------

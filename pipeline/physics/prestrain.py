@@ -21,11 +21,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq, minimize_scalar
 
-from pipeline.errors import ConvergenceWarning
-from pipeline.physics.energy import potential
-from pipeline.physics.kinematics import ritz_basis
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.statics import (
+from debist.errors import ConvergenceWarning
+from debist.physics.energy import potential
+from debist.physics.kinematics import ritz_basis
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.statics import (
     Equilibrium,
     StaticsError,
     _bracket_starts,

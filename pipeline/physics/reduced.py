@@ -30,12 +30,12 @@ import numpy as np
 from numpy.polynomial import Chebyshev
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.physics.dynamics import FullModel, SimulationResult, simulate, well_state
-from pipeline.physics.energy import potential
-from pipeline.physics.kinematics import ritz_basis
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.segments import solve_segments
-from pipeline.physics.statics import force_displacement
+from debist.physics.dynamics import FullModel, SimulationResult, simulate, well_state
+from debist.physics.energy import potential
+from debist.physics.kinematics import ritz_basis
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.segments import solve_segments
+from debist.physics.statics import force_displacement
 
 __all__ = [
     "Comparison",

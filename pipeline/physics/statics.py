@@ -7,7 +7,7 @@ remaining three coordinates solve ``T^T dU/dq_m = 0`` and the reaction is ``F = 
 All equilibria at a given load are found as the roots of ``F_v(q) - F`` along that path, each
 refined by a Newton solve of the full Eq. 15 (other starting points may be added); equilibria
 with a slack DE (``lambda_1 < 1``) are discarded (docs/interpretation.md item 5). The
-pre-strain analysis of Fig. 3 is in :mod:`pipeline.physics.prestrain`.
+pre-strain analysis of Fig. 3 is in :mod:`debist.physics.prestrain`.
 
 References
 ----------
@@ -23,11 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.errors import ConvergenceWarning, DebistError
-from pipeline.physics._newton import newton
-from pipeline.physics.energy import capacitances, potential, scalar_gradient_hessian
-from pipeline.physics.kinematics import ritz_basis
-from pipeline.physics.params import V_MAX, PrototypeParams
+from debist.errors import ConvergenceWarning, DebistError
+from debist.physics._newton import newton
+from debist.physics.energy import capacitances, potential, scalar_gradient_hessian
+from debist.physics.kinematics import ritz_basis
+from debist.physics.params import V_MAX, PrototypeParams
 
 __all__ = [
     "Equilibrium",
@@ -43,7 +43,7 @@ FORCE_STATES = ((0.0, 0.0), (V_MAX, 0.0), (0.0, V_MAX), (V_MAX, V_MAX))
 
 
 #: Up to this many simultaneous Newton problems the generated scalar terms are faster than
-#: the vectorised :func:`~pipeline.physics.energy.potential` (the same equations).
+#: the vectorised :func:`~debist.physics.energy.potential` (the same equations).
 _SCALAR_BATCH = 4
 
 
@@ -449,7 +449,7 @@ def equilibria(
 
     Examples
     --------
-    >>> from pipeline.physics.params import PrototypeParams
+    >>> from debist.physics.params import PrototypeParams
     >>> eqs = equilibria(PrototypeParams.paper())
     >>> [(round(e.q * 1e3, 1) + 0.0, e.stable) for e in eqs]
     [(-10.2, True), (0.0, False), (10.2, True)]

@@ -1,17 +1,17 @@
 """The virtual rig's plant compiled with numba: HV drivers, tip friction and the full model.
 
-The same equations as :class:`pipeline.rig.plant.RigPlant` and
-:class:`pipeline.rig.drivers.DriverOutput` (their Python/NumPy methods are the reference; the
+The same equations as :class:`debist.rig.plant.RigPlant` and
+:class:`debist.rig.drivers.DriverOutput` (their Python/NumPy methods are the reference; the
 tests check that both agree) as nopython functions of plain arrays: the full model of
-:mod:`pipeline.physics.compiled` (packed by :func:`~pipeline.physics.compiled.pack_model`),
+:mod:`debist.physics.compiled` (packed by :func:`~debist.physics.compiled.pack_model`),
 the Maxwell-slip elements (:func:`pack_friction`) and the drivers' piecewise analytic output
-(:attr:`DriverOutput.table <pipeline.rig.drivers.DriverOutput.table>`). One call evaluates
+(:attr:`DriverOutput.table <debist.rig.drivers.DriverOutput.table>`). One call evaluates
 the whole right-hand side or Jacobian, drivers included, for :func:`scipy.integrate.odeint`
 (or ``solve_ivp``).
 
 The Python-facing kernels are cached on disk and close over :data:`STAMP`, the sha256 of
 the physics modules they call (numba's cache does not see changes in other files; see
-:mod:`pipeline.physics.compiled`).
+:mod:`debist.physics.compiled`).
 
 References
 ----------
@@ -29,12 +29,12 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.physics import _generated
-from pipeline.physics import compiled as physics_compiled
-from pipeline.physics.compiled import _L, _cho_solve, _jac_into, _rhs_into, source_stamp
+from debist.physics import _generated
+from debist.physics import compiled as physics_compiled
+from debist.physics.compiled import _L, _cho_solve, _jac_into, _rhs_into, source_stamp
 
 if TYPE_CHECKING:
-    from pipeline.rig.plant import RigPlant
+    from debist.rig.plant import RigPlant
 
 __all__ = [
     "NO_DRIVER",
@@ -82,7 +82,7 @@ def driver_value(t: float, d: NDArray[np.float64]) -> float:
     t : float
         Time [s].
     d : ndarray, shape (3 n + 6,)
-        :attr:`pipeline.rig.drivers.DriverOutput.table`.
+        :attr:`debist.rig.drivers.DriverOutput.table`.
 
     Returns
     -------
@@ -127,12 +127,12 @@ def _stamped(stamp: str):
         x : ndarray of float64, shape (10 + n_friction,), contiguous
             State ``[q_m, q_m_dot, q_eps, z]``.
         fp : ndarray, shape (N_MODEL,)
-            The full model (:func:`pipeline.physics.compiled.pack_model`).
+            The full model (:func:`debist.physics.compiled.pack_model`).
         fr : ndarray, shape (2 + 2 n_friction,)
             The friction (:func:`pack_friction`).
         d1, d2 : ndarray
             Tables of the HV drivers of DE 1 and DE 2 (:attr:`DriverOutput.table
-            <pipeline.rig.drivers.DriverOutput.table>`), or empty: then ``w`` holds the
+            <debist.rig.drivers.DriverOutput.table>`), or empty: then ``w`` holds the
             squared voltages.
         w : ndarray, shape (2,)
             ``v_1^2``, ``v_2^2`` [V^2] where ``d1``, ``d2`` are empty.

@@ -2,9 +2,9 @@
 
 Each DE is fed by a high-voltage converter whose output follows the reference of the rig's DAC
 (zero-order hold) with a first-order lag and a slew-rate limit, within ``[0, 3000]`` V. The
-drivers do not depend on the mechanics, so :mod:`pipeline.rig.plant` computes their outputs
+drivers do not depend on the mechanics, so :mod:`debist.rig.plant` computes their outputs
 first (:class:`DriverOutput`) and feeds them to the plant as functions of time, or as arrays
-(:attr:`DriverOutput.table`) to the compiled plant (:func:`pipeline.rig.compiled.driver_value`).
+(:attr:`DriverOutput.table`) to the compiled plant (:func:`debist.rig.compiled.driver_value`).
 
 References
 ----------
@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 
-from pipeline.physics.params import V_MAX
+from debist.physics.params import V_MAX
 
 __all__ = ["DriverOutput", "uniform_grid"]
 
@@ -168,7 +168,7 @@ class DriverOutput:
         -------
         ndarray, shape (3 n + 6,)
             ``[t_0, hold, tau, slew, n, r (n), knots (n + 1), ramp (n)]`` ([s], [s], [s],
-            [V/s], [-], [V], [V], [s]); :func:`pipeline.rig.compiled.driver_value` evaluates
+            [V/s], [-], [V], [V], [s]); :func:`debist.rig.compiled.driver_value` evaluates
             it as :meth:`__call__` does.
         """
         head = [self.t0, self.hold, self.tau, self.slew, float(self._r.size)]

@@ -1,7 +1,7 @@
 """Writer of dSPACE ControlDesk recordings as MAT files (v5 and v7.3), atomically.
 
 The virtual rig saves its logs the way a lab exports a ControlDesk recording, so that the
-ingest stage (:mod:`pipeline.ingest.mat`) reads them like a measured file. A recording is
+ingest stage (:mod:`debist.ingest.mat`) reads them like a measured file. A recording is
 one struct variable (``Recording1`` by default) with the fields
 
 ``Description``
@@ -494,7 +494,7 @@ def write_recording(
     recording : mapping
         The value of :func:`recording` (``X`` and ``Y`` required, ``Description`` optional).
     version : {"5", "7.3"}
-        MAT file version; :func:`pipeline.ingest.load_rig_log` reads both alike.
+        MAT file version; :func:`debist.ingest.load_rig_log` reads both alike.
     variable : str
         Name of the struct variable, ControlDesk's default ``"Recording1"``.
     created : str

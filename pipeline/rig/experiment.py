@@ -18,11 +18,11 @@ Examples
     [rig.prototype]                       # deviations of the built prototype from [physics]
     dz_1 = 0.15e-3                        # [m]
 
-    [rig.plant]                           # pipeline.rig.params.RigParams keys
+    [rig.plant]                           # debist.rig.params.RigParams keys
     sensor_noise = 1e-6                   # [m]
 
     [rig.experiments.identification]
-    profile = "identification"            # pipeline.rig.profiles.PROFILES
+    profile = "identification"            # debist.rig.profiles.PROFILES
     seed = 1                              # sensor noise
     format = "7.3"                        # MAT version: "5" or "7.3"
 
@@ -48,15 +48,15 @@ from pydantic import (
     PositiveFloat,
 )
 
-from pipeline import progress
-from pipeline.config import CONFIG, ConfigValueError, config_from_section
-from pipeline.errors import WorkflowError
-from pipeline.forking import fork_context, fork_workers
-from pipeline.physics.params import PrototypeParams
-from pipeline.rig.dspace import Channel, recording
-from pipeline.rig.params import RigParams
-from pipeline.rig.profiles import PROFILES, make_profile
-from pipeline.rig.run import RigRun, simulate_rig
+from debist import progress
+from debist.config import CONFIG, ConfigValueError, config_from_section
+from debist.errors import WorkflowError
+from debist.forking import fork_context, fork_workers
+from debist.physics.params import PrototypeParams
+from debist.rig.dspace import Channel, recording
+from debist.rig.params import RigParams
+from debist.rig.profiles import PROFILES, make_profile
+from debist.rig.run import RigRun, simulate_rig
 
 __all__ = [
     "CHANNELS",
@@ -101,7 +101,7 @@ class ExperimentConfig:
     Parameters
     ----------
     profile : str
-        Excitation profile, a key of :data:`pipeline.rig.profiles.PROFILES`.
+        Excitation profile, a key of :data:`debist.rig.profiles.PROFILES`.
     seed : int
         Seed of the sensor and monitor noise, ``>= 0``.
     profile_seed : int or None
@@ -138,7 +138,7 @@ class ExperimentConfig:
             raise ConfigValueError("profile", "one of " + ", ".join(PROFILES), self.profile)
 
     def profile_kwargs(self) -> dict[str, Any]:
-        """Return the keyword arguments of :func:`pipeline.rig.profiles.make_profile`.
+        """Return the keyword arguments of :func:`debist.rig.profiles.make_profile`.
 
         Returns
         -------
@@ -212,7 +212,7 @@ class RigConfig:
         >>> RigConfig.from_dict({"experiments": {"a": {"seed": "1"}}}, {})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
+        debist.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
         """
         head = config_from_section(_RigSection, section, "[rig]")
         PrototypeParams.from_dict(physics)
@@ -253,7 +253,7 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
     WorkflowError
         For an unknown profile or invalid profile settings.
     ValueError
-        From :func:`pipeline.rig.run.simulate_rig` (e.g. no well on the start side).
+        From :func:`debist.rig.run.simulate_rig` (e.g. no well on the start side).
     """
     exp = cfg.experiments[name]
     kwargs: dict[str, Any] = {"duration": exp.duration, "hold": exp.hold}
@@ -286,7 +286,7 @@ def run_experiments(
     The experiments are independent (each starts at rest with its own seeds), so they run
     in forked worker processes (:class:`concurrent.futures.ProcessPoolExecutor`), one per
     core; each result is the same as a serial run's (the same deterministic computation in
-    another process). Serially where :func:`pipeline.forking.fork_workers` says forking is
+    another process). Serially where :func:`debist.forking.fork_workers` says forking is
     unsafe (inside a daemonic worker: ``debist batch`` already runs one prototype per worker;
     outside the main thread; on platforms without ``fork``).
 
@@ -352,7 +352,7 @@ def rig_recording(run: RigRun, name: str, cfg: RigConfig) -> dict[str, Any]:
     Returns
     -------
     dict
-        For :func:`pipeline.rig.dspace.write_recording`.
+        For :func:`debist.rig.dspace.write_recording`.
     """
     exp = cfg.experiments[name]
     channels = [
@@ -376,7 +376,7 @@ def truth_tree(run: RigRun, cfg: RigConfig, curves: dict[str, np.ndarray]) -> di
     cfg : RigConfig
         The rig.
     curves : dict of str to ndarray
-        The prototype's true curves, :func:`pipeline.rig.run.true_curves` (the same for
+        The prototype's true curves, :func:`debist.rig.run.true_curves` (the same for
         every experiment of the rig, so computed once by the caller).
 
     Returns

@@ -4,7 +4,7 @@ A lab builds several copies of the actuator; they differ in pre-strain, assembly
 :func:`make_fleet` draws such copies around a nominal rig, keeping only those that still work
 as the paper's actuator (bistable at 0 V, switched by one DE at 3 kV), checked directly on the
 equilibria of each draw (:func:`is_bistable_and_switchable`). The bifurcation searches of
-:mod:`pipeline.physics.prestrain` (``pitchfork_zb``, ``switching_limit_zb``) assume the mirror
+:mod:`debist.physics.prestrain` (``pitchfork_zb``, ``switching_limit_zb``) assume the mirror
 symmetry of the paper's prototype, which the anchor offsets break, so they are not used here.
 
 References
@@ -20,10 +20,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from pipeline.errors import DebistError, WorkflowError
-from pipeline.physics.params import V_MAX, PrototypeParams
-from pipeline.physics.statics import equilibria
-from pipeline.rig.params import RigParams
+from debist.errors import DebistError, WorkflowError
+from debist.physics.params import V_MAX, PrototypeParams
+from debist.physics.statics import equilibria
+from debist.rig.params import RigParams
 
 __all__ = ["DEFAULT_SCATTER", "FleetError", "is_bistable_and_switchable", "make_fleet"]
 
@@ -53,7 +53,7 @@ def is_bistable_and_switchable(
 ) -> bool:
     """Whether a rig's prototype works as the paper's actuator, with margins.
 
-    Four equilibrium problems (Eq. 15, :func:`pipeline.physics.statics.equilibria`):
+    Four equilibrium problems (Eq. 15, :func:`debist.physics.statics.equilibria`):
 
     1. at v = 0 with a tip force ``+force_margin`` pushing right, a stable equilibrium with
        ``q < 0`` exists (the left well holds against friction), and

@@ -2,7 +2,7 @@
 
 A lab's batch run is N prototypes through the same pipeline. :func:`fleet_workflows` takes a
 workflow with a ``[rig]`` section as the template, draws N prototypes around its rig with
-:func:`pipeline.rig.fleet.make_fleet` and returns one workflow per prototype: the template
+:func:`debist.rig.fleet.make_fleet` and returns one workflow per prototype: the template
 with the member's prototype in ``[rig.prototype]``, its friction in ``[rig.plant]``, its own
 name and output folder. ``[physics]`` stays the nominal design, so each member's analytical
 row shows what the nominal model misses on that copy. ``debist batch`` then runs them on Dask.
@@ -22,11 +22,11 @@ from typing import Any
 
 import tomli_w
 
-from pipeline.errors import WorkflowError
-from pipeline.names import check_file_name
-from pipeline.physics.params import PrototypeParams
-from pipeline.rig.fleet import make_fleet
-from pipeline.rig.params import RigParams
+from debist.errors import WorkflowError
+from debist.names import check_file_name
+from debist.physics.params import PrototypeParams
+from debist.rig.fleet import make_fleet
+from debist.rig.params import RigParams
 
 __all__ = ["fleet_workflows"]
 
@@ -56,7 +56,7 @@ def fleet_workflows(
     seed : int
         Seed of the scatter (same seed, same fleet).
     scatter : mapping, optional
-        Spreads by name (:data:`pipeline.rig.fleet.DEFAULT_SCATTER`).
+        Spreads by name (:data:`debist.rig.fleet.DEFAULT_SCATTER`).
 
     Returns
     -------
@@ -68,7 +68,7 @@ def fleet_workflows(
     WorkflowError
         If the template has no ``[rig]`` section or an invalid one, ``n``/``scatter``
         are invalid, or its name is not a plain file name
-        (:func:`pipeline.names.check_file_name`).
+        (:func:`debist.names.check_file_name`).
     FleetError
         If the scatter leaves too few working prototypes.
 

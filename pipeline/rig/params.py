@@ -15,8 +15,8 @@ from typing import Annotated, Literal
 import pydantic
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
 
-from pipeline.config import CONFIG, AsTuple, ConfigValueError, config_from_section
-from pipeline.physics.params import PrototypeParams
+from debist.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.physics.params import PrototypeParams
 
 __all__ = ["RigParams"]
 
@@ -39,9 +39,9 @@ class RigParams:
         +10.99 mm, still switchable by 3 kV on either DE).
     model : {"full", "reduced"}
         The mechanics of the plant: ``"full"`` (default) the full model of Sec. 3
-        (:class:`pipeline.rig.plant.RigPlant`, Eq. 19-23), whose DE force is not of the
+        (:class:`debist.rig.plant.RigPlant`, Eq. 19-23), whose DE force is not of the
         separable form ``g_i(q) v_i^2`` of Eq. 37; ``"reduced"`` the reduced one-coordinate
-        model of Eq. 24-26 of the same prototype (:class:`pipeline.rig.reduced.ReducedPlant`),
+        model of Eq. 24-26 of the same prototype (:class:`debist.rig.reduced.ReducedPlant`),
         whose true curves ``f(q)``, ``d(q)``, ``g_i(q)`` are exactly those of Eq. 37. Both
         have the same friction, drivers and sensors.
     friction_k : tuple of float
@@ -162,7 +162,7 @@ class RigParams:
         >>> RigParams.from_dict({"oversample": 2.5})
         Traceback (most recent call last):
         ...
-        pipeline.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
+        debist.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
         """
         if isinstance(section, Mapping) and isinstance(section.get("prototype"), Mapping):
             proto = PrototypeParams.from_dict(section["prototype"], f"{where[:-1]}.prototype]")

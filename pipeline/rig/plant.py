@@ -1,35 +1,35 @@
 """The virtual rig's plant: the full model of Section 3 plus what the analytical model misses.
 
 The "real" prototype that the virtual rig measures is the full dynamic model of
-:mod:`pipeline.physics.dynamics` (Eq. 19-23) with
+:mod:`debist.physics.dynamics` (Eq. 19-23) with
 
 * **geometric asymmetry**: the anchor offsets ``dz_1``, ``dz_2`` of
-  :class:`~pipeline.physics.params.PrototypeParams` (a bearing offset, an anchor off its
+  :class:`~debist.physics.params.PrototypeParams` (a bearing offset, an anchor off its
   nominal position); the default rig has ``dz_1 = 0.15 mm``, ``dz_2 = 0.05 mm``, wells at
   -9.50 and +10.99 mm instead of +-10.21 mm;
 * **friction at the beam tip**: a generalised Maxwell-slip (GMS) model with a few elements
   (Al-Bender, Lampaert & Swevers 2005), hysteretic pre-sliding and a breakaway force;
 * **high-voltage drivers**: the voltage applied to a DE follows the DAC reference with a
-  first-order lag and a slew-rate limit (:class:`pipeline.rig.drivers.DriverOutput`);
+  first-order lag and a slew-rate limit (:class:`debist.rig.drivers.DriverOutput`);
 * **sensors**: a laser triangulation sensor with white noise, quantisation and a finite
   range, sampled ``oversample`` times faster than the log and decimated by a zero-phase FIR
   (the rig's anti-aliasing); noisy voltage monitors.
 
 The plant state is ``x = [q_m (4), q_m_dot (4), q_eps (2), z (n_friction)]``: the state of
-:class:`~pipeline.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
-elements. :func:`pipeline.rig.run.simulate_rig` integrates it with
+:class:`~debist.physics.dynamics.FullModel` and the deflections ``z_i`` [m] of the friction
+elements. :func:`debist.rig.run.simulate_rig` integrates it with
 :func:`scipy.integrate.odeint` (ODEPACK's LSODA with the analytic Jacobian; or
 :func:`scipy.integrate.solve_ivp`'s Radau) behind the drivers and sensors;
-:func:`pipeline.rig.run.true_curves` gives the characteristic curves an identification should
+:func:`debist.rig.run.true_curves` gives the characteristic curves an identification should
 recover. The right-hand side and Jacobian run compiled
-(:mod:`pipeline.rig.compiled`, numba, drivers included); the NumPy implementation of
+(:mod:`debist.rig.compiled`, numba, drivers included); the NumPy implementation of
 :class:`RigPlant` is the reference they are tested against (``compiled=False``).
 
 ``[rig.plant] model = "reduced"`` swaps the full model for the reduced one-coordinate model of
-Eq. 24-26 of the same prototype (:class:`pipeline.rig.reduced.ReducedPlant`, state ``[q,
+Eq. 24-26 of the same prototype (:class:`debist.rig.reduced.ReducedPlant`, state ``[q,
 q_dot, q_eps (2), z]``), whose DE force is exactly ``g_i(q) v_i^2`` (Eq. 37): the same
 friction, drivers, sensors and recorder, so an identification can be checked against exact
-curves. :func:`pipeline.rig.run.make_plant` selects the plant.
+curves. :func:`debist.rig.run.make_plant` selects the plant.
 
 References
 ----------
@@ -43,10 +43,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.physics.dynamics import FullModel, well_state
-from pipeline.physics.kinematics import pitch_angle, ritz_basis
-from pipeline.rig.drivers import DriverOutput
-from pipeline.rig.params import RigParams
+from debist.physics.dynamics import FullModel, well_state
+from debist.physics.kinematics import pitch_angle, ritz_basis
+from debist.rig.drivers import DriverOutput
+from debist.rig.params import RigParams
 
 __all__ = ["RigPlant"]
 
@@ -58,7 +58,7 @@ class RigPlant:
 
         F_fr = -sum_i k_i z_i - c q_dot,
 
-    enters :class:`~pipeline.physics.dynamics.FullModel` as the external horizontal tip force
+    enters :class:`~debist.physics.dynamics.FullModel` as the external horizontal tip force
     (mapped onto the Ritz coordinates by ``dq/dq_m = L``, Eq. 15, 22). Each Maxwell-slip
     element (a spring ``k_i`` in series with a block of slip force ``F_i``) evolves as the
     regularised elasto-plastic element
@@ -75,10 +75,10 @@ class RigPlant:
     rig : RigParams
         Rig parameters.
     v1, v2 : callable
-        Applied voltages ``v_i(t)`` [V] (e.g. :class:`~pipeline.rig.drivers.DriverOutput`).
+        Applied voltages ``v_i(t)`` [V] (e.g. :class:`~debist.rig.drivers.DriverOutput`).
     compiled : bool
         Evaluate :meth:`rhs` and :meth:`jac` with the compiled kernels of
-        :mod:`pipeline.rig.compiled` (default; two :class:`~pipeline.rig.drivers.DriverOutput`
+        :mod:`debist.rig.compiled` (default; two :class:`~debist.rig.drivers.DriverOutput`
         are then evaluated inside the kernel, other callables in Python) or with NumPy
         (``False``, the reference).
 
@@ -103,8 +103,8 @@ class RigPlant:
     def _compiled(self):
         """``(rhs, jac)`` of the compiled path, built on first use (numba imported then)."""
         if self._kernels is None:
-            from pipeline.physics.compiled import pack_model
-            from pipeline.rig import compiled as kern
+            from debist.physics.compiled import pack_model
+            from debist.rig import compiled as kern
 
             fp, fr = pack_model(self.model), kern.pack_friction(self)
             v1, v2 = self.model.v1, self.model.v2
@@ -149,7 +149,7 @@ class RigPlant:
         Parameters
         ----------
         side : {-1, +1}
-            Which well (:func:`~pipeline.physics.dynamics.well_state`).
+            Which well (:func:`~debist.physics.dynamics.well_state`).
 
         Returns
         -------
@@ -164,7 +164,7 @@ class RigPlant:
         return np.concatenate([well_state(self.rig.prototype, side), np.zeros(self.n_friction)])
 
     def atol_vector(self, atol: float, positions: float | None = None) -> NDArray[np.float64]:
-        """Absolute tolerances of the states for the integrator (see :mod:`pipeline.rig.run`).
+        """Absolute tolerances of the states for the integrator (see :mod:`debist.rig.run`).
 
         Parameters
         ----------

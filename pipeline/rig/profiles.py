@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.errors import WorkflowError
+from debist.errors import WorkflowError
 
 __all__ = [
     "PROFILES",
@@ -725,7 +725,7 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
     >>> make_profile("sweep")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    pipeline.errors.WorkflowError: unknown excitation profile 'sweep'; known profiles: ...
+    debist.errors.WorkflowError: unknown excitation profile 'sweep'; known profiles: ...
     """
     if name not in PROFILES:
         raise WorkflowError(

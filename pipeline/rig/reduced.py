@@ -1,9 +1,9 @@
 """The virtual rig's reduced plant: the one-coordinate model of Eq. 24-26 with the rig around it.
 
-``[rig.plant] model = "reduced"`` replaces the full model of :class:`pipeline.rig.plant.RigPlant`
+``[rig.plant] model = "reduced"`` replaces the full model of :class:`debist.rig.plant.RigPlant`
 by the paper's reduced model of the same prototype (the ``[rig.prototype]`` with its anchor
-offsets), built by :func:`pipeline.physics.reduced.fit_reduced` and tabulated as cubic splines
-like :class:`pipeline.physics.freerun.AnalyticalModel`:
+offsets), built by :func:`debist.physics.reduced.fit_reduced` and tabulated as cubic splines
+like :class:`debist.physics.freerun.AnalyticalModel`:
 
     m_q(q) q_ddot + 1/2 m_q'(q) q_dot^2 + d(q) q_dot + f(q) + sum_i k_bar k_i(q) q_eps,i
         = g_1(q) v_1^2 + g_2(q) v_2^2 + F_fr,
@@ -11,7 +11,7 @@ like :class:`pipeline.physics.freerun.AnalyticalModel`:
 
 with the same tip friction ``F_fr`` as the full plant (the Maxwell-slip elements act on the
 tip displacement ``q``, which is the reduced coordinate), the same HV drivers and the same
-sensors (:func:`pipeline.rig.run.simulate_rig` runs both plants). Its DE force is exactly
+sensors (:func:`debist.rig.run.simulate_rig` runs both plants). Its DE force is exactly
 ``g_i(q) v_i^2`` with ``g_i = 1/2 dC_i/dq``, so the curves an identification of Eq. 37 should
 recover are known exactly (:func:`reduced_true_curves`). What Eq. 37 does not represent is the
 position-dependent mass (``m_q`` varies by about 13 % over +-25 mm; the term
@@ -33,16 +33,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline, PPoly
 
-from pipeline.physics.params import PrototypeParams
-from pipeline.physics.reduced import fit_reduced
-from pipeline.rig.params import RigParams
+from debist.physics.params import PrototypeParams
+from debist.physics.reduced import fit_reduced
+from debist.rig.params import RigParams
 
 __all__ = ["CURVES", "ReducedPlant", "reduced_tables", "reduced_true_curves", "truth_attrs"]
 
 #: The tabulated curves, in the order of the spline's last axis.
 CURVES = ("m_q", "dm_q", "d", "f", "g1", "g2", "k1", "k2", "phi")
 #: Half width of the tabulated range of ``q`` [m] and its points (0.025 mm spacing), as the
-#: analytical model of :func:`pipeline.physics.freerun.analytical_model`.
+#: analytical model of :func:`debist.physics.freerun.analytical_model`.
 Q_MAX = 25e-3
 N_GRID = 2001
 
@@ -86,7 +86,7 @@ def reduced_tables(
 class ReducedPlant:
     """Right-hand side and Jacobian of the reduced plant: Eq. 26 plus tip friction.
 
-    The friction is that of :class:`pipeline.rig.plant.RigPlant`: ``F_fr = -sum_i k_i z_i -
+    The friction is that of :class:`debist.rig.plant.RigPlant`: ``F_fr = -sum_i k_i z_i -
     c q_dot`` acts on the tip, i.e. directly on ``q``, and each element evolves as
     ``dz_i/dt = q_dot (1 - s_i |k_i z_i / F_i|^p)``, ``s_i = 1`` if ``q_dot z_i > 0``.
     The curves are evaluated from the piecewise cubics of :func:`reduced_tables` (the
@@ -98,7 +98,7 @@ class ReducedPlant:
     rig : RigParams
         Rig parameters (``prototype`` and the friction).
     v1, v2 : callable
-        Applied voltages ``v_i(t)`` [V] (e.g. :class:`~pipeline.rig.drivers.DriverOutput`).
+        Applied voltages ``v_i(t)`` [V] (e.g. :class:`~debist.rig.drivers.DriverOutput`).
 
     Attributes
     ----------
@@ -299,7 +299,7 @@ class ReducedPlant:
         return x0
 
     def atol_vector(self, atol: float, positions: float | None = None) -> NDArray[np.float64]:
-        """Absolute tolerances of the states for the integrator (see :mod:`pipeline.rig.run`).
+        """Absolute tolerances of the states for the integrator (see :mod:`debist.rig.run`).
 
         Parameters
         ----------
@@ -431,7 +431,7 @@ def truth_attrs(rig: RigParams, curves: dict[str, NDArray[np.float64]]) -> dict[
     rig : RigParams
         Rig parameters.
     curves : dict of str to ndarray
-        The true curves (:func:`pipeline.rig.run.true_curves`), with ``"q"`` and ``"m_q"``.
+        The true curves (:func:`debist.rig.run.true_curves`), with ``"q"`` and ``"m_q"``.
 
     Returns
     -------

@@ -1,9 +1,9 @@
 """One experiment on the virtual rig: drivers, plant, sensors and recorder, and its truth.
 
 :func:`simulate_rig` drives the plant :func:`make_plant` selects (the full model of
-:class:`pipeline.rig.plant.RigPlant` or the reduced one of
-:class:`pipeline.rig.reduced.ReducedPlant`) through the HV drivers
-(:class:`pipeline.rig.drivers.DriverOutput`), integrates it with
+:class:`debist.rig.plant.RigPlant` or the reduced one of
+:class:`debist.rig.reduced.ReducedPlant`) through the HV drivers
+(:class:`debist.rig.drivers.DriverOutput`), integrates it with
 :func:`scipy.integrate.odeint` (ODEPACK's LSODA; or :func:`scipy.integrate.solve_ivp`'s
 Radau or BDF) and records what the rig's sensors see: the laser with
 white noise, quantisation and a finite range, sampled ``oversample`` times faster than the log
@@ -14,7 +14,7 @@ curves an identification should recover.
 References
 ----------
 Masoud & Maas 2025, Eq. 19-26, 33, 37, Sec. 5.1 (3 kV converters, laser sensor, 10 ms log).
-Hindmarsh 1983 (ODEPACK); Petzold 1983 (LSODA); see :mod:`pipeline.physics.segments`.
+Hindmarsh 1983 (ODEPACK); Petzold 1983 (LSODA); see :mod:`debist.physics.segments`.
 """
 
 from __future__ import annotations
@@ -28,14 +28,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import decimate
 
-from pipeline.errors import DebistWarning
-from pipeline.physics.params import V_MAX
-from pipeline.physics.reduced import reduced_curves
-from pipeline.physics.segments import ODEINT, solve_segments
-from pipeline.physics.statics import force_displacement
-from pipeline.rig.drivers import DriverOutput, uniform_grid
-from pipeline.rig.params import RigParams
-from pipeline.rig.plant import RigPlant
+from debist.errors import DebistWarning
+from debist.physics.params import V_MAX
+from debist.physics.reduced import reduced_curves
+from debist.physics.segments import ODEINT, solve_segments
+from debist.physics.statics import force_displacement
+from debist.rig.drivers import DriverOutput, uniform_grid
+from debist.rig.params import RigParams
+from debist.rig.plant import RigPlant
 
 __all__ = ["METHODS", "TOLERANCES", "RigRun", "make_plant", "simulate_rig", "true_curves"]
 
@@ -66,7 +66,7 @@ def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
 
     Returns
     -------
-    RigPlant or pipeline.rig.reduced.ReducedPlant
+    RigPlant or debist.rig.reduced.ReducedPlant
         ``"full"``: the full model of Sec. 3 (Eq. 19-23); ``"reduced"``: the reduced model
         of Eq. 24-26. Both offer ``functions``, ``rest_state``, ``atol_vector``, ``tip``,
         ``tip_velocity``, ``pitch`` and ``friction_force``.
@@ -76,7 +76,7 @@ def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
     Masoud & Maas 2025, Eq. 19-26.
     """
     if rig.model == "reduced":
-        from pipeline.rig.reduced import ReducedPlant
+        from debist.rig.reduced import ReducedPlant
 
         return ReducedPlant(rig, v1, v2)
     return RigPlant(rig, v1, v2, compiled=compiled)
@@ -176,15 +176,15 @@ def simulate_rig(
     """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
 
     1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
-       voltages (:class:`~pipeline.rig.drivers.DriverOutput`; they do not depend on the mechanics).
+       voltages (:class:`~debist.rig.drivers.DriverOutput`; they do not depend on the mechanics).
     2. The plant (:func:`make_plant`: :class:`RigPlant`, or the reduced plant of
-       :mod:`pipeline.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
-       ``side`` (equilibrium at v = 0, :func:`~pipeline.physics.dynamics.well_state`, or the
+       :mod:`debist.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
+       ``side`` (equilibrium at v = 0, :func:`~debist.physics.dynamics.well_state`, or the
        stable zero of the reduced ``f(q)``; relaxed creep, unloaded friction) and is
        integrated with the plant's (approximate) Jacobian by LSODA
        (:func:`scipy.integrate.odeint`, its step loop compiled in Fortran) or by
        :func:`scipy.integrate.solve_ivp` (Radau, BDF), split at the reference steps larger
-       than ``step_threshold`` (:func:`~pipeline.physics.segments.solve_segments`), with
+       than ``step_threshold`` (:func:`~debist.physics.segments.solve_segments`), with
        output on the internal grid ``sample_time / oversample``.
     3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
        ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
@@ -263,7 +263,7 @@ def simulate_rig(
     ValueError
         If ``t_ref`` is not uniform, the shapes differ, ``sample_time`` is not positive or
         longer than the record, ``side`` is not -1 or +1 or ``method`` unknown; from
-        :func:`~pipeline.physics.dynamics.well_state` if that well does not exist.
+        :func:`~debist.physics.dynamics.well_state` if that well does not exist.
 
     Warns
     -----
@@ -375,7 +375,7 @@ def simulate_rig(
 def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float64]]:
     """Return the prototype's true characteristic curves in the identified model's convention.
 
-    From the reduced model of the rig's prototype (:func:`pipeline.physics.reduced.
+    From the reduced model of the rig's prototype (:func:`debist.physics.reduced.
     reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
     ``dz_1``, ``dz_2`` is included), and the actuation force at the switching voltage from
     the full model's static force-displacement curves (Fig. 4). Friction, the drivers and
@@ -411,7 +411,7 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     Notes
     -----
     For ``rig.model = "reduced"`` the curves are the reduced plant's own, exact in the form
-    of Eq. 37 (:func:`pipeline.rig.reduced.reduced_true_curves`: the same keys, ``g1_vmax =
+    of Eq. 37 (:func:`debist.rig.reduced.reduced_true_curves`: the same keys, ``g1_vmax =
     g1``, ``g2_vmax = g2``, plus ``dm_q``, ``k1``, ``k2``).
 
     References
@@ -419,7 +419,7 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
     """
     if rig.model == "reduced":
-        from pipeline.rig.reduced import reduced_true_curves
+        from debist.rig.reduced import reduced_true_curves
 
         return reduced_true_curves(rig, q_grid)
     c = reduced_curves(rig.prototype, q_grid)

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.stages import StageInputs, StageOutput
+from debist.stages import StageInputs, StageOutput
 
 __all__ = ["AnalyzeResult", "execute", "run_analyze"]
 
@@ -18,7 +18,7 @@ class AnalyzeResult:
     Attributes
     ----------
     tree : dict
-        Contents of ``statics.h5`` (:func:`pipeline.physics.analysis.analysis_tree`).
+        Contents of ``statics.h5`` (:func:`debist.physics.analysis.analysis_tree`).
     figures : dict of str to matplotlib.figure.Figure
         Fig. 3, 4, 5, 6a, 7 and the reduced model's curves.
     summary : dict
@@ -35,10 +35,10 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
 
     Parameters
     ----------
-    params : pipeline.physics.params.PrototypeParams
+    params : debist.physics.params.PrototypeParams
         The prototype [SI].
     section : mapping
-        The ``[analyze]`` section (:class:`pipeline.physics.analysis.AnalyzeConfig`).
+        The ``[analyze]`` section (:class:`debist.physics.analysis.AnalyzeConfig`).
 
     Returns
     -------
@@ -55,8 +55,8 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
     ----------
     Masoud & Maas 2025, Section 3, Fig. 3-7.
     """
-    from pipeline.config import config_from_section
-    from pipeline.physics.analysis import (
+    from debist.config import config_from_section
+    from debist.physics.analysis import (
         AnalyzeConfig,
         analysis_figures,
         analysis_tree,
@@ -106,9 +106,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, StaticsError
         As :func:`run_analyze`.
     """
-    from pipeline.artifacts import Figure, H5Tree
-    from pipeline.fileformats import REPORT_DPI
-    from pipeline.physics.params import PrototypeParams
+    from debist.artifacts import Figure, H5Tree
+    from debist.fileformats import REPORT_DPI
+    from debist.physics.params import PrototypeParams
 
     params = ctx.physics() or PrototypeParams.from_dict({})
     res = run_analyze(params, ctx.section("analyze"))

@@ -1,7 +1,7 @@
 """The compare stage: SINDy and a polynomial NARX model beside the identified model.
 
 SINDy is fitted on the same data and derivatives and run free with the same simulator; the
-NARX model (:mod:`pipeline.narx`), a discrete-time black box, is chosen and fitted on the
+NARX model (:mod:`debist.narx`), a discrete-time black box, is chosen and fitted on the
 estimation records and run free on every data set from its first measured samples. Both
 join the NRMSE table of Eq. 41, so every row's verdict says whether the physics-informed
 model beats them.
@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline import progress
-from pipeline.datasets import validation_datasets
-from pipeline.physics_stages import analytical_for
-from pipeline.records import estimation_records
-from pipeline.stages import StageInputs, StageOutput
-from pipeline.validate import ValidateConfig, default_q_limit, validate_model
+from debist import progress
+from debist.datasets import validation_datasets
+from debist.physics_stages import analytical_for
+from debist.records import estimation_records
+from debist.stages import StageInputs, StageOutput
+from debist.validate import ValidateConfig, default_q_limit, validate_model
 
 __all__ = ["CompareResult", "execute", "run_compare"]
 
@@ -89,8 +89,8 @@ def run_compare(
     ----------
     Brunton, Proctor & Kutz 2016 (SINDy); Masoud & Maas 2025, Eq. 41.
     """
-    from pipeline.narx import NarxConfig
-    from pipeline.sindy import SindyConfig, fit_sindy
+    from debist.narx import NarxConfig
+    from debist.sindy import SindyConfig, fit_sindy
 
     sindy_section = dict(section["sindy"])
     ncfg = NarxConfig.from_dict(sindy_section.pop("narx", None))
@@ -139,10 +139,10 @@ def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated
     Without SysIdentPy, or when no candidate structure survives, the rows say so (status)
     with NaN numbers: the peer is never silently missing.
     """
-    from pipeline.errors import DebistWarning, IdentificationError
-    from pipeline.narx import NARX_MISSING, fit_narx, narx_available
-    from pipeline.simulate import SimulationResult
-    from pipeline.validate import score_free_runs
+    from debist.errors import DebistWarning, IdentificationError
+    from debist.narx import NARX_MISSING, fit_narx, narx_available
+    from debist.simulate import SimulationResult
+    from debist.validate import score_free_runs
 
     status, narx = None, None
     if not narx_available():
@@ -214,7 +214,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, IdentificationError
         As :func:`run_compare`.
     """
-    from pipeline.artifacts import H5Tree
+    from debist.artifacts import H5Tree
 
     res = run_compare(
         ctx.tables("ingest"),

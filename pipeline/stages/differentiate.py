@@ -8,10 +8,10 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline import progress
-from pipeline.errors import ConvergenceWarning
-from pipeline.stages import StageInputs, StageOutput
-from pipeline.stages.tables import sample_time
+from debist import progress
+from debist.errors import ConvergenceWarning
+from debist.stages import StageInputs, StageOutput
+from debist.stages.tables import sample_time
 
 __all__ = ["execute", "run_differentiate"]
 
@@ -40,7 +40,7 @@ def run_differentiate(
     RigLogError
         For non-uniform sampling.
     """
-    from pipeline.differentiate import differentiate
+    from debist.differentiate import differentiate
 
     params = dict(section)
     method = params.pop("method", "tvregdiff")

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.identify import FitDiagnostics, IdentifyConfig, RBFModel, fit_rbf_model
-from pipeline.physics_stages import physics_mass, physics_prior
-from pipeline.records import estimation_records
-from pipeline.stages import StageInputs, StageOutput
+from debist.identify import FitDiagnostics, IdentifyConfig, RBFModel, fit_rbf_model
+from debist.physics_stages import physics_mass, physics_prior
+from debist.records import estimation_records
+from debist.stages import StageInputs, StageOutput
 
 __all__ = ["IdentifyResult", "analytical_curves", "diagnostics_tree", "execute", "run_identify"]
 
@@ -31,7 +31,7 @@ class IdentifyResult:
         Rank, condition number, residuals, T_z trace.
     curves : pandas.DataFrame
         Characteristic curves on a grid with 95 % bands and identified masks
-        (:func:`pipeline.identify.bands.curves_frame`).
+        (:func:`debist.identify.bands.curves_frame`).
     summary : dict
         Scalars for reports (reproducible: no wall times).
     equation_error_model : RBFModel or None
@@ -40,10 +40,10 @@ class IdentifyResult:
         Wall times [s]: ``fit`` (least squares with the T_z search), ``refine`` and
         ``hyper-parameters`` (the search of ``[identify.auto]``).
     design : dict of str to pandas.DataFrame
-        Equilibria and switching voltages (:func:`pipeline.identify.design.design_numbers`)
+        Equilibria and switching voltages (:func:`debist.identify.design.design_numbers`)
         and the static force at the held input levels with bands and masks (``static``,
-        :func:`pipeline.identify.bands.static_frame`).
-    search : pipeline.identify.autotune.AutoResult or None
+        :func:`debist.identify.bands.static_frame`).
+    search : debist.identify.autotune.AutoResult or None
         The hyper-parameter search of ``[identify.auto]`` (None without it).
     """
 
@@ -83,16 +83,16 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     WorkflowError
         For an invalid section.
     """
-    from pipeline.identify.autotune import auto_settings, select_hyperparameters
-    from pipeline.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
-    from pipeline.identify.design import (
+    from debist.identify.autotune import auto_settings, select_hyperparameters
+    from debist.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
+    from debist.identify.design import (
         design_numbers,
         held_levels,
         mark_identified,
         mark_switching,
     )
-    from pipeline.identify.refine import refine_config, refine_model
-    from pipeline.identify.terms import PHYSICS_TERMS
+    from debist.identify.refine import refine_config, refine_model
+    from debist.identify.terms import PHYSICS_TERMS
 
     section = dict(section)
     if section.get("m_q") == "physics":
@@ -178,10 +178,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
 
 def _excitation(records, cfg: IdentifyConfig, tables):
     """Run the excitation check on the estimation records (warnings in the data's unit)."""
-    from pipeline.identify.basis import RBFBasis
-    from pipeline.identify.excitation import check_excitation
-    from pipeline.ingest.checks import check_varies
-    from pipeline.validate import report_factor
+    from debist.identify.basis import RBFBasis
+    from debist.identify.excitation import check_excitation
+    from debist.ingest.checks import check_varies
+    from debist.validate import report_factor
 
     q = np.concatenate([r.q for r in records])
     if np.ptp(q) == 0:  # nothing moved: a data error of the logs, named as such
@@ -262,10 +262,10 @@ def execute(ctx: StageInputs) -> StageOutput:
     IdentificationError, WorkflowError
         As :func:`run_identify`.
     """
-    from pipeline.artifacts import Figure, H5Tree
-    from pipeline.fileformats import REPORT_DPI
-    from pipeline.plots import curves_figure
-    from pipeline.report import summary_units
+    from debist.artifacts import Figure, H5Tree
+    from debist.fileformats import REPORT_DPI
+    from debist.plots import curves_figure
+    from debist.report import summary_units
 
     res = run_identify(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
@@ -282,7 +282,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
-        from pipeline.study_plots import autotune_figure
+        from debist.study_plots import autotune_figure
 
         outputs["autotune.parquet"] = res.search.table
         outputs["plots/autotune.png"] = Figure(autotune_figure(res.search), REPORT_DPI)
@@ -310,7 +310,7 @@ def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
     ----------
     Masoud & Maas 2025, Eq. 26, 33, Fig. 14.
     """
-    from pipeline.physics.reduced import reduced_curves
+    from debist.physics.reduced import reduced_curves
 
     grid = np.linspace(model.q_range[0], model.q_range[1], 201)
     cur = reduced_curves(physics, grid)

@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING
 
 import pandas as pd
 
-from pipeline.stages import StageInputs, StageOutput
+from debist.stages import StageInputs, StageOutput
 
 if TYPE_CHECKING:
-    from pipeline.workflow import DatasetSpec
+    from debist.workflow import DatasetSpec
 
 __all__ = ["execute", "run_ingest"]
 
@@ -32,7 +32,7 @@ def run_ingest(
         virtual-rig log is recorded as ``"rig:<experiment>"``. Default: the path as read.
 
     Each source file is read once, however many data sets name it
-    (:class:`pipeline.ingest.RawLogCache`).
+    (:class:`debist.ingest.RawLogCache`).
 
     Returns
     -------
@@ -47,7 +47,7 @@ def run_ingest(
     WorkflowError
         For an invalid ingest section.
     """
-    import pipeline.ingest as ingest
+    import debist.ingest as ingest
 
     tables: dict[str, pd.DataFrame] = {}
     cache = ingest.RawLogCache(ingest.read_raw, [ds.source for ds in datasets])

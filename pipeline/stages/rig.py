@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.stages import StageInputs, StageOutput
+from debist.stages import StageInputs, StageOutput
 
 __all__ = ["RigResult", "execute", "run_rig"]
 
@@ -21,11 +21,11 @@ class RigResult:
     Attributes
     ----------
     outputs : dict
-        ``<experiment>.mat`` (:class:`pipeline.artifacts.FileWriter` of the MAT writer) and
-        ``<experiment>_truth.h5`` (:class:`pipeline.artifacts.H5Tree`) per experiment; its
-        ``curves`` group holds the true curves (:func:`pipeline.rig.run.true_curves`) with
+        ``<experiment>.mat`` (:class:`debist.artifacts.FileWriter` of the MAT writer) and
+        ``<experiment>_truth.h5`` (:class:`debist.artifacts.H5Tree`) per experiment; its
+        ``curves`` group holds the true curves (:func:`debist.rig.run.true_curves`) with
         the plant ``model`` and the mass they are per in its attributes
-        (:func:`pipeline.rig.reduced.truth_attrs`).
+        (:func:`debist.rig.reduced.truth_attrs`).
     summary : dict
         Per experiment: samples, q range [m], 3 kV switchings, saturated samples and
         integration statistics.
@@ -46,7 +46,7 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     physics : mapping
         The ``[physics]`` section (nominal prototype).
     section : mapping
-        The ``[rig]`` section (:class:`pipeline.rig.experiment.RigConfig`).
+        The ``[rig]`` section (:class:`debist.rig.experiment.RigConfig`).
 
     Returns
     -------
@@ -63,18 +63,18 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     ----------
     Masoud & Maas 2025, Sec. 5.1, Fig. 11a.
     """
-    from pipeline.artifacts import FileWriter, H5Tree
-    from pipeline.errors import DebistError
-    from pipeline.rig.dspace import write_recording
-    from pipeline.rig.experiment import (
+    from debist.artifacts import FileWriter, H5Tree
+    from debist.errors import DebistError
+    from debist.rig.dspace import write_recording
+    from debist.rig.experiment import (
         CREATED,
         RigConfig,
         rig_recording,
         run_experiments,
         truth_tree,
     )
-    from pipeline.rig.reduced import truth_attrs
-    from pipeline.rig.run import true_curves
+    from debist.rig.reduced import truth_attrs
+    from debist.rig.run import true_curves
 
     cfg = RigConfig.from_dict(section, physics)
     runs, curves = run_experiments(

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from pipeline.stages import StageInputs, StageOutput
+from debist.stages import StageInputs, StageOutput
 
 __all__ = ["execute", "run_study"]
 
@@ -38,7 +38,7 @@ def run_study(tables, derivs, section: Mapping[str, Any]) -> dict[str, Any]:
     ----------
     Masoud & Maas 2025, Fig. 11b and 11c, Sec. 5.2.
     """
-    from pipeline.studies import StudyConfig, alpha_study, rbf_grid_study
+    from debist.studies import StudyConfig, alpha_study, rbf_grid_study
 
     study = dict(section["study"])
     identify = {**section["identify"], **study.pop("identify", {})}
@@ -68,8 +68,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError
         As :func:`run_study`.
     """
-    from pipeline.artifacts import Figure
-    from pipeline.fileformats import REPORT_DPI
+    from debist.artifacts import Figure
+    from debist.fileformats import REPORT_DPI
 
     results = run_study(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("study")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RigLogError
+from debist.errors import RigLogError
 
 __all__ = ["UNIFORM_TOL", "input_columns", "sample_time"]
 

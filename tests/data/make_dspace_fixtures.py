@@ -9,7 +9,7 @@ The recording is synthetic (seeded), shaped like a ControlDesk MAT export: a str
 ``X`` (two time bases, "Periodic Task 1" at 1 ms and "Periodic Task 2" at 5 ms),
 ``Y`` (channels with the full block path as ``Name``, ``Raster``, ``Data``, ``Unit``,
 ``Type``) and ``Description``. It is built and written by the library writer
-:mod:`pipeline.rig.dspace` (MAT v5 with scipy; MAT v7.3 with h5py in MATLAB's layout:
+:mod:`debist.rig.dspace` (MAT v5 with scipy; MAT v7.3 with h5py in MATLAB's layout:
 512-byte user block with the MAT header (version 0x0200), ``MATLAB_class`` attributes,
 char arrays as uint16, struct arrays as object references into ``#refs#``), with the fixed
 header date ``CREATED``, so both files are byte-identical from run to run.
@@ -22,10 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-if __name__ == "__main__":  # run as a script from a checkout: make `pipeline` importable
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from pipeline.rig import dspace
+from debist.rig import dspace
 
 VARIABLE = "Recording1"
 N_FAST, DT_FAST = 200, 1e-3

@@ -1,0 +1,912 @@
+"""The ``debist`` command line: a thin Typer adapter over :mod:`debist`.
+
+Parses arguments, loads the workflow, calls the runner, prints with rich, and maps
+debist's exceptions to exit codes in one place (:func:`debist.errors.exit_code`): 0 done,
+1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
+or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
+
+Long steps report through :mod:`debist.progress`; the CLI draws those reports as rich
+progress bars on stderr when stderr is a terminal (not with ``-q``). Help texts are plain
+text (Typer's ``rich_markup_mode=None``), so workflow sections such as ``[rig]`` and units
+such as ``[s]`` print literally instead of being taken for rich markup.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import click
+import typer
+from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperCommand, TyperGroup
+
+from debist.errors import (
+    DebistError,
+    Interrupted,
+    VerificationError,
+    WorkflowError,
+    exit_code,
+    os_error_line,
+)
+
+
+class _Command(TyperCommand):
+    """A command whose usage line names its arguments plainly (``WORKFLOW``, not ``{WORKFLOW}``)."""
+
+    def collect_usage_pieces(self, ctx: click.Context) -> list[str]:
+        """Return the usage pieces without Typer's braces around required arguments."""
+        pieces = super().collect_usage_pieces(ctx)
+        return [p[1:-1] if p.startswith("{") and p.endswith("}") else p for p in pieces]
+
+
+#: Global options also accepted after the command (``debist run -q WF``).
+_GLOBAL_FLAGS = frozenset({"-q", "--quiet", "-v", "--verbose"})
+
+
+class _Commands(TyperGroup):
+    """The command group, listing each command with its whole first paragraph of help.
+
+    Click cuts the listing at the first period or at the terminal width, which would drop
+    the sections and units of a help line (``Eq. 37`` ends a "sentence"). Global flags
+    given after the command are moved before it, so ``debist run -q WF`` works.
+    """
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        """Move ``-q``/``-v`` after the command name in front of it, then parse as Click does."""
+        head, rest, command = [], [], False
+        for i, arg in enumerate(args):
+            if arg == "--":
+                rest += args[i:]
+                break
+            if command and arg in _GLOBAL_FLAGS:
+                head.append(arg)
+                continue
+            command = command or arg in self.commands
+            rest.append(arg)
+        return super().parse_args(ctx, head + rest)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """Write the Commands section (see :meth:`click.Group.format_commands`)."""
+        rows = []
+        for name in self.list_commands(ctx):
+            cmd = self.get_command(ctx, name)
+            if cmd is not None and not cmd.hidden:
+                text = cmd.short_help or (cmd.help or "").split("\n\n")[0]
+                rows.append((name, " ".join(text.split())))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+app = typer.Typer(
+    cls=_Commands,
+    help="Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025).",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,  # help is plain text: "[rig]", "[s]" are words, not rich markup
+)
+#: Reports written to a file or pipe are not squeezed to 80 columns (rich's default there).
+console = Console(width=None if sys.stdout.isatty() else 140)
+err = Console(stderr=True, soft_wrap=True)
+#: Output level set by the global options: -1 with ``-q``, 1 with ``-v``, else 0.
+_level = {"value": 0}
+
+WorkflowArg = Annotated[Path, typer.Argument(metavar="WORKFLOW", help="Workflow TOML file.")]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        "-S",
+        metavar="KEY=VALUE",
+        help="Change one setting of the workflow for this command, e.g. identify.M=8 "
+        "(repeatable; checked like the file; the manifests record the values used).",
+    ),
+]
+WaitOpt = Annotated[
+    bool,
+    typer.Option(
+        "--wait", help="If another debist run writes to the output folder, wait for it to end."
+    ),
+]
+
+
+@app.callback()
+def _options(
+    memory_budget: Annotated[
+        float | None,
+        typer.Option(
+            "--memory-budget",
+            metavar="GB",
+            min=0.001,
+            help="Memory a stage may plan for [GB]; a setting that needs more is refused "
+            "before it allocates (default: half of this machine's RAM, or the environment "
+            "variable DEBIST_MEMORY_BUDGET_GB).",
+        ),
+    ] = None,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            is_eager=True,
+            callback=lambda value: _print_version(value),
+            help="Print debist's version and exit.",
+        ),
+    ] = False,
+    quiet: Annotated[
+        bool,
+        typer.Option(
+            "-q", "--quiet", help="Print only errors and the run digest; no progress bars."
+        ),
+    ] = False,
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "-v",
+            "--verbose",
+            help="Also print why each stage runs or is skipped, and its timings [s].",
+        ),
+    ] = False,
+) -> None:
+    """Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025)."""
+    if quiet and verbose:
+        raise typer.BadParameter("give -q/--quiet or -v/--verbose, not both")
+    _level["value"] = -1 if quiet else (1 if verbose else 0)
+    console.quiet = quiet
+    if memory_budget is not None:
+        from debist.preflight import BUDGET_ENV
+
+        os.environ[BUDGET_ENV] = repr(float(memory_budget))  # batch workers inherit it
+
+
+def _print_version(value: bool) -> None:
+    """Print the installed version (package metadata) and exit, for ``--version``."""
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("debist")
+        except PackageNotFoundError:  # run from a source tree that is not installed
+            text = "unknown (not installed)"
+        typer.echo(f"debist {text}")
+        raise typer.Exit(0)
+
+
+@contextmanager
+def _guard() -> Iterator[None]:
+    """Turn debist's exceptions and interruptions into one line and their exit code."""
+    try:
+        yield
+    except DebistError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(exit_code(exc)) from None
+    except OSError as exc:  # the file system said no: read-only, full, permissions
+        err.print(f"[red]error:[/red] {escape(os_error_line(exc))}")
+        raise typer.Exit(exit_code(exc)) from None
+    except KeyboardInterrupt as exc:
+        what = str(exc) if isinstance(exc, Interrupted) else "interrupted"
+        err.print(
+            f"[yellow]{escape(what)}[/yellow]: stopped; finished stages are kept, the "
+            "unfinished one left nothing behind"
+        )
+        raise typer.Exit(exit_code(exc)) from None
+
+
+def _on_sigterm(signum: int, _frame: object) -> None:
+    raise Interrupted(signum)
+
+
+def _runner(workflow: Path, out: Path | None, wait: bool = False, sets: list[str] | None = None):
+    from debist.runner import Runner
+    from debist.workflow import load_workflow
+
+    return Runner(load_workflow(workflow, out, sets or None), wait=wait)
+
+
+def _essential(text: str) -> None:
+    """Print a line that ``-q`` keeps (the run digest, the lines of ``status``)."""
+    quiet, console.quiet = console.quiet, False
+    try:
+        console.print(text, soft_wrap=True)
+    finally:
+        console.quiet = quiet
+
+
+def _progress_console() -> Console | None:
+    """Return the console for progress bars: stderr if a terminal and not ``-q``, else None."""
+    try:
+        terminal = sys.stderr.isatty()  # not rich's is_terminal: FORCE_COLOR must not draw bars
+    except (AttributeError, ValueError):  # replaced or closed
+        terminal = False
+    return Console(stderr=True) if terminal and _level["value"] >= 0 else None
+
+
+def _bar_columns(label) -> tuple:
+    """Return the columns of every progress bar: ``label``, bar, done/total, elapsed, time left."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return (label, BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TextColumn("left"),
+            TimeRemainingColumn())  # fmt: skip
+
+
+class _Display:
+    """Progress reports (:mod:`debist.progress`) drawn as rich progress bars, one per task.
+
+    A row reads ``stage: task``, a bar, ``done/total``, the elapsed time and rich's
+    estimate of the time left. A row goes when its task reaches its total; when a stage
+    ends, its rows are drawn complete (work that stopped early, such as an optimiser that
+    converged before its evaluation budget, is finished too) and removed.
+
+    Parameters
+    ----------
+    target : rich.console.Console
+        Where to draw (stderr, a terminal).
+
+    References
+    ----------
+    rich documentation, ``rich.progress.Progress``.
+    """
+
+    def __init__(self, target: Console):
+        from rich.progress import Progress, TextColumn
+
+        self.bars = Progress(
+            *_bar_columns(TextColumn("{task.description}", markup=False)),
+            console=target,
+            transient=True,
+            redirect_stdout=sys.stdout.isatty(),  # stage lines above the bars, not through them
+            redirect_stderr=True,
+        )
+        self.stage = ""
+        self._rows: dict[str, tuple[object, int]] = {}  # label -> (task id, done)
+        self._lock = threading.Lock()
+
+    def listen(self, task: str, done: int, total: int) -> None:
+        """Show one report (the :data:`debist.progress.Listener` signature)."""
+        label = (
+            task
+            if not self.stage or task.startswith(f"{self.stage}:")
+            else (f"{self.stage}: {task}")
+        )
+        total = max(total, done) if total > 0 else None
+        with self._lock:
+            row = self._rows.get(label)
+            if row is not None and done < row[1]:  # the same task started over
+                self.bars.remove_task(row[0])
+                row = None
+            if row is None:
+                tid = self.bars.add_task(label, total=total, completed=done)
+            else:
+                tid = row[0]
+                self.bars.update(tid, total=total, completed=done)
+            self._rows[label] = (tid, done)
+            if total is not None and done >= total:
+                self.bars.refresh()
+                self.bars.remove_task(tid)
+                del self._rows[label]
+
+    def finish(self) -> None:
+        """Draw every open row complete, then remove it (at the end of a stage)."""
+        with self._lock:
+            for tid, done in self._rows.values():
+                self.bars.update(tid, total=max(done, 1), completed=max(done, 1))
+            if self._rows:
+                self.bars.refresh()
+            for tid, _done in self._rows.values():
+                self.bars.remove_task(tid)
+            self._rows.clear()
+
+
+@contextmanager
+def _progress() -> Iterator[_Display | None]:
+    """Draw the progress reports made inside the block, if there is a terminal to draw on."""
+    from debist.progress import listening
+
+    target = _progress_console()
+    if target is None:
+        yield None
+        return
+    display = _Display(target)
+    with display.bars, listening(display.listen):
+        try:
+            yield display
+        finally:
+            display.finish()
+
+
+def _events(runner, display: _Display | None, ran: set[str]):
+    """Return the runner's ``on_event`` callback: stage lines, and with ``-v`` why and timings.
+
+    The names of the stages that ran go into ``ran``.
+    """
+    verbose = _level["value"] > 0
+
+    def on_event(stage: str, what: str, detail: str) -> None:
+        why = f" ({escape(detail)})" if verbose and detail else ""
+        if what == "skip":
+            console.print(f"[dim]Stage '{stage}' is up to date, skipping{why}[/dim]")
+        elif what == "start":
+            if display is not None:
+                display.finish()
+                display.stage = stage
+            console.print(f"Running stage '{stage}' ...{why}")
+        elif what == "recovered":
+            console.print(f"[yellow]recovered:[/yellow] {escape(detail)}")
+        else:
+            if display is not None:
+                display.finish()
+            ran.add(stage)
+            console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
+            if verbose:
+                _print_timings(runner.wf.stage_dir(stage))
+
+    return on_event
+
+
+def _print_timings(stage_dir: Path) -> None:
+    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``)."""
+    try:
+        timings = json.loads((stage_dir / "timings.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    parts = [f"{k} {v:.2f} s" for k, v in timings.items() if k != "stage" and isinstance(v, float)]
+    if parts:
+        console.print(f"[dim]  timings: {escape(', '.join(parts))}[/dim]", soft_wrap=True)
+
+
+def _convergence_notice(runner, manifests) -> str | None:
+    """Say on how many data sets TVRegDiff stopped at its iteration limit, and what to change."""
+    diff = manifests.get("differentiate")
+    stopped = [n for n, ok in (diff.summary.get("converged", {}) if diff else {}).items() if not ok]
+    if not stopped:
+        return None
+    names = ", ".join(stopped[:3]) + (", ..." if len(stopped) > 3 else "")
+    section = runner.wf.section("differentiate")
+    try:
+        from debist.differentiate.tvregdiff_method import TVRegDiffConfig
+
+        params = {k: v for k, v in section.items() if k != "method"}
+        cfg = TVRegDiffConfig.from_dict(params)
+        iterations, tol = cfg.iterations, cfg.tol
+        second = cfg.iterations if cfg.iterations2 is None else cfg.iterations2
+    except DebistError:  # another method: name the keys without their values
+        iterations = tol = second = "?"
+    return (
+        f"differentiate: TVRegDiff stopped at its iteration limit before its tolerance on "
+        f"{len(stopped)} data set(s) ({names}; converged = false in the "
+        f"summary). A fixed small count is how Chartrand and the paper run it; for "
+        f"converged derivatives raise [differentiate] iterations (now {iterations}) and "
+        f"iterations2 (now {second}), or loosen [differentiate] tol (now {tol})."
+    )
+
+
+def _report(runner, manifests, ran: set[str]) -> None:
+    from debist import report
+
+    notice = _convergence_notice(runner, manifests)
+    if notice and ("differentiate" in ran or _level["value"] > 0):  # once, not on every rerun
+        console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
+    if "rig" in manifests:
+        console.print(report.rig_table(manifests["rig"].summary))
+    if "analyze" in manifests:
+        console.print(report.analyze_table(manifests["analyze"].summary))
+    if "identify" in manifests:
+        console.print(report.identify_table(manifests["identify"].summary))
+        design = report.design_table(manifests["identify"].summary)
+        if design is not None:
+            console.print(design)
+        for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
+            console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
+        line = report.auto_line(manifests["identify"].summary)
+        if line:
+            warn = manifests["identify"].summary["auto"].get("undecided")
+            console.print(escape(line), style="yellow" if warn else None)
+    last = "compare" if "compare" in manifests else "validate"
+    if "compare" in manifests:
+        s = manifests["compare"].summary
+        console.print(f"SINDy ({s['n_params']} terms):")
+        for equation in str(s["equations"]).splitlines():  # a term per line, not one long line
+            for line in report.wrap_equation(equation):
+                console.print(f"  {escape(line)}", soft_wrap=True)
+    if last in manifests:
+        summary = manifests[last].summary
+        console.print(report.nrmse_table(summary["table"]))
+        table = report.published_table(
+            summary["table"], summary.get("published", []), summary.get("order")
+        )
+        if table is not None:
+            console.print(table)
+    console.print(f"[dim]artifacts: {escape(str(runner.wf.output_dir))}[/dim]")
+
+
+def _run(
+    workflow: Path,
+    stages: list[str] | None,
+    force: bool,
+    out: Path | None,
+    wait: bool,
+    select: dict[str, str | None] | None = None,
+    sets: list[str] | None = None,
+) -> None:
+    with _guard():
+        runner = _runner(workflow, out, wait, sets)
+        if select is not None:
+            listed = select["stages"]
+            names = (
+                [n.strip() for n in listed.split(",") if n.strip()] if listed is not None else None
+            )
+            stages = runner.select(names, start=select["start"], until=select["until"])
+        ran: set[str] = set()
+        with _progress() as display:
+            manifests = runner.run(stages, force=force, on_event=_events(runner, display, ran))
+        _report(runner, manifests, ran)
+        if stages is None and (digest := runner.digest()) is not None:
+            _essential(f"run digest: [bold]{digest}[/bold]")
+            console.print(
+                f"[dim]check it later with: debist verify {escape(str(workflow))} "
+                f"--digest {digest}[/dim]",
+                soft_wrap=True,
+            )
+
+
+@app.command(cls=_Command)
+def run(
+    workflow: WorkflowArg,
+    force: ForceOpt = False,
+    out: OutOpt = None,
+    wait: WaitOpt = False,
+    stages: Annotated[
+        str | None,
+        typer.Option(
+            "--stages",
+            help="Run only these stages, comma-separated, e.g. 'identify,validate'; the "
+            "stages they read must be up to date.",
+        ),
+    ] = None,
+    start: Annotated[
+        str | None,
+        typer.Option("--from", help="Run from this stage on (in the workflow's order)."),
+    ] = None,
+    until: Annotated[
+        str | None, typer.Option("--until", help="Run up to and including this stage.")
+    ] = None,
+    sets: SetOpt = None,
+) -> None:
+    """Run every stage of WORKFLOW, skipping those that are up to date; print the run digest.
+
+    --stages, or --from and --until, run a part of the workflow (no digest then); a stage
+    whose upstream stage outside the part is missing or stale is refused (exit 2). --set
+    changes a setting for this run only (verify and status then need the same --set).
+    """
+    select = {"stages": stages, "start": start, "until": until}
+    _run(workflow, None, force, out, wait, select, sets)
+
+
+def _stage_command(name: str, help_text: str, command: str | None = None) -> None:
+    def command_fn(
+        workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+    ) -> None:
+        _run(workflow, [name], force, out, wait)
+
+    command_fn.__doc__ = help_text
+    app.command(command or name, cls=_Command)(command_fn)
+
+
+_stage_command(
+    "ingest",
+    "Read the rig logs of [datasets.*] into canonical tables (t [s], q [m], v1..vN [V]) "
+    "as [ingest] maps their channels.",
+)
+_stage_command(
+    "differentiate",
+    "Compute q_dot [m/s] and q_ddot [m/s^2] by the [differentiate] method (TVRegDiff by default).",
+)
+_stage_command(
+    "identify",
+    "Identify the RBF model of Eq. 37-40 from [identify] by least squares with the search "
+    "over the friction lag T_z [s].",
+)
+_stage_command(
+    "validate",
+    "Free-run the identified model on every data set as [validate] says; NRMSE table and plots.",
+)
+_stage_command(
+    "compare",
+    "Fit SINDy by [compare] on the same data and derivatives; free-run it with the same simulator.",
+)
+_stage_command(
+    "study",
+    "Sensitivity studies of [study]: RBF grid (M, sigma_n; Fig. 11b) and TVRegDiff alpha "
+    "(Fig. 11c).",
+)
+_stage_command(
+    "rig",
+    "Run the virtual rig of [rig]: dSPACE MAT logs and truth files per experiment.",
+    "simulate-rig",
+)
+
+
+@app.command(cls=_Command)
+def fleet(
+    template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
+    size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
+    folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
+        "fleet"
+    ),
+) -> None:
+    """Write one workflow per prototype of a seeded fleet around TEMPLATE's rig (for batch).
+
+    Each prototype's rig experiments are run once and its logs checked by TEMPLATE's own
+    ingest; a draw whose logs fail (e.g. the beam overshoots the laser's range) is skipped
+    and said so, and the next draw is taken.
+    """
+    import tomllib
+
+    from debist import artifacts
+    from debist.fleetrun import viable_fleet
+
+    with _guard():
+        try:
+            raw = tomllib.loads(template.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
+        existing = [p for p in folder.glob("*.toml")] if folder.is_dir() else []
+        if existing:
+            raise WorkflowError(
+                f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
+                "--dir (debist never overwrites them)"
+            )
+        files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
+        paths = artifacts.write_text_files(folder, files)
+    for name, why in rejected.items():
+        console.print(f"skipped {escape(name)}: its log fails the template's ingest: {escape(why)}")
+    console.print(
+        f"wrote {len(paths)} workflows to {escape(str(folder))}; run them with: debist batch "
+        f"{escape(str(folder))}"
+    )
+
+
+_stage_command(
+    "analyze", "Design analysis of [physics] (Section 3): statics.h5 and Fig. 3-7 as PNG."
+)
+
+
+@app.command(cls=_Command)
+def status(
+    workflow: WorkflowArg,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help='One JSON object keyed by stage: {"state": "up_to_date" | "stale" | '
+            '"missing", "reasons": [{"kind": ..., "detail": ...}]}.',
+        ),
+    ] = False,
+    out: OutOpt = None,
+    sets: SetOpt = None,
+) -> None:
+    """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
+    from debist import outdir
+    from debist.runner import STAGES
+
+    with _guard():
+        runner = _runner(workflow, out, sets=sets)
+        states = runner.status()
+        warning = ""
+        try:
+            outdir.check_output_dir(
+                runner.wf.output_dir,
+                workflow=runner.wf.name,
+                workflow_dir=runner.wf.path.parent,
+                workflow_file=runner.wf.path,
+                sources=[d.source for d in runner.wf.datasets if not d.rig],
+                stages=STAGES,
+            )
+        except DebistError as exc:
+            warning = f"a run would stop: {exc}"
+    if as_json:
+        typer.echo(json.dumps({s.stage: s.to_json() for s in states}, indent=2))
+        if warning:
+            err.print(f"[yellow]{escape(warning)}[/yellow]")
+        return
+    for s in states:
+        color = {"up to date": "green", "stale": "yellow", "missing": "red"}[s.state]
+        _essential(
+            f"{s.stage:14s} [{color}]{s.state}[/{color}]"
+            + (f"  ({escape(s.reason)})" if s.reason else "")
+        )
+    if warning:
+        console.print(f"[yellow]{escape(warning)}[/yellow]")
+
+
+@app.command(cls=_Command)
+def verify(
+    workflow: WorkflowArg,
+    digest: Annotated[
+        str | None,
+        typer.Option(
+            "--digest",
+            help="The run digest that `run` printed: the manifests must be exactly those.",
+        ),
+    ] = None,
+    out: OutOpt = None,
+    sets: SetOpt = None,
+) -> None:
+    """Re-hash every artifact and check the chain of manifests; exit 3 naming any problem.
+
+    The run is checked against the workflow as it is now (with any --set): a setting that
+    changed since the run, a source that changed, or ingest tables that the sources no
+    longer give are problems. With --digest, the manifests must also be exactly those of
+    the quoted run; a mismatch names the first stage that departs from it.
+    """
+    with _guard():
+        runner = _runner(workflow, out, sets=sets)
+        problems = runner.verify(digest)
+        for note in runner.version_notes():  # a note, not a failure
+            err.print(f"[yellow]note:[/yellow] {escape(note)} (a rerun may give other bytes)")
+        if problems:
+            for p in problems:
+                err.print(f"[red]problem:[/red] {escape(p)}")
+            raise typer.Exit(exit_code(VerificationError(problems)))
+    what = "the quoted digest, " if digest else ""
+    console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
+
+
+@app.command(cls=_Command)
+def diff(
+    run_a: Annotated[Path, typer.Argument(metavar="RUN_A", help="Output folder of a run.")],
+    run_b: Annotated[Path, typer.Argument(metavar="RUN_B", help="Output folder of another.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
+) -> None:
+    """Show the settings and the NRMSE rows that differ between two runs (reads only)."""
+    from rich.table import Table
+
+    from debist.rundiff import diff_runs
+
+    with _guard():
+        found = diff_runs(run_a, run_b)
+    if as_json:
+        typer.echo(json.dumps(found, indent=2, default=str))
+        return
+    if not found["config"] and not found["nrmse"]:
+        console.print("the two runs have the same settings and NRMSE")
+        return
+    if found["config"]:
+        table = Table("stage", "setting", str(run_a), str(run_b), title="settings that differ")
+        for r in found["config"]:
+            table.add_row(r["stage"], r["key"], escape(str(r["a"])), escape(str(r["b"])))
+        console.print(table)
+    if found["nrmse"]:
+        table = Table("data set", "model", "metric", "A", "B", "B - A", title="NRMSE that differs")
+
+        def fmt(x):
+            return "-" if x is None else f"{x:.3f}"
+
+        for r in found["nrmse"]:
+            table.add_row(r["dataset"], r["model"], r["metric"], fmt(r["a"]), fmt(r["b"]),
+                          fmt(r["change"]))  # fmt: skip
+        console.print(table)
+
+
+@app.command(cls=_Command)
+def report(
+    workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+) -> None:
+    """Run the report stage: one self-contained HTML page of the run (needs a [report] section).
+
+    Writes <output_dir>/report/report.html (tables, figures, provenance) from the artifacts of
+    the workflow's stages, which must be up to date; `debist run` makes it as its last step,
+    and `debist verify` checks it like every artifact.
+    """
+    from debist.htmlreport import REPORT_FILE
+
+    with _guard():
+        runner = _runner(workflow, out, wait)
+        if "report" not in runner.stages():
+            raise WorkflowError(
+                f"[report] workflow '{workflow}' has no [report] section: add an empty "
+                "`[report]` table to it (`debist run` then writes the report too)"
+            )
+    _run(workflow, ["report"], force, out, wait)
+    console.print(f"report: {escape(str(runner.wf.stage_dir('report') / REPORT_FILE))}")
+
+
+class ExportFormat(StrEnum):
+    """Formats of ``debist export``: C99 header and source, a MATLAB function, a NumPy module."""
+
+    c = "c"
+    matlab = "matlab"
+    python = "python"
+
+
+@app.command(cls=_Command)
+def export(
+    workflow: WorkflowArg,
+    fmt: Annotated[
+        ExportFormat,
+        typer.Option(
+            "--format",
+            help="c: debist_model.h and debist_model.c (C99, math.h only, no allocation); "
+            "matlab: debist_model.m (a Simulink MATLAB Function block or Octave); "
+            "python: debist_model.py (NumPy only).",
+        ),
+    ] = ExportFormat.c,
+    dest: Annotated[
+        Path | None,
+        typer.Option("--dest", help="Folder for the files (default: <output_dir>/export)."),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace existing files of the same names.")
+    ] = False,
+    out: OutOpt = None,
+) -> None:
+    """Write the identified model as self-contained C99, MATLAB or NumPy code for a controller.
+
+    Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
+    """
+    import shutil
+    import tempfile
+    from contextlib import nullcontext
+
+    from debist import artifacts, outdir
+    from debist.errors import OutputDirError
+    from debist.export import export_files, load_identified
+
+    with _guard():
+        runner = _runner(workflow, out)
+        folder = runner.wf.output_dir
+        with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
+            model, info = load_identified(runner)
+            files = export_files(model, fmt.value, info)
+            target = dest if dest is not None else folder / "export"
+            if force:  # each file replaced atomically (os.replace from a sibling folder)
+                target.mkdir(parents=True, exist_ok=True)
+                tmp = Path(tempfile.mkdtemp(prefix=".export.tmp-", dir=target))
+                try:
+                    for path in artifacts.write_text_files(tmp, files):
+                        os.replace(path, target / path.name)
+                finally:
+                    shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                try:
+                    artifacts.write_text_files(target, files)
+                except OutputDirError as exc:
+                    raise OutputDirError(f"{exc}, or pass --force") from None
+    for name in files:
+        console.print(f"wrote {escape(str(target / name))}")
+    console.print(f"run digest: {info.run_digest or 'n/a (not every stage has run)'}")
+
+
+StagesOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--stages", help="Comma-separated stages, e.g. 'ingest,differentiate' (default: all)."
+    ),
+]
+SchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="processes (default): a local Dask cluster of worker processes under nannies; "
+        "a workflow whose worker dies is retried once, then reported failed, and the others "
+        "run on | distributed: the cluster at --address (the default with --address) | "
+        "threads: one process | synchronous: one thread, for debugging.",
+    ),
+]
+WorkersOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--workers",
+        min=1,
+        help="Local worker processes, or threads (default: one per workflow, at most one "
+        "per core).",
+    ),
+]
+AddressOpt = Annotated[
+    str | None,
+    typer.Option("--address", help="A running Dask scheduler, e.g. tcp://host:8786."),
+]
+
+
+@app.command(cls=_Command)
+def batch(
+    paths: Annotated[
+        list[str],
+        typer.Argument(help="Workflow files, directories (their *.toml) or glob patterns."),
+    ],
+    stages: StagesOpt = None,
+    force: ForceOpt = False,
+    scheduler: SchedulerOpt = None,
+    workers: WorkersOpt = None,
+    address: AddressOpt = None,
+) -> None:
+    """Run many workflows (one per prototype) on Dask; exit 1 if any of them failed.
+
+    Ends with a summary table, one row per workflow file, also after failures.
+    """
+    from rich.progress import Progress, TextColumn
+    from rich.table import Table
+
+    from debist.batch import expand_workflows, run_batch, summary_table, write_index
+
+    selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    try:
+        files = expand_workflows(paths)
+        target = _progress_console()
+        columns = _bar_columns(TextColumn("batch: workflows"))
+        with Progress(*columns, console=target, transient=True, disable=target is None) as bar:
+            task = bar.add_task("batch", total=len(files))
+            results = run_batch(
+                files,
+                stages=selected,
+                force=force,
+                scheduler=scheduler,
+                workers=workers,
+                address=address,
+                on_done=lambda _result: bar.advance(task),
+            )
+    except WorkflowError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}")
+        raise typer.Exit(2) from None
+    frame = summary_table(results)
+    failed = int((frame.status == "failed").sum())
+    table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
+    columns = ("workflow file", "name", "status", "seconds", "ran", "skipped")
+    for column in (*columns, "RBF NRMSE(q)", "error / note"):
+        justify = "right" if column == "seconds" else "left"
+        table.add_column(column, overflow="fold", justify=justify)
+    for row in frame.itertuples(index=False):
+        style = "red" if row.status == "failed" else "green"
+        where = f"{row.failed_stage}: " if row.failed_stage else ""
+        table.add_row(
+            escape(row.file),
+            escape(row.name),
+            f"[{style}]{row.status}[/{style}]",
+            f"{row.seconds:.1f}",
+            str(row.ran),
+            str(row.skipped),
+            escape(row.rbf_nrmse_q),
+            escape("; ".join(x for x in (where + row.error, row.note) if x)),
+        )
+    console.print(table)
+    index = write_index(results)
+    if index is not None:
+        console.print(f"index of the reports: {escape(str(index))}")
+    if failed:
+        raise typer.Exit(1)
+
+
+def _warning_line(message, category, *_args, **_kwargs) -> str:
+    """One line per warning: its class and message, not the source line that raised it."""
+    return f"warning ({category.__name__}): {message}\n"
+
+
+def main() -> None:
+    """Entry point of the ``debist`` console script (SIGTERM stops as cleanly as Ctrl-C)."""
+    import warnings
+
+    warnings.formatwarning = _warning_line
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    app()
+
+
+if __name__ == "__main__":
+    main()

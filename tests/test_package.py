@@ -1,0 +1,78 @@
+"""The installed package: one top-level name, ``debist``, whose source folder is ``pipeline/``."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import debist
+from debist.fingerprint import code_fingerprint
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _python(code: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120
+    )
+
+
+def test_every_source_folder_is_a_listed_package():
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert config["package-dir"] == {"debist": "pipeline"}
+    folders = sorted(
+        ".".join(("debist", *p.parent.relative_to(ROOT / "pipeline").parts))
+        for p in (ROOT / "pipeline").rglob("__init__.py")
+    )
+    assert sorted(config["packages"]) == folders
+
+
+def test_only_debist_is_importable_outside_the_checkout(tmp_path):
+    found = _python("import debist; print(debist.__name__)", tmp_path)
+    assert found.returncode == 0, found.stderr
+    assert found.stdout.strip() == "debist"
+    for name in ("pipeline", "cli"):
+        missing = _python(f"import {name}", tmp_path)
+        assert missing.returncode != 0
+        assert f"No module named '{name}'" in missing.stderr
+    top_level = importlib.metadata.distribution("debist").read_text("top_level.txt")
+    if top_level is not None:  # written by setuptools for both install modes
+        assert top_level.split() == ["debist"]
+
+
+def test_the_checkout_script_runs_without_an_installed_debist(tmp_path):
+    # sys.modules["debist"] = None makes importlib.util.find_spec("debist") answer None, as in
+    # a bare checkout; cli.py must then load ./pipeline under the name debist itself
+    code = (
+        "import sys, runpy; sys.modules['debist'] = None; sys.argv = ['cli.py', '--version'];"
+        f"runpy.run_path({str(ROOT / 'cli.py')!r}, run_name='__main__')"
+    )
+    run = _python(code, tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert debist.__version__ in run.stdout
+
+
+def test_python_dash_m_debist_is_the_command_line(tmp_path):
+    run = subprocess.run(
+        [sys.executable, "-m", "debist", "--version"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    assert debist.__version__ in run.stdout
+
+
+@pytest.mark.parametrize("folder", ["pipeline", "debist"])
+def test_fingerprints_do_not_depend_on_the_source_folders_name(tmp_path, folder):
+    copy = tmp_path / folder
+    shutil.copytree(ROOT / "pipeline", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    module = "debist.stages.identify"
+    assert code_fingerprint(module, copy) == code_fingerprint(module, ROOT / "pipeline")
