@@ -70,6 +70,7 @@ __all__ = [
     "Manifest",
     "canonical_json",
     "changed_outputs",
+    "checked_output",
     "foreign_files",
     "foreign_message",
     "library_versions",
@@ -320,15 +321,44 @@ def read_summary(stage_dir: str | os.PathLike, manifest: Manifest) -> dict[str, 
         If ``summary.json`` is missing or does not hash to the manifest: a report is never
         printed from content the manifest does not vouch for.
     """
-    expected = manifest.outputs.get(SUMMARY)
-    if expected is None:
+    if SUMMARY not in manifest.outputs:
         return {}
-    path = Path(stage_dir) / SUMMARY
+    path = checked_output(stage_dir, manifest, SUMMARY)
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def checked_output(stage_dir: str | os.PathLike, manifest: Manifest, rel: str) -> Path:
+    """Return the path of one output after checking its bytes against the manifest.
+
+    Parameters
+    ----------
+    stage_dir : path-like
+        The stage folder.
+    manifest : Manifest
+        Its manifest.
+    rel : str
+        The output's path relative to the stage folder, as the manifest lists it.
+
+    Returns
+    -------
+    pathlib.Path
+        The file, whose sha256 is the one the manifest records.
+
+    Raises
+    ------
+    ArtifactError
+        If the manifest does not list ``rel``, or the file is missing or does not hash to
+        the manifest: nothing is read from content the manifest does not vouch for.
+    """
+    expected = manifest.outputs.get(rel)
+    path = _inside(Path(stage_dir), rel)
+    if expected is None:
+        raise ArtifactError(f"'{path}' is not an output of this stage (its manifest lacks it)")
     if not path.is_file() or sha256_file(path) != expected:
         raise ArtifactError(
             f"'{path}' is missing or changed since the stage wrote it (run `debist verify`)"
         )
-    return json.loads(path.read_text(encoding="utf-8"))
+    return path
 
 
 def changed_outputs(stage_dir: str | os.PathLike, manifest: Manifest) -> list[str]:

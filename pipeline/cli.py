@@ -331,16 +331,20 @@ def _progress() -> Iterator[_Display | None]:
             display.finish()
 
 
-def _events(runner, display: _Display | None, ran: set[str]):
-    """Return the runner's ``on_event`` callback: stage lines, and with ``-v`` why and timings.
+def _events(wf, display: _Display | None, ran: set[str]):
+    """Return the API's ``on_progress`` callback: stage lines, bars, and with ``-v`` timings.
 
     The names of the stages that ran go into ``ran``.
     """
     verbose = _level["value"] > 0
 
-    def on_event(stage: str, what: str, detail: str) -> None:
+    def on_progress(event) -> None:
+        stage, what, detail = event.stage, event.what, event.detail
         why = f" ({escape(detail)})" if verbose and detail else ""
-        if what == "skip":
+        if what == "step":
+            if display is not None:
+                display.listen(detail, event.done, event.total)
+        elif what == "skip":
             console.print(f"[dim]Stage '{stage}' is up to date, skipping{why}[/dim]")
         elif what == "start":
             if display is not None:
@@ -355,9 +359,9 @@ def _events(runner, display: _Display | None, ran: set[str]):
             ran.add(stage)
             console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
             if verbose:
-                _print_timings(runner.wf.stage_dir(stage))
+                _print_timings(wf.stage_dir(stage))
 
-    return on_event
+    return on_progress
 
 
 def _print_timings(stage_dir: Path) -> None:
@@ -371,14 +375,14 @@ def _print_timings(stage_dir: Path) -> None:
         console.print(f"[dim]  timings: {escape(', '.join(parts))}[/dim]", soft_wrap=True)
 
 
-def _convergence_notice(runner, manifests) -> str | None:
+def _convergence_notice(wf, manifests) -> str | None:
     """Say on how many data sets TVRegDiff stopped at its iteration limit, and what to change."""
     diff = manifests.get("differentiate")
     stopped = [n for n, ok in (diff.summary.get("converged", {}) if diff else {}).items() if not ok]
     if not stopped:
         return None
     names = ", ".join(stopped[:3]) + (", ..." if len(stopped) > 3 else "")
-    section = runner.wf.section("differentiate")
+    section = wf.section("differentiate")
     try:
         from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 
@@ -397,10 +401,10 @@ def _convergence_notice(runner, manifests) -> str | None:
     )
 
 
-def _report(runner, manifests, ran: set[str]) -> None:
+def _report(wf, manifests, ran: set[str]) -> None:
     from debist import report
 
-    notice = _convergence_notice(runner, manifests)
+    notice = _convergence_notice(wf, manifests)
     if notice and ("differentiate" in ran or _level["value"] > 0):  # once, not on every rerun
         console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
     if "rig" in manifests:
@@ -433,7 +437,7 @@ def _report(runner, manifests, ran: set[str]) -> None:
         )
         if table is not None:
             console.print(table)
-    console.print(f"[dim]artifacts: {escape(str(runner.wf.output_dir))}[/dim]")
+    console.print(f"[dim]artifacts: {escape(str(wf.output_dir))}[/dim]")
 
 
 def _run(
@@ -445,23 +449,28 @@ def _run(
     select: dict[str, str | None] | None = None,
     sets: list[str] | None = None,
 ) -> None:
+    from debist import api
+    from debist.runner import Runner
+
     with _guard():
-        runner = _runner(workflow, out, wait, sets)
+        wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if select is not None:
             listed = select["stages"]
             names = (
                 [n.strip() for n in listed.split(",") if n.strip()] if listed is not None else None
             )
-            stages = runner.select(names, start=select["start"], until=select["until"])
+            stages = Runner(wf).select(names, start=select["start"], until=select["until"])
         ran: set[str] = set()
         with _progress() as display:
-            manifests = runner.run(stages, force=force, on_event=_events(runner, display, ran))
-        _report(runner, manifests, ran)
-        if stages is None and (digest := runner.digest()) is not None:
-            _essential(f"run digest: [bold]{digest}[/bold]")
+            result = api.run(
+                wf, stages=stages, force=force, wait=wait, on_progress=_events(wf, display, ran)
+            )
+        _report(wf, result.manifests, ran)
+        if result.digest is not None:
+            _essential(f"run digest: [bold]{result.digest}[/bold]")
             console.print(
                 f"[dim]check it later with: debist verify {escape(str(workflow))} "
-                f"--digest {digest}[/dim]",
+                f"--digest {result.digest}[/dim]",
                 soft_wrap=True,
             )
 

@@ -288,8 +288,7 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
     """
     table = Table(title="Free-run validation (NRMSE, Eq. 41)")
     params = bool(rows) and "n_params" in rows[0]
-    keys = ["nrmse_q", "nrmse_phi", "nrmse_q_dot", "nrmse_q_ddot"]
-    keys = [k for k in keys if rows and k in rows[0]]
+    keys = _nrmse_keys(rows)
     cols = ["data set", "role", "model"]
     cols += [f"NRMSE({k.removeprefix('nrmse_')})" for k in keys] + ["RMS(q)"]
     for col in cols + (["params"] if params else []):
@@ -306,6 +305,57 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
         rms_cell = failed if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
         table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, verdict(r, rows))
     return table
+
+
+def _nrmse_keys(rows: list[dict[str, Any]]) -> list[str]:
+    """Return the NRMSE columns of a table's rows, in the order the reports show them."""
+    keys = ["nrmse_q", "nrmse_phi", "nrmse_q_dot", "nrmse_q_ddot"]
+    return [k for k in keys if rows and k in rows[0]]
+
+
+def nrmse_frame(rows: list[dict[str, Any]]) -> Any:
+    """Return the NRMSE table the CLI prints (:func:`nrmse_table`) as numbers in a DataFrame.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of ``nrmse.parquet`` (NRMSE stored as fractions).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``data set, role, model``, ``NRMSE(q) [%]`` and the others the rows have
+        (``NRMSE(phi) [%]``, ``NRMSE(q_dot) [%]``, ``NRMSE(q_ddot) [%]``: percent of the
+        measured range, Eq. 41; NaN where the model does not predict the quantity or did
+        not finish), ``RMS(q)`` and ``RMS(q) unit``, ``params`` when the rows have it,
+        ``status`` and ``verdict`` (the CLI's words).
+
+    Examples
+    --------
+    >>> rows = [{"dataset": "a", "role": "validation", "model": "rbf", "nrmse_q": 0.0123,
+    ...          "rms_q": 0.2, "rms_unit": "mm", "status": "ok", "nrmse_q_baseline": 0.3}]
+    >>> frame = nrmse_frame(rows)
+    >>> round(float(frame.loc[0, "NRMSE(q) [%]"]), 6), frame.loc[0, "verdict"]
+    (1.23, 'ok')
+    """
+    import pandas as pd
+
+    keys = _nrmse_keys(rows)
+    params = bool(rows) and "n_params" in rows[0]
+    records = []
+    for r in rows:
+        record: dict[str, Any] = {"data set": r["dataset"], "role": r["role"], "model": r["model"]}
+        for k in keys:
+            value = math.nan if not_modelled(r, k) else _num_or_nan(r[k])
+            record[f"NRMSE({k.removeprefix('nrmse_')}) [%]"] = 100.0 * value
+        record["RMS(q)"] = _num_or_nan(r["rms_q"])
+        record["RMS(q) unit"] = r["rms_unit"]
+        if params:
+            record["params"] = int(r["n_params"])
+        record["status"] = r.get("status") or "diverged"
+        record["verdict"] = verdict(r, rows)
+        records.append(record)
+    return pd.DataFrame.from_records(records)
 
 
 #: Models that predict q only (a NARX model): their velocity and acceleration columns are "n/a".

@@ -108,6 +108,36 @@ MOVING_FRACTION = 0.1
 _D_PREFIX, _D_SCALARS = "d[", ("viscous", "physics_damping")
 
 
+def point_curves(model, q: np.ndarray) -> dict[str, np.ndarray]:
+    """Evaluate the identified curves at positions ``q`` as the columns of the curve table.
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model.
+    q : ndarray, shape (n,)
+        Positions [unit of q].
+
+    Returns
+    -------
+    dict of str to ndarray, each shape (n,)
+        ``q``, ``c``, ``d``, ``cq`` (``c(q) q``), ``restoring`` (``c(q) q + F_0``, the
+        static force at v = 0), then per input ``g<i>`` and ``dC<i>_dq`` (``2 g_i``).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-39 and Fig. 14.
+    """
+    cur = model.curves(q)
+    F_0 = float(model.backbone.get("F_0", 0.0))
+    frame = {"q": q, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
+    frame["restoring"] = cur["cq"] + F_0
+    for j in range(model.n_inputs):
+        frame[f"g{j + 1}"] = cur["g"][:, j]
+        frame[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    return frame
+
+
 def curve_names(n_inputs: int) -> list[str]:
     """Names of the curves with bands: ``restoring``, ``d``, ``g1`` .. ``gN``."""
     return ["restoring", "d", *[f"g{j + 1}" for j in range(n_inputs)]]
@@ -515,14 +545,8 @@ def curves_frame(
     from debist.identify.excitation import input_active, quasi_static
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
-    cur = model.curves(grid)
-    F_0 = float(model.backbone.get("F_0", 0.0))
-    frame = {"q": grid, "c": cur["c"], "d": cur["d"], "cq": cur["cq"]}
-    frame["restoring"] = cur["cq"] + F_0
-    point = {"restoring": frame["restoring"], "d": cur["d"]}
-    for j in range(model.n_inputs):
-        frame[f"g{j + 1}"] = point[f"g{j + 1}"] = cur["g"][:, j]
-        frame[f"dC{j + 1}_dq"] = cur["dC_dq"][:, j]
+    frame = point_curves(model, grid)
+    point = {name: frame[name] for name in curve_names(model.n_inputs)}
     maps = curve_maps(
         diag.columns,
         grid,

@@ -1,0 +1,841 @@
+"""debist's Python API: run workflows, read their results, simulate identified models.
+
+The command line (:mod:`debist.cli`) is a display adapter over these functions; a lab's
+script uses them directly::
+
+    import debist
+
+    result = debist.run("workflows/silverbox.toml", overrides={"identify.M": 8})
+    print(result.digest)
+    print(result.nrmse)                      # the table `debist run` prints, in percent
+    model = result.model                     # or debist.load_model("runs/silverbox")
+    sim = model.simulate(t, v, q0=0.0, q_dot0=0.0)
+
+Nothing here prints: progress goes to an optional callback. Every artifact a
+:class:`Result` reads is checked against its stage's manifest first (sha256), so a
+number read here is one the run vouches for.
+
+References
+----------
+Masoud & Maas 2025, Sec. 4-5 (the stages); the shape follows pysindy's model objects
+(``simulate``) and DVC's ``dvc.api`` (a library over the pipeline's artifacts).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from debist import artifacts, progress
+from debist.errors import ArtifactError, WorkflowError
+from debist.workflow import Workflow
+from debist.workflow import load_workflow as _load_workflow
+
+__all__ = [
+    "FleetResult",
+    "Model",
+    "ProgressEvent",
+    "Result",
+    "Verification",
+    "fleet",
+    "load_model",
+    "load_workflow",
+    "open_run",
+    "run",
+    "run_batch",
+    "status",
+    "verify",
+]
+
+PathLike = str | os.PathLike
+
+
+@dataclass(frozen=True)
+class ProgressEvent:
+    """One progress report of :func:`run`.
+
+    Attributes
+    ----------
+    stage : str
+        The stage (empty for a recovery of an interrupted run's leftovers).
+    what : {"recovered", "skip", "start", "done", "step"}
+        A stage skipped as up to date, started, finished; ``"step"`` for the progress of a
+        long computation inside the running stage.
+    detail : str
+        Why a stage runs (``"start"``), its wall time (``"done"``), or the task of a step.
+    done, total : int
+        Work done and in all for a ``"step"`` (``total`` 0 when unknown); 0 otherwise.
+    """
+
+    stage: str
+    what: str
+    detail: str = ""
+    done: int = 0
+    total: int = 0
+
+
+def load_workflow(
+    path: PathLike,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    *,
+    output_dir: PathLike | None = None,
+) -> Workflow:
+    """Read and check a workflow file, with settings overridden for this call.
+
+    Parameters
+    ----------
+    path : path-like
+        The TOML workflow file.
+    overrides : mapping or sequence of str, optional
+        Any key of the workflow, dotted (``{"identify.M": 8, "validate.substeps": 4}``) or
+        as ``"identify.M=8"`` strings; checked by the same schema as the file, and recorded
+        in the stages' manifests.
+    output_dir : path-like, optional
+        Replaces ``[workflow] output_dir``.
+
+    Returns
+    -------
+    Workflow
+        The checked workflow (:class:`debist.workflow.Workflow`).
+
+    Raises
+    ------
+    WorkflowError
+        One line naming the file, the section and the key: a missing or invalid file, an
+        unknown key, a value of the wrong type or range, a missing data file.
+    """
+    return _load_workflow(path, output_dir, overrides)
+
+
+def _workflow(
+    workflow: PathLike | Workflow,
+    overrides: Mapping[str, Any] | Sequence[str] | None,
+    output_dir: PathLike | None,
+) -> Workflow:
+    if isinstance(workflow, Workflow):
+        if overrides or output_dir is not None:
+            raise WorkflowError(
+                "overrides and output_dir go to load_workflow, not with a loaded Workflow"
+            )
+        return workflow
+    return load_workflow(workflow, overrides, output_dir=output_dir)
+
+
+def run(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+    stages: Sequence[str] | None = None,
+    start: str | None = None,
+    until: str | None = None,
+    force: bool = False,
+    wait: bool = False,
+    on_progress: Callable[[ProgressEvent], None] | None = None,
+) -> Result:
+    """Run a workflow's stages, skipping those that are up to date (as ``debist run``).
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        A workflow file, or one loaded by :func:`load_workflow`.
+    overrides : mapping or sequence of str, optional
+        Settings that replace the file's (see :func:`load_workflow`).
+    output_dir : path-like, optional
+        Replaces ``[workflow] output_dir``.
+    stages : sequence of str, optional
+        Run only these stages (their upstream stages must be up to date); default all, and
+        only then does the result carry the run digest.
+    start, until : str, optional
+        Run the range of the workflow's stages from ``start`` to ``until`` (inclusive).
+    force : bool, optional
+        Rerun up-to-date stages too.
+    wait : bool, optional
+        Wait for another process writing to the same output folder instead of refusing.
+    on_progress : callable, optional
+        Called with a :class:`ProgressEvent` per stage event and per step of a long
+        computation. Nothing is printed either way.
+
+    Returns
+    -------
+    Result
+        The run's results, read from its artifacts.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow, override or stage name, or a refused output folder.
+    RunLockedError
+        Another process writes to the output folder (unless ``wait``).
+    DebistError
+        What a stage raised (bad data: the message names the file, channel and value);
+        that stage's previous artifacts stay as they were.
+    """
+    from debist.runner import Runner
+
+    wf = _workflow(workflow, overrides, output_dir)
+    runner = Runner(wf, wait=wait)
+    if start is not None or until is not None:
+        stages = runner.select(stages, start=start, until=until)
+    state = {"stage": ""}
+
+    def on_event(stage: str, what: str, detail: str) -> None:
+        state["stage"] = stage
+        if on_progress is not None:
+            on_progress(ProgressEvent(stage, what, detail))
+
+    def on_step(task: str, done: int, total: int) -> None:
+        if on_progress is not None:
+            on_progress(ProgressEvent(state["stage"], "step", task, done, total))
+
+    with progress.listening(on_step if on_progress is not None else None):
+        manifests = runner.run(stages, force=force, on_event=on_event)
+    digest = runner.digest() if stages is None else None
+    return Result(wf, manifests, digest)
+
+
+def status(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> list[Any]:
+    """Say per stage whether it is up to date, stale (and why) or missing; reads only.
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    list of debist.runner.StageStatus
+        In execution order: ``stage``, ``state`` (``"up to date"``, ``"stale"``,
+        ``"missing"``) and the ``reasons``.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    """
+    from debist.runner import Runner
+
+    return Runner(_workflow(workflow, overrides, output_dir)).status()
+
+
+@dataclass(frozen=True)
+class Verification:
+    """What :func:`verify` found.
+
+    Attributes
+    ----------
+    problems : tuple of str
+        Each naming a file: modified, missing or unlisted artifacts, a broken chain of
+        manifests, a digest that differs. Empty when the run is intact.
+    notes : tuple of str
+        Libraries installed now in other versions than those that made the run (not a
+        failure: a rerun may give other bytes).
+    """
+
+    problems: tuple[str, ...]
+    notes: tuple[str, ...]
+
+    @property
+    def ok(self) -> bool:
+        """Whether every artifact matches its manifest and the chain holds."""
+        return not self.problems
+
+
+def verify(
+    workflow: PathLike | Workflow,
+    digest: str | None = None,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> Verification:
+    """Re-hash every artifact of a run and check the chain of manifests (``debist verify``).
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`: the run is checked against the workflow as it is now.
+    digest : str, optional
+        A run digest (:attr:`Result.digest`) the manifests must be exactly those of.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    Verification
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    RunLockedError
+        While another process writes to the output folder.
+    """
+    from debist.runner import Runner
+
+    runner = Runner(_workflow(workflow, overrides, output_dir))
+    return Verification(tuple(runner.verify(digest)), tuple(runner.version_notes()))
+
+
+def run_batch(
+    workflows: PathLike | Iterable[PathLike],
+    *,
+    stages: Sequence[str] | None = None,
+    force: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    address: str | None = None,
+    on_done: Callable[[Any], None] | None = None,
+) -> list[Any]:
+    """Run many workflows as Dask tasks; one result or failure per workflow (``debist batch``).
+
+    Parameters
+    ----------
+    workflows : path-like or iterable of path-like
+        Workflow files, folders (their ``*.toml``) or glob patterns.
+    stages, force : optional
+        As for :func:`run`, for every workflow.
+    scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
+        Default: a local Dask cluster of ``workers`` processes (see
+        :func:`debist.batch.run_batch`); ``"distributed"`` with ``address``.
+    workers : int, optional
+        Worker processes (default: one per workflow, at most one per CPU).
+    address : str, optional
+        A running Dask scheduler, e.g. ``"tcp://host:8786"``.
+    on_done : callable, optional
+        Called with each :class:`debist.batch.BatchResult` as its workflow finishes.
+
+    Returns
+    -------
+    list of debist.batch.BatchResult
+        In input order: ``ok``, ``error`` (the failure, naming the stage), ``output_dir``
+        (open it with :func:`open_run`), ``summary["nrmse"]`` (rows as fractions).
+
+    Raises
+    ------
+    WorkflowError
+        Before anything runs: no workflow found, an unknown stage or scheduler, two
+        workflows writing to one folder, a cluster that cannot be reached.
+
+    Notes
+    -----
+    Worker processes re-import the calling script: call from under
+    ``if __name__ == "__main__":``.
+    """
+    from debist.batch import expand_workflows
+    from debist.batch import run_batch as _run_batch
+
+    files = expand_workflows(workflows)
+    if not files:
+        raise WorkflowError(f"no workflow file found in {workflows!r}")
+    return _run_batch(
+        files,
+        stages=stages,
+        force=force,
+        scheduler=scheduler,
+        workers=workers,
+        address=address,
+        on_done=on_done,
+    )
+
+
+@dataclass(frozen=True)
+class FleetResult:
+    """The workflows :func:`fleet` wrote.
+
+    Attributes
+    ----------
+    paths : tuple of pathlib.Path
+        One workflow file per kept prototype, in draw order.
+    rejected : dict of str to str
+        Draws skipped because their logs fail the template's ingest, with the reason.
+    """
+
+    paths: tuple[Path, ...]
+    rejected: dict[str, str]
+
+
+def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> FleetResult:
+    """Write one workflow per prototype of a seeded fleet around a template's rig.
+
+    Each prototype's rig experiments are run once and its logs checked by the template's
+    own ingest; a draw whose logs fail is skipped (and named), the next draw taken.
+
+    Parameters
+    ----------
+    template : path-like
+        A workflow with a ``[rig]`` section.
+    size : int
+        Prototypes wanted, ``>= 1``.
+    seed : int, optional
+        Seed of the scatter.
+    folder : path-like
+        Where the workflows go; it must not hold workflows already.
+
+    Returns
+    -------
+    FleetResult
+
+    Raises
+    ------
+    WorkflowError
+        An unreadable template, one without ``[rig]``, a folder that holds workflows
+        already (nothing is overwritten), or too few viable draws.
+    """
+    import tomllib
+
+    from debist.fleetrun import viable_fleet
+
+    template, folder = Path(template), Path(folder)
+    if size < 1:
+        raise WorkflowError(f"fleet size must be at least 1, got {size}")
+    try:
+        raw = tomllib.loads(template.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
+    existing = sorted(folder.glob("*.toml")) if folder.is_dir() else []
+    if existing:
+        raise WorkflowError(
+            f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
+            "folder (debist never overwrites them)"
+        )
+    files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
+    paths = artifacts.write_text_files(folder, files)
+    return FleetResult(tuple(paths), dict(rejected))
+
+
+# ------------------------------------------------------------------- results
+
+
+class Result:
+    """The results of a workflow's run, read from its checked artifacts.
+
+    Made by :func:`run` or :func:`open_run`; every table is read on first access, after its
+    sha256 was checked against the stage's manifest.
+
+    Parameters
+    ----------
+    workflow : Workflow
+        The workflow that ran.
+    manifests : dict of str to Manifest
+        The manifest of every stage considered.
+    digest : str or None
+        The run digest (None for a partial run).
+    """
+
+    def __init__(
+        self,
+        workflow: Workflow,
+        manifests: Mapping[str, artifacts.Manifest],
+        digest: str | None,
+    ):
+        self.workflow = workflow
+        self.manifests = dict(manifests)
+        self.digest = digest
+
+    def __repr__(self) -> str:
+        stages = ", ".join(self.manifests)
+        return f"<debist.Result {self.workflow.name!r}: {stages}; digest {self.digest}>"
+
+    @property
+    def output_dir(self) -> Path:
+        """The run's artifact folder."""
+        return self.workflow.output_dir
+
+    def _manifest(self, stage: str) -> artifacts.Manifest:
+        manifest = self.manifests.get(stage)
+        if manifest is None:
+            raise ArtifactError(
+                f"the run of '{self.workflow.name}' has no '{stage}' stage "
+                f"(it has: {', '.join(self.manifests) or 'none'})"
+            )
+        return manifest
+
+    def path(self, stage: str, rel: str) -> Path:
+        """Return an artifact's path after checking its bytes against the stage's manifest.
+
+        Parameters
+        ----------
+        stage : str
+            Stage name.
+        rel : str
+            Path inside the stage folder (``"nrmse.parquet"``, ``"model.h5"``).
+
+        Returns
+        -------
+        pathlib.Path
+
+        Raises
+        ------
+        ArtifactError
+            The stage did not run, does not list the file, or the file changed.
+        """
+        return artifacts.checked_output(self.workflow.stage_dir(stage), self._manifest(stage), rel)
+
+    def summary(self, stage: str) -> dict[str, Any]:
+        """Return a stage's checked ``summary.json`` (small results, as the CLI prints them).
+
+        Raises
+        ------
+        ArtifactError
+            The stage did not run or its summary changed.
+        """
+        return artifacts.read_summary(self.workflow.stage_dir(stage), self._manifest(stage))
+
+    def table(self, stage: str, rel: str) -> pd.DataFrame:
+        """Read a Parquet artifact after checking it (see :meth:`path`)."""
+        return artifacts.read_parquet(self.path(stage, rel))
+
+    @property
+    def _scored(self) -> str:
+        return "compare" if "compare" in self.manifests else "validate"
+
+    @cached_property
+    def nrmse(self) -> pd.DataFrame:
+        """The free-run NRMSE table (Eq. 41) that ``debist run`` prints, in percent.
+
+        The compare stage's when it ran (RBF, SINDy and NARX rows), else the validate
+        stage's; columns as :func:`debist.report.nrmse_frame` (units in the names).
+
+        Raises
+        ------
+        ArtifactError
+            Neither stage ran.
+        """
+        from debist.report import nrmse_frame
+
+        return nrmse_frame(self.summary(self._scored)["table"])
+
+    @cached_property
+    def nrmse_raw(self) -> pd.DataFrame:
+        """Every column of the stage's ``nrmse.parquet``, one row per data set and model.
+
+        NRMSE as fractions, the k-step-ahead scores and the residual whiteness beside them.
+        """
+        return self.table(self._scored, "nrmse.parquet")
+
+    @cached_property
+    def curves(self) -> pd.DataFrame:
+        """The identified characteristic curves on a grid of q, with their bands and masks.
+
+        Columns ``q`` [unit of q], ``restoring``, ``d``, ``g1``... and per curve ``_lo``,
+        ``_hi`` (the band of ``attrs["band"]``) and ``_identified`` (where the data
+        inform it); ``attrs["band"]`` says what the band holds.
+        """
+        frame = self.table("identify", "curves.parquet")
+        frame.attrs["band"] = self.summary("identify").get("bands", {}).get("label", "")
+        return frame
+
+    @cached_property
+    def equilibria(self) -> pd.DataFrame:
+        """Equilibria of the identified (and analytical) model with their stability."""
+        return self.table("identify", "equilibria.parquet")
+
+    @cached_property
+    def switching(self) -> pd.DataFrame:
+        """Switching levels of each input, in the input's own unit."""
+        return self.table("identify", "switching.parquet")
+
+    @cached_property
+    def model(self) -> Model:
+        """The identified model (``identify/model.h5``), ready to simulate."""
+        return Model.from_h5(self.path("identify", "model.h5"), self.summary("identify"))
+
+    def free_run(self, dataset: str) -> pd.DataFrame:
+        """Measured and simulated trajectories of one data set.
+
+        Parameters
+        ----------
+        dataset : str
+            Data set name (a row of :attr:`nrmse`).
+
+        Returns
+        -------
+        pandas.DataFrame
+            The validate stage's ``t, q`` and the identified model's ``q_sim, q_dot_sim,
+            q_ddot_sim``, the other models validated beside it with their name as suffix
+            (``q_sim_analytical``, ``q_sim_rbf-ls``), and when the compare stage ran SINDy's
+            (``q_sim_sindy``...) and the NARX peer's (``q_sim_narx``).
+
+        Raises
+        ------
+        ArtifactError
+            No such data set, or a file changed.
+        """
+        rel = f"simulated/{dataset}.parquet"
+        frame = self.table("validate", rel)
+        if "compare" in self.manifests:
+            other = self.table("compare", rel).drop(columns=["t", "q"])
+            other = other.rename(columns=lambda c: c if c.endswith("_narx") else f"{c}_sindy")
+            frame = pd.concat([frame, other], axis=1)
+        return frame
+
+
+def open_run(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> Result:
+    """Open the results of a workflow that ran before, without running anything.
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    Result
+        With the manifests of the stages that have artifacts; ``digest`` when all do.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    """
+    from debist.runner import Runner
+
+    wf = _workflow(workflow, overrides, output_dir)
+    runner = Runner(wf)
+    manifests = {}
+    for stage in runner.stages():
+        manifest = artifacts.read_manifest(wf.stage_dir(stage))
+        if manifest is not None:
+            summary = artifacts.read_summary(wf.stage_dir(stage), manifest)
+            manifests[stage] = replace(manifest, summary=summary)
+    return Result(wf, manifests, runner.digest())
+
+
+# --------------------------------------------------------------------- model
+
+
+class Model:
+    """An identified model (Eq. 37-40): simulate it, evaluate its curves and equilibria.
+
+    Parameters
+    ----------
+    rbf : debist.identify.RBFModel
+        The identified model.
+    units : dict, optional
+        The identify stage's units (``q``, ``v1``...); for labels only.
+
+    See Also
+    --------
+    load_model : from a run folder or a ``model.h5``.
+    """
+
+    def __init__(self, rbf: Any, units: Mapping[str, Any] | None = None):
+        self.rbf = rbf
+        self.units = dict(units or {})
+
+    @classmethod
+    def from_h5(cls, path: PathLike, summary: Mapping[str, Any] | None = None) -> Model:
+        """Load from an identify stage's ``model.h5`` (:meth:`RBFModel.from_tree`)."""
+        from debist.identify import RBFModel
+
+        tree = artifacts.read_h5(path)
+        return cls(RBFModel.from_tree(tree), (summary or {}).get("units"))
+
+    def __repr__(self) -> str:
+        m = self.rbf
+        return (
+            f"<debist.Model: {m.basis.xi.size} RBF centres, {m.n_inputs} input(s), "
+            f"{m.n_params} parameters, T_z = {m.T_z:.4g} s>"
+        )
+
+    @property
+    def n_inputs(self) -> int:
+        """Number of inputs v_i."""
+        return int(self.rbf.n_inputs)
+
+    @property
+    def q_range(self) -> tuple[float, float]:
+        """The estimation range of q [unit of q]: where the model was fitted."""
+        lo, hi = self.rbf.q_range
+        return float(lo), float(hi)
+
+    def simulate(
+        self,
+        t: np.ndarray,
+        v: np.ndarray,
+        q0: float,
+        q_dot0: float,
+        *,
+        substeps: int = 2,
+        interpolation: str = "bandlimited",
+        engine: str = "compiled",
+        q_limit: float | None = None,
+    ) -> pd.DataFrame:
+        """Free-run the model on new inputs (the validate stage's simulator and settings).
+
+        Parameters
+        ----------
+        t : ndarray, shape (n,)
+            Uniformly sampled time [s].
+        v : ndarray, shape (n,) or (n, n_inputs)
+            Inputs [V] (the unit the model was identified in).
+        q0, q_dot0 : float
+            Initial position [unit of q] and velocity [unit of q / s].
+        substeps : int, optional
+            RK4 steps per sample interval (``[validate] substeps``, default 2).
+        interpolation : {"bandlimited", "linear"}, optional
+            Input interpolation between samples.
+        engine : {"compiled", "numpy"}, optional
+            The compiled kernel or the NumPy reference (same numbers to rounding).
+        q_limit : float, optional
+            ``|q|`` beyond which the run counts as diverged; default twice the largest
+            ``|q|`` of the estimation range, as validate.
+
+        Returns
+        -------
+        pandas.DataFrame
+            ``t, q, q_dot, q_ddot`` (NaN after a divergence; ``attrs["diverged_at"]`` is
+            its sample index, -1 if none).
+
+        Raises
+        ------
+        ValueError
+            Time not uniform and increasing, inputs of the wrong shape or not finite.
+        ResourceError
+            The run would exceed the memory budget.
+
+        References
+        ----------
+        Masoud & Maas 2025, Sec. 5.2 (free-run simulation).
+        """
+        from debist.simulate import simulate
+        from debist.validate import default_q_limit
+
+        t = np.asarray(t, dtype=float)
+        v = np.asarray(v, dtype=float)
+        if v.ndim == 1:
+            v = v[:, None]
+        if t.ndim != 1 or t.size < 2:
+            raise ValueError(f"t must be 1-D with at least 2 samples, got shape {t.shape}")
+        if v.shape != (t.size, self.n_inputs):
+            raise ValueError(
+                f"v must have shape ({t.size}, {self.n_inputs}) for this model, got {v.shape}"
+            )
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+            raise ValueError("t and v must be finite")
+        steps = np.diff(t)
+        dt = float(np.median(steps))
+        if dt <= 0 or np.max(np.abs(steps - dt)) > 1e-6 * dt:
+            raise ValueError("t must increase in uniform steps (resample the inputs first)")
+        limit = default_q_limit(self.rbf.q_range) if q_limit is None else float(q_limit)
+        (res,) = simulate(
+            self.rbf,
+            [v],
+            dt,
+            np.array([float(q0)]),
+            np.array([float(q_dot0)]),
+            substeps=substeps,
+            interpolation=interpolation,
+            q_limit=limit,
+            engine=engine,
+        )
+        frame = pd.DataFrame({"t": t, "q": res.q, "q_dot": res.q_dot, "q_ddot": res.q_ddot})
+        frame.attrs["diverged_at"] = res.diverged_at
+        return frame
+
+    def curves(self, q: np.ndarray) -> pd.DataFrame:
+        """Evaluate the identified curves of Eq. 37 at positions ``q``.
+
+        Parameters
+        ----------
+        q : ndarray, shape (n,)
+            Positions [unit of q].
+
+        Returns
+        -------
+        pandas.DataFrame
+            The columns of the identify stage's curve table without its bands (those are in
+            :attr:`Result.curves`): ``q, c, d, cq, restoring`` (``c(q) q + F_0``), ``g1,
+            dC1_dq``, ... (:func:`debist.identify.bands.point_curves`).
+        """
+        from debist.identify.bands import point_curves
+
+        return pd.DataFrame(point_curves(self.rbf, np.atleast_1d(np.asarray(q, dtype=float))))
+
+    def equilibria(self, v: Sequence[float] | Sequence[Sequence[float]] = ()) -> pd.DataFrame:
+        """Equilibria at rest and at constant inputs, with their stability.
+
+        Parameters
+        ----------
+        v : sequence of float, or sequence of sequences
+            One input level ``(v_1, ..., v_N)`` [V] or several; the rest level (all 0) is
+            always level 0.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per equilibrium: level, inputs, ``q``, stiffness ``k``, damping ``d``,
+            natural frequency ``f_n``, stability
+            (:func:`debist.identify.stability.stability_table`).
+
+        Raises
+        ------
+        StabilityError
+            A level without ``n_inputs`` values.
+        """
+        from debist.identify.stability import stability_table
+
+        levels = np.atleast_2d(np.asarray(v, dtype=float)) if len(v) else np.empty((0, 0))
+        return stability_table(self.rbf, [tuple(map(float, row)) for row in levels])
+
+
+def load_model(path: PathLike) -> Model:
+    """Load an identified model: a run's output folder, its ``identify`` folder or a ``model.h5``.
+
+    From a run folder the file is checked against the identify stage's manifest first.
+
+    Parameters
+    ----------
+    path : path-like
+        The output folder of a run, its ``identify`` folder, or a ``model.h5`` file.
+
+    Returns
+    -------
+    Model
+
+    Raises
+    ------
+    ArtifactError
+        No model there, or a ``model.h5`` that does not hash to its manifest.
+    """
+    path = Path(path)
+    folder = path if path.is_dir() else None
+    if folder is not None and (folder / "identify").is_dir():
+        folder = folder / "identify"
+    if folder is None:
+        return Model.from_h5(path) if path.is_file() else _no_model(path)
+    manifest = artifacts.read_manifest(folder)
+    if manifest is None:
+        return _no_model(path)
+    return Model.from_h5(
+        artifacts.checked_output(folder, manifest, "model.h5"),
+        artifacts.read_summary(folder, manifest),
+    )
+
+
+def _no_model(path: Path) -> Model:
+    raise ArtifactError(
+        f"'{path}' is not a run folder, an identify folder or a model.h5 file "
+        "(run the workflow first: debist.run(...))"
+    )

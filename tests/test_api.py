@@ -1,0 +1,137 @@
+"""The Python API (debist.api): the same run, numbers and free runs as the command line."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import debist
+from debist import artifacts
+from debist.errors import ArtifactError, WorkflowError
+
+
+@pytest.fixture
+def run_copy(synthetic_run, tmp_path):
+    """A private copy of the synthetic workflow's complete run (the CLI's), and its digest."""
+    root, digest = synthetic_run
+    shutil.copytree(root, tmp_path / "p")
+    return tmp_path / "p", digest
+
+
+def test_import_debist_is_light_and_lists_its_api():
+    code = "import sys, debist; print(sorted(m for m in ('numpy', 'pandas') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "[]", out.stderr
+    for name in ("run", "load_workflow", "load_model", "run_batch", "verify", "Result", "Model"):
+        assert name in debist.__all__ and callable(getattr(debist, name))
+    with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
+        debist.nonsense  # noqa: B018
+
+
+def test_run_skips_what_is_up_to_date_prints_nothing_and_reports_progress(run_copy, capfd):
+    root, digest = run_copy
+    events = []
+    result = debist.run(root / "wf.toml", on_progress=events.append)
+    captured = capfd.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert result.digest == digest
+    assert {e.what for e in events} == {"skip"}
+    assert [e.stage for e in events] == list(result.manifests)
+    assert debist.verify(root / "wf.toml", digest).ok
+
+
+def test_nrmse_is_the_table_the_cli_prints_in_percent(synthetic_run):
+    root, _ = synthetic_run
+    result = debist.open_run(root / "wf.toml")
+    raw = artifacts.read_parquet(root / "out/compare/nrmse.parquet")  # rbf, sindy, narx
+    frame = result.nrmse
+    assert list(frame["model"]) == list(raw["model"])
+    np.testing.assert_allclose(frame["NRMSE(q) [%]"], 100.0 * raw["nrmse_q"], rtol=1e-15)
+    np.testing.assert_allclose(frame["NRMSE(q_dot) [%]"], 100.0 * raw["nrmse_q_dot"])
+    assert set(frame["verdict"]) <= {"ok"} | {v for v in frame["verdict"] if v}
+    # the CLI's own output of that run shows the same percentages, to its two decimals
+    from conftest import invoke_cli
+
+    code, out = invoke_cli("run", root / "wf.toml")
+    assert code == 0
+    for value in frame["NRMSE(q) [%]"]:
+        assert f"{value:.2f} %" in out
+
+
+def test_overrides_change_the_run_and_are_recorded(run_copy):
+    root, digest = run_copy
+    events = []
+    result = debist.run(root / "wf.toml", overrides={"identify.M": 6}, on_progress=events.append)
+    assert result.digest != digest
+    assert result.manifests["identify"].config["M"] == 6
+    assert "identify" in {e.stage for e in events if e.what == "done"}
+    assert result.model.rbf.basis.xi.size == 6
+    # the same overrides verify; the file's own settings no longer do
+    assert debist.verify(root / "wf.toml", overrides={"identify.M": 6}).ok
+    assert not debist.verify(root / "wf.toml").ok
+    with pytest.raises(WorkflowError, match="identify"):
+        debist.load_workflow(root / "wf.toml", {"identify.M": "many"})
+
+
+def test_model_simulate_reproduces_the_validate_stage_free_run(synthetic_run):
+    root, _ = synthetic_run
+    result = debist.open_run(root / "wf.toml")
+    model = debist.load_model(root / "out")
+    measured = result.table("ingest", "check.parquet")
+    derivs = result.table("differentiate", "check.parquet")
+    v = measured[["v1", "v2"]].to_numpy()
+    sim = model.simulate(measured["t"].to_numpy(), v, measured["q"][0], derivs["q_dot"][0])
+    validated = result.free_run("check")
+    # validate runs both records as one batch (inputs interpolated together): equal to 1e-12
+    assert np.max(np.abs(sim["q"] - validated["q_sim"])) <= 1e-12  # [m]
+    assert np.max(np.abs(sim["q_dot"] - validated["q_dot_sim"])) <= 1e-9  # [m/s]
+    scale = np.ptp(validated["q"])
+    # the NumPy reference engine: the same scheme, equal to rounding
+    ref = model.simulate(
+        measured["t"].to_numpy(), v, measured["q"][0], derivs["q_dot"][0], engine="numpy"
+    )
+    np.testing.assert_allclose(ref["q"], sim["q"], rtol=0, atol=1e-9 * scale)
+
+
+def test_model_curves_and_equilibria_are_the_identify_stages(synthetic_run):
+    root, _ = synthetic_run
+    result = debist.open_run(root / "wf.toml")
+    curves = result.curves
+    evaluated = result.model.curves(curves["q"].to_numpy())
+    np.testing.assert_allclose(evaluated["g1"], curves["g1"], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(evaluated["d"], curves["d"], rtol=1e-12, atol=1e-300)
+    assert "holds" in curves.attrs["band"] or "band" in curves.attrs["band"]
+    rest = result.model.equilibria()
+    stored = result.equilibria
+    stored = stored[(stored["model"] == "rbf") & (stored["level"] == 0)]
+    np.testing.assert_allclose(np.sort(rest["q"]), np.sort(stored["q"]), rtol=1e-9)
+    # wells are statically stable (k > 0), the saddle between them is not
+    assert list(rest.sort_values("q")["static_stable"]) == [True, False, True]
+
+
+def test_a_changed_artifact_is_never_read(run_copy):
+    root, _ = run_copy
+    model_file = root / "out/identify/model.h5"
+    model_file.write_bytes(model_file.read_bytes() + b"\0")
+    with pytest.raises(ArtifactError, match="changed since the stage wrote it"):
+        debist.load_model(root / "out")
+    with pytest.raises(ArtifactError, match="changed since the stage wrote it"):
+        debist.open_run(root / "wf.toml").model  # noqa: B018
+    found = debist.verify(root / "wf.toml")
+    assert not found.ok and any("model.h5" in p for p in found.problems)
+
+
+def test_simulate_refuses_bad_inputs_by_name(synthetic_run):
+    root, _ = synthetic_run
+    model = debist.load_model(root / "out/identify")
+    t = np.arange(0.0, 0.1, 1e-3)
+    with pytest.raises(ValueError, match=r"v must have shape \(100, 2\)"):
+        model.simulate(t, np.zeros(t.size), 0.0, 0.0)
+    with pytest.raises(ValueError, match="uniform"):
+        model.simulate(t**2, np.zeros((t.size, 2)), 0.0, 0.0)
+    with pytest.raises(ArtifactError, match="not a run folder"):
+        debist.load_model(root)

@@ -1,0 +1,46 @@
+"""The README's Python section, run as the script it is (a fresh folder, the shipped workflows)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def readme_script() -> str:
+    """The first Python block under the README's "Python API" heading."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("## Python API", 1)[1]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def test_the_readme_names_only_what_the_api_exports():
+    import debist
+
+    called = set(re.findall(r"debist\.([a-z_]+)\(", readme_script()))
+    assert called and called <= set(debist.__all__)
+
+
+@pytest.mark.slow
+def test_the_readme_python_section_runs(tmp_path):
+    shutil.copytree(ROOT / "workflows", tmp_path / "workflows")
+    shutil.copytree(ROOT / "data", tmp_path / "data")
+    (tmp_path / "example.py").write_text(readme_script(), encoding="utf-8")
+    run = subprocess.run(
+        [sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, timeout=1200
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    out = run.stdout
+    assert re.search(r"run digest: [0-9a-f]{64}", out)
+    gap = float(re.search(r"free run: (\S+) m", out).group(1))
+    assert gap <= 1e-12
+    members = re.findall(r"^(\S+) unseen NRMSE\(q\) \[%\]: \[([0-9.]+)\]$", out, re.M)
+    assert len(members) == 3, out
+    assert all(float(value) < 5.0 for _, value in members), members
+    assert len(list((tmp_path / "fleet-api").glob("*.toml"))) == 3
