@@ -567,29 +567,15 @@ def fleet(
     ingest; a draw whose logs fail (e.g. the beam overshoots the laser's range) is skipped
     and said so, and the next draw is taken.
     """
-    import tomllib
-
-    from debist import artifacts
-    from debist.fleetrun import viable_fleet
+    from debist import api
 
     with _guard():
-        try:
-            raw = tomllib.loads(template.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-            raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
-        existing = [p for p in folder.glob("*.toml")] if folder.is_dir() else []
-        if existing:
-            raise WorkflowError(
-                f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
-                "--dir (debist never overwrites them)"
-            )
-        files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
-        paths = artifacts.write_text_files(folder, files)
-    for name, why in rejected.items():
+        made = api.fleet(template, size, seed=seed, folder=folder)
+    for name, why in made.rejected.items():
         console.print(f"skipped {escape(name)}: its log fails the template's ingest: {escape(why)}")
     console.print(
-        f"wrote {len(paths)} workflows to {escape(str(folder))}; run them with: debist batch "
-        f"{escape(str(folder))}"
+        f"wrote {len(made.paths)} workflows to {escape(str(folder))}; run them with: debist "
+        f"batch {escape(str(folder))}"
     )
 
 
@@ -666,15 +652,16 @@ def verify(
     longer give are problems. With --digest, the manifests must also be exactly those of
     the quoted run; a mismatch names the first stage that departs from it.
     """
+    from debist import api
+
     with _guard():
-        runner = _runner(workflow, out, sets=sets)
-        problems = runner.verify(digest)
-        for note in runner.version_notes():  # a note, not a failure
+        found = api.verify(workflow, digest, overrides=sets or None, output_dir=out)
+        for note in found.notes:  # a note, not a failure
             err.print(f"[yellow]note:[/yellow] {escape(note)} (a rerun may give other bytes)")
-        if problems:
-            for p in problems:
+        if found.problems:
+            for p in found.problems:
                 err.print(f"[red]problem:[/red] {escape(p)}")
-            raise typer.Exit(exit_code(VerificationError(problems)))
+            raise typer.Exit(exit_code(VerificationError(list(found.problems))))
     what = "the quoted digest, " if digest else ""
     console.print(f"[green]all artifacts match their manifests, {what}and the chain holds[/green]")
 
