@@ -155,8 +155,6 @@ _TABLE_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """Floats, integers, layout, term order and scratch size of a term table's structure."""
-    from debist.termtable import INPUT_MAP_CODES
-
     n_in = t.n_inputs
     s_codes = np.stack([t.term_skind, t.term_spow], axis=1).reshape(-1, 2)
     s_unique, s_index = np.unique(s_codes, axis=0, return_inverse=True)
@@ -173,7 +171,7 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     lay[_NG] = G
     lay[_QMAX] = int(t.term_qpow.max()) if t.n_terms else 0
     lay[_G] = t.table_q.size
-    lay[_SQUARE] = int(INPUT_MAP_CODES[t.input_map] == 0)
+    lay[_SQUARE] = int(t.squares_inputs)
     lay[_P_CENTRE] = pack.floats(t.base_centre)
     lay[_P_WIDTH] = pack.floats(t.base_width)
     lay[_P_LO] = pack.floats(t.base_lo)

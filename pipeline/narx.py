@@ -46,7 +46,7 @@ from pydantic import Field, PositiveInt
 
 from debist.config import CONFIG, AsTuple, config_from_section
 from debist.errors import DebistWarning, IdentificationError
-from debist.identify.terms import input_map as apply_input_map
+from debist.termtable import input_map as apply_input_map
 from debist.validate import nrmse
 
 __all__ = ["NARX_MISSING", "NarxConfig", "NarxModel", "fit_narx", "narx_available"]

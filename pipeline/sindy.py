@@ -37,7 +37,7 @@ from pydantic import NonNegativeFloat, PositiveInt
 
 from debist.config import CONFIG, config_from_section
 from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
-from debist.identify.terms import input_map
+from debist.termtable import input_map
 
 OPTIMIZERS = ("STLSQ", "SR3")
 

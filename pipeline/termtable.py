@@ -30,11 +30,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from debist.errors import WorkflowError
+
 __all__ = [
     "BASE_GAUSS",
     "BASE_ONE",
     "BASE_TABLE",
-    "INPUT_MAP_CODES",
+    "INPUT_MAPS",
     "S_CREEP",
     "S_ONE",
     "S_POW",
@@ -47,8 +49,40 @@ __all__ = [
 BASE_ONE, BASE_GAUSS, BASE_TABLE = 0, 1, 2
 #: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``, creep state ``w_k`` (k in ``spow``).
 S_ONE, S_POW, S_TANH, S_CREEP = 0, 1, 2, 3
-#: Input maps h(v) by code: ``"v2"`` is v^2 (DE actuators, Eq. 37), ``"v"`` is v.
-INPUT_MAP_CODES = {"v2": 0, "v": 1}
+#: Input maps h(v) of Eq. 37: ``"v2"`` is v^2 (DE actuators: the electrostatic force grows
+#: with v^2), ``"v"`` is v (linear rigs). Every model, the fit and the kernel read this one.
+INPUT_MAPS = ("v2", "v")
+
+
+def input_map(v: np.ndarray, kind: str) -> np.ndarray:
+    """Apply the input map h(v) of the model.
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., n_inputs)
+        Inputs [V].
+    kind : {"v2", "v"}
+        ``"v2"``: h(v) = v^2 [V^2] (DE actuators, Eq. 37); ``"v"``: h(v) = v [V].
+
+    Returns
+    -------
+    ndarray, same shape as ``v``
+
+    Raises
+    ------
+    WorkflowError
+        If ``kind`` is unknown.
+
+    Examples
+    --------
+    >>> input_map(np.array([2.0, -3.0]), "v2")
+    array([4., 9.])
+    """
+    if kind == "v2":
+        return np.square(v)
+    if kind == "v":
+        return np.asarray(v, dtype=float)
+    raise WorkflowError(f"`input_map` must be one of {INPUT_MAPS}, got {kind!r}")
 
 
 def _int(a, shape=None) -> np.ndarray:
@@ -141,9 +175,13 @@ class TermTable:
         return int(self.term_hpow.shape[1])
 
     def map_inputs(self, v: np.ndarray) -> np.ndarray:
-        """Apply the input map: ``h(v)``, same shape as ``v`` [V^2 or V]."""
-        v = np.asarray(v, dtype=float)
-        return v * v if self.input_map == "v2" else v
+        """Apply the input map: ``h(v)``, same shape as ``v`` [V^2 or V] (:func:`input_map`)."""
+        return input_map(np.asarray(v, dtype=float), self.input_map)
+
+    @property
+    def squares_inputs(self) -> bool:
+        """Whether the input map is ``h(v) = v^2`` (the compiled kernel's flag)."""
+        return self.input_map == "v2"
 
     def bases(self, q: np.ndarray) -> np.ndarray:
         """Evaluate every basis.
@@ -401,7 +439,7 @@ class TableModel:
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel (:func:`debist.kernel.table_arrays`)."""
-        from debist.kernel import table_arrays
+        from debist.kernel import table_arrays  # here, not at the top: numba loads on first use
 
         return table_arrays(self)
 

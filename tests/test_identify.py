@@ -5,7 +5,8 @@ from conftest import bistable_truth
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
 from debist.identify.friction import friction_state
-from debist.identify.terms import force_columns, input_columns, input_map
+from debist.identify.terms import force_columns, input_columns
+from debist.termtable import input_map
 
 
 def test_basis_is_eq38_with_equidistant_centres():

@@ -492,11 +492,11 @@ def test_config_from_section_message_format():
 def test_literals_follow_the_registries():
     """Choices written as Literal types in the configs equal the constants they mirror."""
     from debist.identify.config import IdentifyConfig
-    from debist.identify.terms import INPUT_MAPS
     from debist.rig.dspace import MAT_VERSIONS
     from debist.rig.experiment import ExperimentConfig
     from debist.simulate import INTERPOLATIONS
     from debist.sindy import OPTIMIZERS, SindyConfig
+    from debist.termtable import INPUT_MAPS
     from debist.validate import ValidateConfig
 
     def choices(cls, name):

@@ -60,7 +60,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -68,7 +68,13 @@ import pandas as pd
 
 from debist import progress as _progress
 from debist.errors import IdentificationError, WorkflowError
-from debist.identify.config import IdentifyConfig
+from debist.identify.config import (
+    DEFAULT_WINDOW,
+    IdentifyConfig,
+    auto_settings,
+    candidate_config,
+    check_grid,
+)
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.terms import column_names
 
@@ -92,9 +98,6 @@ UNDECIDED_SE = 0.5
 MAX_PRODUCT = 40
 #: Parsimony order of the table's columns: (column, ascending) -- most parsimonious first.
 PARSIMONY = (("n_params", True), ("sigma_n", False), ("lambda", False), ("lowpass", True))
-#: Samples per restarted window of the held-out blocks' multiple-shooting score (as
-#: ``[identify.refine] length``).
-DEFAULT_WINDOW = 300
 #: Samples a held-out segment needs at least to be scored.
 _MIN_SCORED = 10
 
@@ -310,19 +313,6 @@ def _freeze(value: Any) -> Any:
     return tuple(value) if isinstance(value, list | tuple) else value
 
 
-def _candidate_cfg(base: IdentifyConfig, setting: Mapping[str, Any]) -> IdentifyConfig:
-    """Return the base configuration with a candidate's values, without bootstrap."""
-    try:
-        return replace(base, **dict(setting), bootstrap=0)
-    except ValueError as exc:  # pydantic.ValidationError and ConfigValueError
-        errors = getattr(exc, "errors", None)
-        reason = errors()[0]["msg"] if callable(errors) and errors() else str(exc)
-        raise WorkflowError(
-            f"[identify] hyper-parameter grid: the setting {dict(setting)!r} is not a valid "
-            f"configuration: {reason}"
-        ) from None
-
-
 def _n_params(cfg: IdentifyConfig, n_inputs: int) -> int:
     force, inputs = column_names(cfg.rbf, cfg.backbone, cfg.M, n_inputs, cfg.creep is not False)
     return len(force) + len(inputs) + (cfg.m_q == "identify")
@@ -433,66 +423,6 @@ def _column(values: list[Any]) -> list[Any] | np.ndarray:
     return [str(list(v)) if isinstance(v, tuple | list) else str(v) for v in values]
 
 
-def _check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[str, list]:
-    known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap", "auto", "refine"}
-    out = {}
-    if not grid:
-        raise WorkflowError("[identify] hyper-parameter grid is empty")
-    for key, values in grid.items():
-        if key not in known:
-            raise WorkflowError(
-                f"[identify] hyper-parameter grid: unknown key {key!r}; choose from {sorted(known)}"
-            )
-        values = list(values) if isinstance(values, list | tuple) else [values]
-        if not values:
-            raise WorkflowError(f"[identify] hyper-parameter grid: {key} has no values")
-        for v in values:
-            _candidate_cfg(base, {key: v})  # refuse an invalid value before any fit
-        out[key] = values
-    return out
-
-
-def auto_settings(cfg: IdentifyConfig) -> tuple[dict[str, list], dict[str, int]]:
-    """Read the ``[identify.auto]`` table of a configuration: the candidate grid and options.
-
-    Parameters
-    ----------
-    cfg : IdentifyConfig
-        A configuration whose ``auto`` is a table of candidate lists per field (a single
-        value counts as a list of one) and optionally ``folds`` (an integer >= 2, default 4)
-        and ``window`` (samples per restarted window of the score, an integer >= 10, default
-        :data:`DEFAULT_WINDOW`).
-
-    Returns
-    -------
-    grid : dict of str to list
-        Candidates per field, each checked to make a valid configuration.
-    options : dict of str to int
-        ``folds`` (blocks per record) and ``window`` [samples], keyword arguments of
-        :func:`select_hyperparameters`.
-
-    Raises
-    ------
-    WorkflowError
-        For an empty grid, an unknown field, an invalid candidate value or an invalid
-        ``folds`` or ``window``, naming ``[identify.auto]``.
-    """
-    table = dict(cfg.auto or {})
-    options = {"folds": table.pop("folds", 4), "window": table.pop("window", DEFAULT_WINDOW)}
-    for key, least in (("folds", 2), ("window", 10)):
-        value = options[key]
-        if isinstance(value, bool) or not isinstance(value, int) or value < least:
-            raise WorkflowError(
-                f"[identify.auto] {key}: expected an integer >= {least}, got {value!r}"
-            )
-    try:
-        grid = _check_grid(replace(cfg, auto=None), table)
-    except WorkflowError as exc:
-        text = str(exc).replace("[identify] hyper-parameter grid", "[identify.auto]")
-        raise WorkflowError(text) from None
-    return grid, options
-
-
 def select_hyperparameters(
     records: Sequence[Record],
     base_cfg: IdentifyConfig,
@@ -570,7 +500,7 @@ def select_hyperparameters(
 
     t0 = time.perf_counter()
     del seed  # deterministic: contiguous blocks, no sampling
-    grid = _check_grid(base_cfg, grid)
+    grid = check_grid(base_cfg, grid)
     if not records:
         raise WorkflowError("no estimation records to cross-validate")
     fold_list = blocked_folds([r.q.size for r in records], folds)
@@ -592,7 +522,7 @@ def select_hyperparameters(
     def run(setting: dict[str, Any]) -> dict[str, Any]:
         key = tuple(_freeze(setting[k]) for k in keys)
         if key not in cache:
-            cfg = _candidate_cfg(base_cfg, setting)
+            cfg = candidate_config(base_cfg, setting)
             cache[key] = {**_evaluate(records, cfg, fold_list, substeps, window), "cfg": cfg}
             order.append(dict(setting))
             report(len(order), total)

@@ -641,7 +641,7 @@ def static_frame(
     Masoud & Maas 2025, Eq. 37, Fig. 4.
     """
     from debist.identify.design import at_level
-    from debist.identify.terms import input_map
+    from debist.termtable import input_map
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)

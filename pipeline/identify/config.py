@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import fields, replace
 from typing import Annotated, Any, Literal
 
 import pydantic
-from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat
+from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
 from debist.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
 from debist.errors import WorkflowError
@@ -215,12 +216,8 @@ class IdentifyConfig:
                 "sensitivities lack the creep states): set creep = false or drop the refinement",
             )
         if self.refine:
-            from debist.identify.refine import refine_config
-
             refine_config(self.refine)
         if self.auto is not None:
-            from debist.identify.autotune import auto_settings
-
             auto_settings(self)
 
     @classmethod
@@ -259,3 +256,189 @@ class IdentifyConfig:
                 f"{label} unknown key 'prior' (the analytical backbone comes from [physics])"
             )
         return config_from_section(cls, section, where, internal=("prior",))
+
+
+# ----------------------------------------------- [identify.refine] and [identify.auto]
+
+#: Samples per restarted window of the held-out blocks' multiple-shooting score (as
+#: ``[identify.refine] length``).
+DEFAULT_WINDOW = 300
+
+
+@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
+class RefineConfig:
+    """The ``[identify.refine]`` section.
+
+    Parameters
+    ----------
+    windows : int
+        Number of windows spread evenly over the estimation records.
+    length : int
+        Samples per window.
+    max_nfev : int
+        Budget of cost evaluations of the optimiser.
+    substeps : int
+        RK4 steps per sample in the window simulations.
+    interpolation : {"bandlimited", "linear"}
+        Input interpolation (as in validation).
+    refine_T_z : bool
+        Also refine T_z (when the model has a friction lag, T_z > 0).
+    ftol : float
+        Relative cost decrease below which the optimiser stops.
+    holdout : int
+        Every ``holdout``-th block of each estimation record (blocks two windows long) is
+        held out: no fitted window touches it, and the refinement is kept only if its
+        windowed free-run error there falls (blocked cross-validation); 0: no held-out
+        blocks, judged on the whole estimation records only.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        If a value has the wrong type or is out of range (a ``ValueError``;
+        :func:`refine_config` raises a ``WorkflowError`` naming the key instead).
+    """
+
+    windows: PositiveInt = 40
+    length: Annotated[int, Field(ge=10)] = 300
+    max_nfev: PositiveInt = 30
+    substeps: PositiveInt = 2
+    interpolation: Literal["bandlimited", "linear"] = "bandlimited"
+    refine_T_z: bool = True
+    ftol: PositiveFloat = 1e-6
+    holdout: Annotated[int, Field(ge=0)] = 4
+
+
+def refine_config(
+    section: dict | bool | None, where: str = "[identify.refine]"
+) -> RefineConfig | None:
+    """Parse ``[identify.refine]`` (None or ``false`` when absent: no refinement).
+
+    Parameters
+    ----------
+    section : dict, bool or None
+        The table, ``true`` for defaults, or nothing.
+    where : str, optional
+        The workflow table, for the messages.
+
+    Returns
+    -------
+    RefineConfig or None
+
+    Raises
+    ------
+    WorkflowError
+        On an unknown key (with a suggestion) or an invalid value:
+        ``[identify.refine] key: expected ..., got ...``.
+    """
+    if not section:
+        return None
+    return config_from_section(RefineConfig, {} if section is True else section, where)
+
+
+def candidate_config(base: IdentifyConfig, setting: Mapping[str, Any]) -> IdentifyConfig:
+    """Return the base configuration with a candidate's values, without bootstrap.
+
+    Parameters
+    ----------
+    base : IdentifyConfig
+        The ``[identify]`` settings the candidates vary.
+    setting : mapping
+        Field name to value of one candidate of ``[identify.auto]``.
+
+    Returns
+    -------
+    IdentifyConfig
+
+    Raises
+    ------
+    WorkflowError
+        If the candidate makes an invalid configuration (the reason named).
+    """
+    try:
+        return replace(base, **dict(setting), bootstrap=0)
+    except ValueError as exc:  # pydantic.ValidationError and ConfigValueError
+        errors = getattr(exc, "errors", None)
+        reason = errors()[0]["msg"] if callable(errors) and errors() else str(exc)
+        raise WorkflowError(
+            f"[identify] hyper-parameter grid: the setting {dict(setting)!r} is not a valid "
+            f"configuration: {reason}"
+        ) from None
+
+
+def check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[str, list]:
+    """Check a hyper-parameter grid: known fields, and every value a valid configuration.
+
+    Parameters
+    ----------
+    base : IdentifyConfig
+        The configuration the candidates vary.
+    grid : mapping of str to sequence
+        Candidate values per field (a single value counts as a list of one).
+
+    Returns
+    -------
+    dict of str to list
+        The grid with lists for values.
+
+    Raises
+    ------
+    WorkflowError
+        An empty grid, an unknown field, a field without values or an invalid value.
+    """
+    known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap", "auto", "refine"}
+    out = {}
+    if not grid:
+        raise WorkflowError("[identify] hyper-parameter grid is empty")
+    for key, values in grid.items():
+        if key not in known:
+            raise WorkflowError(
+                f"[identify] hyper-parameter grid: unknown key {key!r}; choose from {sorted(known)}"
+            )
+        values = list(values) if isinstance(values, list | tuple) else [values]
+        if not values:
+            raise WorkflowError(f"[identify] hyper-parameter grid: {key} has no values")
+        for v in values:
+            candidate_config(base, {key: v})  # refuse an invalid value before any fit
+        out[key] = values
+    return out
+
+
+def auto_settings(cfg: IdentifyConfig) -> tuple[dict[str, list], dict[str, int]]:
+    """Read the ``[identify.auto]`` table of a configuration: the candidate grid and options.
+
+    Parameters
+    ----------
+    cfg : IdentifyConfig
+        A configuration whose ``auto`` is a table of candidate lists per field (a single
+        value counts as a list of one) and optionally ``folds`` (an integer >= 2, default 4)
+        and ``window`` (samples per restarted window of the score, an integer >= 10, default
+        :data:`DEFAULT_WINDOW`).
+
+    Returns
+    -------
+    grid : dict of str to list
+        Candidates per field, each checked to make a valid configuration.
+    options : dict of str to int
+        ``folds`` (blocks per record) and ``window`` [samples], keyword arguments of
+        :func:`select_hyperparameters`.
+
+    Raises
+    ------
+    WorkflowError
+        For an empty grid, an unknown field, an invalid candidate value or an invalid
+        ``folds`` or ``window``, naming ``[identify.auto]``.
+    """
+    table = dict(cfg.auto or {})
+    options = {"folds": table.pop("folds", 4), "window": table.pop("window", DEFAULT_WINDOW)}
+    for key, least in (("folds", 2), ("window", 10)):
+        value = options[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise WorkflowError(
+                f"[identify.auto] {key}: expected an integer >= {least}, got {value!r}"
+            )
+    try:
+        grid = check_grid(replace(cfg, auto=None), table)
+    except WorkflowError as exc:
+        text = str(exc).replace("[identify] hyper-parameter grid", "[identify.auto]")
+        raise WorkflowError(text) from None
+    return grid, options

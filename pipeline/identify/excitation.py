@@ -43,7 +43,8 @@ from scipy.signal import welch
 
 from debist.errors import WorkflowError
 from debist.identify.basis import RBFBasis
-from debist.identify.terms import RBF_TERMS, input_map
+from debist.identify.terms import RBF_TERMS
+from debist.termtable import input_map
 
 if TYPE_CHECKING:  # the fit module may import this one
     from debist.identify.fit import Record

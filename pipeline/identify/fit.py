@@ -13,7 +13,8 @@ from debist.identify.basis import RBFBasis
 from debist.identify.config import IdentifyConfig
 from debist.identify.friction import creep_states, friction_state
 from debist.identify.model import RBFModel
-from debist.identify.terms import PHYSICS_TERMS, force_columns, input_columns, input_map
+from debist.identify.terms import PHYSICS_TERMS, force_columns, input_columns
+from debist.termtable import input_map
 
 
 @dataclass(frozen=True)

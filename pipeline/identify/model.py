@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 from debist.identify.basis import RBFBasis
-from debist.identify.terms import PhysicsPrior, input_map
+from debist.identify.terms import PhysicsPrior
+from debist.termtable import input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")

@@ -25,17 +25,13 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated, Literal
 
 import numpy as np
-import pydantic
-from pydantic import Field, PositiveFloat, PositiveInt
 from scipy.optimize import least_squares
 
 from debist import preflight, progress
-from debist.config import CONFIG, config_from_section
 from debist.errors import WorkflowError
-from debist.identify.config import IdentifyConfig
+from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
 from debist.identify.model import RBFModel
 from debist.identify.terms import term_sign, term_table
@@ -43,49 +39,6 @@ from debist.kernel import free_run_sensitivity
 from debist.prediction import restarted_runs
 from debist.simulate import check_free_run, prepare_inputs, simulate
 from debist.termtable import TableModel
-
-
-@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class RefineConfig:
-    """The ``[identify.refine]`` section.
-
-    Parameters
-    ----------
-    windows : int
-        Number of windows spread evenly over the estimation records.
-    length : int
-        Samples per window.
-    max_nfev : int
-        Budget of cost evaluations of the optimiser.
-    substeps : int
-        RK4 steps per sample in the window simulations.
-    interpolation : {"bandlimited", "linear"}
-        Input interpolation (as in validation).
-    refine_T_z : bool
-        Also refine T_z (when the model has a friction lag, T_z > 0).
-    ftol : float
-        Relative cost decrease below which the optimiser stops.
-    holdout : int
-        Every ``holdout``-th block of each estimation record (blocks two windows long) is
-        held out: no fitted window touches it, and the refinement is kept only if its
-        windowed free-run error there falls (blocked cross-validation); 0: no held-out
-        blocks, judged on the whole estimation records only.
-
-    Raises
-    ------
-    pydantic.ValidationError
-        If a value has the wrong type or is out of range (a ``ValueError``;
-        :func:`refine_config` raises a ``WorkflowError`` naming the key instead).
-    """
-
-    windows: PositiveInt = 40
-    length: Annotated[int, Field(ge=10)] = 300
-    max_nfev: PositiveInt = 30
-    substeps: PositiveInt = 2
-    interpolation: Literal["bandlimited", "linear"] = "bandlimited"
-    refine_T_z: bool = True
-    ftol: PositiveFloat = 1e-6
-    holdout: Annotated[int, Field(ge=0)] = 4
 
 
 @dataclass(frozen=True)
@@ -490,33 +443,6 @@ def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Recor
         f"the Jacobian's batched free run of {(P + 1) * W} window trajectories "
         f"({W} windows x {P + 1} parameter vectors) of {L} samples x {ns} sub-steps",
     )
-
-
-def refine_config(
-    section: dict | bool | None, where: str = "[identify.refine]"
-) -> RefineConfig | None:
-    """Parse ``[identify.refine]`` (None or ``false`` when absent: no refinement).
-
-    Parameters
-    ----------
-    section : dict, bool or None
-        The table, ``true`` for defaults, or nothing.
-    where : str, optional
-        The workflow table, for the messages.
-
-    Returns
-    -------
-    RefineConfig or None
-
-    Raises
-    ------
-    WorkflowError
-        On an unknown key (with a suggestion) or an invalid value:
-        ``[identify.refine] key: expected ..., got ...``.
-    """
-    if not section:
-        return None
-    return config_from_section(RefineConfig, {} if section is True else section, where)
 
 
 __all__ = ["RefineConfig", "RefineResult", "refine_config", "refine_model"]

@@ -57,7 +57,7 @@ from scipy.optimize import brentq, minimize_scalar
 
 from debist.errors import DebistError
 from debist.identify.model import RBFModel
-from debist.identify.terms import input_map
+from debist.termtable import input_map
 
 __all__ = [
     "EquilibriumPoint",

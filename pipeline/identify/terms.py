@@ -20,7 +20,13 @@ import numpy as np
 
 from debist.errors import WorkflowError
 from debist.identify.basis import RBFBasis
-from debist.termtable import S_CREEP, S_POW, S_TANH, TermTable, TermTableBuilder
+from debist.termtable import (
+    S_CREEP,
+    S_POW,
+    S_TANH,
+    TermTable,
+    TermTableBuilder,
+)
 
 #: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
 RBF_TERMS = ("c", "d", "g")
@@ -38,8 +44,6 @@ BACKBONE_TERMS = {
 }
 #: Backbone terms that take the analytical model's curves (a [physics] section).
 PHYSICS_TERMS = ("physics_spring", "physics_damping", "physics_gain")
-#: Input maps h(v): "v2" for DE actuators (electrostatic force ~ v^2), "v" for linear rigs.
-INPUT_MAPS = ("v2", "v")
 
 
 @dataclass(frozen=True)
@@ -91,32 +95,6 @@ def _prior(prior: PhysicsPrior | None) -> PhysicsPrior:
             f"backbone terms {PHYSICS_TERMS} need the analytical model: add a [physics] section"
         )
     return prior
-
-
-def input_map(v: np.ndarray, kind: str) -> np.ndarray:
-    """Apply the input map h(v) of the model.
-
-    Parameters
-    ----------
-    v : ndarray, shape (..., n_inputs)
-        Input voltages [V].
-    kind : {"v2", "v"}
-        ``"v2"``: h(v) = v^2 [V^2] (DE actuators, Eq. 37); ``"v"``: h(v) = v [V].
-
-    Returns
-    -------
-    ndarray, same shape as ``v``
-
-    Raises
-    ------
-    WorkflowError
-        If ``kind`` is unknown.
-    """
-    if kind == "v2":
-        return np.square(v)
-    if kind == "v":
-        return np.asarray(v, dtype=float)
-    raise WorkflowError(f"`input_map` must be one of {INPUT_MAPS}, got {kind!r}")
 
 
 def check_terms(rbf: Sequence[str], backbone: Sequence[str]) -> None:
