@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from debist.errors import WorkflowError
 from debist.identify import Record
-from debist.stages.tables import input_columns
+from debist.tables import input_columns
 
 __all__ = ["estimation_records"]
 

@@ -29,12 +29,12 @@ from debist import preflight, progress
 from debist.config import CONFIG, config_from_section
 from debist.datasets import validation_datasets
 from debist.differentiate import TVRegDiffConfig
+from debist.differentiate.tables import differentiate_tables
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from debist.records import estimation_records
-from debist.stages.differentiate import run_differentiate
-from debist.stages.tables import input_columns
 from debist.study_plots import alpha_figure, grid_figure
+from debist.tables import input_columns
 from debist.validate import DataSet, ValidateConfig, validate_model
 
 __all__ = [
@@ -419,7 +419,7 @@ def alpha_study(
     rows, curves = [], []
     for alpha in cfg.alpha:
         params = _scaled_section(diff_section, float(alpha))
-        derivs = run_differentiate(tables, {"method": "tvregdiff", **params})
+        derivs = differentiate_tables(tables, {"method": "tvregdiff", **params})
         converged = all(d.attrs["converged"] for d in derivs.values())
         records, datasets = _study_data(tables, derivs, cfg.max_samples)
         score = _fit_and_score(records, datasets, icfg, vcfg, cfg.free_run)
