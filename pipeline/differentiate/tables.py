@@ -5,8 +5,8 @@ the sensitivity studies call it too.
 
 References
 ----------
-Masoud & Maas 2025, Sec. 4 (the derivatives of Eq. 40); R. Chartrand, Numerical differentiation of noisy, nonsmooth
-data, ISRN Applied Mathematics (2011).
+Masoud & Maas 2025, Sec. 4 (the derivatives of Eq. 40); R. Chartrand, Numerical
+differentiation of noisy, nonsmooth data, ISRN Applied Mathematics (2011).
 """
 
 from __future__ import annotations
