@@ -41,6 +41,7 @@ from debist.workflow import load_workflow as _load_workflow
 __all__ = [
     "FleetResult",
     "Model",
+    "NrmseTable",
     "ProgressEvent",
     "Result",
     "Verification",
@@ -420,6 +421,27 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
 # ------------------------------------------------------------------- results
 
 
+class NrmseTable(pd.DataFrame):
+    """The NRMSE table of a run: a DataFrame that prints whole, as ``debist run`` shows it.
+
+    ``print(result.nrmse)`` gives every row and column with NRMSE to two decimals [%] and
+    RMS to four significant digits; anything derived from it (a selection, a copy) is a
+    plain :class:`pandas.DataFrame`.
+    """
+
+    @property
+    def _constructor(self):
+        return pd.DataFrame
+
+    def __repr__(self) -> str:
+        formats: dict[str, Callable[[Any], str]] = {
+            c: "{:.2f}".format for c in self.columns if str(c).endswith("[%]")
+        }
+        formats["RMS(q)"] = "{:.4g}".format
+        # NaN: not predicted by that model (NARX: q only) or not finished (see status)
+        return self.to_string(index=False, formatters=formats, na_rep="n/a")
+
+
 class Result:
     """The results of a workflow's run, read from its checked artifacts.
 
@@ -504,7 +526,7 @@ class Result:
         return "compare" if "compare" in self.manifests else "validate"
 
     @cached_property
-    def nrmse(self) -> pd.DataFrame:
+    def nrmse(self) -> NrmseTable:
         """The free-run NRMSE table (Eq. 41) that ``debist run`` prints, in percent.
 
         The compare stage's when it ran (RBF, SINDy and NARX rows), else the validate
@@ -517,7 +539,7 @@ class Result:
         """
         from debist.report import nrmse_frame
 
-        return nrmse_frame(self.summary(self._scored)["table"])
+        return NrmseTable(nrmse_frame(self.summary(self._scored)["table"]))
 
     @cached_property
     def nrmse_raw(self) -> pd.DataFrame:

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import debist
@@ -135,3 +136,17 @@ def test_simulate_refuses_bad_inputs_by_name(synthetic_run):
         model.simulate(t**2, np.zeros((t.size, 2)), 0.0, 0.0)
     with pytest.raises(ArtifactError, match="not a run folder"):
         debist.load_model(root)
+
+
+def test_printing_the_nrmse_table_shows_every_row_and_column(synthetic_run):
+    root, _ = synthetic_run
+    table = debist.open_run(root / "wf.toml").nrmse
+    text = repr(table)
+    lines = text.splitlines()
+    assert len(lines) == len(table) + 1 and "..." not in text
+    assert lines[0].split()[:3] == ["data", "set", "role"] and "verdict" in lines[0]
+    for row, line in zip(table.itertuples(index=False), lines[1:], strict=True):
+        assert f"{row[3]:.2f}" in line  # NRMSE(q) [%] to two decimals, as the CLI prints it
+    narx = [line for line, model in zip(lines[1:], table["model"], strict=True) if model == "narx"]
+    assert narx and all("n/a" in line for line in narx)  # NARX predicts q only
+    assert type(table[["model"]]) is pd.DataFrame  # a selection is a plain DataFrame
