@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.identify.basis import RBFBasis
-from debist.identify.model import RBFModel
-from debist.identify.terms import PhysicsPrior
-from debist.simulate import prepare_inputs, simulate
-from debist.sindy import SindyModel
-from debist.termtable import TableModel
+from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
+from debist.model.sindy import SindyModel
+from debist.model.terms import PhysicsPrior
+from debist.model.termtable import TableModel
+from debist.simulate.freerun import prepare_inputs, simulate
 
 DT = 0.01
 
@@ -138,7 +138,7 @@ def compile_times() -> tuple[float, float]:
     code = (
         "import time, numpy as np; t = time.perf_counter();"
         "import sys; sys.path.insert(0, 'benchmarks'); import bench_simulate as b;"
-        "from debist.simulate import simulate;"
+        "from debist.simulate.freerun import simulate;"
         "simulate(b.rbf_model(), [b._inputs(50, 0)], 0.01, np.zeros(1), np.zeros(1));"
         "print(time.perf_counter() - t)"
     )

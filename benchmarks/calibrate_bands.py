@@ -63,7 +63,7 @@ def _member_outputs(folder: Path) -> list[tuple[Path, Path]]:
 
 
 def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
-    from debist.fileformats import read_h5
+    from debist.engine.fileformats import read_h5
 
     curves = pd.read_parquet(run / "identify" / "curves.parquet")
     truth = read_h5(run / "rig" / "identification_truth.h5")["curves"]

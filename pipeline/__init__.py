@@ -9,7 +9,7 @@ The library behind the ``debist`` command line, and its Python API (:mod:`debist
     result.model.simulate(t, v, q0=0.0, q_dot0=0.0)
 
 Every stage is a pure function in one of the sub-packages; file input and output live in
-:mod:`debist.artifacts` and the readers of :mod:`debist.ingest`. The names below load
+:mod:`debist.engine.artifacts` and the readers of :mod:`debist.ingest`. The names below load
 lazily, so ``import debist`` stays cheap (the command line imports what it needs).
 
 References
@@ -42,7 +42,7 @@ def __getattr__(name: str):
     """Load the API's names on first use (PEP 562), keeping ``import debist`` light."""
     if name in __all__:
         # import_module, not an import statement: a stage's code fingerprint follows import
-        # statements (debist.fingerprint), and no stage runs the API that this loads.
+        # statements (debist.engine.fingerprint), and no stage runs the API that this loads.
         from importlib import import_module
 
         return getattr(import_module("debist.api"), name)

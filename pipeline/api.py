@@ -33,10 +33,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from debist import artifacts, progress
+from debist.engine import artifacts, progress
 from debist.errors import ArtifactError, WorkflowError
-from debist.workflow import Workflow
-from debist.workflow import load_workflow as _load_workflow
+from debist.workflow.loader import Workflow
+from debist.workflow.loader import load_workflow as _load_workflow
 
 __all__ = [
     "FleetResult",
@@ -104,7 +104,7 @@ def load_workflow(
     Returns
     -------
     Workflow
-        The checked workflow (:class:`debist.workflow.Workflow`).
+        The checked workflow (:class:`debist.workflow.loader.Workflow`).
 
     Raises
     ------
@@ -179,7 +179,7 @@ def run(
         What a stage raised (bad data: the message names the file, channel and value);
         that stage's previous artifacts stay as they were.
     """
-    from debist.runner import Runner
+    from debist.engine.runner import Runner
 
     wf = _workflow(workflow, overrides, output_dir)
     runner = Runner(wf, wait=wait)
@@ -219,7 +219,7 @@ def status(
 
     Returns
     -------
-    list of debist.runner.StageStatus
+    list of debist.engine.runner.StageStatus
         In execution order: ``stage``, ``state`` (``"up to date"``, ``"stale"``,
         ``"missing"``) and the ``reasons``.
 
@@ -228,7 +228,7 @@ def status(
     WorkflowError
         A bad workflow or override.
     """
-    from debist.runner import Runner
+    from debist.engine.runner import Runner
 
     return Runner(_workflow(workflow, overrides, output_dir)).status()
 
@@ -285,7 +285,7 @@ def verify(
     RunLockedError
         While another process writes to the output folder.
     """
-    from debist.runner import Runner
+    from debist.engine.runner import Runner
 
     runner = Runner(_workflow(workflow, overrides, output_dir))
     return Verification(tuple(runner.verify(digest)), tuple(runner.version_notes()))
@@ -311,17 +311,17 @@ def run_batch(
         As for :func:`run`, for every workflow.
     scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
         Default: a local Dask cluster of ``workers`` processes (see
-        :func:`debist.batch.run_batch`); ``"distributed"`` with ``address``.
+        :func:`debist.engine.batch.run_batch`); ``"distributed"`` with ``address``.
     workers : int, optional
         Worker processes (default: one per workflow, at most one per CPU).
     address : str, optional
         A running Dask scheduler, e.g. ``"tcp://host:8786"``.
     on_done : callable, optional
-        Called with each :class:`debist.batch.BatchResult` as its workflow finishes.
+        Called with each :class:`debist.engine.batch.BatchResult` as its workflow finishes.
 
     Returns
     -------
-    list of debist.batch.BatchResult
+    list of debist.engine.batch.BatchResult
         In input order: ``ok``, ``error`` (the failure, naming the stage), ``output_dir``
         (open it with :func:`open_run`), ``summary["nrmse"]`` (rows as fractions).
 
@@ -336,8 +336,8 @@ def run_batch(
     Worker processes re-import the calling script: call from under
     ``if __name__ == "__main__":``.
     """
-    from debist.batch import expand_workflows
-    from debist.batch import run_batch as _run_batch
+    from debist.engine.batch import expand_workflows
+    from debist.engine.batch import run_batch as _run_batch
 
     files = expand_workflows(workflows)
     if not files:
@@ -398,7 +398,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     """
     import tomllib
 
-    from debist.fleetrun import viable_fleet
+    from debist.engine.fleetrun import viable_fleet
 
     template, folder = Path(template), Path(folder)
     if size < 1:
@@ -530,14 +530,14 @@ class Result:
         """The free-run NRMSE table (Eq. 41) that ``debist run`` prints, in percent.
 
         The compare stage's when it ran (RBF, SINDy and NARX rows), else the validate
-        stage's; columns as :func:`debist.report.nrmse_frame` (units in the names).
+        stage's; columns as :func:`debist.report.tables.nrmse_frame` (units in the names).
 
         Raises
         ------
         ArtifactError
             Neither stage ran.
         """
-        from debist.report import nrmse_frame
+        from debist.report.tables import nrmse_frame
 
         return NrmseTable(nrmse_frame(self.summary(self._scored)["table"]))
 
@@ -631,7 +631,7 @@ def open_run(
     WorkflowError
         A bad workflow or override.
     """
-    from debist.runner import Runner
+    from debist.engine.runner import Runner
 
     wf = _workflow(workflow, overrides, output_dir)
     runner = Runner(wf)
@@ -741,7 +741,7 @@ class Model:
         ----------
         Masoud & Maas 2025, Sec. 5.2 (free-run simulation).
         """
-        from debist.simulate import simulate
+        from debist.simulate.freerun import simulate
         from debist.validate import default_q_limit
 
         t = np.asarray(t, dtype=float)

@@ -5,7 +5,7 @@ debist's exceptions to exit codes in one place (:func:`debist.errors.exit_code`)
 1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
 or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
 
-Long steps report through :mod:`debist.progress`; the CLI draws those reports as rich
+Long steps report through :mod:`debist.engine.progress`; the CLI draws those reports as rich
 progress bars on stderr when stderr is a terminal (not with ``-q``). Help texts are plain
 text (Typer's ``rich_markup_mode=None``), so workflow sections such as ``[rig]`` and units
 such as ``[s]`` print literally instead of being taken for rich markup.
@@ -165,7 +165,7 @@ def _options(
     _level["value"] = -1 if quiet else (1 if verbose else 0)
     console.quiet = quiet
     if memory_budget is not None:
-        from debist.preflight import BUDGET_ENV
+        from debist.engine.preflight import BUDGET_ENV
 
         os.environ[BUDGET_ENV] = repr(float(memory_budget))  # batch workers inherit it
 
@@ -208,8 +208,8 @@ def _on_sigterm(signum: int, _frame: object) -> None:
 
 
 def _runner(workflow: Path, out: Path | None, wait: bool = False, sets: list[str] | None = None):
-    from debist.runner import Runner
-    from debist.workflow import load_workflow
+    from debist.engine.runner import Runner
+    from debist.workflow.loader import load_workflow
 
     return Runner(load_workflow(workflow, out, sets or None), wait=wait)
 
@@ -247,7 +247,7 @@ def _bar_columns(label) -> tuple:
 
 
 class _Display:
-    """Progress reports (:mod:`debist.progress`) drawn as rich progress bars, one per task.
+    """Progress reports (:mod:`debist.engine.progress`) drawn as rich progress bars, one per task.
 
     A row reads ``stage: task``, a bar, ``done/total``, the elapsed time and rich's
     estimate of the time left. A row goes when its task reaches its total; when a stage
@@ -279,7 +279,7 @@ class _Display:
         self._lock = threading.Lock()
 
     def listen(self, task: str, done: int, total: int) -> None:
-        """Show one report (the :data:`debist.progress.Listener` signature)."""
+        """Show one report (the :data:`debist.engine.progress.Listener` signature)."""
         label = (
             task
             if not self.stage or task.startswith(f"{self.stage}:")
@@ -317,7 +317,7 @@ class _Display:
 @contextmanager
 def _progress() -> Iterator[_Display | None]:
     """Draw the progress reports made inside the block, if there is a terminal to draw on."""
-    from debist.progress import listening
+    from debist.engine.progress import listening
 
     target = _progress_console()
     if target is None:
@@ -402,7 +402,7 @@ def _convergence_notice(wf, manifests) -> str | None:
 
 
 def _report(wf, manifests, ran: set[str]) -> None:
-    from debist import report
+    from debist.report import tables as report
 
     notice = _convergence_notice(wf, manifests)
     if notice and ("differentiate" in ran or _level["value"] > 0):  # once, not on every rerun
@@ -450,7 +450,7 @@ def _run(
     sets: list[str] | None = None,
 ) -> None:
     from debist import api
-    from debist.runner import Runner
+    from debist.engine.runner import Runner
 
     with _guard():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
@@ -599,8 +599,8 @@ def status(
     sets: SetOpt = None,
 ) -> None:
     """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
-    from debist import outdir
-    from debist.runner import STAGES
+    from debist.engine import outdir
+    from debist.engine.runner import STAGES
 
     with _guard():
         runner = _runner(workflow, out, sets=sets)
@@ -675,7 +675,7 @@ def diff(
     """Show the settings and the NRMSE rows that differ between two runs (reads only)."""
     from rich.table import Table
 
-    from debist.rundiff import diff_runs
+    from debist.engine.rundiff import diff_runs
 
     with _guard():
         found = diff_runs(run_a, run_b)
@@ -712,7 +712,7 @@ def report(
     the workflow's stages, which must be up to date; `debist run` makes it as its last step,
     and `debist verify` checks it like every artifact.
     """
-    from debist.htmlreport import REPORT_FILE
+    from debist.report.html import REPORT_FILE
 
     with _guard():
         runner = _runner(workflow, out, wait)
@@ -762,7 +762,7 @@ def export(
     import tempfile
     from contextlib import nullcontext
 
-    from debist import artifacts, outdir
+    from debist.engine import artifacts, outdir
     from debist.errors import OutputDirError
     from debist.export import export_files, load_identified
 
@@ -841,7 +841,7 @@ def batch(
     from rich.progress import Progress, TextColumn
     from rich.table import Table
 
-    from debist.batch import expand_workflows, run_batch, summary_table, write_index
+    from debist.engine.batch import expand_workflows, run_batch, summary_table, write_index
 
     selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:

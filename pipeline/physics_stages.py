@@ -39,7 +39,7 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
 
     Returns
     -------
-    debist.identify.terms.PhysicsPrior
+    debist.model.terms.PhysicsPrior
 
     Raises
     ------
@@ -50,7 +50,7 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33.
     """
-    from debist.identify.terms import PHYSICS_TERMS, PhysicsPrior
+    from debist.model.terms import PHYSICS_TERMS, PhysicsPrior
     from debist.physics.reduced import reduced_curves
 
     if physics is None:

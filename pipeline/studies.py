@@ -25,17 +25,17 @@ import pandas as pd
 import pydantic
 from pydantic import BeforeValidator, Field, PositiveFloat
 
-from debist import preflight, progress
-from debist.config import CONFIG, config_from_section
 from debist.datasets import validation_datasets
 from debist.differentiate import TVRegDiffConfig
 from debist.differentiate.tables import differentiate_tables
+from debist.engine import preflight, progress
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from debist.records import estimation_records
-from debist.study_plots import alpha_figure, grid_figure
+from debist.report.study_plots import alpha_figure, grid_figure
 from debist.tables import input_columns
 from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.workflow.config import CONFIG, config_from_section
 
 __all__ = [
     "StudyConfig",

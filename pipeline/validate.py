@@ -12,11 +12,11 @@ import pydantic
 from pydantic import FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 from typing_extensions import TypedDict
 
-from debist import progress
-from debist.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
-from debist.simulate import FreeRunModel, SimulationResult, simulate
+from debist.simulate.freerun import FreeRunModel, SimulationResult, simulate
+from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 
 
 def nrmse(y_meas: np.ndarray, y_calc: np.ndarray) -> float:
@@ -162,7 +162,7 @@ class ValidateConfig:
         the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
         in metres and the two DE voltages as inputs.
     engine : {"compiled", "numpy"}
-        Free-run engine: the compiled kernel (:mod:`debist.kernel`, default) or the NumPy
+        Free-run engine: the compiled kernel (:mod:`debist.simulate.kernel`, default) or the NumPy
         reference; the same scheme and the same numbers to rounding.
     predict_steps : int
         Horizon k [samples] of the k-step-ahead NRMSE scored beside the free run (each
@@ -383,7 +383,7 @@ def validate_model(
     ----------
     Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
     """
-    from debist.simulate import check_free_run
+    from debist.simulate.freerun import check_free_run
 
     fit_min = 4  # samples the cubic of initial_state needs; as many must remain to score
     by_dt: dict[float, list[DataSet]] = {}

@@ -76,9 +76,9 @@ def example_rbf_model(
 
     With ``creep_rate`` [1/s] > 0 it has the DE creep of Eq. 26 too (seeded weights ~100 N/m).
     """
-    from debist.identify.basis import RBFBasis
-    from debist.identify.model import RBFModel
-    from debist.identify.terms import PhysicsPrior
+    from debist.model.basis import RBFBasis
+    from debist.model.rbf import RBFModel
+    from debist.model.terms import PhysicsPrior
 
     rng = np.random.default_rng(1)
     M = 10

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from debist import artifacts
 from debist.cli import app
+from debist.engine import artifacts
+from debist.engine.runner import Runner
 from debist.errors import WorkflowError
-from debist.runner import Runner
-from debist.workflow import load_workflow
+from debist.workflow.loader import load_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = (

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 import debist
-from debist import artifacts
+from debist.engine import artifacts
 from debist.errors import ArtifactError, WorkflowError
 
 

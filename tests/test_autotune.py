@@ -17,7 +17,7 @@ from debist.identify.autotune import (
     one_standard_error,
     select_hyperparameters,
 )
-from debist.study_plots import autotune_figure
+from debist.report.study_plots import autotune_figure
 
 
 def _reference_choice(rows: list[dict]) -> int:
@@ -280,7 +280,7 @@ def test_the_identify_stage_fits_the_searched_setting_and_reports_the_search(in_
     """With [identify.auto] the stage's model is the fit at the chosen setting (the same
     model as a plain fit at that setting), and the summary carries the search."""
     from debist.identify.autotune import UNDECIDED_SE, undecided
-    from debist.report import auto_line
+    from debist.report.tables import auto_line
     from debist.stages.identify import run_identify
 
     rec = in_class_record

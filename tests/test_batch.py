@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from debist import artifacts
-from debist.batch import (
+from debist.engine import artifacts
+from debist.engine.batch import (
     BatchResult,
     expand_workflows,
     local_cluster,
@@ -18,8 +18,8 @@ from debist.batch import (
     summary_table,
     write_index,
 )
+from debist.engine.outdir import OWN_FILES
 from debist.errors import WorkflowError
-from debist.outdir import OWN_FILES
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ["ingest", "differentiate", "identify", "validate"]
@@ -171,7 +171,7 @@ def test_broken_workflows_fail_alone_naming_their_files(protos):
 
 
 def test_unexpected_exception_is_a_failed_item_with_its_traceback(protos, monkeypatch):
-    import debist.runner as runner
+    import debist.engine.runner as runner
 
     def flaky(point, workflow=None):  # the runner's fault point as a stage starts
         if point == "stage:differentiate:start" and workflow == "proto-b":
@@ -385,7 +385,7 @@ def test_local_dask_cluster_gives_the_serial_bytes(protos):
 def test_a_task_lost_on_the_cluster_is_a_failed_item(protos, monkeypatch):
     import distributed
 
-    import debist.batch as batch
+    import debist.engine.batch as batch
 
     item = batch.run_workflow_item
 
@@ -409,8 +409,8 @@ def test_a_batch_member_has_the_digest_of_its_solo_run(tmp_path, monkeypatch):
     """The paper experiment in this process and in a worker process (single-threaded BLAS
     there): the bootstrap bands' sums gave bytes 6.6e-24 apart before stages ran with one
     BLAS thread everywhere."""
-    from debist.runner import Runner
-    from debist.workflow import load_workflow
+    from debist.engine.runner import Runner
+    from debist.workflow.loader import load_workflow
 
     root = Path(__file__).resolve().parents[1]
     wf = tmp_path / "pe.toml"

@@ -10,7 +10,8 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from rich.console import Console
 from typer.testing import CliRunner
 
-from debist import cli, progress
+from debist import cli
+from debist.engine import progress
 from debist.physics.segments import solve_segments
 
 REFINE = """

@@ -70,7 +70,7 @@ def test_equilibria_where_the_curves_are_not_identified_are_marked():
     import pandas as pd
 
     from debist.identify.design import mark_identified
-    from debist.report import equilibrium_kind
+    from debist.report.tables import equilibrium_kind
 
     q = np.linspace(-0.01, 0.01, 21)
     curves = pd.DataFrame({"q": q, "restoring_identified": np.abs(q) > 0.004})
@@ -99,7 +99,7 @@ def test_switching_voltages_where_g_is_not_identified_are_marked():
     import pandas as pd
 
     from debist.identify.design import mark_switching
-    from debist.report import switching_note
+    from debist.report.tables import switching_note
 
     q = np.linspace(-0.016, 0.016, 33)  # 1 mm grid
     curves = pd.DataFrame({

@@ -32,8 +32,8 @@ from debist.export import (
     matlab_source,
     python_source,
 )
-from debist.identify.model import RBFModel
-from debist.simulate import simulate
+from debist.model.rbf import RBFModel
+from debist.simulate.freerun import simulate
 
 DT = 0.01
 N = 2000
@@ -330,8 +330,8 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     import pandas as pd
     from typer.testing import CliRunner
 
-    from debist import artifacts
     from debist.cli import app
+    from debist.engine import artifacts
 
     def invoke(*args):
         result = CliRunner().invoke(app, [str(a) for a in args])

@@ -6,12 +6,12 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from debist.artifacts import write_text_files
 from debist.cli import app
+from debist.engine.artifacts import write_text_files
+from debist.engine.runner import Runner
 from debist.errors import OutputDirError, WorkflowError
 from debist.rig.fleet_workflows import fleet_workflows
-from debist.runner import Runner
-from debist.workflow import load_workflow
+from debist.workflow.loader import load_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "workflows" / "paper-experiment.toml"
@@ -56,7 +56,7 @@ def test_template_without_rig_is_refused(tmp_path):
 
 
 def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_path, monkeypatch):
-    from debist import fleetrun
+    from debist.engine import fleetrun
 
     raw = tomllib.loads(TEMPLATE.read_text())
     calls = []
@@ -76,7 +76,7 @@ def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_pat
 
 
 def test_a_fleet_whose_logs_all_fail_ingest_is_refused_with_the_reason(tmp_path):
-    from debist.fleetrun import viable_fleet
+    from debist.engine.fleetrun import viable_fleet
     from debist.rig.fleet import FleetError
 
     raw = tomllib.loads(TEMPLATE.read_text())

@@ -11,7 +11,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from debist.errors import ArtifactError
-from debist.htmlreport import (
+from debist.report.html import (
     FIGURE_GROUPS,
     PNG_SIGNATURE,
     SECTIONS,
@@ -299,7 +299,7 @@ def test_index_rows_and_page(run):
 
 def test_batch_index_lists_only_identified_wells():
     """The fleet index counts a well on an unidentified part of the curve, it does not list it."""
-    from debist.htmlreport import _wells
+    from debist.report.html import _wells
 
     rows = [
         {"model": "rbf", "level": 0, "q": -0.0105, "static_stable": True, "identified": True},
@@ -316,7 +316,7 @@ def test_an_undecided_hyper_parameter_search_says_so(run):
     """The [identify.auto] line is on the page, with 'undecided' when the folds disagree."""
     import copy
 
-    from debist.report import auto_line
+    from debist.report.tables import auto_line
 
     assert "hyper-parameters:" not in render_report(run)
     run = copy.deepcopy(run)
@@ -339,7 +339,7 @@ def test_an_undecided_hyper_parameter_search_says_so(run):
 
 
 def test_prediction_and_residual_checks_are_tabulated_with_their_verdicts():
-    from debist.htmlreport import _check_rows
+    from debist.report.html import _check_rows
 
     rows = [
         {"model": "rbf", "dataset": "a", "k_steps": 10, "nrmse_q_k": 0.0031,

@@ -5,8 +5,8 @@ from conftest import bistable_truth
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
 from debist.identify.friction import friction_state
-from debist.identify.terms import force_columns, input_columns
-from debist.termtable import input_map
+from debist.model.terms import force_columns, input_columns
+from debist.model.termtable import input_map
 
 
 def test_basis_is_eq38_with_equidistant_centres():
@@ -335,7 +335,7 @@ def test_creep_config_and_model_tree(bistable_record):
     with pytest.raises(WorkflowError, match=r"\[identify\] creep_bounds: expected \[lo, hi\]"):
         IdentifyConfig.from_dict({"creep_bounds": [5.0, 1.0]})
     assert IdentifyConfig.from_dict({}).creep is False
-    from debist.preflight import identify_columns
+    from debist.engine.preflight import identify_columns
 
     plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
     assert identify_columns(IdentifyConfig.from_dict({"creep": "search"}), 2)[0] == plain_cols + 10

@@ -5,14 +5,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from debist import artifacts
+from debist.engine import artifacts
 from debist.errors import WorkflowError
 from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced
 from debist.physics_stages import physics_prior
-from debist.simulate import simulate
+from debist.simulate.freerun import simulate
 
 P = PrototypeParams.paper()
 PHYSICS = ["physics_spring", "physics_damping", "physics_gain"]

@@ -15,7 +15,7 @@ from debist.ingest.checks import printed_resolution, time_rtol
 from debist.ingest.resample import resample_segment
 from debist.ingest.units import UNITS, lookup_unit
 from debist.stages.ingest import run_ingest
-from debist.workflow import DatasetSpec
+from debist.workflow.loader import DatasetSpec
 
 G0 = 9.80665  # [m/s^2] standard gravity (CGPM 1901)
 

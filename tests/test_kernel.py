@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 from conftest import example_rbf_model
 
-from debist import kernel, progress
-from debist.identify.terms import force_columns, input_columns, term_table
+from debist.engine import progress
+from debist.model.sindy import SindyModel
+from debist.model.terms import force_columns, input_columns, term_table
 from debist.physics.freerun import analytical_model
 from debist.physics.params import PrototypeParams
-from debist.simulate import prepare_inputs, simulate
-from debist.sindy import SindyModel
+from debist.simulate import kernel
+from debist.simulate.freerun import prepare_inputs, simulate
 
 DT = 0.01
 
@@ -251,8 +252,8 @@ def test_kernel_arrays_check_the_spline_shape():
 def test_forward_sensitivities_are_the_derivative_of_the_free_run():
     """The refinement's Jacobian: d q / d p from the sensitivity equations against central
     differences of the kernel's own free run, for weights, the mass and log T_z."""
-    from debist.identify.terms import term_sign, term_table
-    from debist.termtable import TableModel
+    from debist.model.terms import term_sign, term_table
+    from debist.model.termtable import TableModel
 
     model = rbf_model(T_z=0.02)
     names, theta = model.parameters()

@@ -108,7 +108,7 @@ def test_g_stays_unmarked_where_its_input_was_never_on(paper_until_identify):
     there beyond one RBF width (no sample with v_1 on informs it), and still marked left."""
     import tomllib
 
-    from debist.identify.basis import RBFBasis
+    from debist.model.basis import RBFBasis
     from debist.physics.params import PrototypeParams
     from debist.stages.identify import run_identify
 

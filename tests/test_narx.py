@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from debist.errors import WorkflowError
-from debist.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
-from debist.report import not_modelled, verdict
+from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
+from debist.report.tables import not_modelled, verdict
 from debist.validate import nrmse
 
 pytestmark = pytest.mark.skipif(not narx_available(), reason="SysIdentPy (debist[narx]) absent")
@@ -59,7 +59,7 @@ def test_the_structure_comes_from_the_estimation_data_only():
 
 def test_the_nested_information_criterion_equals_sysidentpy_s_own():
     """One FROLS pass scores every model size as SysIdentPy's per-size reruns do."""
-    from debist.narx import _estimator, _sysidentpy
+    from debist.model.narx import _estimator, _sysidentpy
 
     FROLS, Polynomial, LeastSquares = _sysidentpy()  # never a bare import: see the next test
 
@@ -125,7 +125,7 @@ def test_verdicts_name_narx_and_its_unmodelled_columns_are_not_divergence():
 
 def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     """The stage never drops the peer silently: its rows carry the reason and NaN numbers."""
-    import debist.narx as narx_module
+    import debist.model.narx as narx_module
     from debist.records import Record
     from debist.stages.compare import _narx_rows
     from debist.validate import DataSet, ValidateConfig

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from conftest import invoke_cli
 
-from debist import artifacts, outdir
+from debist.engine import artifacts, outdir
 
 invoke = invoke_cli
 

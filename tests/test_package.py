@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import debist
-from debist.fingerprint import code_fingerprint
+from debist.engine.fingerprint import code_fingerprint
 
 ROOT = Path(__file__).resolve().parents[1]
 

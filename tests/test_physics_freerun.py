@@ -8,7 +8,7 @@ from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced, simulate_reduced
 from debist.physics_stages import analytical_for
-from debist.simulate import simulate
+from debist.simulate.freerun import simulate
 from debist.validate import DataSet, ValidateConfig, validate_model
 
 P = PrototypeParams.paper()

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from debist.physics import plots
 from debist.physics.dynamics import mode_analysis
 from debist.physics.params import PrototypeParams
 from debist.physics.prestrain import prestrain_sweep
 from debist.physics.reduced import compare_full_reduced, fit_reduced, switching_profile
 from debist.physics.statics import FORCE_STATES, force_displacement
+from debist.report import physics_plots as plots
 
 P = PrototypeParams.paper()
 

@@ -13,12 +13,12 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from debist import preflight
 from debist.cli import app
+from debist.engine import preflight
 from debist.errors import ResourceError, WorkflowError
 from debist.identify import IdentifyConfig, Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
-from debist.sindy import SindyConfig, fit_sindy
+from debist.model.sindy import SindyConfig, fit_sindy
 from debist.studies import StudyConfig, rbf_grid_study
 from debist.validate import DataSet, ValidateConfig, validate_model
 
@@ -124,7 +124,7 @@ def test_data_free_lower_bound_refuses_huge_M_and_passes_the_shipped_ones(budget
 def test_estimate_agrees_with_the_measured_peak_of_a_real_fit():
     """tracemalloc sees 3 of the 5 regressor-sized arrays alive at the SVD (numpy's LAPACK
     copies are malloc'ed outside it): the estimate is 1.5 times its peak. Against the peak
-    resident size (see debist.preflight) it is within 7 %."""
+    resident size (see debist.engine.preflight) it is within 7 %."""
     records = _records(6000, n_rec=2)
     cfg = IdentifyConfig.from_dict({"M": 30, "T_z": 0.0, "max_condition": 1e300})
     estimate = preflight.identify_bytes(cfg, 1, 12000, 6000)
@@ -170,7 +170,7 @@ def test_huge_substeps_are_refused_naming_the_key(budget):
 
 
 def test_free_run_estimate_agrees_with_the_measured_peak():
-    from debist.simulate import simulate
+    from debist.simulate.freerun import simulate
 
     model, v = _Oscillator(), [np.ones((60, 1)), np.ones((45, 1))]
     estimate = preflight.free_run_bytes([60, 45], 1, 2, 40)

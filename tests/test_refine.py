@@ -6,7 +6,7 @@ import pytest
 from debist.errors import WorkflowError
 from debist.identify import IdentifyConfig, Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_config, refine_model
-from debist.simulate import simulate
+from debist.simulate.freerun import simulate
 
 
 def _noisy_records(rec, level, seed):

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from debist import forking, render
-from debist.forking import fork_workers
-from debist.render import FigureJob, render_pngs
+from debist.engine import forking
+from debist.engine.forking import fork_workers
+from debist.report import render
+from debist.report.render import FigureJob, render_pngs
 
 
 def _draw(seed: int, warn: bool = False) -> Figure:

@@ -6,9 +6,9 @@ import pandas as pd
 import pytest
 from test_stability import K1, M_Q, D, double_well
 
-from debist.htmlreport import _design
 from debist.identify.stability import stability_table
-from debist.report import de_inputs, design_table, identify_table, summary_units
+from debist.report.html import _design
+from debist.report.tables import de_inputs, design_table, identify_table, summary_units
 
 
 def _cells(table):
@@ -77,7 +77,7 @@ def test_an_acceleration_input_is_named_and_drawn_as_such():
     run_identify: switching levels in m/s^2, Fig. 14 shows g_i, not dC_i/dq."""
     from test_excitation import _duffing
 
-    from debist.plots import curves_figure
+    from debist.report.plots import curves_figure
     from debist.stages.identify import run_identify
 
     rec = _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=60.0)

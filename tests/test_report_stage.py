@@ -19,15 +19,15 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from matplotlib.image import imread
 from typer.testing import CliRunner
 
-from debist import artifacts, outdir
 from debist.cli import app
+from debist.engine import artifacts, outdir
+from debist.engine.runner import Runner
 from debist.errors import WorkflowError
-from debist.htmlreport import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
-from debist.report_figures import dynamic_window
-from debist.runner import Runner
-from debist.schema import check_workflow
+from debist.report.figures import dynamic_window
+from debist.report.html import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
 from debist.stages.report import ReportInputs, run_report
-from debist.workflow import load_workflow
+from debist.workflow.loader import load_workflow
+from debist.workflow.schema import check_workflow
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 SHOWN = ["ingest", "differentiate", "identify", "validate", "compare"]

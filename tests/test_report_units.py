@@ -6,8 +6,8 @@ from rich.console import Console
 from test_stability import double_well
 from test_trust import DT, _tables
 
-from debist.report import design_table, identify_table, summary_units
-from debist.sindy import SindyConfig, fit_sindy
+from debist.model.sindy import SindyConfig, fit_sindy
+from debist.report.tables import design_table, identify_table, summary_units
 from debist.stages.identify import run_identify
 from debist.stages.validate import run_validate
 

@@ -12,7 +12,7 @@ from debist.physics.reduced import fit_reduced
 from debist.rig.params import RigParams
 from debist.rig.reduced import Q_MAX, ReducedPlant
 from debist.rig.run import make_plant, simulate_rig, true_curves
-from debist.simulate import simulate
+from debist.simulate.freerun import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-reduced.toml"
@@ -112,8 +112,8 @@ def test_pulse_on_de1_switches_from_the_left_to_the_right_well(switching):
 
 
 def test_rig_stage_writes_the_exact_curves_with_the_mass_they_are_per(tmp_path):
-    from debist.artifacts import read_h5
-    from debist.fileformats import write_output
+    from debist.engine.artifacts import read_h5
+    from debist.engine.fileformats import write_output
     from debist.stages.rig import run_rig
 
     section = {"plant": {"model": "reduced"}, "prototype": {"dz_1": 0.15e-3, "dz_2": 0.05e-3},
@@ -132,8 +132,8 @@ def test_rig_stage_writes_the_exact_curves_with_the_mass_they_are_per(tmp_path):
 
 
 def test_workflow_loads_and_model_is_checked(tmp_path):
-    from debist.runner import stage_config
-    from debist.workflow import load_workflow
+    from debist.engine.runner import stage_config
+    from debist.workflow.loader import load_workflow
 
     wf = load_workflow(WORKFLOW, tmp_path / "out")
     config = stage_config(wf, "rig")

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from debist import artifacts
+from debist.engine import artifacts
+from debist.engine.runner import Runner
 from debist.errors import WorkflowError
-from debist.runner import Runner
-from debist.workflow import load_workflow
+from debist.workflow.loader import load_workflow
 
 WORKFLOW = """
 [workflow]

@@ -8,8 +8,8 @@ import pytest
 from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
-from debist import artifacts
 from debist.cli import app
+from debist.engine import artifacts
 
 
 @pytest.fixture

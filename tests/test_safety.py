@@ -21,10 +21,10 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from debist import artifacts, outdir
 from debist.cli import app
-from debist.fingerprint import code_fingerprint, module_closure
-from debist.registry import STAGES
+from debist.engine import artifacts, outdir
+from debist.engine.fingerprint import code_fingerprint, module_closure
+from debist.engine.registry import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,10 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.config import config_from_section, unknown_key_message
 from debist.errors import WorkflowError
-from debist.schema import SECTIONS, check_workflow
-from debist.workflow import load_workflow
+from debist.workflow.config import config_from_section, unknown_key_message
+from debist.workflow.loader import load_workflow
+from debist.workflow.schema import SECTIONS, check_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -492,11 +492,11 @@ def test_config_from_section_message_format():
 def test_literals_follow_the_registries():
     """Choices written as Literal types in the configs equal the constants they mirror."""
     from debist.identify.config import IdentifyConfig
+    from debist.model.sindy import OPTIMIZERS, SindyConfig
+    from debist.model.termtable import INPUT_MAPS
     from debist.rig.dspace import MAT_VERSIONS
     from debist.rig.experiment import ExperimentConfig
-    from debist.simulate import INTERPOLATIONS
-    from debist.sindy import OPTIMIZERS, SindyConfig
-    from debist.termtable import INPUT_MAPS
+    from debist.simulate.freerun import INTERPOLATIONS
     from debist.validate import ValidateConfig
 
     def choices(cls, name):

@@ -6,9 +6,9 @@ import shutil
 import pytest
 from conftest import invoke_cli
 
-from debist import artifacts
+from debist.engine import artifacts
 from debist.errors import WorkflowError
-from debist.workflow import load_workflow, parse_overrides
+from debist.workflow.loader import load_workflow, parse_overrides
 
 
 def invoke(*args):

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from debist.identify import RBFBasis, RBFModel
-from debist.simulate import simulate, upsample_inputs
+from debist.simulate.freerun import simulate, upsample_inputs
 from debist.validate import initial_state, nrmse, rms
 
 

@@ -7,8 +7,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from debist.errors import IdentificationError, WorkflowError
-from debist.simulate import simulate
-from debist.sindy import SindyConfig, SindyModel, fit_sindy
+from debist.model.sindy import SindyConfig, SindyModel, fit_sindy
+from debist.simulate.freerun import simulate
 
 # q'' = -k1 q - k3 q^3 - d q' + g1 (1 + a q) v1^2 + g2 v2^2, SI units (q ~ 1 mm, v ~ 1 kV).
 K1 = (2 * np.pi * 50.0) ** 2  # [1/s^2]

@@ -11,8 +11,6 @@ import numpy as np
 import pytest
 
 from debist.errors import DebistError
-from debist.identify.basis import RBFBasis
-from debist.identify.model import RBFModel
 from debist.identify.stability import (
     StabilityError,
     equilibria,
@@ -21,7 +19,9 @@ from debist.identify.stability import (
     switching_voltages,
     verdict,
 )
-from debist.identify.terms import PhysicsPrior
+from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
+from debist.model.terms import PhysicsPrior
 
 K1, K3, M_Q, D, G = -40.0, 4e5, 0.04, 0.5, 2e-8
 Q_RANGE = (-0.012, 0.012)

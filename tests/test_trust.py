@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 from test_stability import double_well
 
-from debist.report import nrmse_table
-from debist.simulate import simulate
+from debist.report.tables import nrmse_table
+from debist.simulate.freerun import simulate
 from debist.stages.validate import run_validate
 from debist.validate import default_q_limit, nrmse
 

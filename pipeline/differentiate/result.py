@@ -9,7 +9,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.config import config_from_section
+from debist.workflow.config import config_from_section
 
 __all__ = ["Derivatives", "check_int", "check_positive", "check_signal", "config_from_dict"]
 
@@ -106,7 +106,7 @@ def config_from_dict(
     Parameters
     ----------
     cls : type
-        The method's config dataclass (a pydantic dataclass, see :mod:`debist.config`).
+        The method's config dataclass (a pydantic dataclass, see :mod:`debist.workflow.config`).
     params : mapping of str to value
         The parameters given in the workflow (without ``method``).
     method : str

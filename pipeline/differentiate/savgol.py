@@ -9,8 +9,8 @@ import pydantic
 from numpy.typing import ArrayLike
 from pydantic import Field
 
-from debist.config import CONFIG, ConfigValueError
 from debist.differentiate.result import Derivatives, check_signal, config_from_dict
+from debist.workflow.config import CONFIG, ConfigValueError
 
 __all__ = ["SavGolConfig", "savgol_derivatives"]
 

@@ -10,8 +10,8 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, PositiveFloat
 
-from debist.config import CONFIG
 from debist.differentiate.result import Derivatives, check_signal, config_from_dict
+from debist.workflow.config import CONFIG
 
 __all__ = ["SpectralConfig", "lowpass_gain", "spectral_derivatives"]
 

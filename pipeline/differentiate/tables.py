@@ -17,8 +17,8 @@ from typing import Any
 
 import pandas as pd
 
-from debist import progress
 from debist.differentiate.base import differentiate
+from debist.engine import progress
 from debist.errors import ConvergenceWarning
 from debist.tables import sample_time
 

@@ -12,10 +12,10 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
-from debist.config import CONFIG, ConfigValueError
 from debist.differentiate.result import Derivatives, check_signal, config_from_dict
 from debist.differentiate.tvregdiff import tvregdiff
 from debist.ingest.units import lookup_unit
+from debist.workflow.config import CONFIG, ConfigValueError
 
 
 def unit_factor(symbol: str) -> float | None:

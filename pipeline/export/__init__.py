@@ -3,10 +3,10 @@
 ``debist export`` writes the RBF model of Eq. 37 (with its backbone and physics prior) as
 plain source files a controller or a Simulink model can build without debist (C99, a MATLAB
 function file for a Simulink MATLAB Function block or Octave, or NumPy): the term table
-of :meth:`debist.identify.model.RBFModel.table_model` as constant arrays, the state
+of :meth:`debist.model.rbf.RBFModel.table_model` as constant arrays, the state
 derivative, one classical RK4 step with inputs linear between two samples (the scheme of
 debist's free run with ``substeps = 1`` and ``interpolation = "linear"``, so the exported
-code reproduces :func:`debist.simulate.simulate` to rounding), and the characteristic
+code reproduces :func:`debist.simulate.freerun.simulate` to rounding), and the characteristic
 curves restoring force, d(q) and g_i(q) as a lookup table. The generators are pure functions
 returning file contents; :func:`load_identified` reads a run's identified model and checks
 that the identify stage is up to date.
@@ -83,7 +83,7 @@ def load_identified(runner):
 
     Parameters
     ----------
-    runner : debist.runner.Runner
+    runner : debist.engine.runner.Runner
         The workflow's runner.
 
     Returns
@@ -102,9 +102,9 @@ def load_identified(runner):
         If the identify stage is missing or stale (naming why: never run, outputs
         changed such as a modified ``model.h5``, config or upstream changed).
     """
-    from debist import artifacts
+    from debist.engine import artifacts
     from debist.identify.bands import identified_intervals
-    from debist.identify.model import RBFModel
+    from debist.model.rbf import RBFModel
 
     wf = runner.wf
     if "identify" not in runner.stages():

@@ -14,7 +14,7 @@ import numpy as np
 
 from debist import __version__
 from debist.errors import ArtifactError, WorkflowError
-from debist.termtable import BASE_GAUSS
+from debist.model.termtable import BASE_GAUSS
 
 __all__ = ["CURVE_POINTS", "ExportInfo", "curve_table"]
 
@@ -31,7 +31,7 @@ class ExportInfo:
     workflow : str
         The workflow's name.
     run_digest : str or None
-        The run digest (:func:`debist.outdir.run_digest`); None when a stage of the
+        The run digest (:func:`debist.engine.outdir.run_digest`); None when a stage of the
         workflow has not run.
     identify_manifest : str or None
         sha256 of ``identify/manifest.json`` (names the identified model even without a

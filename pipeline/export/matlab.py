@@ -12,7 +12,7 @@ from __future__ import annotations
 import textwrap
 
 from debist.export.common import ExportInfo, _arrays, _describe, _fill, _literal, curve_table
-from debist.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
+from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
 
 __all__ = ["MATLAB_FILE", "MATLAB_NAME_FILE", "m_string", "matlab_source"]
 

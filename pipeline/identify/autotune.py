@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from debist import progress as _progress
+from debist.engine import progress as _progress
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify.config import (
     DEFAULT_WINDOW,
@@ -76,7 +76,7 @@ from debist.identify.config import (
     check_grid,
 )
 from debist.identify.fit import Record, fit_rbf_model
-from debist.identify.terms import column_names
+from debist.model.terms import column_names
 
 __all__ = [
     "DEFAULT_WINDOW",
@@ -344,11 +344,11 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     """Mean NRMSE(q) of the held-out spans' restarted windows; (inf, True) if one diverged.
 
     Each span is tiled by windows of ``window`` samples, each run free from the measured
-    state at its start (:func:`debist.prediction.restarted_runs`); the span's score is
+    state at its start (:func:`debist.simulate.prediction.restarted_runs`); the span's score is
     NRMSE(q) (Eq. 41) of the windows' runs against the measurement, normalised by the span's
     range.
     """
-    from debist.prediction import restarted_runs
+    from debist.simulate.prediction import restarted_runs
     from debist.validate import default_q_limit, nrmse
 
     scores = []
@@ -440,7 +440,7 @@ def select_hyperparameters(
     (:func:`blocked_folds`); per candidate and fold the model is fitted on the other blocks
     (each remaining contiguous piece a record, trimmed by ``trim``) and run free on the
     held-out block in windows of ``window`` samples, each restarted from the measured state
-    at its start (multiple shooting: :func:`debist.prediction.restarted_runs`); the fold's
+    at its start (multiple shooting: :func:`debist.simulate.prediction.restarted_runs`); the fold's
     score is NRMSE(q) of Eq. 41 of those runs (mean over the records). A failed fit or a
     diverged window scores ``inf``. The choice is the most parsimonious candidate within one
     standard error of the best mean (:func:`one_standard_error`; order :data:`PARSIMONY`).
@@ -473,7 +473,7 @@ def select_hyperparameters(
         random (kept for a stable signature should a randomised strategy be added).
     progress : callable, optional
         Called as ``progress(done, total)`` [candidates]; default: the listener of
-        :mod:`debist.progress` (task "hyper-parameters"), if any.
+        :mod:`debist.engine.progress` (task "hyper-parameters"), if any.
 
     Returns
     -------

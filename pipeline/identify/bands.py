@@ -62,8 +62,8 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from debist.identify.basis import RBFBasis
-from debist.identify.terms import PhysicsPrior, term_table
+from debist.model.basis import RBFBasis
+from debist.model.terms import PhysicsPrior, term_table
 
 #: Model-error half-width of each curve's band, as a fraction of the curve's scale (the larger
 #: of its range and its largest magnitude over the supported points): per curve the 95th
@@ -154,7 +154,7 @@ def curve_maps(
 ) -> dict[str, np.ndarray]:
     """Linear maps from the regression parameters to the characteristic curves.
 
-    Built from the term library (:func:`debist.identify.terms.term_table`): the restoring
+    Built from the term library (:func:`debist.model.terms.term_table`): the restoring
     force is the force side at rest (``z = 0``, ``h(v) = 0``), the damping the terms linear
     in ``z`` at ``z = 1``, and ``g_j`` the input terms of input ``j`` at ``h(v_j) = 1``.
 
@@ -641,7 +641,7 @@ def static_frame(
     Masoud & Maas 2025, Eq. 37, Fig. 4.
     """
     from debist.identify.design import at_level
-    from debist.termtable import input_map
+    from debist.model.termtable import input_map
 
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)

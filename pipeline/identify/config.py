@@ -9,9 +9,9 @@ from typing import Annotated, Any, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
-from debist.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
 from debist.errors import WorkflowError
-from debist.identify.terms import check_terms
+from debist.model.terms import check_terms
+from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'
@@ -38,7 +38,7 @@ class IdentifyConfig:
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
         "input_gain", and with a ``[physics]`` section the analytical model's curves
         "physics_spring", "physics_damping", "physics_gain" (scaled; see
-        :class:`debist.identify.terms.PhysicsPrior`). With "clip" evaluation the
+        :class:`debist.model.terms.PhysicsPrior`). With "clip" evaluation the
         model outside the estimation range is the backbone plus the RBF curves held at
         their edge values.
     input_map : {"v2", "v"}

@@ -169,8 +169,8 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33, 37.
     """
-    from debist.identify.model import RBFModel
-    from debist.identify.terms import PhysicsPrior
+    from debist.model.rbf import RBFModel
+    from debist.model.terms import PhysicsPrior
     from debist.physics_stages import physics_mass, physics_prior
 
     prior = physics_prior(physics, records, n_grid=801)

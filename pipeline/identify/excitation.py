@@ -42,9 +42,9 @@ import pandas as pd
 from scipy.signal import welch
 
 from debist.errors import WorkflowError
-from debist.identify.basis import RBFBasis
-from debist.identify.terms import RBF_TERMS
-from debist.termtable import input_map
+from debist.model.basis import RBFBasis
+from debist.model.terms import RBF_TERMS
+from debist.model.termtable import input_map
 
 if TYPE_CHECKING:  # the fit module may import this one
     from debist.identify.fit import Record

@@ -7,14 +7,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from debist import preflight
+from debist.engine import preflight
 from debist.errors import IdentificationError
-from debist.identify.basis import RBFBasis
 from debist.identify.config import IdentifyConfig
 from debist.identify.friction import creep_states, friction_state
-from debist.identify.model import RBFModel
-from debist.identify.terms import PHYSICS_TERMS, force_columns, input_columns
-from debist.termtable import input_map
+from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
+from debist.model.terms import PHYSICS_TERMS, force_columns, input_columns
+from debist.model.termtable import input_map
 
 
 @dataclass(frozen=True)
@@ -267,7 +267,7 @@ def fit_rbf_model(
         ``lowpass`` is not below a record's Nyquist frequency.
     ResourceError
         If the least squares would need more memory than the budget
-        (:func:`debist.preflight.check_identify`), before anything is allocated.
+        (:func:`debist.engine.preflight.check_identify`), before anything is allocated.
 
     References
     ----------

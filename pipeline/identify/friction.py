@@ -75,7 +75,7 @@ def creep_states(phi: np.ndarray, q_dot: np.ndarray, dt: float, rate: float) -> 
     Parameters
     ----------
     phi : ndarray, shape (n, M)
-        The basis along the record, phi_j(q) (:class:`debist.identify.basis.RBFBasis`).
+        The basis along the record, phi_j(q) (:class:`debist.model.basis.RBFBasis`).
     q_dot : ndarray, shape (n,)
         Velocity [unit of q / s].
     dt : float

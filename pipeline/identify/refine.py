@@ -29,16 +29,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from debist import preflight, progress
+from debist.engine import preflight, progress
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
-from debist.identify.model import RBFModel
-from debist.identify.terms import term_sign, term_table
-from debist.kernel import free_run_sensitivity
-from debist.prediction import restarted_runs
-from debist.simulate import check_free_run, prepare_inputs, simulate
-from debist.termtable import TableModel
+from debist.model.rbf import RBFModel
+from debist.model.terms import term_sign, term_table
+from debist.model.termtable import TableModel
+from debist.simulate.freerun import check_free_run, prepare_inputs, simulate
+from debist.simulate.kernel import free_run_sensitivity
+from debist.simulate.prediction import restarted_runs
 
 
 @dataclass(frozen=True)
@@ -232,11 +232,11 @@ def refine_model(
     term would be as large as the regression output), so that the optimiser sees
     comparable variables. The Jacobian comes from the forward sensitivities of the
     windows' free runs, integrated with them by the compiled kernel
-    (:func:`debist.kernel.free_run_sensitivity`): the exact derivative of the discrete
+    (:func:`debist.simulate.kernel.free_run_sensitivity`): the exact derivative of the discrete
     free run, at the cost of about one run per window.
     Residuals are q_sim - q over each window, with diverged windows penalised.
     Before anything is allocated, settings whose batched simulations exceed the memory
-    budget are refused (``ResourceError``, :mod:`debist.preflight`).
+    budget are refused (``ResourceError``, :mod:`debist.engine.preflight`).
     """
     if model.has_creep:
         raise WorkflowError(
@@ -407,8 +407,8 @@ def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Recor
     Raises
     ------
     ResourceError
-        If :func:`debist.preflight.refine_bytes` for the window runs, or
-        :func:`debist.preflight.free_run_bytes` for the free runs over the whole records,
+        If :func:`debist.engine.preflight.refine_bytes` for the window runs, or
+        :func:`debist.engine.preflight.free_run_bytes` for the free runs over the whole records,
         exceeds the budget, naming the ``[identify.refine]`` keys.
 
     Notes

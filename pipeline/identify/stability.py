@@ -5,7 +5,7 @@ The identified model of Masoud & Maas 2025 (Eq. 37),
     m_q q'' + d(q) z + F_c tanh(z / v_c) + f(q) = sum_i g_i(q) h(v_i),   T_z z' = q' - z,
 
 with the restoring force ``f(q) = c(q) q + F_0`` (``c`` includes the backbone ``k_1 + k_3 q^2``
-and the scaled analytical curve, see :meth:`debist.identify.model.RBFModel.curves`), is at
+and the scaled analytical curve, see :meth:`debist.model.rbf.RBFModel.curves`), is at
 rest where the static force
 
     F(q; v) = f(q) - sum_i g_i(q) h(v_i)
@@ -56,8 +56,8 @@ from scipy.integrate import quad
 from scipy.optimize import brentq, minimize_scalar
 
 from debist.errors import DebistError
-from debist.identify.model import RBFModel
-from debist.termtable import input_map
+from debist.model.rbf import RBFModel
+from debist.model.termtable import input_map
 
 __all__ = [
     "EquilibriumPoint",

@@ -1,7 +1,7 @@
 """Configuration of the ingest stage: which file format, which channels, which checks.
 
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
-parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.config`) and rejects
+parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.workflow.config`) and rejects
 anything it does not understand with a one-line :class:`~debist.errors.WorkflowError`
 naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
@@ -60,14 +60,6 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist.config import (
-    CONFIG,
-    AsTuple,
-    ConfigValueError,
-    Interval,
-    config_from_section,
-    unknown_key_message,
-)
 from debist.errors import WorkflowError
 from debist.ingest.units import (
     EXAMPLES,
@@ -76,6 +68,14 @@ from debist.ingest.units import (
     lookup_unit,
     role_quantities,
     si_symbol,
+)
+from debist.workflow.config import (
+    CONFIG,
+    AsTuple,
+    ConfigValueError,
+    Interval,
+    config_from_section,
+    unknown_key_message,
 )
 
 __all__ = [
@@ -437,7 +437,7 @@ def _channel(key: str, table: object, where: Where, extra: bool) -> ChannelSpec:
         raise
 
 
-#: pydantic configuration of :class:`IngestSpec`: as :data:`~debist.config.CONFIG`, and
+#: pydantic configuration of :class:`IngestSpec`: as :data:`~debist.workflow.config.CONFIG`, and
 #: ``sample_slice`` may be given by its workflow key ``slice`` or by its name.
 _INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
 

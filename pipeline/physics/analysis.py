@@ -21,7 +21,6 @@ import numpy as np
 import pydantic
 from pydantic import Field, PositiveFloat
 
-from debist.config import CONFIG, ConfigValueError, Interval, config_from_section
 from debist.physics.dynamics import ModeAnalysis, mode_analysis
 from debist.physics.params import PrototypeParams
 from debist.physics.prestrain import PrestrainSweep, prestrain_sweep
@@ -33,6 +32,7 @@ from debist.physics.reduced import (
     switching_profile,
 )
 from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
+from debist.workflow.config import CONFIG, ConfigValueError, Interval, config_from_section
 
 __all__ = ["Analysis", "AnalyzeConfig", "analysis_figures", "analysis_tree", "run_analysis"]
 
@@ -287,7 +287,7 @@ def analysis_figures(result: Analysis) -> dict[str, Any]:
         ``fig3_prestrain``, ``fig4_force_displacement``, ``fig5_capacitance``,
         ``fig6a_modes``, ``fig7_full_vs_reduced`` and ``reduced_curves``.
     """
-    from debist.physics import plots
+    from debist.report import physics_plots as plots
 
     return {
         "fig3_prestrain": plots.plot_prestrain_sweep(result.sweep),

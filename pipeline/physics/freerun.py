@@ -2,10 +2,10 @@
 
 :class:`AnalyticalModel` tabulates the reduced model's curves once (``m_q, dm_q/dq, d, f, g_i,
 k_i`` of :class:`debist.physics.reduced.ReducedModel`) and interpolates them with cubic
-splines, so that the shared batched RK4 simulator (:mod:`debist.simulate`) runs it beside the
-identified and SINDy models, driven by the measured voltages, with the same initial states and
-the same scoring. The tabulation grid is fine (default 0.025 mm); the interpolation error is far
-below the model's own error.
+splines, so that the shared batched RK4 simulator (:mod:`debist.simulate.freerun`) runs it
+beside the identified and SINDy models, driven by the measured voltages, with the same initial
+states and the same scoring. The tabulation grid is fine (default 0.025 mm); the interpolation
+error is far below the model's own error.
 
 References
 ----------
@@ -29,7 +29,7 @@ _CURVES = ("m_q", "dm_q", "d", "f", "g1", "g2", "k1", "k2", "phi")
 
 
 class AnalyticalModel:
-    """Reduced model of Eq. 26 with tabulated curves, for :func:`debist.simulate.simulate`.
+    """Reduced model of Eq. 26 with tabulated curves, for :func:`debist.simulate.freerun.simulate`.
 
     States ``x = [q, q_dot, q_eps,1, q_eps,2]`` [m, m/s, -, -]; inputs ``v = [v1, v2]`` [V].
 
@@ -115,7 +115,7 @@ class AnalyticalModel:
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel: the splines of all curves but phi."""
-        from debist.kernel import spline_arrays
+        from debist.simulate.kernel import spline_arrays
 
         return spline_arrays(self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar)
 

@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping
 import pydantic
 from pydantic import FiniteFloat, NonNegativeFloat, PositiveFloat
 
-from debist.config import CONFIG, config_from_section
+from debist.workflow.config import CONFIG, config_from_section
 
 __all__ = ["V_MAX", "PrototypeParams"]
 

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import ODEintWarning, odeint, solve_ivp
 
-from debist import progress
+from debist.engine import progress
 
 __all__ = ["ODEINT", "SegmentedSolution", "solve_segments"]
 

@@ -48,15 +48,15 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist import progress
-from debist.config import CONFIG, ConfigValueError, config_from_section
+from debist.engine import progress
+from debist.engine.forking import fork_context, fork_workers
 from debist.errors import WorkflowError
-from debist.forking import fork_context, fork_workers
 from debist.physics.params import PrototypeParams
 from debist.rig.dspace import Channel, recording
 from debist.rig.params import RigParams
 from debist.rig.profiles import PROFILES, make_profile
 from debist.rig.run import RigRun, simulate_rig
+from debist.workflow.config import CONFIG, ConfigValueError, config_from_section
 
 __all__ = [
     "CHANNELS",
@@ -286,7 +286,7 @@ def run_experiments(
     The experiments are independent (each starts at rest with its own seeds), so they run
     in forked worker processes (:class:`concurrent.futures.ProcessPoolExecutor`), one per
     core; each result is the same as a serial run's (the same deterministic computation in
-    another process). Serially where :func:`debist.forking.fork_workers` says forking is
+    another process). Serially where :func:`debist.engine.forking.fork_workers` says forking is
     unsafe (inside a daemonic worker: ``debist batch`` already runs one prototype per worker;
     outside the main thread; on platforms without ``fork``).
 

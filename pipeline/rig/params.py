@@ -15,8 +15,8 @@ from typing import Annotated, Literal
 import pydantic
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
 
-from debist.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 from debist.physics.params import PrototypeParams
+from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 
 __all__ = ["RigParams"]
 

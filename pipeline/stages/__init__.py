@@ -3,12 +3,12 @@
 Each stage module holds the stage's pure ``run_<stage>`` function (arrays and configuration
 in, a result out; no file IO, no printing) and an ``execute(ctx)`` adapter that takes the
 stage's inputs from a :class:`StageInputs` (the runner, which reads them through
-:mod:`debist.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
+:mod:`debist.engine.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
 ingest reads files itself, because reading rig logs is what it is for.
 
-The registry :data:`debist.registry.STAGES` names each stage's module; a stage's key hashes
+The registry :data:`debist.engine.registry.STAGES` names each stage's module; a stage's key hashes
 the source of that module and of every ``pipeline`` module it imports, transitively
-(:func:`debist.fingerprint.code_fingerprint`), so this package's ``__init__`` imports
+(:func:`debist.engine.fingerprint.code_fingerprint`), so this package's ``__init__`` imports
 nothing: a stage's code is exactly what its own module reaches.
 """
 
@@ -21,7 +21,7 @@ if TYPE_CHECKING:  # typing only: stage modules must not import the workflow loa
     import pandas as pd
 
     from debist.physics.params import PrototypeParams
-    from debist.workflow import Workflow
+    from debist.workflow.loader import Workflow
 
 __all__ = ["StageInputs", "StageOutput"]
 
@@ -34,8 +34,8 @@ class StageOutput:
     ----------
     outputs : dict of str to object
         Output path relative to the stage folder to value: a pandas DataFrame (Parquet),
-        :class:`debist.artifacts.H5Tree`, :class:`debist.artifacts.Figure`,
-        :class:`debist.artifacts.FileWriter`, ``str`` or ``bytes``.
+        :class:`debist.engine.artifacts.H5Tree`, :class:`debist.engine.artifacts.Figure`,
+        :class:`debist.engine.artifacts.FileWriter`, ``str`` or ``bytes``.
     summary : dict
         Small JSON-compatible results the reports print (written as the hashed output
         ``summary.json``); reproducible values only, no wall times.
@@ -51,8 +51,8 @@ class StageOutput:
 class StageInputs(Protocol):
     """What a stage's ``execute`` may read: the workflow and the upstream stages' artifacts.
 
-    Implemented by :class:`debist.runner.Runner`; every read goes through
-    :mod:`debist.artifacts`.
+    Implemented by :class:`debist.engine.runner.Runner`; every read goes through
+    :mod:`debist.engine.artifacts`.
     """
 
     wf: Workflow

@@ -55,13 +55,13 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
     ----------
     Masoud & Maas 2025, Section 3, Fig. 3-7.
     """
-    from debist.config import config_from_section
     from debist.physics.analysis import (
         AnalyzeConfig,
         analysis_figures,
         analysis_tree,
         run_analysis,
     )
+    from debist.workflow.config import config_from_section
 
     cfg = config_from_section(AnalyzeConfig, section, "[analyze]")
     res = run_analysis(params, cfg)
@@ -106,8 +106,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, StaticsError
         As :func:`run_analyze`.
     """
-    from debist.artifacts import Figure, H5Tree
-    from debist.fileformats import REPORT_DPI
+    from debist.engine.artifacts import Figure, H5Tree
+    from debist.engine.fileformats import REPORT_DPI
     from debist.physics.params import PrototypeParams
 
     params = ctx.physics() or PrototypeParams.from_dict({})

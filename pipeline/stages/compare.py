@@ -1,7 +1,7 @@
 """The compare stage: SINDy and a polynomial NARX model beside the identified model.
 
 SINDy is fitted on the same data and derivatives and run free with the same simulator; the
-NARX model (:mod:`debist.narx`), a discrete-time black box, is chosen and fitted on the
+NARX model (:mod:`debist.model.narx`), a discrete-time black box, is chosen and fitted on the
 estimation records and run free on every data set from its first measured samples. Both
 join the NRMSE table of Eq. 41, so every row's verdict says whether the physics-informed
 model beats them.
@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from debist import progress
 from debist.datasets import validation_datasets
+from debist.engine import progress
 from debist.physics_stages import analytical_for
 from debist.records import estimation_records
 from debist.stages import StageInputs, StageOutput
@@ -89,8 +89,8 @@ def run_compare(
     ----------
     Brunton, Proctor & Kutz 2016 (SINDy); Masoud & Maas 2025, Eq. 41.
     """
-    from debist.narx import NarxConfig
-    from debist.sindy import SindyConfig, fit_sindy
+    from debist.model.narx import NarxConfig
+    from debist.model.sindy import SindyConfig, fit_sindy
 
     sindy_section = dict(section["sindy"])
     ncfg = NarxConfig.from_dict(sindy_section.pop("narx", None))
@@ -140,8 +140,8 @@ def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated
     with NaN numbers: the peer is never silently missing.
     """
     from debist.errors import DebistWarning, IdentificationError
-    from debist.narx import NARX_MISSING, fit_narx, narx_available
-    from debist.simulate import SimulationResult
+    from debist.model.narx import NARX_MISSING, fit_narx, narx_available
+    from debist.simulate.freerun import SimulationResult
     from debist.validate import score_free_runs
 
     status, narx = None, None
@@ -214,7 +214,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, IdentificationError
         As :func:`run_compare`.
     """
-    from debist.artifacts import H5Tree
+    from debist.engine.artifacts import H5Tree
 
     res = run_compare(
         ctx.tables("ingest"),

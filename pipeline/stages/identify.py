@@ -92,7 +92,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         mark_switching,
     )
     from debist.identify.refine import refine_config, refine_model
-    from debist.identify.terms import PHYSICS_TERMS
+    from debist.model.terms import PHYSICS_TERMS
 
     section = dict(section)
     if section.get("m_q") == "physics":
@@ -178,9 +178,9 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
 
 def _excitation(records, cfg: IdentifyConfig, tables):
     """Run the excitation check on the estimation records (warnings in the data's unit)."""
-    from debist.identify.basis import RBFBasis
     from debist.identify.excitation import check_excitation
     from debist.ingest.checks import check_varies
+    from debist.model.basis import RBFBasis
     from debist.validate import report_factor
 
     q = np.concatenate([r.q for r in records])
@@ -262,10 +262,10 @@ def execute(ctx: StageInputs) -> StageOutput:
     IdentificationError, WorkflowError
         As :func:`run_identify`.
     """
-    from debist.artifacts import Figure, H5Tree
-    from debist.fileformats import REPORT_DPI
-    from debist.plots import curves_figure
-    from debist.report import summary_units
+    from debist.engine.artifacts import Figure, H5Tree
+    from debist.engine.fileformats import REPORT_DPI
+    from debist.report.plots import curves_figure
+    from debist.report.tables import summary_units
 
     res = run_identify(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
@@ -282,7 +282,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
-        from debist.study_plots import autotune_figure
+        from debist.report.study_plots import autotune_figure
 
         outputs["autotune.parquet"] = res.search.table
         outputs["plots/autotune.png"] = Figure(autotune_figure(res.search), REPORT_DPI)

@@ -12,7 +12,7 @@ import pandas as pd
 from debist.stages import StageInputs, StageOutput
 
 if TYPE_CHECKING:
-    from debist.workflow import DatasetSpec
+    from debist.workflow.loader import DatasetSpec
 
 __all__ = ["execute", "run_ingest"]
 

@@ -2,7 +2,7 @@
 
 The stage reads what the other stages of the workflow wrote (their summaries, tables,
 free runs and PNG figures, each checked against its manifest), draws the report's own
-figures (Fig. 11a, 12, 13, 15) and renders ``report.html`` (:mod:`debist.htmlreport`).
+figures (Fig. 11a, 12, 13, 15) and renders ``report.html`` (:mod:`debist.report.html`).
 Its key hashes every upstream output, so the page is a pure function of hashed content:
 it reruns when any of them changes, and ``debist verify`` checks it like any artifact.
 
@@ -21,24 +21,24 @@ from typing import Any
 
 import pandas as pd
 
-from debist import artifacts, outdir
+from debist.engine import artifacts, outdir
+from debist.engine.fileformats import REPORT_DPI
+from debist.engine.registry import stage as registry_stage
 from debist.errors import ArtifactError
-from debist.fileformats import REPORT_DPI
-from debist.htmlreport import (
+from debist.identify.bands import BOOTSTRAP_LABEL
+from debist.report.figures import (
+    dynamic_window,
+    excitation_figure,
+    free_run_figure,
+)
+from debist.report.html import (
     FIGURE_GROUPS,
     REPORT_FILE,
     SECTIONS,
     ReportConfig,
     render_report,
 )
-from debist.identify.bands import BOOTSTRAP_LABEL
-from debist.registry import stage as registry_stage
-from debist.render import FigureJob, render_pngs
-from debist.report_figures import (
-    dynamic_window,
-    excitation_figure,
-    free_run_figure,
-)
+from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
 
 __all__ = ["ReportInputs", "ReportResult", "execute", "gather_run", "run_report"]
@@ -119,7 +119,7 @@ class ReportResult:
     html : str
         The page.
     figures : dict of str to int
-        Figures per group of :data:`debist.htmlreport.FIGURE_GROUPS`.
+        Figures per group of :data:`debist.report.html.FIGURE_GROUPS`.
     """
 
     html: str
@@ -146,7 +146,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
     inputs : ReportInputs
         The upstream results.
     section : mapping
-        The ``[report]`` section (see :class:`debist.htmlreport.ReportConfig`).
+        The ``[report]`` section (see :class:`debist.report.html.ReportConfig`).
 
     Returns
     -------

@@ -21,8 +21,8 @@ class RigResult:
     Attributes
     ----------
     outputs : dict
-        ``<experiment>.mat`` (:class:`debist.artifacts.FileWriter` of the MAT writer) and
-        ``<experiment>_truth.h5`` (:class:`debist.artifacts.H5Tree`) per experiment; its
+        ``<experiment>.mat`` (:class:`debist.engine.artifacts.FileWriter` of the MAT writer) and
+        ``<experiment>_truth.h5`` (:class:`debist.engine.artifacts.H5Tree`) per experiment; its
         ``curves`` group holds the true curves (:func:`debist.rig.run.true_curves`) with
         the plant ``model`` and the mass they are per in its attributes
         (:func:`debist.rig.reduced.truth_attrs`).
@@ -63,7 +63,7 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     ----------
     Masoud & Maas 2025, Sec. 5.1, Fig. 11a.
     """
-    from debist.artifacts import FileWriter, H5Tree
+    from debist.engine.artifacts import FileWriter, H5Tree
     from debist.errors import DebistError
     from debist.rig.dspace import write_recording
     from debist.rig.experiment import (

@@ -68,8 +68,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError
         As :func:`run_study`.
     """
-    from debist.artifacts import Figure
-    from debist.fileformats import REPORT_DPI
+    from debist.engine.artifacts import Figure
+    from debist.engine.fileformats import REPORT_DPI
 
     results = run_study(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("study")

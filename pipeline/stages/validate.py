@@ -14,8 +14,8 @@ from debist.datasets import validation_datasets
 from debist.identify import RBFModel
 from debist.identify.stability import model_is_stable
 from debist.physics_stages import analytical_for
-from debist.prediction import prediction_table
-from debist.render import FigureJob, render_pngs
+from debist.report.render import FigureJob, render_pngs
+from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
 
@@ -36,12 +36,12 @@ class ValidateResult:
         NRMSE and RMS per data set and model.
     simulated : dict of str to pandas.DataFrame
         Measured and simulated trajectories per data set.
-    plots : dict of str to debist.render.FigureJob
-        Measured vs simulated q per data set, to draw (:func:`debist.plots.free_run_figure`).
+    plots : dict of str to debist.report.render.FigureJob
+        Measured vs simulated q per data set, to draw (:func:`debist.report.plots.free_run_figure`).
     sim_time : float
         Wall time of the free runs [s].
     residuals : pandas.DataFrame or None
-        The residual analysis's correlations (:func:`debist.prediction.prediction_table`),
+        The residual analysis's correlations (:func:`debist.simulate.prediction.prediction_table`),
         None with ``predict_steps = 0``.
     """
 
@@ -99,7 +99,7 @@ def run_validate(
     WorkflowError
         For an invalid section, or physics that does not fit the data.
     """
-    from debist.plots import free_run_figure
+    from debist.report.plots import free_run_figure
 
     cfg = ValidateConfig.from_dict(section)
     q_limit = cfg.q_limit if cfg.q_limit is not None else default_q_limit(model.q_range)

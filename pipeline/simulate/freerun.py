@@ -4,7 +4,7 @@ One fixed-step classical Runge-Kutta integrator with sub-steps, driven by the
 measured inputs interpolated band-limited (polyphase FIR, the default) or
 linearly, never by a zero-order hold that delays the input by half a sample.
 Several records are simulated at once as a batch. Two engines run the same scheme: the
-compiled kernel (:mod:`debist.kernel`, the default, for every model that hands it its
+compiled kernel (:mod:`debist.simulate.kernel`, the default, for every model that hands it its
 arrays through ``kernel_arrays()``) and the NumPy reference, vectorised over the batch and
 calling the model's own ``rhs``; they agree to rounding.
 """
@@ -17,8 +17,8 @@ from typing import Protocol
 
 import numpy as np
 
-from debist import preflight
-from debist import progress as _progress
+from debist.engine import preflight
+from debist.engine import progress as _progress
 from debist.errors import WorkflowError
 
 INTERPOLATIONS = ("bandlimited", "linear")
@@ -239,7 +239,7 @@ def check_free_run(
     Raises
     ------
     ResourceError
-        If :func:`debist.preflight.free_run_bytes` exceeds the budget, before any
+        If :func:`debist.engine.preflight.free_run_bytes` exceeds the budget, before any
         array is built.
 
     References
@@ -279,7 +279,7 @@ def simulate(
     Parameters
     ----------
     model : FreeRunModel
-        The model (e.g. :class:`debist.identify.model.RBFModel`).
+        The model (e.g. :class:`debist.model.rbf.RBFModel`).
     inputs : sequence of ndarray, each shape (n_k, n_inputs), or FineInputs
         Input records [V], all with sample time ``dt``, or the same already
         interpolated by :func:`prepare_inputs` (for repeated simulations).
@@ -300,8 +300,8 @@ def simulate(
         engine), or the NumPy reference engine.
     progress : callable, optional
         Called as ``progress(done, total)`` [samples] while the compiled engine integrates
-        long records (between chunks of :data:`debist.kernel.CHUNK` samples); default:
-        report to the listener of :mod:`debist.progress` as task "free run", if any.
+        long records (between chunks of :data:`debist.simulate.kernel.CHUNK` samples); default:
+        report to the listener of :mod:`debist.engine.progress` as task "free run", if any.
     x0 : ndarray, shape (B, n_states), optional
         Whole initial states (e.g. a friction state estimated from the record); default
         ``model.initial_state(q0, q_dot0)``.
@@ -379,7 +379,7 @@ def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
 
 def _integrate_compiled(model, prepared, dt, x0, q_limit, progress):
     """Integrate with the compiled kernel over the prepared input grid (see :func:`simulate`)."""
-    from debist.kernel import free_run
+    from debist.simulate.kernel import free_run
 
     lengths = np.asarray(prepared.lengths, dtype=np.int64)
     states, acc, dead = free_run(

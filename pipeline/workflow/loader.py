@@ -44,7 +44,7 @@ from typing import Any
 
 from debist.errors import WorkflowError
 from debist.names import check_file_name
-from debist.schema import DATALESS, ROLES, SECTIONS, check_workflow
+from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
 
@@ -241,7 +241,7 @@ def load_workflow(
     WorkflowError
         In one line: the file is missing, a directory, not UTF-8, not valid TOML or a
         symlink loop; a section or key is unknown or a value invalid
-        (:func:`debist.schema.check_workflow`: ``[section] key: expected ..., got ...``);
+        (:func:`debist.workflow.schema.check_workflow`: ``[section] key: expected ..., got ...``);
         a source file is missing, a directory or a symlink loop; the output folder is a
         file (or lies inside one) or a symlink loop.
     """

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from debist.report_figures import dynamic_window
+from debist.report.figures import dynamic_window
 
 
 def free_run_figure(
@@ -38,7 +38,7 @@ def free_run_figure(
         converted for display only. None: ``unit``.
     q_ddot : ndarray, shape (n,), optional
         The measured acceleration [unit/s^2]: the zoom is the 200-sample window where its
-        RMS is largest (:func:`debist.report_figures.dynamic_window`, as in the report);
+        RMS is largest (:func:`debist.report.figures.dynamic_window`, as in the report);
         default the second difference of the measured q.
 
     Returns
@@ -118,7 +118,7 @@ def curves_figure(
     unit : str, optional
         Unit of q for the axis labels.
     units : dict, optional
-        Units of the identified quantities (:func:`debist.report.summary_units`:
+        Units of the identified quantities (:func:`debist.report.tables.summary_units`:
         ``force``, ``d_v``, ``g_0``) for the y labels; None: no y units.
 
     Returns
@@ -126,7 +126,7 @@ def curves_figure(
     matplotlib.figure.Figure
         Three axes: restoring force ``c(q) q + F_0``, damping ``d(q)`` and
         ``dC_i/dq = 2 g_i(q)`` for DE voltage inputs with ``h = v^2``
-        (:func:`debist.report.de_inputs`), else ``g_i(q)`` in its own unit.
+        (:func:`debist.report.tables.de_inputs`), else ``g_i(q)`` in its own unit.
 
     References
     ----------
@@ -143,7 +143,7 @@ def curves_figure(
     inputs = sorted(c for c in curves.columns if c[:1] == "g" and c[1:].isdigit())
     # 2 g_i is a capacitance gradient only for DE voltages with h = v^2 (Eq. 33); any other
     # input (an acceleration, a force) shows its gain g_i in its own unit
-    from debist.report import de_inputs
+    from debist.report.tables import de_inputs
 
     de = units is None or de_inputs(units)
     gain = 2.0 if de else 1.0

@@ -14,7 +14,7 @@ Maxwell creep of the DEs (Masoud & Maas 2025, Eq. 26) with k_i(q) written in the
 the creep force ``sum_k c_k w_k`` is linear in its weights once lambda is fixed. The RBF model
 of Eq. 37 with its backbone and physics prior, and the SINDy polynomials, are such tables; the
 same arrays give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
-right-hand side (:class:`TableModel`) and the compiled one (:mod:`debist.kernel`), so the
+right-hand side (:class:`TableModel`) and the compiled one (:mod:`debist.simulate.kernel`), so the
 fitted, the reference-simulated and the compiled-simulated model are one object.
 
 References
@@ -438,8 +438,10 @@ class TableModel:
         return out
 
     def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:func:`debist.kernel.table_arrays`)."""
-        from debist.kernel import table_arrays  # here, not at the top: numba loads on first use
+        """Arrays of the compiled free-run kernel (:func:`debist.simulate.kernel.table_arrays`)."""
+        from debist.simulate.kernel import (
+            table_arrays,  # here, not at the top: numba loads on first use
+        )
 
         return table_arrays(self)
 

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from debist.identify.basis import RBFBasis
-from debist.identify.terms import PhysicsPrior
-from debist.termtable import input_map
+from debist.model.basis import RBFBasis
+from debist.model.terms import PhysicsPrior
+from debist.model.termtable import input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")
@@ -170,7 +170,7 @@ class RBFModel:
         Returns
         -------
         names : list of str
-            Column names of the term library (:func:`debist.identify.terms.term_table`):
+            Column names of the term library (:func:`debist.model.terms.term_table`):
             the RBF terms of every curve with a nonzero weight, then the backbone terms the
             model has.
         values : ndarray, shape (len(names),)
@@ -222,8 +222,8 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 37.
         """
-        from debist.identify.terms import term_sign, term_table
-        from debist.termtable import TableModel
+        from debist.model.terms import term_sign, term_table
+        from debist.model.termtable import TableModel
 
         names, values = self.parameters()
         table = term_table(
@@ -234,12 +234,12 @@ class RBFModel:
         return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
 
     def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:mod:`debist.kernel`), built once."""
+        """Arrays of the compiled free-run kernel (:mod:`debist.simulate.kernel`), built once."""
         return self._kernel
 
     @cached_property
     def _kernel(self):
-        from debist.kernel import table_arrays
+        from debist.simulate.kernel import table_arrays
 
         return table_arrays(self.table_model())
 
@@ -395,7 +395,7 @@ class RBFModel:
         Parameters
         ----------
         tree : dict
-            As returned by :meth:`to_tree` or :func:`debist.artifacts.read_h5`.
+            As returned by :meth:`to_tree` or :func:`debist.engine.artifacts.read_h5`.
 
         Returns
         -------

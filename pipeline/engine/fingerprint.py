@@ -28,9 +28,10 @@ __all__ = ["code_fingerprint", "module_closure"]
 #: The package whose modules are followed; imports of other packages are libraries,
 #: recorded by version in the stage key instead.
 PACKAGE = "debist"
-#: The package's own folder. Its name need not be ``debist``: in a checkout and in an
+#: The package's own folder (this module lives in its ``engine`` package). Its name need not be
+#: ``debist``: in a checkout and in an
 #: editable install the source folder is ``pipeline/``, mapped to the import name ``debist``.
-_ROOT = Path(__file__).resolve().parent
+_ROOT = Path(__file__).resolve().parent.parent
 
 
 def _module_file(name: str, root: Path = _ROOT) -> Path | None:

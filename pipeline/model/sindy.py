@@ -9,7 +9,7 @@ x_dot = [q_dot, q_ddot] the RBF model is estimated from, with u = h(v) as contro
 Only the q_ddot equation is kept: the kinematic equation q' = q_dot is imposed when
 simulating. :class:`SindyModel` evaluates the identified polynomial with its own numpy
 code (exponent table times coefficients), so free-run simulation with
-:func:`debist.simulate.simulate` costs about as much as for the RBF model.
+:func:`debist.simulate.freerun.simulate` costs about as much as for the RBF model.
 
 References
 ----------
@@ -35,9 +35,9 @@ import numpy as np
 import pydantic
 from pydantic import NonNegativeFloat, PositiveInt
 
-from debist.config import CONFIG, config_from_section
 from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
-from debist.termtable import input_map
+from debist.model.termtable import input_map
+from debist.workflow.config import CONFIG, config_from_section
 
 OPTIMIZERS = ("STLSQ", "SR3")
 
@@ -129,7 +129,7 @@ class SindyConfig:
 class SindyModel:
     """q'' = sum_j xi_j q^a_j q_dot^b_j prod_i h(v_i)^c_ij, q' = q_dot: the identified SINDy model.
 
-    Implements :class:`debist.simulate.FreeRunModel` with states ``[q, q_dot]``.
+    Implements :class:`debist.simulate.freerun.FreeRunModel` with states ``[q, q_dot]``.
 
     Parameters
     ----------
@@ -222,7 +222,7 @@ class SindyModel:
         return (z[:, None, :] ** powers).prod(axis=2) @ coef
 
     def table_model(self):
-        """Return the model as a term table (:class:`debist.termtable.TableModel`).
+        """Return the model as a term table (:class:`debist.model.termtable.TableModel`).
 
         Returns
         -------
@@ -234,7 +234,7 @@ class SindyModel:
         ----------
         Brunton, Proctor & Kutz 2016, Eq. 4.
         """
-        from debist.termtable import S_POW, TableModel, TermTableBuilder
+        from debist.model.termtable import S_POW, TableModel, TermTableBuilder
 
         build = TermTableBuilder(self.n_inputs, self.input_map)
         one = build.one()
@@ -246,12 +246,12 @@ class SindyModel:
         return TableModel(table, self.coefficients[keep], np.ones(1), np.zeros(1), lag=False)
 
     def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:mod:`debist.kernel`), built once."""
+        """Arrays of the compiled free-run kernel (:mod:`debist.simulate.kernel`), built once."""
         return self._kernel
 
     @cached_property
     def _kernel(self):
-        from debist.kernel import table_arrays
+        from debist.simulate.kernel import table_arrays
 
         return table_arrays(self.table_model())
 
@@ -326,7 +326,7 @@ class SindyModel:
         Parameters
         ----------
         tree : mapping
-            As returned by :meth:`to_tree` or :func:`debist.artifacts.read_h5`.
+            As returned by :meth:`to_tree` or :func:`debist.engine.artifacts.read_h5`.
 
         Returns
         -------
@@ -515,7 +515,7 @@ def fit_sindy(
             f"{x.shape[0]} samples for {n_features_expected} SINDy library terms "
             f"(degree {cfg.degree})"
         )
-    from debist.preflight import check_memory, sindy_bytes
+    from debist.engine.preflight import check_memory, sindy_bytes
 
     check_memory(
         sindy_bytes(x.shape[0], n_features_expected),

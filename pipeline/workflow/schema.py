@@ -1,7 +1,7 @@
 """The workflow schema: every section of a parsed workflow file checked before any stage runs.
 
 :func:`check_workflow` builds each section's typed configuration, the same classes the
-stages build (:mod:`debist.config`), from the parsed TOML, merged the way the stages
+stages build (:mod:`debist.workflow.config`), from the parsed TOML, merged the way the stages
 merge them (a data set's ingest is ``[ingest]`` updated by its own keys, ``[compare]``
 takes ``input_map`` from ``[identify]``, ``[study.identify]`` updates ``[identify]``), so
 a workflow that loads has no wrong type, unknown key or out-of-range value left for a
@@ -27,24 +27,24 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import pydantic
 
-from debist import preflight
-from debist.config import CONFIG, config_from_section, unknown_key_message
 from debist.differentiate import CONFIGS
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
+from debist.engine import preflight
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
-from debist.identify.terms import PHYSICS_TERMS
 from debist.ingest.spec import OPTION_KEYS, IngestSpec
 from debist.ingest.units import UNITS
+from debist.model.terms import PHYSICS_TERMS
 from debist.names import check_file_name
 from debist.physics.params import PrototypeParams
 from debist.validate import ValidateConfig
+from debist.workflow.config import CONFIG, config_from_section, unknown_key_message
 
 if TYPE_CHECKING:  # the modules of optional sections are imported when a workflow has them
-    from debist.htmlreport import ReportConfig
+    from debist.model.sindy import SindyConfig
     from debist.physics.analysis import AnalyzeConfig
+    from debist.report.html import ReportConfig
     from debist.rig.experiment import RigConfig
-    from debist.sindy import SindyConfig
     from debist.studies import StudyConfig
 
 __all__ = [
@@ -392,8 +392,8 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     compare = None
     if "compare" in raw:
         sindy = {"input_map": raw.get("identify", {}).get("input_map", "v2"), **raw["compare"]}
-        from debist.narx import NarxConfig
-        from debist.sindy import SindyConfig
+        from debist.model.narx import NarxConfig
+        from debist.model.sindy import SindyConfig
 
         NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
         compare = SindyConfig.from_dict(sindy, "[compare]")
@@ -405,7 +405,7 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
         analyze = AnalyzeConfig.from_dict(raw["analyze"])
     report = None
     if "report" in raw:
-        from debist.htmlreport import ReportConfig
+        from debist.report.html import ReportConfig
 
         report = ReportConfig.from_dict(raw["report"])
     return CheckedWorkflow(

@@ -216,8 +216,8 @@ def identify_columns(cfg: Any, n_inputs: int) -> tuple[int, int]:
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 40; :func:`debist.identify.terms.force_columns` and
-    :func:`~debist.identify.terms.input_columns` (one column per name).
+    Masoud & Maas 2025, Eq. 40; :func:`debist.model.terms.force_columns` and
+    :func:`~debist.model.terms.input_columns` (one column per name).
     """
     p, _, p_z = _columns(cfg, n_inputs)
     return p, p_z
@@ -405,7 +405,7 @@ def check_identify_config(cfg: Any, n_inputs: int) -> None:
 def free_run_bytes(
     lengths: Sequence[int], n_inputs: int, n_states: int, substeps: int, batch_extra: int = 0
 ) -> int:
-    """Estimate the peak memory of :func:`debist.simulate.simulate` [bytes].
+    """Estimate the peak memory of :func:`debist.simulate.freerun.simulate` [bytes].
 
     Parameters
     ----------
@@ -506,7 +506,7 @@ def refine_bytes(
 
 
 def sindy_bytes(rows: int, n_features: int) -> int:
-    """Estimate the peak memory of :func:`debist.sindy.fit_sindy` [bytes].
+    """Estimate the peak memory of :func:`debist.model.sindy.fit_sindy` [bytes].
 
     Parameters
     ----------

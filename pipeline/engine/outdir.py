@@ -26,8 +26,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from debist import artifacts
-from debist.artifacts import SWAP_FOLDER
+from debist.engine import artifacts
+from debist.engine.artifacts import SWAP_FOLDER
 from debist.errors import OutputDirError, RunLockedError
 
 __all__ = [

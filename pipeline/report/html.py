@@ -29,9 +29,8 @@ import jinja2
 import pydantic
 from pydantic import PositiveFloat
 
-from debist.config import CONFIG, config_from_section
 from debist.errors import ArtifactError
-from debist.report import (
+from debist.report.tables import (
     auto_line,
     equilibrium_kind,
     not_modelled,
@@ -39,6 +38,7 @@ from debist.report import (
     switching_word,
     verdict,
 )
+from debist.workflow.config import CONFIG, config_from_section
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -443,7 +443,7 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     The backbone's coefficients are basis coefficients of the fit (the RBF sums add to
     them), not the physics of the beam: they are labelled so, with their units.
     """
-    from debist.report import summary_units
+    from debist.report.tables import summary_units
 
     units = summary_units(summary)
     rows = [
@@ -474,7 +474,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     design = summary.get("design")
     if not design:
         return None
-    from debist.report import summary_units
+    from debist.report.tables import summary_units
 
     units = summary_units(summary)
     scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14
@@ -748,7 +748,7 @@ def write_page(path: str | os.PathLike, html: str) -> Path:
     POSIX ``rename(2)``: the new file replaces the old one in one step, so a reader never
     sees half a page.
     """
-    from debist import artifacts
+    from debist.engine import artifacts
 
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)

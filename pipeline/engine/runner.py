@@ -6,7 +6,7 @@ hashes and its upstream manifests, and its outputs still hash to the manifest. `
 skips such stages; anything else is rerun, and so is everything downstream whose inputs
 change as a result.
 
-Before a run writes anything it checks the output folder (:mod:`debist.outdir`: its
+Before a run writes anything it checks the output folder (:mod:`debist.engine.outdir`: its
 owner, forbidden places, foreign files in stage folders), takes the folder's lock and
 resolves the leftovers of an interrupted run. ``status`` and ``verify`` only read.
 """
@@ -24,12 +24,12 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from debist import artifacts, outdir, registry
+from debist.engine import artifacts, outdir, registry
+from debist.engine.faults import fault_point
+from debist.engine.fileformats import write_output
+from debist.engine.fingerprint import code_fingerprint
 from debist.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
-from debist.faults import fault_point
-from debist.fileformats import write_output
-from debist.fingerprint import code_fingerprint
-from debist.workflow import Workflow
+from debist.workflow.loader import Workflow
 
 #: Stage names in execution order.
 STAGES = registry.names()
@@ -263,12 +263,12 @@ class Runner:
         }
 
     def read_h5(self, stage: str, rel: str) -> dict[str, Any]:
-        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.artifacts`)."""
+        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
 
     def read_parquet(self, stage: str, rel: str) -> Any:
-        """Read a Parquet artifact of an upstream stage (see :mod:`debist.artifacts`)."""
+        """Read a Parquet artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
 

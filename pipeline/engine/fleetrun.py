@@ -16,11 +16,11 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
+from debist.engine.runner import Runner
 from debist.errors import DebistError
 from debist.rig.fleet import FleetError
 from debist.rig.fleet_workflows import fleet_workflows
-from debist.runner import Runner
-from debist.workflow import load_workflow
+from debist.workflow.loader import load_workflow
 
 __all__ = ["viable_fleet"]
 

@@ -11,12 +11,12 @@ Writes are atomic: the outputs go to a temporary sibling folder, are hashed, the
 is written last, and the folder is swapped into place (old folder moved aside, new one
 moved in, old one removed) with SIGINT and SIGTERM deferred until it is done. A process
 killed in between (SIGKILL, power loss) leaves ``.<stage>.tmp-*`` or ``.<stage>.old-*`` folders
-(:data:`SWAP_FOLDER`), which :func:`debist.outdir.recover` resolves. A stage folder is
+(:data:`SWAP_FOLDER`), which :func:`debist.engine.outdir.recover` resolves. A stage folder is
 only ever replaced when every file in it is listed by its manifest: a file debist did not
 write is never deleted.
 
 The output folder as a whole (its owner, its lock, the recovery of leftovers and the run
-digest) is :mod:`debist.outdir`.
+digest) is :mod:`debist.engine.outdir`.
 
 References
 ----------
@@ -45,9 +45,8 @@ from pathlib import Path
 from typing import Any
 
 from debist import __version__
-from debist.errors import ArtifactError, OutputDirError
-from debist.faults import fault_point
-from debist.fileformats import (
+from debist.engine.faults import fault_point
+from debist.engine.fileformats import (
     Figure,
     FileWriter,
     H5Tree,
@@ -57,6 +56,7 @@ from debist.fileformats import (
     sha256_file,
     write_output,
 )
+from debist.errors import ArtifactError, OutputDirError
 
 __all__ = [
     "MANIFEST",
@@ -159,7 +159,7 @@ def stage_key(
     stage : str
         Stage name.
     code : str
-        Fingerprint of the code the stage runs (:func:`debist.fingerprint.code_fingerprint`).
+        Fingerprint of the code the stage runs (:func:`debist.engine.fingerprint.code_fingerprint`).
     versions : mapping of str to str
         Versions of the libraries the stage uses.
     config : mapping
@@ -457,7 +457,7 @@ def write_stage(
     upstream : mapping of str to str
         Upstream stage to the sha256 of its manifest.
     outputs : mapping of str to object
-        Relative output path to value (see :func:`debist.fileformats.write_output`).
+        Relative output path to value (see :func:`debist.engine.fileformats.write_output`).
     summary : mapping, optional
         Small JSON-compatible results for reports, written as ``summary.json``.
     timings : mapping of str to float, optional

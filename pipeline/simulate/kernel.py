@@ -1,11 +1,11 @@
 """The compiled free-run kernel: one fixed-step RK4 for every model that is compared.
 
-The scheme is exactly that of :func:`debist.simulate.simulate` (classical RK4 with
+The scheme is exactly that of :func:`debist.simulate.freerun.simulate` (classical RK4 with
 sub-steps, the inputs interpolated once onto the grid of half sub-steps, divergence when a
 state is not finite or ``|q|`` exceeds the limit), compiled with numba (nopython, cached on
 disk) and parallel over the trajectories of a batch (records, windows, parameter vectors).
 Models hand it plain arrays: a term table with weights per trajectory
-(:class:`debist.termtable.TableModel`: the RBF model of Eq. 37 with its backbone and
+(:class:`debist.model.termtable.TableModel`: the RBF model of Eq. 37 with its backbone and
 physics prior, the SINDy polynomials) or the tabulated curves of the analytical reduced model
 (Eq. 26), so one kernel integrates them all and "the same simulator for every model" holds by
 construction.
@@ -115,13 +115,13 @@ class _Packer:
 
 
 def table_arrays(model) -> KernelArrays:
-    """Kernel arrays of a :class:`debist.termtable.TableModel`.
+    """Kernel arrays of a :class:`debist.model.termtable.TableModel`.
 
     The terms are grouped by their factors other than the basis (power of q, velocity factor,
     input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_(j in g) w_j
     b_j(q)``, so each right-hand side evaluates every basis, velocity factor and monomial
     once, then one product per term and three per group. The table's part of the arrays is
-    built once per :class:`debist.termtable.TermTable` (the refinement changes only the
+    built once per :class:`debist.model.termtable.TermTable` (the refinement changes only the
     weights, masses and T_z).
 
     Parameters
@@ -1122,7 +1122,7 @@ def free_run(
     arrays : KernelArrays
         The model.
     fine : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
-        Inputs on the grid of half sub-steps [V] (:func:`debist.simulate.prepare_inputs`).
+        Inputs on the grid of half sub-steps [V] (:func:`debist.simulate.freerun.prepare_inputs`).
     lengths : ndarray of int, shape (B,)
         Samples of each trajectory (``<= n``).
     dt : float

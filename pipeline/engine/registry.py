@@ -2,7 +2,7 @@
 
 The runner, the CLI and batch read the stage graph from here. A stage's module holds its
 pure ``run_<stage>`` function and the ``execute(ctx)`` adapter the runner calls; the stage's
-key hashes that module's import closure (:func:`debist.fingerprint.code_fingerprint`) and
+key hashes that module's import closure (:func:`debist.engine.fingerprint.code_fingerprint`) and
 the versions of the libraries listed here, so a change elsewhere leaves it up to date.
 
 References

@@ -18,9 +18,9 @@ from typing import Any
 
 import pandas as pd
 
-from debist import artifacts
+from debist.engine import artifacts
+from debist.engine.registry import names
 from debist.errors import WorkflowError
-from debist.registry import names
 
 __all__ = ["NRMSE_COLUMNS", "diff_runs"]
 

@@ -6,7 +6,7 @@ unexplained is noise. Both are computed here for any model the free-run simulato
 
 - :func:`k_step_prediction` restarts the model from the measured state (q and the
   differentiate stage's q_dot) at every sample and integrates ``k`` samples ahead with the
-  same RK4 scheme and input interpolation as the free run (:func:`debist.simulate.simulate`,
+  same RK4 scheme and input interpolation as the free run (:func:`debist.simulate.freerun.simulate`,
   the windows batched); ``k = 1`` gives the one-step prediction errors.
 - :func:`residual_analysis` tests those errors: their autocorrelation (whiteness, with the
   Ljung-Box portmanteau statistic) and their cross-correlation with each input, each with
@@ -36,7 +36,13 @@ import pandas as pd
 from scipy import stats
 
 from debist.errors import WorkflowError
-from debist.simulate import FineInputs, FreeRunModel, prepare_inputs, simulate, substeps_needed
+from debist.simulate.freerun import (
+    FineInputs,
+    FreeRunModel,
+    prepare_inputs,
+    simulate,
+    substeps_needed,
+)
 from debist.validate import DataSet, nrmse
 
 __all__ = [
@@ -88,7 +94,7 @@ def k_step_prediction(
     k : int
         Prediction horizon [samples], ``>= 1``.
     substeps, interpolation, q_limit, engine
-        As :func:`debist.simulate.simulate` (the validate stage's settings).
+        As :func:`debist.simulate.freerun.simulate` (the validate stage's settings).
     max_windows : int, optional
         Most restarts per record; a longer record restarts at evenly spaced samples
         (then ``k >= 2``; with ``k = 1`` every sample is kept so that the errors are
@@ -109,7 +115,7 @@ def k_step_prediction(
     References
     ----------
     Ljung 1999, Sec. 7.3 (k-step-ahead prediction); the scheme of
-    :func:`debist.simulate.simulate` (classical RK4 with sub-steps).
+    :func:`debist.simulate.freerun.simulate` (classical RK4 with sub-steps).
 
     Examples
     --------
@@ -186,7 +192,7 @@ def restarted_runs(
     velocity), else ``initial_state(q, q_dot)``, and is driven by the record's inputs,
     interpolated once over the whole record (so a window's inputs are those of the whole
     record's free run). All windows run as one batch with the scheme of
-    :func:`debist.simulate.simulate`. A lost switch then costs one window, not the rest
+    :func:`debist.simulate.freerun.simulate`. A lost switch then costs one window, not the rest
     of the record (Ribeiro et al. 2020).
 
     Parameters
@@ -201,7 +207,7 @@ def restarted_runs(
     dt : float
         Sample time [s].
     substeps, interpolation, q_limit, engine
-        As :func:`debist.simulate.simulate`.
+        As :func:`debist.simulate.freerun.simulate`.
 
     Returns
     -------

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from debist.errors import WorkflowError
-from debist.identify.basis import RBFBasis
-from debist.termtable import (
+from debist.model.basis import RBFBasis
+from debist.model.termtable import (
     S_CREEP,
     S_POW,
     S_TANH,
@@ -307,7 +307,7 @@ def term_table(
     """Build the term library of Eq. 37: one term per regressor column name, as a term table.
 
     The one definition of the model's terms: the regressor columns of Eq. 40
-    (:meth:`~debist.termtable.TermTable.columns`), the NumPy and the compiled right-hand
+    (:meth:`~debist.model.termtable.TermTable.columns`), the NumPy and the compiled right-hand
     sides and the refinement's parameters all come from it.
 
     Parameters

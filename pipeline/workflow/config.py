@@ -392,7 +392,7 @@ def config_from_section(
 
     Examples
     --------
-    >>> from debist.sindy import SindyConfig
+    >>> from debist.model.sindy import SindyConfig
     >>> config_from_section(SindyConfig, {"degree": "3"}, "[compare]")
     Traceback (most recent call last):
     ...

@@ -1,7 +1,7 @@
 """Batch runs: many workflows (one per prototype) on Dask, locally or on a cluster.
 
 Each workflow is one Dask task that loads the workflow file and runs its stages with
-:class:`debist.runner.Runner` in a worker, with the runner's content-hash caching (a
+:class:`debist.engine.runner.Runner` in a worker, with the runner's content-hash caching (a
 rerun skips up-to-date stages). One failing workflow never stops the others: its error
 comes back in its :class:`BatchResult`, and so does a worker process that dies while
 running it (a crash in native code, the out-of-memory killer, ``kill -9``). Every
@@ -23,7 +23,7 @@ Examples
 A script that runs every prototype of a folder on two local worker processes (the
 ``__main__`` guard is needed because worker processes are spawned)::
 
-    from debist.batch import expand_workflows, run_batch, summary_table
+    from debist.engine.batch import expand_workflows, run_batch, summary_table
 
     if __name__ == "__main__":
         results = run_batch(expand_workflows(["workflows/protos/"]), workers=2)
@@ -279,7 +279,7 @@ def _load_headers(paths: Sequence[Path]) -> dict[Path, tuple[str, Path]]:
     WorkflowError
         If two workflows write to the same (or a nested) output directory.
     """
-    from debist.workflow import load_workflow
+    from debist.workflow.loader import load_workflow
 
     headers: dict[Path, tuple[str, Path]] = {}
     for path in paths:
@@ -332,8 +332,8 @@ def run_workflow_item(
         or any other ``Exception`` comes back as ``status="failed"`` with its class
         and message (and the traceback for an unexpected one).
     """
-    from debist.runner import Runner
-    from debist.workflow import load_workflow
+    from debist.engine.runner import Runner
+    from debist.workflow.loader import load_workflow
 
     path = Path(path).resolve()
     t_start = time.perf_counter()
@@ -477,7 +477,7 @@ def run_batch(
     and the configuration ``distributed.scheduler.allowed-failures``,
     ``distributed.nanny.pre-spawn-environ``: https://distributed.dask.org/en/stable/.
     """
-    from debist.runner import STAGES
+    from debist.engine.runner import STAGES
 
     paths = [Path(p).resolve() for p in workflow_paths]
     if scheduler is None:
@@ -565,7 +565,7 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
         one BLAS/OpenMP thread (``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and
         ``OPENBLAS_NUM_THREADS`` = 1, unless this process's environment sets them), each
         with an equal share of the memory budget (``DEBIST_MEMORY_BUDGET_GB``, unless set
-        here: :func:`debist.preflight.memory_budget`), and inherit the rest of this
+        here: :func:`debist.engine.preflight.memory_budget`), and inherit the rest of this
         process's environment. The cluster's logs are silenced
         (its failures come back as task errors), and the environment variables that the
         nannies set in this process are restored on exit.
@@ -579,7 +579,7 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
     import dask
     from distributed import Client, LocalCluster
 
-    from debist import preflight
+    from debist.engine import preflight
 
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ"), **_WORKER_ENVIRON}
     if preflight.BUDGET_ENV not in os.environ:  # the workers share this machine's budget
@@ -785,9 +785,9 @@ def write_index(
 
     References
     ----------
-    :func:`debist.htmlreport.render_index` (the page).
+    :func:`debist.report.html.render_index` (the page).
     """
-    from debist.htmlreport import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
+    from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
 
     dirs = [Path(r.output_dir).resolve() for r in results if r.output_dir is not None]
     if folder is None:
