@@ -5,8 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
+
+from debist.identify.fit import Record
+from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
+from debist.simulate.freerun import simulate
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -185,3 +191,122 @@ def synthetic_run(tmp_path_factory, bistable_record):
     code, out = invoke_cli("run", root / "wf.toml")
     assert code == 0, out
     return root, out.split("run digest: ")[1].split()[0]
+
+
+# --- a backbone-only double well with known curves (stability, design, trust, report tests) ---
+# f(q) = k1 q + k3 q^3 with k1 < 0: wells at +-sqrt(-k1/k3), local maximum F_MAX.
+
+K1, K3, M_Q, D, G = -40.0, 4e5, 0.04, 0.5, 2e-8
+Q_RANGE = (-0.012, 0.012)
+F_MAX = 2.0 * (-K1 / 3.0) ** 1.5 / np.sqrt(K3)  # local maximum of f [N]
+
+
+def double_well(d_v=D, g=G, input_map="v2", k1=K1, prior=None, s_d=0.0):
+    """Backbone-only model: c = k1 + k3 q^2, d = d_v (+ s_d d_prior), g = [g, -g]."""
+    M = 10
+    basis = RBFBasis.equidistant(*Q_RANGE, M, 0.5)
+    backbone = {"k_1": k1, "k_3": K3, "d_v": d_v, "g_0": np.array([g, -g])}
+    if prior is not None:
+        backbone.update({"s_c": 0.0, "s_d": s_d, "s_g": np.zeros(2)})
+    zeros = np.zeros(M)
+    return RBFModel(
+        basis, input_map, 2, M_Q, 0.01, 1e-3, zeros, zeros, np.zeros((2, M)), backbone,
+        Q_RANGE, prior,
+    )  # fmt: skip
+
+
+DT_LOG = 2e-3  # [s], sample time of logged_tables
+
+
+def logged_tables(model, seed=0, n=3000):
+    """Logs of a model's free run under random sub-threshold and switching inputs."""
+    rng = np.random.default_rng(seed)
+    v = np.zeros((n, 2))
+    v[:, 0] = np.repeat(rng.uniform(0, 900, n // 100), 100)
+    v[:, 1] = np.repeat(rng.uniform(0, 900, n // 100), 100)
+    v[1000:1300, 0] = 3000.0  # switch right (0.18 N against a barrier force of 0.154 N)
+    v[2000:2300, 1] = 3000.0  # and back
+    sim = simulate(model, [v], DT_LOG, np.array([-0.01]), np.array([0.0]), engine="numpy")[0]
+    assert not sim.diverged and sim.q.max() > 0.008 and sim.q.min() < -0.008  # both wells
+    tables, derivs = {}, {}
+    for name, role in (("est", "estimation"), ("val", "validation")):  # the same log twice
+        t = np.arange(n) * DT_LOG
+        frame = pd.DataFrame({"t": t, "q": sim.q, "v1": v[:, 0], "v2": v[:, 1]})
+        frame.attrs.update(role=role, units={"q": "m", "t": "s", "v1": "V", "v2": "V"})
+        tables[name] = frame
+        derivs[name] = pd.DataFrame({"q_dot": sim.q_dot, "q_ddot": sim.q_ddot})
+    return tables, derivs
+
+
+# --- (a) Duffing oscillator q'' + 2 zeta w q' + w^2 q + k3 q^3 = u(t) (excitation tests) ---
+
+DUFFING_W0 = 2 * np.pi * 1.0  # [rad/s]
+DUFFING_ZETA = 0.05
+DUFFING_K3 = 0.5 * DUFFING_W0**2  # hardening: the cubic force is half the linear one at q = 1
+DUFFING_DT = 0.02  # [s]
+# [s]: exp(-zeta w0 40 s) ~ 4e-6, the free transient is gone after T_SETTLE
+DUFFING_T_END, DUFFING_T_SETTLE = 200.0, 40.0
+
+
+def duffing_record(u, name, t_end=DUFFING_T_END):
+    """Steady-state record of the Duffing oscillator driven by the force u(t), h(v) = v."""
+
+    def rhs(t, x):
+        w0, zeta, k3 = DUFFING_W0, DUFFING_ZETA, DUFFING_K3
+        return [x[1], u(t) - 2 * zeta * w0 * x[1] - w0**2 * x[0] - k3 * x[0] ** 3]
+
+    t = np.arange(0.0, t_end, DUFFING_DT)
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-7, atol=1e-9)
+    keep = t >= DUFFING_T_SETTLE
+    q, qd = sol.y[0][keep], sol.y[1][keep]
+    f = np.array([u(tt) for tt in t[keep]])
+    qdd = f - 2 * DUFFING_ZETA * DUFFING_W0 * qd - DUFFING_W0**2 * q - DUFFING_K3 * q**3
+    return Record(name, q, qd, qdd, f[:, None], DUFFING_DT)
+
+
+# --- a model inside the identified class, and noise-free data of it (identify, bands) ---
+
+
+def truth_model(rng):
+    """An RBF model with seeded random curves inside the identified class (M = 8)."""
+    basis = RBFBasis.equidistant(-0.03, 0.03, 8, 0.5)
+    return RBFModel(
+        basis=basis,
+        input_map="v2",
+        n_inputs=2,
+        m_q=1.0,
+        T_z=0.0,
+        coulomb_velocity=1e-3,
+        theta_c=rng.uniform(-20, 20, 8),
+        theta_d=rng.uniform(1, 3, 8),
+        theta_g=rng.uniform(1e-7, 3e-7, (2, 8)) * np.array([[1.0], [-1.0]]),
+        backbone={"k_1": -40.0, "k_3": 4e5, "d_v": 2.0, "g_0": np.zeros(2)},
+        q_range=(-0.03, 0.03),
+    )
+
+
+def inside_class_record(truth, t):
+    """Noise-free data of a model inside the class (solve_ivp DOP853, exact q'')."""
+
+    def rhs(tt, x):
+        return [
+            x[1],
+            truth.accel(np.array([x[0]]), np.array([x[1]]), excitation(np.array([tt])))[0],
+        ]
+
+    sol = solve_ivp(
+        rhs, (t[0], t[-1]), [-0.01, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12
+    )
+    q, q_dot = sol.y
+    v = excitation(t)
+    return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
+
+
+#: [identify] settings whose model class holds truth_model.
+INSIDE_CLASS = {
+    "M": 8,
+    "q_range": [-0.03, 0.03],
+    "backbone": ["linear_spring", "cubic_spring", "viscous"],
+    "max_condition": 1e10,
+    "min_support": 0,
+}

@@ -189,10 +189,10 @@ def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistabl
     """A model inside the class (no approximation bias), accelerations with AR(1) noise:
     the 95 % band of the restoring force holds the truth at >= 85 % of the identified
     points, and it is not trivially wide."""
-    from test_identify import _INSIDE, _inside_class_record, _truth_model
+    from conftest import INSIDE_CLASS, inside_class_record, truth_model
 
-    truth = _truth_model(np.random.default_rng(2))
-    rec = _inside_class_record(truth, bistable_record["t"])
+    truth = truth_model(np.random.default_rng(2))
+    rec = inside_class_record(truth, bistable_record["t"])
     rng = np.random.default_rng(8)
     e = np.empty(rec["q"].size)
     e[0] = 0.0
@@ -200,7 +200,7 @@ def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistabl
         e[k] = 0.9 * e[k - 1] + np.sqrt(1 - 0.81) * rng.standard_normal()
     rec["q_ddot"] = rec["q_ddot"] + 0.05 * np.std(rec["q_ddot"]) * e
     records = _records(rec)
-    model, diag = fit_rbf_model(records, _cfg(**_INSIDE, bootstrap=300))
+    model, diag = fit_rbf_model(records, _cfg(**INSIDE_CLASS, bootstrap=300))
     frame, _ = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
     q = frame.q.to_numpy()
     f_true = truth.curves(q)["cq"]

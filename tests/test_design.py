@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_stability import F_MAX, K1, K3, M_Q, G, double_well
+from conftest import F_MAX, K1, K3, M_Q, G, double_well
 
 from debist.identify import Record
 from debist.identify.design import analytical_as_eq37, design_numbers, held_levels

@@ -5,7 +5,8 @@ import json
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from conftest import DUFFING_DT as DT
+from conftest import DUFFING_T_END, duffing_record
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
@@ -16,26 +17,7 @@ from debist.identify.excitation import check_excitation
 
 # --- (a) Duffing oscillator q'' + 2 zeta w q' + w^2 q + k3 q^3 = u(t) -------------------------
 
-W0 = 2 * np.pi * 1.0  # [rad/s]
-ZETA = 0.05
-K3 = 0.5 * W0**2  # hardening: the cubic force is half the linear one at q = 1
-DT = 0.02  # [s]
-T_END, T_SETTLE = 200.0, 40.0  # [s]: exp(-zeta w0 40 s) ~ 4e-6, the free transient is gone
-
-
-def _duffing(u, name, t_end=T_END):
-    """Steady-state record of the Duffing oscillator driven by the force u(t), h(v) = v."""
-
-    def rhs(t, x):
-        return [x[1], u(t) - 2 * ZETA * W0 * x[1] - W0**2 * x[0] - K3 * x[0] ** 3]
-
-    t = np.arange(0.0, t_end, DT)
-    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-7, atol=1e-9)
-    keep = t >= T_SETTLE
-    q, qd = sol.y[0][keep], sol.y[1][keep]
-    f = np.array([u(tt) for tt in t[keep]])
-    qdd = f - 2 * ZETA * W0 * qd - W0**2 * q - K3 * q**3
-    return Record(name, q, qd, qdd, f[:, None], DT)
+T_END = DUFFING_T_END
 
 
 def _check(rec, **kw):
@@ -45,7 +27,7 @@ def _check(rec, **kw):
 
 @pytest.fixture(scope="module")
 def sine_record():
-    return _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine")
+    return duffing_record(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine")
 
 
 def _line_warnings(rep):
@@ -69,7 +51,9 @@ def test_multisine_drive_is_not_flagged():
     rng = np.random.default_rng(11)
     freqs = np.array([0.3, 0.55, 0.8, 1.3, 1.9])  # [Hz]
     phases = rng.uniform(0, 2 * np.pi, freqs.size)
-    rec = _duffing(lambda t: 8.0 * np.sum(np.cos(2 * np.pi * freqs * t + phases)), "multisine")
+    rec = duffing_record(
+        lambda t: 8.0 * np.sum(np.cos(2 * np.pi * freqs * t + phases)), "multisine"
+    )
     rep = _check(rec)
     spec = rep.spectra.set_index("channel")
     assert rep.single_frequency == [] and _line_warnings(rep) == []
@@ -84,7 +68,7 @@ def test_noise_drive_is_not_flagged():
     force = sosfiltfilt(sos, rng.standard_normal(t.size))
     force *= 10.0 / force.std()
     spline = CubicSpline(t, force)  # smooth interpolant: no kinks for the stepper
-    rec = _duffing(lambda tt: float(spline(tt)), "noise", t_end=180.0)
+    rec = duffing_record(lambda tt: float(spline(tt)), "noise", t_end=180.0)
     rep = _check(rec)
     q_row = rep.spectra.set_index("channel").loc["q"]
     assert rep.single_frequency == [] and _line_warnings(rep) == []

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from conftest import bistable_truth
+from conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
 
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
@@ -62,51 +62,6 @@ def test_rbf_fit_approximates_smooth_curves(bistable_record):
     assert np.max(np.abs(model.curves(q)["cq"] - truth["c"] * q)) < 1e-2 * np.ptp(truth["c"] * q)
 
 
-def _truth_model(rng):
-    basis = RBFBasis.equidistant(-0.03, 0.03, 8, 0.5)
-    return RBFModel(
-        basis=basis,
-        input_map="v2",
-        n_inputs=2,
-        m_q=1.0,
-        T_z=0.0,
-        coulomb_velocity=1e-3,
-        theta_c=rng.uniform(-20, 20, 8),
-        theta_d=rng.uniform(1, 3, 8),
-        theta_g=rng.uniform(1e-7, 3e-7, (2, 8)) * np.array([[1.0], [-1.0]]),
-        backbone={"k_1": -40.0, "k_3": 4e5, "d_v": 2.0, "g_0": np.zeros(2)},
-        q_range=(-0.03, 0.03),
-    )
-
-
-def _inside_class_record(truth, t):
-    """Noise-free data of a model inside the class (solve_ivp DOP853, exact q'')."""
-    from conftest import excitation
-    from scipy.integrate import solve_ivp
-
-    def rhs(tt, x):
-        return [
-            x[1],
-            truth.accel(np.array([x[0]]), np.array([x[1]]), excitation(np.array([tt])))[0],
-        ]
-
-    sol = solve_ivp(
-        rhs, (t[0], t[-1]), [-0.01, 0.0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12
-    )
-    q, q_dot = sol.y
-    v = excitation(t)
-    return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
-
-
-_INSIDE = {
-    "M": 8,
-    "q_range": [-0.03, 0.03],
-    "backbone": ["linear_spring", "cubic_spring", "viscous"],
-    "max_condition": 1e10,
-    "min_support": 0,
-}
-
-
 def _curve_errors(truth, model, q):
     grid = np.linspace(q.min(), q.max(), 50)
     want, got = truth.curves(grid), model.curves(grid)
@@ -115,9 +70,9 @@ def _curve_errors(truth, model, q):
 
 def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
     """Data from a model inside the class (solve_ivp, exact q''): weights recovered to 1e-6."""
-    truth = _truth_model(np.random.default_rng(2))
-    rec = _inside_class_record(truth, bistable_record["t"])
-    model, diag = _fit(rec, **_INSIDE)
+    truth = truth_model(np.random.default_rng(2))
+    rec = inside_class_record(truth, bistable_record["t"])
+    model, diag = _fit(rec, **INSIDE_CLASS)
     assert diag.rank == len(diag.columns)
     assert diag.fit_r2 > 1 - 1e-12
     for key, err in _curve_errors(truth, model, rec["q"]).items():
@@ -131,9 +86,9 @@ def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(bistable_recor
     keeps only the band where Eq. 37 holds and recovers the curves."""
     from scipy import signal
 
-    truth = _truth_model(np.random.default_rng(2))
-    rec = _inside_class_record(truth, bistable_record["t"])
-    model, _ = _fit(rec, lowpass=10.0, **_INSIDE)
+    truth = truth_model(np.random.default_rng(2))
+    rec = inside_class_record(truth, bistable_record["t"])
+    model, _ = _fit(rec, lowpass=10.0, **INSIDE_CLASS)
     for key, err in _curve_errors(truth, model, rec["q"]).items():
         assert err < 1e-5, key
     # Eq. 40 is algebraic per sample: broadband inputs with the exact accelerations
@@ -144,8 +99,8 @@ def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(bistable_recor
     sos = signal.butter(8, 30.0, btype="highpass", fs=1.0 / rec["dt"], output="sos")
     weak = -0.4 * signal.sosfiltfilt(sos, force.sum(axis=1))
     disturbed = {**rec, "v": v, "q_ddot": q_ddot + weak}
-    raw = _curve_errors(truth, _fit(disturbed, **_INSIDE)[0], rec["q"])
-    filtered = _curve_errors(truth, _fit(disturbed, lowpass=10.0, **_INSIDE)[0], rec["q"])
+    raw = _curve_errors(truth, _fit(disturbed, **INSIDE_CLASS)[0], rec["q"])
+    filtered = _curve_errors(truth, _fit(disturbed, lowpass=10.0, **INSIDE_CLASS)[0], rec["q"])
     assert max(filtered.values()) < 1e-3  # measured 3e-5
     assert raw["g"] > 0.1  # measured 0.20: the gain absorbs the weak band
 
@@ -159,7 +114,7 @@ def test_lowpass_at_or_above_nyquist_is_an_error_naming_the_data_set(bistable_re
 
 def test_T_z_search_recovers_the_time_constant(bistable_record):
     """Friction acting on z (Eq. 37), model inside the class: the outer search finds T_z."""
-    truth = _truth_model(np.random.default_rng(4))
+    truth = truth_model(np.random.default_rng(4))
     T_true = 0.03
     q, q_dot, v, dt = (bistable_record[k] for k in ("q", "q_dot", "v", "dt"))
     z = friction_state(q_dot, dt, T_true)
@@ -290,18 +245,18 @@ def test_creep_search_recovers_the_relaxation_rate_and_the_curves(bistable_recor
     from dataclasses import replace
 
     weights = np.random.default_rng(5).uniform(60.0, 120.0, 8)
-    truth = replace(_truth_model(np.random.default_rng(2)), creep_rate=3.7, theta_creep=weights)
+    truth = replace(truth_model(np.random.default_rng(2)), creep_rate=3.7, theta_creep=weights)
     rec = _creep_record(truth, bistable_record["t"])
-    model, diag = _fit(rec, creep="search", **_INSIDE)
+    model, diag = _fit(rec, creep="search", **INSIDE_CLASS)
     assert model.creep_rate == pytest.approx(3.7, rel=0.01)  # measured 3.6995
     assert diag.creep_trace.shape[0] > 5 and diag.creep_trace[:, 1].min() < 1e-3
     assert diag.columns[16:24] == [f"creep[{k}]" for k in range(8)]
     with_creep = _curve_errors(truth, model, rec["q"])
     assert max(with_creep.values()) < 0.01, with_creep  # measured 8.5e-4
     assert np.max(np.abs(model.theta_creep - weights)) < 0.05 * np.ptp(weights)  # 0.02
-    fixed, _ = _fit(rec, creep=3.7, **_INSIDE)
+    fixed, _ = _fit(rec, creep=3.7, **INSIDE_CLASS)
     assert fixed.creep_rate == 3.7 and max(_curve_errors(truth, fixed, rec["q"]).values()) < 0.01
-    without = _curve_errors(truth, _fit(rec, **_INSIDE)[0], rec["q"])
+    without = _curve_errors(truth, _fit(rec, **INSIDE_CLASS)[0], rec["q"])
     for key in ("cq", "d", "g"):
         assert without[key] > 100 * with_creep[key], key  # measured 3.1 / 11 / 26 vs < 1e-3
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import gzip
-import time
 import tracemalloc
 from pathlib import Path
 
@@ -45,18 +44,19 @@ def _records(n: int, n_rec: int = 1, n_in: int = 1, seed: int = 3) -> list[Recor
 
 
 def _peak(call):
-    """Run ``call``; return (its exception or None, tracemalloc peak [bytes], seconds)."""
+    """Run ``call``; return (its exception or None, tracemalloc peak [bytes]).
+
+    The peak, not a wall time, shows that a refusal came before the allocation.
+    """
     tracemalloc.start()
-    t0 = time.perf_counter()
     try:
         call()
         exc = None
     except Exception as e:
         exc = e
-    seconds = time.perf_counter() - t0
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    return exc, peak, seconds
+    return exc, peak
 
 
 # ------------------------------------------------------------------------------ budget
@@ -99,14 +99,13 @@ def test_column_count_is_that_of_the_fit(section, n_in):
 def test_huge_M_is_refused_by_the_fit_before_allocating(budget):
     records = _records(3950)  # 3750 rows after trim = 100
     cfg = IdentifyConfig.from_dict({"M": 100000, "input_map": "v", "trim": 100})
-    exc, peak, seconds = _peak(lambda: fit_rbf_model(records, cfg))
+    exc, peak = _peak(lambda: fit_rbf_model(records, cfg))
     assert isinstance(exc, ResourceError)
     assert str(exc).startswith(
         "[identify] M = 100000: the regressor of 3750 samples x 300003 columns needs about "
     )
     assert "(peak, with the SVD's copies); the memory budget is 4 GB" in str(exc)
     assert peak < SMALL  # the regressor alone would be 3750 x 300003 x 8 bytes = 9 GB
-    assert seconds < 1.0  # generous: it is a few multiplications
 
 
 def test_data_free_lower_bound_refuses_huge_M_and_passes_the_shipped_ones(budget):
@@ -114,10 +113,10 @@ def test_data_free_lower_bound_refuses_huge_M_and_passes_the_shipped_ones(budget
     p = 300003  # c, d, g of one input and the default backbone of 3 terms
     assert preflight.identify_columns(cfg, 1) == (p, 100001)
     assert preflight.identify_lower_bound(cfg, 1) >= 8 * p**2
-    exc, peak, seconds = _peak(lambda: preflight.check_identify_config(cfg, 1))
+    exc, peak = _peak(lambda: preflight.check_identify_config(cfg, 1))
     assert isinstance(exc, ResourceError)
     assert str(exc).startswith(f"[identify] M = 100000: the least squares of {p} columns")
-    assert peak < 1e5 and seconds < 1.0
+    assert peak < 1e5
     preflight.check_identify_config(IdentifyConfig.from_dict({"M": 16, "rbf": ["c", "d", "g"]}), 2)
 
 
@@ -128,7 +127,7 @@ def test_estimate_agrees_with_the_measured_peak_of_a_real_fit():
     records = _records(6000, n_rec=2)
     cfg = IdentifyConfig.from_dict({"M": 30, "T_z": 0.0, "max_condition": 1e300})
     estimate = preflight.identify_bytes(cfg, 1, 12000, 6000)
-    exc, peak, _ = _peak(lambda: fit_rbf_model(records, cfg))
+    exc, peak = _peak(lambda: fit_rbf_model(records, cfg))
     assert exc is None
     assert 1.2 < estimate / peak < 1.8
 
@@ -160,7 +159,7 @@ def _datasets(n: int = 1000) -> list[DataSet]:
 def test_huge_substeps_are_refused_naming_the_key(budget):
     cfg = ValidateConfig.from_dict({"substeps": 1_000_000_000})
     run = lambda: validate_model(_Oscillator(), "osc", _datasets(), cfg, 10.0)  # noqa: E731
-    exc, peak, _ = _peak(run)
+    exc, peak = _peak(run)
     assert isinstance(exc, ResourceError)
     assert str(exc).startswith(
         "[validate] substeps = 1000000000: the free run of 1 record(s) of up to 1000 samples "
@@ -174,7 +173,7 @@ def test_free_run_estimate_agrees_with_the_measured_peak():
 
     model, v = _Oscillator(), [np.ones((60, 1)), np.ones((45, 1))]
     estimate = preflight.free_run_bytes([60, 45], 1, 2, 40)
-    exc, peak, _ = _peak(lambda: simulate(model, v, 1e-2, np.zeros(2), np.zeros(2), substeps=40))
+    exc, peak = _peak(lambda: simulate(model, v, 1e-2, np.zeros(2), np.zeros(2), substeps=40))
     assert exc is None
     assert 0.9 < estimate / peak < 1.2
 
@@ -198,7 +197,7 @@ def test_refinement_with_huge_windows_is_refused(budget):
     cfg = IdentifyConfig.from_dict({"M": 4, "T_z": 0.0, "max_condition": 1e300})
     model, diag = fit_rbf_model(records, cfg)
     rcfg = RefineConfig(windows=1_000_000, length=400)
-    exc, peak, _ = _peak(lambda: refine_model(model, diag, records, cfg, rcfg))
+    exc, peak = _peak(lambda: refine_model(model, diag, records, cfg, rcfg))
     assert isinstance(exc, ResourceError)
     assert str(exc).startswith("[identify.refine] windows = 1000000, length = 400: the Jacob")
     assert peak < SMALL
@@ -210,7 +209,7 @@ def test_sindy_library_above_the_budget_is_refused(monkeypatch):
 
     monkeypatch.setenv(preflight.BUDGET_ENV, "0.001")  # 1 MB
     (r,) = _records(5000)
-    exc, peak, _ = _peak(lambda: fit_sindy(r.q, r.q_dot, r.q_ddot, r.v, 1e-3, SindyConfig()))
+    exc, peak = _peak(lambda: fit_sindy(r.q, r.q_dot, r.q_ddot, r.v, 1e-3, SindyConfig()))
     assert isinstance(exc, ResourceError)
     assert str(exc).startswith("[compare] degree = 3: the SINDy library of 5000 samples x 20")
     assert peak < SMALL
@@ -277,9 +276,7 @@ def test_cli_refuses_huge_M_with_exit_code_2_naming_the_key(tmp_path, monkeypatc
         result = runner.invoke(app, [stage, str(wf)])
         assert result.exit_code == 0, result.output
     wf.write_text(WORKFLOW.format(M=100000))
-    t0 = time.perf_counter()
     result = runner.invoke(app, ["identify", str(wf)])
     assert result.exit_code == 2, result.output
     assert "[identify] M = 100000" in result.output
     assert "the memory budget is 4 GB" in result.output
-    assert time.perf_counter() - t0 < 10.0  # generous: loading artifacts, no least squares

@@ -4,7 +4,7 @@ headings that match, the input's own quantity and unit."""
 import numpy as np
 import pandas as pd
 import pytest
-from test_stability import K1, M_Q, D, double_well
+from conftest import K1, M_Q, D, double_well, duffing_record
 
 from debist.identify.stability import stability_table
 from debist.report.html import _design
@@ -75,12 +75,11 @@ def test_backbone_coefficients_are_named_as_basis_terms():
 def test_an_acceleration_input_is_named_and_drawn_as_such():
     """A base-excited Duffing oscillator (input an acceleration [m/s^2], h = u) through
     run_identify: switching levels in m/s^2, Fig. 14 shows g_i, not dC_i/dq."""
-    from test_excitation import _duffing
 
     from debist.report.plots import curves_figure
     from debist.stages.identify import run_identify
 
-    rec = _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=60.0)
+    rec = duffing_record(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=60.0)
     t = np.arange(rec.q.size) * rec.dt
     frame = pd.DataFrame({"t": t, "q": rec.q, "v1": rec.v[:, 0]})
     frame.attrs.update(role="estimation", units={"q": "m", "t": "s", "v1": "m/s^2"})

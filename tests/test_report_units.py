@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from conftest import DT_LOG as DT
+from conftest import double_well, logged_tables
 from rich.console import Console
-from test_stability import double_well
-from test_trust import DT, _tables
 
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.report.tables import design_table, identify_table, summary_units
@@ -27,7 +27,7 @@ def _render(table) -> str:
 @pytest.fixture(scope="module")
 def data():
     truth = double_well()
-    tables, derivs = _tables(truth)
+    tables, derivs = logged_tables(truth)
     for d in derivs.values():
         d.attrs["dt"] = DT
     return truth, tables, derivs

@@ -9,6 +9,7 @@ squares.
 
 import numpy as np
 import pytest
+from conftest import F_MAX, K1, K3, M_Q, Q_RANGE, D, G, double_well
 
 from debist.errors import DebistError
 from debist.identify.stability import (
@@ -23,24 +24,7 @@ from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.model.terms import PhysicsPrior
 
-K1, K3, M_Q, D, G = -40.0, 4e5, 0.04, 0.5, 2e-8
-Q_RANGE = (-0.012, 0.012)
 A = np.sqrt(-K1 / K3)  # well position [m]
-F_MAX = 2.0 * (-K1 / 3.0) ** 1.5 / np.sqrt(K3)  # local maximum of f [N]
-
-
-def double_well(d_v=D, g=G, input_map="v2", k1=K1, prior=None, s_d=0.0):
-    """Backbone-only model: c = k1 + k3 q^2, d = d_v (+ s_d d_prior), g = [g, -g]."""
-    M = 10
-    basis = RBFBasis.equidistant(*Q_RANGE, M, 0.5)
-    backbone = {"k_1": k1, "k_3": K3, "d_v": d_v, "g_0": np.array([g, -g])}
-    if prior is not None:
-        backbone.update({"s_c": 0.0, "s_d": s_d, "s_g": np.zeros(2)})
-    zeros = np.zeros(M)
-    return RBFModel(
-        basis, input_map, 2, M_Q, 0.01, 1e-3, zeros, zeros, np.zeros((2, M)), backbone,
-        Q_RANGE, prior,
-    )  # fmt: skip
 
 
 def fitted_double_well():

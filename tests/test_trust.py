@@ -3,39 +3,16 @@
 import numpy as np
 import pandas as pd
 import pytest
-from test_stability import double_well
+from conftest import double_well, duffing_record, logged_tables
 
 from debist.report.tables import nrmse_table
-from debist.simulate.freerun import simulate
 from debist.stages.validate import run_validate
 from debist.validate import default_q_limit, nrmse
-
-DT = 2e-3
-
-
-def _tables(model, seed=0, n=3000):
-    """Logs of a model's free run under random sub-threshold and switching inputs."""
-    rng = np.random.default_rng(seed)
-    v = np.zeros((n, 2))
-    v[:, 0] = np.repeat(rng.uniform(0, 900, n // 100), 100)
-    v[:, 1] = np.repeat(rng.uniform(0, 900, n // 100), 100)
-    v[1000:1300, 0] = 3000.0  # switch right (0.18 N against a barrier force of 0.154 N)
-    v[2000:2300, 1] = 3000.0  # and back
-    sim = simulate(model, [v], DT, np.array([-0.01]), np.array([0.0]), engine="numpy")[0]
-    assert not sim.diverged and sim.q.max() > 0.008 and sim.q.min() < -0.008  # both wells
-    tables, derivs = {}, {}
-    for name, role in (("est", "estimation"), ("val", "validation")):  # the same log twice
-        t = np.arange(n) * DT
-        frame = pd.DataFrame({"t": t, "q": sim.q, "v1": v[:, 0], "v2": v[:, 1]})
-        frame.attrs.update(role=role, units={"q": "m", "t": "s", "v1": "V", "v2": "V"})
-        tables[name] = frame
-        derivs[name] = pd.DataFrame({"q_dot": sim.q_dot, "q_ddot": sim.q_ddot})
-    return tables, derivs
 
 
 def test_a_model_with_negative_damping_at_its_wells_is_unstable_not_a_number():
     truth = double_well()
-    tables, derivs = _tables(truth)
+    tables, derivs = logged_tables(truth)
     bad = double_well(d_v=-0.2)
     res = run_validate(bad, tables, derivs, {"substeps": 1})
     rows = res.table[res.table.model == "rbf"]
@@ -51,7 +28,7 @@ def test_a_model_with_negative_damping_at_its_wells_is_unstable_not_a_number():
 
 def test_every_row_has_the_mean_as_baseline_and_a_warning_when_it_is_not_beaten():
     truth = double_well()
-    tables, derivs = _tables(truth)
+    tables, derivs = logged_tables(truth)
     res = run_validate(truth, tables, derivs, {"substeps": 1})
     q = tables["val"]["q"].to_numpy()
     row = res.table[(res.table.dataset == "val")].iloc[0]
@@ -66,7 +43,7 @@ def test_every_row_has_the_mean_as_baseline_and_a_warning_when_it_is_not_beaten(
 def test_a_free_run_that_leaves_twice_the_estimation_range_is_diverged():
     assert default_q_limit((-0.012, 0.01)) == pytest.approx(0.024)
     truth = double_well()
-    tables, derivs = _tables(truth)
+    tables, derivs = logged_tables(truth)
     # a stable, damped well at q = 0 whose softening (k_3 < 0) lets the 3 kV pulses push the
     # beam over the barrier at +-10 mm (0.72 N against at most 0.154 N): it escapes to infinity
     escape = double_well(g=8e-8, k1=40.0)
@@ -80,11 +57,10 @@ def test_a_free_run_that_leaves_twice_the_estimation_range_is_diverged():
 def test_a_single_frequency_duffing_gets_the_excitation_warning_and_an_honest_row():
     """One sine cannot separate stiffness from damping: identify says so; the validation row
     is a number only if the identified damping at the well is positive, else 'unstable'."""
-    from test_excitation import _duffing
 
     from debist.stages.identify import run_identify
 
-    rec = _duffing(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=120.0)
+    rec = duffing_record(lambda t: 15.0 * np.cos(2 * np.pi * 0.8 * t), "sine", t_end=120.0)
     t = np.arange(rec.q.size) * rec.dt
     tables, derivs = {}, {}
     for name, role in (("est", "estimation"), ("val", "validation")):
