@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import doctest
-import importlib
 import inspect
-import pkgutil
 import warnings
 from dataclasses import replace
 
@@ -368,21 +365,3 @@ def test_tvregdiff_method_unit_scaling(c):
         d1 = tvregdiff_derivatives(c * x, DT, config=scaled)
     np.testing.assert_allclose(d1.x_dot, c * d0.x_dot, rtol=1e-6, atol=1e-9 * c)
     np.testing.assert_allclose(d1.x_ddot, c * d0.x_ddot, rtol=1e-6, atol=1e-9 * c)
-
-
-# ---------------------------------------------------------------- docstrings
-
-
-@pytest.mark.parametrize(
-    "module",
-    sorted(
-        m.name
-        for m in pkgutil.iter_modules(importlib.import_module("debist.differentiate").__path__)
-    ),
-)
-def test_docstring_examples_run(module):
-    mod = importlib.import_module(f"debist.differentiate.{module}")
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
-    assert result.failed == 0

@@ -1,6 +1,5 @@
 """The excitation check before identification (debist.identify.excitation)."""
 
-import doctest
 import json
 
 import numpy as np
@@ -12,7 +11,6 @@ from scipy.signal import butter, sosfiltfilt
 
 from debist.errors import WorkflowError
 from debist.identify import RBFBasis, Record
-from debist.identify import excitation as excitation_module
 from debist.identify.excitation import check_excitation
 
 # --- (a) Duffing oscillator q'' + 2 zeta w q' + w^2 q + k3 q^3 = u(t) -------------------------
@@ -240,8 +238,3 @@ def test_records_must_agree_in_inputs():
         check_excitation(recs[:1], basis, "v3")
     with pytest.raises(WorkflowError, match="record 'c': sample time"):
         check_excitation([Record("c", z, z, z, np.zeros((4, 1)), 0.0)], basis)
-
-
-def test_docstring_example():
-    result = doctest.testmod(excitation_module)
-    assert result.attempted > 0 and result.failed == 0

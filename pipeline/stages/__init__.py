@@ -41,6 +41,12 @@ class StageOutput:
         ``summary.json``); reproducible values only, no wall times.
     timings : dict of str to float
         Wall times of parts of the stage [s] (written to the unhashed ``timings.json``).
+
+    Examples
+    --------
+    >>> out = StageOutput({"notes.txt": "two data sets\n"}, {"n_datasets": 2})
+    >>> out.summary, out.timings
+    ({'n_datasets': 2}, {})
     """
 
     outputs: dict[str, Any]
