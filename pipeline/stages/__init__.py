@@ -44,7 +44,7 @@ class StageOutput:
 
     Examples
     --------
-    >>> out = StageOutput({"notes.txt": "two data sets\n"}, {"n_datasets": 2})
+    >>> out = StageOutput({"notes.txt": "two data sets"}, {"n_datasets": 2})
     >>> out.summary, out.timings
     ({'n_datasets': 2}, {})
     """
