@@ -15,70 +15,9 @@ from typing_extensions import TypedDict
 from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
+from debist.metrics import mean_baseline_nrmse, nrmse, rms
 from debist.simulate.freerun import FreeRunModel, SimulationResult, simulate
 from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
-
-
-def nrmse(y_meas: np.ndarray, y_calc: np.ndarray) -> float:
-    """Normalised root-mean-square error of Eq. 41.
-
-    Parameters
-    ----------
-    y_meas : ndarray, shape (N,)
-        Measured signal.
-    y_calc : ndarray, shape (N,)
-        Calculated (simulated) signal, same unit.
-
-    Returns
-    -------
-    float
-        ``sqrt(mean((y_meas - y_calc)^2)) / (max(y_meas) - min(y_meas))``
-        [dimensionless]; NaN when ``y_calc`` has non-finite values (a diverged
-        simulation is reported as such, not as a number).
-
-    Raises
-    ------
-    ValueError
-        If the shapes differ or the measured signal is constant.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 41.
-
-    Examples
-    --------
-    >>> nrmse(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]))
-    0.0
-    >>> round(nrmse(np.array([0.0, 2.0]), np.array([1.0, 1.0])), 3)
-    0.5
-    """
-    y_meas = np.asarray(y_meas, dtype=float)
-    y_calc = np.asarray(y_calc, dtype=float)
-    if y_meas.shape != y_calc.shape:
-        raise ValueError(f"shapes differ: {y_meas.shape} and {y_calc.shape}")
-    span = float(np.max(y_meas) - np.min(y_meas))
-    if span == 0:
-        raise ValueError("measured signal is constant: NRMSE is undefined")
-    if not np.all(np.isfinite(y_calc)):
-        return float("nan")
-    return float(np.sqrt(np.mean((y_meas - y_calc) ** 2)) / span)
-
-
-def rms(error: np.ndarray) -> float:
-    """Root-mean-square of an error signal (NaN if any value is not finite).
-
-    Parameters
-    ----------
-    error : ndarray, shape (N,)
-        Error samples.
-
-    Returns
-    -------
-    float
-        sqrt(mean(error^2)), same unit as ``error``.
-    """
-    error = np.asarray(error, dtype=float)
-    return float(np.sqrt(np.mean(error**2))) if np.all(np.isfinite(error)) else float("nan")
 
 
 def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
@@ -490,7 +429,7 @@ def score_free_runs(
                 "rms_unit": unit,
                 "diverged": sim.diverged,
                 "status": "diverged" if sim.diverged else "ok",
-                "nrmse_q_baseline": nrmse(ds.q[s], np.full(ds.q[s].size, np.mean(ds.q[s]))),
+                "nrmse_q_baseline": mean_baseline_nrmse(ds.q[s]),
             }
         )
         simulated[ds.name] = pd.DataFrame(

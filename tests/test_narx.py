@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 
 from debist.errors import WorkflowError
+from debist.metrics import nrmse
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.report.tables import not_modelled, verdict
-from debist.validate import nrmse
 
 pytestmark = pytest.mark.skipif(not narx_available(), reason="SysIdentPy (debist[narx]) absent")
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
+from debist.metrics import nrmse
 from debist.physics.kinematics import pitch_angle, ritz_basis
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.reduced import (
-    _nrmse,
     compare_full_reduced,
     fit_reduced,
     reduced_curves,
@@ -72,8 +72,11 @@ def test_rest_in_the_well_is_a_fixed_point(model, static):
 
 def test_nrmse_definition():
     y = np.sin(np.linspace(0, 6, 100))
-    assert _nrmse(y, y) == 0.0
-    assert _nrmse(y, y + 0.1) == pytest.approx(0.1 / (y.max() - y.min()))
+    assert nrmse(y, y, on_constant="nan") == 0.0
+    assert nrmse(y, y + 0.1) == pytest.approx(0.1 / (y.max() - y.min()))
+    assert np.isnan(nrmse(np.ones(3), np.zeros(3), on_constant="nan"))  # the full model at rest
+    with pytest.raises(ValueError, match="constant"):
+        nrmse(np.ones(3), np.zeros(3))
     v1, v2, bp = switching_profile()
     assert (v1(0.49), v1(0.5), v1(1.5), v2(2.5), v2(3.5)) == (0.0, V_MAX, 0.0, V_MAX, 0.0)
     assert bp == (0.5, 1.5, 2.5, 3.5)

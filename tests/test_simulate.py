@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 
 from debist.identify import RBFBasis, RBFModel
+from debist.metrics import nrmse, rms
 from debist.simulate.freerun import simulate, upsample_inputs
-from debist.validate import initial_state, nrmse, rms
+from debist.validate import initial_state
 
 
 def oscillator(k1=(2 * np.pi * 3.0) ** 2, dv=2.0, T_z=0.0):

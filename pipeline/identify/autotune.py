@@ -348,8 +348,9 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     NRMSE(q) (Eq. 41) of the windows' runs against the measurement, normalised by the span's
     range.
     """
+    from debist.metrics import nrmse
     from debist.simulate.prediction import restarted_runs
-    from debist.validate import default_q_limit, nrmse
+    from debist.validate import default_q_limit
 
     scores = []
     by_dt: dict[float, list[tuple[int, int, int]]] = {}

@@ -33,6 +33,7 @@ from debist.engine import preflight, progress
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
+from debist.metrics import rms
 from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
 from debist.model.termtable import TableModel
@@ -191,7 +192,7 @@ def _window_rms(model: RBFModel, records, picks, rcfg: RefineConfig, q_limit: fl
     err = np.concatenate(
         [run - records[i].q[s : s + L] for run, (i, s) in zip(runs, picks, strict=True)]
     )
-    return float(np.sqrt(np.mean(err**2))) if np.all(np.isfinite(err)) else float("nan")
+    return rms(err)
 
 
 def refine_model(
@@ -382,7 +383,7 @@ def _full_rms(
         q_limit=q_limit,
     )
     err = np.concatenate([s.q - r.q for s, r in zip(sims, records, strict=True)])
-    return float(np.sqrt(np.mean(err**2))) if np.all(np.isfinite(err)) else float("nan")
+    return rms(err)
 
 
 def _rejected(model, records, rcfg, message, t_start) -> RefineResult:

@@ -45,8 +45,8 @@ import pydantic
 from pydantic import Field, PositiveInt
 
 from debist.errors import DebistWarning, IdentificationError
+from debist.metrics import nrmse
 from debist.model.termtable import input_map as apply_input_map
-from debist.validate import nrmse
 from debist.workflow.config import CONFIG, AsTuple, config_from_section
 
 __all__ = ["NARX_MISSING", "NarxConfig", "NarxModel", "fit_narx", "narx_available"]

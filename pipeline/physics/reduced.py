@@ -30,6 +30,7 @@ import numpy as np
 from numpy.polynomial import Chebyshev
 from numpy.typing import ArrayLike, NDArray
 
+from debist.metrics import nrmse
 from debist.physics.dynamics import FullModel, SimulationResult, simulate, well_state
 from debist.physics.energy import potential
 from debist.physics.kinematics import ritz_basis
@@ -479,12 +480,6 @@ def switching_profile(
     return v1, v2, (*left, *right)
 
 
-def _nrmse(y_ref: NDArray[np.float64], y: NDArray[np.float64]) -> float:
-    """NRMSE of Eq. 41: RMS error over the range of the reference signal."""
-    span = float(np.max(y_ref) - np.min(y_ref))
-    return float(np.sqrt(np.mean((y_ref - y) ** 2)) / span) if span > 0 else float("nan")
-
-
 @dataclass(frozen=True)
 class Comparison:
     """Full versus reduced model under the same input (Fig. 7).
@@ -566,6 +561,6 @@ def compare_full_reduced(
         model=model,
         v1=full.v1,
         v2=full.v2,
-        nrmse_q=_nrmse(full.q, red.q),
-        nrmse_phi=_nrmse(full.phi, red.phi),
+        nrmse_q=nrmse(full.q, red.q, on_constant="nan"),
+        nrmse_phi=nrmse(full.phi, red.phi, on_constant="nan"),
     )

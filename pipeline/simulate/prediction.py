@@ -36,6 +36,7 @@ import pandas as pd
 from scipy import stats
 
 from debist.errors import WorkflowError
+from debist.metrics import nrmse
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
@@ -43,7 +44,7 @@ from debist.simulate.freerun import (
     simulate,
     substeps_needed,
 )
-from debist.validate import DataSet, nrmse
+from debist.validate import DataSet
 
 __all__ = [
     "RESIDUAL_CONFIDENCE",
