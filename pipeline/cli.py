@@ -758,11 +758,10 @@ def export(
 
     Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
     """
-    import shutil
-    import tempfile
     from contextlib import nullcontext
 
     from debist.engine import artifacts, outdir
+    from debist.engine.fileformats import atomic_write
     from debist.errors import OutputDirError
     from debist.export import export_files, load_identified
 
@@ -773,14 +772,10 @@ def export(
             model, info = load_identified(runner)
             files = export_files(model, fmt.value, info)
             target = dest if dest is not None else folder / "export"
-            if force:  # each file replaced atomically (os.replace from a sibling folder)
+            if force:  # each file replaced atomically
                 target.mkdir(parents=True, exist_ok=True)
-                tmp = Path(tempfile.mkdtemp(prefix=".export.tmp-", dir=target))
-                try:
-                    for path in artifacts.write_text_files(tmp, files):
-                        os.replace(path, target / path.name)
-                finally:
-                    shutil.rmtree(tmp, ignore_errors=True)
+                for name, text in files.items():
+                    atomic_write(artifacts.inside(target, name), text)
             else:
                 try:
                     artifacts.write_text_files(target, files)

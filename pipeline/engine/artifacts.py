@@ -35,7 +35,6 @@ import re
 import secrets
 import shutil
 import signal
-import tempfile
 import threading
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -50,6 +49,7 @@ from debist.engine.fileformats import (
     Figure,
     FileWriter,
     H5Tree,
+    atomic_write,
     canonical_json,
     read_h5,
     read_parquet,
@@ -73,6 +73,7 @@ __all__ = [
     "checked_output",
     "foreign_files",
     "foreign_message",
+    "inside",
     "library_versions",
     "manifest_digest",
     "read_h5",
@@ -351,7 +352,7 @@ def checked_output(stage_dir: str | os.PathLike, manifest: Manifest, rel: str) -
         the manifest: nothing is read from content the manifest does not vouch for.
     """
     expected = manifest.outputs.get(rel)
-    path = _inside(Path(stage_dir), rel)
+    path = inside(Path(stage_dir), rel)
     if expected is None:
         raise ArtifactError(f"'{path}' is not an output of this stage (its manifest lacks it)")
     if not path.is_file() or sha256_file(path) != expected:
@@ -500,7 +501,7 @@ def write_stage(
             json.loads(canonical_json(dict(summary or {}))), indent=2, sort_keys=True
         )
         for rel, value in [*sorted(outputs.items()), (SUMMARY, summary_json + "\n")]:
-            path = _inside(tmp, rel)
+            path = inside(tmp, rel)
             write_output(value, path)
             hashes[rel] = sha256_file(path)
         manifest = Manifest(
@@ -525,8 +526,26 @@ def write_stage(
     return Manifest(**{**asdict(manifest), "summary": json.loads(summary_json)})
 
 
-def _inside(folder: Path, rel: str) -> Path:
-    """``folder / rel`` if it stays inside ``folder`` (relative, no ``..``), else refuse it."""
+def inside(folder: Path, rel: str) -> Path:
+    """Return ``folder / rel`` if it stays inside ``folder`` (relative, no ``..``), else refuse it.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The folder every write must stay in.
+    rel : str
+        A relative path from input or a stage (hostile until checked).
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    OutputDirError
+        For an absolute path, ``..`` or ``.`` parts, a NUL byte, or a path that resolves
+        (through symlinks) outside ``folder``.
+    """
     parts = Path(rel).parts
     path = folder / rel
     if (
@@ -654,18 +673,12 @@ def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> lis
             f"'{final / existing[0]}' exists ({len(existing)} file(s) in all): choose another "
             "folder or remove them"
         )
-    tmp = Path(tempfile.mkdtemp(prefix=".files.tmp-", dir=final))
-    moved: list[Path] = []
+    written: list[Path] = []
     try:
         for name, text in files.items():
-            (tmp / name).write_text(text, encoding="utf-8")
-        for name in files:
-            os.replace(tmp / name, final / name)
-            moved.append(final / name)
+            written.append(atomic_write(inside(final, name), text))
     except BaseException:
-        for path in moved:  # all new files (checked above): take them back
+        for path in written:  # all new files (checked above): take them back
             path.unlink(missing_ok=True)
         raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return [final / name for name in files]
+    return written

@@ -13,10 +13,12 @@ creation properties" (``track_times``); PNG specification, tEXt chunks.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
 import os
+import secrets
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +33,7 @@ __all__ = [
     "Figure",
     "FileWriter",
     "H5Tree",
+    "atomic_write",
     "canonical_json",
     "png_bytes",
     "read_h5",
@@ -38,6 +41,80 @@ __all__ = [
     "sha256_file",
     "write_output",
 ]
+
+
+def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path], None]) -> Path:
+    """Write a file so that a reader sees the old file or the whole new one, never a part.
+
+    The content goes to a fresh file beside ``path`` (mode 0o666 less the umask, like any new
+    file), is flushed to disk (``fsync``) and moved over ``path`` with :func:`os.replace`;
+    the folder is then synced (POSIX, best effort) so the rename survives a power cut. On any
+    error, Ctrl-C included, the temporary file is removed and ``path`` is untouched. The one
+    atomic file write of debist (artifacts, reports, rig logs, exports, the folder marker).
+
+    Parameters
+    ----------
+    path : path-like
+        The file to write (its folder must exist).
+    content : str, bytes or callable
+        Text (written as UTF-8), bytes, or ``write(tmp)`` that writes the temporary file
+        itself (e.g. an HDF5 writer).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    OSError
+        What the file system raises (no space, read-only, permissions); nothing is left.
+
+    References
+    ----------
+    POSIX ``rename(2)`` and ``fsync(2)``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = atomic_write(Path(d) / "a.txt", "one")
+    ...     sorted(p.name for p in Path(d).iterdir()), path.read_text()
+    (['a.txt'], 'one')
+    """
+    path = Path(path)
+    folder = path.parent
+    for _ in range(16):
+        tmp = folder / f".{path.name}.{secrets.token_hex(6)}.tmp"
+        try:  # mode 0o666 minus the umask, like any new file (mkstemp would give 0o600)
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            break
+        except FileExistsError:
+            continue
+    else:  # pragma: no cover - 16 collisions of 48 random bits
+        raise FileExistsError(f"cannot create a temporary file beside '{path}'")
+    try:
+        if isinstance(content, str):
+            tmp.write_bytes(content.encode("utf-8"))
+        elif isinstance(content, bytes):
+            tmp.write_bytes(content)
+        else:
+            content(tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+    if os.name == "posix":  # make the rename durable; best effort
+        with contextlib.suppress(OSError):
+            fd = os.open(folder, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+    return path
 
 
 def sha256_file(path: str | os.PathLike) -> str:

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from debist.engine import artifacts
 from debist.engine.artifacts import SWAP_FOLDER
+from debist.engine.fileformats import atomic_write
 from debist.errors import OutputDirError, RunLockedError
 
 __all__ = [
@@ -201,9 +202,7 @@ def claim_output_dir(
     if workflow_file is not None:
         record["workflow_file"] = os.path.relpath(Path(workflow_file).resolve(), out.resolve())
     if _marker(out) != record:
-        tmp = out / f"{MARKER}.tmp-{os.getpid()}"
-        tmp.write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, out / MARKER)
+        atomic_write(out / MARKER, json.dumps(record, indent=2) + "\n")
 
 
 @contextmanager

@@ -19,8 +19,6 @@ from __future__ import annotations
 import base64
 import math
 import os
-import shutil
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,6 +27,7 @@ import jinja2
 import pydantic
 from pydantic import PositiveFloat
 
+from debist.engine.fileformats import atomic_write
 from debist.errors import ArtifactError
 from debist.report.tables import (
     auto_line,
@@ -748,14 +747,6 @@ def write_page(path: str | os.PathLike, html: str) -> Path:
     POSIX ``rename(2)``: the new file replaces the old one in one step, so a reader never
     sees half a page.
     """
-    from debist.engine import artifacts
-
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".page.tmp-", dir=target.parent))
-    try:
-        (written,) = artifacts.write_text_files(tmp, {target.name: html})
-        os.replace(written, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return target
+    return atomic_write(target, html)

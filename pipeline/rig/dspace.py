@@ -53,13 +53,11 @@ Specification", user block and object modification times.
 
 from __future__ import annotations
 
-import contextlib
 import inspect
 import io
 import os
 import re
-import secrets
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +66,8 @@ import h5py
 import numpy as np
 import scipy.io
 from numpy.typing import ArrayLike, NDArray
+
+from debist.engine.fileformats import atomic_write
 
 __all__ = ["MAT_VERSIONS", "Channel", "recording", "write_mat", "write_recording"]
 
@@ -389,37 +389,6 @@ def _write_v73(path: Path, variables: Mapping[str, Any], created: str) -> None:
         fh.write(header)
 
 
-# ---------------------------------------------------------------------------- atomic
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Run ``write(tmp)`` on a fresh file beside ``path``, fsync it, move it over ``path``."""
-    folder = path.parent
-    for _ in range(16):
-        tmp = folder / f".{path.name}.{secrets.token_hex(6)}.tmp"
-        try:  # mode 0o666 minus the umask, like any new file (mkstemp would give 0o600)
-            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-            break
-        except FileExistsError:
-            continue
-    else:  # pragma: no cover - 16 collisions of 48 random bits
-        raise FileExistsError(f"cannot create a temporary file beside '{path}'")
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
-    if os.name == "posix":  # make the rename durable; best effort
-        with contextlib.suppress(OSError):
-            fd = os.open(folder, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-
-
 def write_mat(
     path: str | os.PathLike[str],
     variables: Mapping[str, Any],
@@ -471,9 +440,9 @@ def write_mat(
     target = Path(path)
     if version == "5":
         data = _v5_bytes(variables, created)
-        _atomic_write(target, lambda tmp: tmp.write_bytes(data))
+        atomic_write(target, lambda tmp: tmp.write_bytes(data))
     else:
-        _atomic_write(target, lambda tmp: _write_v73(tmp, variables, created))
+        atomic_write(target, lambda tmp: _write_v73(tmp, variables, created))
     return target
 
 
