@@ -56,6 +56,7 @@ def analysed(tmp_path_factory):
     return wf, manifests
 
 
+@pytest.mark.slow
 def test_physics_only_workflow_runs_just_analyze(analysed):
     wf, manifests = analysed
     assert list(manifests) == ["analyze"]

@@ -63,6 +63,7 @@ def test_nrmse_is_the_table_the_cli_prints_in_percent(synthetic_run):
         assert f"{value:.2f} %" in out
 
 
+@pytest.mark.slow
 def test_overrides_change_the_run_and_are_recorded(run_copy):
     root, digest = run_copy
     events = []

@@ -97,6 +97,7 @@ def file_hashes(root):
     }
 
 
+@pytest.mark.slow
 def test_processes_write_the_bytes_of_a_serial_run_and_a_rerun_skips_everything(protos):
     runs = protos[0].parent / "runs"
     serial = run_batch(protos, stages=STAGES, scheduler="synchronous")
@@ -284,6 +285,7 @@ def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry
     assert dict(os.environ) == before  # what the nannies set in this process is undone
 
 
+@pytest.mark.slow
 def test_a_killed_batch_worker_fails_its_workflow_only(protos, monkeypatch, capsys):
     """SIGKILL (as the out-of-memory killer sends) in proto-b's worker, on both attempts."""
     folder = protos[0].parent

@@ -28,6 +28,7 @@ def project(tmp_path, bistable_record):
     return tmp_path
 
 
+@pytest.mark.slow
 def test_quiet_prints_only_the_run_digest_and_verbose_says_why(project):
     wf = str(project / "wf.toml")
     result = CliRunner().invoke(app, ["-q", "run", wf])

@@ -52,6 +52,7 @@ def test_stages_runs_exactly_the_listed_stages(differentiated):
     assert folders(differentiated) == ["differentiate", "ingest"]
 
 
+@pytest.mark.slow
 def test_from_until_runs_the_range_and_reuses_the_rest(project):
     code, out = invoke("run", project / "wf.toml", "--from", "identify", "--until", "validate")
     assert code == 0, out

@@ -204,6 +204,7 @@ fclose(fid);
 
 @pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave)")
 @pytest.mark.parametrize("key", list(MODELS))
+@pytest.mark.slow
 def test_matlab_export_matches_free_run_in_octave(tmp_path, key):
     model, v, ref = free_run(key)
     (tmp_path / MATLAB_FILE).write_text(matlab_source(model)[MATLAB_FILE], encoding="utf-8")
@@ -326,6 +327,7 @@ max_condition = 1e10
 """
 
 
+@pytest.mark.slow
 def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_record):
     import pandas as pd
     from typer.testing import CliRunner

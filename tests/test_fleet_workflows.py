@@ -22,6 +22,7 @@ def render(out: Path, n: int = 3, seed: int = 1) -> dict[str, str]:
     return fleet_workflows(raw, TEMPLATE.parent, out, n, seed=seed)
 
 
+@pytest.mark.slow
 def test_members_are_seeded_distinct_and_loadable(tmp_path):
     files = render(tmp_path)
     assert list(files) == [f"paper-experiment-{k:03d}.toml" for k in range(3)]
@@ -55,6 +56,7 @@ def test_template_without_rig_is_refused(tmp_path):
     assert result.exit_code == 2 and "[rig]" in result.output
 
 
+@pytest.mark.slow
 def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_path, monkeypatch):
     from debist.engine import fleetrun
 
@@ -75,6 +77,7 @@ def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_pat
     assert files[f"{name}-002.toml"] == render(tmp_path / "x", n=9, seed=4)[f"{name}-002.toml"]
 
 
+@pytest.mark.slow
 def test_a_fleet_whose_logs_all_fail_ingest_is_refused_with_the_reason(tmp_path):
     from debist.engine.fleetrun import viable_fleet
     from debist.rig.fleet import FleetError

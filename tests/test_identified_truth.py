@@ -115,6 +115,7 @@ def _curves_and_truth(out: Path):
 
 @pytest.mark.parametrize("bands", ["shipped", "bootstrap"])
 @pytest.mark.parametrize("name", list(CURVES))
+@pytest.mark.slow
 def test_identified_curves_match_the_truth_where_marked(staircase, staircase_boot, name, bands):
     """Within 10 % of the truth's range wherever marked, with either band (the model-error
     term only takes marks away: this workflow's band_tolerance = 0.1 is below twice every

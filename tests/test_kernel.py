@@ -75,6 +75,7 @@ def test_rbf_model_with_backbone_and_prior(substeps, interpolation, T_z, outside
 
 
 @pytest.mark.parametrize(("T_z", "substeps"), [(0.02, 1), (0.0, 3)])
+@pytest.mark.slow
 def test_rbf_model_with_creep_states_in_both_engines_and_its_term_table(T_z, substeps):
     """The creep of Eq. 26 as M extra states w_j' = phi_j(q) q_dot - lambda w_j: the model's
     own rhs, its term table's NumPy rhs and the compiled kernel agree to 1e-12."""

@@ -66,6 +66,7 @@ def bistable(bistable_record):
 
 
 @pytest.mark.parametrize("case", ["duffing", "bistable"])
+@pytest.mark.slow
 def test_refinement_never_increases_the_estimation_free_run_error(case, request):
     model, records, res = request.getfixturevalue(case)
     if res.accepted:
@@ -97,6 +98,7 @@ def test_refine_config_parsing():
         refine_config({"window": 5})
 
 
+@pytest.mark.slow
 def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     """The Duffing refinement is accepted on its error; declared unstable (as a negatively
     damped well would be), the same refinement is rejected and the least squares kept."""

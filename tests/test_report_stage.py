@@ -141,6 +141,7 @@ def synthetic_inputs(rec):
     )
 
 
+@pytest.mark.slow
 def test_run_report_draws_the_papers_figures(bistable_record):
     inputs = synthetic_inputs(bistable_record)
     res = run_report(inputs, {})
@@ -345,6 +346,7 @@ def chrome(tmp_path, width):
 )
 @pytest.mark.skipif(find_spec("selenium") is None, reason="selenium is not installed")
 @pytest.mark.parametrize("width", [1366, 400])
+@pytest.mark.slow
 def test_chromium_lays_the_report_out_at_desktop_and_phone_width(synthetic_run, tmp_path, width):
     """Headless Chromium at 1366 and 400 px: nothing overflows the page, wide tables scroll in
     their own box with the cue shown on a phone, figures are loaded at twice their shown width

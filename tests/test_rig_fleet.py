@@ -15,6 +15,7 @@ def fleet():
     return make_fleet(4, seed=7)
 
 
+@pytest.mark.slow
 def test_same_seed_same_fleet_and_prefix_property(fleet):
     again = make_fleet(4, seed=7)
     assert again == fleet

@@ -333,6 +333,7 @@ def test_logged_channels_are_the_truth_plus_sensor_effects(switching):
     assert not np.any(run.saturated)
 
 
+@pytest.mark.slow
 def test_compiled_plant_integrates_to_the_reference_within_the_tolerance(switching):
     """The switching experiment (3 kV both ways) integrated with the compiled plant (the
     fixture, LSODA), the NumPy reference, Radau and a tight solution. The right-hand sides

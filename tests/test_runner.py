@@ -32,6 +32,7 @@ def stage_hashes(root):
     }
 
 
+@pytest.mark.slow
 def test_run_skip_status_and_downstream_only_rerun(project):
     wf = project / "wf.toml"
     code, out = invoke("run", wf)
@@ -72,6 +73,7 @@ def test_run_skip_status_and_downstream_only_rerun(project):
     assert stage_hashes(project / "out/ingest") == before
 
 
+@pytest.mark.slow
 def test_verify_names_the_modified_file(project):
     wf = project / "wf.toml"
     assert invoke("run", wf)[0] == 0
@@ -83,6 +85,7 @@ def test_verify_names_the_modified_file(project):
     assert "check.parquet (modified)" in out
 
 
+@pytest.mark.slow
 def test_outputs_are_byte_identical_across_runs(project):
     wf = project / "wf.toml"
     assert invoke("run", wf)[0] == 0
@@ -95,6 +98,7 @@ def test_outputs_are_byte_identical_across_runs(project):
     assert {k: first[k] for k in data} == {k: second[k] for k in data}
 
 
+@pytest.mark.slow
 def test_corrupt_input_fails_naming_file_and_keeps_previous_artifacts(project):
     wf = project / "wf.toml"
     assert invoke("run", wf)[0] == 0
@@ -129,6 +133,7 @@ def test_bad_workflow_key_is_a_usage_error(project):
     assert code == 2 and "identfy" in out
 
 
+@pytest.mark.slow
 def test_study_stage_runs_only_when_configured(project):
     wf = project / "wf.toml"
     code, out = invoke("status", wf, "--json")

@@ -252,6 +252,7 @@ def test_an_unmarked_output_folder_of_an_earlier_version_is_adopted(project):
         ("moved-new", [".identify.old-"]),
     ],
 )
+@pytest.mark.slow
 def test_killed_swap_is_recovered_to_the_same_bytes(project, point, left):
     before = hashes(project / "out")
     proc = debist("identify", "wf.toml", "--force", cwd=project, fault=f"swap:identify:{point}")
@@ -285,6 +286,7 @@ def test_sigterm_in_a_stage_exits_143_and_keeps_the_previous_state(project):
     assert invoke("verify", project / "wf.toml")[0] == 0
 
 
+@pytest.mark.slow
 def test_sigterm_during_a_swap_waits_for_the_swap_to_end(project):
     before = hashes(project / "out")
     proc = debist(
@@ -308,6 +310,7 @@ def _wait_until_stopped(pid, timeout=120.0):
     raise AssertionError(f"process {pid} did not reach its stop point")
 
 
+@pytest.mark.slow
 def test_a_second_run_is_refused_naming_the_first_or_waits(project):
     env = {**os.environ, "DEBIST_FAULT": "stage:identify:start=STOP"}
     cmd = [sys.executable, "-m", "debist"]
@@ -461,6 +464,7 @@ def test_verify_of_a_never_run_folder_and_of_missing_or_extra_stage_folders(proj
     assert code == 3 and "extra stage folder" in out
 
 
+@pytest.mark.slow
 def test_manifests_are_byte_deterministic_and_the_same_in_two_clones(tmp_path):
     a = make_project(tmp_path / "a")
     b = make_project(tmp_path / "elsewhere" / "deeper" / "b")

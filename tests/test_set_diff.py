@@ -40,6 +40,7 @@ def test_overrides_parse_as_toml_with_a_string_fallback_and_are_checked(tmp_path
     assert wf.sections["identify"]["M"] == 6 and wf.sections["identify"]["sigma_n"] == 1.0
 
 
+@pytest.mark.slow
 def test_run_set_changes_one_setting_records_it_and_diff_shows_it(base, tmp_path):
     shutil.copytree(base, tmp_path / "p")
     root = tmp_path / "p"

@@ -52,6 +52,7 @@ def test_a_changed_workflow_fails_verify_and_names_the_key(project):
     assert "the workflow changed since this run: [identify] M (8 -> 6)" in out
 
 
+@pytest.mark.slow
 def test_stage_folders_copied_from_a_run_with_another_setting_fail_without_a_digest(
     project, tmp_path
 ):
@@ -86,6 +87,7 @@ def test_edited_and_resigned_ingest_tables_fail_without_a_digest(project):
     assert "check.parquet" not in out  # the untouched table is not blamed
 
 
+@pytest.mark.slow
 def test_a_digest_names_the_first_stage_that_departs_from_it(project):
     root, digest = project
     path = root / "out" / "validate" / "nrmse.parquet"
@@ -101,6 +103,7 @@ def test_a_digest_names_the_first_stage_that_departs_from_it(project):
     assert "report" not in out and "'compare'" not in out
 
 
+@pytest.mark.slow
 def test_a_wrong_digest_on_an_intact_run_is_not_called_a_changed_manifest(project):
     root, digest = project
     wrong = "0" * 64

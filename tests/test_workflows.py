@@ -94,6 +94,7 @@ def paper_experiment(tmp_path_factory):
     return out, out_dir, identified, model, {k: v[sel] for k, v in truth.items() if k != "attrs"}
 
 
+@pytest.mark.slow
 def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
     out, tmp_path, identified, model, truth = paper_experiment
     assert "Free-run validation" in out and "analytical" in out
