@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+# The stages' machinery (runner, batch, the model and its simulator) is imported inside the
+# functions that use it: `import debist` loads this module lazily and must stay light.
 from debist.engine import artifacts, progress
 from debist.errors import ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow

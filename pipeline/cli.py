@@ -30,6 +30,8 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperCommand, TyperGroup
 
+# debist's other modules are imported inside the commands, not here, so that `debist --help`
+# and a bad argument answer at once instead of after loading numpy, pandas and scipy.
 from debist.errors import (
     DebistError,
     Interrupted,

@@ -17,6 +17,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from debist.errors import WorkflowError
+from debist.model.terms import PHYSICS_TERMS, PhysicsPrior
+from debist.physics.freerun import analytical_model
+from debist.physics.reduced import reduced_curves
 
 if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
     from debist.identify import Record
@@ -50,9 +53,6 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33.
     """
-    from debist.model.terms import PHYSICS_TERMS, PhysicsPrior
-    from debist.physics.reduced import reduced_curves
-
     if physics is None:
         raise WorkflowError(
             f"[identify] backbone terms {PHYSICS_TERMS} need a [physics] section (the prototype)"
@@ -87,8 +87,6 @@ def physics_mass(physics) -> float:
     ----------
     Masoud & Maas 2025, Eq. 26 (a constant m_q).
     """
-    from debist.physics.reduced import reduced_curves
-
     if physics is None:
         raise WorkflowError("[identify] m_q = 'physics' needs a [physics] section")
     return float(reduced_curves(physics, np.array([0.0])).m_q[0])
@@ -131,6 +129,5 @@ def analytical_for(physics, datasets: Sequence[DataSet], cfg: ValidateConfig):
                 f"[physics] describes a DE prototype (q [m], inputs v1, v2 [V]); data set "
                 f"'{ds.name}' has q in {ds.q_unit!r} and {ds.v.shape[1]} input(s)"
             )
-    from debist.physics.freerun import analytical_model
 
     return analytical_model(physics)

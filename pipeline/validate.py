@@ -16,7 +16,7 @@ from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
 from debist.metrics import mean_baseline_nrmse, nrmse, rms
-from debist.simulate.freerun import FreeRunModel, SimulationResult, simulate
+from debist.simulate.freerun import FreeRunModel, SimulationResult, check_free_run, simulate
 from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 
 
@@ -322,8 +322,6 @@ def validate_model(
     ----------
     Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
     """
-    from debist.simulate.freerun import check_free_run
-
     fit_min = 4  # samples the cubic of initial_state needs; as many must remain to score
     by_dt: dict[float, list[DataSet]] = {}
     for ds in datasets:

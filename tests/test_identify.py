@@ -4,7 +4,7 @@ from conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_mo
 
 from debist.errors import IdentificationError, WorkflowError
 from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
-from debist.identify.friction import friction_state
+from debist.model.friction import friction_state
 from debist.model.terms import force_columns, input_columns
 from debist.model.termtable import input_map
 
@@ -265,7 +265,7 @@ def test_creep_states_are_the_filter_of_eq_26_discretised_exactly():
     """w' = phi q_dot - lambda w (first-order hold): exact for a piecewise linear input."""
     from scipy.integrate import solve_ivp
 
-    from debist.identify.friction import creep_states
+    from debist.model.friction import creep_states
 
     dt, rate = 0.01, 3.7
     t = np.arange(0, 2.0, dt)

@@ -125,12 +125,12 @@ def test_verdicts_name_narx_and_its_unmodelled_columns_are_not_divergence():
 
 def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     """The stage never drops the peer silently: its rows carry the reason and NaN numbers."""
-    import debist.model.narx as narx_module
+    import debist.stages.compare as compare_stage
     from debist.records import Record
     from debist.stages.compare import _narx_rows
     from debist.validate import DataSet, ValidateConfig
 
-    monkeypatch.setattr(narx_module, "narx_available", lambda: False)
+    monkeypatch.setattr(compare_stage, "narx_available", lambda: False)
     rec = bistable_record
     ds = DataSet("unseen", "validation", rec["t"], rec["q"], rec["q_dot"], rec["q_ddot"],
                  rec["v"], "m")  # fmt: skip

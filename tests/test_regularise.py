@@ -102,8 +102,8 @@ def test_constrained_fit_is_the_bounded_least_squares(bistable_record):
     assert np.all(model.theta_g[0] >= 0) and model.backbone["d_v"] >= 0
     assert np.all(model.curves(np.linspace(-0.02, 0.02, 50))["g"][:, 1] <= 0)
     from debist.identify.fit import _system, _trimmed
-    from debist.identify.friction import friction_state
     from debist.model.basis import RBFBasis
+    from debist.model.friction import friction_state
 
     recs = _trimmed(records, 0)
     q_all = recs[0].q

@@ -56,7 +56,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from debist.engine import preflight
+from debist.engine.runner import STAGES, Runner
 from debist.errors import DebistError, WorkflowError
+from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
+from debist.workflow.loader import load_workflow
 
 #: Values of ``scheduler`` in :func:`run_batch`.
 SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
@@ -279,8 +283,6 @@ def _load_headers(paths: Sequence[Path]) -> dict[Path, tuple[str, Path]]:
     WorkflowError
         If two workflows write to the same (or a nested) output directory.
     """
-    from debist.workflow.loader import load_workflow
-
     headers: dict[Path, tuple[str, Path]] = {}
     for path in paths:
         try:
@@ -332,9 +334,6 @@ def run_workflow_item(
         or any other ``Exception`` comes back as ``status="failed"`` with its class
         and message (and the traceback for an unexpected one).
     """
-    from debist.engine.runner import Runner
-    from debist.workflow.loader import load_workflow
-
     path = Path(path).resolve()
     t_start = time.perf_counter()
     events: list[StageEvent] = []
@@ -477,8 +476,6 @@ def run_batch(
     and the configuration ``distributed.scheduler.allowed-failures``,
     ``distributed.nanny.pre-spawn-environ``: https://distributed.dask.org/en/stable/.
     """
-    from debist.engine.runner import STAGES
-
     paths = [Path(p).resolve() for p in workflow_paths]
     if scheduler is None:
         scheduler = "distributed" if address else "processes"
@@ -578,8 +575,6 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
     """
     import dask
     from distributed import Client, LocalCluster
-
-    from debist.engine import preflight
 
     pre_spawn = {**dask.config.get("distributed.nanny.pre-spawn-environ"), **_WORKER_ENVIRON}
     if preflight.BUDGET_ENV not in os.environ:  # the workers share this machine's budget
@@ -787,8 +782,6 @@ def write_index(
     ----------
     :func:`debist.report.html.render_index` (the page).
     """
-    from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
-
     dirs = [Path(r.output_dir).resolve() for r in results if r.output_dir is not None]
     if folder is None:
         if not dirs:

@@ -29,6 +29,7 @@ from debist.engine.faults import fault_point
 from debist.engine.fileformats import write_output
 from debist.engine.fingerprint import code_fingerprint
 from debist.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
+from debist.physics.params import PrototypeParams
 from debist.workflow.loader import Workflow
 
 #: Stage names in execution order.
@@ -114,8 +115,6 @@ def physics_params(wf: Workflow):
     WorkflowError
         On an unknown key or an invalid value.
     """
-    from debist.physics.params import PrototypeParams
-
     return PrototypeParams.from_dict(wf.section("physics"))
 
 

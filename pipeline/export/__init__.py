@@ -21,11 +21,14 @@ semantics).
 
 from __future__ import annotations
 
+from debist.engine import artifacts
 from debist.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
 from debist.export.common import CURVE_POINTS, ExportInfo, curve_table
 from debist.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
 from debist.export.python import PYTHON_FILE, python_source
+from debist.identify.bands import identified_intervals
+from debist.model.rbf import RBFModel
 
 __all__ = [
     "CURVE_POINTS",
@@ -102,10 +105,6 @@ def load_identified(runner):
         If the identify stage is missing or stale (naming why: never run, outputs
         changed such as a modified ``model.h5``, config or upstream changed).
     """
-    from debist.engine import artifacts
-    from debist.identify.bands import identified_intervals
-    from debist.model.rbf import RBFModel
-
     wf = runner.wf
     if "identify" not in runner.stages():
         raise WorkflowError(

@@ -76,7 +76,10 @@ from debist.identify.config import (
     check_grid,
 )
 from debist.identify.fit import Record, fit_rbf_model
+from debist.metrics import nrmse
 from debist.model.terms import column_names
+from debist.simulate.prediction import restarted_runs
+from debist.validate import default_q_limit
 
 __all__ = [
     "DEFAULT_WINDOW",
@@ -348,10 +351,6 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     NRMSE(q) (Eq. 41) of the windows' runs against the measurement, normalised by the span's
     range.
     """
-    from debist.metrics import nrmse
-    from debist.simulate.prediction import restarted_runs
-    from debist.validate import default_q_limit
-
     scores = []
     by_dt: dict[float, list[tuple[int, int, int]]] = {}
     for span in spans:

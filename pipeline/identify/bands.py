@@ -62,8 +62,11 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from debist.identify.design import at_level
+from debist.identify.excitation import input_active, quasi_static
 from debist.model.basis import RBFBasis
 from debist.model.terms import PhysicsPrior, term_table
+from debist.model.termtable import input_map
 
 #: Model-error half-width of each curve's band, as a fraction of the curve's scale (the larger
 #: of its range and its largest magnitude over the supported points): per curve the 95th
@@ -542,8 +545,6 @@ def curves_frame(
     ----------
     Masoud & Maas 2025, Eq. 37-40 (curves), Fig. 14.
     """
-    from debist.identify.excitation import input_active, quasi_static
-
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     frame = point_curves(model, grid)
     point = {name: frame[name] for name in curve_names(model.n_inputs)}
@@ -640,9 +641,6 @@ def static_frame(
     ----------
     Masoud & Maas 2025, Eq. 37, Fig. 4.
     """
-    from debist.identify.design import at_level
-    from debist.model.termtable import input_map
-
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
     cur = model.curves(grid)
     restoring = cur["cq"] + float(model.backbone.get("F_0", 0.0))

@@ -10,6 +10,7 @@ import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
 from debist.errors import WorkflowError
+from debist.identify.regularise import CONSTRAINT
 from debist.model.terms import check_terms
 from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
 
@@ -202,7 +203,6 @@ class IdentifyConfig:
             raise ConfigValueError(
                 "rbf", message="the model needs an input term: 'g' in rbf or 'input_gain'"
             )
-        from debist.identify.regularise import CONSTRAINT
 
         for text in self.constraints:
             if CONSTRAINT.match(text) is None:

@@ -19,7 +19,10 @@ import numpy as np
 import pandas as pd
 
 from debist.identify.stability import stability_table, switching_voltages
+from debist.model.rbf import RBFModel
+from debist.model.terms import PhysicsPrior
 from debist.physics.params import V_MAX
+from debist.physics_stages import physics_mass, physics_prior
 
 
 def _level_step(records: Sequence[Any], resolution: float) -> float:
@@ -169,10 +172,6 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
     ----------
     Masoud & Maas 2025, Eq. 24-26, 33, 37.
     """
-    from debist.model.rbf import RBFModel
-    from debist.model.terms import PhysicsPrior
-    from debist.physics_stages import physics_mass, physics_prior
-
     prior = physics_prior(physics, records, n_grid=801)
     scale = model.m_q / physics_mass(physics)
     prior = PhysicsPrior(q=prior.q, c=scale * prior.c, d=scale * prior.d, g=scale * prior.g)

@@ -9,9 +9,16 @@ import numpy as np
 
 from debist.engine import preflight
 from debist.errors import IdentificationError
+from debist.identify.bands import block_bootstrap
 from debist.identify.config import IdentifyConfig
-from debist.identify.friction import creep_states, friction_state
+from debist.identify.regularise import (
+    Estimator,
+    constraint_bounds,
+    gcv_lambda,
+    smoothness_operator,
+)
 from debist.model.basis import RBFBasis
+from debist.model.friction import creep_states, friction_state
 from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS, force_columns, input_columns
 from debist.model.termtable import input_map
@@ -240,7 +247,7 @@ def fit_rbf_model(
     evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
 
     With ``cfg.creep`` the force side also has the creep columns w_j (the filtered
-    phi_j(q) q_dot, :func:`debist.identify.friction.creep_states`) at the relaxation rate
+    phi_j(q) q_dot, :func:`debist.model.friction.creep_states`) at the relaxation rate
     lambda; ``creep = "search"`` finds lambda by the same bounded search over log lambda
     (variable projection of the creep columns), alternating twice with the T_z search when
     that is searched too (T_z without creep, lambda, T_z with creep, lambda).
@@ -318,8 +325,6 @@ def fit_rbf_model(
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
-        from debist.identify.bands import block_bootstrap
-
         theta_boot, block = block_bootstrap(
             psi, y, [r.q.size for r in records], cfg.bootstrap, cfg.bootstrap_seed,
             estimator=estimator,
@@ -416,13 +421,6 @@ def _search_creep(records, basis, cfg, bounds, T_z):
 
 def _estimator(psi, y, names, cfg: IdentifyConfig):
     """Build the workflow's estimator: plain, smoothed (fixed or GCV lambda), constrained."""
-    from debist.identify.regularise import (
-        Estimator,
-        constraint_bounds,
-        gcv_lambda,
-        smoothness_operator,
-    )
-
     lower, upper = constraint_bounds(names, cfg.constraints)
     penalty = smoothness_operator(names, cfg.M)
     trace = np.empty((0, 3))

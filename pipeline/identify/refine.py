@@ -33,6 +33,7 @@ from debist.engine import preflight, progress
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
+from debist.identify.stability import model_is_stable
 from debist.metrics import rms
 from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
@@ -346,8 +347,6 @@ def refine_model(
             f"({held_ls:.4g} -> {held_ref:.4g} RMS)"
         )
     if accepted:
-        from debist.identify.stability import model_is_stable
-
         qd_all = np.concatenate([r.q_dot for r in records])
         stable, reason = model_is_stable(refined, q_all, q_dot=qd_all)
         if not stable:

@@ -9,8 +9,9 @@ from typing import Any
 import numpy as np
 
 from debist.model.basis import RBFBasis
-from debist.model.terms import PhysicsPrior
-from debist.model.termtable import input_map
+from debist.model.friction import creep_states, friction_state
+from debist.model.terms import PhysicsPrior, term_sign, term_table
+from debist.model.termtable import TableModel, input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")
@@ -222,9 +223,6 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 37.
         """
-        from debist.model.terms import term_sign, term_table
-        from debist.model.termtable import TableModel
-
         names, values = self.parameters()
         table = term_table(
             names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior,
@@ -239,6 +237,7 @@ class RBFModel:
 
     @cached_property
     def _kernel(self):
+        # here, not at the top: numba loads and compiles the kernel on first use only
         from debist.simulate.kernel import table_arrays
 
         return table_arrays(self.table_model())
@@ -270,9 +269,9 @@ class RBFModel:
         A prediction restarted at sample k needs the friction state the model would have
         there; z = q_dot (:meth:`initial_state`) holds only at rest. Here z is the measured
         velocity passed through the model's own filter z' = (q_dot - z) / T_z from the
-        record's start (:func:`debist.identify.friction.friction_state`), as the
+        record's start (:func:`debist.model.friction.friction_state`), as the
         regression of Eq. 40 builds it. The creep states likewise filter phi_j(q) q_dot
-        (:func:`debist.identify.friction.creep_states`).
+        (:func:`debist.model.friction.creep_states`).
 
         Parameters
         ----------
@@ -289,8 +288,6 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 26, 37.
         """
-        from debist.identify.friction import creep_states, friction_state
-
         q = np.asarray(q, dtype=float)
         q_dot = np.asarray(q_dot, dtype=float)
         out = np.stack([q, q_dot, friction_state(q_dot, dt, self.T_z)], axis=-1)

@@ -35,8 +35,9 @@ import numpy as np
 import pydantic
 from pydantic import NonNegativeFloat, PositiveInt
 
+from debist.engine.preflight import check_memory, sindy_bytes
 from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
-from debist.model.termtable import input_map
+from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
 from debist.workflow.config import CONFIG, config_from_section
 
 OPTIMIZERS = ("STLSQ", "SR3")
@@ -234,8 +235,6 @@ class SindyModel:
         ----------
         Brunton, Proctor & Kutz 2016, Eq. 4.
         """
-        from debist.model.termtable import S_POW, TableModel, TermTableBuilder
-
         build = TermTableBuilder(self.n_inputs, self.input_map)
         one = build.one()
         keep = np.flatnonzero(self.coefficients)
@@ -251,6 +250,7 @@ class SindyModel:
 
     @cached_property
     def _kernel(self):
+        # here, not at the top: numba loads and compiles the kernel on first use only
         from debist.simulate.kernel import table_arrays
 
         return table_arrays(self.table_model())
@@ -515,7 +515,6 @@ def fit_sindy(
             f"{x.shape[0]} samples for {n_features_expected} SINDy library terms "
             f"(degree {cfg.degree})"
         )
-    from debist.engine.preflight import check_memory, sindy_bytes
 
     check_memory(
         sindy_bytes(x.shape[0], n_features_expected),

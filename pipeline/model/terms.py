@@ -202,7 +202,7 @@ def force_columns(
         The analytical model's curves (needed by the ``physics_*`` terms).
     w : ndarray, shape (n, M), optional
         The creep states along the record [unit of q]
-        (:func:`debist.identify.friction.creep_states`); given: the creep columns
+        (:func:`debist.model.friction.creep_states`); given: the creep columns
         ``creep[i]`` = w_i follow the ``d[i]``.
 
     Returns

@@ -220,7 +220,7 @@ class TermTable:
         hv : array_like, shape (n, n_inputs)
             Mapped inputs h(v_i).
         w : array_like, shape (n, C), optional
-            The creep states [unit of q] (:func:`debist.identify.friction.creep_states`
+            The creep states [unit of q] (:func:`debist.model.friction.creep_states`
             along a record); default 0 (at rest), so creep terms vanish.
 
         Returns
@@ -439,6 +439,7 @@ class TableModel:
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel (:func:`debist.simulate.kernel.table_arrays`)."""
+        # here, not at the top: numba loads and compiles the kernel on first use only
         from debist.simulate.kernel import (
             table_arrays,  # here, not at the top: numba loads on first use
         )

@@ -287,6 +287,7 @@ def analysis_figures(result: Analysis) -> dict[str, Any]:
         ``fig3_prestrain``, ``fig4_force_displacement``, ``fig5_capacitance``,
         ``fig6a_modes``, ``fig7_full_vs_reduced`` and ``reduced_curves``.
     """
+    # here, not at the top: matplotlib loads only when a figure is drawn
     from debist.report import physics_plots as plots
 
     return {

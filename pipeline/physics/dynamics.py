@@ -57,6 +57,7 @@ def _zero(t: float) -> float:
 
 def _kernels():
     """Return the compiled kernels (numba is imported on first use, not with this module)."""
+    # here, not at the top: numba loads and compiles the kernel on first use only
     from debist.physics import compiled
 
     return compiled

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from debist.physics import _generated
 from debist.physics.kinematics import de_lengths, ritz_basis, vertical_displacement
 from debist.physics.params import PrototypeParams
 
@@ -109,8 +110,6 @@ def scalar_gradient_hessian(
     ----------
     Masoud & Maas 2025, Eq. 9-11, 14, 15.
     """
-    from debist.physics import _generated
-
     consts = generated_constants(params)
     n = qm.shape[0]
     b, v1, v2 = (np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (b, v1, v2))

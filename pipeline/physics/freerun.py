@@ -115,6 +115,7 @@ class AnalyticalModel:
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel: the splines of all curves but phi."""
+        # here, not at the top: numba loads and compiles the kernel on first use only
         from debist.simulate.kernel import spline_arrays
 
         return spline_arrays(self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar)

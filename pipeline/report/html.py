@@ -33,6 +33,7 @@ from debist.report.tables import (
     auto_line,
     equilibrium_kind,
     not_modelled,
+    summary_units,
     switching_note,
     switching_word,
     verdict,
@@ -442,8 +443,6 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     The backbone's coefficients are basis coefficients of the fit (the RBF sums add to
     them), not the physics of the beam: they are labelled so, with their units.
     """
-    from debist.report.tables import summary_units
-
     units = summary_units(summary)
     rows = [
         ("T_z [s]", _num(summary.get("T_z"))),
@@ -473,7 +472,6 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     design = summary.get("design")
     if not design:
         return None
-    from debist.report.tables import summary_units
 
     units = summary_units(summary)
     scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14

@@ -8,6 +8,8 @@ import numpy as np
 import pandas as pd
 
 from debist.report.figures import dynamic_window
+from debist.report.tables import de_inputs
+from debist.validate import report_factor
 
 
 def free_run_figure(
@@ -53,8 +55,6 @@ def free_run_figure(
         If ``report_unit`` cannot express q (:func:`debist.validate.report_factor`).
     """
     from matplotlib.figure import Figure
-
-    from debist.validate import report_factor
 
     factor, unit = report_factor(unit, report_unit)
     q, q_sim = factor * sim["q"].to_numpy(), factor * sim["q_sim"].to_numpy()
@@ -143,7 +143,6 @@ def curves_figure(
     inputs = sorted(c for c in curves.columns if c[:1] == "g" and c[1:].isdigit())
     # 2 g_i is a capacitance gradient only for DE voltages with h = v^2 (Eq. 33); any other
     # input (an acceleration, a force) shows its gain g_i in its own unit
-    from debist.report.tables import de_inputs
 
     de = units is None or de_inputs(units)
     gain = 2.0 if de else 1.0

@@ -14,6 +14,8 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
+from debist.ingest.units import lookup_unit, registry
+
 #: How identified quantities are labelled in reports (summary key -> label). The backbone's
 #: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the
 #: physical damping, stiffness and frequency at each well are in the equilibria table.
@@ -59,8 +61,6 @@ def pretty_unit(expression: str) -> str:
     ----------
     pint, unit formatting (https://pint.readthedocs.io).
     """
-    from debist.ingest.units import registry
-
     unit = registry().parse_units(expression.replace("^", "**"))
     text = format(unit, "~C").replace("**", "^").replace("*", " ")
     return text or "1"
@@ -128,8 +128,6 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
 
 def _quantity(unit: str) -> str:
     """Return the quantity an input's unit measures (``"voltage"``, ``"acceleration"``)."""
-    from debist.ingest.units import lookup_unit
-
     found = lookup_unit(unit)
     return found.quantity if found is not None and found.quantity[:1] != "[" else "input"
 
@@ -180,8 +178,6 @@ def switching_word(units: dict[str, Any], i: int) -> str:
 
 def _energy(unit: str) -> str:
     """``"J"`` for a unit of energy with factor 1 (``N m``), else the unit as given."""
-    from debist.ingest.units import lookup_unit
-
     found = lookup_unit(unit.replace(" ", "*"))
     return "J" if found is not None and found.si == "J" and found.factor == 1.0 else unit
 

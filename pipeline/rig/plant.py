@@ -103,6 +103,7 @@ class RigPlant:
     def _compiled(self):
         """``(rhs, jac)`` of the compiled path, built on first use (numba imported then)."""
         if self._kernels is None:
+            # here, not at the top: numba compiles these kernels on first use only
             from debist.physics.compiled import pack_model
             from debist.rig import compiled as kern
 

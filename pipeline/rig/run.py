@@ -36,6 +36,7 @@ from debist.physics.statics import force_displacement
 from debist.rig.drivers import DriverOutput, uniform_grid
 from debist.rig.params import RigParams
 from debist.rig.plant import RigPlant
+from debist.rig.reduced import ReducedPlant, reduced_true_curves
 
 __all__ = ["METHODS", "TOLERANCES", "RigRun", "make_plant", "simulate_rig", "true_curves"]
 
@@ -76,8 +77,6 @@ def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
     Masoud & Maas 2025, Eq. 19-26.
     """
     if rig.model == "reduced":
-        from debist.rig.reduced import ReducedPlant
-
         return ReducedPlant(rig, v1, v2)
     return RigPlant(rig, v1, v2, compiled=compiled)
 
@@ -419,8 +418,6 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
     """
     if rig.model == "reduced":
-        from debist.rig.reduced import reduced_true_curves
-
         return reduced_true_curves(rig, q_grid)
     c = reduced_curves(rig.prototype, q_grid)
     F0 = force_displacement(rig.prototype, c.q).F

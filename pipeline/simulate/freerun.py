@@ -379,6 +379,7 @@ def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
 
 def _integrate_compiled(model, prepared, dt, x0, q_limit, progress):
     """Integrate with the compiled kernel over the prepared input grid (see :func:`simulate`)."""
+    # here, not at the top: numba loads and compiles the kernel on first use only
     from debist.simulate.kernel import free_run
 
     lengths = np.asarray(prepared.lengths, dtype=np.int64)

@@ -6,7 +6,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from debist.engine.artifacts import Figure, H5Tree
+from debist.engine.fileformats import REPORT_DPI
+from debist.physics.analysis import (
+    AnalyzeConfig,
+    analysis_figures,
+    analysis_tree,
+    run_analysis,
+)
+from debist.physics.params import PrototypeParams
 from debist.stages import StageInputs, StageOutput
+from debist.workflow.config import config_from_section
 
 __all__ = ["AnalyzeResult", "execute", "run_analyze"]
 
@@ -55,14 +65,6 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
     ----------
     Masoud & Maas 2025, Section 3, Fig. 3-7.
     """
-    from debist.physics.analysis import (
-        AnalyzeConfig,
-        analysis_figures,
-        analysis_tree,
-        run_analysis,
-    )
-    from debist.workflow.config import config_from_section
-
     cfg = config_from_section(AnalyzeConfig, section, "[analyze]")
     res = run_analysis(params, cfg)
     cmp = res.comparison
@@ -106,10 +108,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, StaticsError
         As :func:`run_analyze`.
     """
-    from debist.engine.artifacts import Figure, H5Tree
-    from debist.engine.fileformats import REPORT_DPI
-    from debist.physics.params import PrototypeParams
-
     params = ctx.physics() or PrototypeParams.from_dict({})
     res = run_analyze(params, ctx.section("analyze"))
     outputs: dict[str, Any] = {"statics.h5": H5Tree(res.tree)}

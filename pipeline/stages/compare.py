@@ -20,10 +20,15 @@ import pandas as pd
 
 from debist.datasets import validation_datasets
 from debist.engine import progress
+from debist.engine.artifacts import H5Tree
+from debist.errors import DebistWarning, IdentificationError
+from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
+from debist.model.sindy import SindyConfig, fit_sindy
 from debist.physics_stages import analytical_for
 from debist.records import estimation_records
+from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
-from debist.validate import ValidateConfig, default_q_limit, validate_model
+from debist.validate import ValidateConfig, default_q_limit, score_free_runs, validate_model
 
 __all__ = ["CompareResult", "execute", "run_compare"]
 
@@ -89,9 +94,6 @@ def run_compare(
     ----------
     Brunton, Proctor & Kutz 2016 (SINDy); Masoud & Maas 2025, Eq. 41.
     """
-    from debist.model.narx import NarxConfig
-    from debist.model.sindy import SindyConfig, fit_sindy
-
     sindy_section = dict(section["sindy"])
     ncfg = NarxConfig.from_dict(sindy_section.pop("narx", None))
     cfg = SindyConfig.from_dict(sindy_section)
@@ -139,11 +141,6 @@ def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated
     Without SysIdentPy, or when no candidate structure survives, the rows say so (status)
     with NaN numbers: the peer is never silently missing.
     """
-    from debist.errors import DebistWarning, IdentificationError
-    from debist.model.narx import NARX_MISSING, fit_narx, narx_available
-    from debist.simulate.freerun import SimulationResult
-    from debist.validate import score_free_runs
-
     status, narx = None, None
     if not narx_available():
         status = NARX_MISSING
@@ -214,8 +211,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, IdentificationError
         As :func:`run_compare`.
     """
-    from debist.engine.artifacts import H5Tree
-
     res = run_compare(
         ctx.tables("ingest"),
         ctx.tables("differentiate"),

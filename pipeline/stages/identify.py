@@ -11,10 +11,29 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from debist.engine.artifacts import Figure, H5Tree
+from debist.engine.fileformats import REPORT_DPI
 from debist.identify import FitDiagnostics, IdentifyConfig, RBFModel, fit_rbf_model
+from debist.identify.autotune import auto_settings, select_hyperparameters
+from debist.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
+from debist.identify.design import (
+    design_numbers,
+    held_levels,
+    mark_identified,
+    mark_switching,
+)
+from debist.identify.excitation import check_excitation
+from debist.ingest.checks import check_varies
+from debist.model.basis import RBFBasis
+from debist.model.terms import PHYSICS_TERMS
+from debist.physics.reduced import reduced_curves
 from debist.physics_stages import physics_mass, physics_prior
 from debist.records import estimation_records
+from debist.report.plots import curves_figure
+from debist.report.study_plots import autotune_figure
+from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
+from debist.validate import report_factor
 
 __all__ = ["IdentifyResult", "analytical_curves", "diagnostics_tree", "execute", "run_identify"]
 
@@ -83,16 +102,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     WorkflowError
         For an invalid section.
     """
-    from debist.identify.autotune import auto_settings, select_hyperparameters
-    from debist.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
-    from debist.identify.design import (
-        design_numbers,
-        held_levels,
-        mark_identified,
-        mark_switching,
-    )
+    # here, not at the top: the refinement brings the numba kernel, loaded only when it runs
     from debist.identify.refine import refine_config, refine_model
-    from debist.model.terms import PHYSICS_TERMS
 
     section = dict(section)
     if section.get("m_q") == "physics":
@@ -178,11 +189,6 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
 
 def _excitation(records, cfg: IdentifyConfig, tables):
     """Run the excitation check on the estimation records (warnings in the data's unit)."""
-    from debist.identify.excitation import check_excitation
-    from debist.ingest.checks import check_varies
-    from debist.model.basis import RBFBasis
-    from debist.validate import report_factor
-
     q = np.concatenate([r.q for r in records])
     if np.ptp(q) == 0:  # nothing moved: a data error of the logs, named as such
         frame = next(t for t in tables.values() if t.attrs.get("role") == "estimation")
@@ -262,11 +268,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     IdentificationError, WorkflowError
         As :func:`run_identify`.
     """
-    from debist.engine.artifacts import Figure, H5Tree
-    from debist.engine.fileformats import REPORT_DPI
-    from debist.report.plots import curves_figure
-    from debist.report.tables import summary_units
-
     res = run_identify(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.section("identify"), ctx.physics()
     )
@@ -282,8 +283,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
-        from debist.report.study_plots import autotune_figure
-
         outputs["autotune.parquet"] = res.search.table
         outputs["plots/autotune.png"] = Figure(autotune_figure(res.search), REPORT_DPI)
     return StageOutput(outputs, res.summary, res.timings)
@@ -310,8 +309,6 @@ def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
     ----------
     Masoud & Maas 2025, Eq. 26, 33, Fig. 14.
     """
-    from debist.physics.reduced import reduced_curves
-
     grid = np.linspace(model.q_range[0], model.q_range[1], 201)
     cur = reduced_curves(physics, grid)
     scale = model.m_q / float(np.interp(0.0, grid, cur.m_q))

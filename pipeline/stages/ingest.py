@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import pandas as pd
 
+import debist.ingest as ingest
 from debist.stages import StageInputs, StageOutput
 
 if TYPE_CHECKING:
@@ -47,8 +48,6 @@ def run_ingest(
     WorkflowError
         For an invalid ingest section.
     """
-    import debist.ingest as ingest
-
     tables: dict[str, pd.DataFrame] = {}
     cache = ingest.RawLogCache(ingest.read_raw, [ds.source for ds in datasets])
     for ds in datasets:

@@ -9,6 +9,18 @@ from typing import Any
 
 import numpy as np
 
+from debist.engine.artifacts import FileWriter, H5Tree
+from debist.errors import DebistError
+from debist.rig.dspace import write_recording
+from debist.rig.experiment import (
+    CREATED,
+    RigConfig,
+    rig_recording,
+    run_experiments,
+    truth_tree,
+)
+from debist.rig.reduced import truth_attrs
+from debist.rig.run import true_curves
 from debist.stages import StageInputs, StageOutput
 
 __all__ = ["RigResult", "execute", "run_rig"]
@@ -63,19 +75,6 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     ----------
     Masoud & Maas 2025, Sec. 5.1, Fig. 11a.
     """
-    from debist.engine.artifacts import FileWriter, H5Tree
-    from debist.errors import DebistError
-    from debist.rig.dspace import write_recording
-    from debist.rig.experiment import (
-        CREATED,
-        RigConfig,
-        rig_recording,
-        run_experiments,
-        truth_tree,
-    )
-    from debist.rig.reduced import truth_attrs
-    from debist.rig.run import true_curves
-
     cfg = RigConfig.from_dict(section, physics)
     runs, curves = run_experiments(
         cfg, meanwhile=partial(true_curves, cfg.rig, np.linspace(-20e-3, 20e-3, 401))

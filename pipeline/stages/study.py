@@ -5,7 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from debist.engine.artifacts import Figure
+from debist.engine.fileformats import REPORT_DPI
 from debist.stages import StageInputs, StageOutput
+from debist.studies import StudyConfig, alpha_study, rbf_grid_study
 
 __all__ = ["execute", "run_study"]
 
@@ -38,8 +41,6 @@ def run_study(tables, derivs, section: Mapping[str, Any]) -> dict[str, Any]:
     ----------
     Masoud & Maas 2025, Fig. 11b and 11c, Sec. 5.2.
     """
-    from debist.studies import StudyConfig, alpha_study, rbf_grid_study
-
     study = dict(section["study"])
     identify = {**section["identify"], **study.pop("identify", {})}
     diff = dict(study.pop("differentiate", section["differentiate"]))
@@ -68,9 +69,6 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError
         As :func:`run_study`.
     """
-    from debist.engine.artifacts import Figure
-    from debist.engine.fileformats import REPORT_DPI
-
     results = run_study(
         ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("study")
     )

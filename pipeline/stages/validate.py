@@ -14,6 +14,7 @@ from debist.datasets import validation_datasets
 from debist.identify import RBFModel
 from debist.identify.stability import model_is_stable
 from debist.physics_stages import analytical_for
+from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
@@ -99,8 +100,6 @@ def run_validate(
     WorkflowError
         For an invalid section, or physics that does not fit the data.
     """
-    from debist.report.plots import free_run_figure
-
     cfg = ValidateConfig.from_dict(section)
     q_limit = cfg.q_limit if cfg.q_limit is not None else default_q_limit(model.q_range)
     datasets = validation_datasets(tables, derivs)

@@ -34,9 +34,16 @@ from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.ingest.spec import OPTION_KEYS, IngestSpec
 from debist.ingest.units import UNITS
+from debist.model.narx import NarxConfig
+from debist.model.sindy import SindyConfig
 from debist.model.terms import PHYSICS_TERMS
 from debist.names import check_file_name
+from debist.physics.analysis import AnalyzeConfig
 from debist.physics.params import PrototypeParams
+from debist.report.html import ReportConfig
+from debist.rig.experiment import RigConfig
+from debist.rig.profiles import make_profile
+from debist.studies import StudyConfig
 from debist.validate import ValidateConfig
 from debist.workflow.config import CONFIG, config_from_section, unknown_key_message
 
@@ -186,8 +193,6 @@ def _tables(raw: Mapping[str, Any]) -> None:
 def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
     if "rig" not in raw:
         return None
-    from debist.rig.experiment import RigConfig
-    from debist.rig.profiles import make_profile
 
     cfg = RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
     for name, exp in cfg.experiments.items():
@@ -336,7 +341,6 @@ def _study(
             f"{diff['method']!r} (give a [study.differentiate] table)"
         )
     dcfg = _differentiate(diff, where)
-    from debist.studies import StudyConfig
 
     return StudyConfig.from_dict(study), icfg, dcfg
 
@@ -392,21 +396,15 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     compare = None
     if "compare" in raw:
         sindy = {"input_map": raw.get("identify", {}).get("input_map", "v2"), **raw["compare"]}
-        from debist.model.narx import NarxConfig
-        from debist.model.sindy import SindyConfig
 
         NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
         compare = SindyConfig.from_dict(sindy, "[compare]")
     study = _study(raw, specs) if "study" in raw else None
     analyze = None
     if "analyze" in raw:
-        from debist.physics.analysis import AnalyzeConfig
-
         analyze = AnalyzeConfig.from_dict(raw["analyze"])
     report = None
     if "report" in raw:
-        from debist.report.html import ReportConfig
-
         report = ReportConfig.from_dict(raw["report"])
     return CheckedWorkflow(
         head, datasets, differentiate, identify, validate, compare, study, physics, analyze, rig,
