@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from debist.errors import IdentificationError, WorkflowError
-from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record
+from debist.identify import IdentifyConfig, RBFModel, Record
 from debist.identify.autotune import (
     auto_settings,
     blocked_folds,
@@ -132,21 +132,10 @@ def _excitation(t: np.ndarray) -> np.ndarray:
 
 
 def _truth() -> RBFModel:
-    """A bistable model inside the class: M = 8, sigma_n = 0.5 on [-30, 30] mm."""
-    rng = np.random.default_rng(2)
-    return RBFModel(
-        basis=RBFBasis.equidistant(-0.03, 0.03, 8, 0.5),
-        input_map="v2",
-        n_inputs=2,
-        m_q=1.0,
-        T_z=0.0,
-        coulomb_velocity=1e-3,
-        theta_c=rng.uniform(-20, 20, 8),
-        theta_d=rng.uniform(1, 3, 8),
-        theta_g=rng.uniform(1e-7, 3e-7, (2, 8)) * np.array([[1.0], [-1.0]]),
-        backbone={"k_1": -40.0, "k_3": 4e5, "d_v": 2.0, "g_0": np.zeros(2)},
-        q_range=(-0.03, 0.03),
-    )
+    """A bistable model inside the class: M = 8, sigma_n = 0.5 on [-30, 30] mm (seed 2)."""
+    from conftest import truth_model
+
+    return truth_model(np.random.default_rng(2))
 
 
 @pytest.fixture(scope="module")
