@@ -102,7 +102,7 @@ def test_refine_config_parsing():
 def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     """The Duffing refinement is accepted on its error; declared unstable (as a negatively
     damped well would be), the same refinement is rejected and the least squares kept."""
-    from debist.identify import stability
+    from debist.identify import refine
 
     calls = []
 
@@ -110,7 +110,7 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
         calls.append((q.size, None if q_dot is None else q_dot.size))
         return False, "negative damping d = -1 in the visited well at q = 0"
 
-    monkeypatch.setattr(stability, "model_is_stable", unstable)
+    monkeypatch.setattr(refine, "model_is_stable", unstable)  # the name refine calls
     model, _, res = _refined(
         _duffing_record(), 0.1, backbone=["linear_spring", "cubic_spring", "viscous", "input_gain"]
     )
