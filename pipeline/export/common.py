@@ -293,12 +293,3 @@ def _context(model, info: ExportInfo | None, name_ref: str) -> dict[str, Any]:
         "S_POW": S_POW,
         "S_TANH": S_TANH,
     }
-
-
-def _fill(template: str, fields: dict[str, str]) -> str:
-    """Replace every ``@NAME@`` of a template (C braces make ``str.format`` awkward)."""
-    for key, value in fields.items():
-        template = template.replace(f"@{key}@", value)
-    if "@" in template:
-        raise AssertionError(f"unfilled field in template: {template[template.index('@') :][:40]}")
-    return template
