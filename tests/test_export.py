@@ -465,6 +465,44 @@ def test_hostile_workflow_names_are_escaped_in_every_export(tmp_path, name):
     assert not (tmp_path / "PWNED").exists()
 
 
+#: Provenance that would end the comment or docstring it is written into, per format.
+HOSTILE_PROVENANCE = {
+    "c": ExportInfo(run_digest="ab */ int evil = 1; /* cd"),
+    "matlab": ExportInfo(identify_manifest="ab\nsystem('touch PWNED')"),
+    "python": ExportInfo(version='1.0"""\nimport os  #'),
+}
+
+
+@pytest.mark.parametrize("fmt", list(HOSTILE_PROVENANCE))
+def test_provenance_that_could_leave_a_comment_is_refused(fmt):
+    """Provenance goes into comments only as printable ASCII that cannot end them."""
+    with pytest.raises(ArtifactError, match="cannot be written into"):
+        export_files(rbf_model(), fmt, HOSTILE_PROVENANCE[fmt])
+
+
+def test_templates_insert_only_filtered_text_and_integers():
+    """A raw string or float in ``{{ ... }}`` is an error, as is a missing value."""
+    import jinja2
+
+    from debist.export.common import Code, _environment
+
+    env = _environment({"quote": lambda s: f"'{s}'"})
+
+    def render(text, **values):
+        return env.from_string(text).render(**values)
+
+    assert render("{{ n }} {{ s | quote }} {{ c }}", n=3, s="a", c=Code("x")) == "3 'a' x"
+    for value in ("*/ evil", 1.5, True, None, [1]):
+        with pytest.raises(TypeError, match="without a filter"):
+            render("{{ v }}", v=value)
+    with pytest.raises(TypeError, match="without a filter"):
+        render("{{ s | quote | upper }}", s="a")  # a built-in filter's str is raw again
+    with pytest.raises(jinja2.UndefinedError):
+        render("{{ missing }}")
+    with pytest.raises(jinja2.UndefinedError):
+        render("{{ missing | quote }}")
+
+
 @pytest.mark.parametrize("fmt", ["c", "matlab", "python"])
 def test_export_of_a_model_with_creep_is_refused(fmt):
     """The exports do not carry the creep states of Eq. 26 yet: a clear error, no code."""

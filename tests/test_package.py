@@ -33,6 +33,17 @@ def test_every_source_folder_is_a_listed_package():
     assert sorted(config["packages"]) == folders
 
 
+def test_the_export_templates_are_package_data():
+    """The wheel carries pipeline/export/templates/*.j2, and the package finds every one."""
+    import importlib.resources
+
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert data["package-data"] == {"debist.export": ["templates/*.j2"]}
+    on_disk = sorted(p.name for p in (ROOT / "pipeline/export/templates").glob("*.j2"))
+    found = importlib.resources.files("debist.export") / "templates"
+    assert on_disk and sorted(p.name for p in found.iterdir()) == on_disk
+
+
 def test_only_debist_is_importable_outside_the_checkout(tmp_path):
     found = _python("import debist; print(debist.__name__)", tmp_path)
     assert found.returncode == 0, found.stderr

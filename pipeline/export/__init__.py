@@ -8,8 +8,10 @@ derivative, one classical RK4 step with inputs linear between two samples (the s
 debist's free run with ``substeps = 1`` and ``interpolation = "linear"``, so the exported
 code reproduces :func:`debist.simulate.freerun.simulate` to rounding), and the characteristic
 curves restoring force, d(q) and g_i(q) as a lookup table. The generators are pure functions
-returning file contents; :func:`load_identified` reads a run's identified model and checks
-that the identify stage is up to date.
+returning file contents, rendered from the jinja2 templates in ``templates/`` that insert
+free text and numbers only through each language's escaping and literal filters (see
+:mod:`debist.export.common`); :func:`load_identified` reads a run's identified model and
+checks that the identify stage is up to date.
 
 References
 ----------

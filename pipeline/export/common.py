@@ -1,22 +1,32 @@
-"""Shared pieces of every export: provenance, the model's constants, the curve table, literals.
+"""Shared pieces of every export: provenance, constants, curve table, literals, templates.
+
+Every export renders jinja2 templates (``templates/*.j2`` of this package). A template may
+insert nothing but integers and :class:`Code`, the text an escaping or formatting filter
+returns: a raw string or float in ``{{ ... }}`` is an error when rendering, so no free text
+(a workflow's name, provenance) and no number reaches the code without its language's
+escaping or exact literal.
 
 References
 ----------
-Masoud & Maas 2025, Eq. 37 (the term table); NumPy ``numpy.interp`` (the table semantics).
+Masoud & Maas 2025, Eq. 37 (the term table); NumPy ``numpy.interp`` (the table semantics);
+jinja2 3.1, "API" (``Environment``, ``PackageLoader``, ``StrictUndefined``, ``finalize``).
 """
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import jinja2
 import numpy as np
 
 from debist import __version__
 from debist.errors import ArtifactError, WorkflowError
-from debist.model.termtable import BASE_GAUSS
+from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
 
-__all__ = ["CURVE_POINTS", "ExportInfo", "curve_table"]
+__all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]
 
 #: Grid points of the characteristic-curve lookup table (as ``curves.parquet``).
 CURVE_POINTS = 201
@@ -194,10 +204,92 @@ def _literal(x: float, infinity: str) -> str:
     return repr(x)
 
 
-def _fill(template: str, fields: dict[str, str]) -> str:
-    """Replace every ``@NAME@`` of a template (C braces make ``str.format`` awkward)."""
-    for key, value in fields.items():
-        template = template.replace(f"@{key}@", value)
-    if "@" in template:
-        raise AssertionError(f"unfilled field in template: {template[template.index('@') :][:40]}")
-    return template
+class Code(str):
+    """Text formatted or escaped for the target language: what a template may insert."""
+
+
+def _comment_text(text: str, forbidden: tuple[str, ...], where: str) -> str:
+    """Return ``text`` for a comment line: printable ASCII without ``forbidden``.
+
+    Raises
+    ------
+    ArtifactError
+        If ``text`` has another character or a forbidden sequence (it could end the
+        comment); the exports put only fixed text, numbers and digests into comments.
+    """
+    text = str(text)
+    bad = [c for c in text if not " " <= c <= "~"] + [f for f in forbidden if f in text]
+    if bad:
+        raise ArtifactError(f"{text!r} cannot be written into {where}: it holds {bad[0]!r}")
+    return text
+
+
+def _only_code(value):
+    """Pass integers and :class:`Code` (the ``finalize`` of the export templates)."""
+    if isinstance(value, jinja2.Undefined):
+        str(value)  # StrictUndefined: raises UndefinedError naming the missing value
+    if isinstance(value, Code) or (
+        isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    ):
+        return value
+    raise TypeError(
+        f"an export template inserts a {type(value).__name__} without a filter: {value!r:.60}"
+    )
+
+
+def _code(fn: Callable[..., str]) -> Callable[..., Code]:
+    """Wrap a formatting or escaping function as a filter that returns :class:`Code`."""
+
+    def filt(*args, **kwargs) -> Code:
+        return Code(fn(*args, **kwargs))
+
+    return filt
+
+
+def _flatten(rows) -> list:
+    """Concatenate the rows of a matrix (row-major)."""
+    return [v for row in rows for v in row]
+
+
+def _environment(filters: dict[str, Callable[..., str]]) -> jinja2.Environment:
+    """Return the jinja2 environment of one language: its ``filters`` and the templates.
+
+    Missing values are errors (``StrictUndefined``), nothing is HTML-escaped, block tags
+    take their line with them, and ``{{ ... }}`` inserts only integers and :class:`Code`
+    (every filter of ``filters`` returns it).
+    """
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("debist.export", "templates"),
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        autoescape=False,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        finalize=_only_code,
+    )
+    env.filters.update({name: _code(fn) for name, fn in filters.items()})
+    env.filters["flatten"] = _flatten
+    env.filters["width"] = _code(lambda n, w: f"{n:{w}d}")
+    return env
+
+
+def _context(model, info: ExportInfo | None, name_ref: str) -> dict[str, Any]:
+    """Collect the values of the export templates: constants, curves and provenance.
+
+    ``name_ref`` names where the format keeps the workflow's name (see :func:`_describe`).
+    """
+    info = info or ExportInfo()
+    arr = _arrays(model)
+    cq, names, cval = curve_table(model)
+    return {
+        **arr,
+        "describe": _describe(info, arr, names, name_ref),
+        "workflow": info.workflow,
+        "curve_names": names,
+        "curve_q": cq.tolist(),
+        "curve_values": cval.tolist(),
+        "BASE_GAUSS": BASE_GAUSS,
+        "BASE_TABLE": BASE_TABLE,
+        "S_POW": S_POW,
+        "S_TANH": S_TANH,
+    }
