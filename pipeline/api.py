@@ -28,33 +28,46 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
 from debist.engine import artifacts, progress
-from debist.errors import ArtifactError, WorkflowError
+from debist.errors import ArtifactError, DebistError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
+if TYPE_CHECKING:
+    from debist.report.frames import NrmseTable
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
+
 __all__ = [
+    "Export",
     "FleetResult",
     "Model",
-    "NrmseTable",
     "ProgressEvent",
     "Result",
     "Verification",
+    "batch_index",
+    "batch_table",
+    "diff",
+    "export_model",
+    "find_workflows",
     "fleet",
     "load_model",
     "load_workflow",
     "open_run",
     "run",
     "run_batch",
+    "run_blocker",
     "status",
     "verify",
+    "workflow_stages",
 ]
 
 PathLike = str | os.PathLike
@@ -185,8 +198,7 @@ def run(
 
     wf = _workflow(workflow, overrides, output_dir)
     runner = Runner(wf, wait=wait)
-    if start is not None or until is not None:
-        stages = runner.select(stages, start=start, until=until)
+    stages = runner.select(stages, start=start, until=until)  # names checked, in order
     state = {"stage": ""}
 
     def on_event(stage: str, what: str, detail: str) -> None:
@@ -233,6 +245,186 @@ def status(
     from debist.engine.runner import Runner
 
     return Runner(_workflow(workflow, overrides, output_dir)).status()
+
+
+def workflow_stages(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> tuple[str, ...]:
+    """Name the stages a workflow has, in execution order (its sections decide).
+
+    (Not ``stages``, ``debist.stages`` is the package of the stage adapters.)
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    tuple of str
+        E.g. ``("ingest", "differentiate", "identify", "validate", "compare", "report")``.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    """
+    from debist.engine.runner import Runner
+
+    return tuple(Runner(_workflow(workflow, overrides, output_dir)).stages())
+
+
+def run_blocker(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> str | None:
+    """Say why a run of the workflow would stop at its output folder, without running it.
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    str or None
+        The refusal a run would raise (the folder belongs to another workflow, is not a
+        debist folder, ...), or None when a run may write there.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    """
+    from debist.engine import outdir
+    from debist.engine.runner import STAGES
+
+    wf = _workflow(workflow, overrides, output_dir)
+    try:
+        outdir.check_output_dir(
+            wf.output_dir,
+            workflow=wf.name,
+            workflow_dir=wf.path.parent,
+            workflow_file=wf.path,
+            sources=[d.source for d in wf.datasets if not d.rig],
+            stages=STAGES,
+        )
+    except DebistError as exc:
+        return str(exc)
+    return None
+
+
+def diff(run_a: PathLike, run_b: PathLike) -> dict[str, list[dict[str, Any]]]:
+    """Compare two runs' output folders: the settings and the NRMSE that differ (reads only).
+
+    Parameters
+    ----------
+    run_a, run_b : path-like
+        Output folders of two runs.
+
+    Returns
+    -------
+    dict
+        ``"config"``: rows ``{stage, key, a, b}``; ``"nrmse"``: rows ``{dataset, model,
+        metric, a, b, change}`` in percent [%] (see :func:`debist.engine.rundiff.diff_runs`).
+
+    Raises
+    ------
+    WorkflowError
+        If a folder holds no stage manifest.
+    """
+    from debist.engine.rundiff import diff_runs
+
+    return diff_runs(run_a, run_b)
+
+
+@dataclass(frozen=True)
+class Export:
+    """What :func:`export_model` wrote.
+
+    Attributes
+    ----------
+    files : tuple of pathlib.Path
+        The files written, in the order of the format's file list.
+    run_digest : str or None
+        The digest of the run the model comes from (None when not every stage has run).
+    """
+
+    files: tuple[Path, ...]
+    run_digest: str | None
+
+
+def export_model(
+    workflow: PathLike | Workflow,
+    fmt: str = "c",
+    *,
+    dest: PathLike | None = None,
+    force: bool = False,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> Export:
+    """Write the identified model as self-contained C99, MATLAB or NumPy code (``debist export``).
+
+    (Not ``export``, ``debist.export`` is the package of the code generators.)
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`; its identify stage must be up to date.
+    fmt : {"c", "matlab", "python"}, optional
+        ``debist_model.h`` and ``.c``; ``debist_model.m``; ``debist_model.py``.
+    dest : path-like, optional
+        Folder of the files (default ``<output_dir>/export``).
+    force : bool, optional
+        Replace files of the same names (each atomically); without it an existing file is
+        an error and nothing is written.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    Export
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow, or an identify stage that is missing or stale.
+    OutputDirError
+        A file exists (without ``force``), or a name resolves outside ``dest``.
+
+    References
+    ----------
+    See :mod:`debist.export` (the model of Masoud & Maas 2025, Eq. 37, and its RK4 step).
+    """
+    from contextlib import nullcontext
+
+    from debist.engine import outdir
+    from debist.engine.fileformats import atomic_write
+    from debist.engine.runner import Runner
+    from debist.export.files import export_files, load_identified
+
+    runner = Runner(_workflow(workflow, overrides, output_dir))
+    folder = runner.wf.output_dir
+    with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
+        model, info = load_identified(runner)
+        files = export_files(model, fmt, info)
+        target = Path(dest) if dest is not None else folder / "export"
+        if force:
+            target.mkdir(parents=True, exist_ok=True)
+            for name, text in files.items():
+                atomic_write(artifacts.inside(target, name), text)
+        else:
+            artifacts.write_text_files(target, files)
+    return Export(tuple(target / name for name in files), info.run_digest)
 
 
 @dataclass(frozen=True)
@@ -355,6 +547,70 @@ def run_batch(
     )
 
 
+def find_workflows(paths: PathLike | Iterable[PathLike]) -> list[Path]:
+    """Expand workflow files, folders (their ``*.toml``) and glob patterns, as ``debist batch``.
+
+    Parameters
+    ----------
+    paths : path-like or iterable of path-like
+        Files (taken as they are), folders, patterns (``**`` recurses).
+
+    Returns
+    -------
+    list of pathlib.Path
+        Sorted within each entry, in the order of the entries.
+
+    Raises
+    ------
+    WorkflowError
+        No entry, or an entry that matches nothing.
+    """
+    from debist.engine.batch import expand_workflows
+
+    return expand_workflows(paths)
+
+
+def batch_table(results: Iterable[Any]) -> pd.DataFrame:
+    """Tabulate a batch's results, one row per workflow, failures included.
+
+    Parameters
+    ----------
+    results : iterable of debist.engine.batch.BatchResult
+        From :func:`run_batch`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``file``, ``name``, ``status`` ("ok" or "failed"), ``seconds``, ``ran``,
+        ``skipped``, ``failed_stage``, ``error``, ``note``, ``rbf_nrmse_q`` (see
+        :func:`debist.engine.batch.summary_table`).
+    """
+    from debist.engine.batch import summary_table
+
+    return summary_table(results)
+
+
+def batch_index(results: Sequence[Any], folder: PathLike | None = None) -> Path | None:
+    """Write a batch's index page: one row per prototype, linking each one's report.
+
+    Parameters
+    ----------
+    results : sequence of debist.engine.batch.BatchResult
+        From :func:`run_batch`.
+    folder : path-like, optional
+        Where ``index.html`` goes (default: the folder that holds every output folder).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The page (replaced atomically); None when no workflow could be loaded or the
+        common folder is the file system root or the home folder.
+    """
+    from debist.engine.batch import write_index
+
+    return write_index(results, folder)
+
+
 @dataclass(frozen=True)
 class FleetResult:
     """The workflows :func:`fleet` wrote.
@@ -421,27 +677,6 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
 
 
 # ------------------------------------------------------------------- results
-
-
-class NrmseTable(pd.DataFrame):
-    """The NRMSE table of a run: a DataFrame that prints whole, as ``debist run`` shows it.
-
-    ``print(result.nrmse)`` gives every row and column with NRMSE to two decimals [%] and
-    RMS to four significant digits; anything derived from it (a selection, a copy) is a
-    plain :class:`pandas.DataFrame`.
-    """
-
-    @property
-    def _constructor(self):
-        return pd.DataFrame
-
-    def __repr__(self) -> str:
-        formats: dict[str, Callable[[Any], str]] = {
-            c: "{:.2f}".format for c in self.columns if str(c).endswith("[%]")
-        }
-        formats["RMS(q)"] = "{:.4g}".format
-        # NaN: not predicted by that model (NARX: q only) or not finished (see status)
-        return self.to_string(index=False, formatters=formats, na_rep="n/a")
 
 
 class Result:
@@ -539,6 +774,9 @@ class Result:
         ArtifactError
             Neither stage ran.
         """
+        from debist.report.frames import (  # here, not at the top: pandas loads in 0.3 s
+            NrmseTable,
+        )
         from debist.report.tables import nrmse_frame
 
         return NrmseTable(nrmse_frame(self.summary(self._scored)["table"]))
@@ -654,7 +892,7 @@ class Model:
 
     Parameters
     ----------
-    rbf : debist.identify.RBFModel
+    rbf : debist.model.rbf.RBFModel
         The identified model.
     units : dict, optional
         The identify stage's units (``q``, ``v1``...); for labels only.
@@ -671,7 +909,7 @@ class Model:
     @classmethod
     def from_h5(cls, path: PathLike, summary: Mapping[str, Any] | None = None) -> Model:
         """Load from an identify stage's ``model.h5`` (:meth:`RBFModel.from_tree`)."""
-        from debist.identify import RBFModel
+        from debist.model.rbf import RBFModel
 
         tree = artifacts.read_h5(path)
         return cls(RBFModel.from_tree(tree), (summary or {}).get("units"))

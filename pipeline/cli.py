@@ -35,6 +35,7 @@ from typer.core import TyperCommand, TyperGroup
 from debist.errors import (
     DebistError,
     Interrupted,
+    OutputDirError,
     VerificationError,
     WorkflowError,
     exit_code,
@@ -207,13 +208,6 @@ def _guard() -> Iterator[None]:
 
 def _on_sigterm(signum: int, _frame: object) -> None:
     raise Interrupted(signum)
-
-
-def _runner(workflow: Path, out: Path | None, wait: bool = False, sets: list[str] | None = None):
-    from debist.engine.runner import Runner
-    from debist.workflow.loader import load_workflow
-
-    return Runner(load_workflow(workflow, out, sets or None), wait=wait)
 
 
 def _essential(text: str) -> None:
@@ -452,20 +446,25 @@ def _run(
     sets: list[str] | None = None,
 ) -> None:
     from debist import api
-    from debist.engine.runner import Runner
 
+    start = until = None
     with _guard():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if select is not None:
-            listed = select["stages"]
-            names = (
+            listed, start, until = select["stages"], select["start"], select["until"]
+            stages = (
                 [n.strip() for n in listed.split(",") if n.strip()] if listed is not None else None
             )
-            stages = Runner(wf).select(names, start=select["start"], until=select["until"])
         ran: set[str] = set()
         with _progress() as display:
             result = api.run(
-                wf, stages=stages, force=force, wait=wait, on_progress=_events(wf, display, ran)
+                wf,
+                stages=stages,
+                start=start,
+                until=until,
+                force=force,
+                wait=wait,
+                on_progress=_events(wf, display, ran),
             )
         _report(wf, result.manifests, ran)
         if result.digest is not None:
@@ -601,24 +600,13 @@ def status(
     sets: SetOpt = None,
 ) -> None:
     """Say per stage whether it is up to date, stale (and why) or missing; reads only."""
-    from debist.engine import outdir
-    from debist.engine.runner import STAGES
+    from debist import api
 
     with _guard():
-        runner = _runner(workflow, out, sets=sets)
-        states = runner.status()
-        warning = ""
-        try:
-            outdir.check_output_dir(
-                runner.wf.output_dir,
-                workflow=runner.wf.name,
-                workflow_dir=runner.wf.path.parent,
-                workflow_file=runner.wf.path,
-                sources=[d.source for d in runner.wf.datasets if not d.rig],
-                stages=STAGES,
-            )
-        except DebistError as exc:
-            warning = f"a run would stop: {exc}"
+        wf = api.load_workflow(workflow, sets or None, output_dir=out)
+        states = api.status(wf)
+        blocker = api.run_blocker(wf)
+        warning = f"a run would stop: {blocker}" if blocker else ""
     if as_json:
         typer.echo(json.dumps({s.stage: s.to_json() for s in states}, indent=2))
         if warning:
@@ -677,10 +665,10 @@ def diff(
     """Show the settings and the NRMSE rows that differ between two runs (reads only)."""
     from rich.table import Table
 
-    from debist.engine.rundiff import diff_runs
+    from debist import api
 
     with _guard():
-        found = diff_runs(run_a, run_b)
+        found = api.diff(run_a, run_b)
     if as_json:
         typer.echo(json.dumps(found, indent=2, default=str))
         return
@@ -714,17 +702,18 @@ def report(
     the workflow's stages, which must be up to date; `debist run` makes it as its last step,
     and `debist verify` checks it like every artifact.
     """
+    from debist import api
     from debist.report.html import REPORT_FILE
 
     with _guard():
-        runner = _runner(workflow, out, wait)
-        if "report" not in runner.stages():
+        wf = api.load_workflow(workflow, output_dir=out)
+        if "report" not in api.workflow_stages(wf):
             raise WorkflowError(
                 f"[report] workflow '{workflow}' has no [report] section: add an empty "
                 "`[report]` table to it (`debist run` then writes the report too)"
             )
     _run(workflow, ["report"], force, out, wait)
-    console.print(f"report: {escape(str(runner.wf.stage_dir('report') / REPORT_FILE))}")
+    console.print(f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}")
 
 
 class ExportFormat(StrEnum):
@@ -760,32 +749,18 @@ def export(
 
     Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
     """
-    from contextlib import nullcontext
-
-    from debist.engine import artifacts, outdir
-    from debist.engine.fileformats import atomic_write
-    from debist.errors import OutputDirError
-    from debist.export import export_files, load_identified
+    from debist import api
 
     with _guard():
-        runner = _runner(workflow, out)
-        folder = runner.wf.output_dir
-        with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
-            model, info = load_identified(runner)
-            files = export_files(model, fmt.value, info)
-            target = dest if dest is not None else folder / "export"
-            if force:  # each file replaced atomically
-                target.mkdir(parents=True, exist_ok=True)
-                for name, text in files.items():
-                    atomic_write(artifacts.inside(target, name), text)
-            else:
-                try:
-                    artifacts.write_text_files(target, files)
-                except OutputDirError as exc:
-                    raise OutputDirError(f"{exc}, or pass --force") from None
-    for name in files:
-        console.print(f"wrote {escape(str(target / name))}")
-    console.print(f"run digest: {info.run_digest or 'n/a (not every stage has run)'}")
+        try:
+            done = api.export_model(workflow, fmt.value, dest=dest, force=force, output_dir=out)
+        except OutputDirError as exc:
+            if force:
+                raise
+            raise OutputDirError(f"{exc}, or pass --force") from None
+    for path in done.files:
+        console.print(f"wrote {escape(str(path))}")
+    console.print(f"run digest: {done.run_digest or 'n/a (not every stage has run)'}")
 
 
 StagesOpt = Annotated[
@@ -838,16 +813,16 @@ def batch(
     from rich.progress import Progress, TextColumn
     from rich.table import Table
 
-    from debist.engine.batch import expand_workflows, run_batch, summary_table, write_index
+    from debist import api
 
     selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
-        files = expand_workflows(paths)
+        files = api.find_workflows(paths)
         target = _progress_console()
         columns = _bar_columns(TextColumn("batch: workflows"))
         with Progress(*columns, console=target, transient=True, disable=target is None) as bar:
             task = bar.add_task("batch", total=len(files))
-            results = run_batch(
+            results = api.run_batch(
                 files,
                 stages=selected,
                 force=force,
@@ -859,7 +834,7 @@ def batch(
     except WorkflowError as exc:
         err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from None
-    frame = summary_table(results)
+    frame = api.batch_table(results)
     failed = int((frame.status == "failed").sum())
     table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")
     columns = ("workflow file", "name", "status", "seconds", "ran", "skipped")
@@ -880,7 +855,7 @@ def batch(
             escape("; ".join(x for x in (where + row.error, row.note) if x)),
         )
     console.print(table)
-    index = write_index(results)
+    index = api.batch_index(results)
     if index is not None:
         console.print(f"index of the reports: {escape(str(index))}")
     if failed:

@@ -22,7 +22,7 @@ from debist.physics.freerun import analytical_model
 from debist.physics.reduced import reduced_curves
 
 if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
-    from debist.identify import Record
+    from debist.identify.fit import Record
     from debist.validate import DataSet, ValidateConfig
 
 __all__ = ["analytical_for", "physics_mass", "physics_prior"]

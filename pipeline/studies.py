@@ -18,24 +18,28 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from typing import Annotated, Any, TypeVar
+from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
-import pydantic
-from pydantic import BeforeValidator, Field, PositiveFloat
 
 from debist.datasets import validation_datasets
-from debist.differentiate import TVRegDiffConfig
 from debist.differentiate.tables import differentiate_tables
+from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.engine import preflight, progress
 from debist.errors import IdentificationError, WorkflowError
-from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
+from debist.metrics import rms
+from debist.model.rbf import RBFModel
 from debist.records import estimation_records
 from debist.report.study_plots import alpha_figure, grid_figure
 from debist.tables import input_columns
 from debist.validate import DataSet, ValidateConfig, validate_model
-from debist.workflow.config import CONFIG, config_from_section
+from debist.workflow.sections import StudyConfig
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = [
     "StudyConfig",
@@ -48,86 +52,6 @@ __all__ = [
 
 #: Longest status message kept in the result tables [characters].
 STATUS_CHARS = 90
-
-
-def _as_list(value: object) -> object:
-    """Let a study grid be one number or an array (TOML arrays are lists)."""
-    if isinstance(value, int | float) and not isinstance(value, bool):
-        return (value,)
-    return tuple(value) if isinstance(value, list) else value
-
-
-_T = TypeVar("_T")
-#: A study grid: one value or a non-empty array of values.
-_Grid = Annotated[tuple[_T, ...], BeforeValidator(_as_list), Field(min_length=1)]
-
-
-@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class StudyConfig:
-    """The ``[study]`` workflow section: grids of the hyper-parameter studies.
-
-    Parameters
-    ----------
-    M : sequence of int
-        Numbers of RBF centres per curve (Fig. 11b), each ``>= 2``.
-    sigma_n : sequence of float
-        Normalised widths ``sigma = sigma_n * delta_xi`` (Fig. 11b), each ``> 0``.
-    alpha : sequence of float
-        TVRegDiff regularisation weights of the first derivative (Fig. 11c), each
-        ``> 0``, in the units of the data: ``alpha`` scales with the unit of q
-        (q in m needs 1e-3 times the value for q in mm, see
-        :class:`~debist.differentiate.TVRegDiffConfig`). The defaults span the
-        project's default ``1e-5`` for q in metres (the paper's 0.01 for mm)
-        by two decades below and one above.
-    free_run : bool
-        True: score every model by the free-run NRMSE(q) (Eq. 41) on the
-        estimation data (and the validation data). False: equation-error MSE
-        only, much faster.
-    max_samples : int
-        At most this many samples (the first ones) of each record are fitted
-        and simulated, ``>= 100``.
-
-    Raises
-    ------
-    pydantic.ValidationError
-        If a list is empty or a value has the wrong type or is out of range (a
-        ``ValueError``; :meth:`from_dict` raises a ``WorkflowError`` naming the key).
-
-    Examples
-    --------
-    >>> StudyConfig.from_dict({"M": [4, 8], "free_run": False}).M
-    (4, 8)
-    """
-
-    M: _Grid[Annotated[int, Field(ge=2)]] = (4, 6, 8, 10, 12, 16)
-    sigma_n: _Grid[PositiveFloat] = (0.25, 0.5, 0.75, 1.0, 1.5)
-    alpha: _Grid[PositiveFloat] = (1e-7, 1e-6, 1e-5, 1e-4)
-    free_run: bool = True
-    max_samples: Annotated[int, Field(ge=100)] = 20000
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any], where: str = "[study]") -> StudyConfig:
-        """Build and check the configuration from a workflow section.
-
-        Parameters
-        ----------
-        section : mapping
-            The ``[study]`` table without its ``identify`` and ``differentiate``
-            sub-tables.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        StudyConfig
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key (with a suggestion) or an invalid value:
-            ``[study] key: expected ..., got ...``.
-        """
-        return config_from_section(cls, section, where)
 
 
 def derivative_roughness(x_dot: np.ndarray) -> float:
@@ -152,7 +76,7 @@ def derivative_roughness(x_dot: np.ndarray) -> float:
     2.0
     """
     x_dot = np.asarray(x_dot, dtype=float)
-    return float(np.sqrt(np.mean(np.diff(x_dot, 2) ** 2)))
+    return rms(np.diff(x_dot, 2))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -276,7 +200,7 @@ def rbf_grid_study(
         Their derivatives ``t, q, q_hat, q_dot [m/s], q_ddot [m/s^2]`` with
         ``attrs['dt']`` [s] (the differentiation stage's output).
     identify_section : mapping
-        The ``[identify]`` section (see :class:`~debist.identify.IdentifyConfig`).
+        The ``[identify]`` section (see :class:`~debist.identify.config.IdentifyConfig`).
     validate_section : mapping
         The ``[validate]`` section (see :class:`~debist.validate.ValidateConfig`).
     cfg : StudyConfig

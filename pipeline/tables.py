@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.errors import RigLogError
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["UNIFORM_TOL", "input_columns", "sample_time"]
 

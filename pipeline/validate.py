@@ -4,20 +4,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
-import pydantic
-from pydantic import FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
-from typing_extensions import TypedDict
 
 from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
 from debist.metrics import mean_baseline_nrmse, nrmse, rms
 from debist.simulate.freerun import FreeRunModel, SimulationResult, check_free_run, simulate
-from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.workflow.sections import ValidateConfig
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 
 def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
@@ -54,109 +53,6 @@ def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
     t = np.arange(window) * dt
     coef = np.polynomial.polynomial.polyfit(t, q[:window], 3)
     return float(coef[0]), float(coef[1])
-
-
-class PublishedResult(TypedDict):
-    """One published result of ``[[validate.published]]``: ``{model = "...", rms = {...}}``.
-
-    Attributes
-    ----------
-    model : str
-        Name of the published model (with its reference).
-    rms : dict of str to float
-        Its RMS error per data set name [report unit].
-    """
-
-    __pydantic_config__ = CONFIG  # type: ignore[misc]
-
-    model: str
-    rms: dict[str, FiniteFloat]
-
-
-@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class ValidateConfig:
-    """The ``[validate]`` workflow section.
-
-    Parameters
-    ----------
-    substeps : int
-        RK4 steps per sample interval, ``>= 1``.
-    input_interpolation : {"bandlimited", "linear"}
-        Input interpolation between samples.
-    init_samples : int
-        Samples of measured output a protocol allows for initialisation; the
-        initial state is estimated from them only and the metrics are computed
-        over the remaining samples. 0: start from the differentiated signals at
-        the first sample and score every sample.
-    report_unit : str or None
-        Unit for the RMS column (e.g. "mV", "mm"); default the unit of q.
-    q_limit : float or None
-        |q| beyond which a run counts as diverged [unit of q]; default twice the
-        largest |q| of the estimation range (:func:`default_q_limit`).
-    published : tuple of dict
-        Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``
-        (:class:`PublishedResult`).
-    analytical : bool
-        Also free-run the analytical reduced model (Eq. 26) with the nominal parameters of
-        the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
-        in metres and the two DE voltages as inputs.
-    engine : {"compiled", "numpy"}
-        Free-run engine: the compiled kernel (:mod:`debist.simulate.kernel`, default) or the NumPy
-        reference; the same scheme and the same numbers to rounding.
-    predict_steps : int
-        Horizon k [samples] of the k-step-ahead NRMSE scored beside the free run (each
-        sample's prediction restarted from the measured state k samples earlier, as
-        MATLAB's ``predict``); 0: no prediction scores and no residual analysis.
-    resid_lags : int
-        Largest lag [samples] of the residual analysis of the one-step prediction errors
-        (autocorrelation and cross-correlation with each input, as MATLAB's ``resid``).
-
-    Raises
-    ------
-    pydantic.ValidationError
-        If a value has the wrong type or is out of range (a ``ValueError``;
-        :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
-    """
-
-    substeps: PositiveInt = 2
-    input_interpolation: Literal["bandlimited", "linear"] = "bandlimited"
-    init_samples: NonNegativeInt = 0
-    report_unit: str | None = None
-    q_limit: PositiveFloat | None = None
-    published: Annotated[tuple[PublishedResult, ...], AsTuple] = ()
-    analytical: bool = False
-    engine: Literal["compiled", "numpy"] = "compiled"
-    predict_steps: NonNegativeInt = 10
-    resid_lags: PositiveInt = 25
-
-    def __post_init__(self) -> None:
-        if self.report_unit is not None and lookup_unit(self.report_unit) is None:
-            raise ConfigValueError(
-                "report_unit", "a known unit (e.g. 'mm', 'mV')", self.report_unit
-            )
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any], where: str = "[validate]") -> ValidateConfig:
-        """Build and validate from a workflow section.
-
-        Parameters
-        ----------
-        section : mapping
-            The ``[validate]`` table.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        ValidateConfig
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key (with a suggestion) or an invalid value:
-            ``[validate] key: expected ..., got ...``.
-        """
-        return config_from_section(cls, section, where)
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +17,11 @@ from debist.identify.fit import Record
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
+
+# debist's user cache (import lists of its modules, pint's answers) goes to a folder of this
+# test session, never the user's own; the CLI runs in subprocesses inherit it.
+os.environ["DEBIST_CACHE_DIR"] = tempfile.mkdtemp(prefix="debist-cache-")
+atexit.register(shutil.rmtree, os.environ["DEBIST_CACHE_DIR"], ignore_errors=True)
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

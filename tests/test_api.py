@@ -12,7 +12,7 @@ import pytest
 
 import debist
 from debist.engine import artifacts
-from debist.errors import ArtifactError, WorkflowError
+from debist.errors import ArtifactError, OutputDirError, WorkflowError
 
 
 @pytest.fixture
@@ -151,3 +151,42 @@ def test_printing_the_nrmse_table_shows_every_row_and_column(synthetic_run):
     narx = [line for line, model in zip(lines[1:], table["model"], strict=True) if model == "narx"]
     assert narx and all("n/a" in line for line in narx)  # NARX predicts q only
     assert type(table[["model"]]) is pd.DataFrame  # a selection is a plain DataFrame
+
+
+def test_the_cli_commands_are_the_apis_calls(run_copy, tmp_path):
+    root, digest = run_copy
+    wf = root / "wf.toml"
+    stages = debist.workflow_stages(wf)
+    assert stages[0] == "ingest" and "identify" in stages and "report" not in stages
+    assert debist.run_blocker(wf) is None
+    # another workflow's folder: the blocker is the refusal a run gives, and nothing is written
+    other = root / "other.toml"
+    other.write_text(wf.read_text().replace('name = "', 'name = "other-', 1))
+    before = sorted(p.name for p in (root / "out").iterdir())
+    found = debist.run_blocker(other, output_dir=root / "out")
+    assert found is not None and "belongs to" in found
+    with pytest.raises(OutputDirError, match="belongs to"):
+        debist.run(other, output_dir=root / "out")
+    assert sorted(p.name for p in (root / "out").iterdir()) == before
+    # export: the files of the format, refused over existing ones without force
+    done = debist.export_model(wf, "python", dest=tmp_path / "exp")
+    assert [p.name for p in done.files] == ["debist_model.py"] and done.run_digest == digest
+    assert "def rk4_step(x, v0, v1, dt):" in done.files[0].read_text()
+    with pytest.raises(OutputDirError):
+        debist.export_model(wf, "python", dest=tmp_path / "exp")
+    assert debist.export_model(wf, "python", dest=tmp_path / "exp", force=True).files == done.files
+    # diff of a run with itself: nothing differs
+    assert debist.diff(root / "out", root / "out") == {"config": [], "nrmse": []}
+
+
+def test_batch_helpers_find_tabulate_and_index(run_copy):
+    root, _ = run_copy
+    assert debist.find_workflows([root / "wf.toml"]) == [root / "wf.toml"]
+    with pytest.raises(WorkflowError):
+        debist.find_workflows([root / "nothing-*.toml"])
+    results = debist.run_batch([root / "wf.toml"], scheduler="synchronous")
+    table = debist.batch_table(results)
+    assert list(table["status"]) == ["done"] and table["ran"].tolist() == [0]
+    index = debist.batch_index(results)
+    assert index is not None and index.name == "index.html"
+    assert "wf" in index.read_text() or results[0].name in index.read_text()

@@ -10,13 +10,15 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from debist.errors import IdentificationError, WorkflowError
-from debist.identify import IdentifyConfig, RBFModel, Record
 from debist.identify.autotune import (
     auto_settings,
     blocked_folds,
     one_standard_error,
     select_hyperparameters,
 )
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record
+from debist.model.rbf import RBFModel
 from debist.report.study_plots import autotune_figure
 
 

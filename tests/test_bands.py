@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from conftest import bistable_truth
 
-from debist.identify import IdentifyConfig, Record, fit_rbf_model
 from debist.identify.bands import (
     block_bootstrap,
     curve_bands,
@@ -13,6 +12,8 @@ from debist.identify.bands import (
     identified_intervals,
     support_weights,
 )
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
 
 
 def _records(rec, noise=0.0, seed=0):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import F_MAX, K1, K3, M_Q, G, double_well
 
-from debist.identify import Record
 from debist.identify.design import analytical_as_eq37, design_numbers, held_levels
+from debist.identify.fit import Record
 from debist.physics.params import PrototypeParams
 
 

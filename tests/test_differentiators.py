@@ -12,19 +12,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from debist.differentiate import (
-    CONFIGS,
-    DIFFERENTIATORS,
-    Derivatives,
-    SavGolConfig,
-    SpectralConfig,
-    TVRegDiffConfig,
-    differentiate,
-    savgol_derivatives,
-    spectral_derivatives,
-    tvregdiff_derivatives,
-)
-from debist.differentiate.spectral import lowpass_gain
+from debist.differentiate.base import CONFIGS, DIFFERENTIATORS, differentiate
+from debist.differentiate.result import Derivatives
+from debist.differentiate.savgol import SavGolConfig, savgol_derivatives
+from debist.differentiate.spectral import SpectralConfig, lowpass_gain, spectral_derivatives
+from debist.differentiate.tvregdiff_method import TVRegDiffConfig, tvregdiff_derivatives
 from debist.errors import ConvergenceWarning, WorkflowError
 
 DT, N = 0.01, 1000
@@ -154,7 +146,7 @@ def test_savgol_is_exact_for_a_cubic(window, polyorder):
 
 
 def test_tvregdiff_method_matches_two_passes_and_reports():
-    from debist.differentiate import tvregdiff
+    from debist.differentiate.tvregdiff import tvregdiff
 
     x = X + 1e-3 * np.random.default_rng(1).standard_normal(N)
     cfg = TVRegDiffConfig(alpha=1e-4, ep=1e-6, iterations=5, alpha2=1e-3, iterations2=3)

@@ -10,8 +10,9 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from debist.errors import WorkflowError
-from debist.identify import RBFBasis, Record
 from debist.identify.excitation import check_excitation
+from debist.identify.fit import Record
+from debist.model.basis import RBFBasis
 
 # --- (a) Duffing oscillator q'' + 2 zeta w q' + w^2 q + k3 q^3 = u(t) -------------------------
 

@@ -20,18 +20,11 @@ import pytest
 from conftest import example_rbf_model, write_rig_csv
 
 from debist.errors import ArtifactError, WorkflowError
-from debist.export import (
-    C_FILES,
-    MATLAB_FILE,
-    MATLAB_NAME_FILE,
-    PYTHON_FILE,
-    ExportInfo,
-    c_sources,
-    curve_table,
-    export_files,
-    matlab_source,
-    python_source,
-)
+from debist.export.c import C_FILES, c_sources
+from debist.export.common import ExportInfo, curve_table
+from debist.export.files import export_files
+from debist.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
+from debist.export.python import PYTHON_FILE, python_source
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
 

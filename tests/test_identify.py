@@ -3,8 +3,11 @@ import pytest
 from conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
 
 from debist.errors import IdentificationError, WorkflowError
-from debist.identify import IdentifyConfig, RBFBasis, RBFModel, Record, fit_rbf_model
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
+from debist.model.basis import RBFBasis
 from debist.model.friction import friction_state
+from debist.model.rbf import RBFModel
 from debist.model.terms import force_columns, input_columns
 from debist.model.termtable import input_map
 

@@ -7,7 +7,9 @@ import pytest
 
 from debist.engine import artifacts
 from debist.errors import WorkflowError
-from debist.identify import IdentifyConfig, RBFModel, Record, fit_rbf_model
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
+from debist.model.rbf import RBFModel
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced

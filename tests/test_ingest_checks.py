@@ -14,10 +14,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from debist.errors import RigLogError, UnitMismatchWarning
-from debist.ingest import IngestSpec, detect_format, load_rig_log
 from debist.ingest.checks import find_gaps, split_segments
-from debist.ingest.detect import sniff_format
+from debist.ingest.detect import detect_format, sniff_format
+from debist.ingest.load import load_rig_log
 from debist.ingest.resample import resample_segment
+from debist.ingest.spec import IngestSpec
 
 SECTION = {
     "time": {"name": "t", "unit": "s"},

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from debist.errors import RigLogError, WorkflowError
-from debist.ingest import IngestSpec, load_rig_log, read_raw
+from debist.ingest.load import load_rig_log, read_raw
+from debist.ingest.spec import IngestSpec
 from debist.ingest.text import detect_decimal, detect_dialect
 
 SECTION = {

@@ -10,7 +10,8 @@ import pytest
 import scipy.io
 
 from debist.errors import RigLogError, WorkflowError, exit_code
-from debist.ingest import IngestSpec, load_rig_log
+from debist.ingest.load import load_rig_log
+from debist.ingest.spec import IngestSpec
 
 N = 400
 DT = 0.01

@@ -14,10 +14,11 @@ import pytest
 import scipy.io
 
 from debist.errors import ResourceError, RigLogError, UnitMismatchWarning
-from debist.ingest import IngestSpec, load_rig_log, read_raw
 from debist.ingest.channels import map_channels
+from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.mat import interpret_mat, read_mat
 from debist.ingest.mat73 import load_mat73
+from debist.ingest.spec import IngestSpec
 
 REPO_DATA = Path(__file__).resolve().parents[1] / "data"
 DATA = Path(__file__).resolve().parent / "data"

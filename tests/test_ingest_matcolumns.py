@@ -10,7 +10,8 @@ import pytest
 import scipy.io
 
 from debist.errors import RigLogError, WorkflowError
-from debist.ingest import ChannelSpec, IngestSpec, load_rig_log
+from debist.ingest.load import load_rig_log
+from debist.ingest.spec import ChannelSpec, IngestSpec
 
 N = 200
 SECTION = {

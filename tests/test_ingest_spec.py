@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from debist.errors import WorkflowError
-from debist.ingest import RIG_LOG_FORMATS, ChannelSpec, IngestSpec, ResampleSpec
+from debist.ingest.load import RIG_LOG_FORMATS
+from debist.ingest.spec import ChannelSpec, IngestSpec, ResampleSpec
 
 BASE = {"sample_time": 1e-3, "q": {"column": 1, "unit": "V"}, "v1": {"column": 0, "unit": "V"}}
 

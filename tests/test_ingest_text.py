@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from debist.errors import RigLogError
-from debist.ingest import IngestSpec, load_rig_log, read_raw
+from debist.ingest.load import load_rig_log, read_raw
+from debist.ingest.spec import IngestSpec
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 DATA = Path(__file__).resolve().parent / "data"

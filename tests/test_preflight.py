@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 from debist.cli import app
 from debist.engine import preflight
 from debist.errors import ResourceError, WorkflowError
-from debist.identify import IdentifyConfig, Record, fit_rbf_model
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.studies import StudyConfig, rbf_grid_study

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from debist.errors import WorkflowError
-from debist.identify import IdentifyConfig, Record, fit_rbf_model
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_config, refine_model
 from debist.simulate.freerun import simulate
 

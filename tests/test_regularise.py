@@ -6,8 +6,9 @@ from conftest import bistable_truth
 from scipy.optimize import lsq_linear
 
 from debist.errors import WorkflowError
-from debist.identify import IdentifyConfig, Record, fit_rbf_model
 from debist.identify.bands import block_bootstrap
+from debist.identify.config import IdentifyConfig
+from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.regularise import (
     LAMBDA_GRID,
     Estimator,

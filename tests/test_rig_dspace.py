@@ -11,8 +11,9 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from debist.ingest import IngestSpec, load_rig_log
+from debist.ingest.load import load_rig_log
 from debist.ingest.mat73 import load_mat73
+from debist.ingest.spec import IngestSpec
 from debist.rig import dspace
 from debist.rig.dspace import Channel, recording, write_mat, write_recording
 from debist.rig.profiles import identification_profile
@@ -138,7 +139,7 @@ def test_same_input_gives_byte_identical_files(signals, tmp_path, version, monke
     )
     assert diff.size > 0 and diff.max() < 116  # only the header's "Created on" differs
     if version == "7.3":  # the group-creation fallback of older h5py writes the same bytes
-        monkeypatch.setattr(dspace, "_GROUP_TRACK_TIMES", False)
+        monkeypatch.setattr(dspace, "_group_track_times", lambda: False)
         d = write_recording(tmp_path / "d.mat", _rec(signals), version=version, created=CREATED)
         assert d.read_bytes() == a.read_bytes()
 

@@ -466,7 +466,7 @@ def test_unknown_key_message_suggests_only_close_keys():
 
 
 def test_config_from_section_message_format():
-    from debist.differentiate import SavGolConfig
+    from debist.differentiate.savgol import SavGolConfig
     from debist.validate import ValidateConfig
 
     def message(cls, section, where="[x]"):

@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from debist.identify import RBFBasis, RBFModel
 from debist.metrics import nrmse, rms
+from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate, upsample_inputs
 from debist.validate import initial_state
 

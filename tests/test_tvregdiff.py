@@ -11,13 +11,13 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 from scipy.sparse.linalg import spsolve
 
-from debist.differentiate import TVRegDiffResult, tv_functional, tvregdiff
 from debist.differentiate._tvr_solve import (
     large_bands,
     small_kkt,
     solve_large,
     solve_small,
 )
+from debist.differentiate.tvregdiff import TVRegDiffResult, tv_functional, tvregdiff
 from debist.errors import ConvergenceWarning
 
 quiet = pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")

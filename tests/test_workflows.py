@@ -77,7 +77,7 @@ PAPER_TABLE2_RBF = {
 def paper_experiment(tmp_path_factory):
     """One run of workflows/paper-experiment.toml: output, folder and the curves vs truth."""
     from debist.engine import artifacts
-    from debist.identify import RBFModel
+    from debist.model.rbf import RBFModel
 
     out_dir = tmp_path_factory.mktemp("paper-experiment")
     out = run("paper-experiment.toml", out_dir)

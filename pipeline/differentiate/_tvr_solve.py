@@ -26,10 +26,13 @@ SIAM J. Sci. Comput. 17(1), 227-238.
 
 from __future__ import annotations
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import NDArray
-from scipy import sparse
-from scipy.linalg import solve_banded, solveh_banded
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+sparse = lazy.load("scipy.sparse", suppress_warning=True)
+linalg = lazy.load("scipy.linalg", suppress_warning=True)
 
 __all__ = [
     "large_bands",
@@ -94,7 +97,7 @@ def solve_large(
         ``u = diff(y) / dx`` with ``u_0 = y_0 / dx``, where ``y`` solves the
         pentadiagonal system.
     """
-    y = solveh_banded(large_bands(q, alpha, dx), b, lower=False, check_finite=False)
+    y = linalg.solveh_banded(large_bands(q, alpha, dx), b, lower=False, check_finite=False)
     return np.diff(y, prepend=0.0) / dx
 
 
@@ -182,5 +185,5 @@ def solve_small(
     """
     rhs = np.zeros(2 * b.size + 1)
     rhs[1::2] = np.diff(b, prepend=0.0)
-    z = solve_banded((2, 2), small_bands(q, alpha, dx), rhs, check_finite=False)
+    z = linalg.solve_banded((2, 2), small_bands(q, alpha, dx), rhs, check_finite=False)
     return z[0::2]

@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.workflow.config import config_from_section
-
-__all__ = ["Derivatives", "check_int", "check_positive", "check_signal", "config_from_dict"]
+__all__ = ["Derivatives", "check_int", "check_positive", "check_signal"]
 
 _C = TypeVar("_C")
 
@@ -96,36 +93,6 @@ def check_signal(x: ArrayLike, dt: float) -> tuple[NDArray[np.float64], float]:
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"`dt` must be positive and finite, got {dt!r}")
     return x, dt
-
-
-def config_from_dict(
-    cls: type[_C], params: Mapping[str, Any], method: str, where: str = "[differentiate]"
-) -> _C:
-    """Build a differentiator's config dataclass from its workflow parameters.
-
-    Parameters
-    ----------
-    cls : type
-        The method's config dataclass (a pydantic dataclass, see :mod:`debist.workflow.config`).
-    params : mapping of str to value
-        The parameters given in the workflow (without ``method``).
-    method : str
-        Method name, for the messages.
-    where : str, optional
-        The workflow table the parameters come from, for the messages.
-
-    Returns
-    -------
-    object
-        ``cls(**params)``.
-
-    Raises
-    ------
-    WorkflowError
-        On an unknown key (named, with the method's known keys and a suggestion) or an
-        invalid value: ``[differentiate] key: expected ..., got ...``.
-    """
-    return config_from_section(cls, params, where, known_label=f"known keys of method '{method}'")
 
 
 def check_positive(name: str, value: float) -> float:

@@ -2,21 +2,20 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, Self
+from typing import Annotated, ClassVar
 
 import pydantic
 from numpy.typing import ArrayLike
 from pydantic import Field
 
-from debist.differentiate.result import Derivatives, check_signal, config_from_dict
-from debist.workflow.config import CONFIG, ConfigValueError
+from debist.differentiate.result import Derivatives, check_signal
+from debist.workflow.config import CONFIG, ConfigValueError, SectionConfig
 
 __all__ = ["SavGolConfig", "savgol_derivatives"]
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class SavGolConfig:
+class SavGolConfig(SectionConfig):
     """Settings of the ``"savgol"`` differentiator.
 
     Parameters
@@ -38,6 +37,9 @@ class SavGolConfig:
     3
     """
 
+    SECTION: ClassVar[str] = "[differentiate]"
+    KNOWN_LABEL: ClassVar[str] = "known keys of method 'savgol'"
+
     window: Annotated[int, Field(ge=3)] = 21
     polyorder: Annotated[int, Field(ge=2)] = 3
 
@@ -48,29 +50,6 @@ class SavGolConfig:
             raise ConfigValueError(
                 "polyorder", f"an integer < window = {self.window}", self.polyorder
             )
-
-    @classmethod
-    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
-        """Build from a workflow section.
-
-        Parameters
-        ----------
-        params : mapping of str to value
-            Keys among the attribute names.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        SavGolConfig
-            The config.
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key or an invalid value.
-        """
-        return config_from_dict(cls, params, "savgol", where)
 
 
 _DEFAULT = SavGolConfig()

@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, PositiveFloat
 
-from debist.differentiate.result import Derivatives, check_signal, config_from_dict
-from debist.workflow.config import CONFIG
+from debist.differentiate.result import Derivatives, check_signal
+from debist.workflow.config import CONFIG, SectionConfig
 
 __all__ = ["SpectralConfig", "lowpass_gain", "spectral_derivatives"]
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class SpectralConfig:
+class SpectralConfig(SectionConfig):
     """Settings of the ``"spectral"`` differentiator.
 
     Parameters
@@ -48,32 +47,12 @@ class SpectralConfig:
     0.2
     """
 
+    SECTION: ClassVar[str] = "[differentiate]"
+    KNOWN_LABEL: ClassVar[str] = "known keys of method 'spectral'"
+
     cutoff_hz: PositiveFloat | None = 10.0
     taper: Annotated[float, Field(ge=0, le=1, description="a number in [0, 1]")] = 0.2
     extension: Literal["odd", "periodic"] = "odd"
-
-    @classmethod
-    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
-        """Build from a workflow section.
-
-        Parameters
-        ----------
-        params : mapping of str to value
-            Keys among the attribute names.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        SpectralConfig
-            The config.
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key or an invalid value.
-        """
-        return config_from_dict(cls, params, "spectral", where)
 
 
 def lowpass_gain(freq: ArrayLike, cutoff_hz: float | None, taper: float) -> NDArray[np.float64]:

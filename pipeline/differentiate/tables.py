@@ -15,12 +15,15 @@ import warnings
 from collections.abc import Mapping
 from typing import Any
 
-import pandas as pd
+import lazy_loader as lazy
 
 from debist.differentiate.base import differentiate
 from debist.engine import progress
 from debist.errors import ConvergenceWarning
 from debist.tables import sample_time
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["differentiate_tables"]
 

@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
 from dataclasses import replace
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
 import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
-from debist.differentiate.result import Derivatives, check_signal, config_from_dict
+from debist.differentiate.result import Derivatives, check_signal
 from debist.differentiate.tvregdiff import tvregdiff
 from debist.ingest.units import lookup_unit
-from debist.workflow.config import CONFIG, ConfigValueError
+from debist.metrics import rms
+from debist.workflow.config import CONFIG, ConfigValueError, SectionConfig
 
 
 def unit_factor(symbol: str) -> float | None:
@@ -32,7 +32,7 @@ def _lower(value: object) -> object:
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class TVRegDiffConfig:
+class TVRegDiffConfig(SectionConfig):
     """Settings of the ``"tvregdiff"`` differentiator.
 
     The default ``ep`` is the paper's ``1e-6`` for a position in millimetres, converted to
@@ -85,6 +85,9 @@ class TVRegDiffConfig:
     20
     """
 
+    SECTION: ClassVar[str] = "[differentiate]"
+    KNOWN_LABEL: ClassVar[str] = "known keys of method 'tvregdiff'"
+
     alpha: PositiveFloat | Literal["auto"] = "auto"
     iterations: PositiveInt = 10
     scale: Annotated[Literal["large", "small"], BeforeValidator(_lower)] = "large"
@@ -99,29 +102,6 @@ class TVRegDiffConfig:
     def __post_init__(self) -> None:
         if self.unit is not None and unit_factor(self.unit) is None:
             raise ConfigValueError("unit", "a known unit (e.g. 'mm', 'm', 'V')", self.unit)
-
-    @classmethod
-    def from_dict(cls, params: Mapping[str, Any], where: str = "[differentiate]") -> Self:
-        """Build from a workflow section.
-
-        Parameters
-        ----------
-        params : mapping of str to value
-            Keys among the attribute names.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        TVRegDiffConfig
-            The config.
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key or an invalid value.
-        """
-        return config_from_dict(cls, params, "tvregdiff", where)
 
 
 _DEFAULT = TVRegDiffConfig()
@@ -188,7 +168,7 @@ def auto_alpha(
         res = tvregdiff(x, config.iterations, a, scale=config.scale, ep=config.ep, dx=dt,
                         tol=config.tol)  # fmt: skip
         resid = x - _antiderivative(x, res.derivative, dt)
-        search.append({"alpha": float(a), "residual": float(np.sqrt(np.mean(resid**2)))})
+        search.append({"alpha": float(a), "residual": rms(resid)})
         passes.append(res)
     chosen = len(search) - 1
     for i, (hi, lo) in enumerate(itertools.pairwise(search)):

@@ -28,6 +28,7 @@ addressed by the hash of their inputs.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -135,13 +136,16 @@ def library_versions(names: Sequence[str]) -> dict[str, str]:
     dict of str to str
         ``"debist"`` and each name to its version (``"absent"`` when not installed).
     """
-    versions = {"debist": __version__}
-    for name in names:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "absent"
-    return versions
+    return {"debist": __version__, **{name: _version(name) for name in names}}
+
+
+@functools.cache
+def _version(name: str) -> str:
+    """Return the installed version of a distribution, read once per process (3 ms a lookup)."""
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return "absent"
 
 
 def stage_key(

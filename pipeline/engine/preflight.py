@@ -210,7 +210,7 @@ def identify_columns(cfg: Any, n_inputs: int) -> tuple[int, int]:
     Returns
     -------
     columns : int
-        Regressor columns (the names :func:`debist.identify.fit_rbf_model` reports).
+        Regressor columns (the names :func:`debist.identify.fit.fit_rbf_model` reports).
     z_columns : int
         Those that depend on the friction state z (re-built in every T_z evaluation).
 
@@ -242,7 +242,7 @@ def _solve_elements(rows: int, cols: int) -> int:
 
 
 def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = None) -> int:
-    """Estimate the peak memory of :func:`debist.identify.fit_rbf_model`.
+    """Estimate the peak memory of :func:`debist.identify.fit.fit_rbf_model`.
 
     Parameters
     ----------

@@ -16,11 +16,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
+import lazy_loader as lazy
 
 from debist.engine import artifacts
 from debist.engine.registry import names
 from debist.errors import WorkflowError
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["NRMSE_COLUMNS", "diff_runs"]
 

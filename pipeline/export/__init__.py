@@ -10,8 +10,10 @@ code reproduces :func:`debist.simulate.freerun.simulate` to rounding), and the c
 curves restoring force, d(q) and g_i(q) as a lookup table. The generators are pure functions
 returning file contents, rendered from the jinja2 templates in ``templates/`` that insert
 free text and numbers only through each language's escaping and literal filters (see
-:mod:`debist.export.common`); :func:`load_identified` reads a run's identified model and
-checks that the identify stage is up to date.
+:mod:`debist.export.common`); :func:`debist.export.files.load_identified` reads a run's
+identified model and checks that the identify stage is up to date, and
+:func:`debist.export.files.export_files` gives the files of one format. This package's
+``__init__`` imports none of its modules.
 
 References
 ----------
@@ -20,120 +22,3 @@ Masoud & Maas 2025, Eq. 37-40; Hairer, Norsett & Wanner, Solving ODEs I, Sec. II
 block" (local functions, fixed-size code generation); NumPy ``numpy.interp`` (the table
 semantics).
 """
-
-from __future__ import annotations
-
-from debist.engine import artifacts
-from debist.errors import ArtifactError, WorkflowError
-from debist.export.c import C_FILES, c_sources
-from debist.export.common import CURVE_POINTS, ExportInfo, curve_table
-from debist.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
-from debist.export.python import PYTHON_FILE, python_source
-from debist.identify.bands import identified_intervals
-from debist.model.rbf import RBFModel
-
-__all__ = [
-    "CURVE_POINTS",
-    "C_FILES",
-    "FORMATS",
-    "MATLAB_FILE",
-    "MATLAB_NAME_FILE",
-    "PYTHON_FILE",
-    "ExportInfo",
-    "c_sources",
-    "curve_table",
-    "export_files",
-    "load_identified",
-    "matlab_source",
-    "python_source",
-]
-
-#: Export formats of ``debist export --format``.
-FORMATS = ("c", "matlab", "python")
-
-
-def export_files(model, fmt: str, info: ExportInfo | None = None) -> dict[str, str]:
-    """Return the files of an export format.
-
-    Parameters
-    ----------
-    model : RBFModel
-        The identified model.
-    fmt : {"c", "matlab", "python"}
-        :func:`c_sources`, :func:`matlab_source` or :func:`python_source`.
-    info : ExportInfo, optional
-        Provenance for the header comments.
-
-    Returns
-    -------
-    dict of str to str
-        File name to text.
-
-    Raises
-    ------
-    WorkflowError
-        If ``fmt`` is unknown.
-    """
-    if fmt == "c":
-        return c_sources(model, info)
-    if fmt == "matlab":
-        return matlab_source(model, info)
-    if fmt == "python":
-        return python_source(model, info)
-    raise WorkflowError(f"--format must be one of {FORMATS}, got {fmt!r}")
-
-
-def load_identified(runner):
-    """Read the identified model of a run after checking that identify is up to date.
-
-    Parameters
-    ----------
-    runner : debist.engine.runner.Runner
-        The workflow's runner.
-
-    Returns
-    -------
-    model : RBFModel
-        From ``identify/model.h5``.
-    info : ExportInfo
-        Workflow name, run digest, sha256 of ``identify/manifest.json`` and the identified
-        intervals of ``identify/curves.parquet``.
-
-    Raises
-    ------
-    WorkflowError
-        If the workflow has no identify stage (no data sets).
-    ArtifactError
-        If the identify stage is missing or stale (naming why: never run, outputs
-        changed such as a modified ``model.h5``, config or upstream changed).
-    """
-    wf = runner.wf
-    if "identify" not in runner.stages():
-        raise WorkflowError(
-            f"workflow '{wf.path}' has no identify stage (no [[datasets]]): nothing to export"
-        )
-    state = next(s for s in runner.status() if s.stage == "identify")
-    sdir = wf.stage_dir("identify")
-    if state.state != "up to date":
-        raise ArtifactError(
-            f"stage 'identify' in '{sdir}' is {state.state} ({state.reason}): run "
-            f"`debist identify {wf.path}` (or `debist run`) first"
-        )
-    model = RBFModel.from_tree(artifacts.read_h5(sdir / "model.h5"))
-    manifest = artifacts.read_manifest(sdir)
-    identified: dict[str, list[list[float]]] = {}
-    if manifest is not None and "curves.parquet" in manifest.outputs:
-        frame = artifacts.read_parquet(sdir / "curves.parquet")
-        for col in frame.columns:
-            if col.endswith("_identified"):
-                mask = frame[col].to_numpy(dtype=bool)
-                identified[col[: -len("_identified")]] = identified_intervals(
-                    frame["q"].to_numpy(), mask
-                )
-    info = ExportInfo(
-        workflow=wf.name,
-        run_digest=runner.digest(),
-        identify_manifest=artifacts.manifest_digest(sdir),
-        identified=identified,
-    )
-    return model, info

@@ -63,8 +63,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.engine import progress as _progress
 from debist.errors import IdentificationError, WorkflowError
@@ -80,6 +80,9 @@ from debist.metrics import nrmse
 from debist.model.terms import column_names
 from debist.simulate.prediction import restarted_runs
 from debist.validate import default_q_limit
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = [
     "DEFAULT_WINDOW",

@@ -59,14 +59,18 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
+from debist import metrics
 from debist.identify.design import at_level
 from debist.identify.excitation import input_active, quasi_static
 from debist.model.basis import RBFBasis
 from debist.model.terms import PhysicsPrior, term_table
 from debist.model.termtable import input_map
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 #: Model-error half-width of each curve's band, as a fraction of the curve's scale (the larger
 #: of its range and its largest magnitude over the supported points): per curve the 95th
@@ -560,7 +564,7 @@ def curves_frame(
     q = np.concatenate([r.q for r in records])
     q_dot = np.concatenate([r.q_dot for r in records])
     active = input_active(np.vstack([r.v for r in records]))
-    rms = float(np.sqrt(np.mean(q_dot**2)))
+    rms = metrics.rms(q_dot)
     sigma = model.basis.sigma
     # Each curve counts the samples that inform it, within one RBF width (a point's value
     # is a blend of the centres within about sigma): the restoring force where the beam

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields, replace
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
@@ -12,7 +12,14 @@ from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, Positive
 from debist.errors import WorkflowError
 from debist.identify.regularise import CONSTRAINT
 from debist.model.terms import check_terms
-from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, Interval, config_from_section
+from debist.workflow.config import (
+    CONFIG,
+    AsTuple,
+    ConfigValueError,
+    Interval,
+    SectionConfig,
+    config_from_section,
+)
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'
@@ -23,7 +30,7 @@ _M_Q = 'a mass > 0 [kg], "identify", or "physics" (with a [physics] section)'
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class IdentifyConfig:
+class IdentifyConfig(SectionConfig):
     """Hyper-parameters of the RBF identification (Masoud & Maas 2025, Sec. 4.2).
 
     Parameters
@@ -129,6 +136,9 @@ class IdentifyConfig:
         (a ``ValueError``; :meth:`from_dict` raises a ``WorkflowError`` naming the key).
     """
 
+    SECTION: ClassVar[str] = "[identify]"
+    INTERNAL: ClassVar[tuple[str, ...]] = ("prior",)
+
     M: Annotated[int, Field(ge=2)] = 10
     sigma_n: PositiveFloat = 0.5
     rbf: Annotated[tuple[str, ...], AsTuple] = ("c", "d", "g")
@@ -222,7 +232,7 @@ class IdentifyConfig:
 
     @classmethod
     def from_dict(
-        cls, section: Mapping[str, Any], where: str | Callable[[str], str] = "[identify]"
+        cls, section: Mapping[str, Any] | None, where: str | Callable[[str], str] | None = None
     ) -> IdentifyConfig:
         """Build and validate the configuration from a workflow section.
 
@@ -231,7 +241,8 @@ class IdentifyConfig:
         section : dict
             The ``[identify]`` table.
         where : str or callable, optional
-            The workflow table (or a function of the key giving it), for the messages.
+            The workflow table (or a function of the key giving it), for the messages
+            (default ``[identify]``).
 
         Returns
         -------
@@ -251,11 +262,12 @@ class IdentifyConfig:
         debist.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
         """
         if isinstance(section, Mapping) and "prior" in section:
-            label = where("prior") if callable(where) else where
+            given = cls.SECTION if where is None else where
+            label = given("prior") if callable(given) else given
             raise WorkflowError(
                 f"{label} unknown key 'prior' (the analytical backbone comes from [physics])"
             )
-        return config_from_section(cls, section, where, internal=("prior",))
+        return super().from_dict(section, where)
 
 
 # ----------------------------------------------- [identify.refine] and [identify.auto]

@@ -37,14 +37,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
-from scipy.signal import welch
 
+from debist import metrics
 from debist.errors import WorkflowError
 from debist.model.basis import RBFBasis
 from debist.model.terms import RBF_TERMS
 from debist.model.termtable import input_map
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
+signal = lazy.load("scipy.signal", suppress_warning=True)
 
 if TYPE_CHECKING:  # the fit module may import this one
     from debist.identify.fit import Record
@@ -274,7 +278,8 @@ def check_excitation(
 
     Examples
     --------
-    >>> from debist.identify import RBFBasis, Record
+    >>> from debist.identify.fit import Record
+    >>> from debist.model.basis import RBFBasis
     >>> t = np.arange(0, 20.0, 0.01)
     >>> q = 0.01 * np.sin(2 * np.pi * 1.5 * t)
     >>> v = np.full((t.size, 1), 100.0)
@@ -300,7 +305,7 @@ def check_excitation(
     hv = input_map(v, input_map_kind)
     slow = np.concatenate([quasi_static(r.q_dot, fast_factor) for r in records])
 
-    rms = float(np.sqrt(np.mean(q_dot**2))) if q_dot.size else 0.0
+    rms = metrics.rms(q_dot) if q_dot.size else 0.0
     masks = {"total": np.ones(q.size, dtype=bool), "moving": np.abs(q_dot) > moving_fraction * rms}
     masks["quasi_static"] = slow
     hmax = np.abs(hv).max(axis=0) if hv.size else np.zeros(n_inputs)
@@ -579,7 +584,7 @@ def _lines(x, fs, nperseg, power_fraction, line_bins) -> dict:
     if x.size < _MIN_SPECTRUM or not np.ptp(x) > 0:
         return out
     seg = min(x.size, int(nperseg) if nperseg else _default_nperseg(x.size))
-    f, p = welch(x, fs=fs, window="hann", nperseg=seg, detrend="constant")
+    f, p = signal.welch(x, fs=fs, window="hann", nperseg=seg, detrend="constant")
     f, p = f[1:], p[1:]
     out["df"] = fs / seg
     total = float(p.sum())

@@ -17,6 +17,7 @@ from debist.identify.regularise import (
     gcv_lambda,
     smoothness_operator,
 )
+from debist.metrics import rms
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states, friction_state
 from debist.model.rbf import RBFModel
@@ -335,7 +336,7 @@ def fit_rbf_model(
         rank=rank,
         condition=cond,
         singular_values=S,
-        residual_rms=float(np.sqrt(np.mean(resid**2))),
+        residual_rms=rms(resid),
         fit_r2=float(1.0 - np.sum(resid**2) / np.sum((y - y.mean()) ** 2)),
         support=support,
         T_z_trace=trace,

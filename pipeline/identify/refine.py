@@ -26,8 +26,8 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import lazy_loader as lazy
 import numpy as np
-from scipy.optimize import least_squares
 
 from debist.engine import preflight, progress
 from debist.errors import WorkflowError
@@ -41,6 +41,9 @@ from debist.model.termtable import TableModel
 from debist.simulate.freerun import check_free_run, prepare_inputs, simulate
 from debist.simulate.kernel import free_run_sensitivity
 from debist.simulate.prediction import restarted_runs
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+optimize = lazy.load("scipy.optimize", suppress_warning=True)
 
 
 @dataclass(frozen=True)
@@ -208,7 +211,7 @@ def refine_model(
     Parameters
     ----------
     model : RBFModel
-        The least-squares model of :func:`debist.identify.fit_rbf_model`.
+        The least-squares model of :func:`debist.identify.fit.fit_rbf_model`.
     diag : FitDiagnostics
         Its diagnostics (parameter vector, column names and norms).
     records : sequence of Record
@@ -317,7 +320,7 @@ def refine_model(
         return evaluate(x)[1]
 
     r0 = fun(x0)
-    sol = least_squares(
+    sol = optimize.least_squares(
         fun,
         x0,
         jac=jac,
@@ -354,8 +357,8 @@ def refine_model(
     return RefineResult(
         model=refined if accepted else model,
         accepted=accepted,
-        window_rms_ls=float(np.sqrt(np.mean(r0**2))),
-        window_rms_refined=float(np.sqrt(np.mean(sol.fun**2))),
+        window_rms_ls=rms(r0),
+        window_rms_refined=rms(sol.fun),
         full_rms_ls=full_ls,
         full_rms_refined=full_ref,
         nfev=int(sol.nfev),

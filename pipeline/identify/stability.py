@@ -49,15 +49,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import quad
-from scipy.optimize import brentq, minimize_scalar
 
 from debist.errors import DebistError
 from debist.model.rbf import RBFModel
 from debist.model.termtable import input_map
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
+integrate = lazy.load("scipy.integrate", suppress_warning=True)
+optimize = lazy.load("scipy.optimize", suppress_warning=True)
 
 __all__ = [
     "EquilibriumPoint",
@@ -242,7 +245,9 @@ def _roots(F: Callable, grid: NDArray[np.float64]) -> list[float]:
     s = np.sign(Fg)
     roots = [float(q) for q in grid[s == 0]]
     for k in np.flatnonzero(s[:-1] * s[1:] < 0):
-        roots.append(brentq(lambda x: float(F(x)[0]), grid[k], grid[k + 1], xtol=1e-14, rtol=1e-13))
+        roots.append(
+            optimize.brentq(lambda x: float(F(x)[0]), grid[k], grid[k + 1], xtol=1e-14, rtol=1e-13)
+        )
     return sorted(roots)
 
 
@@ -305,7 +310,7 @@ def equilibria(
             return float(F(x)[0])
 
         def energy(j: int, n: int, scalar=scalar, qa=qa) -> float:
-            return float(quad(scalar, qa[j], qa[n], limit=200)[0])
+            return float(integrate.quad(scalar, qa[j], qa[n], limit=200)[0])
 
         barrier = _barriers(q, wells, energy)
         for j in range(len(q)):
@@ -576,7 +581,9 @@ def _switching(
     for v in vs[1:]:
         if ind(float(v)) < 0:
             # in v^2 the indicator is near linear (exactly for h = v^2 and constant g)
-            w = brentq(lambda w: ind(np.sqrt(w)), prev**2, float(v) ** 2, xtol=2 * xtol * v)
+            w = optimize.brentq(
+                lambda w: ind(np.sqrt(w)), prev**2, float(v) ** 2, xtol=2 * xtol * v
+            )
             v_sw = float(np.sqrt(w))
             q_fold = indicator(v_sw, push, q_w, q_s)[1]
             return SwitchingVoltage(input_, float(v_sw), q_w, q_s, float(q_fold), True, "")
@@ -664,7 +671,7 @@ def switching_voltages(
             sub = np.linspace(a, b, max(3, int(n_grid * (b - a) / (hi - lo))))
             Fs = push * F(sub)
             k = int(np.argmax(Fs))
-            r = minimize_scalar(
+            r = optimize.minimize_scalar(
                 lambda x: -push * float(F(x)[0]),
                 bounds=(sub[max(k - 1, 0)], sub[min(k + 1, sub.size - 1)]),
                 method="bounded",

@@ -27,8 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.errors import RigLogError
 from debist.ingest.channels import Mapped
@@ -49,6 +49,9 @@ from debist.ingest.resample import resample_segment, uniform_grid
 from debist.ingest.spec import IngestSpec, ResampleSpec
 from debist.ingest.units import lookup_unit
 from debist.ingest.validity import cut_faults, fault_mask
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["Segment", "assemble", "to_frame"]
 

@@ -63,7 +63,7 @@ class RawLogCache:
     Parameters
     ----------
     reader : callable
-        ``reader(path, spec) -> RawLog``, e.g. :func:`debist.ingest.read_raw`.
+        ``reader(path, spec) -> RawLog``, e.g. :func:`debist.ingest.load.read_raw`.
     sources : iterable of path-like, optional
         Every source the stage will read, one entry per data set: a log is dropped from
         memory after its last use. Without it logs are kept until the cache is dropped.

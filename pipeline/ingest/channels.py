@@ -14,8 +14,8 @@ import re
 import warnings
 from dataclasses import dataclass
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.errors import RigLogError, UnitMismatchWarning
 from debist.ingest.checks import printed_resolution
@@ -28,6 +28,9 @@ from debist.ingest.units import (
     lookup_unit,
     role_quantities,
 )
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["Column", "Mapped", "map_channels", "select_channel", "to_float"]
 

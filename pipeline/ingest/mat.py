@@ -44,13 +44,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import scipy.io
 
 from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
 from debist.errors import DebistError, RigLogError
 from debist.ingest.mat73 import load_mat73
 from debist.ingest.raw import RawChannel, RawLog
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+sio = lazy.load("scipy.io", suppress_warning=True)
 
 __all__ = ["check_declared", "interpret_mat", "read_mat"]
 
@@ -249,7 +252,7 @@ def check_declared(path: Path, fmt: str) -> int:
     SciPy, ``scipy.io.whosmat`` (variable headers without the data); RFC 1951 (deflate's
     largest expansion).
     """
-    listing = scipy.io.whosmat(path)
+    listing = sio.whosmat(path)
     sizes = [
         (int(np.prod(shape, dtype=object)) * _CLASS_BYTES.get(cls, 0), name, shape, cls)
         for name, shape, cls in listing
@@ -307,7 +310,7 @@ def read_mat(path: Path, fmt: str) -> RawLog:
             variables = load_mat73(path)
         else:
             check_declared(path, fmt)
-            variables = scipy.io.loadmat(path, simplify_cells=True)
+            variables = sio.loadmat(path, simplify_cells=True)
     except DebistError:
         raise
     except Exception as exc:

@@ -52,11 +52,14 @@ import os
 from pathlib import Path
 from typing import Any
 
-import h5py
+import lazy_loader as lazy
 import numpy as np
 
 from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
 from debist.errors import RigLogError
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+h5py = lazy.load("h5py")
 
 __all__ = ["MAX_OBJECTS", "load_mat73"]
 

@@ -10,13 +10,15 @@ declare the unit ``s``.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from debist.errors import RigLogError
 from debist.ingest.raw import RawChannel, RawLog
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 __all__ = ["read_parquet"]
 
@@ -52,6 +54,9 @@ def read_parquet(path: Path) -> RawLog:
         pyarrow cannot read the file (truncated footer, corrupt pages); its message is
         quoted and the exception chained.
     """
+    import pyarrow as pa  # here, not at the top: pyarrow takes 0.15 s to load
+    import pyarrow.parquet as pq
+
     try:
         table = pq.read_table(path)
         channels = tuple(_channel(field, table.column(i)) for i, field in enumerate(table.schema))

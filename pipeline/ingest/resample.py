@@ -18,7 +18,7 @@ Two methods (key ``resample.method``):
     :func:`numpy.interp` on the new grid. No anti-aliasing: use it for upsampling, for
     jittery time bases, or with a target step much shorter than the signal's time scales.
 
-Resampling never crosses a gap: :func:`debist.ingest.load_rig_log` calls it once per
+Resampling never crosses a gap: :func:`debist.ingest.load.load_rig_log` calls it once per
 gap-free segment. The new grid starts at the segment's first time and ends at or before
 its last.
 """

@@ -444,7 +444,7 @@ _INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
 
 @pydantic.dataclasses.dataclass(frozen=True, config=_INGEST_CONFIG)
 class IngestSpec:
-    """Frozen configuration of :func:`debist.ingest.load_rig_log`.
+    """Frozen configuration of :func:`debist.ingest.load.load_rig_log`.
 
     Parameters
     ----------

@@ -46,11 +46,14 @@ import re
 from collections import Counter
 from pathlib import Path
 
-import pandas as pd
+import lazy_loader as lazy
 
 from debist.errors import RigLogError
 from debist.ingest.detect import is_gzip, open_binary
 from debist.ingest.raw import RawChannel, RawLog
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = [
     "TAIL_LINES",

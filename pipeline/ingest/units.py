@@ -26,10 +26,15 @@ definitions and parser); BIPM, "The International System of Units (SI)", 9th edi
 from __future__ import annotations
 
 import functools
+import hashlib
 import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
 from typing import TYPE_CHECKING
+
+from debist.engine import cache as user_cache
 
 if TYPE_CHECKING:
     import pint
@@ -43,6 +48,7 @@ __all__ = [
     "canonical_unit",
     "describe_quantities",
     "lookup_unit",
+    "pretty_unit",
     "registry",
     "role_quantities",
     "si_symbol",
@@ -127,16 +133,22 @@ def registry() -> pint.UnitRegistry:
     Returns
     -------
     pint.UnitRegistry
-        The default definitions; importing pint costs about a second, so it is loaded
-        only when a unit is looked up.
+        The default definitions. Importing pint takes about 0.25 s, so it is loaded only
+        when a unit is looked up; its parsed definitions are kept in the user cache
+        (:func:`debist.engine.cache.cache_dir`, pint's own disk cache), which saves another
+        0.2 s. A cache that cannot be created or read is passed over: the definitions are
+        parsed again.
 
     References
     ----------
-    pint, ``UnitRegistry`` (https://pint.readthedocs.io).
+    pint, ``UnitRegistry`` and its ``cache_folder`` (https://pint.readthedocs.io).
     """
-    import pint
+    import pint  # here, not at the top: only a unit lookup needs pint
 
-    return pint.UnitRegistry()
+    try:
+        return pint.UnitRegistry(cache_folder=user_cache.cache_dir() / "pint")
+    except Exception:
+        return pint.UnitRegistry()
 
 
 def canonical_unit(symbol: str) -> str:
@@ -215,7 +227,9 @@ def lookup_unit(symbol: str) -> Unit | None:
     Unit or None
         Factor to SI, SI symbol and quantity; None for text pint does not parse as a
         unit, a number (``"2 mm"``), an empty string, or a unit with an offset to SI
-        (``"degC"``).
+        (``"degC"``). pint's answer for each symbol is remembered in the user cache
+        (:mod:`debist.engine.cache`) under pint's version and this module's source, so a
+        workflow loads without importing pint (0.25 s) once its units have been seen.
 
     Examples
     --------
@@ -226,6 +240,108 @@ def lookup_unit(symbol: str) -> Unit | None:
     >>> lookup_unit("bananas") is None, lookup_unit("degC") is None
     (True, True)
     """
+    key = canonical_unit(symbol)
+    known = _answers("lookup")
+    if key in known:
+        found = known[key]
+        return None if found is None else Unit(key, *found)
+    unit = _pint_unit(symbol)
+    _remember("lookup", key, None if unit is None else [unit.factor, unit.si, unit.quantity])
+    return unit
+
+
+def pretty_unit(expression: str) -> str:
+    """Simplify a unit expression with pint and write it as the reports do.
+
+    Parameters
+    ----------
+    expression : str
+        Any unit expression pint parses (``"(m/s**2)/m"``).
+
+    Returns
+    -------
+    str
+        The simplified unit, products with a blank and powers with ``^`` (``"1/s^2"``,
+        ``"N s/m"``); ``"1"`` for a dimensionless one. Remembered in the user cache like
+        :func:`lookup_unit`.
+
+    Raises
+    ------
+    pint.errors.UndefinedUnitError
+        If pint does not know a unit of the expression.
+
+    References
+    ----------
+    pint, unit formatting (https://pint.readthedocs.io).
+
+    Examples
+    --------
+    >>> pretty_unit("(m/s**2)/m"), pretty_unit("N*s/m"), pretty_unit("m/m")
+    ('1/s^2', 'N s/m', '1')
+    """
+    known = _answers("pretty")
+    if isinstance(known.get(expression), str):
+        return known[expression]
+    unit = registry().parse_units(expression.replace("^", "**"))
+    text = format(unit, "~C").replace("**", "^").replace("*", " ") or "1"
+    _remember("pretty", expression, text)
+    return text
+
+
+#: The file in the user cache that remembers pint's answers (:func:`lookup_unit`,
+#: :func:`pretty_unit`); a stamp of pint's version and this module's source guards it.
+_ANSWERS_FILE = "units-v1.json"
+
+
+def _valid_lookup(value: object) -> bool:
+    return value is None or (
+        isinstance(value, list)
+        and len(value) == 3
+        and isinstance(value[0], float)
+        and isinstance(value[1], str)
+        and isinstance(value[2], str)
+    )
+
+
+#: The answers of each kind, and how a remembered answer must look to be used.
+_KINDS = {"lookup": _valid_lookup, "pretty": lambda value: isinstance(value, str)}
+
+
+@functools.cache
+def _stamp() -> str:
+    """Return what pint's answers depend on: pint's version and this module's source."""
+    source = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+    try:
+        return f"pint {metadata.version('pint')} units.py {source}"
+    except metadata.PackageNotFoundError:
+        return f"pint absent units.py {source}"
+
+
+@functools.cache
+def _all_answers() -> dict[str, dict[str, object]]:
+    """Kind -> expression -> pint's answer, as remembered from earlier runs."""
+    found = user_cache.read_json(_ANSWERS_FILE)
+    if not isinstance(found, dict) or found.get("stamp") != _stamp():
+        found = {}
+    answers: dict[str, dict[str, object]] = {}
+    for kind, valid in _KINDS.items():
+        given = found.get(kind)
+        given = given if isinstance(given, dict) else {}
+        answers[kind] = {k: v for k, v in given.items() if valid(v)}
+    return answers
+
+
+def _answers(kind: str) -> dict[str, object]:
+    return _all_answers()[kind]
+
+
+def _remember(kind: str, expression: str, answer: object) -> None:
+    _all_answers()[kind][expression] = answer
+    user_cache.write_json(_ANSWERS_FILE, {"stamp": _stamp(), **_all_answers()})
+
+
+def _pint_unit(symbol: str) -> Unit | None:
+    """Ask pint (:func:`lookup_unit` without the user cache)."""
     unit = _parse(symbol)
     if unit is None:
         return None

@@ -35,19 +35,22 @@ from __future__ import annotations
 import functools
 import itertools
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 import pydantic
 from pydantic import Field, PositiveInt
 
 from debist.errors import DebistWarning, IdentificationError
 from debist.metrics import nrmse
 from debist.model.termtable import input_map as apply_input_map
-from debist.workflow.config import CONFIG, AsTuple, config_from_section
+from debist.workflow.config import CONFIG, AsTuple, SectionConfig
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["NARX_MISSING", "NarxConfig", "NarxModel", "fit_narx", "narx_available"]
 
@@ -56,7 +59,7 @@ NARX_MISSING = "not available (pip install 'debist[narx]')"
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class NarxConfig:
+class NarxConfig(SectionConfig):
     """Settings of the NARX peer (the workflow's ``[compare.narx]`` table).
 
     Parameters
@@ -84,6 +87,8 @@ class NarxConfig:
     Billings 2013, Ch. 3; Lacerda et al. 2020 (SysIdentPy ``FROLS``).
     """
 
+    SECTION: ClassVar[str] = "[compare.narx]"
+
     enabled: bool = True
     degree: Annotated[tuple[Annotated[int, Field(ge=1, le=4)], ...], AsTuple] = (2, 3)
     lags: Annotated[tuple[Annotated[int, Field(ge=1, le=10)], ...], AsTuple] = (2, 3)
@@ -92,22 +97,6 @@ class NarxConfig:
     n_info_values: PositiveInt = 40
     holdout: Annotated[float, Field(gt=0.0, lt=0.9)] = 0.25
     max_samples: Annotated[int, Field(ge=100)] = 20000
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any] | None, where: str = "[compare.narx]"):
-        """Build the settings from a workflow table (missing keys take the defaults).
-
-        Raises
-        ------
-        WorkflowError
-            Naming an unknown key or a wrong value: ``[compare.narx] key: expected ...``.
-
-        Examples
-        --------
-        >>> NarxConfig.from_dict({"lags": [1, 2]}).lags
-        (1, 2)
-        """
-        return config_from_section(cls, {} if section is None else section, where)
 
 
 def _sysidentpy():
@@ -177,7 +166,7 @@ class NarxModel:
     q_std: float
     h_scale: np.ndarray
     q_limit: float
-    candidates: pd.DataFrame = field(default_factory=pd.DataFrame)
+    candidates: pd.DataFrame = field(default_factory=lambda: pd.DataFrame())
 
     @property
     def n_params(self) -> int:

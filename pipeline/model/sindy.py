@@ -29,7 +29,7 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import pydantic
@@ -38,13 +38,13 @@ from pydantic import NonNegativeFloat, PositiveInt
 from debist.engine.preflight import check_memory, sindy_bytes
 from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
 from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
-from debist.workflow.config import CONFIG, config_from_section
+from debist.workflow.config import CONFIG, SectionConfig
 
 OPTIMIZERS = ("STLSQ", "SR3")
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class SindyConfig:
+class SindyConfig(SectionConfig):
     """Hyper-parameters of the SINDy baseline (the workflow's ``[compare]`` section).
 
     Parameters
@@ -87,6 +87,8 @@ class SindyConfig:
     Brunton, Proctor & Kutz 2016, PNAS, Sec. "Sparse regression" (STLSQ).
     """
 
+    SECTION: ClassVar[str] = "[compare]"
+
     degree: PositiveInt = 3
     input_terms: bool = True
     optimizer: Literal["STLSQ", "SR3"] = "STLSQ"
@@ -94,36 +96,6 @@ class SindyConfig:
     alpha: NonNegativeFloat = 1e-10
     input_map: Literal["v2", "v"] = "v2"
     normalize_columns: bool = True
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any] | None, where: str = "[compare]") -> SindyConfig:
-        """Build the configuration from a workflow section.
-
-        Parameters
-        ----------
-        section : mapping or None
-            Keys are the field names; missing keys take the defaults.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        SindyConfig
-
-        Raises
-        ------
-        WorkflowError
-            Naming an unknown key (with a suggestion), or a field with a wrong type or
-            value: ``[compare] key: expected ..., got ...``.
-
-        Examples
-        --------
-        >>> SindyConfig.from_dict({"degre": 2})  # doctest: +ELLIPSIS
-        Traceback (most recent call last):
-        ...
-        debist.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
-        """
-        return config_from_section(cls, {} if section is None else section, where)
 
 
 @dataclass(frozen=True)

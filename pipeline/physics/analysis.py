@@ -13,14 +13,12 @@ Masoud & Maas 2025, Section 3, Fig. 3-7.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-import pydantic
-from pydantic import Field, PositiveFloat
 
+from debist.physics.config import AnalyzeConfig
 from debist.physics.dynamics import ModeAnalysis, mode_analysis
 from debist.physics.params import PrototypeParams
 from debist.physics.prestrain import PrestrainSweep, prestrain_sweep
@@ -32,90 +30,8 @@ from debist.physics.reduced import (
     switching_profile,
 )
 from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
-from debist.workflow.config import CONFIG, ConfigValueError, Interval, config_from_section
 
 __all__ = ["Analysis", "AnalyzeConfig", "analysis_figures", "analysis_tree", "run_analysis"]
-
-
-@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class AnalyzeConfig:
-    """Settings of the design analysis (the workflow's ``[analyze]`` section).
-
-    Parameters
-    ----------
-    b_range : tuple of float
-        Range of the pre-strain sweep (Fig. 3) [m]; default ``[b_max - 12.5 mm, b_max]``
-        (``None``). The paper plots [20, 30] mm; the default extends it so that both
-        bifurcation points (``z_b,min``, ``z_b,max``) fall inside.
-    n_b : int
-        Screw positions in the sweep, ``>= 2``.
-    q_max : float
-        Half width of the force-displacement and capacitance curves (Fig. 4, 5) [m].
-    n_q : int
-        Points of those curves, ``>= 2``.
-    t_end : float
-        Duration of the full vs reduced simulation (Fig. 7) [s].
-    left, right : tuple of float
-        On/off times of the 3 kV steps on DE 1 and DE 2 in that simulation [s].
-    degree : int
-        Polynomial degree of ``q_m(q)`` of the reduced model (Eq. 24), ``>= 2``.
-
-    Raises
-    ------
-    pydantic.ValidationError
-        On a range that is empty or not increasing, a non-positive count or duration, a
-        step after ``t_end`` or a value of the wrong type (a ``ValueError``;
-        :meth:`from_dict` raises a ``WorkflowError`` naming the key).
-
-    References
-    ----------
-    Masoud & Maas 2025, Fig. 3-7.
-    """
-
-    b_range: Interval | None = None
-    n_b: Annotated[int, Field(ge=2)] = 101
-    q_max: PositiveFloat = 15e-3
-    n_q: Annotated[int, Field(ge=2)] = 121
-    t_end: PositiveFloat = 5.0
-    left: Interval = (0.5, 1.5)
-    right: Interval = (2.5, 3.5)
-    degree: Annotated[int, Field(ge=2)] = 30
-
-    def __post_init__(self) -> None:
-        if self.right[1] > self.t_end:
-            raise ConfigValueError(
-                "right", f"steps that end by t_end = {self.t_end} [s]", list(self.right)
-            )
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any], where: str = "[analyze]") -> AnalyzeConfig:
-        """Build from the workflow's ``[analyze]`` section.
-
-        Parameters
-        ----------
-        section : mapping
-            The table; missing keys take the defaults.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        AnalyzeConfig
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key (with a suggestion) or an invalid value:
-            ``[analyze] key: expected ..., got ...``.
-
-        Examples
-        --------
-        >>> AnalyzeConfig.from_dict({"n_b": 1})
-        Traceback (most recent call last):
-        ...
-        debist.errors.WorkflowError: [analyze] n_b: expected an integer >= 2, got 1
-        """
-        return config_from_section(cls, section, where)
 
 
 @dataclass(frozen=True)

@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import functools
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
 
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import ReducedModel, fit_reduced
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+interpolate = lazy.load("scipy.interpolate", suppress_warning=True)
 
 __all__ = ["AnalyticalModel", "analytical_model"]
 
@@ -59,7 +62,9 @@ class AnalyticalModel:
         self.q_range = model.q_range
         q = np.linspace(*model.q_range, n_grid)
         cur = model.curves(q)
-        self._spl = CubicSpline(q, np.stack([getattr(cur, name) for name in _CURVES], axis=1))
+        self._spl = interpolate.CubicSpline(
+            q, np.stack([getattr(cur, name) for name in _CURVES], axis=1)
+        )
         p = model.params
         self._relax = p.Y_MW / p.eta_MW if p.eta_MW > 0 else 0.0
         self._kbar = p.V_DE * p.Y_MW

@@ -22,12 +22,12 @@ element based on dielectric elastomer. Front. Robot. AI 12. Table 1, Eq. 9, Eq. 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from typing import ClassVar
 
 import pydantic
 from pydantic import FiniteFloat, NonNegativeFloat, PositiveFloat
 
-from debist.workflow.config import CONFIG, config_from_section
+from debist.workflow.config import CONFIG, SectionConfig
 
 __all__ = ["V_MAX", "PrototypeParams"]
 
@@ -36,7 +36,7 @@ V_MAX = 3.0e3
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class PrototypeParams:
+class PrototypeParams(SectionConfig):
     """Geometry and material parameters of the bistable DE actuator, SI units.
 
     Parameters
@@ -130,6 +130,8 @@ class PrototypeParams:
     5.26
     """
 
+    SECTION: ClassVar[str] = "[physics]"
+
     epsilon_0: PositiveFloat = 8.854e-12
     epsilon_r: PositiveFloat = 2.8
     n: PositiveFloat = 8.0
@@ -178,48 +180,6 @@ class PrototypeParams:
         Masoud & Maas 2025, Table 1; docs/interpretation.md items 2-4.
         """
         return cls()
-
-    @classmethod
-    def from_dict(
-        cls, section: Mapping[str, object], where: str | Callable[[str], str] = "[physics]"
-    ) -> PrototypeParams:
-        """Build parameters from a workflow section (e.g. the ``[physics]`` table of a TOML file).
-
-        Keys are the field names of this class, values are in SI units. Keys that are not
-        given keep their :meth:`paper` value.
-
-        Parameters
-        ----------
-        section : Mapping[str, object]
-            Parameter name -> value [SI].
-        where : str or callable, optional
-            The workflow table (or a function of the key giving it), for the messages.
-
-        Returns
-        -------
-        PrototypeParams
-            The parameters.
-
-        Raises
-        ------
-        WorkflowError
-            If a key is not a parameter name (with a suggestion), or a value is not a
-            finite (positive) number: ``[physics] key: expected ..., got ...``.
-
-        References
-        ----------
-        Masoud & Maas 2025, Table 1.
-
-        Examples
-        --------
-        >>> PrototypeParams.from_dict({"b": 0.024}).b
-        0.024
-        >>> PrototypeParams.from_dict({"b": -0.024})
-        Traceback (most recent call last):
-        ...
-        debist.errors.WorkflowError: [physics] b: expected a number > 0, got -0.024
-        """
-        return config_from_section(cls, section, where)
 
     def to_dict(self) -> dict[str, float]:
         """Return the parameters as a flat dict [SI], the inverse of :meth:`from_dict`.

@@ -17,9 +17,9 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq, minimize_scalar
 
 from debist.errors import ConvergenceWarning
 from debist.physics.energy import potential
@@ -37,6 +37,9 @@ from debist.physics.statics import (
     _solve_batch,
     solve_equilibrium,
 )
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+optimize = lazy.load("scipy.optimize", suppress_warning=True)
 
 __all__ = [
     "PrestrainSweep",
@@ -117,7 +120,7 @@ def pitchfork_zb(
             f"pitchfork_zb: the smallest Hessian eigenvalue of the straight beam does not change "
             f"sign over `b_bracket`={b_bracket} m (values {f_lo:.3g}, {f_hi:.3g} N/m)"
         )
-    b_crit = brentq(lam_min, lo, hi, xtol=1e-10)
+    b_crit = optimize.brentq(lam_min, lo, hi, xtol=1e-10)
     return params.b_max - b_crit
 
 
@@ -136,7 +139,7 @@ def _left_max(params, q, y_row, b, v):
         cache["y"] = yq
         return -float(potential(qmq, params, b=b, v1=v).grad[0] / params.l**2)
 
-    r = minimize_scalar(
+    r = optimize.minimize_scalar(
         neg_F, bounds=(q[k - 1], q[k + 1]), method="bounded", options={"xatol": 1e-9}
     )
     return max(-float(r.fun), float(F[k])), ys
@@ -204,7 +207,7 @@ def switching_limit_zb(
                     f"b={hi} m (upper end of `b_range`)"
                 )
             y_prev = prev[1]
-            b_sw = brentq(
+            b_sw = optimize.brentq(
                 lambda bb, y_prev=y_prev: _left_max(params, q, y_prev, bb, v)[0],
                 b,
                 prev[0],

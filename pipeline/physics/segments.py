@@ -29,11 +29,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import ODEintWarning, odeint, solve_ivp
 
 from debist.engine import progress
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+integrate = lazy.load("scipy.integrate", suppress_warning=True)
 
 __all__ = ["ODEINT", "SegmentedSolution", "solve_segments"]
 
@@ -82,7 +85,7 @@ class _Segment(NamedTuple):
 
 def _ivp_segment(fun, span, x, t_out, options) -> _Segment:
     """Integrate one segment with :func:`scipy.integrate.solve_ivp`."""
-    sol = solve_ivp(fun, span, x, t_eval=t_out, **options)
+    sol = integrate.solve_ivp(fun, span, x, t_eval=t_out, **options)
     return _Segment(sol.y.T, bool(sol.success), sol.message, sol.nfev, sol.njev)
 
 
@@ -110,8 +113,8 @@ def _odeint_segment(fun, span, x, t_out, options) -> _Segment:
     if tt.size == 1:  # output at the start only
         return _Segment(np.asarray(x, dtype=float)[None, :], True, "Integration successful.", 0, 0)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ODEintWarning)
-        y, info = odeint(
+        warnings.simplefilter("ignore", integrate.ODEintWarning)
+        y, info = integrate.odeint(
             fun, x, tt, Dfun=jac, tfirst=True, full_output=True, tcrit=np.array([c]), **kw
         )
     slack = 1e-10 * max(abs(a), abs(c), c - a)  # LSODA stops within roundoff of tcrit

@@ -18,8 +18,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = [
     "MODEL_STYLES",

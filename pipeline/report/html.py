@@ -24,8 +24,6 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
-import pydantic
-from pydantic import PositiveFloat
 
 from debist.engine.fileformats import atomic_write
 from debist.errors import ArtifactError
@@ -38,7 +36,7 @@ from debist.report.tables import (
     switching_word,
     verdict,
 )
-from debist.workflow.config import CONFIG, config_from_section
+from debist.workflow.sections import ReportConfig
 
 __all__ = [
     "FIGURE_GROUPS",
@@ -83,61 +81,6 @@ SECTIONS = (
 )
 #: Figure groups of :func:`render_report`, each shown in its section.
 FIGURE_GROUPS = ("excitation", "free_run", "identify", "study", "analyze")
-
-
-@pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class ReportConfig:
-    """The ``[report]`` workflow section (an empty table takes the defaults).
-
-    Parameters
-    ----------
-    zoom_window : float
-        Length of the zoom on the most dynamic part of each free run (Fig. 13): the window
-        of this length whose acceleration ``q_ddot`` has the largest RMS [s].
-
-    Raises
-    ------
-    pydantic.ValidationError
-        On a non-positive or non-numeric value (:meth:`from_dict` raises a
-        ``WorkflowError`` naming the key instead).
-
-    References
-    ----------
-    Masoud & Maas 2025, Fig. 13.
-    """
-
-    zoom_window: PositiveFloat = 2.0
-
-    @classmethod
-    def from_dict(cls, section: Mapping[str, Any], where: str = "[report]") -> ReportConfig:
-        """Build from the workflow's ``[report]`` section.
-
-        Parameters
-        ----------
-        section : mapping
-            The table; missing keys take the defaults.
-        where : str, optional
-            The workflow table, for the messages.
-
-        Returns
-        -------
-        ReportConfig
-
-        Raises
-        ------
-        WorkflowError
-            On an unknown key or an invalid value: ``[report] key: expected ..., got ...``.
-
-        Examples
-        --------
-        >>> ReportConfig.from_dict({}).zoom_window
-        2.0
-        >>> ReportConfig.from_dict({"zoom_window": 0})
-        Traceback (most recent call last):
-        ...
-        debist.errors.WorkflowError: [report] zoom_window: expected a number > 0, got 0
-        """
-        return config_from_section(cls, section, where)
 
 
 #: The tables' style of the report and the batch index: one place (wide tables scroll with an

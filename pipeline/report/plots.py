@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.report.figures import dynamic_window
 from debist.report.tables import de_inputs
 from debist.validate import report_factor
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 
 def free_run_figure(

@@ -9,8 +9,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["WINDOW_SAMPLES", "alpha_figure", "autotune_figure", "grid_figure"]
 

@@ -14,7 +14,7 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
-from debist.ingest.units import lookup_unit, registry
+from debist.ingest.units import lookup_unit, pretty_unit
 
 #: How identified quantities are labelled in reports (summary key -> label). The backbone's
 #: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the
@@ -41,29 +41,6 @@ _DIMENSIONS = {
     "s_c": "1",
     "s_d": "1",
 }
-
-
-def pretty_unit(expression: str) -> str:
-    """Simplify a unit expression with pint and write it as the reports do.
-
-    Parameters
-    ----------
-    expression : str
-        Any unit expression pint parses (``"(m/s**2)/m"``).
-
-    Returns
-    -------
-    str
-        The simplified unit, products with a blank and powers with ``^`` (``"1/s^2"``,
-        ``"N s/m"``); ``"1"`` for a dimensionless one.
-
-    References
-    ----------
-    pint, unit formatting (https://pint.readthedocs.io).
-    """
-    unit = registry().parse_units(expression.replace("^", "**"))
-    text = format(unit, "~C").replace("**", "^").replace("*", " ")
-    return text or "1"
 
 
 def summary_units(summary: dict[str, Any]) -> dict[str, Any]:

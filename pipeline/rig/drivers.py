@@ -15,11 +15,14 @@ from __future__ import annotations
 
 import math
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import lfilter
 
 from debist.physics.params import V_MAX
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+signal = lazy.load("scipy.signal", suppress_warning=True)
 
 __all__ = ["DriverOutput", "uniform_grid"]
 
@@ -147,7 +150,7 @@ class DriverOutput:
                 k += 1
                 continue
             m = min(n - k, block)
-            y = lfilter([1.0 - a], [1.0, -a], r[k : k + m], zi=[a * v[k]])[0]
+            y = signal.lfilter([1.0 - a], [1.0, -a], r[k : k + m], zi=[a * v[k]])[0]
             # interval k + j (j >= 1) starts at v_{k+j} = y[j - 1]
             bad = np.flatnonzero(np.abs(r[k + 1 : k + m] - y[: m - 1]) > lim)
             j = int(bad[0]) + 1 if bad.size else m

@@ -53,6 +53,7 @@ Specification", user block and object modification times.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import io
 import os
@@ -62,12 +63,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import h5py
+import lazy_loader as lazy
 import numpy as np
-import scipy.io
 from numpy.typing import ArrayLike, NDArray
 
 from debist.engine.fileformats import atomic_write
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+h5py = lazy.load("h5py")
+sio = lazy.load("scipy.io", suppress_warning=True)
 
 __all__ = ["MAT_VERSIONS", "Channel", "recording", "write_mat", "write_recording"]
 
@@ -76,7 +80,6 @@ MAT_VERSIONS = ("5", "7.3")
 #: Platform written into the MAT header (MATLAB's name for 64-bit Linux).
 _PLATFORM = "GLNXA64"
 _VARIABLE = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}")
-_GROUP_TRACK_TIMES = "track_times" in inspect.signature(h5py.Group.create_group).parameters
 
 
 @dataclass(frozen=True, eq=False)
@@ -302,15 +305,21 @@ def _v5_bytes(variables: Mapping[str, Any], created: str) -> bytes:
     text = _header_text("5", created)
     buf = io.BytesIO()
     converted = {name: _to_v5(value, name) for name, value in variables.items()}
-    scipy.io.savemat(buf, converted, do_compression=True, oned_as="row")
+    sio.savemat(buf, converted, do_compression=True, oned_as="row")
     data = bytearray(buf.getvalue())
     data[:116] = text
     return bytes(data)
 
 
 # --------------------------------------------------------------------------- MAT v7.3
+@functools.cache
+def _group_track_times() -> bool:
+    """Whether this h5py's ``create_group`` takes ``track_times`` (asked once, on first use)."""
+    return "track_times" in inspect.signature(h5py.Group.create_group).parameters
+
+
 def _create_group(parent: h5py.Group, name: str) -> h5py.Group:
-    if _GROUP_TRACK_TIMES:
+    if _group_track_times():
         return parent.create_group(name, track_times=False)
     gcpl = h5py.h5p.create(h5py.h5p.GROUP_CREATE)  # older h5py: no track_times keyword
     gcpl.set_obj_track_times(False)
@@ -463,7 +472,7 @@ def write_recording(
     recording : mapping
         The value of :func:`recording` (``X`` and ``Y`` required, ``Description`` optional).
     version : {"5", "7.3"}
-        MAT file version; :func:`debist.ingest.load_rig_log` reads both alike.
+        MAT file version; :func:`debist.ingest.load.load_rig_log` reads both alike.
     variable : str
         Name of the struct variable, ControlDesk's default ``"Recording1"``.
     created : str

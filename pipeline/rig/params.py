@@ -10,13 +10,18 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import field
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import pydantic
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
 
 from debist.physics.params import PrototypeParams
-from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.workflow.config import (
+    CONFIG,
+    AsTuple,
+    ConfigValueError,
+    SectionConfig,
+)
 
 __all__ = ["RigParams"]
 
@@ -26,7 +31,7 @@ def _default_prototype() -> PrototypeParams:
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
-class RigParams:
+class RigParams(SectionConfig):
     """The simulated prototype and the rig around it, SI units.
 
     Parameters
@@ -100,6 +105,8 @@ class RigParams:
     True
     """
 
+    SECTION: ClassVar[str] = "[rig.plant]"
+
     prototype: PrototypeParams = field(default_factory=_default_prototype)
     model: Literal["full", "reduced"] = "full"
     friction_k: Annotated[tuple[PositiveFloat, ...], AsTuple] = (40.0, 12.0, 4.0)
@@ -133,7 +140,7 @@ class RigParams:
         return float(sum(self.friction_F))
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, object], where: str = "[rig.plant]") -> RigParams:
+    def from_dict(cls, section: Mapping[str, object], where: str | None = None) -> RigParams:
         """Build rig parameters from a workflow section (e.g. the ``[rig.plant]`` table).
 
         Parameters
@@ -144,7 +151,7 @@ class RigParams:
             table the default asymmetric prototype) or a :class:`PrototypeParams`;
             friction tuples may be lists.
         where : str, optional
-            The workflow table, for the messages.
+            The workflow table, for the messages (default ``[rig.plant]``).
 
         Returns
         -------
@@ -164,10 +171,11 @@ class RigParams:
         ...
         debist.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
         """
+        where = cls.SECTION if where is None else where
         if isinstance(section, Mapping) and isinstance(section.get("prototype"), Mapping):
             proto = PrototypeParams.from_dict(section["prototype"], f"{where[:-1]}.prototype]")
             section = {**section, "prototype": proto}
-        return config_from_section(cls, section, where)
+        return super().from_dict(section, where)
 
     def to_dict(self) -> dict[str, object]:
         """Return the parameters as nested plain data [SI], the inverse of :meth:`from_dict`.

@@ -29,13 +29,16 @@ from __future__ import annotations
 import functools
 import math
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline, PPoly
 
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced
 from debist.rig.params import RigParams
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+interpolate = lazy.load("scipy.interpolate", suppress_warning=True)
 
 __all__ = ["CURVES", "ReducedPlant", "reduced_tables", "reduced_true_curves", "truth_attrs"]
 
@@ -50,7 +53,7 @@ N_GRID = 2001
 @functools.lru_cache(maxsize=8)
 def reduced_tables(
     prototype: PrototypeParams, q_max: float = Q_MAX, n_grid: int = N_GRID
-) -> CubicSpline:
+) -> interpolate.CubicSpline:
     """Tabulate the reduced model's curves of a prototype as one cubic spline.
 
     Parameters
@@ -80,7 +83,7 @@ def reduced_tables(
     """
     q = np.linspace(-q_max, q_max, n_grid)
     cur = fit_reduced(prototype, q_max=q_max).curves(q)
-    return CubicSpline(q, np.stack([getattr(cur, name) for name in CURVES], axis=1))
+    return interpolate.CubicSpline(q, np.stack([getattr(cur, name) for name in CURVES], axis=1))
 
 
 class ReducedPlant:
@@ -290,7 +293,7 @@ class ReducedPlant:
         ----------
         Masoud & Maas 2025, Eq. 26 (static equilibria).
         """
-        f = PPoly(self.spline.c[:, :, CURVES.index("f")], self._x, extrapolate=False)
+        f = interpolate.PPoly(self.spline.c[:, :, CURVES.index("f")], self._x, extrapolate=False)
         roots = [r for r in f.roots() if side * r > 1e-6 and f.derivative()(r) > 0.0]
         if not roots:
             raise ValueError(f"no stable equilibrium of the reduced model with sign(q) = {side}")

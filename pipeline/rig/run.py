@@ -24,9 +24,9 @@ import time
 import warnings
 from dataclasses import dataclass
 
+import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import decimate
 
 from debist.errors import DebistWarning
 from debist.physics.params import V_MAX
@@ -37,6 +37,9 @@ from debist.rig.drivers import DriverOutput, uniform_grid
 from debist.rig.params import RigParams
 from debist.rig.plant import RigPlant
 from debist.rig.reduced import ReducedPlant, reduced_true_curves
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+signal = lazy.load("scipy.signal", suppress_warning=True)
 
 __all__ = ["METHODS", "TOLERANCES", "RigRun", "make_plant", "simulate_rig", "true_curves"]
 
@@ -154,7 +157,7 @@ class RigRun:
 
 def _decimate(y: NDArray[np.float64], factor: int) -> NDArray[np.float64]:
     """Zero-phase FIR decimation (Hamming-window sinc, 20 factor + 1 taps)."""
-    return y if factor == 1 else decimate(y, factor, ftype="fir", zero_phase=True)
+    return y if factor == 1 else signal.decimate(y, factor, ftype="fir", zero_phase=True)
 
 
 def simulate_rig(

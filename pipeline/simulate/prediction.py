@@ -31,9 +31,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
-from scipy import stats
 
 from debist.errors import WorkflowError
 from debist.metrics import nrmse
@@ -45,6 +44,10 @@ from debist.simulate.freerun import (
     substeps_needed,
 )
 from debist.validate import DataSet
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
+stats = lazy.load("scipy.stats", suppress_warning=True)
 
 __all__ = [
     "RESIDUAL_CONFIDENCE",

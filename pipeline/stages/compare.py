@@ -15,8 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.datasets import validation_datasets
 from debist.engine import progress
@@ -29,6 +29,9 @@ from debist.records import estimation_records
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
 from debist.validate import ValidateConfig, default_q_limit, score_free_runs, validate_model
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["CompareResult", "execute", "run_compare"]
 

@@ -8,14 +8,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.engine.artifacts import Figure, H5Tree
 from debist.engine.fileformats import REPORT_DPI
-from debist.identify import FitDiagnostics, IdentifyConfig, RBFModel, fit_rbf_model
 from debist.identify.autotune import auto_settings, select_hyperparameters
 from debist.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
+from debist.identify.config import IdentifyConfig
 from debist.identify.design import (
     design_numbers,
     held_levels,
@@ -23,8 +23,10 @@ from debist.identify.design import (
     mark_switching,
 )
 from debist.identify.excitation import check_excitation
+from debist.identify.fit import FitDiagnostics, fit_rbf_model
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
+from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS
 from debist.physics.reduced import reduced_curves
 from debist.physics_stages import physics_mass, physics_prior
@@ -34,6 +36,9 @@ from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
 from debist.validate import report_factor
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["IdentifyResult", "analytical_curves", "diagnostics_tree", "execute", "run_identify"]
 

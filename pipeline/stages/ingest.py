@@ -7,10 +7,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import pandas as pd
+import lazy_loader as lazy
 
-import debist.ingest as ingest
+from debist.ingest.cache import RawLogCache
+from debist.ingest.load import load_rig_log, read_raw
+from debist.ingest.spec import IngestSpec
 from debist.stages import StageInputs, StageOutput
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 if TYPE_CHECKING:
     from debist.workflow.loader import DatasetSpec
@@ -33,7 +38,7 @@ def run_ingest(
         virtual-rig log is recorded as ``"rig:<experiment>"``. Default: the path as read.
 
     Each source file is read once, however many data sets name it
-    (:class:`debist.ingest.RawLogCache`).
+    (:class:`debist.ingest.cache.RawLogCache`).
 
     Returns
     -------
@@ -49,10 +54,10 @@ def run_ingest(
         For an invalid ingest section.
     """
     tables: dict[str, pd.DataFrame] = {}
-    cache = ingest.RawLogCache(ingest.read_raw, [ds.source for ds in datasets])
+    cache = RawLogCache(read_raw, [ds.source for ds in datasets])
     for ds in datasets:
-        spec = ingest.IngestSpec.from_dict(ds.ingest)
-        segments = ingest.load_rig_log(ds.source, spec, cache)
+        spec = IngestSpec.from_dict(ds.ingest)
+        segments = load_rig_log(ds.source, spec, cache)
         for k, frame in enumerate(segments):
             name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
             frame.attrs["role"] = ds.role

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
+import lazy_loader as lazy
 
 from debist.engine import artifacts, outdir
 from debist.engine.fileformats import REPORT_DPI
@@ -40,6 +40,9 @@ from debist.report.html import (
 )
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 __all__ = ["ReportInputs", "ReportResult", "execute", "gather_run", "run_report"]
 

@@ -7,18 +7,21 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
-import pandas as pd
 
 from debist.datasets import validation_datasets
-from debist.identify import RBFModel
 from debist.identify.stability import model_is_stable
+from debist.model.rbf import RBFModel
 from debist.physics_stages import analytical_for
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
+
+# the libraries below load on first use (lazy_loader): start-up of the CLI
+pd = lazy.load("pandas")
 
 #: Free-run columns of ``simulated/<data set>.parquet``; those of the other models validated
 #: beside the RBF model (``analytical``, ``rbf-ls``) carry the model name as a suffix.

@@ -5,7 +5,9 @@ Every stage's configuration is a frozen pydantic dataclass built with :data:`CON
 no ``inf`` or ``nan``). Range constraints are pydantic ``Field`` constraints; rules that
 involve several fields live in ``__post_init__`` and raise :class:`ConfigValueError`.
 :func:`config_from_section` builds one from a workflow section and turns pydantic's
-:class:`~pydantic.ValidationError` into a one-line :class:`~debist.errors.WorkflowError`::
+:class:`~pydantic.ValidationError` into a one-line :class:`~debist.errors.WorkflowError`;
+:class:`SectionConfig` is the one base whose ``from_dict`` does that for a class that names
+its table (``SECTION = "[validate]"``)::
 
     [identify] M: expected an integer, got 'ten'
     [compare] unknown key 'degre'; did you mean 'degree'? (known keys: degree, ...)
@@ -23,7 +25,7 @@ import difflib
 import types
 import typing
 from collections.abc import Callable, Mapping, Sequence
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, ClassVar, Self, TypeVar
 
 import pydantic
 from pydantic import BeforeValidator, ConfigDict, Field
@@ -35,6 +37,7 @@ __all__ = [
     "AsTuple",
     "ConfigValueError",
     "Interval",
+    "SectionConfig",
     "config_from_section",
     "format_validation_error",
     "unknown_key_message",
@@ -437,3 +440,73 @@ def field_names(cls: type, internal: Sequence[str] = ()) -> list[str]:
     if infos is None:
         return [f.name for f in dataclasses.fields(cls) if f.name not in internal]
     return [(i.alias or n) for n, i in infos.items() if n not in internal]
+
+
+class SectionConfig:
+    """Base of the configuration dataclasses of the workflow's tables.
+
+    A subclass is a frozen pydantic dataclass built with :data:`CONFIG` that names its table;
+    :meth:`from_dict` builds it from that table through :func:`config_from_section`, so every
+    table is checked, and its errors worded, by one mechanism.
+
+    Attributes
+    ----------
+    SECTION : str
+        The workflow table, for the messages (e.g. ``"[validate]"``).
+    KNOWN_LABEL : str
+        Introduces the known keys in an unknown-key message.
+    INTERNAL : tuple of str
+        Fields that are not workflow keys: refused in a table, filled by the caller.
+
+    Examples
+    --------
+    >>> @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
+    ... class Demo(SectionConfig):
+    ...     SECTION: ClassVar[str] = "[demo]"
+    ...     n: int = 1
+    >>> Demo.from_dict({"n": 3}).n
+    3
+    >>> Demo.from_dict({"m": 3})
+    Traceback (most recent call last):
+    ...
+    debist.errors.WorkflowError: [demo] unknown key 'm' (known keys: n)
+    """
+
+    SECTION: ClassVar[str] = ""
+    KNOWN_LABEL: ClassVar[str] = "known keys"
+    INTERNAL: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def from_dict(
+        cls,
+        section: Mapping[str, Any] | None,
+        where: str | Callable[[str], str] | None = None,
+    ) -> Self:
+        """Build and check the configuration from its workflow table.
+
+        Parameters
+        ----------
+        section : mapping of str to value or None
+            The table's keys (None or empty: every default).
+        where : str or callable, optional
+            The table's label for the messages, or a function of the key giving it
+            (default :attr:`SECTION`).
+
+        Returns
+        -------
+        SectionConfig
+            An instance of the subclass.
+
+        Raises
+        ------
+        WorkflowError
+            On a table that is not a table, an unknown key (with a suggestion), or an
+            invalid value: ``[section] key: expected ..., got ...``.
+        """
+        return config_from_section(
+            cls,
+            {} if section is None else section,
+            cls.SECTION if where is None else where,
+            known_label=cls.KNOWN_LABEL,
+            internal=cls.INTERNAL,
+        )

@@ -23,11 +23,11 @@ from __future__ import annotations
 import difflib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import Annotated, Any, Literal
 
 import pydantic
 
-from debist.differentiate import CONFIGS
+from debist.differentiate.base import CONFIGS
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.engine import preflight
 from debist.errors import WorkflowError
@@ -38,21 +38,12 @@ from debist.model.narx import NarxConfig
 from debist.model.sindy import SindyConfig
 from debist.model.terms import PHYSICS_TERMS
 from debist.names import check_file_name
-from debist.physics.analysis import AnalyzeConfig
+from debist.physics.config import AnalyzeConfig
 from debist.physics.params import PrototypeParams
-from debist.report.html import ReportConfig
-from debist.rig.experiment import RigConfig
+from debist.rig.config import RigConfig
 from debist.rig.profiles import make_profile
-from debist.studies import StudyConfig
-from debist.validate import ValidateConfig
 from debist.workflow.config import CONFIG, config_from_section, unknown_key_message
-
-if TYPE_CHECKING:  # the modules of optional sections are imported when a workflow has them
-    from debist.model.sindy import SindyConfig
-    from debist.physics.analysis import AnalyzeConfig
-    from debist.report.html import ReportConfig
-    from debist.rig.experiment import RigConfig
-    from debist.studies import StudyConfig
+from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
 
 __all__ = [
     "DATALESS",
@@ -140,7 +131,7 @@ class CheckedWorkflow:
         Each data set with its merged ingest, in file order.
     differentiate : object
         ``[differentiate]``: the config of its ``method`` (see
-        :data:`debist.differentiate.CONFIGS`).
+        :data:`debist.differentiate.base.CONFIGS`).
     identify : IdentifyConfig
         ``[identify]`` (``m_q = "physics"`` stands in as 1 kg: the stage resolves it).
     validate : ValidateConfig
