@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 from scipy import signal
 
-from debist.differentiate import tvregdiff
+from debist.differentiate.tvregdiff import tvregdiff
 
 DT = 0.01
 ITERATIONS = 10
