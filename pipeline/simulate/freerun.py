@@ -20,6 +20,7 @@ import numpy as np
 from debist.engine import preflight
 from debist.engine import progress as _progress
 from debist.errors import WorkflowError
+from debist.simulate import rk4
 
 INTERPOLATIONS = ("bandlimited", "linear")
 #: Free-run engines: the compiled kernel and the NumPy reference.
@@ -405,14 +406,13 @@ def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationR
     for k in range(n - 1):
         for s in range(ns):
             j = (k * ns + s) * 2
-            va, vb, vc = fine[:, j], fine[:, j + 1], fine[:, j + 2]
-            k1, a1 = model.rhs(x, va)
+            k1, a1 = model.rhs(x, fine[:, j + rk4.INPUT_OFFSET[0]])
             if s == 0:
                 acc[:, k] = a1
-            k2, _ = model.rhs(x + 0.5 * h * k1, vb)
-            k3, _ = model.rhs(x + 0.5 * h * k2, vb)
-            k4, _ = model.rhs(x + h * k3, vc)
-            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            k2, _ = model.rhs(rk4.stage_state(x, h, 1, k1), fine[:, j + rk4.INPUT_OFFSET[1]])
+            k3, _ = model.rhs(rk4.stage_state(x, h, 2, k2), fine[:, j + rk4.INPUT_OFFSET[2]])
+            k4, _ = model.rhs(rk4.stage_state(x, h, 3, k3), fine[:, j + rk4.INPUT_OFFSET[3]])
+            x = rk4.advance(x, h, rk4.increment(k1, k2, k3, k4))
         bad = alive & ~(np.isfinite(x).all(axis=1) & (np.abs(x[:, 0]) <= q_limit))
         if bad.any():
             diverged_at[bad] = k + 1

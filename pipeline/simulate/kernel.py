@@ -38,6 +38,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from debist.simulate import rk4
+
 __all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run", "free_run_sensitivity"]
 
 #: Model kinds of the kernel.
@@ -55,6 +57,14 @@ CHUNK = 50_000
 _TINY = 1e-290
 # Layout of a spline model.
 _S_N, _S_P_X, _S_P_C, _S_P_RELAX, _S_P_KBAR, _S_N_LAYOUT = range(6)
+
+
+#: The RK4 step of :mod:`debist.simulate.rk4`, compiled: every kernel path takes the NumPy
+#: engine's step, operation for operation.
+_stage_state = nb.njit(cache=True, inline="always")(rk4.stage_state)
+_increment = nb.njit(cache=True, inline="always")(rk4.increment)
+_advance = nb.njit(cache=True, inline="always")(rk4.advance)
+_INPUT_OFFSET = rk4.INPUT_OFFSET
 
 
 @dataclass(frozen=True)
@@ -596,18 +606,9 @@ def _trajectory(
         for s in range(1 if last else ns):
             j = (k * ns + s) * 2
             for stage in range(1 if last else 4):
-                if stage == 0:
-                    for i in range(S):
-                        xt[i] = x[i]
-                    js = j
-                elif stage == 3:
-                    for i in range(S):
-                        xt[i] = x[i] + h * d[2, i]
-                    js = j + 2
-                else:
-                    for i in range(S):
-                        xt[i] = x[i] + 0.5 * h * d[stage - 1, i]
-                    js = j + 1
+                for i in range(S):
+                    xt[i] = x[i] if stage == 0 else _stage_state(x[i], h, stage, d[stage - 1, i])
+                js = j + _INPUT_OFFSET[stage]
                 if kind == 0:
                     a = _rhs_table(xt, fine, b, js, d, stage, fp, ip, lay, W)
                 else:
@@ -616,8 +617,7 @@ def _trajectory(
                     acc[b, k] = a
             if not last:
                 for i in range(S):
-                    incr = d[0, i] + 2.0 * d[1, i] + 2.0 * d[2, i] + d[3, i]
-                    x[i] = x[i] + (h / 6.0) * incr
+                    x[i] = _advance(x[i], h, _increment(d[0, i], d[1, i], d[2, i], d[3, i]))
         if last:
             break
         ok = abs(x[0]) <= q_limit
@@ -863,11 +863,14 @@ def _lockstep(
         for s in range(ns if stepping else 1):
             j = (k * ns + s) * 2
             for stage in range(4 if stepping else 1):
-                f = 0.0 if stage == 0 else (h if stage == 3 else 0.5 * h)
-                js = j if stage == 0 else (j + 2 if stage == 3 else j + 1)
+                js = j + _INPUT_OFFSET[stage]
                 for i in range(S):
                     for c in range(nb_):
-                        XT[i, c] = X[i, c] if stage == 0 else X[i, c] + f * D[stage - 1, i, c]
+                        XT[i, c] = (
+                            X[i, c]
+                            if stage == 0
+                            else _stage_state(X[i, c], h, stage, D[stage - 1, i, c])
+                        )
                 _rhs_table_lock(XT, fine, bidx, nb_, js, D, stage, fp, ip, lay, work, Ti, wts,
                                 mass, tz)  # fmt: skip
                 if stage == 0 and s == 0:
@@ -877,8 +880,8 @@ def _lockstep(
             if stepping:
                 for i in range(S):
                     for c in range(nb_):
-                        incr = D[0, i, c] + 2.0 * D[1, i, c] + 2.0 * D[2, i, c] + D[3, i, c]
-                        X[i, c] = X[i, c] + (h / 6.0) * incr
+                        incr = _increment(D[0, i, c], D[1, i, c], D[2, i, c], D[3, i, c])
+                        X[i, c] = _advance(X[i, c], h, incr)
         for c in range(nb_):
             b = bidx[c]
             if dead[b] < 0 and k < L[c] - 1:
@@ -937,12 +940,15 @@ def _trajectory_sens(
         for s in range(1 if last else ns):
             j = (k * ns + s) * 2
             for stage in range(1 if last else 4):
-                f = 0.0 if stage == 0 else (h if stage == 3 else 0.5 * h)
-                js = j if stage == 0 else (j + 2 if stage == 3 else j + 1)
+                js = j + _INPUT_OFFSET[stage]
                 for i in range(S):
-                    xt[i] = x[i] if stage == 0 else x[i] + f * d[stage - 1, i]
+                    xt[i] = x[i] if stage == 0 else _stage_state(x[i], h, stage, d[stage - 1, i])
                     for p in range(P):
-                        St[i, p] = Sx[i, p] if stage == 0 else Sx[i, p] + f * dS[stage - 1, i, p]
+                        St[i, p] = (
+                            Sx[i, p]
+                            if stage == 0
+                            else _stage_state(Sx[i, p], h, stage, dS[stage - 1, i, p])
+                        )
                 a = _rhs_table(xt, fine, b, js, d, stage, fp, ip, lay, W)
                 if stage == 0 and s == 0:
                     acc[b, k] = a
@@ -969,11 +975,10 @@ def _trajectory_sens(
                     dS[stage, 2, p_tz] -= (xt[1] - xt[2]) / tz
             if not last:
                 for i in range(S):
-                    incr = d[0, i] + 2.0 * d[1, i] + 2.0 * d[2, i] + d[3, i]
-                    x[i] = x[i] + (h / 6.0) * incr
+                    x[i] = _advance(x[i], h, _increment(d[0, i], d[1, i], d[2, i], d[3, i]))
                     for p in range(P):
-                        sincr = dS[0, i, p] + 2.0 * dS[1, i, p] + 2.0 * dS[2, i, p]
-                        Sx[i, p] = Sx[i, p] + (h / 6.0) * (sincr + dS[3, i, p])
+                        sincr = _increment(dS[0, i, p], dS[1, i, p], dS[2, i, p], dS[3, i, p])
+                        Sx[i, p] = _advance(Sx[i, p], h, sincr)
         if last:
             break
         ok = abs(x[0]) <= q_limit
