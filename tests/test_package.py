@@ -87,3 +87,45 @@ def test_fingerprints_do_not_depend_on_the_source_folders_name(tmp_path, folder)
     shutil.copytree(ROOT / "pipeline", copy, ignore=shutil.ignore_patterns("__pycache__"))
     module = "debist.stages.identify"
     assert code_fingerprint(module, copy) == code_fingerprint(module, ROOT / "pipeline")
+
+
+def test_the_modules_import_each_other_without_cycles():
+    """No import cycle among debist's modules, imports inside functions included."""
+    from debist.engine import fingerprint
+
+    root = fingerprint._ROOT
+    names = []
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root).with_suffix("").parts)
+        names.append(".".join(["debist", *(parts[:-1] if parts[-1] == "__init__" else parts)]))
+    # importing a.b.c runs a and a.b first: that edge from a module to its own packages is not
+    # a cycle (and the packages' __init__ files import none of their modules)
+    graph = {
+        m: {n for n in fingerprint._direct_imports(m, root) if n != m and not m.startswith(n + ".")}
+        for m in names
+    }
+    done: set[str] = set()
+
+    def visit(node: str, path: list[str]) -> None:
+        if node in path:
+            raise AssertionError("import cycle: " + " -> ".join([*path[path.index(node) :], node]))
+        if node in done:
+            return
+        for nxt in sorted(graph.get(node, ())):
+            visit(nxt, [*path, node])
+        done.add(node)
+
+    for name in names:
+        visit(name, [])
+    assert len(names) > 100 and sum(map(len, graph.values())) > 500  # the graph was read
+
+
+def test_package_inits_import_none_of_their_modules():
+    """A package's __init__ runs no debist import (typing-only imports aside)."""
+    import ast
+
+    from debist.engine import fingerprint
+
+    for init in sorted((ROOT / "pipeline").rglob("__init__.py")):
+        found = fingerprint._imported_names(ast.parse(init.read_text()), "debist")
+        assert not [n for n in found if n.startswith("debist")], f"{init} imports {found}"
