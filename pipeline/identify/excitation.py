@@ -42,7 +42,7 @@ import numpy as np
 
 from debist import metrics
 from debist.errors import WorkflowError
-from debist.model.basis import RBFBasis
+from debist.model.basis import RBFBasis, gaussian
 from debist.model.terms import RBF_TERMS
 from debist.model.termtable import input_map
 
@@ -518,7 +518,7 @@ def _coverage(q, basis, masks, min_samples, n_inputs) -> pd.DataFrame:
     neff = {name: np.zeros(xi.size) for name in weighted}
     for k, centre in enumerate(xi):
         near = np.abs(q - centre) <= basis.sigma
-        gauss = np.exp(-((q - centre) ** 2) / (2.0 * basis.sigma**2))
+        gauss = gaussian(q - centre, basis.sigma)
         for name, mask in masks.items():
             counts[name][k] = np.count_nonzero(near & mask)
             if name in neff:

@@ -9,6 +9,36 @@ import numpy as np
 from debist.errors import WorkflowError
 
 
+def gaussian(dq, sigma):
+    """Return the Gaussian of Eq. 38 at distance ``dq`` from its centre.
+
+    The one definition of the basis function: the fit's regressor, the curves, the
+    excitation counts, the NumPy engine and (compiled by numba) the free-run kernel call it.
+
+    Parameters
+    ----------
+    dq : float or ndarray
+        ``q - xi_i`` [unit of q].
+    sigma : float or ndarray
+        The width sigma [unit of q], broadcast against ``dq``.
+
+    Returns
+    -------
+    float or ndarray
+        ``exp(-dq^2 / (2 sigma^2))``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38.
+
+    Examples
+    --------
+    >>> float(gaussian(0.0, 1.0)), round(float(gaussian(1.0, 1.0)), 6)
+    (1.0, 0.606531)
+    """
+    return np.exp(-(dq * dq) / (2.0 * sigma * sigma))
+
+
 @dataclass(frozen=True)
 class RBFBasis:
     """Gaussian RBFs with equidistant centres over an operating range.
@@ -102,7 +132,7 @@ class RBFBasis:
         q = np.asarray(q, dtype=float)
         if self.outside == "clip":
             q = np.clip(q, self.xi[0], self.xi[-1])
-        return np.exp(-((q[..., None] - self.xi) ** 2) / (2.0 * self.sigma**2))
+        return gaussian(q[..., None] - self.xi, self.sigma)
 
     def support(self, q: np.ndarray) -> np.ndarray:
         """Count the samples within one width of each centre.

@@ -1,8 +1,71 @@
-"""The friction state z of the identified model (Masoud & Maas 2025, Eq. 37)."""
+"""The friction state z and the creep states of the identified model (Masoud & Maas 2025).
+
+The state equations are written here once: the NumPy engine, the model's own right-hand side
+and (compiled by numba) the free-run kernel call :func:`friction_state_rate` and
+:func:`creep_state_rate`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+
+
+def friction_state_rate(q_dot, z, T_z):
+    """Return z' = (q_dot - z) / T_z, the friction state's rate of Eq. 37.
+
+    Parameters
+    ----------
+    q_dot, z : float or ndarray
+        Velocity and friction state [unit of q / s].
+    T_z : float or ndarray
+        Friction time constant [s], > 0 (with T_z = 0 the state is q_dot itself).
+
+    Returns
+    -------
+    float or ndarray
+        [unit of q / s^2].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37.
+
+    Examples
+    --------
+    >>> friction_state_rate(1.0, 0.25, 0.5)
+    1.5
+    """
+    return (q_dot - z) / T_z
+
+
+def creep_state_rate(phi, q_dot, rate, w):
+    """Return w' = phi(q) q_dot - lambda w, a creep state's rate (Eq. 26, Maxwell element).
+
+    Parameters
+    ----------
+    phi : float or ndarray
+        The state's basis value at q.
+    q_dot : float or ndarray
+        Velocity [unit of q / s].
+    rate : float
+        The relaxation rate lambda = Y_MW / eta_MW [1/s].
+    w : float or ndarray
+        The creep state.
+
+    Returns
+    -------
+    float or ndarray
+        The state's rate.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 26.
+
+    Examples
+    --------
+    >>> creep_state_rate(0.5, 2.0, 4.0, 0.25)
+    0.0
+    """
+    return phi * q_dot - rate * w
 
 
 def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:

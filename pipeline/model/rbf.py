@@ -9,7 +9,12 @@ from typing import Any
 import numpy as np
 
 from debist.model.basis import RBFBasis
-from debist.model.friction import creep_states, friction_state
+from debist.model.friction import (
+    creep_state_rate,
+    creep_states,
+    friction_state,
+    friction_state_rate,
+)
 from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import TableModel, input_map
 
@@ -317,13 +322,13 @@ class RBFModel:
             z_dot = np.zeros_like(z)
             z = q_dot
         else:
-            z_dot = (q_dot - z) / self.T_z
+            z_dot = friction_state_rate(q_dot, z, self.T_z)
         if not self.has_creep:
             a = self.accel(q, z, v)
             return np.stack([q_dot, a, z_dot], axis=1), a
         w = x[:, 3:]
         a = self.accel(q, z, v, w)
-        w_dot = self.basis(q) * q_dot[:, None] - self.creep_rate * w
+        w_dot = creep_state_rate(self.basis(q), q_dot[:, None], self.creep_rate, w)
         return np.column_stack([q_dot, a, z_dot, w_dot]), a
 
     def max_step(self) -> float:

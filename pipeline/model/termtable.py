@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from debist.errors import WorkflowError
+from debist.model.basis import gaussian
+from debist.model.friction import creep_state_rate, friction_state_rate
 
 __all__ = [
     "BASE_GAUSS",
@@ -201,7 +203,7 @@ class TermTable:
             if kind == BASE_GAUSS:
                 qc = np.minimum(np.maximum(q, self.base_lo[k]), self.base_hi[k])
                 diff = qc - self.base_centre[k]
-                out[:, k] = np.exp(-(diff * diff) / (2.0 * self.base_width[k] ** 2))
+                out[:, k] = gaussian(diff, self.base_width[k])
             elif kind == BASE_TABLE:
                 out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
@@ -453,7 +455,7 @@ class TableModel:
             tz = np.broadcast_to(self.T_z, q.shape)
             lagged = tz > 0
             s = np.where(lagged, x[:, 2], q_dot)
-            z_dot = np.where(lagged, (q_dot - s) / np.where(lagged, tz, 1.0), 0.0)
+            z_dot = np.where(lagged, friction_state_rate(q_dot, s, np.where(lagged, tz, 1.0)), 0.0)
         else:
             s = q_dot
         c0 = 3 if self.lag else 2
@@ -464,6 +466,6 @@ class TableModel:
         derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
         if self.table.n_creep:
             b = self.table.bases(q)[:, self.table.creep_base]
-            w_dot = b * q_dot[:, None] - self.table.creep_rate * w
+            w_dot = creep_state_rate(b, q_dot[:, None], self.table.creep_rate, w)
             return np.column_stack([*derivs, w_dot]), acc
         return np.stack(derivs, axis=1), acc

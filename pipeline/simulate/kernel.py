@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from debist.model import basis, friction
 from debist.simulate import rk4
 
 __all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run", "free_run_sensitivity"]
@@ -65,6 +66,11 @@ _stage_state = nb.njit(cache=True, inline="always")(rk4.stage_state)
 _increment = nb.njit(cache=True, inline="always")(rk4.increment)
 _advance = nb.njit(cache=True, inline="always")(rk4.advance)
 _INPUT_OFFSET = rk4.INPUT_OFFSET
+#: The model's own functions, compiled: the basis of Eq. 38 and the state equations of the
+#: friction state (Eq. 37) and the creep states (Eq. 26).
+_gaussian = nb.njit(cache=True, inline="always")(basis.gaussian)
+_friction_rate = nb.njit(cache=True, inline="always")(friction.friction_state_rate)
+_creep_state_rate = nb.njit(cache=True, inline="always")(friction.creep_state_rate)
 
 
 @dataclass(frozen=True)
@@ -412,7 +418,7 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
                 qc = qc if qc < hi else hi
                 dq = qc - fp[o_centre + k]
                 wk = fp[o_width + k]
-                W[w_k + k] = math.exp(-(dq * dq) / (2.0 * wk * wk))
+                W[w_k + k] = _gaussian(dq, wk)
         else:  # tabulated: linear interpolation, held outside (numpy.interp)
             tab = o_tab + ip[o_tab_row + k]
             if q <= fp[tq]:
@@ -462,11 +468,11 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     d[row, 0] = q_dot
     d[row, 1] = acc
     if lag:
-        d[row, 2] = (q_dot - x[2]) / tz if tz > 0.0 else 0.0
+        d[row, 2] = _friction_rate(q_dot, x[2], tz) if tz > 0.0 else 0.0
     rate = fp[lay[_P_CRATE]]
     o_cb = lay[_I_CBASE]
     for i in range(lay[_NC]):
-        d[row, c0 + i] = W[w_k + ip[o_cb + i]] * q_dot - rate * x[c0 + i]
+        d[row, c0 + i] = _creep_state_rate(W[w_k + ip[o_cb + i]], q_dot, rate, x[c0 + i])
     return acc
 
 
@@ -719,7 +725,7 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
                 qc = q if q > lo else lo
                 qc = qc if qc < hi else hi
                 dq = qc - centre
-                Wk[k, c] = math.exp(-(dq * dq) / (2.0 * wk * wk))
+                Wk[k, c] = _gaussian(dq, wk)
         elif kind == 2:  # tabulated: linear interpolation, held outside (numpy.interp)
             NT = lay[_NT]
             tab = o_tab + ip[lay[_I_BTAB] + k]
@@ -812,13 +818,13 @@ def _rhs_table_lock(
         D[row, 0, c] = XT[1, c]
         D[row, 1, c] = a
         if lag:
-            D[row, 2, c] = (XT[1, c] - XT[2, c]) / tz[c] if tz[c] > 0.0 else 0.0
+            D[row, 2, c] = _friction_rate(XT[1, c], XT[2, c], tz[c]) if tz[c] > 0.0 else 0.0
     rate = fp[lay[_P_CRATE]]
     o_cb = lay[_I_CBASE]
     for i in range(lay[_NC]):
         k = ip[o_cb + i]
         for c in range(nb_):
-            D[row, c0 + i, c] = work[k, c] * XT[1, c] - rate * XT[c0 + i, c]
+            D[row, c0 + i, c] = _creep_state_rate(work[k, c], XT[1, c], rate, XT[c0 + i, c])
 
 
 @nb.njit(cache=True)
@@ -964,7 +970,7 @@ def _trajectory_sens(
                     row += a_s * (St[2, p] if lagged else St[1, p])
                     dS[stage, 1, p] = row
                     if lag:
-                        dS[stage, 2, p] = (St[1, p] - St[2, p]) / tz if lagged else 0.0
+                        dS[stage, 2, p] = _friction_rate(St[1, p], St[2, p], tz) if lagged else 0.0
                 for m in range(J):  # d acc / d w_m = tv[m]; w_m = sign * parameter
                     p = pmap[m]
                     if p >= 0:
@@ -972,7 +978,7 @@ def _trajectory_sens(
                 if p_mass >= 0:
                     dS[stage, 1, p_mass] -= a / mass
                 if p_tz >= 0 and lagged:  # parameter log T_z: d z' / d log T_z
-                    dS[stage, 2, p_tz] -= (xt[1] - xt[2]) / tz
+                    dS[stage, 2, p_tz] -= _friction_rate(xt[1], xt[2], tz)
             if not last:
                 for i in range(S):
                     x[i] = _advance(x[i], h, _increment(d[0, i], d[1, i], d[2, i], d[3, i]))
