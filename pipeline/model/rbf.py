@@ -10,13 +10,11 @@ import numpy as np
 
 from debist.model.basis import RBFBasis
 from debist.model.friction import (
-    creep_state_rate,
     creep_states,
     friction_state,
-    friction_state_rate,
 )
 from debist.model.terms import PhysicsPrior, term_sign, term_table
-from debist.model.termtable import TableModel, input_map
+from debist.model.termtable import TableModel
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "s_g")
@@ -126,22 +124,17 @@ class RBFModel:
             g = g + g_p * bb["s_g"]
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
-    @cached_property
-    def _weights(self) -> np.ndarray:
-        """Stacked RBF weights, shape (M, 2 + n_inputs): columns c, d, g_1..g_N."""
-        return np.column_stack([self.theta_c, self.theta_d, self.theta_g.T])
-
     def accel(
         self, q: np.ndarray, z: np.ndarray, v: np.ndarray, creep: np.ndarray | None = None
     ) -> np.ndarray:
-        """Acceleration of Eq. 37 solved for q''.
+        """Acceleration of Eq. 37 solved for q'', through the model's term table.
 
         Parameters
         ----------
         q : ndarray, shape (B,)
             Positions [unit of q].
         z : ndarray, shape (B,)
-            Friction states [unit of q / s].
+            Friction states [unit of q / s] (q_dot where ``T_z = 0``).
         v : ndarray, shape (B, n_inputs)
             Inputs [V].
         creep : ndarray, shape (B, M), optional
@@ -150,25 +143,15 @@ class RBFModel:
         Returns
         -------
         ndarray, shape (B,)
-            q'' [unit of q / s^2].
+            q'' [unit of q / s^2]: :meth:`debist.model.termtable.TableModel.accel` of
+            :meth:`table_model`, the one evaluation of Eq. 37 the engines share.
         """
-        bb = self.backbone
-        w = self.basis(q) @ self._weights
-        c = w[:, 0] + bb.get("k_1", 0.0) + bb.get("k_3", 0.0) * q * q
-        d = w[:, 1] + bb.get("d_v", 0.0)
-        g = w[:, 2:] + bb["g_0"] if "g_0" in bb else w[:, 2:]
-        if self.prior is not None:
-            c_p, d_p, g_p = self.prior(q)
-            c, d = c + bb.get("s_c", 0.0) * c_p, d + bb.get("s_d", 0.0) * d_p
-            g = g + g_p * bb["s_g"]
-        force = (g * input_map(v, self.input_map)).sum(axis=1) - c * q - d * z
-        if bb.get("F_0", 0.0):
-            force = force - bb["F_0"]
-        if bb.get("F_c", 0.0):
-            force = force - bb["F_c"] * np.tanh(z / self.coulomb_velocity)
-        if self.has_creep and creep is not None:
-            force = force - np.asarray(creep, dtype=float) @ self.theta_creep
-        return force / self.m_q
+        return self._table.accel(q, z, v, creep)
+
+    @cached_property
+    def _table(self):
+        """The term table of :meth:`table_model`, built once."""
+        return self.table_model()
 
     def parameters(self) -> tuple[list[str], np.ndarray]:
         """Return the model's terms and their values, as regressor column names and parameters.
@@ -317,19 +300,7 @@ class RBFModel:
         q_ddot : ndarray, shape (B,)
             The acceleration (second column of ``x_dot``).
         """
-        q, q_dot, z = x[:, 0], x[:, 1], x[:, 2]
-        if self.T_z == 0:
-            z_dot = np.zeros_like(z)
-            z = q_dot
-        else:
-            z_dot = friction_state_rate(q_dot, z, self.T_z)
-        if not self.has_creep:
-            a = self.accel(q, z, v)
-            return np.stack([q_dot, a, z_dot], axis=1), a
-        w = x[:, 3:]
-        a = self.accel(q, z, v, w)
-        w_dot = creep_state_rate(self.basis(q), q_dot[:, None], self.creep_rate, w)
-        return np.column_stack([q_dot, a, z_dot, w_dot]), a
+        return self._table.rhs(x, v)
 
     def max_step(self) -> float:
         """Largest stable RK4 step for the friction and creep filters [s] (inf without)."""

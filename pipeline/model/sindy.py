@@ -166,14 +166,8 @@ class SindyModel:
         z = np.column_stack([q, q_dot, input_map(np.asarray(v, float), self.input_map)])
         return np.prod(z[:, None, :] ** self.exponents[None], axis=2)
 
-    @cached_property
-    def _active(self) -> tuple[np.ndarray, np.ndarray]:
-        """Float exponents (faster pow) and coefficients of the nonzero terms."""
-        keep = self.coefficients != 0
-        return self.exponents[keep].astype(float), self.coefficients[keep]
-
     def accel(self, q: np.ndarray, q_dot: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Acceleration of the identified model, evaluating only the nonzero terms.
+        """Acceleration of the identified model, through its term table (the nonzero terms).
 
         Parameters
         ----------
@@ -187,12 +181,12 @@ class SindyModel:
         ndarray, shape (B,)
             q'' [m/s^2].
         """
-        powers, coef = self._active
-        z = np.empty((np.shape(q)[0], 2 + self.n_inputs))
-        z[:, 0] = q
-        z[:, 1] = q_dot
-        z[:, 2:] = input_map(v, self.input_map)
-        return (z[:, None, :] ** powers).prod(axis=2) @ coef
+        return self._table.accel(q, q_dot, v)
+
+    @cached_property
+    def _table(self):
+        """The term table of :meth:`table_model`, built once: the model's one evaluation."""
+        return self.table_model()
 
     def table_model(self):
         """Return the model as a term table (:class:`debist.model.termtable.TableModel`).
@@ -258,8 +252,7 @@ class SindyModel:
         q_ddot : ndarray, shape (B,)
             The acceleration [m/s^2].
         """
-        a = self.accel(x[:, 0], x[:, 1], v)
-        return np.stack([x[:, 1], a], axis=1), a
+        return self._table.rhs(x, v)
 
     def max_step(self) -> float:
         """Largest stable step [s]: no internal time constant, so inf."""

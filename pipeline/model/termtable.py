@@ -448,6 +448,37 @@ class TableModel:
 
         return table_arrays(self)
 
+    def accel(
+        self, q: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Acceleration of the model (Eq. 37 solved for q''), evaluated with NumPy.
+
+        Parameters
+        ----------
+        q : ndarray, shape (B,)
+            Positions [unit of q].
+        s : ndarray, shape (B,)
+            The friction terms' velocity: the friction state z, or q_dot without lag.
+        v : ndarray, shape (B, n_inputs)
+            Inputs, before the input map h(v).
+        w : ndarray, shape (B, C), optional
+            Creep states (tables with creep); default 0, the actuator at rest.
+
+        Returns
+        -------
+        ndarray, shape (B,)
+            q'' = (sum_j weight_j column_j) / m [unit of q / s^2].
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37.
+        """
+        if self.table.n_creep and w is None:
+            w = np.zeros((np.shape(q)[0], self.table.n_creep))
+        cols = self.table.columns(q, s, self.table.map_inputs(v), w)
+        acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
+        return acc / np.broadcast_to(self.mass, np.shape(q))
+
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """State derivative (B, n_states) and acceleration (B,), evaluated with NumPy."""
         q, q_dot = x[:, 0], x[:, 1]
@@ -460,9 +491,7 @@ class TableModel:
             s = q_dot
         c0 = 3 if self.lag else 2
         w = x[:, c0:] if self.table.n_creep else None
-        cols = self.table.columns(q, s, self.table.map_inputs(v), w)
-        acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
-        acc = acc / np.broadcast_to(self.mass, q.shape)
+        acc = self.accel(q, s, v, w)
         derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
         if self.table.n_creep:
             b = self.table.bases(q)[:, self.table.creep_base]
