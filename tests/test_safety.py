@@ -519,3 +519,20 @@ def test_editing_the_identification_reruns_identify_and_what_follows(tmp_path):
     assert changed == ["compare", "identify", "study"]
     closure = module_closure("debist.stages.differentiate", ROOT / "pipeline")
     assert "debist.identify.fit" not in closure and "debist.differentiate" in closure
+
+
+def test_a_stage_runs_with_one_blas_thread_even_where_scipy_loads_late():
+    """SciPy's own OpenBLAS, loaded inside a stage (the CLI imports SciPy on first use), is
+    limited too: else a stage run on its own would sum in another order than in a full run."""
+    code = (
+        "import threadpoolctl\n"
+        "from debist.engine.runner import one_blas_thread\n"
+        "with one_blas_thread():\n"
+        "    import scipy.linalg\n"
+        "    blas = [i for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas']\n"
+        "print(len(blas), max(i['num_threads'] for i in blas))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    n_libraries, threads = map(int, out.stdout.split())
+    assert n_libraries >= 2 and threads == 1  # numpy's and SciPy's OpenBLAS, one thread each

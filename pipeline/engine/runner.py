@@ -17,7 +17,8 @@ import importlib
 import os
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -177,6 +178,29 @@ def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]
         if canon(config.get(k)) != canon(recorded.get(k)):
             out.append(f"{k} ({canon(recorded.get(k))} -> {canon(config.get(k))})")
     return out
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the block with one BLAS thread in every BLAS library a stage may call.
+
+    As in a batch's worker processes: a multi-threaded BLAS sums in another order, and a
+    run's bytes must not depend on where it ran. threadpoolctl limits the libraries loaded
+    when the block starts, and SciPy brings its own OpenBLAS, loaded with ``scipy.linalg``
+    (which the command line imports on first use), so that is loaded first.
+
+    Yields
+    ------
+    None
+
+    References
+    ----------
+    threadpoolctl, ``threadpool_limits`` (https://github.com/joblib/threadpoolctl).
+    """
+    import scipy.linalg  # noqa: F401  here, not at the top: SciPy's BLAS, only when a stage runs
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 class Runner:
@@ -611,9 +635,7 @@ class Runner:
             fault_point(f"stage:{stage}:start", self.wf.name)
             t0 = time.perf_counter()
             module = importlib.import_module(registry.stage(stage).module)
-            # one BLAS thread, as in a batch's worker processes: a multi-threaded BLAS sums
-            # in another order, and a run's bytes must not depend on where it ran
-            with threadpool_limits(limits=1, user_api="blas"):
+            with one_blas_thread():
                 result = module.execute(self)
             seconds = time.perf_counter() - t0
             code, versions = self._code(stage)
