@@ -286,3 +286,15 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run():
         down[i] -= step
         fd = (q_of(up) - q_of(down)) / (2 * step)
         assert np.max(np.abs(fd - dq[..., i])) <= 1e-3 * np.max(np.abs(fd)), names[i : i + 1]
+
+
+def test_a_changed_compiled_helper_is_refused_until_the_kernel_records_it(monkeypatch):
+    """numba's cache sees changes of kernel.py only: a change in rk4, basis or friction must
+    change kernel.py's COMPILED_FROM_SHA256, and the import check says so, naming the value."""
+    from debist.simulate import kernel, rk4
+
+    kernel._check_compiled_from()  # the recorded value is the sources' own
+    monkeypatch.setattr(rk4, "NODES", (0.0, 0.5, 0.5, 0.999))
+    with pytest.raises(ImportError, match="COMPILED_FROM_SHA256") as raised:
+        kernel._check_compiled_from()
+    assert kernel._compiled_from_sha256() in str(raised.value)

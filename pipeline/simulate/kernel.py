@@ -30,6 +30,8 @@ documentation: ``njit``, ``cache=True``, ``prange``).
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import math
 import weakref
 from collections.abc import Callable
@@ -59,6 +61,48 @@ _TINY = 1e-290
 # Layout of a spline model.
 _S_N, _S_P_X, _S_P_C, _S_P_RELAX, _S_P_KBAR, _S_N_LAYOUT = range(6)
 
+
+#: The functions of other modules this one compiles, and the constants they read.
+_COMPILED_FROM = (
+    rk4.stage_state,
+    rk4.increment,
+    rk4.advance,
+    basis.gaussian,
+    friction.friction_state_rate,
+    friction.creep_state_rate,
+)
+#: sha256 of their source (and of rk4's NODES and INPUT_OFFSET). numba's on-disk cache is
+#: invalidated by a change of this file only, not of theirs: a change there must change this
+#: line, and importing this module refuses to go on until it does (:func:`_check_compiled_from`).
+COMPILED_FROM_SHA256 = "14573195a767fa84e7d89eccdb76dd370db006c86aed5eff0a84982f2b47546c"
+
+
+def _compiled_from_sha256() -> str:
+    """sha256 over the source of :data:`_COMPILED_FROM` and rk4's tableau constants."""
+    text = "\n".join(inspect.getsource(f) for f in _COMPILED_FROM)
+    text += repr((rk4.NODES, rk4.INPUT_OFFSET))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _check_compiled_from() -> None:
+    """Refuse stale compiled code: see :data:`COMPILED_FROM_SHA256`.
+
+    Raises
+    ------
+    ImportError
+        If a compiled function of another module changed since this file recorded it.
+    """
+    found = _compiled_from_sha256()
+    if found != COMPILED_FROM_SHA256:
+        raise ImportError(
+            "debist.simulate.kernel compiles functions of debist.simulate.rk4, "
+            "debist.model.basis and debist.model.friction that changed; numba's cache would "
+            "keep the old code. Set COMPILED_FROM_SHA256 in debist/simulate/kernel.py to "
+            f"'{found}' (numba then recompiles the kernels)."
+        )
+
+
+_check_compiled_from()
 
 #: The RK4 step of :mod:`debist.simulate.rk4`, compiled: every kernel path takes the NumPy
 #: engine's step, operation for operation.
