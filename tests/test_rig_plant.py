@@ -271,18 +271,19 @@ def test_compiled_plant_equals_the_numpy_reference(inputs):
 
 
 def test_plant_kernels_are_cached_under_the_hash_of_the_physics_kernels():
-    """The plant kernels call the full model's compiled code in other files, which numba's
-    disk cache does not watch: they close over the sha256 of those files (its index key)."""
+    """The plant kernels call the full model's compiled code and the GMS element in other
+    files, which numba's disk cache does not watch: they close over the sha256 of those files
+    (its index key)."""
     import hashlib
     import inspect
     from pathlib import Path
 
     from debist.physics import _generated
     from debist.physics import compiled as physics_compiled
-    from debist.rig import compiled
+    from debist.rig import compiled, gms
 
     h = hashlib.sha256()
-    for mod in (physics_compiled, _generated):
+    for mod in (physics_compiled, _generated, gms):
         h.update(Path(inspect.getfile(mod)).read_bytes())
     for kernel in (compiled.plant_rhs, compiled.plant_jac):
         assert [c.cell_contents for c in kernel.py_func.__closure__] == [h.hexdigest()]

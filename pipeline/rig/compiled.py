@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from debist.physics import _generated
 from debist.physics import compiled as physics_compiled
 from debist.physics.compiled import _L, _cho_solve, _jac_into, _rhs_into, source_stamp
+from debist.rig import gms
 
 if TYPE_CHECKING:
     from debist.rig.plant import RigPlant
@@ -46,7 +47,7 @@ __all__ = [
 ]
 
 #: sha256 of the physics modules the plant kernels call; they close over it.
-STAMP = source_stamp(physics_compiled, _generated)
+STAMP = source_stamp(physics_compiled, _generated, gms)
 #: The empty driver table: the kernels then take the squared voltages from ``w``.
 NO_DRIVER = np.empty(0)
 
@@ -109,6 +110,12 @@ def driver_value(t: float, d: NDArray[np.float64]) -> float:
     return rk + (vk - rk) * math.exp(-e / tau)
 
 
+#: One GMS element (:mod:`debist.rig.gms`), compiled into the kernels (its source is in
+#: :data:`STAMP`, so numba's cache follows it).
+_element_rate = nb.njit(inline="always")(gms.element_rate)
+_element_partials = nb.njit(inline="always")(gms.element_partials)
+
+
 def _stamped(stamp: str):
     """Build the Python-facing kernels as closures over ``stamp`` (see the module docstring).
 
@@ -161,9 +168,7 @@ def _stamped(stamp: str):
         out = np.empty(x.size)
         _rhs_into(x[:10], w1, w2, F, fp, out)
         for i in range(nf):
-            z = x[10 + i]
-            slip = abs(z * fr[2 + nf + i]) ** p if qd * z > 0.0 else 0.0
-            out[10 + i] = qd * (1.0 - slip)
+            out[10 + i] = _element_rate(qd, x[10 + i], fr[2 + nf + i], p)
         return out
 
     @nb.njit(cache=True)
@@ -209,15 +214,10 @@ def _stamped(stamp: str):
         for i in range(4):
             qd += fp[_L + i] * x[4 + i]
         for i in range(nf):
-            z = x[10 + i]
-            kF = fr[2 + nf + i]
-            u = abs(z * kF)
-            slip = qd * z > 0.0
-            g = 1.0 - (u**p if slip else 0.0)
+            g, dz = _element_partials(qd, x[10 + i], fr[2 + nf + i], p)
             for j in range(4):
                 J[10 + i, 4 + j] = g * fp[_L + j]
-            if slip:
-                J[10 + i, 10 + i] = -qd * p * u ** (p - 1.0) * math.copysign(1.0, z) * kF
+            J[10 + i, 10 + i] = dz
         return J
 
     return plant_rhs, plant_jac

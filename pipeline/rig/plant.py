@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from debist.physics.dynamics import FullModel, well_state
 from debist.physics.kinematics import pitch_angle, ritz_basis
+from debist.rig import gms
 from debist.rig.drivers import DriverOutput
 from debist.rig.params import RigParams
 
@@ -272,8 +273,8 @@ class RigPlant:
         qd = float(self._L @ x[4:8])
         out = np.empty(self.n_states)
         out[:10] = self.model.rhs(t, x[:10], F_extra=float(self.friction_force(x)))
-        u = np.abs(z * self._kF)
-        out[10:] = qd * (1.0 - np.where(qd * z > 0.0, u**self._p, 0.0))
+        pairs = zip(z, self._kF, strict=True)
+        out[10:] = [gms.element_rate(qd, zi, kFi, self._p) for zi, kFi in pairs]
         return out
 
     def jac(self, t: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -301,10 +302,12 @@ class RigPlant:
         J[4:8, 4:8] -= self._c * np.outer(MinvL, self._L)
         z = x[10:]
         qd = float(self._L @ x[4:8])
-        slip = qd * z > 0.0
-        u = np.abs(z * self._kF)
-        p = self._p
-        J[10:, 4:8] = np.outer(1.0 - np.where(slip, u**p, 0.0), self._L)
-        dz = np.where(slip, -qd * p * u ** (p - 1.0) * np.sign(z) * self._kF, 0.0)
-        J[10:, 10:] = np.diag(dz)
+        parts = np.array(
+            [
+                gms.element_partials(qd, zi, kFi, self._p)
+                for zi, kFi in zip(z, self._kF, strict=True)
+            ]
+        )
+        J[10:, 4:8] = np.outer(parts[:, 0], self._L)
+        J[10:, 10:] = np.diag(parts[:, 1])
         return J

@@ -27,7 +27,6 @@ Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Sec. 5.1; Al-Bender, Lampaert & Sweve
 from __future__ import annotations
 
 import functools
-import math
 
 import lazy_loader as lazy
 import numpy as np
@@ -35,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced
+from debist.rig import gms
 from debist.rig.params import RigParams
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -205,7 +205,7 @@ class ReducedPlant:
         p = self._p
         for zi, ki, kFi in zip(z, self._kl, self._kFl, strict=True):
             force -= ki * zi
-            out.append(qd * (1.0 - abs(zi * kFi) ** p) if qd * zi > 0.0 else qd)
+            out.append(gms.element_rate(qd, zi, kFi, p))
         out[1] = force / m
         return np.array(out)
 
@@ -246,12 +246,7 @@ class ReducedPlant:
         J[2, 0], J[2, 1], J[2, 2] = dk1 * qd, k1, -self._relax
         J[3, 0], J[3, 1], J[3, 3] = dk2 * qd, k2, -self._relax
         for i, (zi, kFi) in enumerate(zip(z, self._kFl, strict=True), start=4):
-            if qd * zi > 0.0:
-                u = abs(zi * kFi)
-                J[i, 1] = 1.0 - u**p
-                J[i, i] = -qd * p * u ** (p - 1.0) * math.copysign(kFi, zi)
-            else:
-                J[i, 1] = 1.0
+            J[i, 1], J[i, i] = gms.element_partials(qd, zi, kFi, p)
         return J
 
     def functions(self, compiled: bool = True):
