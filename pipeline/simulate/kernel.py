@@ -106,15 +106,15 @@ _check_compiled_from()
 
 #: The RK4 step of :mod:`debist.simulate.rk4`, compiled: every kernel path takes the NumPy
 #: engine's step, operation for operation.
-_stage_state = nb.njit(cache=True, inline="always")(rk4.stage_state)
-_increment = nb.njit(cache=True, inline="always")(rk4.increment)
-_advance = nb.njit(cache=True, inline="always")(rk4.advance)
+_stage_state = nb.njit(cache=True)(rk4.stage_state)
+_increment = nb.njit(cache=True)(rk4.increment)
+_advance = nb.njit(cache=True)(rk4.advance)
 _INPUT_OFFSET = rk4.INPUT_OFFSET
 #: The model's own functions, compiled: the basis of Eq. 38 and the state equations of the
 #: friction state (Eq. 37) and the creep states (Eq. 26).
-_gaussian = nb.njit(cache=True, inline="always")(basis.gaussian)
-_friction_rate = nb.njit(cache=True, inline="always")(friction.friction_state_rate)
-_creep_state_rate = nb.njit(cache=True, inline="always")(friction.creep_state_rate)
+_gaussian = nb.njit(cache=True)(basis.gaussian)
+_friction_rate = nb.njit(cache=True)(friction.friction_state_rate)
+_creep_state_rate = nb.njit(cache=True)(friction.creep_state_rate)
 
 
 @dataclass(frozen=True)
