@@ -36,7 +36,7 @@ import numpy as np
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
 from debist.engine import artifacts, progress
-from debist.errors import ArtifactError, DebistError, WorkflowError
+from debist.errors import ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
@@ -305,22 +305,9 @@ def run_blocker(
     WorkflowError
         A bad workflow or override.
     """
-    from debist.engine import outdir
-    from debist.engine.runner import STAGES
+    from debist.engine.runner import Runner
 
-    wf = _workflow(workflow, overrides, output_dir)
-    try:
-        outdir.check_output_dir(
-            wf.output_dir,
-            workflow=wf.name,
-            workflow_dir=wf.path.parent,
-            workflow_file=wf.path,
-            sources=[d.source for d in wf.datasets if not d.rig],
-            stages=STAGES,
-        )
-    except DebistError as exc:
-        return str(exc)
-    return None
+    return Runner(_workflow(workflow, overrides, output_dir)).blocker()
 
 
 def diff(run_a: PathLike, run_b: PathLike) -> dict[str, list[dict[str, Any]]]:

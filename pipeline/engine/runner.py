@@ -29,7 +29,13 @@ from debist.engine import artifacts, outdir, registry
 from debist.engine.faults import fault_point
 from debist.engine.fileformats import write_output
 from debist.engine.fingerprint import code_fingerprint
-from debist.errors import ArtifactError, OutputDirError, RunLockedError, WorkflowError
+from debist.errors import (
+    ArtifactError,
+    DebistError,
+    OutputDirError,
+    RunLockedError,
+    WorkflowError,
+)
 from debist.physics.params import PrototypeParams
 from debist.workflow.loader import Workflow
 
@@ -354,6 +360,21 @@ class Runner:
             "sources": [d.source for d in self.wf.datasets if not d.rig],
             "stages": STAGES,
         }
+
+    def blocker(self) -> str | None:
+        """Say why a run would stop at the output folder, without touching it.
+
+        Returns
+        -------
+        str or None
+            The refusal :func:`debist.engine.outdir.check_output_dir` gives for this
+            workflow's folder (another workflow's, not debist's, ...), or None.
+        """
+        try:
+            outdir.check_output_dir(self.wf.output_dir, workflow=self.wf.name, **self._places())
+        except DebistError as exc:
+            return str(exc)
+        return None
 
     # ---------------------------------------------------------------- status
     def status(self) -> list[StageStatus]:
