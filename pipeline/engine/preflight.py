@@ -203,7 +203,8 @@ def identify_columns(cfg: Any, n_inputs: int) -> tuple[int, int]:
     Parameters
     ----------
     cfg : IdentifyConfig
-        The ``[identify]`` settings (``M``, ``rbf``, ``backbone``, ``m_q``, ``creep``).
+        The ``[identify]`` settings (``M``, ``rbf``, ``backbone``, ``m_q``, ``creep``,
+        ``slip``).
     n_inputs : int
         Number of inputs v_1..v_N.
 
@@ -228,6 +229,7 @@ def _columns(cfg: Any, n_inputs: int) -> tuple[int, int, int]:
     M, rbf, backbone, identify_mass = _terms(cfg)
     force = M * (("c" in rbf) + ("d" in rbf)) + sum(b in backbone for b in _FORCE_SCALARS)
     force += M * (getattr(cfg, "creep", False) is not False)  # creep[i] (Eq. 26)
+    force += getattr(cfg, "n_slip", 0)  # slip[e], the Maxwell-slip elements
     z_cols = M * ("d" in rbf) + sum(b in backbone for b in _Z_TERMS)
     if identify_mass:
         return 1 + force, 1 + force, z_cols

@@ -66,12 +66,18 @@ def _arrays(model) -> dict[str, Any]:
     Raises
     ------
     WorkflowError
-        If the model has the creep states of Eq. 26 (not exported yet).
+        If the model has the creep states of Eq. 26 or Maxwell-slip elements (not exported
+        yet).
     """
     if getattr(model, "has_creep", False):
         raise WorkflowError(
             "export of a model with creep ([identify] creep, the M creep states of Eq. 26) "
             "is not supported yet: identify it with creep = false to export it"
+        )
+    if getattr(model, "has_slip", False):
+        raise WorkflowError(
+            "export of a model with Maxwell-slip elements ([identify] slip) is not supported "
+            "yet: identify it with slip = false to export it"
         )
     tm = model.table_model()
     t = tm.table

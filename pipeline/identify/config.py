@@ -25,6 +25,11 @@ from debist.workflow.config import (
 _T_Z = 'a time >= 0 [s] or "search"'
 #: Workflow-facing description of ``creep`` (its type is a union).
 _CREEP = 'false, a relaxation rate > 0 [1/s] or "search"'
+#: Workflow-facing description of ``slip`` (its type is a union).
+_SLIP = "false, a number of elements >= 1, or their break-away deflections > 0 [unit of q]"
+#: The default grid of break-away deflections, as fractions of the estimation range of q:
+#: geometric from 1.5e-4 to 1e-2 (for a +-16 mm range, 4.8 um to 0.32 mm).
+SLIP_GRID = (1.5e-4, 1e-2)
 #: Workflow-facing description of ``m_q``; ``"physics"`` is resolved by the identify stage.
 _M_Q = 'a mass > 0 [kg], "identify", or "physics" (with a [physics] section)'
 
@@ -67,6 +72,13 @@ class IdentifyConfig(SectionConfig):
     creep_bounds : tuple of float or None
         Search interval of lambda [1/s]; default [1 / (duration of the longest estimation
         record), 1 / (10 dt)].
+    slip : False, int or tuple of float
+        Generalised Maxwell-slip friction (Al-Bender, Lampaert & Swevers 2005) as identified
+        force terms ``sum_e k_e delta_e``: elements of fixed break-away deflections Delta_e
+        whose stiffnesses k_e >= 0 the same least squares finds, beside the friction state z
+        of Eq. 37. A number N places N deflections geometrically on :data:`SLIP_GRID` times
+        the estimation range of q; a list gives them [unit of q], ascending; false
+        (default): Eq. 37's friction only.
     m_q : float or "identify"
         Generalised mass [kg]; 1 identifies the curves per unit mass. With
         "identify", ``input_gain`` must fix the input gains instead. In a workflow,
@@ -161,6 +173,11 @@ class IdentifyConfig(SectionConfig):
         AsTuple,
         Field(description="[lo, hi] [1/s] with 0 < lo < hi"),
     ] = None
+    slip: Annotated[
+        Literal[False] | Annotated[int, Field(ge=1, le=20)] | tuple[PositiveFloat, ...],
+        AsTuple,
+        Field(description=_SLIP),
+    ] = False
     m_q: Annotated[PositiveFloat | Literal["identify"], Field(description=_M_Q)] = 1.0
     input_gain: Annotated[tuple[FiniteFloat, ...] | None, AsTuple] = None
     coulomb_velocity: PositiveFloat = 1e-3
@@ -188,6 +205,13 @@ class IdentifyConfig(SectionConfig):
     band_tolerance: PositiveFloat = 0.2
     model_error: bool = True
     prior: Any = None
+
+    @property
+    def n_slip(self) -> int:
+        """Number of Maxwell-slip elements ``slip`` asks for (0 without)."""
+        if self.slip is False:
+            return 0
+        return self.slip if isinstance(self.slip, int) else len(self.slip)
 
     def __post_init__(self) -> None:
         for key, terms in (("rbf", (self.rbf, ())), ("backbone", ((), self.backbone))):
@@ -219,6 +243,16 @@ class IdentifyConfig(SectionConfig):
                 raise ConfigValueError(
                     "constraints", "statements like 'd >= 0', 'g1 >= 0', 'g2 <= 0'", text
                 )
+        if isinstance(self.slip, tuple) and not (
+            self.slip and all(a < b for a, b in zip(self.slip, self.slip[1:], strict=False))
+        ):
+            raise ConfigValueError("slip", "ascending break-away deflections > 0", list(self.slip))
+        if self.refine and self.slip is not False:
+            raise ConfigValueError(
+                "refine",
+                message="[identify.refine] with slip elements is not supported yet (the forward "
+                "sensitivities lack the slip states): set slip = false or drop the refinement",
+            )
         if self.refine and self.creep is not False:
             raise ConfigValueError(
                 "refine",

@@ -10,7 +10,7 @@ import numpy as np
 from debist.engine import preflight
 from debist.errors import IdentificationError
 from debist.identify.bands import block_bootstrap
-from debist.identify.config import IdentifyConfig
+from debist.identify.config import SLIP_GRID, IdentifyConfig
 from debist.identify.regularise import (
     Estimator,
     constraint_bounds,
@@ -19,7 +19,7 @@ from debist.identify.regularise import (
 )
 from debist.metrics import rms
 from debist.model.basis import RBFBasis
-from debist.model.friction import creep_states, friction_state
+from debist.model.friction import creep_states, friction_state, slip_states
 from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS, force_columns, input_columns
 from debist.model.termtable import input_map
@@ -155,13 +155,18 @@ def _system(
     cfg: IdentifyConfig,
     w_all: Sequence[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Stack regressor rows Psi and outputs y of all records (Eq. 40; creep columns w_all)."""
+    """Stack regressor rows Psi and outputs y of all records (Eq. 40; creep columns w_all).
+
+    With ``cfg.slip`` (resolved to break-away deflections, :func:`slip_widths`) the force
+    side has the Maxwell-slip elements' deflections along each record too.
+    """
     rows, ys = [], []
     names: list[str] = []
     for i, (r, z) in enumerate(zip(records, z_all, strict=True)):
         w = None if w_all is None else w_all[i]
+        slip = slip_states(r.q_dot, r.dt, np.asarray(cfg.slip)) if cfg.slip else None
         F, f_names = force_columns(
-            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w
+            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w, slip
         )
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
@@ -288,6 +293,8 @@ def fit_rbf_model(
     q_all = np.concatenate([r.q for r in records])
     q_range = cfg.q_range or (float(q_all.min()), float(q_all.max()))
     basis = RBFBasis.equidistant(q_range[0], q_range[1], cfg.M, cfg.sigma_n, cfg.outside)
+    if cfg.slip is not False:
+        cfg = replace(cfg, slip=slip_widths(cfg.slip, q_range))
     support = _check_support(records, basis, cfg)
     if cfg.m_q != "identify":
         _check_inputs(records, cfg)
@@ -350,6 +357,45 @@ def fit_rbf_model(
         creep_trace=creep_trace,
     )
     return model, diag
+
+
+def slip_widths(slip: int | Sequence[float], q_range: Sequence[float]) -> tuple[float, ...]:
+    """Resolve ``[identify] slip`` to the break-away deflections of the Maxwell-slip elements.
+
+    Parameters
+    ----------
+    slip : int or sequence of float
+        A number N of elements, or their deflections [unit of q] (returned as they are).
+    q_range : sequence of float
+        ``(q_min, q_max)`` of the estimation range [unit of q].
+
+    Returns
+    -------
+    tuple of float, length N
+        N deflections spaced geometrically over :data:`~debist.identify.config.SLIP_GRID`
+        times ``q_max - q_min`` [unit of q].
+
+    Raises
+    ------
+    IdentificationError
+        If the range is empty.
+
+    References
+    ----------
+    Al-Bender, Lampaert & Swevers 2005 (elements of distributed break-away deflections).
+
+    Examples
+    --------
+    >>> [round(w * 1e6, 2) for w in slip_widths(4, (-16e-3, 16e-3))]
+    [4.8, 19.46, 78.92, 320.0]
+    """
+    if not isinstance(slip, int):
+        return tuple(float(w) for w in slip)
+    span = float(q_range[1]) - float(q_range[0])
+    if not span > 0:
+        raise IdentificationError(f"slip elements need a q range, got {tuple(q_range)}")
+    lo, hi = SLIP_GRID
+    return tuple((span * np.geomspace(lo, hi, slip) if slip > 1 else [span * lo]).tolist())
 
 
 def _creep_columns(records: Sequence[Record], basis: RBFBasis, rate: float) -> list[np.ndarray]:
@@ -423,6 +469,8 @@ def _search_creep(records, basis, cfg, bounds, T_z):
 def _estimator(psi, y, names, cfg: IdentifyConfig):
     """Build the workflow's estimator: plain, smoothed (fixed or GCV lambda), constrained."""
     lower, upper = constraint_bounds(names, cfg.constraints)
+    # an element stiffness is a spring's (Al-Bender, Lampaert & Swevers 2005): k_e >= 0
+    lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
     penalty = smoothness_operator(names, cfg.M)
     trace = np.empty((0, 3))
     if cfg.smoothing == "gcv" and penalty.shape[0]:
@@ -514,4 +562,8 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         prior=cfg.prior if uses_prior else None,
         creep_rate=float(creep_rate),
         theta_creep=vec("creep") if creep_rate > 0 else None,
+        slip_width=tuple(cfg.slip) if cfg.slip else (),
+        theta_slip=(
+            np.array([value[f"slip[{e}]"] for e in range(len(cfg.slip))]) if cfg.slip else None
+        ),
     )

@@ -229,7 +229,8 @@ def refine_model(
     Raises
     ------
     WorkflowError
-        If the model has creep states (Eq. 26): their sensitivities are not implemented.
+        If the model has creep states (Eq. 26) or Maxwell-slip elements: their
+        sensitivities are not implemented.
 
     Notes
     -----
@@ -247,6 +248,11 @@ def refine_model(
         raise WorkflowError(
             "[identify.refine] with creep is not supported yet (the forward sensitivities "
             "lack the creep states of Eq. 26)"
+        )
+    if model.has_slip:
+        raise WorkflowError(
+            "[identify.refine] with slip elements is not supported yet (the forward "
+            "sensitivities lack the states of the Maxwell-slip elements)"
         )
     _check_memory(model, diag, records, rcfg)
     t_start = time.perf_counter()

@@ -119,7 +119,8 @@ def smoothness_operator(names: Sequence[str], M: int) -> np.ndarray:
     """
     names = list(names)
     rows = []
-    prefixes = sorted({n.split("[")[0] for n in names if "[" in n})
+    # the curves over the centres; the slip elements' stiffnesses are not a curve of q
+    prefixes = sorted({n.split("[")[0] for n in names if "[" in n} - {"slip"})
     for prefix in prefixes:
         idx = [names.index(f"{prefix}[{k}]") for k in range(M)]
         for k in range(1, M - 1):

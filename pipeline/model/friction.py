@@ -1,8 +1,15 @@
-"""The friction state z and the creep states of the identified model (Masoud & Maas 2025).
+"""The friction state z, the creep states and the slip elements of the identified model.
 
 The state equations are written here once: the NumPy engine, the model's own right-hand side
-and (compiled by numba) the free-run kernel call :func:`friction_state_rate` and
-:func:`creep_state_rate`.
+and (compiled by numba) the free-run kernel call :func:`friction_state_rate`,
+:func:`creep_state_rate`, :func:`slip_state_rate` and :func:`slip_clip`.
+
+The *slip elements* are the generalised Maxwell-slip friction of Al-Bender, Lampaert & Swevers
+(2005) in its stop-operator form: element e is a spring in series with an ideal block that
+slips when the spring's deflection delta_e reaches its break-away deflection Delta_e. With
+Delta_e fixed on a grid, the friction force ``sum_e k_e delta_e`` is linear in the element
+stiffnesses k_e, which the least squares of Eq. 40 identifies beside the friction state z.
+(Masoud & Maas 2025, Sec. 4, name this model; the paper's Eq. 37 keeps the first-order z.)
 """
 
 from __future__ import annotations
@@ -66,6 +73,123 @@ def creep_state_rate(phi, q_dot, rate, w):
     0.0
     """
     return phi * q_dot - rate * w
+
+
+def slip_state_rate(q_dot, delta, width):
+    """Return delta_e' of an ideal Maxwell-slip element: q_dot while it sticks, 0 while it slips.
+
+    The element slips (its deflection stays put) when the deflection is at its break-away value
+    and the motion loads it further: ``|delta| >= width`` and ``q_dot delta > 0``.
+
+    Parameters
+    ----------
+    q_dot : float or ndarray
+        Velocity [unit of q / s].
+    delta : float or ndarray
+        The element's deflection [unit of q].
+    width : float or ndarray
+        Break-away deflection Delta_e > 0 [unit of q].
+
+    Returns
+    -------
+    float or ndarray
+        [unit of q / s].
+
+    References
+    ----------
+    Al-Bender, Lampaert & Swevers 2005, Eq. 3-4 (the elementary Maxwell-slip element);
+    Krasnosel'skii & Pokrovskii 1989 (the stop operator).
+
+    Examples
+    --------
+    >>> [slip_state_rate(qd, delta, 1.0) for qd, delta in ((2.0, 0.5), (2.0, 1.0), (-2.0, 1.0))]
+    [2.0, 0.0, -2.0]
+    """
+    slips = (abs(delta) >= width) * (q_dot * delta > 0.0)
+    return q_dot * (1 - slips)
+
+
+def slip_clip(delta, width):
+    """Return the deflection held to the break-away range ``[-width, width]`` (after a step).
+
+    The fixed-step free run moves an element's deflection with :func:`slip_state_rate` inside
+    a step and then projects it back onto ``|delta| <= width`` (Moreau's catch-up step of the
+    stop operator), so that a step that crosses the break-away point cannot overshoot it.
+
+    Parameters
+    ----------
+    delta : float or ndarray
+        Deflection [unit of q].
+    width : float or ndarray
+        Break-away deflection Delta_e > 0 [unit of q].
+
+    Returns
+    -------
+    float or ndarray
+        ``min(max(delta, -width), width)``.
+
+    References
+    ----------
+    Moreau 1977, "Evolution problem associated with a moving convex set in a Hilbert space"
+    (the catch-up algorithm); Al-Bender, Lampaert & Swevers 2005.
+
+    Examples
+    --------
+    >>> float(slip_clip(1.5, 1.0)), float(slip_clip(-0.25, 1.0))
+    (1.0, -0.25)
+    """
+    return np.minimum(np.maximum(delta, -width), width)
+
+
+def slip_states(q_dot: np.ndarray, dt: float, widths: np.ndarray) -> np.ndarray:
+    """Deflections of the Maxwell-slip elements along a record (the stop operators of q).
+
+    The position increments are the trapezoidal integral of the velocity, and each element
+    follows them until it reaches its break-away deflection:
+    ``delta[k+1] = clip(delta[k] + (q_dot[k] + q_dot[k+1]) dt / 2, -Delta, Delta)``, from
+    ``delta[0] = 0`` (the elements unloaded at the record's start, as the free run starts).
+
+    Parameters
+    ----------
+    q_dot : ndarray, shape (n,)
+        Velocity [unit of q / s].
+    dt : float
+        Sample time [s].
+    widths : ndarray, shape (E,)
+        Break-away deflections Delta_e > 0 [unit of q].
+
+    Returns
+    -------
+    ndarray, shape (n, E)
+        The deflections delta_e [unit of q].
+
+    Raises
+    ------
+    ValueError
+        If ``dt <= 0`` or a width is not positive.
+
+    References
+    ----------
+    Al-Bender, Lampaert & Swevers 2005; Moreau 1977 (catch-up algorithm).
+
+    Examples
+    --------
+    >>> slip_states(np.array([1.0, 1.0, 1.0, -1.0]), 1.0, np.array([1.5])).ravel().tolist()
+    [0.0, 1.0, 1.5, 1.5]
+    """
+    if not dt > 0:
+        raise ValueError(f"`dt` must be positive, got {dt!r}")
+    widths = np.asarray(widths, dtype=float)
+    if not np.all(widths > 0):
+        raise ValueError(f"slip widths must be positive, got {widths.tolist()}")
+    q_dot = np.asarray(q_dot, dtype=float)
+    step = 0.5 * dt * (q_dot[1:] + q_dot[:-1])
+    out = np.zeros((q_dot.size, widths.size))
+    delta = np.zeros(widths.size)
+    for k, dq in enumerate(step):
+        delta = slip_clip(delta + dq, widths)
+        out[k + 1] = delta
+    return out
 
 
 def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:

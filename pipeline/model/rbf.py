@@ -12,6 +12,7 @@ from debist.model.basis import RBFBasis
 from debist.model.friction import (
     creep_states,
     friction_state,
+    slip_states,
 )
 from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import TableModel
@@ -30,7 +31,11 @@ class RBFModel:
     ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``). With creep (``creep_rate > 0``) the
     force side has the DEs' creep of Eq. 26 too, ``+ sum_j theta_creep,j w_j`` with the
     creep states ``w_j' = phi_j(q) q' - lambda w_j`` (lambda = ``creep_rate``); the state is
-    then ``[q, q_dot, z, w_1..w_M]``.
+    then ``[q, q_dot, z, w_1..w_M]``. With Maxwell-slip elements (``slip_width``) the force
+    side has ``+ sum_e theta_slip,e delta_e``, the stiffnesses of elements whose deflections
+    delta_e follow q until they reach their break-away deflections Delta_e (Al-Bender,
+    Lampaert & Swevers 2005; :func:`debist.model.friction.slip_state_rate`); their states
+    follow ``z`` and the creep states.
 
     Parameters
     ----------
@@ -62,6 +67,10 @@ class RBFModel:
         Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; 0: no creep.
     theta_creep : ndarray, shape (M,) or None
         Weights of the creep force sum_j theta_creep,j w_j [N per unit of q] (with creep).
+    slip_width : tuple of float
+        Break-away deflections Delta_e of the Maxwell-slip elements [unit of q]; empty: none.
+    theta_slip : ndarray, shape (E,) or None
+        Their stiffnesses k_e [N per unit of q] (with slip elements).
 
     Notes
     -----
@@ -70,7 +79,7 @@ class RBFModel:
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 33, 37-40.
+    Masoud & Maas 2025, Eq. 33, 37-40; Al-Bender, Lampaert & Swevers 2005 (slip elements).
     """
 
     basis: RBFBasis
@@ -87,6 +96,8 @@ class RBFModel:
     prior: PhysicsPrior | None = None
     creep_rate: float = 0.0
     theta_creep: np.ndarray | None = None
+    slip_width: tuple[float, ...] = ()
+    theta_slip: np.ndarray | None = None
 
     @property
     def has_creep(self) -> bool:
@@ -94,9 +105,36 @@ class RBFModel:
         return self.creep_rate > 0
 
     @property
+    def has_slip(self) -> bool:
+        """Whether the model has Maxwell-slip elements."""
+        return len(self.slip_width) > 0
+
+    @property
     def n_states(self) -> int:
-        """3 (``[q, q_dot, z]``), plus M creep states with creep."""
-        return 3 + (self.basis.M if self.has_creep else 0)
+        """3 (``[q, q_dot, z]``), plus M creep states with creep, plus E slip states."""
+        return 3 + (self.basis.M if self.has_creep else 0) + len(self.slip_width)
+
+    def slip_elements(self) -> dict[str, np.ndarray]:
+        """Return the Maxwell-slip elements as physics: deflection, stiffness and slip force.
+
+        Returns
+        -------
+        dict
+            ``Delta`` (E,) break-away deflections [unit of q], ``k`` (E,) stiffnesses
+            [N per unit of q, or per unit mass with m_q = 1], ``F`` (E,) = k Delta, each
+            element's slip force [N]; ``F_total`` their sum (the friction of gross sliding)
+            and ``k_total`` the presliding stiffness at rest [N per unit of q]. Empty
+            arrays without elements.
+
+        References
+        ----------
+        Al-Bender, Lampaert & Swevers 2005, Sec. II.
+        """
+        width = np.asarray(self.slip_width, dtype=float)
+        k = np.zeros(0) if self.theta_slip is None else np.asarray(self.theta_slip, float)
+        force = k * width
+        return {"Delta": width, "k": k, "F": force, "F_total": float(force.sum()),
+                "k_total": float(k.sum())}  # fmt: skip
 
     def curves(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Evaluate the identified characteristic curves.
@@ -180,6 +218,9 @@ class RBFModel:
         if self.has_creep:  # every creep state, so that the state vector is [q, q_dot, z, w]
             names.extend(f"creep[{k}]" for k in range(M))
             values.extend(np.asarray(self.theta_creep, dtype=float).tolist())
+        if self.has_slip:  # every element, so that the states are [.., delta_1..delta_E]
+            names.extend(f"slip[{e}]" for e in range(len(self.slip_width)))
+            values.extend(np.asarray(self.theta_slip, dtype=float).tolist())
         for j in range(self.n_inputs):
             add(f"g{j + 1}", self.theta_g[j])
         bb = self.backbone
@@ -214,7 +255,7 @@ class RBFModel:
         names, values = self.parameters()
         table = term_table(
             names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior,
-            creep_rate=self.creep_rate,
+            creep_rate=self.creep_rate, slip_width=self.slip_width,
         )  # fmt: skip
         signs = np.array([term_sign(n) for n in names])
         return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
@@ -249,6 +290,7 @@ class RBFModel:
         cols = [q0, q_dot0, q_dot0]
         if self.has_creep:
             cols += [np.zeros_like(q0)] * self.basis.M
+        cols += [np.zeros_like(q0)] * len(self.slip_width)  # the elements unloaded
         return np.stack(cols, axis=-1)
 
     def measured_states(self, q: np.ndarray, q_dot: np.ndarray, dt: float) -> np.ndarray:
@@ -282,6 +324,9 @@ class RBFModel:
         if self.has_creep:
             w = creep_states(self.basis(q), q_dot, dt, self.creep_rate)
             out = np.concatenate([out, w], axis=1)
+        if self.has_slip:
+            slip = slip_states(q_dot, dt, np.asarray(self.slip_width))
+            out = np.concatenate([out, slip], axis=1)
         return out
 
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -302,6 +347,20 @@ class RBFModel:
         """
         return self._table.rhs(x, v)
 
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Hold the slip states to their break-away range after a step (the stop operator).
+
+        Parameters
+        ----------
+        x : ndarray, shape (B, n_states)
+
+        Returns
+        -------
+        ndarray, shape (B, n_states)
+            :meth:`debist.model.termtable.TableModel.project`.
+        """
+        return self._table.project(x)
+
     def max_step(self) -> float:
         """Largest stable RK4 step for the friction and creep filters [s] (inf without)."""
         out = np.inf if self.T_z == 0 else 1.5 * self.T_z
@@ -313,6 +372,8 @@ class RBFModel:
         vals = [self.theta_c, self.theta_d, self.theta_g.ravel()]
         if self.has_creep:  # the weights and lambda
             vals += [np.asarray(self.theta_creep, dtype=float), np.array([self.creep_rate])]
+        if self.has_slip:  # the stiffnesses (the deflections are a fixed grid)
+            vals += [np.asarray(self.theta_slip, dtype=float)]
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
         # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
@@ -337,6 +398,12 @@ class RBFModel:
             model["creep"] = {
                 "attrs": {"creep_rate": self.creep_rate, "equation": "Masoud & Maas 2025, Eq. 26"},
                 "theta_creep": np.asarray(self.theta_creep, dtype=float),
+            }
+        if self.has_slip:  # only then: a model without slip elements keeps its bytes
+            model["slip"] = {
+                "attrs": {"equation": "Al-Bender, Lampaert & Swevers 2005 (Maxwell-slip)"},
+                "width": np.asarray(self.slip_width, dtype=float),
+                "theta_slip": np.asarray(self.theta_slip, dtype=float),
             }
         return {
             "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
@@ -382,6 +449,7 @@ class RBFModel:
             backbone["s_g"] = np.asarray(m["backbone"]["s_g"], dtype=float)
         prior = m["backbone"].get("prior")
         creep = m.get("creep")
+        slip = m.get("slip")
         return cls(
             basis=RBFBasis(np.asarray(m["xi"], float), float(a["sigma"]), str(a["outside"])),
             input_map=str(a["input_map"]),
@@ -401,4 +469,6 @@ class RBFModel:
             ),
             creep_rate=0.0 if creep is None else float(creep["attrs"]["creep_rate"]),
             theta_creep=None if creep is None else np.asarray(creep["theta_creep"], float),
+            slip_width=() if slip is None else tuple(np.asarray(slip["width"], float).tolist()),
+            theta_slip=None if slip is None else np.asarray(slip["theta_slip"], float),
         )

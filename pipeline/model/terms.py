@@ -126,7 +126,12 @@ def check_terms(rbf: Sequence[str], backbone: Sequence[str]) -> None:
 
 
 def column_names(
-    rbf: Sequence[str], backbone: Sequence[str], M: int, n_inputs: int, creep: bool = False
+    rbf: Sequence[str],
+    backbone: Sequence[str],
+    M: int,
+    n_inputs: int,
+    creep: bool = False,
+    n_slip: int = 0,
 ) -> tuple[list[str], list[str]]:
     """Names of the regressor columns of Eq. 40 with the backbone, in their order.
 
@@ -141,6 +146,9 @@ def column_names(
     creep : bool, optional
         Whether the model has the creep force ``sum_i creep[i] w_i`` (Eq. 26 in the RBF
         basis: ``creep[i]`` after the ``d[i]``).
+    n_slip : int, optional
+        Number of Maxwell-slip elements: their force ``sum_e slip[e] delta_e`` follows the
+        creep terms (Al-Bender, Lampaert & Swevers 2005).
 
     Returns
     -------
@@ -163,6 +171,7 @@ def column_names(
         force += [f"d[{i}]" for i in range(M)]
     if creep:
         force += [f"creep[{i}]" for i in range(M)]
+    force += [f"slip[{e}]" for e in range(n_slip)]
     force += [name for name in backbone if name in _FORCE_SCALARS or name in _PHYSICS_FORCE]
     inputs: list[str] = []
     if "g" in rbf:
@@ -183,6 +192,7 @@ def force_columns(
     coulomb_velocity: float,
     prior: PhysicsPrior | None = None,
     w: np.ndarray | None = None,
+    slip: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
 
@@ -204,6 +214,10 @@ def force_columns(
         The creep states along the record [unit of q]
         (:func:`debist.model.friction.creep_states`); given: the creep columns
         ``creep[i]`` = w_i follow the ``d[i]``.
+    slip : ndarray, shape (n, E), optional
+        The Maxwell-slip elements' deflections along the record [unit of q]
+        (:func:`debist.model.friction.slip_states`); given: the columns ``slip[e]`` =
+        delta_e follow the creep columns.
 
     Returns
     -------
@@ -219,9 +233,12 @@ def force_columns(
         If a ``physics_*`` term is active without ``prior``.
     """
     q = np.asarray(q, dtype=float)
-    names, _ = column_names(rbf, backbone, basis.M, 1, creep=w is not None)
+    n_slip = 0 if slip is None else slip.shape[1]
+    names, _ = column_names(rbf, backbone, basis.M, 1, creep=w is not None, n_slip=n_slip)
     table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
-    return table.columns(q, z, np.zeros((q.size, 1)), w), names
+    states = [a for a in (w, slip) if a is not None]
+    extra = np.hstack(states) if states else None
+    return table.columns(q, z, np.zeros((q.size, 1)), extra), names
 
 
 def input_columns(
@@ -303,6 +320,7 @@ def term_table(
     coulomb_velocity: float,
     prior: PhysicsPrior | None = None,
     creep_rate: float = 0.0,
+    slip_width: Sequence[float] | None = None,
 ) -> TermTable:
     """Build the term library of Eq. 37: one term per regressor column name, as a term table.
 
@@ -332,6 +350,11 @@ def term_table(
     creep_rate : float, optional
         Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; with ``creep[i]``
         names every centre gets its creep state (state i has basis Phi_i).
+    slip_width : sequence of float, optional
+        Break-away deflections Delta_e [unit of q] of the Maxwell-slip elements, one per
+        ``slip[e]`` name (``slip[e]`` delta_e, the element stiffness k_e its weight). None
+        (default): a table for regressor columns only, whose ``slip[e]`` terms read their
+        states by index (the deflections matter only to a simulation).
 
     Returns
     -------
@@ -378,6 +401,13 @@ def term_table(
                 build.term(name, gauss(k), skind=S_POW, spow=1)
             elif rbf == "creep":
                 build.term(name, build.one(), skind=S_CREEP, spow=k)
+            elif rbf == "slip":
+                if slip_width is None:  # columns only: distinct stand-in deflections
+                    build.term(name, build.one(), skind=S_CREEP, spow=build.slip(k + 1.0))
+                    continue
+                if k >= len(slip_width):
+                    raise WorkflowError(f"term {name!r} has no break-away deflection")
+                build.term(name, build.one(), skind=S_CREEP, spow=build.slip(slip_width[k]))
             elif rbf.startswith("g") and rbf[1:].isdigit():
                 build.term(name, gauss(k), hpow=h(int(rbf[1:]) - 1))
             else:

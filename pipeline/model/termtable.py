@@ -11,7 +11,13 @@ of Eq. 37, or q_dot), or a *creep state* ``w_k``, and ``h_i = h(v_i)`` are the m
 The creep states are first-order filters of a basis times the velocity,
 ``w_k' = b_(creep_base[k])(q) q_dot - lambda w_k`` with one relaxation rate lambda [1/s]: the
 Maxwell creep of the DEs (Masoud & Maas 2025, Eq. 26) with k_i(q) written in the basis, so that
-the creep force ``sum_k c_k w_k`` is linear in its weights once lambda is fixed. The RBF model
+the creep force ``sum_k c_k w_k`` is linear in its weights once lambda is fixed. After the
+creep states come the *slip states* ``delta_e`` of the Maxwell-slip friction elements with
+break-away deflections ``Delta_e`` (:func:`debist.model.friction.slip_state_rate`, held to
+``|delta_e| <= Delta_e`` after every step by :meth:`TableModel.project`), so that the friction
+force ``sum_e k_e delta_e`` is linear in the stiffnesses k_e once the Delta_e are fixed; a
+term's ``S_CREEP`` factor reads either kind of state (index k of ``[w_1..w_C, delta_1..]``).
+The RBF model
 of Eq. 37 with its backbone and physics prior, and the SINDy polynomials, are such tables; the
 same arrays give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
 right-hand side (:class:`TableModel`) and the compiled one (:mod:`debist.simulate.kernel`), so the
@@ -32,7 +38,12 @@ import numpy as np
 
 from debist.errors import WorkflowError
 from debist.model.basis import gaussian
-from debist.model.friction import creep_state_rate, friction_state_rate
+from debist.model.friction import (
+    creep_state_rate,
+    friction_state_rate,
+    slip_clip,
+    slip_state_rate,
+)
 
 __all__ = [
     "BASE_GAUSS",
@@ -123,7 +134,7 @@ class TermTable:
         Power ``a_j >= 0`` of q.
     term_skind, term_spow : ndarray of int, shape (J,)
         Velocity factor of each term (:data:`S_ONE`, :data:`S_POW` with power ``term_spow``,
-        :data:`S_TANH`, :data:`S_CREEP` with creep state ``term_spow``).
+        :data:`S_TANH`, :data:`S_CREEP` with state ``term_spow`` of ``[w, delta]``).
     term_hpow : ndarray of int, shape (J, n_inputs)
         Powers ``c_ji >= 0`` of the mapped inputs.
     input_map : {"v2", "v"}
@@ -135,11 +146,14 @@ class TermTable:
         [unit of q] (empty: no creep states).
     creep_rate : float
         The creep states' relaxation rate lambda = Y_MW / eta_MW [1/s].
+    slip_width : ndarray, shape (E,)
+        Break-away deflections Delta_e of the Maxwell-slip elements [unit of q] (empty: none);
+        their states follow the C creep states.
 
     References
     ----------
     Masoud & Maas 2025, Eq. 26 (creep), 37-40 (RBF terms); Brunton, Proctor & Kutz 2016
-    (library).
+    (library); Al-Bender, Lampaert & Swevers 2005 (Maxwell-slip elements).
     """
 
     names: tuple[str, ...]
@@ -160,11 +174,22 @@ class TermTable:
     coulomb_velocity: float = 1.0
     creep_base: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     creep_rate: float = 0.0
+    slip_width: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_creep(self) -> int:
         """Number of creep states C."""
         return int(self.creep_base.size)
+
+    @property
+    def n_slip(self) -> int:
+        """Number of Maxwell-slip elements E."""
+        return int(self.slip_width.size)
+
+    @property
+    def n_extra(self) -> int:
+        """Number of states after ``[q, q_dot, z]``: the creep and the slip states, C + E."""
+        return self.n_creep + self.n_slip
 
     @property
     def n_terms(self) -> int:
@@ -221,9 +246,10 @@ class TermTable:
             The velocity-like variable (friction state z or q_dot) [unit of q / s].
         hv : array_like, shape (n, n_inputs)
             Mapped inputs h(v_i).
-        w : array_like, shape (n, C), optional
-            The creep states [unit of q] (:func:`debist.model.friction.creep_states`
-            along a record); default 0 (at rest), so creep terms vanish.
+        w : array_like, shape (n, C + E), optional
+            The creep states, then the slip states [unit of q]
+            (:func:`debist.model.friction.creep_states`, :func:`~debist.model.friction.slip_states`
+            along a record); default 0 (at rest), so their terms vanish.
 
         Returns
         -------
@@ -280,6 +306,7 @@ class TermTable:
             self.coulomb_velocity,
             self.creep_base,
             self.creep_rate,
+            self.slip_width,
         )
 
 
@@ -308,12 +335,22 @@ class TermTableBuilder:
     _table_q: np.ndarray | None = None
     _terms: list[tuple] = field(default_factory=list)
     _creep: list[int] = field(default_factory=list)
+    _slip: list[float] = field(default_factory=list)
 
     def creep(self, base: int) -> int:
         """Index of the creep state ``w' = b(q) q_dot - lambda w`` of basis ``base`` (shared)."""
         if base not in self._creep:
+            if self._slip:
+                raise ValueError("creep states come before the slip states: add them first")
             self._creep.append(int(base))
         return self._creep.index(base)
+
+    def slip(self, width: float) -> int:
+        """State index of a Maxwell-slip element of break-away deflection ``width`` (shared)."""
+        width = float(width)
+        if width not in self._slip:
+            self._slip.append(width)
+        return len(self._creep) + self._slip.index(width)
 
     def one(self) -> int:
         """Index of the constant basis."""
@@ -379,6 +416,7 @@ class TermTableBuilder:
             coulomb_velocity=float(self.coulomb_velocity),
             creep_base=_int(self._creep),
             creep_rate=float(self.creep_rate),
+            slip_width=_float(np.asarray(self._slip, dtype=float).reshape(-1)),
         )
 
 
@@ -386,9 +424,10 @@ class TermTableBuilder:
 class TableModel:
     """A term table with weights per trajectory, as a free-run model of either engine.
 
-    States ``[q, q_dot, z, w_1..w_C]`` when ``lag`` (z' = (q_dot - z) / T_z, and z = q_dot
-    where ``T_z = 0``), else ``[q, q_dot, w_1..w_C]`` with ``s = q_dot``; the creep states
-    ``w_k' = b_k(q) q_dot - lambda w_k`` only when the table has them (``C > 0``).
+    States ``[q, q_dot, z, w_1..w_C, delta_1..delta_E]`` when ``lag`` (z' = (q_dot - z) /
+    T_z, and z = q_dot where ``T_z = 0``), else ``[q, q_dot, w.., delta..]`` with
+    ``s = q_dot``; the creep states ``w_k' = b_k(q) q_dot - lambda w_k`` and the slip states
+    (:func:`debist.model.friction.slip_state_rate`) only when the table has them.
 
     Parameters
     ----------
@@ -405,7 +444,8 @@ class TableModel:
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 26 (creep states), Eq. 37 (z' = (q' - z) / T_z).
+    Masoud & Maas 2025, Eq. 26 (creep states), Eq. 37 (z' = (q' - z) / T_z);
+    Al-Bender, Lampaert & Swevers 2005 (slip states).
     """
 
     table: TermTable
@@ -421,14 +461,14 @@ class TableModel:
 
     @property
     def n_states(self) -> int:
-        """2, plus 1 with the friction state, plus the creep states C."""
-        return (3 if self.lag else 2) + self.table.n_creep
+        """2, plus 1 with the friction state, plus the creep and slip states C + E."""
+        return (3 if self.lag else 2) + self.table.n_extra
 
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
-        """States at ``q0``, ``q_dot0`` with the friction filter at rest (z = q_dot), w = 0."""
+        """States at ``q0``, ``q_dot0``: friction filter at rest (z = q_dot), w = delta = 0."""
         q0, q_dot0 = np.asarray(q0, float), np.asarray(q_dot0, float)
         cols = [q0, q_dot0, q_dot0] if self.lag else [q0, q_dot0]
-        cols += [np.zeros_like(q0)] * self.table.n_creep
+        cols += [np.zeros_like(q0)] * self.table.n_extra
         return np.stack(cols, axis=-1)
 
     def max_step(self) -> float:
@@ -461,8 +501,8 @@ class TableModel:
             The friction terms' velocity: the friction state z, or q_dot without lag.
         v : ndarray, shape (B, n_inputs)
             Inputs, before the input map h(v).
-        w : ndarray, shape (B, C), optional
-            Creep states (tables with creep); default 0, the actuator at rest.
+        w : ndarray, shape (B, C + E), optional
+            Creep and slip states (tables with them); default 0, the actuator at rest.
 
         Returns
         -------
@@ -473,8 +513,8 @@ class TableModel:
         ----------
         Masoud & Maas 2025, Eq. 37.
         """
-        if self.table.n_creep and w is None:
-            w = np.zeros((np.shape(q)[0], self.table.n_creep))
+        if self.table.n_extra and w is None:
+            w = np.zeros((np.shape(q)[0], self.table.n_extra))
         cols = self.table.columns(q, s, self.table.map_inputs(v), w)
         acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
         return acc / np.broadcast_to(self.mass, np.shape(q))
@@ -490,11 +530,35 @@ class TableModel:
         else:
             s = q_dot
         c0 = 3 if self.lag else 2
-        w = x[:, c0:] if self.table.n_creep else None
+        C = self.table.n_creep
+        w = x[:, c0:] if self.table.n_extra else None
         acc = self.accel(q, s, v, w)
         derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
-        if self.table.n_creep:
+        if C:
             b = self.table.bases(q)[:, self.table.creep_base]
-            w_dot = creep_state_rate(b, q_dot[:, None], self.table.creep_rate, w)
-            return np.column_stack([*derivs, w_dot]), acc
+            derivs.append(creep_state_rate(b, q_dot[:, None], self.table.creep_rate, w[:, :C]))
+        if self.table.n_slip:
+            derivs.append(slip_state_rate(q_dot[:, None], w[:, C:], self.table.slip_width))
+        if self.table.n_extra:
+            return np.column_stack(derivs), acc
         return np.stack(derivs, axis=1), acc
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Hold the slip states to their break-away range after a step (:func:`slip_clip`).
+
+        Parameters
+        ----------
+        x : ndarray, shape (B, n_states)
+            States after an RK4 step.
+
+        Returns
+        -------
+        ndarray, shape (B, n_states)
+            ``x`` itself without slip states, else a copy with ``|delta_e| <= Delta_e``.
+        """
+        if not self.table.n_slip:
+            return x
+        x = x.copy()
+        c1 = (3 if self.lag else 2) + self.table.n_creep
+        x[:, c1:] = slip_clip(x[:, c1:], self.table.slip_width)
+        return x

@@ -169,6 +169,45 @@ def _fmt(value: Any, digits: int = 4) -> str:
     return str(value)
 
 
+def slip_rows(summary: dict[str, Any]) -> list[tuple[str, str, float]]:
+    """Rows of the identified Maxwell-slip elements as physics: deflection, stiffness, force.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``slip`` entry, when the model has them).
+
+    Returns
+    -------
+    list of (label, unit, value)
+        Per element its break-away deflection Delta_e [q], stiffness k_e [F/q] and slip force
+        F_e = k_e Delta_e [F]; then the total slip force (gross sliding) and the presliding
+        stiffness sum k_e. Empty without elements.
+
+    References
+    ----------
+    Al-Bender, Lampaert & Swevers 2005.
+    """
+    slip = summary.get("slip")
+    if not slip:
+        return []
+    units = summary_units(summary)
+    q, force = units["q"], units["force"]
+    rows = []
+    for e, (width, k, f) in enumerate(zip(slip["Delta"], slip["k"], slip["F"], strict=True)):
+        name = f"Maxwell-slip element {e + 1}"
+        rows += [
+            (f"{name}: break-away deflection Delta", q, width),
+            (f"{name}: stiffness k", f"{force}/{q}", k),
+            (f"{name}: slip force k Delta", force, f),
+        ]
+    rows += [
+        ("Maxwell-slip: total slip force (gross sliding)", force, slip["F_total"]),
+        ("Maxwell-slip: presliding stiffness sum k", f"{force}/{q}", slip["k_total"]),
+    ]
+    return rows
+
+
 def identify_table(summary: dict[str, Any]) -> Table:
     """Tabulate the identified model, with published values where the workflow gives them.
 
@@ -198,6 +237,7 @@ def identify_table(summary: dict[str, Any]) -> Table:
     rows = [("T_z", "s", summary["T_z"], None), ("mass m_q", units["mass"], summary["m_q"], "m_q")]
     if "creep_rate" in summary:  # Eq. 26's Y_MW / eta_MW, identified with the creep term
         rows.append(("creep rate lambda", "1/s", summary["creep_rate"], None))
+    rows += [(label, unit, value, None) for label, unit, value in slip_rows(summary)]
     for key, value in summary["backbone"].items():
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))

@@ -49,6 +49,9 @@ class FreeRunModel(Protocol):
     def max_step(self) -> float:
         """Largest stable integration step [s]."""
 
+    # optional: ``project(x) -> x``, applied after every step (the slip elements' stop
+    # operator, :meth:`debist.model.termtable.TableModel.project`)
+
 
 @dataclass(frozen=True)
 class SimulationResult:
@@ -403,6 +406,7 @@ def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationR
     states[:, 0] = x
     alive = np.ones(B, dtype=bool)
     diverged_at = np.full(B, -1)
+    project = getattr(model, "project", None)
     for k in range(n - 1):
         for s in range(ns):
             j = (k * ns + s) * 2
@@ -413,6 +417,8 @@ def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationR
             k3, _ = model.rhs(rk4.stage_state(x, h, 2, k2), fine[:, j + rk4.INPUT_OFFSET[2]])
             k4, _ = model.rhs(rk4.stage_state(x, h, 3, k3), fine[:, j + rk4.INPUT_OFFSET[3]])
             x = rk4.advance(x, h, rk4.increment(k1, k2, k3, k4))
+            if project is not None:  # the slip elements' catch-up step
+                x = project(x)
         bad = alive & ~(np.isfinite(x).all(axis=1) & (np.abs(x[:, 0]) <= q_limit))
         if bad.any():
             diverged_at[bad] = k + 1

@@ -55,7 +55,7 @@ CHUNK = 50_000
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
  _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
- _TABLES, _NC, _I_CBASE, _P_CRATE, _N_LAYOUT) = range(42)  # fmt: skip
+ _TABLES, _NC, _I_CBASE, _P_CRATE, _NS, _P_SWIDTH, _N_LAYOUT) = range(44)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -70,11 +70,13 @@ _COMPILED_FROM = (
     basis.gaussian,
     friction.friction_state_rate,
     friction.creep_state_rate,
+    friction.slip_state_rate,
+    friction.slip_clip,
 )
 #: sha256 of their source (and of rk4's NODES and INPUT_OFFSET). numba's on-disk cache is
 #: invalidated by a change of this file only, not of theirs: a change there must change this
 #: line, and importing this module refuses to go on until it does (:func:`_check_compiled_from`).
-COMPILED_FROM_SHA256 = "14573195a767fa84e7d89eccdb76dd370db006c86aed5eff0a84982f2b47546c"
+COMPILED_FROM_SHA256 = "c39aedf33c178e2b9f1437ff56510dc7d587c3442d1234c2b1e399923092e181"
 
 
 def _compiled_from_sha256() -> str:
@@ -115,6 +117,8 @@ _INPUT_OFFSET = rk4.INPUT_OFFSET
 _gaussian = nb.njit(cache=True)(basis.gaussian)
 _friction_rate = nb.njit(cache=True)(friction.friction_state_rate)
 _creep_state_rate = nb.njit(cache=True)(friction.creep_state_rate)
+_slip_state_rate = nb.njit(cache=True)(friction.slip_state_rate)
+_slip_clip = nb.njit(cache=True)(friction.slip_clip)
 
 
 @dataclass(frozen=True)
@@ -269,6 +273,9 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     lay[_NC] = t.n_creep
     lay[_I_CBASE] = pack.ints(t.creep_base if t.n_creep else [0])
     lay[_P_CRATE] = pack.floats([t.creep_rate])
+    # slip states delta_e' = slip_state_rate(q_dot, delta_e, Delta_e), after the creep states
+    lay[_NS] = t.n_slip
+    lay[_P_SWIDTH] = pack.floats(t.slip_width if t.n_slip else [1.0])
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
     return fp, ip, lay, order, n_work
@@ -517,7 +524,20 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     o_cb = lay[_I_CBASE]
     for i in range(lay[_NC]):
         d[row, c0 + i] = _creep_state_rate(W[w_k + ip[o_cb + i]], q_dot, rate, x[c0 + i])
+    c1 = c0 + lay[_NC]
+    o_sw = lay[_P_SWIDTH]
+    for e in range(lay[_NS]):
+        d[row, c1 + e] = _slip_state_rate(q_dot, x[c1 + e], fp[o_sw + e])
     return acc
+
+
+@nb.njit(cache=True, inline="always")
+def _project_table(x, lay, fp):  # pragma: no cover - compiled
+    """Hold the slip states to their break-away range after a step (the stop operator)."""
+    c1 = (3 if lay[_LAG] == 1 else 2) + lay[_NC]
+    o_sw = lay[_P_SWIDTH]
+    for e in range(lay[_NS]):
+        x[c1 + e] = _slip_clip(x[c1 + e], fp[o_sw + e])
 
 
 @nb.njit(cache=True, inline="always")
@@ -668,6 +688,8 @@ def _trajectory(
             if not last:
                 for i in range(S):
                     x[i] = _advance(x[i], h, _increment(d[0, i], d[1, i], d[2, i], d[3, i]))
+                if kind == 0:
+                    _project_table(x, lay, fp)
         if last:
             break
         ok = abs(x[0]) <= q_limit
@@ -869,6 +891,11 @@ def _rhs_table_lock(
         k = ip[o_cb + i]
         for c in range(nb_):
             D[row, c0 + i, c] = _creep_state_rate(work[k, c], XT[1, c], rate, XT[c0 + i, c])
+    c1 = c0 + lay[_NC]
+    o_sw = lay[_P_SWIDTH]
+    for e in range(lay[_NS]):
+        for c in range(nb_):
+            D[row, c1 + e, c] = _slip_state_rate(XT[1, c], XT[c1 + e, c], fp[o_sw + e])
 
 
 @nb.njit(cache=True)
@@ -932,6 +959,11 @@ def _lockstep(
                     for c in range(nb_):
                         incr = _increment(D[0, i, c], D[1, i, c], D[2, i, c], D[3, i, c])
                         X[i, c] = _advance(X[i, c], h, incr)
+                c1 = (3 if lay[_LAG] == 1 else 2) + lay[_NC]
+                for e in range(lay[_NS]):
+                    width = fp[lay[_P_SWIDTH] + e]
+                    for c in range(nb_):
+                        X[c1 + e, c] = _slip_clip(X[c1 + e, c], width)
         for c in range(nb_):
             b = bidx[c]
             if dead[b] < 0 and k < L[c] - 1:
@@ -1131,8 +1163,10 @@ def free_run_sensitivity(
     """
     if arrays.kind != KIND_TABLE:
         raise ValueError("sensitivities are computed for term-table models only")
-    if arrays.lay[_NC] > 0:
-        raise ValueError("sensitivities of models with creep states are not implemented")
+    if arrays.lay[_NC] > 0 or arrays.lay[_NS] > 0:
+        raise ValueError(
+            "sensitivities of models with creep states or Maxwell-slip elements are not implemented"
+        )
     B, n = fine.shape[0], int(np.max(lengths))
     J = int(arrays.lay[_J])
     order = arrays.term_order

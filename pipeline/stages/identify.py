@@ -177,6 +177,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "smoothing": diag.smoothing,
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
+        **({"slip": _slip_summary(model)} if model.has_slip else {}),
         "design": {
             "verdict": design["equilibria"].attrs["verdict"],
             "reason": design["equilibria"].attrs["reason"],
@@ -190,6 +191,11 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     if search is not None:
         summary["auto"] = search.to_summary()
     return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
+
+
+def _slip_summary(model) -> dict[str, Any]:
+    """Return the slip elements as lists (:meth:`debist.model.rbf.RBFModel.slip_elements`)."""
+    return {k: np.asarray(v).tolist() for k, v in model.slip_elements().items()}
 
 
 def _excitation(records, cfg: IdentifyConfig, tables):
