@@ -112,8 +112,8 @@ def _slip_record(truth: RBFModel, n=6500, dt=0.002):
 
 def test_the_fit_recovers_element_stiffnesses_and_the_curves_they_would_bias():
     """Data of a model with three elements (k = 400, 150, 40 N/m per unit mass): with
-    ``slip`` at the true deflections the stiffnesses come back to 2 % and the curves to
-    0.5 %; without, the same data bias the curves far more."""
+    ``slip`` at the true deflections the stiffnesses come back to 0.2 % and the curves to
+    0.1 % (measured 0.04 % and 0.02 %); without, the same data bias the curves by 56 %."""
     truth = _with_slip(truth_model(np.random.default_rng(2)))
     record, x = _slip_record(truth)
     assert np.max(np.abs(x[:, 3])) == pytest.approx(WIDTHS[0])  # the elements slip
@@ -121,7 +121,7 @@ def test_the_fit_recovers_element_stiffnesses_and_the_curves_they_would_bias():
     model, diag = fit_rbf_model([record], IdentifyConfig.from_dict({**base, "slip": WIDTHS}))
     assert diag.columns[16:19] == ["slip[0]", "slip[1]", "slip[2]"]
     assert model.slip_width == WIDTHS
-    np.testing.assert_allclose(model.theta_slip, truth.theta_slip, rtol=0.02)
+    np.testing.assert_allclose(model.theta_slip, truth.theta_slip, rtol=2e-3)
     grid = np.linspace(-0.012, 0.012, 50)
     want = truth.curves(grid)
 
@@ -130,11 +130,11 @@ def test_the_fit_recovers_element_stiffnesses_and_the_curves_they_would_bias():
         return max(np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "g"))
 
     without, _ = fit_rbf_model([record], IdentifyConfig.from_dict(base))
-    assert error(model) < 0.005
-    assert error(without) > 5 * error(model)
+    assert error(model) < 1e-3
+    assert error(without) > 100 * error(model)
     elements = model.slip_elements()
     np.testing.assert_allclose(elements["F"], elements["k"] * np.array(WIDTHS))
-    assert elements["k_total"] == pytest.approx(sum(truth.theta_slip), rel=0.02)
+    assert elements["k_total"] == pytest.approx(sum(truth.theta_slip), rel=2e-3)
 
 
 def test_slip_config_the_default_grid_and_the_model_file():
