@@ -14,6 +14,7 @@ import re
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -70,11 +71,24 @@ def free_run(key):
     return model, v, reference(model, v)
 
 
+def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
+    """``model`` with three Maxwell-slip elements (break-away deflections ``widths`` [m])."""
+    return replace(model, slip_width=widths, theta_slip=np.array(stiffness))
+
+
 MODELS = {
     "lag+prior": lambda: rbf_model(),
     "T_z=0": lambda: rbf_model(T_z=0.0, prior=False),
     "zero-outside,h=v": lambda: rbf_model(outside="zero", input_map="v"),
+    "creep+slip": lambda: with_slip(example_rbf_model(creep_rate=3.7)),
+    "T_z=0+slip": lambda: with_slip(rbf_model(T_z=0.0, prior=False)),
 }
+
+
+def n_states(model):
+    """States of the exported model: [q, q_dot], z with T_z > 0, creep and slip states."""
+    extra = (model.basis.M if model.has_creep else 0) + len(model.slip_width)
+    return (3 if model.T_z > 0 else 2) + extra
 
 
 def load_python(tmp_path, model, info=None):
@@ -114,16 +128,23 @@ def ptr(a):
 def test_python_export_matches_free_run(tmp_path, key):
     model, v, ref = free_run(key)
     mod = load_python(tmp_path, model)
-    n_x = mod.N_STATES
-    assert n_x == (3 if model.T_z > 0 else 2)
+    assert n_states(model) == mod.N_STATES
     x = mod.initial_state(0.004, 0.0)
     q = np.empty(N)
     q[0] = x[0]
+    states = [x]
     for k in range(N - 1):
         x = mod.rk4_step(x, v[k], v[k + 1], DT)
         q[k + 1] = x[0]
+        states.append(x)
     assert np.ptp(ref) > 1e-3  # the run moves (a trivial trajectory would prove little)
     assert_close_q(q, ref)
+    if model.has_slip:  # every element both sticks and slips along the run, and never passes
+        delta = np.array(states)[:, -len(model.slip_width) :]
+        width = np.array(model.slip_width)
+        assert np.all(np.abs(delta) <= width)
+        assert np.all(np.mean(np.abs(delta) == width, axis=0) > 0.02)
+        assert np.all(np.mean(np.abs(delta) < width, axis=0) > 0.02)
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
@@ -131,8 +152,8 @@ def test_python_export_matches_free_run(tmp_path, key):
 def test_c_export_matches_free_run(tmp_path, key):
     model, v, ref = free_run(key)
     dll = build_c(tmp_path, model)
-    n_x = 3 if model.T_z > 0 else 2
-    x = np.array([0.004, 0.0, 0.0][:n_x])
+    x = np.zeros(n_states(model))
+    x[0] = 0.004
     q = np.empty(N)
     q[0] = x[0]
     for k in range(N - 1):
@@ -170,7 +191,7 @@ def run_octave(folder, v, q0, dt, n_x, q_curves=()):
     """Drive the exported debist_model.m in Octave; return q of the free run and curve rows."""
     np.savetxt(folder / "v.txt", v, fmt="%.17g")
     np.savetxt(folder / "qc.txt", [*q_curves, 0.0], fmt="%.17g")  # never an empty file
-    x0 = ", ".join(repr(x) for x in [q0, 0.0, 0.0][:n_x])
+    x0 = ", ".join(repr(x) for x in [q0] + [0.0] * (n_x - 1))
     (folder / "drive.m").write_text(
         f"""v = load('v.txt'); x = [{x0}]'; n = size(v, 1); q = zeros(n, 1); q(1) = x(1);
 for k = 1:n - 1
@@ -203,8 +224,7 @@ def test_matlab_export_matches_free_run_in_octave(tmp_path, key):
     (tmp_path / MATLAB_FILE).write_text(matlab_source(model)[MATLAB_FILE], encoding="utf-8")
     q_grid, names, values = curve_table(model)
     probes = [q_grid[0] - 1.0, *q_grid[::37], 0.5 * (q_grid[3] + q_grid[4]), q_grid[-1] + 1.0]
-    n_x = 3 if model.T_z > 0 else 2
-    q, curves = run_octave(tmp_path, v[:N_OCTAVE], 0.004, DT, n_x, probes)
+    q, curves = run_octave(tmp_path, v[:N_OCTAVE], 0.004, DT, n_states(model), probes)
     assert np.ptp(ref[:N_OCTAVE]) > 1e-3
     assert_close_q(q, ref[:N_OCTAVE])
     want = np.array([[np.interp(p, q_grid, row) for row in values] for p in probes])
@@ -494,11 +514,3 @@ def test_templates_insert_only_filtered_text_and_integers():
         render("{{ missing }}")
     with pytest.raises(jinja2.UndefinedError):
         render("{{ missing | quote }}")
-
-
-@pytest.mark.parametrize("fmt", ["c", "matlab", "python"])
-def test_export_of_a_model_with_creep_is_refused(fmt):
-    """The exports do not carry the creep states of Eq. 26 yet: a clear error, no code."""
-    model = example_rbf_model(creep_rate=3.7)
-    with pytest.raises(WorkflowError, match="export of a model with creep"):
-        export_files(model, fmt)

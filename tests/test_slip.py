@@ -163,8 +163,7 @@ def test_slip_config_the_default_grid_and_the_model_file():
     np.testing.assert_allclose(states[:, 3:], np.minimum(q[:, None], WIDTHS), atol=1e-15)
 
 
-def test_refinement_and_export_of_a_model_with_slip_elements_are_refused():
-    from debist.export.common import _arrays
+def test_refinement_of_a_model_with_slip_elements_is_refused():
     from debist.identify.refine import refine_model
 
     with pytest.raises(WorkflowError, match=r"refine.*slip"):
@@ -172,5 +171,3 @@ def test_refinement_and_export_of_a_model_with_slip_elements_are_refused():
     model = _with_slip(example_rbf_model())
     with pytest.raises(WorkflowError, match="slip elements is not supported yet"):
         refine_model(model, None, [], None, None)
-    with pytest.raises(WorkflowError, match="Maxwell-slip elements"):
-        _arrays(model)

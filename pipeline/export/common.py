@@ -23,8 +23,8 @@ import jinja2
 import numpy as np
 
 from debist import __version__
-from debist.errors import ArtifactError, WorkflowError
-from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_POW, S_TANH
+from debist.errors import ArtifactError
+from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_CREEP, S_POW, S_TANH
 
 __all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]
 
@@ -63,35 +63,33 @@ class ExportInfo:
 def _arrays(model) -> dict[str, Any]:
     """Collect the constants of the exported model from its term table.
 
-    Raises
-    ------
-    WorkflowError
-        If the model has the creep states of Eq. 26 or Maxwell-slip elements (not exported
-        yet).
+    The state is ``[q, q_dot]``, then z with the friction lag (T_z > 0), then the C creep
+    states w_k of Eq. 26 and the E Maxwell-slip deflections delta_e
+    (the layout of :class:`debist.model.termtable.TableModel`, without z when T_z = 0).
     """
-    if getattr(model, "has_creep", False):
-        raise WorkflowError(
-            "export of a model with creep ([identify] creep, the M creep states of Eq. 26) "
-            "is not supported yet: identify it with creep = false to export it"
-        )
-    if getattr(model, "has_slip", False):
-        raise WorkflowError(
-            "export of a model with Maxwell-slip elements ([identify] slip) is not supported "
-            "yet: identify it with slip = false to export it"
-        )
     tm = model.table_model()
     t = tm.table
     lag = float(model.T_z) > 0
+    x_extra = 3 if lag else 2
+    max_step = 1.5 * float(model.T_z) if lag else np.inf
+    if t.n_creep and t.creep_rate > 0:
+        max_step = min(max_step, 1.5 / float(t.creep_rate))
     return {
         "n_inputs": t.n_inputs,
-        "n_states": 3 if lag else 2,
+        "n_states": x_extra + t.n_extra,
+        "x_extra": x_extra,
         "lag": lag,
+        "n_creep": t.n_creep,
+        "creep_base": t.creep_base.tolist(),
+        "creep_rate": float(t.creep_rate),
+        "n_slip": t.n_slip,
+        "slip_width": t.slip_width.tolist(),
         "T_z": float(model.T_z),
         "m_q": float(tm.mass[0]),
         "v_c": float(t.coulomb_velocity),
         "input_map": t.input_map,
         "q_range": (float(model.q_range[0]), float(model.q_range[1])),
-        "max_step": 1.5 * float(model.T_z) if lag else np.inf,
+        "max_step": max_step,
         "clipped": bool(np.isfinite(t.base_lo[t.base_kind == BASE_GAUSS]).any()),
         "base_kind": t.base_kind.tolist(),
         "base_centre": t.base_centre.tolist(),
@@ -161,14 +159,33 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
     lo, hi = arr["q_range"]
     hmap = "v^2" if arr["input_map"] == "v2" else "v"
     lag = arr["lag"]
-    state = "[q, q_dot, z]" if lag else "[q, q_dot]"
+    extra = [f"w{k + 1}" for k in range(arr["n_creep"])]
+    extra += [f"delta{e + 1}" for e in range(arr["n_slip"])]
+    state = "[" + ", ".join(["q", "q_dot", *(["z"] if lag else []), *extra]) + "]"
     lines = [
         "The identified model of debist (Masoud & Maas 2025, Eq. 37):",
-        "  m_q q'' = sum_k w_k term_k(q, s, h),  h_i = h(v_i) = " + hmap,
+        "  m_q q'' = sum_j weight_j term_j(q, s, h),  h_i = h(v_i) = " + hmap,
         "  friction state z' = (q_dot - z) / T_z, s = z"
-        if arr["lag"]
+        if lag
         else "  T_z = 0: no friction state, s = q_dot",
-        f"State x = {state}" + ("; start with z = q_dot (the filter at rest)." if lag else "."),
+    ]
+    if arr["n_creep"]:
+        lines += [
+            "  creep states (Eq. 26): w_k' = b_k(q) q_dot - lambda w_k,",
+            f"  lambda = {arr['creep_rate']!r} 1/s; terms of kind S_CREEP read w_k",
+        ]
+    if arr["n_slip"]:
+        widths = ", ".join(repr(w) for w in arr["slip_width"])
+        lines += [
+            "  Maxwell-slip deflections (Al-Bender, Lampaert & Swevers 2005):",
+            "  delta_e' = q_dot, 0 while |delta_e| >= Delta_e and q_dot delta_e > 0;",
+            "  after every RK4 step delta_e is clipped to [-Delta_e, Delta_e];",
+            f"  Delta_e = [{widths}] m",
+        ]
+    at_rest = ["z = q_dot (the filter at rest)"] if lag else []
+    at_rest += ["w = 0, delta = 0 (at rest)"] if extra else []
+    lines += [
+        f"State x = {state}" + (f"; start with {' and '.join(at_rest)}." if at_rest else "."),
         f"Inputs v [V] (n = {arr['n_inputs']}); mapped inputs h [V^2 or V].",
         "Units: q [m], q_dot [m/s], t and dt [s], v [V]; forces [N] with",
         f"  m_q = {arr['m_q']!r} (per unit mass [m/s^2] when m_q = 1).",
@@ -182,9 +199,9 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
             if name in info.identified:
                 spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in info.identified[name])
                 lines.append(f"Curve {name} identified on q in: {spans or 'none'} m")
-    if arr["lag"]:
+    if np.isfinite(arr["max_step"]):
         lines.append(
-            f"RK4 is stable for dt <= 1.5 T_z = {arr['max_step']!r} s; "
+            f"RK4 is stable for dt <= {arr['max_step']!r} s (1.5 T_z, 1.5 / lambda); "
             "split longer sample times into sub-steps."
         )
     lines += [
@@ -298,4 +315,5 @@ def _context(model, info: ExportInfo | None, name_ref: str) -> dict[str, Any]:
         "BASE_TABLE": BASE_TABLE,
         "S_POW": S_POW,
         "S_TANH": S_TANH,
+        "S_CREEP": S_CREEP,
     }
