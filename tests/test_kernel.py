@@ -250,15 +250,28 @@ def test_kernel_arrays_check_the_spline_shape():
     assert fine.values.shape == (1, 19, 2)
 
 
-def test_forward_sensitivities_are_the_derivative_of_the_free_run():
+#: Maxwell-slip elements of the sensitivity test: break-away deflections [m], stiffnesses [N/m].
+SLIP = ((3e-5, 1e-4, 4e-4), (400.0, 150.0, 40.0))
+
+
+@pytest.mark.parametrize("extra", ["none", "creep+slip"])
+def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra):
     """The refinement's Jacobian: d q / d p from the sensitivity equations against central
-    differences of the kernel's own free run, for weights, the mass and log T_z."""
+    differences of the kernel's own free run, for weights, the mass and log T_z, and with the
+    creep states of Eq. 26 and Maxwell-slip elements (their stiffnesses, and every weight
+    through their states)."""
+    from dataclasses import replace
+
     from debist.model.terms import term_sign, term_table
     from debist.model.termtable import TableModel
 
     model = rbf_model(T_z=0.02)
+    if extra != "none":
+        model = rbf_model(T_z=0.02, creep_rate=3.7)
+        model = replace(model, slip_width=SLIP[0], theta_slip=np.array(SLIP[1]))
     names, theta = model.parameters()
-    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior)
+    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior, model.creep_rate,
+                       model.slip_width or None)  # fmt: skip
     signs = np.array([term_sign(n) for n in names])
 
     def build(p):
@@ -266,7 +279,9 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run():
 
     p0 = np.concatenate([theta, [1.0, np.log(0.02)]])
     fine = prepare_inputs([inputs(300, 0), inputs(300, 1)], 2, "bandlimited").values
-    x0 = np.array([[-0.01, 0.0, 0.0], [0.009, 0.01, 0.01]])
+    x0 = np.zeros((2, build(p0).n_states))
+    x0[:, :3] = [[-0.01, 0.0, 0.0], [0.009, 0.01, 0.01]]
+    x0[1, 3:] = 1e-5  # creep states and slip deflections away from rest on one trajectory
     lengths = np.array([300, 300])
 
     def q_of(p):
@@ -279,6 +294,10 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run():
         n + 1, n + 2,
     )  # fmt: skip
     np.testing.assert_array_equal(q, q_of(p0))
+    if extra != "none":  # the elements stick and slip along the runs: the test covers both
+        states = kernel.free_run(build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
+        at_width = np.isclose(np.abs(states[..., -3:]), SLIP[0], rtol=1e-12, atol=0)
+        assert 0.05 < at_width.mean() < 0.95
     for i in range(n + 2):
         step = 1e-6 * abs(p0[i])
         up, down = p0.copy(), p0.copy()

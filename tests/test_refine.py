@@ -148,13 +148,29 @@ def test_the_held_out_blocks_decide_and_their_errors_are_reported(bistable):
         assert res.holdout_rms_refined < res.holdout_rms_ls
 
 
-def test_refinement_with_creep_is_refused_not_computed_wrong(bistable_record):
-    """The forward sensitivities lack the creep states: config and refine_model refuse."""
-    with pytest.raises(WorkflowError, match=r"\[identify\.refine\] with creep is not supported"):
-        IdentifyConfig.from_dict({"creep": "search", "refine": True})
+def test_refinement_with_creep_removes_the_creep_the_truth_does_not_have(bistable_record):
+    """The creep states of Eq. 26 in the refinement (their sensitivities are in the kernel):
+    least squares on noisy derivatives give the truth, which has no creep, a creep force;
+    refined on windows restarted from the exact states it falls 8x (62 -> 7.5 mN per unit
+    mass RMS along the record), the relaxation rate kept, and the free run's error falls
+    5x (measured: windows 627 -> 3.9 um, whole record 2.17 -> 0.41 mm). The reported error
+    is that of an independent free run of the kept model."""
     rec = bistable_record
     cfg = IdentifyConfig.from_dict({"M": 10, "T_z": 0.0, "creep": 2.0, "max_condition": 1e10})
+    model, diag = fit_rbf_model(_noisy_records(rec, 0.3, seed=5), cfg)
     records = [Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])]
-    model, diag = fit_rbf_model(records, cfg)
-    with pytest.raises(WorkflowError, match=r"\[identify\.refine\] with creep is not supported"):
-        refine_model(model, diag, records, cfg, refine_config(True))
+    res = refine_model(model, diag, records, cfg, RefineConfig(windows=20, length=300, max_nfev=8))
+    assert res.accepted, res.message
+    assert res.model.creep_rate == model.creep_rate == 2.0
+
+    def creep_force(m):  # RMS of sum_k theta_creep,k w_k along the record [N per unit mass]
+        w = m.measured_states(rec["q"], rec["q_dot"], rec["dt"])[:, 3:]
+        return np.sqrt(np.mean((w @ m.theta_creep) ** 2))
+
+    assert creep_force(res.model) < 0.2 * creep_force(model)  # measured 0.12
+    assert res.full_rms_refined < 0.2 * res.full_rms_ls
+    (sim,) = simulate(
+        res.model, [records[0].v], records[0].dt, records[0].q[:1], records[0].q_dot[:1]
+    )
+    rms = np.sqrt(np.mean((sim.q - records[0].q) ** 2))
+    assert rms == pytest.approx(res.full_rms_refined, rel=1e-9)

@@ -247,18 +247,6 @@ class IdentifyConfig(SectionConfig):
             self.slip and all(a < b for a, b in zip(self.slip, self.slip[1:], strict=False))
         ):
             raise ConfigValueError("slip", "ascending break-away deflections > 0", list(self.slip))
-        if self.refine and self.slip is not False:
-            raise ConfigValueError(
-                "refine",
-                message="[identify.refine] with slip elements is not supported yet (the forward "
-                "sensitivities lack the slip states): set slip = false or drop the refinement",
-            )
-        if self.refine and self.creep is not False:
-            raise ConfigValueError(
-                "refine",
-                message="[identify.refine] with creep is not supported yet (the forward "
-                "sensitivities lack the creep states): set creep = false or drop the refinement",
-            )
         if self.refine:
             refine_config(self.refine)
         if self.auto is not None:

@@ -24,13 +24,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import lazy_loader as lazy
 import numpy as np
 
 from debist.engine import preflight, progress
-from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
 from debist.identify.stability import model_is_stable
@@ -96,6 +95,8 @@ def _theta_model(
     n_windows: int,
     T_z: float,
     log_tz: bool,
+    creep_rate: float = 0.0,
+    slip_width: Sequence[float] = (),
 ) -> TableModel:
     """Eq. 37 with one parameter vector per trajectory (rows repeated for every window).
 
@@ -118,6 +119,10 @@ def _theta_model(
         The model's T_z [s] when it is not refined.
     log_tz : bool
         Whether the last parameter is log T_z.
+    creep_rate : float, optional
+        The creep states' relaxation rate lambda [1/s] (``creep[i]`` columns, Eq. 26).
+    slip_width : sequence of float, optional
+        Break-away deflections of the Maxwell-slip elements (``slip[e]`` columns) [unit of q].
 
     Returns
     -------
@@ -128,15 +133,17 @@ def _theta_model(
     tz = np.exp(rows[:, -1]) if log_tz else np.full(rows.shape[0], T_z)
     theta = rows[:, :-1] if log_tz else rows
     terms = [n for n in names if n != "m_q"]
+    extra = {"creep_rate": creep_rate, "slip_width": tuple(slip_width) or None}
     if cfg.m_q == "identify":
         gains = [f"input_gain{j + 1}" for j in range(n_inputs)]
         table = term_table([*terms, *gains], basis, n_inputs, cfg.input_map,
-                           cfg.coulomb_velocity, cfg.prior)  # fmt: skip
+                           cfg.coulomb_velocity, cfg.prior, **extra)  # fmt: skip
         fixed = np.broadcast_to(np.asarray(cfg.input_gain, float), (theta.shape[0], n_inputs))
         weights = np.hstack([-theta[:, 1:], fixed])
         mass = theta[:, 0]
     else:
-        table = term_table(terms, basis, n_inputs, cfg.input_map, cfg.coulomb_velocity, cfg.prior)
+        table = term_table(terms, basis, n_inputs, cfg.input_map, cfg.coulomb_velocity, cfg.prior,
+                           **extra)  # fmt: skip
         weights = theta * np.array([term_sign(n) for n in terms])
         mass = np.full(theta.shape[0], float(cfg.m_q))
     return TableModel(table, weights, mass, tz)
@@ -226,12 +233,6 @@ def refine_model(
     RefineResult
         The accepted model and both fits' errors.
 
-    Raises
-    ------
-    WorkflowError
-        If the model has creep states (Eq. 26) or Maxwell-slip elements: their
-        sensitivities are not implemented.
-
     Notes
     -----
     Parameters are scaled by ``||y|| / ||psi_j||`` (the size of a parameter whose
@@ -240,20 +241,15 @@ def refine_model(
     windows' free runs, integrated with them by the compiled kernel
     (:func:`debist.simulate.kernel.free_run_sensitivity`): the exact derivative of the discrete
     free run, at the cost of about one run per window.
-    Residuals are q_sim - q over each window, with diverged windows penalised.
+    Residuals are q_sim - q over each window, with diverged windows penalised. The creep
+    states (Eq. 26) and the Maxwell-slip elements are refined with the rest (their relaxation
+    rate and break-away deflections stay fixed; the element stiffnesses stay >= 0), each
+    window starting from their states along the record (``RBFModel.measured_states``).
     Before anything is allocated, settings whose batched simulations exceed the memory
     budget are refused (``ResourceError``, :mod:`debist.engine.preflight`).
     """
-    if model.has_creep:
-        raise WorkflowError(
-            "[identify.refine] with creep is not supported yet (the forward sensitivities "
-            "lack the creep states of Eq. 26)"
-        )
-    if model.has_slip:
-        raise WorkflowError(
-            "[identify.refine] with slip elements is not supported yet (the forward "
-            "sensitivities lack the states of the Maxwell-slip elements)"
-        )
+    # the fit's settings with the slip elements resolved to the model's break-away deflections
+    cfg = replace(cfg, slip=tuple(model.slip_width) if model.has_slip else False)
     _check_memory(model, diag, records, rcfg)
     t_start = time.perf_counter()
     dt = records[0].dt
@@ -290,8 +286,10 @@ def refine_model(
     signs = [-1.0 if identify_mass else term_sign(n) for n in terms] + [1.0] * n_fixed
     # each window starts from the model's states along its record: the friction state is the
     # measured velocity filtered by z' = (q_dot - z) / T_z, not q_dot (true only at rest)
-    z_rec = [model.measured_states(r.q, r.q_dot, dt)[:, 2] for r in records]
-    x_start = np.stack([q0, qd0, np.array([z_rec[i][s] for i, s in picks])], axis=1)
+    # (and the creep and slip states likewise, from the measured velocity)
+    x_rec = [model.measured_states(r.q, r.q_dot, dt) for r in records]
+    x_start = np.stack([x_rec[i][s] for i, s in picks])
+    x_start[:, 0], x_start[:, 1] = q0, qd0
     lengths = np.full(W, L)
     last: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -301,8 +299,9 @@ def refine_model(
         if key not in last:
             theta = xs * scale
             batch = _theta_model(
-                theta[None, :], names, model.basis, cfg, model.n_inputs, 1, model.T_z, log_tz
-            )
+                theta[None, :], names, model.basis, cfg, model.n_inputs, 1, model.T_z, log_tz,
+                model.creep_rate, model.slip_width,
+            )  # fmt: skip
             q_sim, dq = free_run_sensitivity(
                 batch.kernel_arrays(), fine.values, lengths, dt, fine.substeps, x_start,
                 q_limit, np.array(term_param), np.array(signs),
@@ -326,10 +325,13 @@ def refine_model(
         return evaluate(x)[1]
 
     r0 = fun(x0)
+    lower = np.full(x0.size, -np.inf)  # the slip elements' stiffnesses stay >= 0, as in the fit
+    lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
     sol = optimize.least_squares(
         fun,
-        x0,
+        np.maximum(x0, lower),
         jac=jac,
+        bounds=(lower, np.inf),
         method="trf",
         max_nfev=rcfg.max_nfev,
         ftol=rcfg.ftol,
@@ -341,7 +343,7 @@ def refine_model(
     if log_tz:
         theta = theta[:-1]
     refined = assemble_model(
-        theta, diag.columns, model.basis, cfg, model.n_inputs, T_z, model.q_range
+        theta, diag.columns, model.basis, cfg, model.n_inputs, T_z, model.q_range, model.creep_rate
     )
     full_ls, full_ref = (_full_rms(m, records, rcfg, q_limit) for m in (model, refined))
     held_ls, held_ref = (_window_rms(m, records, held, rcfg, q_limit) for m in (model, refined))
@@ -447,7 +449,9 @@ def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Recor
     P = len(diag.theta) + log_tz
     W, L = int(rcfg.windows), int(rcfg.length)
     preflight.check_memory(
-        preflight.refine_bytes(W, L, P, model.n_inputs, ns, len(diag.columns), model.basis.M),
+        preflight.refine_bytes(
+            W, L, P, model.n_inputs, ns, len(diag.columns), model.basis.M, model.n_states
+        ),
         f"[identify.refine] windows = {W}, length = {L}",
         f"the Jacobian's batched free run of {(P + 1) * W} window trajectories "
         f"({W} windows x {P + 1} parameter vectors) of {L} samples x {ns} sub-steps",

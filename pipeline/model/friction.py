@@ -105,8 +105,41 @@ def slip_state_rate(q_dot, delta, width):
     >>> [slip_state_rate(qd, delta, 1.0) for qd, delta in ((2.0, 0.5), (2.0, 1.0), (-2.0, 1.0))]
     [2.0, 0.0, -2.0]
     """
-    slips = (abs(delta) >= width) * (q_dot * delta > 0.0)
-    return q_dot * (1 - slips)
+    return q_dot * slip_sticks(q_dot, delta, width)
+
+
+def slip_sticks(q_dot, delta, width):
+    """Return 1 while a Maxwell-slip element sticks, 0 while it slips: d delta_e' / d q_dot.
+
+    The element slips when its deflection is at the break-away value and the motion loads it
+    further, ``|delta| >= width`` and ``q_dot delta > 0`` (:func:`slip_state_rate`); away from
+    that switching surface the rate ``q_dot * slip_sticks(...)`` is linear in q_dot with this
+    slope, which the forward sensitivities of the free run use.
+
+    Parameters
+    ----------
+    q_dot : float or ndarray
+        Velocity [unit of q / s].
+    delta : float or ndarray
+        The element's deflection [unit of q].
+    width : float or ndarray
+        Break-away deflection Delta_e > 0 [unit of q].
+
+    Returns
+    -------
+    int or ndarray of int
+        1 (sticks) or 0 (slips).
+
+    References
+    ----------
+    Al-Bender, Lampaert & Swevers 2005, Eq. 3-4.
+
+    Examples
+    --------
+    >>> [int(slip_sticks(qd, 1.0, 1.0)) for qd in (2.0, -2.0)]
+    [0, 1]
+    """
+    return 1 - (abs(delta) >= width) * (q_dot * delta > 0.0)
 
 
 def slip_clip(delta, width):

@@ -76,7 +76,7 @@ _COMPILED_FROM = (
 #: sha256 of their source (and of rk4's NODES and INPUT_OFFSET). numba's on-disk cache is
 #: invalidated by a change of this file only, not of theirs: a change there must change this
 #: line, and importing this module refuses to go on until it does (:func:`_check_compiled_from`).
-COMPILED_FROM_SHA256 = "c39aedf33c178e2b9f1437ff56510dc7d587c3442d1234c2b1e399923092e181"
+COMPILED_FROM_SHA256 = "a1bb89891c204b33418c8a9736258533cb36e86820b3d3115559b8e34b00cb6d"
 
 
 def _compiled_from_sha256() -> str:
@@ -117,7 +117,9 @@ _INPUT_OFFSET = rk4.INPUT_OFFSET
 _gaussian = nb.njit(cache=True)(basis.gaussian)
 _friction_rate = nb.njit(cache=True)(friction.friction_state_rate)
 _creep_state_rate = nb.njit(cache=True)(friction.creep_state_rate)
-_slip_state_rate = nb.njit(cache=True)(friction.slip_state_rate)
+#: The slip states' rate is ``q_dot * _slip_sticks(...)``, as ``friction.slip_state_rate``
+#: composes it (numba cannot call that function's uncompiled helper).
+_slip_sticks = nb.njit(cache=True)(friction.slip_sticks)
 _slip_clip = nb.njit(cache=True)(friction.slip_clip)
 
 
@@ -527,7 +529,7 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     c1 = c0 + lay[_NC]
     o_sw = lay[_P_SWIDTH]
     for e in range(lay[_NS]):
-        d[row, c1 + e] = _slip_state_rate(q_dot, x[c1 + e], fp[o_sw + e])
+        d[row, c1 + e] = q_dot * _slip_sticks(q_dot, x[c1 + e], fp[o_sw + e])
     return acc
 
 
@@ -541,12 +543,13 @@ def _project_table(x, lay, fp):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
-def _grad_table(x, b, fp, ip, lay, W, V, tv):  # pragma: no cover - compiled
+def _grad_table(x, b, fp, ip, lay, W, V, tv, ae):  # pragma: no cover - compiled
     """Differentiate the table model's acceleration, after :func:`_rhs_table` filled W.
 
-    Returns d acc / d q and d acc / d s, and fills ``tv`` with every term's value over the
-    mass (d acc / d w_j), in the kernel's term order. ``V`` is scratch (basis derivatives,
-    derivatives of the q powers and velocity factors).
+    Returns d acc / d q and d acc / d s, fills ``tv`` with every term's value over the
+    mass (d acc / d w_j), in the kernel's term order, and ``ae`` with d acc / d x_(c0 + k)
+    for the creep and slip states k. ``V`` is scratch whose first K entries are left holding
+    the basis derivatives (then derivatives of the q powers and velocity factors).
     """
     K, U, NI, QMAX, G = lay[_K], lay[_U], lay[_NI], lay[_QMAX], lay[_NG]
     w_k, w_hv = 0, K
@@ -595,6 +598,8 @@ def _grad_table(x, b, fp, ip, lay, W, V, tv):  # pragma: no cover - compiled
     o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
     dq = 0.0
     ds = 0.0
+    for k in range(lay[_NC] + lay[_NS]):
+        ae[k] = 0.0
     for g in range(G):
         a_g = ip[lay[_I_GQPOW] + g]
         s_g = ip[lay[_I_GSIDX] + g]
@@ -610,6 +615,8 @@ def _grad_table(x, b, fp, ip, lay, W, V, tv):  # pragma: no cover - compiled
             tv[m] = W[w_k + k] * fq * fs * fh / mass
         dq += (innerd * fq + inner * fqd) * fs * fh
         ds += inner * fq * fsd * fh
+        if ip[lay[_I_SUNIQ] + 2 * s_g] == 3:  # the factor is the extra state x_(c0 + k)
+            ae[ip[lay[_I_SUNIQ] + 2 * s_g + 1]] += inner * fq * fh / mass
     return dq / mass, ds / mass
 
 
@@ -895,7 +902,7 @@ def _rhs_table_lock(
     o_sw = lay[_P_SWIDTH]
     for e in range(lay[_NS]):
         for c in range(nb_):
-            D[row, c1 + e, c] = _slip_state_rate(XT[1, c], XT[c1 + e, c], fp[o_sw + e])
+            D[row, c1 + e, c] = XT[1, c] * _slip_sticks(XT[1, c], XT[c1 + e, c], fp[o_sw + e])
 
 
 @nb.njit(cache=True)
@@ -997,13 +1004,22 @@ def _trajectory_sens(
     """RK4 of trajectory b with the forward sensitivities of its states to the parameters.
 
     The sensitivities S = dx/dp obey S' = (df/dx) S + df/dp, integrated by the same RK4
-    stages as the states (so they are the exact derivatives of the discrete free run).
+    stages as the states (so they are the exact derivatives of the discrete free run). The
+    creep states' rows follow w_k' = b_k(q) q_dot - lambda w_k; a slip state's rate is
+    q_dot while its element sticks (slope 1) and 0 while it slips, and a step's catch-up
+    clip (:func:`_project_table`) fixes the state at its break-away value, so its
+    sensitivity is 0 there.
     """
     S = states.shape[2]
     P = sens.shape[2]
     J = lay[_J]
     L = lengths[b]
     lag = lay[_LAG] == 1
+    c0 = 3 if lag else 2  # first creep state
+    NC, NS = lay[_NC], lay[_NS]
+    c1 = c0 + NC  # first slip state
+    rate = fp[lay[_P_CRATE]]
+    o_cb, o_sw = lay[_I_CBASE], lay[_P_SWIDTH]
     tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
     mass = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
     p_mass = pmap[2 * J]
@@ -1017,6 +1033,7 @@ def _trajectory_sens(
     W = np.empty(max(n_work, 8))
     V = np.empty(max(n_work, 8))
     tv = np.empty(max(J, 1))
+    ae = np.empty(max(NC + NS, 1))
     for k in range(L):
         last = k == L - 1
         for s in range(1 if last else ns):
@@ -1038,15 +1055,27 @@ def _trajectory_sens(
                         sens[b, k, p] = St[0, p]
                 if last:
                     break
-                a_q, a_s = _grad_table(xt, b, fp, ip, lay, W, V, tv)
+                a_q, a_s = _grad_table(xt, b, fp, ip, lay, W, V, tv, ae)
                 lagged = lag and tz > 0.0
                 for p in range(P):
                     dS[stage, 0, p] = St[1, p]
                     row = a_q * St[0, p]
                     row += a_s * (St[2, p] if lagged else St[1, p])
+                    for e in range(NC + NS):
+                        row += ae[e] * St[c0 + e, p]
                     dS[stage, 1, p] = row
                     if lag:
                         dS[stage, 2, p] = _friction_rate(St[1, p], St[2, p], tz) if lagged else 0.0
+                for i in range(NC):  # V[k]: the basis derivatives left by _grad_table
+                    cb = ip[o_cb + i]
+                    for p in range(P):
+                        dS[stage, c0 + i, p] = (
+                            V[cb] * St[0, p] * xt[1] + W[cb] * St[1, p] - rate * St[c0 + i, p]
+                        )
+                for e in range(NS):
+                    stick = _slip_sticks(xt[1], xt[c1 + e], fp[o_sw + e])
+                    for p in range(P):
+                        dS[stage, c1 + e, p] = stick * St[1, p]
                 for m in range(J):  # d acc / d w_m = tv[m]; w_m = sign * parameter
                     p = pmap[m]
                     if p >= 0:
@@ -1061,6 +1090,11 @@ def _trajectory_sens(
                     for p in range(P):
                         sincr = _increment(dS[0, i, p], dS[1, i, p], dS[2, i, p], dS[3, i, p])
                         Sx[i, p] = _advance(Sx[i, p], h, sincr)
+                for e in range(NS):  # the catch-up clip holds a state at Delta_e: S = 0 there
+                    if _slip_clip(x[c1 + e], fp[o_sw + e]) != x[c1 + e]:
+                        for p in range(P):
+                            Sx[c1 + e, p] = 0.0
+                _project_table(x, lay, fp)
         if last:
             break
         ok = abs(x[0]) <= q_limit
@@ -1163,10 +1197,6 @@ def free_run_sensitivity(
     """
     if arrays.kind != KIND_TABLE:
         raise ValueError("sensitivities are computed for term-table models only")
-    if arrays.lay[_NC] > 0 or arrays.lay[_NS] > 0:
-        raise ValueError(
-            "sensitivities of models with creep states or Maxwell-slip elements are not implemented"
-        )
     B, n = fine.shape[0], int(np.max(lengths))
     J = int(arrays.lay[_J])
     order = arrays.term_order
