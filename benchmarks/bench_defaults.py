@@ -31,8 +31,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment.toml"
-#: The defaults before issue 23, as ``--set`` values: bootstrap-only bands, no NARX row.
-PREVIOUS = ("identify.model_error=false", "compare.narx.enabled=false")
+#: The defaults before issue 23, as ``--set`` values: bootstrap-only bands, no NARX row, no
+#: Maxwell-slip elements.
+PREVIOUS = ("identify.model_error=false", "compare.narx.enabled=false", "identify.slip=false")
 
 
 def _debist(*args: str) -> float:
