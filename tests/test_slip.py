@@ -187,3 +187,20 @@ def test_the_refinement_moves_biased_element_stiffnesses_to_the_truth():
     assert res.model.slip_width == WIDTHS
     np.testing.assert_allclose(res.model.theta_slip, truth.theta_slip, rtol=1e-3)
     assert res.full_rms_refined < 0.01 * res.full_rms_ls
+
+
+def test_the_restoring_band_holds_the_slip_force_the_elements_can_hold_at_rest():
+    """The elements hold the beam at rest against any static force up to sum k_e Delta_e, so
+    the restoring band reaches at least that far to each side (with the Coulomb level)."""
+    from debist.identify.bands import curves_frame, friction_bound
+
+    truth = _with_slip(truth_model(np.random.default_rng(2)))
+    record, _ = _slip_record(truth)
+    cfg = {**INSIDE_CLASS, "T_z": 0.0, "bootstrap": 50, "bootstrap_seed": 1, "slip": WIDTHS}
+    model, diag = fit_rbf_model([record], IdentifyConfig.from_dict(cfg))
+    held = float(np.dot(model.theta_slip, WIDTHS))
+    assert held == pytest.approx(float(np.dot(truth.theta_slip, WIDTHS)), rel=2e-3)  # 0.33
+    assert friction_bound(model) == pytest.approx(held + abs(model.backbone.get("F_c", 0.0)))
+    frame, _ = curves_frame(model, diag, [record], min_support=1.0, band_tolerance=10.0)
+    assert np.all(frame.restoring - frame.restoring_lo >= held * (1 - 1e-12))
+    assert np.all(frame.restoring_hi - frame.restoring >= held * (1 - 1e-12))
