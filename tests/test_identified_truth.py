@@ -239,7 +239,7 @@ def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase_boot, stairc
     a truth outside it (Wasserman 2006, All of Nonparametric Statistics, Sec. 5.7). Adding
     the plant's own inertia and creep forces (which Eq. 37 lacks) to the regression output,
     an independent re-identification with the same settings, cuts the g_i error where marked
-    by a factor of about 6 (measured: 3.5 -> 0.6 % and 3.6 -> 0.6 % of the range, medians),
+    by a factor of about 10 (measured: 3.1 -> 0.34 % and 3.5 -> 0.34 % of the range, medians),
     while the median error of the workflow's g_i exceeds the median band half-width.
     """
     import tomllib
