@@ -450,7 +450,10 @@ def model_is_stable(
     unstable equilibria at 0 V inside the visited interval), or if ``d(q) < 0`` anywhere on
     the visited part of a visited well's
     basin (between its neighbouring unstable equilibria): the free run around that well gains
-    energy on every swing through it.
+    energy on every swing through it. Maxwell-slip elements (``[identify] slip``) do not enter
+    the rules: with their stiffnesses k_e >= 0 (bounded in the fit and the refinement) each
+    element is passive, storing at most k_e Delta_e^2 / 2 and dissipating while it slips
+    (Al-Bender, Lampaert & Swevers 2005), so it cannot feed energy into a well.
 
     Parameters
     ----------
