@@ -71,9 +71,6 @@ def _arrays(model) -> dict[str, Any]:
     t = tm.table
     lag = float(model.T_z) > 0
     x_extra = 3 if lag else 2
-    max_step = 1.5 * float(model.T_z) if lag else np.inf
-    if t.n_creep and t.creep_rate > 0:
-        max_step = min(max_step, 1.5 / float(t.creep_rate))
     return {
         "n_inputs": t.n_inputs,
         "n_states": x_extra + t.n_extra,
@@ -89,7 +86,7 @@ def _arrays(model) -> dict[str, Any]:
         "v_c": float(t.coulomb_velocity),
         "input_map": t.input_map,
         "q_range": (float(model.q_range[0]), float(model.q_range[1])),
-        "max_step": max_step,
+        "max_step": tm.max_step(),  # 1.5 T_z and 1.5 / lambda (inf without either)
         "clipped": bool(np.isfinite(t.base_lo[t.base_kind == BASE_GAUSS]).any()),
         "base_kind": t.base_kind.tolist(),
         "base_centre": t.base_centre.tolist(),

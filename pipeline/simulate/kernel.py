@@ -1091,10 +1091,11 @@ def _trajectory_sens(
                         sincr = _increment(dS[0, i, p], dS[1, i, p], dS[2, i, p], dS[3, i, p])
                         Sx[i, p] = _advance(Sx[i, p], h, sincr)
                 for e in range(NS):  # the catch-up clip holds a state at Delta_e: S = 0 there
-                    if _slip_clip(x[c1 + e], fp[o_sw + e]) != x[c1 + e]:
+                    held = _slip_clip(x[c1 + e], fp[o_sw + e])
+                    if held != x[c1 + e]:
+                        x[c1 + e] = held
                         for p in range(P):
                             Sx[c1 + e, p] = 0.0
-                _project_table(x, lay, fp)
         if last:
             break
         ok = abs(x[0]) <= q_limit
