@@ -76,12 +76,19 @@ def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
     return replace(model, slip_width=widths, theta_slip=np.array(stiffness))
 
 
+def with_inertia(model, theta=(2.0, 900.0)):
+    """``model`` with the position-dependent mass m(q) = m_q + 2 q + 900 q^2 (inertia terms)."""
+    return replace(model, theta_inertia=np.array(theta))
+
+
 MODELS = {
     "lag+prior": lambda: rbf_model(),
     "T_z=0": lambda: rbf_model(T_z=0.0, prior=False),
     "zero-outside,h=v": lambda: rbf_model(outside="zero", input_map="v"),
     "creep+slip": lambda: with_slip(example_rbf_model(creep_rate=3.7)),
     "T_z=0+slip": lambda: with_slip(rbf_model(T_z=0.0, prior=False)),
+    "creep+slip+inertia": lambda: with_inertia(with_slip(example_rbf_model(creep_rate=3.7))),
+    "T_z=0+inertia": lambda: with_inertia(rbf_model(T_z=0.0, prior=False)),
 }
 
 
@@ -187,6 +194,40 @@ def test_c_deriv_and_curves_match_model(tmp_path):
         np.testing.assert_allclose(out, want, rtol=1e-13, atol=1e-300)
 
 
+@pytest.mark.parametrize("key", ["creep+slip+inertia", "T_z=0+inertia"])
+def test_inertia_deriv_matches_table_model(tmp_path, key):
+    """The exports' state derivative with a mass m(q): the NumPy model's (TableModel.rhs)."""
+    model = MODELS[key]()
+    tm = model.table_model()
+    assert tm.table.has_inertia
+    mod = load_python(tmp_path, model)
+    dll = build_c(tmp_path, model) if CC is not None else None
+    rng = np.random.default_rng(11)
+    n_x = n_states(model)
+    for _ in range(20):
+        x = np.concatenate([[rng.uniform(-0.02, 0.02)], rng.normal(0, 0.3, n_x - 1)])
+        x[n_x - len(model.slip_width) :] *= 1e-3  # slip deflections about their widths
+        v = rng.uniform(0, 3000, 2)
+        if model.T_z > 0:
+            want, _ = tm.rhs(x[None, :], v[None, :])
+        else:  # the table model keeps z = q_dot where T_z = 0; the exports drop it
+            want, _ = tm.rhs(np.insert(x, 2, x[1])[None, :], v[None, :])
+            want = np.delete(want, 2, axis=1)
+        tol = {"rtol": 1e-12, "atol": 1e-12 * np.abs(want).max()}
+        np.testing.assert_allclose(mod.deriv(x, mod.map_inputs(v)), want[0], **tol)
+        if dll is not None:
+            h, dx = v * v, np.empty(n_x)
+            dll.debist_deriv(ptr(x), ptr(h), ptr(dx))
+            np.testing.assert_allclose(dx, want[0], **tol)
+    # the mass law m(q) = m_q + sum_a mu_a q^a is in every file's head, with its coefficients
+    files = {**c_sources(model), **python_source(model), **matlab_source(model)}
+    for name in (*C_FILES, PYTHON_FILE, MATLAB_FILE):
+        head = files[name][:3000]
+        assert "m(q) = m_q + sum_a mu_a q^a" in head and "mu_1 = 2.0, mu_2 = 900.0" in head
+    plain = {**c_sources(rbf_model()), **python_source(rbf_model())}
+    assert not any("m(q)" in text or "S_ACC" in text for text in plain.values())
+
+
 def run_octave(folder, v, q0, dt, n_x, q_curves=()):
     """Drive the exported debist_model.m in Octave; return q of the free run and curve rows."""
     np.savetxt(folder / "v.txt", v, fmt="%.17g")
@@ -243,9 +284,11 @@ def test_matlab_file_is_fixed_size_code_for_simulink():
     for needle in ("ef" * 32, "01" * 32, "[-0.012, 0.012] m", "q [m]", "v [V]", "dt [s]"):
         assert needle in text
     # nothing code generation refuses or a Simulink block cannot size at compile time
-    code = "\n".join(ln for ln in text.splitlines() if not ln.lstrip().startswith("%"))
-    for banned in ("{", "}", "persistent", "containers.Map", "global", "eval(", "cell(", "'"):
-        assert banned not in code, banned  # no cells, state, maps or char arrays (strings)
+    inertia = matlab_source(MODELS["creep+slip+inertia"]())[MATLAB_FILE]
+    for file in (text, inertia):
+        code = "\n".join(ln for ln in file.splitlines() if not ln.lstrip().startswith("%"))
+        for banned in ("{", "}", "persistent", "containers.Map", "global", "eval(", "cell(", "'"):
+            assert banned not in code, banned  # no cells, state, maps or char arrays (strings)
     weights = re.search(r"weights = \[ \.\.\.\n(.*?)\];", text, flags=re.S).group(1)
     got = [float(w) for w in weights.replace("...", "").split(",")]
     assert got == model.table_model().weights[0].tolist()  # round-trip literals

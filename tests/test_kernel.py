@@ -252,32 +252,102 @@ def test_kernel_arrays_check_the_spline_shape():
 
 #: Maxwell-slip elements of the sensitivity test: break-away deflections [m], stiffnesses [N/m].
 SLIP = ((3e-5, 1e-4, 4e-4), (400.0, 150.0, 40.0))
+#: A position-dependent inertia m(q) = m_q + 2 q + 900 q^2 (tests/test_inertia.py).
+INERTIA = np.array([2.0, 900.0])
 
 
-@pytest.mark.parametrize("extra", ["none", "creep+slip"])
-def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra):
+def inertia_models(T_z, slip):
+    """The creep model (with slip elements) without and with the inertia :data:`INERTIA`."""
+    from dataclasses import replace
+
+    model = rbf_model(T_z, creep_rate=3.7)
+    if slip:
+        model = replace(model, slip_width=(2e-4, 8e-4, 3.2e-3),
+                        theta_slip=np.array([400.0, 150.0, 40.0]))  # fmt: skip
+    return model, replace(model, theta_inertia=INERTIA)
+
+
+@pytest.mark.parametrize("slip", [False, True])
+@pytest.mark.parametrize("T_z", [0.02, 0.0])
+def test_inertia_terms_in_the_compiled_kernel_serial_and_in_lockstep(two_threads, T_z, slip):
+    """A mass m(q) with the force 1/2 m'(q) q_dot^2 (inertia terms): the compiled kernel, one
+    trajectory at a time and in lockstep blocks, against the NumPy engine to 1e-12, the
+    blocks bit for bit the one-trajectory numbers; the inertia changes the runs."""
+    plain, model = inertia_models(T_z, slip)
+    table = model.table_model().table
+    assert table.has_inertia and table.names.count("inertia[1]") == 1
+    assert "inertia[2]" in table.names and not plain.table_model().table.has_inertia
+    records = [inputs(800, 0), inputs(600, 1)]  # no more than the threads: one at a time
+    q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
+    ref, new = both(model, records, q0, qd0, substeps=2)
+    assert not any(r.diverged for r in ref) and np.ptp(ref[0].q) > 1e-3
+    assert_same(ref, new, tol=1e-12)
+    without = simulate(plain, records, DT, q0, qd0, substeps=2)
+    for r, w in zip(ref, without, strict=True):  # m(q) varies by ~10 %: so do the runs
+        assert np.max(np.abs(r.q - w.q)) > 5e-3 * np.ptp(w.q)
+    records = [inputs(300 + 100 * i, 60 + i) for i in range(5)]
+    q0 = np.linspace(-0.01, 0.01, 5)
+    assert len(records) > two_threads  # lockstep blocks
+    ref, new = both(model, records, q0, np.zeros(5), substeps=2)
+    assert_same(ref, new, tol=1e-12)
+    for i, rec in enumerate(records):
+        one = simulate(model, [rec], DT, q0[i : i + 1], np.zeros(1), substeps=2)
+        np.testing.assert_array_equal(new[i].states, one[0].states)
+        np.testing.assert_array_equal(new[i].q_ddot, one[0].q_ddot)
+
+
+def test_the_kernel_groups_the_inertia_terms_last_and_checks_their_form():
+    """Inertia terms form the last groups (the fast path's loop stops before them); a table
+    without them keeps its term order; an inertia term with inputs or q^0 is refused."""
+    from debist.model.termtable import S_ACC, TableModel, TermTableBuilder
+
+    plain, model = inertia_models(0.02, False)
+    arrays, table = model.kernel_arrays(), model.table_model().table
+    assert arrays.lay[kernel._NA] == 2 and plain.kernel_arrays().lay[kernel._NA] == 0
+    order = [table.names[j] for j in arrays.term_order]
+    assert order[-2:] == ["inertia[1]", "inertia[2]"]
+    plain_table = plain.table_model().table
+    assert order[:-2] == [plain_table.names[j] for j in plain.kernel_arrays().term_order]
+    for hpow, qpow in (([1], 1), ([0], 0)):
+        build = TermTableBuilder(1, "v")
+        build.term("bad", build.one(), qpow=qpow, skind=S_ACC, hpow=hpow)
+        bad = TableModel(build.build(), np.ones((1, 1)), np.ones(1), np.zeros(1))
+        with pytest.raises(ValueError, match="inertia term"):
+            kernel.table_arrays(bad)
+
+
+@pytest.mark.parametrize(
+    ("extra", "T_z"),
+    [("none", 0.02), ("creep+slip", 0.02), ("inertia+creep+slip", 0.02), ("inertia", 0.0)],
+)
+def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra, T_z):
     """The refinement's Jacobian: d q / d p from the sensitivity equations against central
     differences of the kernel's own free run, for weights, the mass and log T_z, and with the
     creep states of Eq. 26 and Maxwell-slip elements (their stiffnesses, and every weight
-    through their states)."""
+    through their states), and with inertia terms m(q) = m + 2 q + 900 q^2 (their weights,
+    and every weight and the mass through m(q)), with the friction lag and without."""
     from dataclasses import replace
 
     from debist.model.terms import term_sign, term_table
     from debist.model.termtable import TableModel
 
-    model = rbf_model(T_z=0.02)
-    if extra != "none":
-        model = rbf_model(T_z=0.02, creep_rate=3.7)
+    model = rbf_model(T_z=T_z, creep_rate=3.7 if "creep" in extra else 0.0)
+    if "slip" in extra:
         model = replace(model, slip_width=SLIP[0], theta_slip=np.array(SLIP[1]))
+    if "inertia" in extra:
+        model = replace(model, theta_inertia=INERTIA)
     names, theta = model.parameters()
+    assert ("inertia[2]" in names) == ("inertia" in extra)
     table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior, model.creep_rate,
                        model.slip_width or None)  # fmt: skip
     signs = np.array([term_sign(n) for n in names])
+    n, lagged = len(names), T_z > 0
 
     def build(p):
-        return TableModel(table, signs * p[:-2], np.array([p[-2]]), np.array([np.exp(p[-1])]))
+        tz = np.exp(p[n + 1]) if lagged else 0.0
+        return TableModel(table, signs * p[:n], np.array([p[n]]), np.array([tz]))
 
-    p0 = np.concatenate([theta, [1.0, np.log(0.02)]])
+    p0 = np.concatenate([theta, [1.0, np.log(T_z)] if lagged else [1.0]])
     fine = prepare_inputs([inputs(300, 0), inputs(300, 1)], 2, "bandlimited").values
     x0 = np.zeros((2, build(p0).n_states))
     x0[:, :3] = [[-0.01, 0.0, 0.0], [0.009, 0.01, 0.01]]
@@ -288,17 +358,16 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra):
         states = kernel.free_run(build(p).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
         return states[..., 0]
 
-    n = len(names)
     q, dq = kernel.free_run_sensitivity(
         build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf, np.arange(n), signs, n,
-        n + 1, n + 2,
+        n + 1 if lagged else -1, p0.size,
     )  # fmt: skip
     np.testing.assert_array_equal(q, q_of(p0))
-    if extra != "none":  # the elements stick and slip along the runs: the test covers both
+    if "slip" in extra:  # the elements stick and slip along the runs: the test covers both
         states = kernel.free_run(build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
         at_width = np.isclose(np.abs(states[..., -3:]), SLIP[0], rtol=1e-12, atol=0)
         assert 0.05 < at_width.mean() < 0.95
-    for i in range(n + 2):
+    for i in range(p0.size):
         step = 1e-6 * abs(p0[i])
         up, down = p0.copy(), p0.copy()
         up[i] += step

@@ -230,6 +230,7 @@ def _columns(cfg: Any, n_inputs: int) -> tuple[int, int, int]:
     force = M * (("c" in rbf) + ("d" in rbf)) + sum(b in backbone for b in _FORCE_SCALARS)
     force += M * (getattr(cfg, "creep", False) is not False)  # creep[i] (Eq. 26)
     force += getattr(cfg, "n_slip", 0)  # slip[e], the Maxwell-slip elements
+    force += len(getattr(cfg, "inertia_powers", ()))  # inertia[a], the coefficients of m(q)
     z_cols = M * ("d" in rbf) + sum(b in backbone for b in _Z_TERMS)
     if identify_mass:
         return 1 + force, 1 + force, z_cols

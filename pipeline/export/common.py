@@ -15,6 +15,7 @@ jinja2 3.1, "API" (``Environment``, ``PackageLoader``, ``StrictUndefined``, ``fi
 from __future__ import annotations
 
 import numbers
+import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,7 +25,7 @@ import numpy as np
 
 from debist import __version__
 from debist.errors import ArtifactError
-from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_CREEP, S_POW, S_TANH
+from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
 
 __all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]
 
@@ -66,11 +67,17 @@ def _arrays(model) -> dict[str, Any]:
     The state is ``[q, q_dot]``, then z with the friction lag (T_z > 0), then the C creep
     states w_k of Eq. 26 and the E Maxwell-slip deflections delta_e
     (the layout of :class:`debist.model.termtable.TableModel`, without z when T_z = 0).
+    ``inertia`` maps each power a of the inertia terms (:data:`S_ACC`) to its coefficient
+    mu_a of the mass ``m(q) = m_q + sum_a mu_a q^a`` (minus the sum of their weights).
     """
     tm = model.table_model()
     t = tm.table
     lag = float(model.T_z) > 0
     x_extra = 3 if lag else 2
+    inertia: dict[int, float] = {}
+    for j in np.flatnonzero(t.term_skind == S_ACC):
+        a = int(t.term_qpow[j])
+        inertia[a] = inertia.get(a, 0.0) - float(tm.weights[0, j])
     return {
         "n_inputs": t.n_inputs,
         "n_states": x_extra + t.n_extra,
@@ -103,6 +110,8 @@ def _arrays(model) -> dict[str, Any]:
         "term_spow": t.term_spow.tolist(),
         "term_hpow": t.term_hpow.tolist(),
         "weights": tm.weights[0].tolist(),
+        "has_inertia": t.has_inertia,
+        "inertia": dict(sorted(inertia.items())),
     }
 
 
@@ -159,9 +168,21 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
     extra = [f"w{k + 1}" for k in range(arr["n_creep"])]
     extra += [f"delta{e + 1}" for e in range(arr["n_slip"])]
     state = "[" + ", ".join(["q", "q_dot", *(["z"] if lag else []), *extra]) + "]"
-    lines = [
-        "The identified model of debist (Masoud & Maas 2025, Eq. 37):",
-        "  m_q q'' = sum_j weight_j term_j(q, s, h),  h_i = h(v_i) = " + hmap,
+    lines = ["The identified model of debist (Masoud & Maas 2025, Eq. 37):"]
+    if arr["has_inertia"]:
+        mus = [f"mu_{a} = {mu!r}" for a, mu in arr["inertia"].items()]
+        lines += [
+            "  m(q) q'' = sum_j weight_j term_j(q, s, h) - 1/2 m'(q) q_dot^2,  h_i = h(v_i) = "
+            + hmap
+            + ",",
+            "  the sum over every term but the inertia terms (kind S_ACC, term q^a), which make",
+            "  the position-dependent mass m(q) = m_q + sum_a mu_a q^a, mu_a = -weight (Lagrange's",
+            "  equation of the kinetic energy 1/2 m(q) q_dot^2); here",
+            *textwrap.wrap(", ".join(mus), 88, initial_indent="  ", subsequent_indent="  "),
+        ]
+    else:
+        lines += ["  m_q q'' = sum_j weight_j term_j(q, s, h),  h_i = h(v_i) = " + hmap]
+    lines += [
         "  friction state z' = (q_dot - z) / T_z, s = z"
         if lag
         else "  T_z = 0: no friction state, s = q_dot",
@@ -313,4 +334,5 @@ def _context(model, info: ExportInfo | None, name_ref: str) -> dict[str, Any]:
         "S_POW": S_POW,
         "S_TANH": S_TANH,
         "S_CREEP": S_CREEP,
+        "S_ACC": S_ACC,
     }

@@ -321,7 +321,13 @@ def _freeze(value: Any) -> Any:
 
 def _n_params(cfg: IdentifyConfig, n_inputs: int) -> int:
     force, inputs = column_names(
-        cfg.rbf, cfg.backbone, cfg.M, n_inputs, cfg.creep is not False, cfg.n_slip
+        cfg.rbf,
+        cfg.backbone,
+        cfg.M,
+        n_inputs,
+        cfg.creep is not False,
+        cfg.n_slip,
+        cfg.inertia_powers,
     )
     return len(force) + len(inputs) + (cfg.m_q == "identify")
 

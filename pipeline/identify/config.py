@@ -79,6 +79,11 @@ class IdentifyConfig(SectionConfig):
         of Eq. 37. A number N places N deflections geometrically on :data:`SLIP_GRID` times
         the estimation range of q; a list gives them [unit of q], ascending; false
         (default): Eq. 37's friction only.
+    inertia : int or tuple of int
+        A position-dependent inertia m(q) = m_q + sum_a mu_a q^a [kg, kg/m^a] with the
+        Lagrangian force 1/2 m'(q) q_dot^2, the coefficients mu_a identified by the same
+        least squares (q_ddot-weighted columns): a degree N (powers a = 1..N) or a list of
+        powers (e.g. [2]: a symmetric m(q)); 0 (default): the constant m_q of Eq. 37.
     m_q : float or "identify"
         Generalised mass [kg]; 1 identifies the curves per unit mass. With
         "identify", ``input_gain`` must fix the input gains instead. In a workflow,
@@ -178,6 +183,11 @@ class IdentifyConfig(SectionConfig):
         AsTuple,
         Field(description=_SLIP),
     ] = False
+    inertia: Annotated[
+        Annotated[int, Field(ge=0, le=4)] | tuple[Annotated[int, Field(ge=1, le=4)], ...],
+        AsTuple,
+        Field(description="a degree 0..4 of m(q) in q, or a list of powers 1..4"),
+    ] = 0
     m_q: Annotated[PositiveFloat | Literal["identify"], Field(description=_M_Q)] = 1.0
     input_gain: Annotated[tuple[FiniteFloat, ...] | None, AsTuple] = None
     coulomb_velocity: PositiveFloat = 1e-3
@@ -205,6 +215,13 @@ class IdentifyConfig(SectionConfig):
     band_tolerance: PositiveFloat = 0.2
     model_error: bool = True
     prior: Any = None
+
+    @property
+    def inertia_powers(self) -> tuple[int, ...]:
+        """Powers a of q in m(q) = m_q + sum_a mu_a q^a that ``inertia`` asks for (ascending)."""
+        if isinstance(self.inertia, tuple):
+            return tuple(sorted(set(self.inertia)))
+        return tuple(range(1, self.inertia + 1))
 
     @property
     def n_slip(self) -> int:

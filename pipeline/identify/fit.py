@@ -158,7 +158,8 @@ def _system(
     """Stack regressor rows Psi and outputs y of all records (Eq. 40; creep columns w_all).
 
     With ``cfg.slip`` (resolved to break-away deflections, :func:`slip_widths`) the force
-    side has the Maxwell-slip elements' deflections along each record too.
+    side has the Maxwell-slip elements' deflections along each record too; with
+    ``cfg.inertia`` the inertia columns ``q^a q_ddot + 1/2 a q^(a-1) q_dot^2``.
     """
     rows, ys = [], []
     names: list[str] = []
@@ -166,8 +167,9 @@ def _system(
         w = None if w_all is None else w_all[i]
         slip = slip_states(r.q_dot, r.dt, np.asarray(cfg.slip)) if cfg.slip else None
         F, f_names = force_columns(
-            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w, slip
-        )
+            r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w, slip,
+            cfg.inertia_powers, r.q_dot, r.q_ddot,
+        )  # fmt: skip
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
             rows.append(_prefilter(np.hstack([r.q_ddot[:, None], F]), r, cfg))
@@ -565,5 +567,12 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         slip_width=tuple(cfg.slip) if cfg.slip else (),
         theta_slip=(
             np.array([value[f"slip[{e}]"] for e in range(len(cfg.slip))]) if cfg.slip else None
+        ),
+        theta_inertia=(
+            np.array(
+                [value.get(f"inertia[{a}]", 0.0) for a in range(1, max(cfg.inertia_powers) + 1)]
+            )
+            if cfg.inertia_powers
+            else None
         ),
     )

@@ -119,8 +119,9 @@ def smoothness_operator(names: Sequence[str], M: int) -> np.ndarray:
     """
     names = list(names)
     rows = []
-    # the curves over the centres; the slip elements' stiffnesses are not a curve of q
-    prefixes = sorted({n.split("[")[0] for n in names if "[" in n} - {"slip"})
+    # the curves over the centres; the slip elements' stiffnesses and the inertia's
+    # polynomial coefficients are not RBF weights of a curve
+    prefixes = sorted({n.split("[")[0] for n in names if "[" in n} - {"slip", "inertia"})
     for prefix in prefixes:
         idx = [names.index(f"{prefix}[{k}]") for k in range(M)]
         for k in range(1, M - 1):

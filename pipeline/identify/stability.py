@@ -178,6 +178,12 @@ def _small_signal(k: float, m_q: float, d: float) -> tuple[float, float]:
     return float(np.sqrt(k / m_q) / (2.0 * np.pi)), float(d / (2.0 * np.sqrt(k * m_q)))
 
 
+def _mass_at(model: RBFModel, q: float) -> float:
+    """Return the model's mass at ``q`` [kg]: m(q) with a position-dependent inertia, else m_q."""
+    mass = getattr(model, "mass", None)
+    return float(mass(np.array([q]))[0]) if callable(mass) else float(model.m_q)
+
+
 def _barriers(q: Sequence[float], wells: Sequence[bool], energy: Callable[[int, int], float]):
     """Barrier of each well: min over neighbouring unstable roots of ``energy(well, saddle)``."""
     out = []
@@ -314,10 +320,11 @@ def equilibria(
 
         barrier = _barriers(q, wells, energy)
         for j in range(len(q)):
-            f_n, zeta = _small_signal(float(k[j]), model.m_q, float(d[j]))
+            m_j = _mass_at(model, float(q[j]))
+            f_n, zeta = _small_signal(float(k[j]), m_j, float(d[j]))
             out.append(
                 EquilibriumPoint(
-                    level=index, v=v, q=float(q[j]), k=float(k[j]), m_q=float(model.m_q),
+                    level=index, v=v, q=float(q[j]), k=float(k[j]), m_q=m_j,
                     d=float(d[j]), static_stable=wells[j], damped=bool(d[j] > 0),
                     stable=wells[j] and bool(d[j] > 0), f_n=f_n, zeta=zeta,
                     barrier=float(barrier[j]),
@@ -453,7 +460,10 @@ def model_is_stable(
     energy on every swing through it. Maxwell-slip elements (``[identify] slip``) do not enter
     the rules: with their stiffnesses k_e >= 0 (bounded in the fit and the refinement) each
     element is passive, storing at most k_e Delta_e^2 / 2 and dissipating while it slips
-    (Al-Bender, Lampaert & Swevers 2005), so it cannot feed energy into a well.
+    (Al-Bender, Lampaert & Swevers 2005), so it cannot feed energy into a well. With a
+    position-dependent inertia (``[identify] inertia``) the model is unstable where its mass
+    m(q) is not positive anywhere on the analysed interval (the kinetic energy
+    1/2 m(q) q_dot^2 would not be positive definite).
 
     Parameters
     ----------
@@ -494,6 +504,14 @@ def model_is_stable(
     lo, hi = (v_lo, v_hi) if not hi > lo else (min(lo, v_lo), max(hi, v_hi))
     if not hi > lo:
         hi = lo + max(1.0, abs(lo)) * 1e-9
+    if getattr(model, "has_inertia", False):
+        grid = np.linspace(lo, hi, int(n_grid))
+        m = model.mass(grid)
+        if np.min(m) <= 0:
+            at = float(grid[np.argmin(m)])
+            return False, (
+                f"the identified mass m(q) = {np.min(m):.4g} is not positive at q = {at:.6g}"
+            )
     table = stability_table(model, (), q_range=(lo, hi), n_grid=n_grid)
     q = table["q"].to_numpy()
     wells = table["static_stable"].to_numpy(dtype=bool)

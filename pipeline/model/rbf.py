@@ -35,7 +35,10 @@ class RBFModel:
     side has ``+ sum_e theta_slip,e delta_e``, the stiffnesses of elements whose deflections
     delta_e follow q until they reach their break-away deflections Delta_e (Al-Bender,
     Lampaert & Swevers 2005; :func:`debist.model.friction.slip_state_rate`); their states
-    follow ``z`` and the creep states.
+    follow ``z`` and the creep states. With a position-dependent inertia (``theta_inertia``)
+    the mass is ``m(q) = m_q + sum_a theta_inertia[a-1] q^a`` and the force side has the
+    Lagrangian ``1/2 m'(q) q_dot^2`` (:meth:`mass`; the curves stay forces, or forces per
+    ``m_q`` when ``m_q = 1``).
 
     Parameters
     ----------
@@ -71,6 +74,9 @@ class RBFModel:
         Break-away deflections Delta_e of the Maxwell-slip elements [unit of q]; empty: none.
     theta_slip : ndarray, shape (E,) or None
         Their stiffnesses k_e [N per unit of q] (with slip elements).
+    theta_inertia : ndarray, shape (N,) or None
+        Coefficients mu_a of the inertia m(q) = m_q + sum_(a=1..N) mu_a q^a [kg per unit of
+        q^a] (None: the constant m_q of Eq. 37).
 
     Notes
     -----
@@ -98,6 +104,26 @@ class RBFModel:
     theta_creep: np.ndarray | None = None
     slip_width: tuple[float, ...] = ()
     theta_slip: np.ndarray | None = None
+    theta_inertia: np.ndarray | None = None
+
+    @property
+    def has_inertia(self) -> bool:
+        """Whether the mass depends on q (``theta_inertia`` given)."""
+        return self.theta_inertia is not None and len(self.theta_inertia) > 0
+
+    def mass(self, q: np.ndarray) -> np.ndarray:
+        """Return the inertia m(q) = m_q + sum_a mu_a q^a [kg] at ``q`` (n,) [unit of q], (n,).
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 26 (the reduced model's m_q(q)); constant m_q in Eq. 37.
+        """
+        q = np.asarray(q, dtype=float)
+        out = np.full(q.shape, float(self.m_q))
+        if self.has_inertia:
+            for a, mu in enumerate(np.asarray(self.theta_inertia, dtype=float), start=1):
+                out = out + mu * q**a
+        return out
 
     @property
     def has_creep(self) -> bool:
@@ -163,7 +189,12 @@ class RBFModel:
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
     def accel(
-        self, q: np.ndarray, z: np.ndarray, v: np.ndarray, creep: np.ndarray | None = None
+        self,
+        q: np.ndarray,
+        z: np.ndarray,
+        v: np.ndarray,
+        creep: np.ndarray | None = None,
+        q_dot: np.ndarray | None = None,
     ) -> np.ndarray:
         """Acceleration of Eq. 37 solved for q'', through the model's term table.
 
@@ -177,6 +208,9 @@ class RBFModel:
             Inputs [V].
         creep : ndarray, shape (B, M), optional
             Creep states w [unit of q] (models with creep); default 0 (at rest).
+        q_dot : ndarray, shape (B,), optional
+            Velocity [unit of q / s] of the Lagrangian force 1/2 m'(q) q_dot^2 (models with
+            a position-dependent inertia; default z).
 
         Returns
         -------
@@ -184,7 +218,9 @@ class RBFModel:
             q'' [unit of q / s^2]: :meth:`debist.model.termtable.TableModel.accel` of
             :meth:`table_model`, the one evaluation of Eq. 37 the engines share.
         """
-        return self._table.accel(q, z, v, creep)
+        if q_dot is None and self.has_inertia:
+            q_dot = z
+        return self._table.accel(q, z, v, creep, q_dot)
 
     @cached_property
     def _table(self):
@@ -221,6 +257,11 @@ class RBFModel:
         if self.has_slip:  # every element, so that the states are [.., delta_1..delta_E]
             names.extend(f"slip[{e}]" for e in range(len(self.slip_width)))
             values.extend(np.asarray(self.theta_slip, dtype=float).tolist())
+        if self.has_inertia:  # the powers the fit had (a power left out has mu_a = 0)
+            for a, mu in enumerate(np.asarray(self.theta_inertia, dtype=float), start=1):
+                if mu:
+                    names.append(f"inertia[{a}]")
+                    values.append(float(mu))
         for j in range(self.n_inputs):
             add(f"g{j + 1}", self.theta_g[j])
         bb = self.backbone
@@ -374,6 +415,8 @@ class RBFModel:
             vals += [np.asarray(self.theta_creep, dtype=float), np.array([self.creep_rate])]
         if self.has_slip:  # the stiffnesses (the deflections are a fixed grid)
             vals += [np.asarray(self.theta_slip, dtype=float)]
+        if self.has_inertia:
+            vals += [np.asarray(self.theta_inertia, dtype=float)]
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
         # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
@@ -404,6 +447,11 @@ class RBFModel:
                 "attrs": {"equation": "Al-Bender, Lampaert & Swevers 2005 (Maxwell-slip)"},
                 "width": np.asarray(self.slip_width, dtype=float),
                 "theta_slip": np.asarray(self.theta_slip, dtype=float),
+            }
+        if self.has_inertia:  # only then: a model with a constant mass keeps its bytes
+            model["inertia"] = {
+                "attrs": {"equation": "m(q) = m_q + sum_a theta_inertia[a-1] q^a"},
+                "theta_inertia": np.asarray(self.theta_inertia, dtype=float),
             }
         return {
             "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
@@ -450,6 +498,7 @@ class RBFModel:
         prior = m["backbone"].get("prior")
         creep = m.get("creep")
         slip = m.get("slip")
+        inertia = m.get("inertia")
         return cls(
             basis=RBFBasis(np.asarray(m["xi"], float), float(a["sigma"]), str(a["outside"])),
             input_map=str(a["input_map"]),
@@ -471,4 +520,5 @@ class RBFModel:
             theta_creep=None if creep is None else np.asarray(creep["theta_creep"], float),
             slip_width=() if slip is None else tuple(np.asarray(slip["width"], float).tolist()),
             theta_slip=None if slip is None else np.asarray(slip["theta_slip"], float),
+            theta_inertia=None if inertia is None else np.asarray(inertia["theta_inertia"], float),
         )

@@ -132,6 +132,7 @@ def column_names(
     n_inputs: int,
     creep: bool = False,
     n_slip: int = 0,
+    inertia: Sequence[int] = (),
 ) -> tuple[list[str], list[str]]:
     """Names of the regressor columns of Eq. 40 with the backbone, in their order.
 
@@ -149,6 +150,9 @@ def column_names(
     n_slip : int, optional
         Number of Maxwell-slip elements: their force ``sum_e slip[e] delta_e`` follows the
         creep terms (Al-Bender, Lampaert & Swevers 2005).
+    inertia : sequence of int, optional
+        Powers a of the position-dependent inertia m(q) = m_q + sum_a inertia[a] q^a: its
+        columns ``inertia[a]`` (``q^a q'' + 1/2 a q^(a-1) q_dot^2``) follow the slip terms.
 
     Returns
     -------
@@ -172,6 +176,7 @@ def column_names(
     if creep:
         force += [f"creep[{i}]" for i in range(M)]
     force += [f"slip[{e}]" for e in range(n_slip)]
+    force += [f"inertia[{a}]" for a in inertia]
     force += [name for name in backbone if name in _FORCE_SCALARS or name in _PHYSICS_FORCE]
     inputs: list[str] = []
     if "g" in rbf:
@@ -193,6 +198,9 @@ def force_columns(
     prior: PhysicsPrior | None = None,
     w: np.ndarray | None = None,
     slip: np.ndarray | None = None,
+    inertia: Sequence[int] = (),
+    q_dot: np.ndarray | None = None,
+    q_ddot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
 
@@ -218,6 +226,12 @@ def force_columns(
         The Maxwell-slip elements' deflections along the record [unit of q]
         (:func:`debist.model.friction.slip_states`); given: the columns ``slip[e]`` =
         delta_e follow the creep columns.
+    inertia : sequence of int, optional
+        Powers a of the position-dependent inertia: the columns ``inertia[a]`` =
+        ``q^a q'' + 1/2 a q^(a-1) q_dot^2`` follow the slip columns.
+    q_dot, q_ddot : ndarray, shape (n,), optional
+        Velocity [unit of q / s] and acceleration [unit of q / s^2] (needed with
+        ``inertia``).
 
     Returns
     -------
@@ -234,11 +248,15 @@ def force_columns(
     """
     q = np.asarray(q, dtype=float)
     n_slip = 0 if slip is None else slip.shape[1]
-    names, _ = column_names(rbf, backbone, basis.M, 1, creep=w is not None, n_slip=n_slip)
+    names, _ = column_names(
+        rbf, backbone, basis.M, 1, creep=w is not None, n_slip=n_slip, inertia=inertia
+    )
+    if inertia and (q_dot is None or q_ddot is None):
+        raise WorkflowError("the inertia columns need the velocity and the acceleration")
     table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
     states = [a for a in (w, slip) if a is not None]
     extra = np.hstack(states) if states else None
-    return table.columns(q, z, np.zeros((q.size, 1)), extra), names
+    return table.columns(q, z, np.zeros((q.size, 1)), extra, q_dot, q_ddot), names
 
 
 def input_columns(
@@ -336,7 +354,9 @@ def term_table(
         names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
         tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``physics_spring``
         (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
-        ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26).
+        ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
+        ``slip[e]`` (a Maxwell-slip element's deflection), ``inertia[a]`` (q^a in the mass,
+        :meth:`~debist.model.termtable.TermTableBuilder.inertia`).
     basis : RBFBasis
         Centres and width (Eq. 38-39); ``outside = "clip"`` holds q at the range's edge.
     n_inputs : int
@@ -408,6 +428,8 @@ def term_table(
                 if k >= len(slip_width):
                     raise WorkflowError(f"term {name!r} has no break-away deflection")
                 build.term(name, build.one(), skind=S_CREEP, spow=build.slip(slip_width[k]))
+            elif rbf == "inertia":
+                build.inertia(name, k)
             elif rbf.startswith("g") and rbf[1:].isdigit():
                 build.term(name, gauss(k), hpow=h(int(rbf[1:]) - 1))
             else:

@@ -17,6 +17,12 @@ break-away deflections ``Delta_e`` (:func:`debist.model.friction.slip_state_rate
 ``|delta_e| <= Delta_e`` after every step by :meth:`TableModel.project`), so that the friction
 force ``sum_e k_e delta_e`` is linear in the stiffnesses k_e once the Delta_e are fixed; a
 term's ``S_CREEP`` factor reads either kind of state (index k of ``[w_1..w_C, delta_1..]``).
+An *inertia term* (``S_ACC``, q^a with a >= 1) is a part of the mass: its regressor column is
+``q^a q'' + 1/2 a q^(a-1) q_dot^2``, the position-dependent inertia of a Lagrangian coordinate
+(``d/dt(m(q) q_dot) - 1/2 m'(q) q_dot^2``) moved to the regressor, so that the mass
+``m(q) = m - sum_(j inertia) w_j q^a_j`` is linear in its coefficients (a force-side weight is
+minus its coefficient: ``m(q) = m_q + sum theta_a q^a``) and the acceleration is
+``(sum_(j other) w_j column_j + sum_(j inertia) w_j 1/2 a_j q^(a_j - 1) q_dot^2) / m(q)``.
 The RBF model
 of Eq. 37 with its backbone and physics prior, and the SINDy polynomials, are such tables; the
 same arrays give the regressor columns of a least squares (:meth:`TermTable.columns`), the NumPy
@@ -50,6 +56,7 @@ __all__ = [
     "BASE_ONE",
     "BASE_TABLE",
     "INPUT_MAPS",
+    "S_ACC",
     "S_CREEP",
     "S_ONE",
     "S_POW",
@@ -60,8 +67,9 @@ __all__ = [
 
 #: Basis kinds: the constant 1, a Gaussian RBF (Eq. 38), a tabulated curve.
 BASE_ONE, BASE_GAUSS, BASE_TABLE = 0, 1, 2
-#: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``, creep state ``w_k`` (k in ``spow``).
-S_ONE, S_POW, S_TANH, S_CREEP = 0, 1, 2, 3
+#: Velocity factors: none, ``s^k``, ``tanh(s / v_c)``, creep state ``w_k`` (k in ``spow``),
+#: and the inertia factor (the term is a part of the mass, see the module docstring).
+S_ONE, S_POW, S_TANH, S_CREEP, S_ACC = 0, 1, 2, 3, 4
 #: Input maps h(v) of Eq. 37: ``"v2"`` is v^2 (DE actuators: the electrostatic force grows
 #: with v^2), ``"v"`` is v (linear rigs). Every model, the fit and the kernel read this one.
 INPUT_MAPS = ("v2", "v")
@@ -134,7 +142,8 @@ class TermTable:
         Power ``a_j >= 0`` of q.
     term_skind, term_spow : ndarray of int, shape (J,)
         Velocity factor of each term (:data:`S_ONE`, :data:`S_POW` with power ``term_spow``,
-        :data:`S_TANH`, :data:`S_CREEP` with state ``term_spow`` of ``[w, delta]``).
+        :data:`S_TANH`, :data:`S_CREEP` with state ``term_spow`` of ``[w, delta]``,
+        :data:`S_ACC` for an inertia term: constant basis, ``a_j >= 1``, no inputs).
     term_hpow : ndarray of int, shape (J, n_inputs)
         Powers ``c_ji >= 0`` of the mapped inputs.
     input_map : {"v2", "v"}
@@ -192,6 +201,41 @@ class TermTable:
         return self.n_creep + self.n_slip
 
     @property
+    def has_inertia(self) -> bool:
+        """Whether some terms are inertia terms (a position-dependent mass)."""
+        return bool(np.any(self.term_skind == S_ACC))
+
+    def inertia_parts(self, q: np.ndarray, q_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the inertia terms' part of the mass and their velocity-squared force.
+
+        Parameters
+        ----------
+        q, q_dot : array_like, shape (n,)
+            Positions [unit of q] and velocities [unit of q / s].
+
+        Returns
+        -------
+        mass : ndarray, shape (n, J)
+            ``q^a_j`` for the inertia terms (their weight times this adds to m), else 0.
+        force : ndarray, shape (n, J)
+            ``1/2 a_j q^(a_j - 1) q_dot^2`` for the inertia terms, else 0.
+
+        References
+        ----------
+        Lagrange's equation of a coordinate with the kinetic energy 1/2 m(q) q_dot^2:
+        ``m(q) q'' + 1/2 m'(q) q_dot^2`` (Goldstein, Classical Mechanics, Sec. 1.4).
+        """
+        q = np.asarray(q, dtype=float).reshape(-1)
+        q_dot = np.asarray(q_dot, dtype=float).reshape(-1)
+        mass = np.zeros((q.size, self.n_terms))
+        force = np.zeros((q.size, self.n_terms))
+        for j in np.flatnonzero(self.term_skind == S_ACC):
+            a = int(self.term_qpow[j])
+            mass[:, j] = q**a
+            force[:, j] = 0.5 * a * q ** (a - 1) * q_dot**2
+        return mass, force
+
+    @property
     def n_terms(self) -> int:
         """Number of terms J."""
         return len(self.names)
@@ -234,7 +278,13 @@ class TermTable:
         return out
 
     def columns(
-        self, q: np.ndarray, s: np.ndarray, hv: np.ndarray, w: np.ndarray | None = None
+        self,
+        q: np.ndarray,
+        s: np.ndarray,
+        hv: np.ndarray,
+        w: np.ndarray | None = None,
+        q_dot: np.ndarray | None = None,
+        q_ddot: np.ndarray | None = None,
     ) -> np.ndarray:
         """Evaluate every term: the regressor columns (without weights and mass).
 
@@ -250,6 +300,10 @@ class TermTable:
             The creep states, then the slip states [unit of q]
             (:func:`debist.model.friction.creep_states`, :func:`~debist.model.friction.slip_states`
             along a record); default 0 (at rest), so their terms vanish.
+        q_dot, q_ddot : array_like, shape (n,), optional
+            Velocity [unit of q / s] and acceleration [unit of q / s^2] of the inertia terms'
+            columns ``q^a q'' + 1/2 a q^(a-1) q_dot^2`` (:meth:`inertia_parts`); without
+            ``q_ddot`` those columns are 0 (the acceleration is what a simulation solves for).
 
         Returns
         -------
@@ -282,6 +336,14 @@ class TermTable:
             for p in np.unique(self.term_hpow[:, i]):
                 if p:
                     out[:, self.term_hpow[:, i] == p] *= (hv[:, i] ** p)[:, None]
+        inertia = self.term_skind == S_ACC
+        if inertia.any():
+            if q_ddot is None:
+                out[:, inertia] = 0.0
+            else:
+                mass, force = self.inertia_parts(q, q_dot)
+                qdd = np.asarray(q_ddot, dtype=float).reshape(-1, 1)
+                out[:, inertia] = (mass * qdd + force)[:, inertia]
         return out
 
     def select(self, keep: Sequence[int]) -> TermTable:
@@ -351,6 +413,12 @@ class TermTableBuilder:
         if width not in self._slip:
             self._slip.append(width)
         return len(self._creep) + self._slip.index(width)
+
+    def inertia(self, name: str, power: int) -> None:
+        """Add an inertia term: ``q^power`` in the mass (``power >= 1``; module docstring)."""
+        if int(power) < 1:
+            raise ValueError(f"an inertia term needs a power of q >= 1, got {power}")
+        self.term(name, self.one(), qpow=int(power), skind=S_ACC)
 
     def one(self) -> int:
         """Index of the constant basis."""
@@ -488,8 +556,22 @@ class TableModel:
 
         return table_arrays(self)
 
+    def mass_of(self, q: np.ndarray) -> np.ndarray:
+        """Return the mass m(q) = m - sum_(j inertia) w_j q^a_j (B,) [kg] at ``q`` (B,)."""
+        q = np.asarray(q, dtype=float).reshape(-1)
+        m = np.broadcast_to(self.mass, q.shape).astype(float)
+        if not self.table.has_inertia:
+            return m
+        part, _ = self.table.inertia_parts(q, np.zeros_like(q))
+        return m - np.einsum("bj,bj->b", part, np.broadcast_to(self.weights, part.shape))
+
     def accel(
-        self, q: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray | None = None
+        self,
+        q: np.ndarray,
+        s: np.ndarray,
+        v: np.ndarray,
+        w: np.ndarray | None = None,
+        q_dot: np.ndarray | None = None,
     ) -> np.ndarray:
         """Acceleration of the model (Eq. 37 solved for q''), evaluated with NumPy.
 
@@ -503,11 +585,20 @@ class TableModel:
             Inputs, before the input map h(v).
         w : ndarray, shape (B, C + E), optional
             Creep and slip states (tables with them); default 0, the actuator at rest.
+        q_dot : ndarray, shape (B,), optional
+            Velocity [unit of q / s] of the inertia terms' ``1/2 m'(q) q_dot^2``; needed
+            only by a table with inertia terms.
 
         Returns
         -------
         ndarray, shape (B,)
-            q'' = (sum_j weight_j column_j) / m [unit of q / s^2].
+            q'' = (sum_j weight_j column_j) / m(q) [unit of q / s^2] (the inertia terms in
+            m(q) and their velocity-squared force, :meth:`TermTable.inertia_parts`).
+
+        Raises
+        ------
+        ValueError
+            If the table has inertia terms and ``q_dot`` is not given.
 
         References
         ----------
@@ -516,8 +607,16 @@ class TableModel:
         if self.table.n_extra and w is None:
             w = np.zeros((np.shape(q)[0], self.table.n_extra))
         cols = self.table.columns(q, s, self.table.map_inputs(v), w)
-        acc = np.einsum("bj,bj->b", cols, np.broadcast_to(self.weights, cols.shape))
-        return acc / np.broadcast_to(self.mass, np.shape(q))
+        weights = np.broadcast_to(self.weights, cols.shape)
+        acc = np.einsum("bj,bj->b", cols, weights)
+        if not self.table.has_inertia:
+            return acc / np.broadcast_to(self.mass, np.shape(q))
+        if q_dot is None:
+            raise ValueError("a table with inertia terms needs q_dot for its acceleration")
+        part, force = self.table.inertia_parts(q, q_dot)
+        acc = acc + np.einsum("bj,bj->b", force, weights)
+        mass = np.broadcast_to(self.mass, np.shape(q)) - np.einsum("bj,bj->b", part, weights)
+        return acc / mass
 
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """State derivative (B, n_states) and acceleration (B,), evaluated with NumPy."""
@@ -532,7 +631,7 @@ class TableModel:
         c0 = 3 if self.lag else 2
         C = self.table.n_creep
         w = x[:, c0:] if self.table.n_extra else None
-        acc = self.accel(q, s, v, w)
+        acc = self.accel(q, s, v, w, q_dot)
         derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
         if C:
             b = self.table.bases(q)[:, self.table.creep_base]

@@ -31,10 +31,10 @@ from debist.report.tables import (
     auto_line,
     equilibrium_kind,
     not_modelled,
-    slip_rows,
     summary_units,
     switching_note,
     switching_word,
+    term_rows,
     verdict,
 )
 from debist.workflow.sections import ReportConfig
@@ -398,7 +398,7 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             unit = ", ".join(dict.fromkeys(unit))
         label = f"backbone coefficient {key} (a basis term, not a physical constant)"
         rows.append((f"{label} [{unit or '?'}]", _num(value)))
-    rows += [(f"{label} [{unit}]", _num(value)) for label, unit, value in slip_rows(summary)]
+    rows += [(f"{label} [{unit}]", _num(value)) for label, unit, value in term_rows(summary)]
     for label, key in (
         ("condition number", "condition"),
         ("nonzero parameters", "n_params"),

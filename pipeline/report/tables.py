@@ -208,6 +208,41 @@ def slip_rows(summary: dict[str, Any]) -> list[tuple[str, str, float]]:
     return rows
 
 
+def inertia_rows(summary: dict[str, Any]) -> list[tuple[str, str, float]]:
+    """Rows of an identified position-dependent inertia m(q): the mass at three positions.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``inertia`` entry: the positions ``q``
+        [unit of q] and the masses ``m`` [kg] there, when the model has m(q)).
+
+    Returns
+    -------
+    list of (label, unit, value)
+        ``m(q)`` at each position (the edges of the estimation range and q = 0). Empty with
+        the constant m_q of Eq. 37.
+
+    References
+    ----------
+    Lagrange's equation with kinetic energy 1/2 m(q) q_dot^2 (Goldstein, Classical
+    Mechanics, Sec. 1.4).
+    """
+    inertia = summary.get("inertia")
+    if not inertia:
+        return []
+    units = summary_units(summary)
+    return [
+        (f"mass m(q) at q = {_fmt(float(q))} {units['q']}", units["mass"], float(m))
+        for q, m in zip(inertia["q"], inertia["m"], strict=True)
+    ]
+
+
+def term_rows(summary: dict[str, Any]) -> list[tuple[str, str, float]]:
+    """Return the terms beyond Eq. 37 as rows (:func:`slip_rows`, :func:`inertia_rows`)."""
+    return slip_rows(summary) + inertia_rows(summary)
+
+
 def identify_table(summary: dict[str, Any]) -> Table:
     """Tabulate the identified model, with published values where the workflow gives them.
 
@@ -237,7 +272,7 @@ def identify_table(summary: dict[str, Any]) -> Table:
     rows = [("T_z", "s", summary["T_z"], None), ("mass m_q", units["mass"], summary["m_q"], "m_q")]
     if "creep_rate" in summary:  # Eq. 26's Y_MW / eta_MW, identified with the creep term
         rows.append(("creep rate lambda", "1/s", summary["creep_rate"], None))
-    rows += [(label, unit, value, None) for label, unit, value in slip_rows(summary)]
+    rows += [(label, unit, value, None) for label, unit, value in term_rows(summary)]
     for key, value in summary["backbone"].items():
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))

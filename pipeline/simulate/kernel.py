@@ -55,7 +55,7 @@ CHUNK = 50_000
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
  _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
- _TABLES, _NC, _I_CBASE, _P_CRATE, _NS, _P_SWIDTH, _N_LAYOUT) = range(44)  # fmt: skip
+ _TABLES, _NC, _I_CBASE, _P_CRATE, _NS, _P_SWIDTH, _NA, _N_LAYOUT) = range(45)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
 # Layout of a spline model.
@@ -186,7 +186,10 @@ def table_arrays(model) -> KernelArrays:
     The terms are grouped by their factors other than the basis (power of q, velocity factor,
     input monomial): the acceleration is then ``sum_g q^a_g S_g(s) H_g(h) sum_(j in g) w_j
     b_j(q)``, so each right-hand side evaluates every basis, velocity factor and monomial
-    once, then one product per term and three per group. The table's part of the arrays is
+    once, then one product per term and three per group. Inertia terms (``S_ACC``) form the
+    last groups (their number in the layout): they add ``w_j 1/2 a_j q^(a_j-1) q_dot^2`` to
+    the sum and take ``w_j q^a_j`` from the mass, and a table without them skips the
+    division by m(q). The table's part of the arrays is
     built once per :class:`debist.model.termtable.TermTable` (the refinement changes only the
     weights, masses and T_z).
 
@@ -228,6 +231,16 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     keys = np.stack([t.term_qpow, s_index.reshape(-1), h_index.reshape(-1)], axis=1)
     groups, g_index = np.unique(keys.reshape(-1, 3), axis=0, return_inverse=True)
     K, G = t.base_kind.size, len(groups)
+    # the inertia groups (their own s-code) go last: the right-hand sides take them apart
+    inertia = s_unique[groups[:, 1], 0] == 4 if G else np.zeros(0, dtype=bool)  # S_ACC
+    acc_terms = t.term_skind == 4
+    if np.any(t.base_kind[t.term_base[acc_terms]] != 0) or np.any(t.term_qpow[acc_terms] < 1):
+        raise ValueError("an inertia term has the constant basis and a power of q >= 1")
+    if np.any(t.term_hpow.reshape(-1, n_in)[acc_terms] != 0):
+        raise ValueError("an inertia term has no input powers")
+    perm = np.argsort(inertia, kind="stable")
+    groups = groups[perm]
+    g_index = np.argsort(perm)[g_index.reshape(-1)]
     order = np.argsort(g_index.reshape(-1), kind="stable")  # terms group by group
     g_ptr = np.searchsorted(g_index.reshape(-1)[order], np.arange(G + 1))
     tables = t.tables if t.tables.size else np.zeros((1, t.table_q.size))
@@ -235,6 +248,7 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     lay = np.zeros(_N_LAYOUT, dtype=np.int64)
     lay[_K], lay[_J], lay[_U], lay[_H], lay[_NI] = K, t.n_terms, len(s_unique), len(h_unique), n_in
     lay[_NG] = G
+    lay[_NA] = int(np.count_nonzero(inertia))
     lay[_QMAX] = int(t.term_qpow.max()) if t.n_terms else 0
     lay[_G] = t.table_q.size
     lay[_SQUARE] = int(t.squares_inputs)
@@ -512,12 +526,24 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
     acc = 0.0
     w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * lay[_J]
     o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
-    for g in range(G):
+    NA = lay[_NA]
+    for g in range(G - NA):
         inner = 0.0
         for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
             inner += fp[w0 + m] * W[w_k + ip[o_tk + m]]
         acc += inner * (W[w_qp + ip[o_gq + g]] * W[w_sf + ip[o_gs + g]] * W[w_hm + ip[o_gh + g]])
-    acc /= fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+    if NA > 0:  # inertia groups: m(q) = m - sum w q^a, force sum w 1/2 a q^(a-1) q_dot^2
+        part = 0.0
+        for g in range(G - NA, G):
+            inner = 0.0
+            for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+                inner += fp[w0 + m] * W[w_k + ip[o_tk + m]]
+            a = ip[o_gq + g]
+            acc += inner * (0.5 * a * W[w_qp + a - 1] * q_dot * q_dot)
+            part += inner * W[w_qp + a]
+        acc /= fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)] - part
+    else:
+        acc /= fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
     d[row, 0] = q_dot
     d[row, 1] = acc
     if lag:
@@ -543,13 +569,15 @@ def _project_table(x, lay, fp):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, inline="always")
-def _grad_table(x, b, fp, ip, lay, W, V, tv, ae):  # pragma: no cover - compiled
-    """Differentiate the table model's acceleration, after :func:`_rhs_table` filled W.
+def _grad_table(x, b, fp, ip, lay, W, V, tv, ae, acc):  # pragma: no cover - compiled
+    """Differentiate the table model's acceleration ``acc``, after :func:`_rhs_table` filled W.
 
-    Returns d acc / d q and d acc / d s, fills ``tv`` with every term's value over the
-    mass (d acc / d w_j), in the kernel's term order, and ``ae`` with d acc / d x_(c0 + k)
-    for the creep and slip states k. ``V`` is scratch whose first K entries are left holding
-    the basis derivatives (then derivatives of the q powers and velocity factors).
+    Returns d acc / d q, d acc / d s, d acc / d q_dot through the inertia terms' force and
+    the mass m(q) (m without inertia terms); fills ``tv`` with d acc / d w_j (a term's value
+    over m(q); an inertia term's ``(1/2 a q^(a-1) q_dot^2 + acc q^a) / m(q)``), in the
+    kernel's term order, and ``ae`` with d acc / d x_(c0 + k) for the creep and slip states
+    k. ``V`` is scratch whose first K entries are left holding the basis derivatives (then
+    derivatives of the q powers and velocity factors).
     """
     K, U, NI, QMAX, G = lay[_K], lay[_U], lay[_NI], lay[_QMAX], lay[_NG]
     w_k, w_hv = 0, K
@@ -596,11 +624,33 @@ def _grad_table(x, b, fp, ip, lay, W, V, tv, ae):  # pragma: no cover - compiled
     mass = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
     w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * lay[_J]
     o_ptr, o_tk = lay[_I_GPTR], lay[_I_TK]
+    NA = lay[_NA]
     dq = 0.0
     ds = 0.0
+    dv = 0.0
+    if NA > 0:  # m(q) as _rhs_table forms it, then the inertia groups' derivatives
+        part = 0.0
+        for g in range(G - NA, G):
+            inner = 0.0
+            for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+                inner += fp[w0 + m] * W[w_k + ip[o_tk + m]]
+            part += inner * W[w_qp + ip[lay[_I_GQPOW] + g]]
+        mass = mass - part
+        q_dot = x[1]
+        for g in range(G - NA, G):
+            a_g = ip[lay[_I_GQPOW] + g]
+            fm = V[v_qp + a_g]  # d q^a / d q = a q^(a-1)
+            col = 0.5 * fm * q_dot * q_dot + acc * W[w_qp + a_g]
+            inner = 0.0
+            for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+                k = ip[o_tk + m]
+                inner += fp[w0 + m] * W[w_k + k]
+                tv[m] = W[w_k + k] * col / mass
+            dq += inner * (0.5 * a_g * V[v_qp + a_g - 1] * q_dot * q_dot + acc * fm)
+            dv += inner * fm * q_dot
     for k in range(lay[_NC] + lay[_NS]):
         ae[k] = 0.0
-    for g in range(G):
+    for g in range(G - NA):
         a_g = ip[lay[_I_GQPOW] + g]
         s_g = ip[lay[_I_GSIDX] + g]
         fq, fqd = W[w_qp + a_g], V[v_qp + a_g]
@@ -617,7 +667,7 @@ def _grad_table(x, b, fp, ip, lay, W, V, tv, ae):  # pragma: no cover - compiled
         ds += inner * fq * fsd * fh
         if ip[lay[_I_SUNIQ] + 2 * s_g] == 3:  # the factor is the extra state x_(c0 + k)
             ae[ip[lay[_I_SUNIQ] + 2 * s_g + 1]] += inner * fq * fh / mass
-    return dq / mass, ds / mass
+    return dq / mass, ds / mass, dv / mass, mass
 
 
 @nb.njit(cache=True, inline="always")
@@ -831,6 +881,7 @@ def _rhs_table_lock(
     w_in = w_s + 1
     w_acc = w_in + 1
     w_tq = w_acc + 1
+    w_part = w_tq + 1
     lag = lay[_LAG] == 1
     c0 = 3 if lag else 2  # first creep state
     for c in range(nb_):
@@ -875,7 +926,8 @@ def _rhs_table_lock(
     o_gq, o_gs, o_gh = lay[_I_GQPOW], lay[_I_GSIDX], lay[_I_GHIDX]
     for c in range(nb_):
         work[w_acc, c] = 0.0
-    for g in range(G):
+    NA = lay[_NA]
+    for g in range(G - NA):
         for c in range(nb_):
             work[w_in, c] = 0.0
         for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
@@ -886,8 +938,26 @@ def _rhs_table_lock(
         for c in range(nb_):
             factor = work[r_q, c] * work[r_s, c] * work[r_h, c]
             work[w_acc, c] += work[w_in, c] * factor
+    if NA > 0:  # the inertia groups, as in _rhs_table: m(q) = m - part
+        for c in range(nb_):
+            work[w_part, c] = 0.0
+        for g in range(G - NA, G):
+            for c in range(nb_):
+                work[w_in, c] = 0.0
+            for m in range(ip[o_ptr + g], ip[o_ptr + g + 1]):
+                k = ip[o_tk + m]
+                for c in range(nb_):
+                    work[w_in, c] += wts[m, c] * work[k, c]
+            pw = ip[o_gq + g]
+            r_q = w_qp + pw
+            for c in range(nb_):
+                q_dot = XT[1, c]
+                work[w_acc, c] += work[w_in, c] * (0.5 * pw * work[r_q - 1, c] * q_dot * q_dot)
+                work[w_part, c] += work[w_in, c] * work[r_q, c]
+        for c in range(nb_):
+            work[w_part, c] = mass[c] - work[w_part, c]
     for c in range(nb_):
-        a = work[w_acc, c] / mass[c]
+        a = work[w_acc, c] / (work[w_part, c] if NA > 0 else mass[c])
         D[row, 0, c] = XT[1, c]
         D[row, 1, c] = a
         if lag:
@@ -921,7 +991,7 @@ def _lockstep(
     X = np.zeros((S, nb_))
     XT = np.empty((S, nb_))
     D = np.zeros((4, S, nb_))
-    work = np.empty((K + NI + QMAX + 1 + U + H + 4, nb_))
+    work = np.empty((K + NI + QMAX + 1 + U + H + 5, nb_))
     Ti = np.empty(nb_, dtype=np.int64)
     wts = np.empty((max(J, 1), nb_))
     mass = np.empty(nb_)
@@ -1008,7 +1078,8 @@ def _trajectory_sens(
     creep states' rows follow w_k' = b_k(q) q_dot - lambda w_k; a slip state's rate is
     q_dot while its element sticks (slope 1) and 0 while it slips, and a step's catch-up
     clip (:func:`_project_table`) fixes the state at its break-away value, so its
-    sensitivity is 0 there.
+    sensitivity is 0 there. With inertia terms the acceleration also depends on q_dot
+    through 1/2 m'(q) q_dot^2, and every derivative is over m(q) (:func:`_grad_table`).
     """
     S = states.shape[2]
     P = sens.shape[2]
@@ -1021,7 +1092,7 @@ def _trajectory_sens(
     rate = fp[lay[_P_CRATE]]
     o_cb, o_sw = lay[_I_CBASE], lay[_P_SWIDTH]
     tz = fp[lay[_P_TZ] + (b if lay[_BT] > 1 else 0)]
-    mass = fp[lay[_P_MASS] + (b if lay[_BM] > 1 else 0)]
+    inertia = lay[_NA] > 0
     p_mass = pmap[2 * J]
     p_tz = pmap[2 * J + 1]
     x = states[b, 0].copy()
@@ -1055,12 +1126,14 @@ def _trajectory_sens(
                         sens[b, k, p] = St[0, p]
                 if last:
                     break
-                a_q, a_s = _grad_table(xt, b, fp, ip, lay, W, V, tv, ae)
+                a_q, a_s, a_v, den = _grad_table(xt, b, fp, ip, lay, W, V, tv, ae, a)
                 lagged = lag and tz > 0.0
                 for p in range(P):
                     dS[stage, 0, p] = St[1, p]
                     row = a_q * St[0, p]
                     row += a_s * (St[2, p] if lagged else St[1, p])
+                    if inertia:
+                        row += a_v * St[1, p]
                     for e in range(NC + NS):
                         row += ae[e] * St[c0 + e, p]
                     dS[stage, 1, p] = row
@@ -1080,8 +1153,8 @@ def _trajectory_sens(
                     p = pmap[m]
                     if p >= 0:
                         dS[stage, 1, p] += pmap[J + m] * tv[m]
-                if p_mass >= 0:
-                    dS[stage, 1, p_mass] -= a / mass
+                if p_mass >= 0:  # d acc / d m = -acc / m(q)
+                    dS[stage, 1, p_mass] -= a / den
                 if p_tz >= 0 and lagged:  # parameter log T_z: d z' / d log T_z
                     dS[stage, 2, p_tz] -= _friction_rate(xt[1], xt[2], tz)
             if not last:
@@ -1148,8 +1221,9 @@ def free_run_sensitivity(
     """Free runs of a term-table model and the sensitivities of q to its parameters.
 
     The weights are ``w_j = term_sign[j] * p[term_param[j]]`` (a fixed weight where
-    ``term_param[j] < 0``), the mass is ``p[mass_param]`` (fixed if negative) and
-    ``T_z = exp(p[tz_param])`` (fixed if negative). The sensitivity equations are integrated
+    ``term_param[j] < 0``), the mass is ``p[mass_param]`` (fixed if negative; with inertia
+    terms the constant part m of m(q)) and ``T_z = exp(p[tz_param])`` (fixed if negative).
+    The sensitivity equations are integrated
     with the states by the same RK4 stages, so the result is the exact derivative of the
     discrete free run (to rounding), which the simulation-error refinement uses as its
     Jacobian.

@@ -178,6 +178,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
         **({"slip": _slip_summary(model)} if model.has_slip else {}),
+        **({"inertia": _inertia_summary(model)} if model.has_inertia else {}),
         "design": {
             "verdict": design["equilibria"].attrs["verdict"],
             "reason": design["equilibria"].attrs["reason"],
@@ -196,6 +197,13 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
 def _slip_summary(model) -> dict[str, Any]:
     """Return the slip elements as lists (:meth:`debist.model.rbf.RBFModel.slip_elements`)."""
     return {k: np.asarray(v).tolist() for k, v in model.slip_elements().items()}
+
+
+def _inertia_summary(model) -> dict[str, Any]:
+    """Return the coefficients of m(q) and the mass at the range's edges and at q = 0."""
+    q = np.array([model.q_range[0], 0.0, model.q_range[1]])
+    return {"mu": np.asarray(model.theta_inertia, dtype=float).tolist(), "q": q.tolist(),
+            "m": model.mass(q).tolist()}  # fmt: skip
 
 
 def _excitation(records, cfg: IdentifyConfig, tables):
