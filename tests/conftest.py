@@ -311,6 +311,14 @@ def inside_class_record(truth, t):
     return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
 
 
+def curve_error(model, truth, grid=None) -> float:
+    """Largest error of ``c(q) q`` and ``g_i`` of ``model`` against ``truth``, relative to the
+    truth's largest magnitude, on ``grid`` (default 50 points over +-12 mm)."""
+    grid = np.linspace(-0.012, 0.012, 50) if grid is None else grid
+    got, want = model.curves(grid), truth.curves(grid)
+    return max(np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "g"))
+
+
 #: [identify] settings whose model class holds truth_model.
 INSIDE_CLASS = {
     "M": 8,

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import INSIDE_CLASS, excitation, truth_model
+from conftest import INSIDE_CLASS, curve_error, excitation, truth_model
 from scipy.integrate import solve_ivp
 
 from debist.identify.config import IdentifyConfig
@@ -70,16 +70,9 @@ def test_the_fit_recovers_the_inertia_and_the_curves_it_would_bias():
     model, diag = fit_rbf_model([record], IdentifyConfig.from_dict({**base, "inertia": 2}))
     assert diag.columns[16:18] == ["inertia[1]", "inertia[2]"]
     np.testing.assert_allclose(model.theta_inertia, MU, rtol=1e-9)
-    grid = np.linspace(-0.012, 0.012, 50)
-    want = truth.curves(grid)
-
-    def error(m):
-        got = m.curves(grid)
-        return max(np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "g"))
-
     without, _ = fit_rbf_model([record], IdentifyConfig.from_dict(base))
-    assert error(model) < 1e-9
-    assert error(without) > 0.1
+    assert curve_error(model, truth) < 1e-9
+    assert curve_error(without, truth) > 0.1
 
 
 def test_the_model_file_keeps_the_inertia_and_a_constant_mass_keeps_its_bytes():

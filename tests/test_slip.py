@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import INSIDE_CLASS, example_rbf_model, excitation, truth_model
+from conftest import INSIDE_CLASS, curve_error, example_rbf_model, excitation, truth_model
 
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
@@ -122,16 +122,9 @@ def test_the_fit_recovers_element_stiffnesses_and_the_curves_they_would_bias():
     assert diag.columns[16:19] == ["slip[0]", "slip[1]", "slip[2]"]
     assert model.slip_width == WIDTHS
     np.testing.assert_allclose(model.theta_slip, truth.theta_slip, rtol=2e-3)
-    grid = np.linspace(-0.012, 0.012, 50)
-    want = truth.curves(grid)
-
-    def error(m):
-        got = m.curves(grid)
-        return max(np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "g"))
-
     without, _ = fit_rbf_model([record], IdentifyConfig.from_dict(base))
-    assert error(model) < 1e-3
-    assert error(without) > 100 * error(model)
+    assert curve_error(model, truth) < 1e-3
+    assert curve_error(without, truth) > 100 * curve_error(model, truth)
     elements = model.slip_elements()
     np.testing.assert_allclose(elements["F"], elements["k"] * np.array(WIDTHS))
     assert elements["k_total"] == pytest.approx(sum(truth.theta_slip), rel=2e-3)
