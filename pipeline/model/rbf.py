@@ -119,11 +119,7 @@ class RBFModel:
         Masoud & Maas 2025, Eq. 26 (the reduced model's m_q(q)); constant m_q in Eq. 37.
         """
         q = np.asarray(q, dtype=float)
-        out = np.full(q.shape, float(self.m_q))
-        if self.has_inertia:
-            for a, mu in enumerate(np.asarray(self.theta_inertia, dtype=float), start=1):
-                out = out + mu * q**a
-        return out
+        return self._table.mass_of(q.reshape(-1)).reshape(q.shape)  # the engines' m(q)
 
     @property
     def has_creep(self) -> bool:
