@@ -107,6 +107,23 @@ def test_support_weights_are_the_gaussian_sample_count():
     assert np.all(support_weights(grid, q, 0.1, q > 2.0) == 0.0)
 
 
+def test_two_sided_support_vanishes_where_the_data_end():
+    """Twice the smaller one-sided count: the plain count inside the data, about half of it
+    where a point sees the data from one side only (the last sample's position), 0 beyond."""
+    rng = np.random.default_rng(3)
+    q = rng.uniform(0.0, 1.0, 20000)
+    grid = np.array([0.3, 0.5, 0.7, q.max(), 1.2])
+    kernel = np.exp(-((grid[:, None] - q[None, :]) ** 2) / (2 * 0.05**2))
+    below = (kernel * (q[None, :] <= grid[:, None])).sum(axis=1)
+    above = (kernel * (q[None, :] >= grid[:, None])).sum(axis=1)
+    got = support_weights(grid, q, 0.05, two_sided=True)
+    np.testing.assert_allclose(got[:3], 2 * np.minimum(below, above)[:3], rtol=0.02)
+    np.testing.assert_allclose(got[:3], kernel.sum(axis=1)[:3], rtol=0.03)  # inside: plain
+    plain = support_weights(grid, q, 0.05)
+    assert got[3] < 0.02 * plain[3]  # the edge: every sample on one side
+    assert plain[4] > 0.0 and got[4] == 0.0  # beyond: the Gaussian tails no longer count
+
+
 def test_identified_intervals_are_the_runs_of_the_mask():
     q = np.linspace(0.0, 1.0, 11)
     mask = np.array([1, 1, 0, 0, 1, 1, 1, 0, 0, 0, 1], dtype=bool)
@@ -277,3 +294,24 @@ def test_creep_columns_enter_the_bootstrap_and_vanish_from_the_static_curves(bis
     restoring = model.curves(q)["cq"] + model.backbone["F_0"]
     err = np.max(np.abs(maps["restoring"] @ diag.theta - restoring))
     assert err <= 1e-12 * np.max(np.abs(restoring))
+
+
+def test_the_scale_is_taken_where_the_data_reach_and_the_mask_where_they_surround():
+    """A ramp whose two-sided support covers only its middle: marked there only, and judged
+    against its scale over the one-sided reach (the whole ramp), not the middle's range."""
+    m = 11
+    grid = np.linspace(-1.0, 1.0, m)
+    maps = {"restoring": np.column_stack([grid, np.ones(m)])}  # value = a q + b
+    theta = np.array([1.0, 0.0])
+    rng = np.random.default_rng(7)
+    boot = theta + np.column_stack([np.zeros(400), 0.02 * rng.standard_normal(400)])
+    point = {"restoring": maps["restoring"] @ theta}
+    middle = {"restoring": np.where(np.abs(grid) <= 0.4, 100.0, 0.0)}
+    reach = {"restoring": np.full(m, 100.0)}
+    width = np.percentile(boot[:, 1], 97.5) - np.percentile(boot[:, 1], 2.5)
+    tol = 1.5 * width / 2.0  # scale 2 over the reach: width <= tol * 2; middle's range 0.8: not
+    assert width > tol * 0.8
+    judged = curve_bands(point, maps, theta, boot, middle, 1.0, tol, reach=reach)
+    alone = curve_bands(point, maps, theta, boot, middle, 1.0, tol)
+    np.testing.assert_array_equal(judged["restoring_identified"], np.abs(grid) <= 0.4)
+    assert not alone["restoring_identified"].any()

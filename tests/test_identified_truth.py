@@ -12,7 +12,10 @@ of Eq. 37, so the identified restoring force ``c(q) q + F_0`` and the input gain
    interval its sub-threshold excitation visits near each well where it was applied: the
    logged q during the profile's sub-threshold blocks (its segments other than pulses and
    rest) at the samples where ``v_i^2`` is at least 10 % of its largest value in those blocks
-   (debist's own notion of an applied input), split at the barrier.
+   and the beam dwells (quasi-static by the rig's true q_dot), split at the barrier; the
+   central 98 % of those positions (1st to 99th percentile): a point the beam reached for 1 %
+   of the time at an edge is seen by the data from one side only, and debist does not mark
+   an extrapolation (two-sided support, :func:`debist.identify.bands.support_weights`).
 """
 
 from pathlib import Path
@@ -31,6 +34,7 @@ TOLERANCE = 0.10  # of the truth's range
 COVERAGE = 0.90  # of the marked points inside the 95 % band
 HALF_WIDTH = 1.5e-3  # [m] around each well centre, for the restoring force
 ACTIVE = 0.1  # v_i^2 above this fraction of its block maximum: v_i applied
+VISITED = (1.0, 99.0)  # [%] percentiles of the dwell positions: the interval visited
 
 
 def _zeros(q, f):
@@ -77,11 +81,13 @@ def _curves_and_truth(out: Path):
     import tomllib
 
     from debist.engine import artifacts
+    from debist.identify.excitation import quasi_static
     from debist.rig.experiment import RigConfig
     from debist.rig.profiles import make_profile
 
     curves = pd.read_parquet(out / "identify/curves.parquet")
-    truth = artifacts.read_h5(out / "rig/identification_truth.h5")["curves"]
+    rig_truth = artifacts.read_h5(out / "rig/identification_truth.h5")
+    truth = rig_truth["curves"]
     log = pd.read_parquet(out / "ingest/identification.parquet")
     q = curves.q.to_numpy()
     true = {name: np.interp(q, truth["q"], truth[key]) for name, key in CURVES.items()}
@@ -101,15 +107,17 @@ def _curves_and_truth(out: Path):
     for label, start, stop in profile.segments:
         if label != "rest" and not label.startswith("pulse"):
             block |= (t >= start - 1e-9) & (t < stop - 1e-9)
+    dwell = quasi_static(rig_truth["states"]["x"][:, 1])  # the true q_dot, on the log's grid
+    assert dwell.size == t.size
     required = {"restoring": [(w - HALF_WIDTH, w + HALF_WIDTH) for w in wells]}
     for i in (1, 2):
         h = log[f"v{i}"].to_numpy() ** 2
-        applied = block & (h >= ACTIVE * h[block].max())
+        applied = block & (h >= ACTIVE * h[block].max()) & dwell
         required[f"g{i}"] = []
         for w in wells:
             near = applied & (np.sign(q_log - barrier) == np.sign(w - barrier))
             if near.sum() >= 20:
-                required[f"g{i}"].append((q_log[near].min(), q_log[near].max()))
+                required[f"g{i}"].append(tuple(np.percentile(q_log[near], VISITED)))
     return curves, true, required
 
 
