@@ -62,7 +62,13 @@ def physics_prior(physics, records: Sequence[Record], n_grid: int = 2001):
     q_max = max(25e-3, 1.2 * max(float(np.max(np.abs(r.q))) for r in records))
     grid = np.linspace(-q_max, q_max, n_grid)
     cur = reduced_curves(physics, grid)
-    return PhysicsPrior(q=grid, c=cur.c, d=cur.d, g=np.stack([cur.g1, cur.g2], axis=1))
+    # the creep of Eq. 26: force k_bar k_i(q) q_eps,i, q_eps,i' = k_i q_dot - Y_MW/eta_MW q_eps,i
+    k_bar = physics.V_DE * physics.Y_MW
+    rate = physics.Y_MW / physics.eta_MW if physics.eta_MW > 0 else 0.0
+    return PhysicsPrior(
+        q=grid, c=cur.c, d=cur.d, g=np.stack([cur.g1, cur.g2], axis=1),
+        k=np.stack([cur.k1, cur.k2], axis=1), k_bar=float(k_bar), creep_rate=float(rate),
+    )  # fmt: skip
 
 
 def physics_mass(physics) -> float:

@@ -128,6 +128,24 @@ def example_rbf_model(
     )
 
 
+def with_physics_creep(model, s_k=(0.8, 1.3), rate=3.7, k_bar=0.02):
+    """``model`` with the DEs' creep of Eq. 26 in the analytical form (backbone
+    ``physics_creep``, scales ``s_k``): k_1 = -40 - 2e3 q, k_2 = 40 - 2e3 q [1/m] on the
+    model's prior grid (a zero prior on +-40 mm without one), ``k_bar`` [N m], ``rate`` [1/s]."""
+    from dataclasses import replace
+
+    from debist.model.terms import PhysicsPrior
+
+    prior = model.prior
+    if prior is None:
+        grid = np.linspace(-0.04, 0.04, 401)
+        prior = PhysicsPrior(grid, 0 * grid, 0 * grid, np.zeros((grid.size, 2)))
+    k = np.stack([-40.0 - 2e3 * prior.q, 40.0 - 2e3 * prior.q], axis=1)
+    prior = replace(prior, k=k, k_bar=k_bar, creep_rate=rate)
+    backbone = {**model.backbone, "s_k": np.asarray(s_k, dtype=float)}
+    return replace(model, prior=prior, creep_rate=rate, backbone=backbone)
+
+
 #: The synthetic rig-log workflow of the CLI tests (``{alpha}``: TVRegDiff's alpha).
 SYNTHETIC_WORKFLOW = """
 [workflow]

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import example_rbf_model, write_rig_csv
+from conftest import example_rbf_model, with_physics_creep, write_rig_csv
 
 from debist.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
@@ -89,12 +89,14 @@ MODELS = {
     "T_z=0+slip": lambda: with_slip(rbf_model(T_z=0.0, prior=False)),
     "creep+slip+inertia": lambda: with_inertia(with_slip(example_rbf_model(creep_rate=3.7))),
     "T_z=0+inertia": lambda: with_inertia(rbf_model(T_z=0.0, prior=False)),
+    "physics_creep+slip": lambda: with_physics_creep(with_slip(example_rbf_model())),
 }
 
 
 def n_states(model):
     """States of the exported model: [q, q_dot], z with T_z > 0, creep and slip states."""
     extra = (model.basis.M if model.has_creep else 0) + len(model.slip_width)
+    extra += model.n_inputs if model.has_physics_creep else 0
     return (3 if model.T_z > 0 else 2) + extra
 
 

@@ -7,7 +7,7 @@ library, the analytical model's splines); the kernel gets the model as arrays. A
 
 import numpy as np
 import pytest
-from conftest import example_rbf_model
+from conftest import example_rbf_model, with_physics_creep
 
 from debist.engine import progress
 from debist.model.sindy import SindyModel
@@ -296,6 +296,34 @@ def test_inertia_terms_in_the_compiled_kernel_serial_and_in_lockstep(two_threads
         np.testing.assert_array_equal(new[i].q_ddot, one[0].q_ddot)
 
 
+@pytest.mark.parametrize("slip", [False, True])
+@pytest.mark.parametrize("T_z", [0.02, 0.0])
+def test_physics_creep_in_the_compiled_kernel_serial_and_in_lockstep(two_threads, T_z, slip):
+    """The creep of Eq. 26 in the analytical form (two strains driven by tabulated k_i(q),
+    the force on tabulated k_bar k_i(q)): the compiled kernel, one trajectory at a time and
+    in lockstep blocks, against the NumPy engine to 1e-12; the creep changes the runs."""
+    from dataclasses import replace
+
+    plain = rbf_model(T_z)
+    if slip:
+        plain = replace(plain, slip_width=SLIP[0], theta_slip=np.array(SLIP[1]))
+    model = with_physics_creep(plain)
+    assert model.n_states == plain.n_states + 2 == model.kernel_arrays().n_states
+    records = [inputs(800, 0), inputs(600, 1)]
+    q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
+    ref, new = both(model, records, q0, qd0, substeps=2)
+    assert not any(r.diverged for r in ref) and np.ptp(ref[0].q) > 1e-3
+    assert_same(ref, new, tol=1e-12)
+    eps = ref[0].states[:, 3:5]
+    assert np.all(eps[0] == 0.0) and np.max(np.abs(eps)) > 1e-3  # relaxed, then it creeps
+    without = simulate(plain, records, DT, q0, qd0, substeps=2)
+    assert np.max(np.abs(ref[0].q - without[0].q)) > 1e-3 * np.ptp(without[0].q)
+    records = [inputs(300 + 100 * i, 60 + i) for i in range(5)]
+    q0 = np.linspace(-0.01, 0.01, 5)
+    ref, new = both(model, records, q0, np.zeros(5), substeps=2)
+    assert_same(ref, new, tol=1e-12)
+
+
 def test_the_kernel_groups_the_inertia_terms_last_and_checks_their_form():
     """Inertia terms form the last groups (the fast path's loop stops before them); a table
     without them keeps its term order; an inertia term with inputs or q^0 is refused."""
@@ -318,7 +346,13 @@ def test_the_kernel_groups_the_inertia_terms_last_and_checks_their_form():
 
 @pytest.mark.parametrize(
     ("extra", "T_z"),
-    [("none", 0.02), ("creep+slip", 0.02), ("inertia+creep+slip", 0.02), ("inertia", 0.0)],
+    [
+        ("none", 0.02),
+        ("creep+slip", 0.02),
+        ("inertia+creep+slip", 0.02),
+        ("inertia", 0.0),
+        ("physics_creep+slip", 0.02),
+    ],
 )
 def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra, T_z):
     """The refinement's Jacobian: d q / d p from the sensitivity equations against central
@@ -331,7 +365,9 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra, T_z):
     from debist.model.terms import term_sign, term_table
     from debist.model.termtable import TableModel
 
-    model = rbf_model(T_z=T_z, creep_rate=3.7 if "creep" in extra else 0.0)
+    model = rbf_model(T_z=T_z, creep_rate=3.7 if "creep" in extra.split("+") else 0.0)
+    if "physics_creep" in extra:
+        model = with_physics_creep(model)
     if "slip" in extra:
         model = replace(model, slip_width=SLIP[0], theta_slip=np.array(SLIP[1]))
     if "inertia" in extra:

@@ -260,6 +260,12 @@ class IdentifyConfig(SectionConfig):
                 raise ConfigValueError(
                     "constraints", "statements like 'd >= 0', 'g1 >= 0', 'g2 <= 0'", text
                 )
+        if self.creep and "physics_creep" in self.backbone:
+            raise ConfigValueError(
+                "creep",
+                message="set `creep` or the backbone term 'physics_creep', not both: a model "
+                "has one creep relaxation rate (physics_creep takes Y_MW / eta_MW of [physics])",
+            )
         if isinstance(self.slip, tuple) and not (
             self.slip and all(a < b for a, b in zip(self.slip, self.slip[1:], strict=False))
         ):

@@ -168,7 +168,7 @@ def _system(
         slip = slip_states(r.q_dot, r.dt, np.asarray(cfg.slip)) if cfg.slip else None
         F, f_names = force_columns(
             r.q, z, basis, cfg.rbf, cfg.backbone, cfg.coulomb_velocity, cfg.prior, w, slip,
-            cfg.inertia_powers, r.q_dot, r.q_ddot,
+            cfg.inertia_powers, r.q_dot, r.q_ddot, _strain(r, cfg),
         )  # fmt: skip
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
@@ -181,6 +181,11 @@ def _system(
             ys.append(_prefilter(float(cfg.m_q) * r.q_ddot, r, cfg))
             names = [*f_names, *g_names]
     return np.vstack(rows), np.concatenate(ys), names
+
+
+def _strain(r: Record, cfg: IdentifyConfig) -> np.ndarray | None:
+    """Return the creep strains of ``physics_creep`` along a record (none without the term)."""
+    return cfg.prior.strain(r.q, r.q_dot, r.dt) if "physics_creep" in cfg.backbone else None
 
 
 def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig, check: bool):
@@ -549,6 +554,9 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
     uses_prior = bool(set(PHYSICS_TERMS) & set(cfg.backbone))
     if uses_prior:
         backbone["s_g"] = np.array([value.get(f"physics_gain{j + 1}", 0.0) for j in range(n_in)])
+    if "physics_creep" in cfg.backbone:  # one rate per model: the prior's (config refuses both)
+        backbone["s_k"] = np.array([value[f"physics_creep{j + 1}"] for j in range(n_in)])
+        creep_rate = cfg.prior.creep()[1]
     return RBFModel(
         basis=basis,
         input_map=cfg.input_map,
@@ -563,7 +571,7 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         q_range=(float(q_range[0]), float(q_range[1])),
         prior=cfg.prior if uses_prior else None,
         creep_rate=float(creep_rate),
-        theta_creep=vec("creep") if creep_rate > 0 else None,
+        theta_creep=vec("creep") if any(n.startswith("creep[") for n in names) else None,
         slip_width=tuple(cfg.slip) if cfg.slip else (),
         theta_slip=(
             np.array([value[f"slip[{e}]"] for e in range(len(cfg.slip))]) if cfg.slip else None

@@ -18,7 +18,7 @@ from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import TableModel
 
 #: Backbone entries stored as vectors (one value per input).
-_VECTORS = ("g_0", "s_g")
+_VECTORS = ("g_0", "s_g", "s_k")
 
 
 @dataclass(frozen=True)
@@ -123,8 +123,13 @@ class RBFModel:
 
     @property
     def has_creep(self) -> bool:
-        """Whether the model has the creep states (``creep_rate > 0``)."""
-        return self.creep_rate > 0
+        """Whether the model has the RBF creep states (``creep_rate > 0``, ``theta_creep``)."""
+        return self.creep_rate > 0 and self.theta_creep is not None
+
+    @property
+    def has_physics_creep(self) -> bool:
+        """Whether the model has the analytical creep strains (backbone ``physics_creep``)."""
+        return "s_k" in self.backbone
 
     @property
     def has_slip(self) -> bool:
@@ -133,8 +138,13 @@ class RBFModel:
 
     @property
     def n_states(self) -> int:
-        """3 (``[q, q_dot, z]``), plus M creep states with creep, plus E slip states."""
-        return 3 + (self.basis.M if self.has_creep else 0) + len(self.slip_width)
+        """States: 3, plus M with creep, plus n_inputs with ``physics_creep``, plus E slip.
+
+        ``[q, q_dot, z]``, the RBF creep states, the creep strains of ``physics_creep`` (one
+        per input) and the slip elements' deflections, in that order.
+        """
+        strains = self.n_inputs if self.has_physics_creep else 0
+        return 3 + (self.basis.M if self.has_creep else 0) + strains + len(self.slip_width)
 
     def slip_elements(self) -> dict[str, np.ndarray]:
         """Return the Maxwell-slip elements as physics: deflection, stiffness and slip force.
@@ -181,7 +191,7 @@ class RBFModel:
         if self.prior is not None:
             c_p, d_p, g_p = self.prior(q)
             c, d = c + bb.get("s_c", 0.0) * c_p, d + bb.get("s_d", 0.0) * d_p
-            g = g + g_p * bb["s_g"]
+            g = g + g_p * np.asarray(bb.get("s_g", 0.0))
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
     def accel(
@@ -273,6 +283,9 @@ class RBFModel:
                 if value:
                     names.append(f"{name}{j + 1}")
                     values.append(float(value))
+        for j, value in enumerate(np.atleast_1d(bb.get("s_k", ()))):  # every strain's term
+            names.append(f"physics_creep{j + 1}")
+            values.append(float(value))
         return names, np.asarray(values, dtype=float)
 
     def table_model(self):
@@ -327,6 +340,8 @@ class RBFModel:
         cols = [q0, q_dot0, q_dot0]
         if self.has_creep:
             cols += [np.zeros_like(q0)] * self.basis.M
+        if self.has_physics_creep:  # the creep strains relaxed
+            cols += [np.zeros_like(q0)] * self.n_inputs
         cols += [np.zeros_like(q0)] * len(self.slip_width)  # the elements unloaded
         return np.stack(cols, axis=-1)
 
@@ -361,6 +376,8 @@ class RBFModel:
         if self.has_creep:
             w = creep_states(self.basis(q), q_dot, dt, self.creep_rate)
             out = np.concatenate([out, w], axis=1)
+        if self.has_physics_creep:
+            out = np.concatenate([out, self.prior.strain(q, q_dot, dt)], axis=1)
         if self.has_slip:
             slip = slip_states(q_dot, dt, np.asarray(self.slip_width))
             out = np.concatenate([out, slip], axis=1)
@@ -401,7 +418,7 @@ class RBFModel:
     def max_step(self) -> float:
         """Largest stable RK4 step for the friction and creep filters [s] (inf without)."""
         out = np.inf if self.T_z == 0 else 1.5 * self.T_z
-        return min(out, 1.5 / self.creep_rate) if self.has_creep else out
+        return min(out, 1.5 / self.creep_rate) if self.creep_rate > 0 else out
 
     @property
     def n_params(self) -> int:
@@ -428,8 +445,9 @@ class RBFModel:
         g0 = np.asarray(self.backbone.get("g_0", np.zeros(self.n_inputs)), dtype=float)
         scalars = {k: float(v) for k, v in self.backbone.items() if k not in _VECTORS}
         backbone: dict[str, Any] = {"attrs": scalars, "g_0": g0}
-        if "s_g" in self.backbone:
-            backbone["s_g"] = np.asarray(self.backbone["s_g"], dtype=float)
+        for key in ("s_g", "s_k"):
+            if key in self.backbone:
+                backbone[key] = np.asarray(self.backbone[key], dtype=float)
         if self.prior is not None:
             backbone["prior"] = self.prior.to_tree()
         model: dict[str, Any] = {}
@@ -489,8 +507,9 @@ class RBFModel:
         a = m["attrs"]
         backbone: dict[str, Any] = dict(m["backbone"]["attrs"])
         backbone["g_0"] = np.asarray(m["backbone"]["g_0"], dtype=float)
-        if "s_g" in m["backbone"]:
-            backbone["s_g"] = np.asarray(m["backbone"]["s_g"], dtype=float)
+        for key in ("s_g", "s_k"):
+            if key in m["backbone"]:
+                backbone[key] = np.asarray(m["backbone"][key], dtype=float)
         prior = m["backbone"].get("prior")
         creep = m.get("creep")
         slip = m.get("slip")
@@ -507,12 +526,12 @@ class RBFModel:
             theta_g=np.asarray(m["theta_g"], float),
             backbone=backbone,
             q_range=(float(a["q_min"]), float(a["q_max"])),
-            prior=None
-            if prior is None
-            else PhysicsPrior(
-                **{k: np.asarray(prior[k], dtype=float) for k in ("q", "c", "d", "g")}
+            prior=None if prior is None else PhysicsPrior.from_tree(prior),
+            creep_rate=(
+                float(creep["attrs"]["creep_rate"])
+                if creep is not None
+                else (float(np.asarray(prior["creep_rate"])) if "s_k" in m["backbone"] else 0.0)
             ),
-            creep_rate=0.0 if creep is None else float(creep["attrs"]["creep_rate"]),
             theta_creep=None if creep is None else np.asarray(creep["theta_creep"], float),
             slip_width=() if slip is None else tuple(np.asarray(slip["width"], float).tolist()),
             theta_slip=None if slip is None else np.asarray(slip["theta_slip"], float),

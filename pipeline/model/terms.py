@@ -20,6 +20,7 @@ import numpy as np
 
 from debist.errors import WorkflowError
 from debist.model.basis import RBFBasis
+from debist.model.friction import creep_states
 from debist.model.termtable import (
     S_CREEP,
     S_POW,
@@ -41,9 +42,10 @@ BACKBONE_TERMS = {
     "physics_spring": "s_c c_phys(q) q",
     "physics_damping": "s_d d_phys(q) z",
     "physics_gain": "s_g,i g_phys,i(q) h(v_i)",
+    "physics_creep": "s_k,i k_phys,i(q) q_eps,i, q_eps,i' = k_phys,i(q) q_dot - lambda q_eps,i",
 }
 #: Backbone terms that take the analytical model's curves (a [physics] section).
-PHYSICS_TERMS = ("physics_spring", "physics_damping", "physics_gain")
+PHYSICS_TERMS = ("physics_spring", "physics_damping", "physics_gain", "physics_creep")
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,10 @@ class PhysicsPrior:
     curves times scale factors ``s_c``, ``s_d``, ``s_g,i`` identified in the same least
     squares; the RBF sums then model only the difference between prototype and analytical
     model. With ``m_q = 1`` (curves per unit mass) the scales come out near ``1 / m_q,phys``.
+    ``physics_creep`` is the DEs' Maxwell creep of Eq. 26 in the analytical model's own form,
+    ``s_k,i k_i(q) q_eps,i`` with the creep strains ``q_eps,i' = k_i(q) q_dot - lambda
+    q_eps,i`` (extra states of a free run), linear in its scales once the analytical
+    relaxation rate ``lambda = Y_MW / eta_MW`` is fixed.
 
     Parameters
     ----------
@@ -65,6 +71,14 @@ class PhysicsPrior:
         Damping ``d(q)`` [N s/m].
     g : ndarray, shape (n, n_inputs)
         Input gains ``g_i(q) = 1/2 dC_i/dq`` [N/V^2].
+    k : ndarray, shape (n, n_inputs), optional
+        Creep couplings ``k_i(q)`` of Eq. 26, the strain of DE i per unit of q [1/m]; None:
+        no ``physics_creep``.
+    k_bar : float, optional
+        ``k_bar = V_DE Y_MW`` of Eq. 26 [N m]: the creep force is ``k_bar sum_i k_i(q)
+        q_eps,i``.
+    creep_rate : float, optional
+        The analytical relaxation rate ``lambda = Y_MW / eta_MW`` of the creep strains [1/s].
 
     References
     ----------
@@ -75,6 +89,9 @@ class PhysicsPrior:
     c: np.ndarray
     d: np.ndarray
     g: np.ndarray
+    k: np.ndarray | None = None
+    k_bar: float = 0.0
+    creep_rate: float = 0.0
 
     def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Interpolate ``c, d`` (n,) and ``g`` (n, n_inputs) at ``q`` [m] (held outside)."""
@@ -85,8 +102,65 @@ class PhysicsPrior:
         return c, d, g
 
     def to_tree(self) -> dict[str, np.ndarray]:
-        """Return the arrays for an HDF5 group (inverse: ``PhysicsPrior(**tree)``)."""
-        return {"q": self.q, "c": self.c, "d": self.d, "g": self.g}
+        """Return the arrays for an HDF5 group (inverse: :meth:`from_tree`)."""
+        tree = {"q": self.q, "c": self.c, "d": self.d, "g": self.g}
+        if self.k is not None:  # only then: a prior without creep keeps its bytes
+            tree.update(k=self.k, k_bar=np.array(self.k_bar), creep_rate=np.array(self.creep_rate))
+        return tree
+
+    @classmethod
+    def from_tree(cls, tree) -> PhysicsPrior:
+        """Rebuild from :meth:`to_tree` output (or its HDF5 round trip)."""
+        arrays = {key: np.asarray(tree[key], dtype=float) for key in ("q", "c", "d", "g")}
+        if "k" in tree:
+            arrays["k"] = np.asarray(tree["k"], dtype=float)
+            arrays["k_bar"] = float(np.asarray(tree["k_bar"]))
+            arrays["creep_rate"] = float(np.asarray(tree["creep_rate"]))
+        return cls(**arrays)
+
+    def creep(self) -> tuple[np.ndarray, float]:
+        """Return the couplings k_i (n, n_inputs) [1/m] and the rate [1/s] of ``physics_creep``.
+
+        Raises
+        ------
+        WorkflowError
+            If the prior has no creep curves or no positive rate (``eta_MW = 0``).
+        """
+        if self.k is None or not self.creep_rate > 0:
+            raise WorkflowError(
+                "backbone term physics_creep needs the analytical creep of Eq. 26: a [physics] "
+                "prototype with Y_MW > 0 and eta_MW > 0"
+            )
+        return self.k, float(self.creep_rate)
+
+    def strain(self, q: np.ndarray, q_dot: np.ndarray, dt: float) -> np.ndarray:
+        """Creep strains of ``physics_creep`` along a record, from rest at its start.
+
+        Parameters
+        ----------
+        q, q_dot : ndarray, shape (n,)
+            Position [m] and velocity [m/s].
+        dt : float
+            Sample time [s].
+
+        Returns
+        -------
+        ndarray, shape (n, n_inputs)
+            ``q_eps,i`` with ``q_eps,i' = k_i(q) q_dot - lambda q_eps,i`` [-]
+            (:func:`debist.model.friction.creep_states` with the couplings as the basis).
+
+        Raises
+        ------
+        WorkflowError
+            As :meth:`creep`.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 26.
+        """
+        k_curves, rate = self.creep()
+        k_q = np.column_stack([np.interp(q, self.q, k) for k in k_curves.T])
+        return creep_states(k_q, np.asarray(q_dot, dtype=float), dt, rate)
 
 
 def _prior(prior: PhysicsPrior | None) -> PhysicsPrior:
@@ -159,7 +233,8 @@ def column_names(
     force : list of str
         The force terms F(q, z) (left of the balance): ``c[i]``, ``d[i]``, then the
         backbone's ``linear_spring``, ``cubic_spring``, ``viscous``, ``coulomb``,
-        ``offset``, ``physics_spring``, ``physics_damping`` (in the order given).
+        ``offset``, ``physics_spring``, ``physics_damping`` (in the order given), then
+        ``physics_creep<j>``.
     inputs : list of str
         The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``input_gain<j>``,
         ``physics_gain<j>``.
@@ -178,6 +253,8 @@ def column_names(
     force += [f"slip[{e}]" for e in range(n_slip)]
     force += [f"inertia[{a}]" for a in inertia]
     force += [name for name in backbone if name in _FORCE_SCALARS or name in _PHYSICS_FORCE]
+    if "physics_creep" in backbone:
+        force += [f"physics_creep{j + 1}" for j in range(n_inputs)]
     inputs: list[str] = []
     if "g" in rbf:
         inputs += [f"g{j + 1}[{i}]" for j in range(n_inputs) for i in range(M)]
@@ -201,6 +278,7 @@ def force_columns(
     inertia: Sequence[int] = (),
     q_dot: np.ndarray | None = None,
     q_ddot: np.ndarray | None = None,
+    strain: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """Columns of the force terms F(q, z) (left-hand side of the balance).
 
@@ -232,6 +310,9 @@ def force_columns(
     q_dot, q_ddot : ndarray, shape (n,), optional
         Velocity [unit of q / s] and acceleration [unit of q / s^2] (needed with
         ``inertia``).
+    strain : ndarray, shape (n, n_inputs), optional
+        The creep strains q_eps,i of ``physics_creep`` along the record [-]
+        (:func:`debist.model.friction.creep_states` of the prior's k_i(q) at its rate).
 
     Returns
     -------
@@ -244,17 +325,22 @@ def force_columns(
     Raises
     ------
     WorkflowError
-        If a ``physics_*`` term is active without ``prior``.
+        If a ``physics_*`` term is active without ``prior``, or ``physics_creep`` without
+        ``strain``.
     """
     q = np.asarray(q, dtype=float)
     n_slip = 0 if slip is None else slip.shape[1]
+    if "physics_creep" in backbone and strain is None:
+        raise WorkflowError("the physics_creep columns need the creep strains along the record")
+    n_strain = 1 if strain is None else strain.shape[1]
     names, _ = column_names(
-        rbf, backbone, basis.M, 1, creep=w is not None, n_slip=n_slip, inertia=inertia
+        rbf, backbone, basis.M, n_strain, creep=w is not None, n_slip=n_slip, inertia=inertia
     )
     if inertia and (q_dot is None or q_ddot is None):
         raise WorkflowError("the inertia columns need the velocity and the acceleration")
     table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
-    states = [a for a in (w, slip) if a is not None]
+    # the states in the table's order: RBF creep, the physics creep strains, the slip elements
+    states = [a for a in (w, strain, slip) if a is not None]
     extra = np.hstack(states) if states else None
     return table.columns(q, z, np.zeros((q.size, 1)), extra, q_dot, q_ddot), names
 
@@ -355,6 +441,9 @@ def term_table(
         tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``physics_spring``
         (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
         ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
+        ``physics_creep<j>`` (k_phys,j(q) q_eps,j with the creep strain q_eps,j' =
+        k_phys,j(q) q_dot - lambda q_eps,j of the prior, Eq. 26; one state per input, after
+        the ``creep[i]`` states),
         ``slip[e]`` (a Maxwell-slip element's deflection), ``inertia[a]`` (q^a in the mass,
         :meth:`~debist.model.termtable.TermTableBuilder.inertia`).
     basis : RBFBasis
@@ -406,6 +495,12 @@ def term_table(
             prior_base[key] = build.table(_prior(prior).q, column)
         return prior_base[key]
 
+    strain: list[int] = []
+    if any(name.startswith("physics_creep") for name in names):
+        k_curves, _ = _prior(prior).creep()  # strain i filters k_i(q) q_dot (Eq. 26)
+        strain = [build.creep(tabulated(f"k{j}", k)) for j, k in enumerate(k_curves.T)]
+        k_bar = _prior(prior).k_bar
+
     def h(j: int) -> list[int]:
         out = [0] * n_inputs
         out[j] = 1
@@ -447,6 +542,10 @@ def term_table(
         elif name.startswith("physics_gain"):
             j = int(name[len("physics_gain") :]) - 1
             build.term(name, tabulated(f"g{j}", _prior(prior).g[:, j]), hpow=h(j))
+        elif name.startswith("physics_creep") and strain:
+            j = int(name[len("physics_creep") :]) - 1
+            force_j = tabulated(f"k_bar k{j}", k_bar * _prior(prior).k[:, j])
+            build.term(name, force_j, skind=S_CREEP, spow=strain[j])
         else:
             raise WorkflowError(f"unknown term {name!r}")
     return build.build()

@@ -64,7 +64,7 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         ``q``, ``force``, ``mass`` (``"kg"`` or ``"1"``), ``barrier`` (F q), ``inputs``
         (one unit per input), ``quantities`` (the quantity each input's unit measures:
         ``"voltage"``, ``"acceleration"``, ``"force"``, ...; ``"input"`` when unknown),
-        ``input_map`` (``"v2"`` or ``"v"``), ``g_0`` and ``s_g`` (one unit per input),
+        ``input_map`` (``"v2"`` or ``"v"``), ``g_0``, ``s_g`` and ``s_k`` (one unit per input),
         ``stiffness`` (F/q) and ``damping`` (F s/q) and one unit per scalar backbone
         parameter (``k_1``, ``k_3``, ``d_v``, ``F_c``, ``F_0``, ``s_c``, ``s_d``).
 
@@ -99,6 +99,7 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         damping=unit("F*s/q"),
         g_0=[unit("F/h", v) for v in inputs],
         s_g=["1"] * n_inputs,
+        s_k=["1"] * n_inputs,
     )
     return out
 
@@ -276,12 +277,12 @@ def identify_table(summary: dict[str, Any]) -> Table:
     for key, value in summary["backbone"].items():
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))
-        elif key in ("g_0", "s_g") and any(value):
-            label = (
-                "backbone coefficient (a basis term; g_i(q) in Fig. 14)"
-                if key == "g_0"
-                else "scale of the analytical g_i,"
-            )
+        elif key in ("g_0", "s_g", "s_k") and any(value):
+            label = {
+                "g_0": "backbone coefficient (a basis term; g_i(q) in Fig. 14)",
+                "s_g": "scale of the analytical g_i,",
+                "s_k": "scale of the analytical creep force k_bar k_i(q) q_eps,i (Eq. 26),",
+            }[key]
             rows += [
                 (f"{label} {key},{i + 1}", units[key][i], v, f"{key}_{i + 1}")
                 for i, v in enumerate(value)
