@@ -315,3 +315,23 @@ def test_the_scale_is_taken_where_the_data_reach_and_the_mask_where_they_surroun
     alone = curve_bands(point, maps, theta, boot, middle, 1.0, tol)
     np.testing.assert_array_equal(judged["restoring_identified"], np.abs(grid) <= 0.4)
     assert not alone["restoring_identified"].any()
+
+
+def test_a_model_with_the_analytical_creep_reads_its_own_calibration():
+    """Backbone ``physics_creep``: the model error calibrated on fleets run with it (the creep
+    was most of the g_i bias: below half the band tolerance now) and its own label."""
+    from debist.identify.bands import (
+        MEASURED_COVERAGE_CREEP,
+        MODEL_ERROR,
+        MODEL_ERROR_CREEP,
+        band_label,
+        model_error_table,
+    )
+
+    assert model_error_table(["offset"]) is MODEL_ERROR
+    assert model_error_table(["offset", "physics_creep"]) is MODEL_ERROR_CREEP
+    assert set(MODEL_ERROR_CREEP) == set(MODEL_ERROR)
+    assert MODEL_ERROR_CREEP["g"] < 0.1 < MODEL_ERROR["g"]
+    assert MEASURED_COVERAGE_CREEP in band_label(True, creep=True)
+    assert MEASURED_COVERAGE_CREEP not in band_label(True)
+    assert band_label(False, creep=True) == band_label(False)

@@ -14,7 +14,7 @@ import numpy as np
 from debist.engine.artifacts import Figure, H5Tree
 from debist.engine.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, select_hyperparameters
-from debist.identify.bands import MODEL_ERROR, band_label, curves_frame, static_frame
+from debist.identify.bands import band_label, curves_frame, model_error_table, static_frame
 from debist.identify.config import IdentifyConfig
 from debist.identify.design import (
     design_numbers,
@@ -146,7 +146,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "message": res.message,
         }
         timings["refine"] = res.seconds
-    model_error = MODEL_ERROR if cfg.model_error else None
+    model_error = model_error_table(cfg.backbone) if cfg.model_error else None
     curves, identified = curves_frame(
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance,
         model_error=model_error,
@@ -173,7 +173,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "refine": refine,
         "identified": identified,
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
-        "bands": {"label": band_label(cfg.model_error), "model_error": model_error or {}},
+        "bands": {
+            "label": band_label(cfg.model_error, "physics_creep" in cfg.backbone),
+            "model_error": model_error or {},
+        },
         "smoothing": diag.smoothing,
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
