@@ -121,3 +121,18 @@ def test_one_creep_rate_per_model():
         IdentifyConfig.from_dict({"creep": 3.7, "backbone": ["physics_creep"]})
     with pytest.raises(Exception, match="Y_MW > 0 and eta_MW > 0"):
         replace(creep_prior(), creep_rate=0.0).creep()
+
+
+def test_a_model_without_the_creep_term_keeps_no_creep_curves():
+    """Another ``physics_*`` term takes the prior, not its creep curves: the model file of
+    such a model is what it was before the creep term existed."""
+    truth = truth_model(np.random.default_rng(2))
+    record = _record(with_physics_creep(truth, s_k=(0.0, 0.0)))
+    spring = {**INSIDE_CLASS, "T_z": 0.0, "bootstrap": 0,
+              "backbone": [*INSIDE_CLASS["backbone"], "physics_spring"]}  # fmt: skip
+    prior = creep_prior()
+    prior = replace(prior, c=-30.0 + 3e5 * prior.q**2)  # a curve for physics_spring
+    cfg = replace(IdentifyConfig.from_dict(spring), prior=prior)
+    model, _ = fit_rbf_model([record], cfg)
+    assert model.prior is not None and model.prior.k is None and not model.has_physics_creep
+    assert "k" not in model.to_tree()["model"]["backbone"]["prior"]

@@ -183,6 +183,16 @@ def _system(
     return np.vstack(rows), np.concatenate(ys), names
 
 
+def _model_prior(cfg: IdentifyConfig):
+    """Return the prior the model keeps: its creep curves only with ``physics_creep``.
+
+    A model with other ``physics_*`` terms keeps the bytes it had before the creep term.
+    """
+    if "physics_creep" in cfg.backbone:
+        return cfg.prior
+    return replace(cfg.prior, k=None, k_bar=0.0, creep_rate=0.0)
+
+
 def _strain(r: Record, cfg: IdentifyConfig) -> np.ndarray | None:
     """Return the creep strains of ``physics_creep`` along a record (none without the term)."""
     return cfg.prior.strain(r.q, r.q_dot, r.dt) if "physics_creep" in cfg.backbone else None
@@ -569,7 +579,7 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         theta_g=np.stack([vec(f"g{j + 1}") for j in range(n_in)]),
         backbone=backbone,
         q_range=(float(q_range[0]), float(q_range[1])),
-        prior=cfg.prior if uses_prior else None,
+        prior=_model_prior(cfg) if uses_prior else None,
         creep_rate=float(creep_rate),
         theta_creep=vec("creep") if any(n.startswith("creep[") for n in names) else None,
         slip_width=tuple(cfg.slip) if cfg.slip else (),
