@@ -136,27 +136,42 @@ def _lacking(true, est, lo, hi, marked) -> np.ndarray:
     return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / scale
 
 
-def _set_model_error(members: list[tuple[Path, Path]], on: bool) -> None:
-    """Write ``[identify] model_error`` into every member's workflow file."""
+def _set_identify(members: list[tuple[Path, Path]], on: bool, backbone: tuple[str, ...]) -> None:
+    """Write ``[identify] model_error`` and the extra ``backbone`` terms into every member's
+    workflow file (a rewrite only where it changes)."""
     import tomli_w
 
     for wf, _ in members:
         raw = tomllib.loads(wf.read_text())
-        if raw.setdefault("identify", {}).get("model_error", True) != on:
-            raw["identify"]["model_error"] = on
+        section = raw.setdefault("identify", {})
+        terms = list(section.get("backbone", []))
+        wanted = terms + [t for t in backbone if t not in terms]
+        if section.get("model_error", True) != on or wanted != terms:
+            section["model_error"], section["backbone"] = on, wanted
             wf.write_text(tomli_w.dumps(raw))
 
 
 def calibrate(
-    plant: str, size: int, seed: int, workers: int, folder: Path, model_error: bool = True
+    plant: str,
+    size: int,
+    seed: int,
+    workers: int,
+    folder: Path,
+    model_error: bool = True,
+    backbone: tuple[str, ...] = (),
 ) -> dict:
-    """Run one fleet and score it; returns the summary (see the module docstring)."""
+    """Run one fleet and score it; returns the summary (see the module docstring).
+
+    ``backbone``: terms added to every member's ``[identify] backbone`` (e.g.
+    ``physics_creep``, whose model error :data:`debist.identify.bands.MODEL_ERROR_CREEP` is
+    calibrated so).
+    """
     fleet = folder / plant
     if not any(fleet.glob("*.toml")):
         _debist("fleet", str(PLANTS[plant]), "--size", str(size), "--seed", str(seed),
                 "--dir", str(fleet))  # fmt: skip
     members = _member_outputs(fleet)
-    _set_model_error(members, model_error)
+    _set_identify(members, model_error, backbone)
     _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
     rows, nrmse = [], []
     for wf, run in members:
@@ -241,14 +256,19 @@ def main() -> None:
     p.add_argument("--dir", type=Path, required=True)
     p.add_argument("--plants", default="full,reduced")
     p.add_argument(
+        "--add-backbone", default="",
+        help="comma-separated backbone terms added to every member (e.g. physics_creep)",
+    )  # fmt: skip
+    p.add_argument(
         "--model-error", choices=("on", "off"), default="on",
         help="off: bootstrap-only bands, and print the model-error term they lack",
     )  # fmt: skip
     args = p.parse_args()
     sys.path.insert(0, str(ROOT))
     on = args.model_error == "on"
+    extra = tuple(t for t in args.add_backbone.split(",") if t)
     results = [
-        calibrate(plant, args.size, args.seed, args.workers, args.dir, on)
+        calibrate(plant, args.size, args.seed, args.workers, args.dir, on, extra)
         for plant in args.plants.split(",")
     ]
     for r in results:

@@ -101,8 +101,9 @@ MODEL_ERROR = {"restoring": 0.088, "d": 0.652, "g": 0.149, "F": 0.205}
 #: tolerance and are marked nowhere.
 MEASURED_COVERAGE = "98-100 %"
 #: The model error of a model with the analytical creep term (backbone ``physics_creep``): the
-#: same calibration on fleets run with it (seed 1, both plants, ``--model-error off``,
-#: 2026-11-23); the creep Eq. 37 lacks was most of the g_i bias (0.149 -> 0.076).
+#: same calibration on fleets run with it (``benchmarks/calibrate_bands.py --size 10 --seed 1
+#: --model-error off --add-backbone physics_creep``, both plants, 2026-11-23); the creep Eq. 37
+#: lacks was most of the g_i bias (0.149 -> 0.076).
 MODEL_ERROR_CREEP = {"restoring": 0.086, "d": 0.451, "g": 0.076, "F": 0.185}
 #: What the bands of :data:`MODEL_ERROR_CREEP` hold on the independent reduced-plant fleet
 #: (``--seed 2``, with ``physics_creep``, 2026-11-23): g_1 99 %, g_2 96 %, the restoring force
