@@ -110,10 +110,11 @@ MODEL_ERROR_CREEP = {"restoring": 0.086, "d": 0.451, "g": 0.076, "F": 0.185}
 #: 100 % of their marked points (d is marked nowhere).
 MEASURED_COVERAGE_CREEP = "96-100 %"
 #: How a band is labelled wherever it is shown: what it is, and what it was measured to hold.
-BAND_LABEL = (
-    f"95 % band (bootstrap and model error calibrated on the virtual rig; holds the truth at "
-    f"{MEASURED_COVERAGE} there)"
+_BAND_TEMPLATE = (
+    "95 % band (bootstrap and model error calibrated on the virtual rig; holds the truth at "
+    "{coverage} there)"
 )
+BAND_LABEL = _BAND_TEMPLATE.format(coverage=MEASURED_COVERAGE)
 #: The label of a bootstrap-only band (``[identify] model_error = false``): its measured coverage
 #: on the calibration fleet (``--seed 1``, both plants, two-sided support, 2026-11-23).
 BOOTSTRAP_LABEL = "bootstrap band (nominal 95 %; holds the truth at only 3-55 % on the virtual rig)"
@@ -143,7 +144,7 @@ def band_label(model_error: bool, creep: bool = False) -> str:
     """
     if not model_error:
         return BOOTSTRAP_LABEL
-    return BAND_LABEL.replace(MEASURED_COVERAGE, MEASURED_COVERAGE_CREEP) if creep else BAND_LABEL
+    return _BAND_TEMPLATE.format(coverage=MEASURED_COVERAGE_CREEP if creep else MEASURED_COVERAGE)
 
 
 def _model_error(table: dict[str, float] | None, name: str) -> float:
