@@ -77,7 +77,33 @@ def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
         rows.append(_score(name, true, est, lo, hi, marked))
     if plant == "full":
         rows += _static_rows(wf, run)
-    return rows
+    return rows + _stiffness_rows(run, truth)
+
+
+def _stiffness_rows(run: Path, truth: dict) -> list[dict]:
+    """k* at the identified wells at rest against the slope of the true restoring force there.
+
+    One row ``k*`` per member: ``lacking`` is ``|k*_true / k*_identified - 1|`` per well (the
+    bootstrap's reach is not subtracted: :data:`debist.identify.bands.STIFFNESS_ERROR` is the
+    95th percentile of these), ``inside`` counts the wells whose ``k_lo .. k_hi`` holds the truth.
+    """
+    eq = pd.read_parquet(run / "identify" / "equilibria.parquet")
+    q, f = np.asarray(truth["q"]), np.asarray(truth["f"])
+    slope = np.gradient(f, q)
+    roots = [i for i in np.flatnonzero(np.diff(np.sign(f)) != 0) if slope[i] > 0]
+    wells = eq[(eq.model == "rbf") & (eq.level == 0) & eq.static_stable & eq.identified]
+    if not roots or wells.empty:
+        return []
+    true = np.array([slope[min(roots, key=lambda i: abs(q[i] - x))] for x in wells.q])
+    est = wells.k.to_numpy()
+    ratio = np.abs(true / est - 1.0)
+    lo = wells.get("k_lo", pd.Series(np.nan, index=wells.index)).to_numpy()
+    hi = wells.get("k_hi", pd.Series(np.nan, index=wells.index)).to_numpy()
+    return [{
+        "curve": "k*", "marked": int(est.size), "max_error": float(ratio.max()),
+        "median_error": float(np.median(ratio)), "inside": int(np.sum((lo <= true) & (true <= hi))),
+        "lacking": ratio.tolist(),
+    }]  # fmt: skip
 
 
 def _static_rows(wf: Path, run: Path) -> list[dict]:
@@ -229,7 +255,7 @@ def _markdown(result: dict) -> str:
 
 
 #: Curves of the calibration -> key of :data:`debist.identify.bands.MODEL_ERROR`.
-GROUPS = {"restoring": "restoring", "d": "d", "g1": "g", "g2": "g", "static F": "F"}
+GROUPS = {"restoring": "restoring", "d": "d", "g1": "g", "g2": "g", "static F": "F", "k*": "k"}
 
 
 def _model_error_table(results: list[dict]) -> str:
@@ -244,7 +270,8 @@ def _model_error_table(results: list[dict]) -> str:
     for key, values in pooled.items():
         table[key] = round(float(np.percentile(values, 95)), 3) if values else 0.0
         lines.append(f"| {key} | {len(values)} | {table[key]} |")
-    return "\n".join([*lines, "", f"MODEL_ERROR = {table}"])
+    stiffness = table.pop("k", None)
+    return "\n".join([*lines, "", f"MODEL_ERROR = {table}", f"STIFFNESS_ERROR = {stiffness}"])
 
 
 def main() -> None:

@@ -335,3 +335,34 @@ def test_a_model_with_the_analytical_creep_reads_its_own_calibration():
     assert MEASURED_COVERAGE_CREEP in band_label(True, creep=True)
     assert MEASURED_COVERAGE_CREEP not in band_label(True)
     assert band_label(False, creep=True) == band_label(False)
+
+
+def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bistable_record):
+    """k* = dF/dq at each identified well: the band's map applied to the parameters is the
+    stability table's k* (a replicate at 2 theta deviates by exactly k*), and without spread the
+    band is k* (1 -+ STIFFNESS_ERROR), f_n its square-root image; saddles and the analytical
+    rows get none."""
+    from dataclasses import replace
+
+    from debist.identify.bands import STIFFNESS_ERROR, stiffness_bands
+    from debist.identify.design import design_numbers
+
+    records = _records(bistable_record)
+    model, diag = fit_rbf_model(records, _cfg(bootstrap=0))
+    eq = design_numbers(model, records)["equilibria"]
+    wells = (eq.model == "rbf") & eq.static_stable.astype(bool)
+    assert wells.sum() == 2 and (~wells).any()
+    k = eq.k[wells].to_numpy()
+    doubled = stiffness_bands(eq, model, replace(diag, theta_boot=2.0 * diag.theta[None]), False)
+    np.testing.assert_allclose(doubled.k_lo[wells], 2.0 * k, rtol=1e-6)
+    np.testing.assert_allclose(doubled.k_hi[wells], 2.0 * k, rtol=1e-6)
+    flat = stiffness_bands(eq, model, replace(diag, theta_boot=diag.theta[None]), True)
+    np.testing.assert_allclose(flat.k_lo[wells], (1 - STIFFNESS_ERROR) * k, rtol=1e-12)
+    np.testing.assert_allclose(flat.k_hi[wells], (1 + STIFFNESS_ERROR) * k, rtol=1e-12)
+    m_q = eq.m_q[wells].to_numpy()
+    f_lo = np.sqrt((1 - STIFFNESS_ERROR) * k / m_q) / (2 * np.pi)
+    np.testing.assert_allclose(flat.f_n_lo[wells], f_lo, rtol=1e-12)
+    assert flat.loc[~wells, ["k_lo", "k_hi", "f_n_lo", "f_n_hi"]].isna().all().all()
+    none = stiffness_bands(eq, model, diag, True)  # no replicates: no band
+    assert none[["k_lo", "k_hi"]].isna().all().all()
+    assert flat.attrs == eq.attrs

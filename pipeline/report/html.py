@@ -31,6 +31,8 @@ from debist.report.tables import (
     auto_line,
     equilibrium_kind,
     not_modelled,
+    small_signal_cells,
+    stiffness_caption,
     summary_units,
     switching_note,
     switching_word,
@@ -194,7 +196,7 @@ leaves its errors correlated with it).</p>
 <p>Identified model: {{ design.verdict }}{% if design.reason %} ({{ design.reason }}){% endif %}</p>
 <p>Equilibria and switching levels ({{ design.title }}); at each well the total damping d(q*),
 the tangent stiffness k* = dF/dq and the small-signal natural frequency
-f_n = sqrt(k*/m_q)/(2 pi).</p>
+f_n = sqrt(k*/m_q)/(2 pi); {{ design.k_band }}.</p>
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>model</th><th>inputs [{{ design.inputs }}]</th><th>q* [{{ design.q_unit }}]</th>
 <th>kind</th><th>d(q*) [{{ design.damping }}]</th><th>k* [{{ design.stiffness }}]</th>
@@ -425,8 +427,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         if r.get("level", 0) != 0 and not r.get("static_stable"):
             continue
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
-        well = bool(r.get("static_stable"))
-        small = [_num(r.get(k)) if well else "" for k in ("d", "k", "f_n", "zeta", "barrier")]
+        small = small_signal_cells(r, _num)
         q = r.get("q")
         q = scale * q if isinstance(q, int | float) else q
         rows.append([r.get("model", ""), volts, _num(q), equilibrium_kind(r), *small])
@@ -448,6 +449,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         "q_unit": q_unit,
         "inputs": ", ".join(dict.fromkeys(units["inputs"])) or "V",
         "barrier": units["barrier"],
+        "k_band": stiffness_caption(summary),
     }
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from typing import Any
 
 from rich.markup import escape
@@ -590,6 +591,44 @@ def rig_table(summary: dict[str, Any]) -> Table:
     return table
 
 
+def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str]:
+    """Cells ``d``, ``k*``, ``f_n``, ``zeta``, ``barrier`` of a design-table row.
+
+    Empty but at a well (``static_stable``); ``k*`` and ``f_n`` carry their 95 % band in
+    brackets where the row has one (``k_lo``, ``k_hi``, ``f_n_lo``, ``f_n_hi``:
+    :func:`debist.identify.bands.stiffness_bands`).
+
+    Parameters
+    ----------
+    row : dict
+        One equilibria record of the identify summary's ``design``.
+    fmt : callable
+        Number formatter ``fmt(value, digits) -> str``.
+
+    Returns
+    -------
+    list of str, length 5
+    """
+    if not row.get("static_stable"):
+        return [""] * 5
+    cells = []
+    for key in ("d", "k", "f_n", "zeta", "barrier"):
+        text = fmt(row.get(key))
+        lo, hi = _num_or_nan(row.get(f"{key}_lo")), _num_or_nan(row.get(f"{key}_hi"))
+        if math.isfinite(lo) and math.isfinite(hi):
+            text += f" ({fmt(lo, 3)}-{fmt(hi, 3)})"
+        cells.append(text)
+    return cells
+
+
+def stiffness_caption(summary: dict[str, Any]) -> str:
+    """Say what the brackets of the design table's ``k*`` and ``f_n`` hold (model error or not)."""
+    from debist.identify.bands import STIFFNESS_BOOTSTRAP_LABEL, STIFFNESS_LABEL
+
+    with_error = bool((summary.get("bands") or {}).get("model_error"))
+    return STIFFNESS_LABEL if with_error else STIFFNESS_BOOTSTRAP_LABEL
+
+
 def equilibrium_kind(row: dict[str, Any]) -> str:
     """Describe one equilibrium row: well, well with negative damping, or saddle.
 
@@ -703,7 +742,8 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         title=title,
         caption=escape(
             f"identified model: {design['verdict']} ({design['reason']}); at each well the "
-            "total damping d(q*), the tangent stiffness k* = dF/dq and f_n = sqrt(k*/m_q)/(2 pi)"
+            "total damping d(q*), the tangent stiffness k* = dF/dq and f_n = sqrt(k*/m_q)/(2 pi); "
+            + stiffness_caption(summary)
         ),
     )
     cols = (
@@ -723,8 +763,7 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         if r["level"] != 0 and not r["static_stable"]:
             continue  # at held levels only the wells
         volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
-        well = bool(r["static_stable"])
-        small = [_fmt(r.get(k)) if well else "" for k in ("d", "k", "f_n", "zeta", "barrier")]
+        small = small_signal_cells(r, _fmt)
         table.add_row(r["model"], volts, _fmt(r["q"]), equilibrium_kind(r), *small)
     for r in design["switching"]:
         unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")

@@ -14,7 +14,13 @@ import numpy as np
 from debist.engine.artifacts import Figure, H5Tree
 from debist.engine.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, select_hyperparameters
-from debist.identify.bands import band_label, curves_frame, model_error_table, static_frame
+from debist.identify.bands import (
+    band_label,
+    curves_frame,
+    model_error_table,
+    static_frame,
+    stiffness_bands,
+)
 from debist.identify.config import IdentifyConfig
 from debist.identify.design import (
     design_numbers,
@@ -156,7 +162,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, records, held_levels(records), min_support=cfg.min_support,
         band_tolerance=cfg.band_tolerance, model_error=model_error,
     )  # fmt: skip
-    design["equilibria"] = mark_identified(design["equilibria"], curves, design["static"])
+    design["equilibria"] = stiffness_bands(
+        mark_identified(design["equilibria"], curves, design["static"]), model, diag,
+        cfg.model_error,
+    )  # fmt: skip
     design["switching"] = mark_switching(design["switching"], curves)
     summary = {
         "T_z": model.T_z,
