@@ -87,6 +87,9 @@ def test_equilibria_where_the_curves_are_not_identified_are_marked():
     eq.attrs["verdict"] = "stable"
     out = mark_identified(eq, curves, static)
     assert out["identified"].tolist() == [True, False, False, True, True]
+    assert out["d_identified"].tolist() == [False, False, False, False, True]  # no d mask
+    with_d = mark_identified(eq, curves.assign(d_identified=q < 0.0), static)
+    assert with_d["d_identified"].tolist() == [True, False, True, False, True]
     assert out.attrs["verdict"] == "stable"
     rows = out.to_dict(orient="records")
     assert equilibrium_kind(rows[0]) == "well"
@@ -124,3 +127,22 @@ def test_switching_voltages_where_g_is_not_identified_are_marked():
     # the restoring force matters too
     curves["restoring_identified"] = np.abs(q) > 0.007
     assert mark_switching(sw, curves)["identified"].tolist() == [False, False, False, True]
+
+
+def test_design_cells_carry_the_stiffness_band_and_say_where_d_is_not_identified():
+    """k* and f_n with their band in brackets; d and zeta "not identified" off d's mask."""
+    import math
+
+    from debist.report.tables import small_signal_cells
+
+    fmt = lambda x, digits=4: "-" if x is None else f"{x:.{digits}g}"  # noqa: E731
+    row = {"static_stable": True, "d": 0.26, "k": 8.486, "f_n": 2.313, "zeta": 0.2227,
+           "barrier": 1.2e-4, "k_lo": 4.44, "k_hi": 12.56, "f_n_lo": 1.673, "f_n_hi": 2.813,
+           "d_identified": np.False_}  # fmt: skip
+    assert small_signal_cells(row, fmt) == [
+        "0.26 (not identified)", "8.486 (4.44-12.6)", "2.313 (1.67-2.81)",
+        "0.2227 (not identified)", "0.00012",
+    ]  # fmt: skip
+    row.update(d_identified=True, k_lo=math.nan, f_n_lo=None)
+    assert small_signal_cells(row, fmt)[:4] == ["0.26", "8.486", "2.313", "0.2227"]
+    assert small_signal_cells({**row, "static_stable": False}, fmt) == [""] * 5

@@ -121,12 +121,14 @@ STIFFNESS_ERROR = 0.476
 STIFFNESS_LABEL = (
     "in brackets the 95 % band of k* and f_n (bootstrap and a model error of "
     f"{100 * STIFFNESS_ERROR:.0f} % of k*, calibrated on the virtual rig, where the identified "
-    "k* ran 4-34 % below the truth and the band held it at every well)"
+    "k* ran 4-34 % below the truth and the band held it at every well); d(q*) and zeta say "
+    '"not identified" where the damping curve is not'
 )
 #: The same without the model error (``[identify] model_error = false``).
 STIFFNESS_BOOTSTRAP_LABEL = (
     "in brackets the bootstrap band of k* and f_n (nominal 95 %; on the virtual rig the "
-    "identified k* ran 4-34 % below the truth, outside such a band)"
+    "identified k* ran 4-34 % below the truth, outside such a band); d(q*) and zeta say "
+    '"not identified" where the damping curve is not'
 )
 #: How a band is labelled wherever it is shown: what it is, and what it was measured to hold.
 _BAND_TEMPLATE = (

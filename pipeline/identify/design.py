@@ -214,13 +214,20 @@ def mark_identified(
     Returns
     -------
     pandas.DataFrame
-        ``equilibria`` with a boolean ``identified`` column (its ``attrs`` kept).
+        ``equilibria`` with boolean columns ``identified`` and ``d_identified`` (the damping
+        curve d's mask at ``q*``, which d(q*) and zeta rest on; False where ``curves`` has
+        no ``d_identified`` column), its ``attrs`` kept.
 
     References
     ----------
     Masoud & Maas 2025, Eq. 37, Sec. 3.3.
     """
     grid = curves["q"].to_numpy()
+    d_mask = (
+        curves["d_identified"].to_numpy()
+        if "d_identified" in curves
+        else np.zeros(grid.size, dtype=bool)
+    )
     inputs = [c for c in equilibria.columns if c[:1] == "v" and c[1:].isdigit()]
 
     def at(q_grid: np.ndarray, mask: np.ndarray, q: float) -> bool:
@@ -228,9 +235,11 @@ def mark_identified(
             return False
         return bool(mask[int(np.argmin(np.abs(q_grid - q)))])
 
-    flags = []
+    flags, d_flags = [], []
     for _, row in equilibria.iterrows():
-        if row.get("model", "rbf") != "rbf":
+        ours = row.get("model", "rbf") == "rbf"
+        d_flags.append(at(grid, d_mask, float(row["q"])) if ours else True)
+        if not ours:
             flags.append(True)
         elif int(row["level"]) == 0:
             flags.append(at(grid, curves["restoring_identified"].to_numpy(), float(row["q"])))
@@ -240,7 +249,9 @@ def mark_identified(
                 same &= np.isclose(static[c].to_numpy(), float(row[c]), rtol=1e-9, atol=1e-6)
             rows = static[same]
             flags.append(at(rows["q"].to_numpy(), rows["F_identified"].to_numpy(), float(row["q"])))
-    out = equilibria.assign(identified=np.array(flags, dtype=bool))
+    out = equilibria.assign(
+        identified=np.array(flags, dtype=bool), d_identified=np.array(d_flags, dtype=bool)
+    )
     out.attrs = dict(equilibria.attrs)
     return out
 

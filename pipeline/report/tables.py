@@ -596,7 +596,8 @@ def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str
 
     Empty but at a well (``static_stable``); ``k*`` and ``f_n`` carry their 95 % band in
     brackets where the row has one (``k_lo``, ``k_hi``, ``f_n_lo``, ``f_n_hi``:
-    :func:`debist.identify.bands.stiffness_bands`).
+    :func:`debist.identify.bands.stiffness_bands`); ``d`` and ``zeta`` say "not identified"
+    where the damping curve is not identified at ``q*`` (``d_identified`` False).
 
     Parameters
     ----------
@@ -617,6 +618,8 @@ def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str
         lo, hi = _num_or_nan(row.get(f"{key}_lo")), _num_or_nan(row.get(f"{key}_hi"))
         if math.isfinite(lo) and math.isfinite(hi):
             text += f" ({fmt(lo, 3)}-{fmt(hi, 3)})"
+        if key in ("d", "zeta") and row.get("d_identified") is not None and not row["d_identified"]:
+            text += " (not identified)"
         cells.append(text)
     return cells
 
