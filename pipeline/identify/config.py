@@ -103,6 +103,12 @@ class IdentifyConfig(SectionConfig):
         regressor column and the output keeps the parameters; it only weights the
         frequency band where the one-coordinate model holds. ``None``: no filter.
         Below the Nyquist frequency of every record.
+    weights_window : float or None
+        Weighted least squares [s]: a first ordinary fit's equation error, its local RMS over
+        this window, and the fit again with each sample's error divided by that RMS where it
+        is above its median (:func:`debist.identify.fit.variance_weights`; the switching
+        transients' error is several times the typical one). ``None``: ordinary least
+        squares (the paper).
     q_range : tuple of float or None
         Operating range of Eq. 39 [unit of q]; default the estimation data range.
     max_condition : float
@@ -193,6 +199,7 @@ class IdentifyConfig(SectionConfig):
     coulomb_velocity: PositiveFloat = 1e-3
     trim: NonNegativeInt = 0
     lowpass: Annotated[PositiveFloat | None, Field(description="a frequency > 0 [Hz]")] = None
+    weights_window: Annotated[PositiveFloat | None, Field(description="a duration > 0 [s]")] = None
     q_range: Interval | None = None
     max_condition: Annotated[float, Field(gt=0, allow_inf_nan=True)] = 1e8
     min_support: NonNegativeInt = 10

@@ -41,6 +41,9 @@ class Record:
         Inputs [V].
     dt : float
         Sample time [s].
+    weight : ndarray, shape (n,), optional
+        Weight of each sample's equation error (weighted least squares; the rows of Eq. 40
+        are multiplied by it after the low-pass); None: 1 (:func:`variance_weights`).
     """
 
     name: str
@@ -49,6 +52,7 @@ class Record:
     q_ddot: np.ndarray
     v: np.ndarray
     dt: float
+    weight: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -68,7 +72,8 @@ class FitDiagnostics:
     singular_values : ndarray, shape (p,)
         Its singular values.
     residual_rms : float
-        RMS of the equation error [N, or unit/s^2 per unit mass].
+        RMS of the equation error [N, or unit/s^2 per unit mass] (weighted with
+        ``weights_window``).
     fit_r2 : float
         Coefficient of determination of the regression output.
     support : ndarray of int, shape (M,)
@@ -122,7 +127,8 @@ def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
                 f"data set '{r.name}': {r.q.size} samples are too few for trim = {trim}"
             )
         s = slice(trim, r.q.size - trim)
-        out.append(Record(r.name, r.q[s], r.q_dot[s], r.q_ddot[s], r.v[s], r.dt))
+        weight = None if r.weight is None else r.weight[s]
+        out.append(Record(r.name, r.q[s], r.q_dot[s], r.q_ddot[s], r.v[s], r.dt, weight))
     return out
 
 
@@ -146,6 +152,72 @@ def _prefilter(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
 
     sos = signal.butter(4, cfg.lowpass, fs=1.0 / r.dt, output="sos")
     return signal.sosfiltfilt(sos, a, axis=0)
+
+
+def _rows(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
+    """Rows of Eq. 40 as the least squares sees them: low-passed, then weighted."""
+    a = _prefilter(a, r, cfg)
+    if r.weight is None:
+        return a
+    return a * (r.weight[:, None] if a.ndim == 2 else r.weight)
+
+
+def variance_weights(
+    records: Sequence[Record], residual: np.ndarray, window: float
+) -> list[Record]:
+    """Weight each sample's equation error by the inverse of its local RMS (two-stage FGLS).
+
+    The equation error of Eq. 40 is far from homoscedastic: in the switching transients it
+    is several times its typical size (derivative error of fast motion, and on the full
+    model the one-coordinate reduction failing while the beam switches), and ordinary least
+    squares lets those few seconds set the curves everywhere. The local RMS ``s(t)`` of a
+    first, ordinary fit's residual over ``window`` (a moving average of its square, per
+    record) gives the weight ``w = s_med / max(s, s_med)``, ``s_med`` its median over all
+    samples: samples noisier than typical count less, none counts more.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The estimation records, as fitted (after ``trim``).
+    residual : ndarray, shape (sum of the records' samples,)
+        The first fit's equation error, stacked in record order.
+    window : float
+        Width of the moving RMS [s].
+
+    Returns
+    -------
+    list of Record
+        The records with ``weight`` set, shape (n,) each, in ``(0, 1]``.
+
+    Raises
+    ------
+    ValueError
+        If ``residual`` does not have one value per sample.
+
+    References
+    ----------
+    Carroll & Ruppert 1988, Transformation and Weighting in Regression, Chapman & Hall,
+    Ch. 3 (variance function estimation, generalised least squares); Ljung, System
+    Identification, 2nd ed., Sec. 7.3 (weighted prediction-error criteria).
+    """
+    from scipy.ndimage import uniform_filter1d
+
+    sizes = [r.q.size for r in records]
+    residual = np.asarray(residual, dtype=float)
+    if residual.shape != (sum(sizes),):
+        raise ValueError(f"residual has shape {residual.shape}, the records {sum(sizes)} samples")
+    parts = np.split(residual, np.cumsum(sizes)[:-1])
+    local = [
+        np.sqrt(uniform_filter1d(e**2, max(1, round(window / r.dt)), mode="nearest"))
+        for r, e in zip(records, parts, strict=True)
+    ]
+    typical = float(np.median(np.concatenate(local)))
+    if not typical > 0:
+        return list(records)
+    return [
+        replace(r, weight=typical / np.maximum(s, typical))
+        for r, s in zip(records, local, strict=True)
+    ]
 
 
 def _system(
@@ -172,13 +244,13 @@ def _system(
         )  # fmt: skip
         hv = input_map(r.v, cfg.input_map)
         if cfg.m_q == "identify":
-            rows.append(_prefilter(np.hstack([r.q_ddot[:, None], F]), r, cfg))
-            ys.append(_prefilter(hv @ np.asarray(cfg.input_gain, dtype=float), r, cfg))
+            rows.append(_rows(np.hstack([r.q_ddot[:, None], F]), r, cfg))
+            ys.append(_rows(hv @ np.asarray(cfg.input_gain, dtype=float), r, cfg))
             names = ["m_q", *f_names]
         else:
             G, g_names = input_columns(r.q, hv, basis, cfg.rbf, cfg.backbone, cfg.prior)
-            rows.append(_prefilter(np.hstack([-F, G]), r, cfg))
-            ys.append(_prefilter(float(cfg.m_q) * r.q_ddot, r, cfg))
+            rows.append(_rows(np.hstack([-F, G]), r, cfg))
+            ys.append(_rows(float(cfg.m_q) * r.q_ddot, r, cfg))
             names = [*f_names, *g_names]
     return np.vstack(rows), np.concatenate(ys), names
 
@@ -269,6 +341,11 @@ def fit_rbf_model(
     equation error over log T_z with a bounded scalar search (Brent) and also
     evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
 
+    With ``cfg.weights_window`` the whole fit (T_z and creep searches included) is run
+    twice: ordinary, then weighted by the inverse local RMS of that fit's equation error
+    (:func:`variance_weights`, two-stage feasible generalised least squares); the
+    diagnostics, residual and bootstrap are the weighted fit's.
+
     With ``cfg.creep`` the force side also has the creep columns w_j (the filtered
     phi_j(q) q_dot, :func:`debist.model.friction.creep_states`) at the relaxation rate
     lambda; ``creep = "search"`` finds lambda by the same bounded search over log lambda
@@ -304,6 +381,16 @@ def fit_rbf_model(
     Masoud & Maas 2025, Eq. 26 (creep), 37-40 and Sec. 4.2 (LS with T_z outer loop).
     """
     records = _trimmed(records, cfg.trim)
+    cfg = replace(cfg, trim=0)
+    if cfg.weights_window is not None:
+        first = replace(cfg, weights_window=None, bootstrap=0)
+        records = variance_weights(records, _fit(records, first)[2], cfg.weights_window)
+    model, diag, _ = _fit(records, cfg)
+    return model, diag
+
+
+def _fit(records: Sequence[Record], cfg: IdentifyConfig):
+    """:func:`fit_rbf_model` on trimmed records with their weights; also the residual."""
     n_in = records[0].v.shape[1]
     sizes = [r.q.size for r in records]
     preflight.check_identify(cfg, n_in, sum(sizes), max(sizes))
@@ -373,7 +460,7 @@ def fit_rbf_model(
         gcv_trace=gcv_trace,
         creep_trace=creep_trace,
     )
-    return model, diag
+    return model, diag, resid
 
 
 def slip_widths(slip: int | Sequence[float], q_range: Sequence[float]) -> tuple[float, ...]:
@@ -477,7 +564,7 @@ def _search_creep(records, basis, cfg, bounds, T_z):
 
     def columns(rate: float) -> np.ndarray:
         w_all = _creep_columns(records, basis, rate)
-        return np.vstack([_prefilter(w, r, cfg) for r, w in zip(records, w_all, strict=True)])
+        return np.vstack([_rows(w, r, cfg) for r, w in zip(records, w_all, strict=True)])
 
     rate, _, _, trace = _projected_search(a_fixed, y, columns, bounds, 1e-3)
     return rate, np.array(trace, dtype=float)
@@ -522,7 +609,7 @@ def _search_T_z(records, basis, cfg, bounds, w_all=None):
             F, _ = force_columns(
                 r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity, prior=cfg.prior
             )
-            cols.append(_prefilter(F, r, cfg))
+            cols.append(_rows(F, r, cfg))
         return np.vstack(cols)
 
     T_z, value, cost, trace = _projected_search(a_fixed, y, columns, bounds, 1e-2)
