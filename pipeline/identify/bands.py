@@ -721,8 +721,12 @@ def static_frame(
     dwelt near ``q`` at that level (the Gaussian-weighted count of samples at the level,
     :func:`debist.identify.design.at_level`, is at least ``min_support``, counted on both
     sides together: at a held level the beam rests at one position, a cluster of samples
-    narrower than the RBF width, which a two-sided count would reduce to itself; a switching
-    transit at the level passes too fast to count) and the band is narrow. Away from where
+    narrower than the RBF width, which a two-sided count would reduce to itself; one
+    switching transit at the level passes too fast to count, but a level held through
+    several switches, as the 3 kV pulses of the paper's identification profile, adds up its
+    transits' samples and is counted over the transit too, where the static force of Eq. 37
+    is a compromise of the fast dynamics: the full plant's calibration fleet, whose F model
+    error was measured there, shows it) and the band is narrow. Away from where
     the data held a level, ``g_i h(v_i)`` is an extrapolation in amplitude: a DE's force is
     of the separable form ``g_i(q) v_i^2`` only approximately (the full model's is not).
 
