@@ -76,6 +76,7 @@ import numpy as np
 from debist import metrics
 from debist.identify.design import at_level
 from debist.identify.excitation import input_active, quasi_static
+from debist.identify.stability import _small_signal
 from debist.model.basis import RBFBasis
 from debist.model.terms import PhysicsPrior, term_table
 from debist.model.termtable import input_map
@@ -121,18 +122,17 @@ MEASURED_COVERAGE_CREEP = "100 %"
 #: within its band there, its slope is not. On the independent seed-2 fleets the band holds the
 #: truth at 60 of 60 wells (largest ``|ratio - 1|``: 0.43).
 STIFFNESS_ERROR = 0.476
+_D_NOTE = '; d(q*) and zeta say "not identified" where the damping curve is not'
 #: How the bands of k* and f_n at the wells are described beside the design table.
 STIFFNESS_LABEL = (
     "in brackets the 95 % band of k* and f_n (bootstrap and a model error of "
     f"{100 * STIFFNESS_ERROR:.0f} % of k*, calibrated on the virtual rig, where the identified "
-    "k* ran 4-34 % below the truth and the band held it at every well); d(q*) and zeta say "
-    '"not identified" where the damping curve is not'
+    "k* ran 4-34 % below the truth and the band held it at every well)" + _D_NOTE
 )
 #: The same without the model error (``[identify] model_error = false``).
 STIFFNESS_BOOTSTRAP_LABEL = (
     "in brackets the bootstrap band of k* and f_n (nominal 95 %; on the virtual rig the "
-    "identified k* ran 4-34 % below the truth, outside such a band); d(q*) and zeta say "
-    '"not identified" where the damping curve is not'
+    "identified k* ran 4-34 % below the truth, outside such a band)" + _D_NOTE
 )
 #: How a band is labelled wherever it is shown: what it is, and what it was measured to hold.
 _BAND_TEMPLATE = (
@@ -854,10 +854,10 @@ def stiffness_bands(equilibria, model, diag, model_error: bool = True) -> pd.Dat
         bound = STIFFNESS_ERROR * abs(k) if model_error else 0.0
         lo = k - float(_widen(-np.percentile(dev, 2.5), bound))
         hi = k + float(_widen(np.percentile(dev, 97.5), bound))
-        m_q = float(row["m_q"])
         bands["k_lo"][i], bands["k_hi"][i] = lo, hi
+        # f_n of each end as the stability table computes it; 0 where the end is not positive
         bands["f_n_lo"][i], bands["f_n_hi"][i] = (
-            float(np.sqrt(max(x, 0.0) / m_q) / (2.0 * np.pi)) for x in (lo, hi)
+            np.nan_to_num(_small_signal(x, float(row["m_q"]), 0.0)[0]) for x in (lo, hi)
         )
     for name, values in bands.items():
         out[name] = values

@@ -128,7 +128,8 @@ def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
             )
         s = slice(trim, r.q.size - trim)
         weight = None if r.weight is None else r.weight[s]
-        out.append(Record(r.name, r.q[s], r.q_dot[s], r.q_ddot[s], r.v[s], r.dt, weight))
+        cut = {"q": r.q[s], "q_dot": r.q_dot[s], "q_ddot": r.q_ddot[s], "v": r.v[s]}
+        out.append(replace(r, **cut, weight=weight))
     return out
 
 
