@@ -26,7 +26,10 @@ Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
 
     python benchmarks/calibrate_bands.py --size 10 --seed 1 --workers 2 --dir /tmp/cal
 
-It prints a Markdown table per plant and writes ``<dir>/calibration.json``.
+It prints a Markdown table per plant and writes ``<dir>/calibration.json``. ``--add-backbone``
+adds terms to every member's backbone and ``--set KEY=VALUE`` sets any other ``[identify]`` key
+(e.g. ``--set weights_window=0.5``), so a setting's model error is calibrated on the fleets it
+would run on.
 """
 
 from __future__ import annotations
@@ -165,18 +168,28 @@ def _lacking(true, est, lo, hi, marked) -> np.ndarray:
     return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / scale
 
 
-def _set_identify(members: list[tuple[Path, Path]], on: bool, backbone: tuple[str, ...]) -> None:
-    """Write ``[identify] model_error`` and the extra ``backbone`` terms into every member's
-    workflow file (a rewrite only where it changes)."""
+def _set_identify(
+    members: list[tuple[Path, Path]],
+    on: bool,
+    backbone: tuple[str, ...],
+    settings: dict | None = None,
+) -> None:
+    """Write ``[identify] model_error``, the extra ``backbone`` terms and ``settings`` into every
+    member's workflow file (a rewrite only where it changes)."""
     import tomli_w
 
     for wf, _ in members:
         raw = tomllib.loads(wf.read_text())
         section = raw.setdefault("identify", {})
         terms = list(section.get("backbone", []))
-        wanted = terms + [t for t in backbone if t not in terms]
-        if section.get("model_error", True) != on or wanted != terms:
-            section["model_error"], section["backbone"] = on, wanted
+        wanted = {
+            **section,
+            **(settings or {}),
+            "model_error": on,
+            "backbone": terms + [t for t in backbone if t not in terms],
+        }
+        if wanted != {**section, "model_error": section.get("model_error", True)}:
+            raw["identify"] = wanted
             wf.write_text(tomli_w.dumps(raw))
 
 
@@ -188,19 +201,21 @@ def calibrate(
     folder: Path,
     model_error: bool = True,
     backbone: tuple[str, ...] = (),
+    settings: dict | None = None,
 ) -> dict:
     """Run one fleet and score it; returns the summary (see the module docstring).
 
     ``backbone``: terms added to every member's ``[identify] backbone`` (e.g.
     ``physics_creep``, whose model error :data:`debist.identify.bands.MODEL_ERROR_CREEP` is
-    calibrated so).
+    calibrated so); ``settings``: other ``[identify]`` keys set in every member (e.g.
+    ``{"weights_window": 0.5}``).
     """
     fleet = folder / plant
     if not any(fleet.glob("*.toml")):
         _debist("fleet", str(PLANTS[plant]), "--size", str(size), "--seed", str(seed),
                 "--dir", str(fleet))  # fmt: skip
     members = _member_outputs(fleet)
-    _set_identify(members, model_error, backbone)
+    _set_identify(members, model_error, backbone, settings)
     _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
     rows, nrmse = [], []
     for wf, run in members:
@@ -293,12 +308,20 @@ def main() -> None:
         "--model-error", choices=("on", "off"), default="on",
         help="off: bootstrap-only bands, and print the model-error term they lack",
     )  # fmt: skip
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="an [identify] key set in every member, VALUE in TOML (e.g. weights_window=0.5)",
+    )  # fmt: skip
     args = p.parse_args()
+    settings = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        settings[key.strip()] = tomllib.loads(f"value = {value}")["value"]
     sys.path.insert(0, str(ROOT))
     on = args.model_error == "on"
     extra = tuple(t for t in args.add_backbone.split(",") if t)
     results = [
-        calibrate(plant, args.size, args.seed, args.workers, args.dir, on, extra)
+        calibrate(plant, args.size, args.seed, args.workers, args.dir, on, extra, settings)
         for plant in args.plants.split(",")
     ]
     for r in results:
