@@ -317,25 +317,37 @@ def test_the_scale_is_taken_where_the_data_reach_and_the_mask_where_they_surroun
     assert not alone["restoring_identified"].any()
 
 
-def test_a_model_with_the_analytical_creep_reads_its_own_calibration():
-    """Backbone ``physics_creep``: the model error calibrated on fleets of both plants run with
-    it (smaller for every curve; g_i still beyond half the default band tolerance, the full
-    plant's g_i bias is not creep) and its own label."""
+def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
+    """Backbone ``physics_creep`` and ``effective_mass`` each have their own calibration (fleets
+    of both plants run with them) and label. The effective-mass scale takes the lagged damping's
+    apparent mass out of the curves: every curve's model error is at most the as-fitted one,
+    and g_i's falls from 0.28-0.30 of its scale to 0.10-0.15."""
     from debist.identify.bands import (
+        MEASURED_COVERAGE_AS_FITTED,
         MEASURED_COVERAGE_CREEP,
         MODEL_ERROR,
+        MODEL_ERROR_AS_FITTED,
         MODEL_ERROR_CREEP,
+        MODEL_ERROR_CREEP_AS_FITTED,
+        STIFFNESS_ERROR,
+        STIFFNESS_ERROR_AS_FITTED,
         band_label,
         model_error_table,
     )
 
     assert model_error_table(["offset"]) is MODEL_ERROR
     assert model_error_table(["offset", "physics_creep"]) is MODEL_ERROR_CREEP
-    assert set(MODEL_ERROR_CREEP) == set(MODEL_ERROR)
-    assert all(MODEL_ERROR_CREEP[k] <= MODEL_ERROR[k] for k in MODEL_ERROR)
-    assert 0.1 < MODEL_ERROR_CREEP["g"] < MODEL_ERROR["g"]
+    assert model_error_table(["offset"], effective_mass=False) is MODEL_ERROR_AS_FITTED
+    creep_as_fitted = model_error_table(["physics_creep"], effective_mass=False)
+    assert creep_as_fitted is MODEL_ERROR_CREEP_AS_FITTED
+    for scaled, fitted in ((MODEL_ERROR, MODEL_ERROR_AS_FITTED),
+                           (MODEL_ERROR_CREEP, MODEL_ERROR_CREEP_AS_FITTED)):  # fmt: skip
+        assert set(scaled) == set(fitted) == {"restoring", "d", "g", "F"}
+        assert all(scaled[k] <= fitted[k] for k in fitted)
+        assert scaled["g"] <= 0.15 < 0.28 <= fitted["g"]
+    assert STIFFNESS_ERROR < 0.5 * STIFFNESS_ERROR_AS_FITTED
     assert f"at {MEASURED_COVERAGE_CREEP} there" in band_label(True, creep=True)
-    assert band_label(True, creep=True) != band_label(True)
+    assert f"at {MEASURED_COVERAGE_AS_FITTED} there" in band_label(True, effective_mass=False)
     assert band_label(False, creep=True) == band_label(False)
 
 
@@ -346,7 +358,7 @@ def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bist
     rows get none."""
     from dataclasses import replace
 
-    from debist.identify.bands import STIFFNESS_ERROR, stiffness_bands
+    from debist.identify.bands import STIFFNESS_ERROR, STIFFNESS_ERROR_AS_FITTED, stiffness_bands
     from debist.identify.design import design_numbers
 
     records = _records(bistable_record)
@@ -361,6 +373,8 @@ def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bist
     flat = stiffness_bands(eq, model, replace(diag, theta_boot=diag.theta[None]), True)
     np.testing.assert_allclose(flat.k_lo[wells], (1 - STIFFNESS_ERROR) * k, rtol=1e-12)
     np.testing.assert_allclose(flat.k_hi[wells], (1 + STIFFNESS_ERROR) * k, rtol=1e-12)
+    fitted = stiffness_bands(eq, model, replace(diag, theta_boot=diag.theta[None]), True, False)
+    np.testing.assert_allclose(fitted.k_hi[wells], (1 + STIFFNESS_ERROR_AS_FITTED) * k, rtol=1e-12)
     m_q = eq.m_q[wells].to_numpy()
     f_lo = np.sqrt((1 - STIFFNESS_ERROR) * k / m_q) / (2 * np.pi)
     np.testing.assert_allclose(flat.f_n_lo[wells], f_lo, rtol=1e-12)

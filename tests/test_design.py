@@ -146,3 +146,23 @@ def test_design_cells_carry_the_stiffness_band_and_say_where_d_is_not_identified
     row.update(d_identified=True, k_lo=math.nan, f_n_lo=None)
     assert small_signal_cells(row, fmt)[:4] == ["0.26", "8.486", "2.313", "0.2227"]
     assert small_signal_cells({**row, "static_stable": False}, fmt) == [""] * 5
+
+
+def test_the_analytical_rows_keep_the_physical_scale_under_the_effective_mass_scale():
+    """A model rescaled to a rigid mass m_q / lambda (identify/mass.py) passes its effective mass:
+    the analytical rows are then those of the unscaled model, not scaled by 1 / lambda."""
+    P = PrototypeParams.paper()
+    rec = _record(np.zeros((600, 2)))
+    model = dataclasses.replace(double_well(), m_q=0.0402)
+    rigid = model.scaled(1.25)
+
+    def analytical(d):
+        eq = d["equilibria"]
+        return eq[eq.model == "analytical"][["q", "k", "f_n", "zeta", "barrier"]].to_numpy()
+
+    base = analytical(design_numbers(model, [rec], P))
+    kept = analytical(design_numbers(rigid, [rec], P, mass=rigid.m_q / 1.25))
+    np.testing.assert_allclose(kept, base, rtol=1e-9)
+    inflated = analytical(design_numbers(rigid, [rec], P))  # without it: forces x 1.25
+    wells = ~np.isnan(base[:, 2])
+    np.testing.assert_allclose(inflated[wells, 1], 1.25 * base[wells, 1], rtol=1e-9)

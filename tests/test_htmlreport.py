@@ -183,7 +183,7 @@ def test_sections_numbers_and_verdicts(run):
     model = {r[0]: r[1] for r in parser.rows if len(r) == 2}
     assert model["T_z [s]"] == "0.0625"
     k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/m^3]"
-    assert model[k_3] == "1.985e+04" and model["m_q [kg]"]
+    assert model[k_3] == "1.985e+04" and model["mass m_q [kg]"]
     assert model["restoring identified on q in [m]"] == "[-0.016, -0.00384], [0.00096, 0.016]"
     assert model["g1 identified on q in [m]"] == "nowhere"
     assert any(r[:4] == ["rbf", "0, 0", "-9.516", "well"] for r in parser.rows)  # q* [mm]

@@ -127,8 +127,9 @@ def _curves_and_truth(out: Path):
 def test_identified_curves_match_the_truth_where_marked(staircase, staircase_boot, name, bands):
     """Within 10 % of the truth's range wherever marked, with either band (the model-error
     term only takes marks away: this workflow's band_tolerance = 0.1 is below twice every
-    curve's MODEL_ERROR, so its shipped bands mark nothing, which the test checks)."""
-    from debist.identify.bands import MODEL_ERROR
+    curve's model error (the as-fitted table: T_z = 0, no effective-mass scale), so its shipped
+    bands mark nothing, which the test checks)."""
+    from debist.identify.bands import MODEL_ERROR_AS_FITTED as MODEL_ERROR
 
     curves, true, _ = staircase if bands == "shipped" else staircase_boot
     marked = curves[f"{name}_identified"].to_numpy()
@@ -164,10 +165,10 @@ def test_marked_region_covers_the_wells_and_the_excited_intervals(staircase_boot
 
 
 def test_the_gains_are_not_marked_with_their_model_error(staircase):
-    """The gains' calibrated model error (MODEL_ERROR["g"] of their scale, from the bias that
-    creep and inertia leave in Eq. 37) exceeds half the band tolerance: nowhere identified,
+    """The gains' calibrated model error (the as-fitted table's "g" of their scale: this workflow
+    has T_z = 0 and no effective-mass scale) exceeds half the band tolerance: nowhere identified,
     and the band says how far off they may be."""
-    from debist.identify.bands import MODEL_ERROR
+    from debist.identify.bands import MODEL_ERROR_AS_FITTED as MODEL_ERROR
     from debist.identify.config import IdentifyConfig
 
     tolerance = IdentifyConfig().band_tolerance

@@ -109,6 +109,13 @@ class IdentifyConfig(SectionConfig):
         is above its median (:func:`debist.identify.fit.variance_weights`; the switching
         transients' error is several times the typical one). ``None``: ordinary least
         squares (the paper).
+    effective_mass : bool
+        Rescale the fitted model so that its effective mass at the wells is ``m_q``: the
+        lagged friction state gives ``d z`` an apparent mass ``-d T_z / (1 + (omega T_z)^2)``,
+        which scales every identified force down by the same ratio; the mass and all weights
+        are multiplied by its inverse, which leaves every free run unchanged
+        (:mod:`debist.identify.mass`). False (the paper): the curves as fitted. Not with
+        ``m_q = "identify"``.
     q_range : tuple of float or None
         Operating range of Eq. 39 [unit of q]; default the estimation data range.
     max_condition : float
@@ -200,6 +207,7 @@ class IdentifyConfig(SectionConfig):
     trim: NonNegativeInt = 0
     lowpass: Annotated[PositiveFloat | None, Field(description="a frequency > 0 [Hz]")] = None
     weights_window: Annotated[PositiveFloat | None, Field(description="a duration > 0 [s]")] = None
+    effective_mass: bool = False
     q_range: Interval | None = None
     max_condition: Annotated[float, Field(gt=0, allow_inf_nan=True)] = 1e8
     min_support: NonNegativeInt = 10
@@ -250,6 +258,11 @@ class IdentifyConfig(SectionConfig):
         if bounds is not None and not bounds[0] < bounds[1]:
             raise ConfigValueError("creep_bounds", "[lo, hi] [1/s] with 0 < lo < hi", list(bounds))
         gains = {"input_gain", "physics_gain"} & set(self.backbone)
+        if self.m_q == "identify" and self.effective_mass:
+            raise ConfigValueError(
+                "effective_mass",
+                message="needs a known mass m_q (a number or 'physics'), not m_q = 'identify'",
+            )
         if self.m_q == "identify":
             if self.input_gain is None or "g" in self.rbf or gains:
                 raise ConfigValueError(

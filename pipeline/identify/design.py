@@ -103,7 +103,9 @@ def held_levels(
     return ordered[:max_levels]
 
 
-def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.DataFrame]:
+def design_numbers(
+    model, records: Sequence[Any], physics=None, mass: float | None = None
+) -> dict[str, pd.DataFrame]:
     """Equilibria, verdict and switching voltages of the identified (and analytical) model.
 
     Parameters
@@ -116,6 +118,10 @@ def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.
         The ``[physics]`` prototype: adds the analytical model's rows, from its reduced
         model in the form of Eq. 37 (:func:`analytical_as_eq37`; the full model's numbers
         are ``debist analyze``'s).
+    mass : float, optional
+        The mass the identified forces refer to [kg] (default ``model.m_q``; with the
+        effective-mass scale of :mod:`debist.identify.mass` the effective mass at the wells),
+        to which the analytical rows are scaled.
 
     Returns
     -------
@@ -139,7 +145,7 @@ def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.
     eq.insert(0, "model", "rbf")
     sw.insert(0, "model", "rbf")
     if physics is not None and model.n_inputs == 2 and model.input_map == "v2":
-        reduced = analytical_as_eq37(physics, records, model)
+        reduced = analytical_as_eq37(physics, records, model, mass)
         ana = stability_table(reduced, levels)
         ana.insert(0, "model", "analytical")
         ana_sw = switching_voltages(reduced, v_max=max(v_max, V_MAX))
@@ -150,7 +156,7 @@ def design_numbers(model, records: Sequence[Any], physics=None) -> dict[str, pd.
     return {"equilibria": eq, "switching": sw}
 
 
-def analytical_as_eq37(physics, records: Sequence[Any], model):
+def analytical_as_eq37(physics, records: Sequence[Any], model, mass: float | None = None):
     """Write the analytical reduced model as an identified model (Eq. 37 form, Eq. 26 curves).
 
     Zero RBF weights and the physics backbone at scale one: ``f = c_phys(q) q``,
@@ -166,6 +172,9 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
         The estimation records (range of the tabulation).
     model : RBFModel
         The identified model (basis, range, ``m_q``).
+    mass : float, optional
+        The mass the identified forces refer to [kg]; default ``model.m_q`` (see
+        :func:`design_numbers`).
 
     Returns
     -------
@@ -176,12 +185,13 @@ def analytical_as_eq37(physics, records: Sequence[Any], model):
     Masoud & Maas 2025, Eq. 24-26, 33, 37.
     """
     prior = physics_prior(physics, records, n_grid=801)
-    scale = model.m_q / physics_mass(physics)
+    m_q = model.m_q if mass is None else float(mass)
+    scale = m_q / physics_mass(physics)
     prior = PhysicsPrior(q=prior.q, c=scale * prior.c, d=scale * prior.d, g=scale * prior.g)
     zeros = np.zeros(model.basis.M)
     backbone = {"s_c": 1.0, "s_d": 1.0, "s_g": np.ones(2), "g_0": np.zeros(2)}
     return RBFModel(
-        model.basis, "v2", 2, model.m_q, 0.0, model.coulomb_velocity, zeros, zeros,
+        model.basis, "v2", 2, m_q, 0.0, model.coulomb_velocity, zeros, zeros,
         np.zeros((2, model.basis.M)), backbone, model.q_range, prior,
     )  # fmt: skip
 

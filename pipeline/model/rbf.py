@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -433,6 +433,48 @@ class RBFModel:
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
         # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
+
+    def scaled(self, factor: float) -> RBFModel:
+        """Return the model with its mass and every weight of Eq. 37 multiplied by ``factor``.
+
+        Every term of the balance scales alike, so the acceleration, and with it every free
+        run, is unchanged; the curves, the backbone coefficients and the mass come out in the
+        new scale. The analytical curves of the ``physics_*`` terms stay as given (their
+        scales ``s_*`` are weights and scale).
+
+        Parameters
+        ----------
+        factor : float
+            The scale [-], positive.
+
+        Returns
+        -------
+        RBFModel
+
+        Raises
+        ------
+        ValueError
+            If ``factor`` is not positive and finite.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37 (homogeneous of degree one in m_q and the weights).
+        """
+        s = float(factor)
+        if not (np.isfinite(s) and s > 0):
+            raise ValueError(f"scale factor {factor!r} is not positive and finite")
+
+        def times(a):
+            return None if a is None else np.asarray(a, dtype=float) * s
+
+        backbone = {
+            k: times(v) if k in _VECTORS else float(v) * s for k, v in self.backbone.items()
+        }
+        return replace(
+            self, m_q=self.m_q * s, theta_c=times(self.theta_c), theta_d=times(self.theta_d),
+            theta_g=times(self.theta_g), backbone=backbone, theta_creep=times(self.theta_creep),
+            theta_slip=times(self.theta_slip), theta_inertia=times(self.theta_inertia),
+        )  # fmt: skip
 
     def to_tree(self) -> dict[str, Any]:
         """Return the model as a nested mapping for an HDF5 artifact.

@@ -30,6 +30,7 @@ from debist.errors import ArtifactError
 from debist.report.tables import (
     auto_line,
     equilibrium_kind,
+    mass_rows,
     not_modelled,
     small_signal_cells,
     stiffness_caption,
@@ -392,7 +393,10 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     units = summary_units(summary)
     rows = [
         ("T_z [s]", _num(summary.get("T_z"))),
-        (f"m_q [{units['mass']}]", _num(summary.get("m_q"))),
+        *(
+            (f"{label} [{unit}]", _num(value))
+            for label, unit, value, _ in mass_rows(summary, units["mass"])
+        ),
     ]
     for key, value in (summary.get("backbone") or {}).items():
         unit = units.get(key)

@@ -271,7 +271,7 @@ def identify_table(summary: dict[str, Any]) -> Table:
     table.add_column("identified", justify="right")
     if published:
         table.add_column("published", justify="right")
-    rows = [("T_z", "s", summary["T_z"], None), ("mass m_q", units["mass"], summary["m_q"], "m_q")]
+    rows = [("T_z", "s", summary["T_z"], None), *mass_rows(summary, units["mass"])]
     if "creep_rate" in summary:  # Eq. 26's Y_MW / eta_MW, identified with the creep term
         rows.append(("creep rate lambda", "1/s", summary["creep_rate"], None))
     rows += [(label, unit, value, None) for label, unit, value in term_rows(summary)]
@@ -591,6 +591,41 @@ def rig_table(summary: dict[str, Any]) -> Table:
     return table
 
 
+def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, str | None]]:
+    """Rows of the identified model's mass: m_q and, with ``effective_mass``, its ratio lambda.
+
+    With the effective-mass scale applied (:mod:`debist.identify.mass`) the model's m_q is the
+    rigid mass whose effective value at the wells, with the lagged damping's apparent mass, is
+    the physical one; the ratio lambda says by how much the fitted curves were scaled up.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify summary (``m_q`` and optionally ``effective_mass``).
+    unit : str
+        The mass unit (``kg``, or ``1`` per unit mass).
+
+    Returns
+    -------
+    list of (label, unit, value, published key)
+    """
+    info = summary.get("effective_mass")
+    if not info:
+        return [("mass m_q", unit, summary["m_q"], "m_q")]
+    if info.get("applied"):
+        return [
+            ("rigid mass m_q (effective mass at the wells: m_q lambda, the physical one)", unit,
+             summary["m_q"], "m_q"),
+            ("effective-mass ratio lambda (the fitted curves divided by it)", "-",
+             info["ratio"], None),
+        ]  # fmt: skip
+    return [
+        ("mass m_q", unit, summary["m_q"], "m_q"),
+        (f"effective-mass ratio lambda (not applied: {info.get('reason', '')})", "-",
+         info["ratio"], None),
+    ]  # fmt: skip
+
+
 def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str]:
     """Cells ``d``, ``k*``, ``f_n``, ``zeta``, ``barrier`` of a design-table row.
 
@@ -628,8 +663,10 @@ def stiffness_caption(summary: dict[str, Any]) -> str:
     """Say what the brackets of the design table's ``k*`` and ``f_n`` hold (model error or not)."""
     from debist.identify.bands import STIFFNESS_BOOTSTRAP_LABEL, STIFFNESS_LABEL
 
-    with_error = bool((summary.get("bands") or {}).get("model_error"))
-    return STIFFNESS_LABEL if with_error else STIFFNESS_BOOTSTRAP_LABEL
+    bands = summary.get("bands") or {}
+    if bands.get("stiffness_label"):  # the identify stage's own words
+        return str(bands["stiffness_label"])
+    return STIFFNESS_LABEL if bands.get("model_error") else STIFFNESS_BOOTSTRAP_LABEL
 
 
 def equilibrium_kind(row: dict[str, Any]) -> str:

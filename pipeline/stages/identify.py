@@ -20,6 +20,7 @@ from debist.identify.bands import (
     model_error_table,
     static_frame,
     stiffness_bands,
+    stiffness_label,
 )
 from debist.identify.config import IdentifyConfig
 from debist.identify.design import (
@@ -30,6 +31,7 @@ from debist.identify.design import (
 )
 from debist.identify.excitation import check_excitation
 from debist.identify.fit import FitDiagnostics, fit_rbf_model
+from debist.identify.mass import effective_mass
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
@@ -131,6 +133,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     excitation = _excitation(records, cfg, tables)
     t_fit = time.perf_counter()
     model, diag = fit_rbf_model(records, cfg)
+    mass = None
+    if cfg.effective_mass:  # the curves on the physical mass's scale; the free run unchanged
+        model, diag, mass = effective_mass(model, diag)
+        cfg = replace(cfg, m_q=model.m_q)  # the rigid mass, for the refinement
     timings = {"fit": time.perf_counter() - t_fit}
     if search is not None:
         timings["hyper-parameters"] = search.seconds
@@ -152,19 +158,20 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "message": res.message,
         }
         timings["refine"] = res.seconds
-    model_error = model_error_table(cfg.backbone) if cfg.model_error else None
+    model_error = model_error_table(cfg.backbone, cfg.effective_mass) if cfg.model_error else None
     curves, identified = curves_frame(
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance,
         model_error=model_error,
     )  # fmt: skip
-    design = design_numbers(model, records, physics)
+    physical = model.m_q * mass.ratio if mass is not None and mass.applied else None
+    design = design_numbers(model, records, physics, physical)
     design["static"], static = static_frame(
         model, diag, records, held_levels(records), min_support=cfg.min_support,
         band_tolerance=cfg.band_tolerance, model_error=model_error,
     )  # fmt: skip
     design["equilibria"] = stiffness_bands(
         mark_identified(design["equilibria"], curves, design["static"]), model, diag,
-        cfg.model_error,
+        cfg.model_error, cfg.effective_mass,
     )  # fmt: skip
     design["switching"] = mark_switching(design["switching"], curves)
     summary = {
@@ -183,7 +190,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "identified": identified,
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
         "bands": {
-            "label": band_label(cfg.model_error, "physics_creep" in cfg.backbone),
+            "label": band_label(
+                cfg.model_error, "physics_creep" in cfg.backbone, cfg.effective_mass
+            ),
+            "stiffness_label": stiffness_label(cfg.model_error, cfg.effective_mass),
             "model_error": model_error or {},
         },
         "smoothing": diag.smoothing,
@@ -191,6 +201,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
         **({"slip": _slip_summary(model)} if model.has_slip else {}),
         **({"inertia": _inertia_summary(model)} if model.has_inertia else {}),
+        **({"effective_mass": mass.to_summary()} if mass is not None else {}),
         "design": {
             "verdict": design["equilibria"].attrs["verdict"],
             "reason": design["equilibria"].attrs["reason"],
