@@ -174,3 +174,30 @@ def test_refinement_with_creep_removes_the_creep_the_truth_does_not_have(bistabl
     )
     rms = np.sqrt(np.mean((sim.q - records[0].q) ** 2))
     assert rms == pytest.approx(res.full_rms_refined, rel=1e-9)
+
+
+def test_refinement_is_invariant_under_the_effective_mass_scale(bistable_record):
+    """The identify stage refines the model rescaled to its rigid mass (identify/mass.py) with
+    that mass in the configuration: the windows then start from the unscaled model's free runs
+    (Eq. 37 is homogeneous in m_q and the weights); the optimiser's path may differ slightly."""
+    from dataclasses import replace
+
+    cfg = IdentifyConfig.from_dict(
+        {"M": 6, "T_z": 0.01, "trim": 20, "max_condition": 1e10, "input_map": "v2", "m_q": 0.04}
+    )
+    records = _noisy_records(bistable_record, 0.3, seed=5)
+    model, diag = fit_rbf_model(records, cfg)
+    rcfg = RefineConfig(windows=8, length=200, max_nfev=4)
+    base = refine_model(model, diag, records, cfg, rcfg)
+    s = 1.3
+    scaled = refine_model(
+        model.scaled(s), replace(diag, theta=diag.theta * s), records,
+        replace(cfg, m_q=cfg.m_q * s), rcfg,
+    )  # fmt: skip
+    for key in ("window_rms_ls", "full_rms_ls", "holdout_rms_ls"):  # the same starting model
+        assert getattr(scaled, key) == pytest.approx(getattr(base, key), rel=1e-9), key
+    assert scaled.model.m_q == pytest.approx(s * cfg.m_q, rel=1e-12)
+    assert scaled.window_rms_refined <= scaled.window_rms_ls
+    # with the physical mass left in the configuration the windows would run another model
+    mixed = refine_model(model.scaled(s), replace(diag, theta=diag.theta * s), records, cfg, rcfg)
+    assert abs(mixed.window_rms_ls / base.window_rms_ls - 1) > 0.01
