@@ -135,6 +135,13 @@ MEASURED_COVERAGE_AS_FITTED = "98-100 %"
 STIFFNESS_ERROR = 0.207
 #: The same without the effective-mass scale: the identified k* was 4-34 % below the truth.
 STIFFNESS_ERROR_AS_FITTED = 0.476
+#: (model-error table, measured coverage) per ``(physics_creep, effective_mass)``.
+_CALIBRATION = {
+    (False, True): (MODEL_ERROR, MEASURED_COVERAGE),
+    (True, True): (MODEL_ERROR_CREEP, MEASURED_COVERAGE_CREEP),
+    (False, False): (MODEL_ERROR_AS_FITTED, MEASURED_COVERAGE_AS_FITTED),
+    (True, False): (MODEL_ERROR_CREEP_AS_FITTED, MEASURED_COVERAGE_AS_FITTED),
+}
 _D_NOTE = '; d(q*) and zeta say "not identified" where the damping curve is not'
 
 
@@ -152,7 +159,7 @@ def stiffness_label(model_error: bool = True, effective_mass: bool = True) -> st
     -------
     str
     """
-    error = STIFFNESS_ERROR if effective_mass else STIFFNESS_ERROR_AS_FITTED
+    error = stiffness_error(effective_mass)
     ran = "0.80-1.12 of" if effective_mass else "4-34 % below"
     if not model_error:
         return (
@@ -164,6 +171,22 @@ def stiffness_label(model_error: bool = True, effective_mass: bool = True) -> st
         f"{100 * error:.0f} % of k*, calibrated on the virtual rig, where the identified "
         f"k* ran {ran} the truth)" + _D_NOTE
     )
+
+
+def stiffness_error(effective_mass: bool = True) -> float:
+    """Return k*'s calibrated model error as a fraction of |k*| [-].
+
+    Parameters
+    ----------
+    effective_mass : bool
+        Whether the model has the effective-mass scale (:mod:`debist.identify.mass`).
+
+    Returns
+    -------
+    float
+        :data:`STIFFNESS_ERROR`, or :data:`STIFFNESS_ERROR_AS_FITTED` without the scale.
+    """
+    return STIFFNESS_ERROR if effective_mass else STIFFNESS_ERROR_AS_FITTED
 
 
 #: How the bands of k* and f_n at the wells are described beside the design table.
@@ -202,10 +225,7 @@ def model_error_table(backbone, effective_mass: bool = True) -> dict[str, float]
         :data:`MODEL_ERROR_CREEP` with ``physics_creep``, else :data:`MODEL_ERROR`; their
         ``_AS_FITTED`` counterparts without the effective-mass scale.
     """
-    creep = "physics_creep" in backbone
-    if effective_mass:
-        return MODEL_ERROR_CREEP if creep else MODEL_ERROR
-    return MODEL_ERROR_CREEP_AS_FITTED if creep else MODEL_ERROR_AS_FITTED
+    return _CALIBRATION["physics_creep" in backbone, bool(effective_mass)][0]
 
 
 def band_label(model_error: bool, creep: bool = False, effective_mass: bool = True) -> str:
@@ -216,9 +236,7 @@ def band_label(model_error: bool, creep: bool = False, effective_mass: bool = Tr
     """
     if not model_error:
         return BOOTSTRAP_LABEL
-    if not effective_mass:
-        return _BAND_TEMPLATE.format(coverage=MEASURED_COVERAGE_AS_FITTED)
-    return _BAND_TEMPLATE.format(coverage=MEASURED_COVERAGE_CREEP if creep else MEASURED_COVERAGE)
+    return _BAND_TEMPLATE.format(coverage=_CALIBRATION[bool(creep), bool(effective_mass)][1])
 
 
 def _model_error(table: dict[str, float] | None, name: str) -> float:
@@ -904,8 +922,7 @@ def stiffness_bands(
         k_map = (force[1] - force[0]) / (2.0 * step)
         dev = (diag.theta_boot - diag.theta) @ k_map
         k = float(row["k"])
-        bound = (STIFFNESS_ERROR if effective_mass else STIFFNESS_ERROR_AS_FITTED) * abs(k)
-        bound = bound if model_error else 0.0
+        bound = stiffness_error(effective_mass) * abs(k) if model_error else 0.0
         lo = k - float(_widen(-np.percentile(dev, 2.5), bound))
         hi = k + float(_widen(np.percentile(dev, 97.5), bound))
         bands["k_lo"][i], bands["k_hi"][i] = lo, hi
