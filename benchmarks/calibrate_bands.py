@@ -146,26 +146,47 @@ def _score(name, true, est, lo, hi, marked) -> dict:
         "max_error": float(err.max()) if err.size else np.nan,
         "median_error": float(np.median(err)) if err.size else np.nan,
         "inside": int(inside.sum()),
-        "lacking": _lacking(true, est, lo, hi, marked).tolist(),
+        "lacking": _lacking(name, true, est, lo, hi, marked).tolist(),
     }
 
 
-def _lacking(true, est, lo, hi, marked) -> np.ndarray:
+def _pooled_values(name: str, lacking: np.ndarray) -> list[float]:
+    """What one member's curve adds to its group's pool of lacking half-widths.
+
+    Pointwise for the restoring force, d and the static force; for a gain g_i (a gain error:
+    every point of a prototype's curve off by about the same factor) the largest over its
+    marked points, so that the group's 95th percentile is that of the prototypes, a band that
+    holds a prototype's whole curve in 95 % of them (a pointwise percentile would let the
+    one or two prototypes whose gain is off by 30 % fall outside at every marked point).
+    """
+    from debist.identify.bands import RELATIVE_MODEL_ERROR
+
+    if GROUPS[name] in RELATIVE_MODEL_ERROR:
+        return [float(np.max(lacking))] if len(lacking) else []
+    return [float(x) for x in lacking]
+
+
+def _lacking(name, true, est, lo, hi, marked) -> np.ndarray:
     """Per marked point, the half-width the band lacks to hold the truth, in quadrature.
 
-    As a fraction of the estimate's scale over the marked points (the larger of its range and
-    its largest magnitude; the stage takes it over the supported points, a superset, so the
-    calibrated term is, if anything, wider there): ``sqrt(err^2 - reach^2)`` where the band's
-    reach toward the truth falls short of the error ``err``, else 0
+    As a fraction of what the stage multiplies the model error by
+    (:func:`debist.identify.bands.error_level`): the estimate's scale over the marked points
+    (the larger of its range and its largest magnitude; the stage takes it over the supported
+    points, a superset, so the calibrated term is, if anything, wider there), for a one-signed
+    gain g_i its local magnitude: ``sqrt(err^2 - reach^2)`` where the band's reach toward the
+    truth falls short of the error ``err``, else 0
     (:func:`debist.identify.bands.curve_bands` adds the term as ``hypot(reach, term)``).
     """
+    from debist.identify.bands import error_level
+
     if not marked.any():
         return np.array([])
     e, t = est[marked], true[marked]
     scale = max(float(np.ptp(e)), float(np.max(np.abs(e))))
+    level = error_level(name, e, np.ones(e.size, dtype=bool), scale)
     reach = np.maximum(np.where(t > e, hi[marked] - e, e - lo[marked]), 0.0)
     err = np.abs(t - e)
-    return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / scale
+    return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / level
 
 
 def _set_identify(
@@ -235,7 +256,7 @@ def calibrate(
         .assign(coverage=lambda s: s.inside / s.marked)
     )  # fmt: skip
     pooled = {
-        name: np.concatenate([np.asarray(x, float) for x in lacking[scores.curve == name]])
+        name: [v for x in lacking[scores.curve == name] for v in _pooled_values(name, x)]
         for name in summary.index
     }
     return {
@@ -243,7 +264,7 @@ def calibrate(
         "size": size,
         "seed": seed,
         "curves": summary.reset_index().to_dict(orient="records"),
-        "lacking": {k: v.tolist() for k, v in pooled.items()},
+        "lacking": pooled,
         "members": scores.to_dict(orient="records"),
         "nrmse": nrmse,
     }
@@ -277,12 +298,16 @@ GROUPS = {"restoring": "restoring", "d": "d", "g1": "g", "g2": "g", "static F": 
 
 
 def _model_error_table(results: list[dict]) -> str:
-    """The 95th percentile of the lacking half-width per curve group, pooled over the plants."""
+    """The 95th percentile of the lacking half-width per curve group, pooled over the plants.
+
+    A fraction of the curve's scale; for the gains g_i of their local magnitude, the largest
+    over each prototype's marked points (:func:`_pooled_values`).
+    """
     pooled: dict[str, list[float]] = {}
     for r in results:
         for name, values in r["lacking"].items():
             pooled.setdefault(GROUPS[name], []).extend(values)
-    lines = ["| curve | marked points | model error (95th percentile, fraction of scale) |",
+    lines = ["| curve | values (marked points; g: prototype curves) | model error (95th pct.) |",
              "|---|---|---|"]  # fmt: skip
     table = {}
     for key, values in pooled.items():

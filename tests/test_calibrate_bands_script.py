@@ -50,3 +50,27 @@ def test_a_member_already_set_is_not_rewritten(tmp_path):
     assert wf.stat().st_mtime_ns == stamp and wf.read_bytes() == before
     script._set_identify([(wf, tmp_path)], True, (), {"weights_window": 1.0})
     assert tomllib.loads(wf.read_text())["identify"]["weights_window"] == 1.0
+
+
+def test_a_gain_error_is_pooled_per_prototype_and_relative_to_the_local_gain():
+    """A gain's lacking half-width is a fraction of its local magnitude, and each prototype's
+    curve adds its largest one to the pool: a gain 30 % off at every marked point of one
+    prototype is one value 0.3 (pointwise, its many points would outweigh the others); the
+    restoring force adds every point, a fraction of its scale."""
+    import numpy as np
+
+    script = _script()
+    q = np.linspace(-1.0, 1.0, 11)
+    true = 2.0 + q  # one-signed gain, 1..3
+    est = 1.3 * true  # a gain error of 30 %: the truth lies 0.3 / 1.3 of |est| below
+    marked = np.ones(q.size, dtype=bool)
+    lacking = script._lacking("g1", true, est, est, est, marked)  # band of zero width
+    np.testing.assert_allclose(lacking, 0.3 / 1.3, rtol=1e-12)
+    assert script._pooled_values("g1", lacking) == [max(lacking)]
+    # the restoring force: |err| / scale (largest magnitude of the estimate, 3.9) per point
+    err = script._lacking("restoring", true, est, est, est, marked)
+    np.testing.assert_allclose(err, 0.3 * true / 3.9, rtol=1e-12)
+    assert len(script._pooled_values("restoring", err)) == q.size
+    # the band's reach toward the truth is taken off in quadrature
+    half = script._lacking("g1", true, est, est - 0.1 * est, est, marked)
+    np.testing.assert_allclose(half, np.sqrt((0.3 / 1.3) ** 2 - 0.1**2), rtol=1e-12)

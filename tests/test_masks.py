@@ -105,7 +105,9 @@ def test_g_is_marked_where_its_sub_threshold_excitation_visits_each_well(paper_u
 
 def test_g_stays_unmarked_where_its_input_was_never_on(paper_until_identify):
     """The same log with DE 1 off whenever the beam is right of the barrier: g1 is unmarked
-    there beyond one RBF width (no sample with v_1 on informs it), and still marked left."""
+    there beyond one RBF width (no sample with v_1 on informs it), and still marked left
+    under a loose band tolerance (its bootstrap band there is 40-60 % of its magnitude over the
+    points its data surround, too wide for the default 0.2: the support is what is tested)."""
     import tomllib
 
     from debist.model.basis import RBFBasis
@@ -123,7 +125,8 @@ def test_g_stays_unmarked_where_its_input_was_never_on(paper_until_identify):
     log = log.assign(v1=np.where(log.q.to_numpy() > 0.0, 0.0, log.v1.to_numpy()))
     log.attrs = attrs
     tables["identification"] = log
-    section = {**wf["identify"], "model_error": False}  # the support logic, bootstrap bands
+    # the support logic: bootstrap bands, a tolerance that any supported point passes
+    section = {**wf["identify"], "model_error": False, "band_tolerance": 1.0}
     res = run_identify(tables, derivs, section, PrototypeParams(**wf["physics"]))
     lo, hi = wf["identify"]["q_range"]
     sigma = RBFBasis.equidistant(lo, hi, wf["identify"]["M"], wf["identify"]["sigma_n"]).sigma
