@@ -238,18 +238,26 @@ def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistabl
         assert (frame[f"{name}_lo"] <= frame[f"{name}_hi"]).all()
 
 
-def test_an_input_never_applied_is_not_identified_there(bistable_record):
-    """g2 is unidentified where DE 2 was never energised (q > 0), whatever its band."""
+def _fit_with_input_only_where(bistable_record, j, keep, seed):
+    """Fit the bistable truth's record with input ``j`` zeroed outside ``keep`` (the
+    accelerations recomputed from the truth, 2 % noise): (model, diag, records, rec)."""
     rec = dict(bistable_record)
     v = rec["v"].copy()
-    v[:, 1] = np.where(rec["q"] > 0.0, 0.0, v[:, 1])
+    v[:, j] = np.where(keep, v[:, j], 0.0)
     rec["v"] = v
     cur = bistable_truth(rec["q"])
     rec["q_ddot"] = (cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2 - cur["c"] * rec["q"]
                      - cur["d"] * rec["q_dot"])  # fmt: skip
-    records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=4)
+    records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=seed)
     cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100)
     model, diag = fit_rbf_model(records, cfg)
+    return model, diag, records, rec
+
+
+def test_an_input_never_applied_is_not_identified_there(bistable_record):
+    """g2 is unidentified where DE 2 was never energised (q > 0), whatever its band."""
+    keep = bistable_record["q"] <= 0.0
+    model, diag, records, _ = _fit_with_input_only_where(bistable_record, 1, keep, seed=4)
     frame, intervals = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
     right = frame.q.to_numpy() > 0.005
     assert not frame.g2_identified.to_numpy()[right].any()
@@ -265,16 +273,8 @@ def test_a_gain_is_judged_against_its_magnitude_where_the_data_surround_it(bista
     supported point would pass, dozens of them with bands wider than a quarter of the gain."""
     from debist.identify.excitation import input_active, quasi_static
 
-    rec = dict(bistable_record)
-    v = rec["v"].copy()
-    v[:, 0] = np.where(rec["q"] < -0.004, v[:, 0], 0.0)
-    rec["v"] = v
-    cur = bistable_truth(rec["q"])
-    rec["q_ddot"] = (cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2 - cur["c"] * rec["q"]
-                     - cur["d"] * rec["q_dot"])  # fmt: skip
-    records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=4)
-    cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100)
-    model, diag = fit_rbf_model(records, cfg)
+    keep = bistable_record["q"] < -0.004
+    model, diag, records, rec = _fit_with_input_only_where(bistable_record, 0, keep, seed=4)
     frame, _ = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
     q, g1 = frame.q.to_numpy(), frame.g1.to_numpy()
     # independent: the samples that inform g_1 and the points they surround / reach
@@ -305,16 +305,7 @@ def test_an_input_applied_only_in_transit_is_not_identified(bistable_record):
     assert 0.2 < slow.mean() < 0.95  # both kinds of samples are present
     marked = {}
     for name, keep in (("transit", ~slow), ("quasi-static", slow)):
-        rec = dict(bistable_record)
-        v = rec["v"].copy()
-        v[:, 0] = np.where(keep, v[:, 0], 0.0)
-        rec["v"] = v
-        cur = bistable_truth(rec["q"])
-        rec["q_ddot"] = (cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2
-                         - cur["c"] * rec["q"] - cur["d"] * rec["q_dot"])  # fmt: skip
-        records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=5)
-        cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100)
-        model, diag = fit_rbf_model(records, cfg)
+        model, diag, records, _ = _fit_with_input_only_where(bistable_record, 0, keep, seed=5)
         frame, _ = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
         marked[name] = int(frame.g1_identified.sum())
     assert marked["transit"] == 0
