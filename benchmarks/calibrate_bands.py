@@ -157,11 +157,11 @@ def _pooled_values(name: str, lacking: np.ndarray) -> list[float]:
     every point of a prototype's curve off by about the same factor) the largest over its
     marked points, so that the group's 95th percentile is that of the prototypes, a band that
     holds a prototype's whole curve in 95 % of them (a pointwise percentile would let the
-    one or two prototypes whose gain is off by 30 % fall outside at every marked point).
+    one or two prototypes whose gain is 20 % off fall outside at every marked point).
     """
-    from debist.identify.bands import RELATIVE_MODEL_ERROR
+    from debist.identify.bands import relative_model_error
 
-    if GROUPS[name] in RELATIVE_MODEL_ERROR:
+    if relative_model_error(name):
         return [float(np.max(lacking))] if len(lacking) else []
     return [float(x) for x in lacking]
 

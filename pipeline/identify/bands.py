@@ -271,8 +271,19 @@ def _model_error(table: dict[str, float] | None, name: str) -> float:
 RELATIVE_MODEL_ERROR = ("g",)
 
 
-def _relative(name: str) -> bool:
-    """Whether curve ``name``'s model error is relative to its local magnitude."""
+def relative_model_error(name: str) -> bool:
+    """Return whether curve ``name``'s model error is a fraction of its local magnitude.
+
+    Parameters
+    ----------
+    name : str
+        Curve name (``restoring``, ``d``, ``g1``, ``g2`` ...; ``g1`` and ``g2`` read ``g``).
+
+    Returns
+    -------
+    bool
+        True for the gains of :data:`RELATIVE_MODEL_ERROR`.
+    """
     return name.rstrip("0123456789") in RELATIVE_MODEL_ERROR
 
 
@@ -306,7 +317,7 @@ def error_level(name: str, value: np.ndarray, scale_points: np.ndarray, span: fl
     value = np.asarray(value, dtype=float)
     on = value[scale_points]
     one_signed = on.size > 0 and (bool(np.all(on > 0)) or bool(np.all(on < 0)))
-    if _relative(name) and one_signed:
+    if relative_model_error(name) and one_signed:
         return np.abs(value)
     return np.full(value.shape, float(span))
 
