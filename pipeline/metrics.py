@@ -99,6 +99,11 @@ def rms(error: np.ndarray) -> float:
     return float(np.sqrt(np.mean(error**2))) if np.all(np.isfinite(error)) else float("nan")
 
 
+#: A free run whose NRMSE(q) exceeds this share of the mean baseline's is called poor: a lost
+#: switch of a bistable beam leaves about half of the mean's error (:func:`mean_baseline_nrmse`).
+POOR_SHARE = 0.5
+
+
 def mean_baseline_nrmse(y_meas: np.ndarray) -> float:
     """NRMSE of the constant prediction ``mean(y_meas)``: the floor a model must beat.
 

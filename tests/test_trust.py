@@ -1,5 +1,7 @@
 """Numbers the data do not support are not shown as numbers: unstable, diverged, baseline."""
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -83,3 +85,51 @@ def test_a_single_frequency_duffing_gets_the_excitation_warning_and_an_honest_ro
         assert (rows.status == "unstable").all() and rows.nrmse_q.isna().all()
     else:
         assert (rows.status == "ok").all() and (rows.nrmse_q < 0.05).all()
+
+
+def test_a_replicate_is_the_model_with_its_parameters_moved():
+    from conftest import DT_LOG, M_Q, G
+
+    from debist.simulate.freerun import simulate
+
+    truth = double_well()
+    tables, _ = logged_tables(truth)
+    v = tables["val"][["v1", "v2"]].to_numpy()
+    names = ["input_gain1", "input_gain2", "m_q", "d[3]"]  # d[3]: a term the model lacks
+    dev = np.array([[0.0, 0.0, 0.0, 0.0], [0.1 * G, -0.1 * G, 0.0, 0.0], [0, 0, 0.1 * M_Q, 0]])
+    reps = simulate(truth.replicate_table(names, dev), [v] * 3, DT_LOG, np.full(3, -0.01),
+                    np.zeros(3))  # fmt: skip
+    same = [double_well(), double_well(g=1.1 * G)]
+    heavier = replace(double_well(), m_q=1.1 * M_Q)
+    for rep, model in zip(reps, [*same, heavier], strict=True):
+        ref = simulate(model, [v], DT_LOG, np.array([-0.01]), np.zeros(1))[0]
+        np.testing.assert_allclose(rep.q, ref.q, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="3 columns for 4 names"):
+        truth.replicate_table(names, dev[:, :3])
+
+
+def test_replicates_that_lose_the_switch_make_a_low_nrmse_fragile():
+    """Two replicates: the estimate itself, and one whose gains are 30 % lower, so that the
+    3 kV pulses (0.18 N against the barrier's 0.154 N) no longer switch the beam."""
+    from conftest import G
+
+    truth = double_well()
+    tables, derivs = logged_tables(truth)
+    dev = np.array([[0.0, 0.0], [-0.3 * G, 0.3 * G]])
+    res = run_validate(
+        truth, tables, derivs, {"substeps": 1}, replicates=(["input_gain1", "input_gain2"], dev)
+    )
+    weak = run_validate(double_well(g=0.7 * G), tables, derivs, {"substeps": 1}).table
+    row = res.table[(res.table.dataset == "val") & (res.table.model == "rbf")].iloc[0]
+    lost = weak[(weak.dataset == "val") & (weak.model == "rbf")].nrmse_q.iloc[0]
+    assert lost > 0.5 * row.nrmse_q_baseline  # the weak replicate really loses the switch
+    assert row.replicates == 2 and row.replicates_poor == 0.5
+    assert row.nrmse_q_lo == pytest.approx(row.nrmse_q, abs=1e-9)
+    assert row.nrmse_q_hi == pytest.approx(lost, rel=1e-9)
+    sim = res.simulated["val"]
+    assert (sim.q_sim_lo <= sim.q_sim_hi).all() and (sim.q_sim_hi - sim.q_sim_lo).max() > 0.01
+    note = nrmse_table(res.table.to_dict(orient="records")).columns[-1]._cells[1]
+    assert "fragile: 50 % of 2 bootstrap replicates lose the motion (95 % of their" in note
+    none = run_validate(truth, tables, derivs, {"substeps": 1, "replicates": 0},
+                        replicates=(["input_gain1", "input_gain2"], dev))  # fmt: skip
+    assert "replicates_poor" not in none.table

@@ -302,13 +302,59 @@ class RBFModel:
         ----------
         Masoud & Maas 2025, Eq. 37.
         """
+        return self.replicate_table([], np.zeros((1, 0)))  # the model itself: no deviation
+
+    def replicate_table(self, columns: list[str], deviations: np.ndarray) -> TableModel:
+        """Return the model with its parameters moved by each row of ``deviations``.
+
+        One trajectory per row: the free-run model of a batch of parameter replicates (the
+        block bootstrap of the least squares, :func:`debist.identify.bands.block_bootstrap`),
+        each the model's parameters plus one replicate's deviation from the estimate, so a
+        refined model keeps its refinement and gets the bootstrap's spread around it.
+
+        Parameters
+        ----------
+        columns : list of str
+            Regressor column names of the fit (the term library's, as :meth:`parameters`;
+            ``"m_q"`` moves the mass).
+        deviations : ndarray, shape (B, len(columns))
+            Replicate minus estimate, in the sign convention of the regression.
+
+        Returns
+        -------
+        TableModel
+            B trajectories of weights and masses (the same terms and ``T_z``).
+
+        Raises
+        ------
+        ValueError
+            If ``deviations`` does not have one column per name.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37-40; Efron & Tibshirani 1993, An Introduction to the
+        Bootstrap, Ch. 6 (replicates of a statistic, here a free run).
+        """
+        dev = np.atleast_2d(np.asarray(deviations, dtype=float))
+        if dev.shape[1] != len(columns):
+            raise ValueError(f"deviations have {dev.shape[1]} columns for {len(columns)} names")
         names, values = self.parameters()
+        extra = [c for c in columns if c not in names and c != "m_q"]
+        names = names + extra
+        index = {n: k for k, n in enumerate(names)}
+        weights = np.tile(np.concatenate([values, np.zeros(len(extra))]), (dev.shape[0], 1))
+        mass = np.full(dev.shape[0], self.m_q)
+        for j, name in enumerate(columns):
+            if name == "m_q":
+                mass += dev[:, j]
+            else:
+                weights[:, index[name]] += dev[:, j]
         table = term_table(
             names, self.basis, self.n_inputs, self.input_map, self.coulomb_velocity, self.prior,
             creep_rate=self.creep_rate, slip_width=self.slip_width,
         )  # fmt: skip
         signs = np.array([term_sign(n) for n in names])
-        return TableModel(table, signs * values, np.array([self.m_q]), np.array([self.T_z]))
+        return TableModel(table, signs * weights, mass, np.array([self.T_z]))
 
     def kernel_arrays(self):
         """Arrays of the compiled free-run kernel (:mod:`debist.simulate.kernel`), built once."""

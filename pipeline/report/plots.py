@@ -29,7 +29,9 @@ def free_run_figure(
     Parameters
     ----------
     sim : pandas.DataFrame
-        Columns ``t [s], q, q_sim`` (q in ``unit``).
+        Columns ``t [s], q, q_sim`` (q in ``unit``), optionally ``q_sim_lo, q_sim_hi``: the
+        2.5 and 97.5 percentiles of the bootstrap replicates' free runs (shaded, labelled
+        as what they are: :func:`debist.validate.replicate_spread`).
     name : str
         Data set name (title).
     row : pandas.Series
@@ -77,6 +79,10 @@ def free_run_figure(
             ls="--",
             label=f"{row['model']} free run",
         )
+        if "q_sim_lo" in sim:
+            lo, hi = (factor * sim[c].to_numpy() for c in ("q_sim_lo", "q_sim_hi"))
+            label = f"{int(row['replicates'])} bootstrap replicates, 95 % (estimation only)"
+            ax.fill_between(t[s], lo[s], hi[s], color="tab:red", alpha=0.15, lw=0, label=label)
         ax.set_ylabel(f"q [{unit}]")
     ax1.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)

@@ -16,6 +16,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from debist.ingest.units import lookup_unit, pretty_unit
+from debist.metrics import POOR_SHARE
 
 #: How identified quantities are labelled in reports (summary key -> label). The backbone's
 #: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the
@@ -425,11 +426,6 @@ def not_modelled(row: dict[str, Any], key: str) -> bool:
     return row.get("model") in OUTPUT_ONLY and key in ("nrmse_q_dot", "nrmse_q_ddot")
 
 
-#: A free run whose NRMSE(q) exceeds this share of the mean's is called poor (a lost switch
-#: of a bistable beam leaves about half of the mean's error).
-POOR_SHARE = 0.5
-
-
 def _num_or_nan(value: Any) -> float:
     try:
         out = float(value)
@@ -454,8 +450,11 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     -------
     str
         ``"unstable: ..."``, ``"diverged: ..."``, ``"not better than the mean ..."``,
-        ``"poor: ..."`` (above :data:`POOR_SHARE` of the mean's NRMSE), ``"worse than
-        <model> (x %)"``, or ``"ok"``; the last two may combine.
+        ``"poor: ..."`` (above :data:`~debist.metrics.POOR_SHARE` of the mean's NRMSE),
+        ``"fragile: ..."`` (the 97.5th percentile of the NRMSE(q) of the model's bootstrap
+        replicates, :func:`debist.validate.replicate_spread`, is poor: more than 2.5 % of
+        them lose the motion), ``"worse than <model> (x %)"``,
+        or ``"ok"``; the last three may combine.
 
     Examples
     --------
@@ -465,6 +464,13 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ...         {"model": "narx", "dataset": "a", "nrmse_q": 0.01, "nrmse_q_baseline": 0.3}]
     >>> verdict(rows[0], rows), verdict(rows[1], rows)
     ('worse than narx (1.00 %)', 'ok')
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "replicates": 40,
+    ...          "replicates_poor": 0.05, "nrmse_q_hi": 0.193})
+    'fragile: 5 % of 40 bootstrap replicates lose the motion (95 % of their NRMSE(q) up to 19.3 %)'
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "replicates": 100,
+    ...          "replicates_poor": 0.01, "nrmse_q_hi": 0.0149})
+    'ok'
+
     """
     if row.get("status") == "unstable":
         return f"unstable: {row.get('reason', '')}"
@@ -478,6 +484,13 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     if not math.isnan(base) and value > POOR_SHARE * base:
         words.append(
             f"poor: {100 * value / base:.0f} % of the mean baseline error (a lost switch?)"
+        )
+    top = _num_or_nan(row.get("nrmse_q_hi"))  # the replicates' 97.5 %: a lost switch there
+    if not math.isnan(base) and top > POOR_SHARE * base:
+        words.append(
+            f"fragile: {100 * _num_or_nan(row.get('replicates_poor')):.0f} % of "
+            f"{int(row['replicates'])} bootstrap replicates lose the motion (95 % of their "
+            f"NRMSE(q) up to {100 * top:.1f} %)"
         )
     better = [
         (_num_or_nan(r.get("nrmse_q")), r.get("model"))

@@ -281,7 +281,7 @@ def diagnostics_tree(diag: FitDiagnostics) -> dict[str, Any]:
         "singular_values": diag.singular_values,
         "support": diag.support,
         "T_z_trace": diag.T_z_trace,
-        **({} if diag.theta_boot is None else {"theta_boot": diag.theta_boot}),
+        **({} if diag.theta_boot is None else {"theta": diag.theta, "theta_boot": diag.theta_boot}),
         **({"gcv_trace": diag.gcv_trace} if diag.gcv_trace.size else {}),
         **({"creep_trace": diag.creep_trace} if diag.creep_trace.size else {}),
     }

@@ -18,7 +18,13 @@ from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
-from debist.validate import ValidateConfig, default_q_limit, mark_unstable, validate_model
+from debist.validate import (
+    ValidateConfig,
+    default_q_limit,
+    mark_unstable,
+    replicate_spread,
+    validate_model,
+)
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -74,6 +80,7 @@ def run_validate(
     section: Mapping[str, Any],
     baseline: RBFModel | None = None,
     physics=None,
+    replicates: tuple[list[str], np.ndarray] | None = None,
 ) -> ValidateResult:
     """Free-run the identified model on every data set and score it (Sec. 5, Eq. 41).
 
@@ -93,6 +100,11 @@ def run_validate(
         The prototype of the ``[physics]`` section: every row gets ``nrmse_phi`` through its
         ``phi(q)`` map, and with ``analytical = true`` the analytical model (nominal
         parameters, Eq. 26) is scored as model ``"analytical"``.
+    replicates : tuple of (list of str, ndarray of shape (B, p)), optional
+        The fit's regressor columns and its bootstrap replicates minus the estimate: up to
+        ``[validate] replicates`` of them are simulated (:func:`debist.validate.
+        replicate_spread`), and the rbf rows get ``replicates``, ``nrmse_q_lo``,
+        ``nrmse_q_hi`` and ``replicates_poor``, the free runs ``q_sim_lo`` and ``q_sim_hi``.
 
     Returns
     -------
@@ -112,6 +124,14 @@ def run_validate(
     table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit, phi)
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
+    if replicates is not None and cfg.replicates > 0:
+        columns, deviations = replicates
+        spread, bands = replicate_spread(
+            model, columns, deviations[: cfg.replicates], datasets, cfg, q_limit
+        )
+        table = table.merge(spread, on="dataset", how="left", validate="one_to_one")
+        for ds, (lo, hi) in bands.items():
+            simulated[ds] = simulated[ds].assign(q_sim_lo=lo, q_sim_hi=hi)
     others = [(baseline, "rbf-ls")] if baseline is not None else []
     if cfg.analytical:
         others.append((analytical, "analytical"))
@@ -149,7 +169,7 @@ def run_validate(
         name: FigureJob(
             free_run_figure,
             (
-                sim[["t", "q", "q_sim"]],
+                sim[[c for c in ("t", "q", "q_sim", "q_sim_lo", "q_sim_hi") if c in sim]],
                 name,
                 table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
                 cfg.init_samples,
@@ -211,6 +231,11 @@ def execute(ctx: StageInputs) -> StageOutput:
     ls = tree.get("equation_error")
     baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
     section = ctx.section("validate")
+    diag = tree.get("diagnostics", {})
+    replicates = None
+    if "theta_boot" in diag and "theta" in diag:
+        columns = [str(c) for c in np.asarray(diag["columns"]).astype(str)]
+        replicates = (columns, np.asarray(diag["theta_boot"]) - np.asarray(diag["theta"]))
     res = run_validate(
         model,
         ctx.tables("ingest"),
@@ -218,6 +243,7 @@ def execute(ctx: StageInputs) -> StageOutput:
         section,
         baseline,
         ctx.physics(),
+        replicates,
     )
     outputs: dict[str, Any] = {"nrmse.parquet": res.table}
     if res.residuals is not None:

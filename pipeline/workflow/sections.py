@@ -83,6 +83,11 @@ class ValidateConfig(SectionConfig):
     resid_lags : int
         Largest lag [samples] of the residual analysis of the one-step prediction errors
         (autocorrelation and cross-correlation with each input, as MATLAB's ``resid``).
+    replicates : int
+        Bootstrap replicates of the identified model simulated in free run beside it (as
+        MATLAB's ``simsd``; :func:`debist.validate.replicate_spread`): the spread of NRMSE(q)
+        they give and the share that lose the motion; at most as many as the identify stage
+        drew (``[identify] bootstrap``); 0: none.
 
     Raises
     ------
@@ -103,6 +108,7 @@ class ValidateConfig(SectionConfig):
     engine: Literal["compiled", "numpy"] = "compiled"
     predict_steps: NonNegativeInt = 10
     resid_lags: PositiveInt = 25
+    replicates: NonNegativeInt = 100
 
     def __post_init__(self) -> None:
         if self.report_unit is not None and lookup_unit(self.report_unit) is None:
