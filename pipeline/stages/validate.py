@@ -234,7 +234,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     diag = tree.get("diagnostics", {})
     replicates = None
     if "theta_boot" in diag and "theta" in diag:
-        columns = [str(c) for c in np.asarray(diag["columns"]).astype(str)]
+        columns = np.asarray(diag["columns"]).astype(str).tolist()
         replicates = (columns, np.asarray(diag["theta_boot"]) - np.asarray(diag["theta"]))
     res = run_validate(
         model,
