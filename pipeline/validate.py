@@ -19,6 +19,11 @@ from debist.workflow.sections import ValidateConfig
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
+#: Columns of a free run (``simulated/<data set>.parquet``) holding the pointwise 2.5 and 97.5
+#: percentiles of the bootstrap replicates' q (:func:`replicate_spread`): the model's own band,
+#: not the free runs of other models.
+REPLICATE_BAND = ("q_sim_lo", "q_sim_hi")
+
 
 def initial_state(q: np.ndarray, dt: float, window: int) -> tuple[float, float]:
     """Estimate position and velocity at the first sample from the first samples only.
@@ -322,9 +327,11 @@ def replicate_spread(
         (the 2.5th and 97.5th order statistics of the replicates' NRMSE(q), a diverged
         replicate counting as infinite), ``replicates_poor`` (the share whose NRMSE(q) is
         above :data:`debist.metrics.POOR_SHARE` of the mean baseline's, or diverged).
+        ``replicates_hold_q``: the share of the scored samples whose measured q lies inside
+        the replicates' band (what the band held on this data set).
     bands : dict of str to ndarray, shape (2, n)
         Per data set the pointwise 2.5 and 97.5 percentiles of the replicates' q [unit of
-        q] (NaN where every replicate diverged).
+        q] (NaN where every replicate diverged), stored as :data:`REPLICATE_BAND`.
 
     References
     ----------
@@ -360,7 +367,9 @@ def replicate_spread(
             q = np.stack([r.q for r in runs])
             with warnings.catch_warnings():  # all-NaN samples (every replicate diverged): NaN
                 warnings.simplefilter("ignore", RuntimeWarning)
-                bands[ds.name] = np.nanpercentile(q, [2.5, 97.5], axis=0)
+                lo, hi = bands[ds.name] = np.nanpercentile(q, [2.5, 97.5], axis=0)
+            inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
+            rows[-1]["replicates_hold_q"] = float(np.mean(inside)) if inside.size else np.nan
     return pd.DataFrame(rows), bands
 
 

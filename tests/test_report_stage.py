@@ -398,3 +398,28 @@ def test_the_validate_stages_other_models_become_runs_of_their_own():
     np.testing.assert_array_equal(runs["analytical"]["q_sim"], 3 * t)
     np.testing.assert_array_equal(runs["analytical"]["q"], t)
     np.testing.assert_array_equal(runs["rbf"]["q_sim"], 2 * t)
+
+
+def test_the_replicate_band_stays_with_its_model_and_says_what_it_held():
+    """q_sim_lo / q_sim_hi are the rbf run's own band (not models "lo" and "hi"); the report's
+    free-run figure shades it with the share of the measured q it holds."""
+    from debist.report.figures import free_run_figure
+    from debist.stages.report import _split_runs
+
+    t = np.arange(50) * 0.01
+    frame = pd.DataFrame({"t": t, "q": t, "q_sim": t, "q_sim_lo": t - 1e-3, "q_sim_hi": t + 1e-3,
+                          "q_sim_analytical": 2 * t})  # fmt: skip
+    runs = _split_runs(frame, "rbf")
+    assert sorted(runs) == ["analytical", "rbf"]
+    np.testing.assert_array_equal(runs["rbf"]["q_sim_hi"], t + 1e-3)
+    rows = {"rbf": {"replicates": 40, "replicates_hold_q": 0.625}}
+    fig = free_run_figure(frame[["t", "q"]], runs, (10, 30), "val", "m", {"rbf": 0.01}, rows)
+    labels = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
+    band = "40 bootstrap replicates, middle 95 % (estimation only; holds 62 % of q here)"
+    assert band in labels and not any(lab.startswith(("lo", "hi")) for lab in labels)
+    shaded = [c for c in fig.axes[0].collections if c.get_label() == band]
+    lo, hi = (
+        shaded[0].get_paths()[0].vertices[:, 1].min(),
+        shaded[0].get_paths()[0].vertices[:, 1].max(),
+    )
+    assert lo == pytest.approx(1e3 * (t[0] - 1e-3)) and hi == pytest.approx(1e3 * (t[-1] + 1e-3))

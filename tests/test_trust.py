@@ -128,6 +128,9 @@ def test_replicates_that_lose_the_switch_make_a_low_nrmse_fragile():
     assert row.nrmse_q_hi == pytest.approx(lost, rel=1e-9)
     sim = res.simulated["val"]
     assert (sim.q_sim_lo <= sim.q_sim_hi).all() and (sim.q_sim_hi - sim.q_sim_lo).max() > 0.01
+    q = tables["val"]["q"].to_numpy()  # what the band held, counted independently
+    held = np.mean((sim.q_sim_lo.to_numpy() <= q) & (q <= sim.q_sim_hi.to_numpy()))
+    assert 0.0 < held < 1.0 and row.replicates_hold_q == pytest.approx(held, abs=1e-15)
     note = nrmse_table(res.table.to_dict(orient="records")).columns[-1]._cells[1]
     assert "fragile: 50 % of 2 bootstrap replicates lose the motion (95 % of their" in note
     none = run_validate(truth, tables, derivs, {"substeps": 1, "replicates": 0},

@@ -21,6 +21,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.validate import REPLICATE_BAND
+
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
@@ -30,6 +32,7 @@ __all__ = [
     "excitation_figure",
     "free_run_figure",
     "q_scale",
+    "replicate_band",
 ]
 
 #: Line colour and style per model name (others cycle through the last entry's colours).
@@ -140,6 +143,43 @@ def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit:
     return fig
 
 
+def replicate_band(
+    ax: Any, t: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: Mapping[str, Any], color: str
+) -> None:
+    """Shade the bootstrap replicates' free-run band, labelled with what it held.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw in.
+    t : ndarray, shape (n,)
+        Time [s].
+    lo, hi : ndarray, shape (n,)
+        The replicates' pointwise 2.5 and 97.5 percentiles of q [display unit]
+        (:func:`debist.validate.replicate_spread`).
+    row : mapping
+        The model's NRMSE row on the data set: ``replicates`` (count) and
+        ``replicates_hold_q`` (share of the samples whose measured q the band holds; absent
+        or NaN: not stated).
+    color : str
+        The model's colour.
+
+    Notes
+    -----
+    The band is the scatter of the estimate alone (no model error), so it is never
+    labelled a prediction interval: the label gives the share of this record's measured q it
+    holds (on the virtual rig 28-71 %).
+
+    References
+    ----------
+    MathWorks, System Identification Toolbox, ``simsd``; Efron & Tibshirani 1993, Ch. 13.
+    """
+    held = row.get("replicates_hold_q")
+    held = "" if held is None or not np.isfinite(held) else f"; holds {100 * held:.0f} % of q here"
+    label = f"{int(row['replicates'])} bootstrap replicates, middle 95 % (estimation only{held})"
+    ax.fill_between(t, lo, hi, color=color, alpha=0.15, lw=0, label=label)
+
+
 def _index(column: str) -> int:
     return int(column[1:])
 
@@ -151,6 +191,7 @@ def free_run_figure(
     name: str,
     unit: str,
     nrmse: Mapping[str, float] | None = None,
+    rows: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> Any:
     """Measured position against the free run of every model, a zoom and the errors.
 
@@ -159,7 +200,9 @@ def free_run_figure(
     measured : pandas.DataFrame
         ``t`` [s] and the measured ``q`` [unit] of one data set.
     runs : mapping of str to pandas.DataFrame
-        Model name to its free run on that data set (``q_sim`` [unit], same samples).
+        Model name to its free run on that data set (``q_sim`` [unit], same samples; with
+        ``q_sim_lo`` and ``q_sim_hi``, the band of its bootstrap replicates, shaded by
+        :func:`replicate_band`).
     window : tuple of int
         Sample slice of the zoom (:func:`dynamic_window`).
     name : str
@@ -168,6 +211,9 @@ def free_run_figure(
         SI unit of q.
     nrmse : mapping of str to float, optional
         NRMSE(q) per model, shown in the legend (dimensionless; NaN: diverged).
+    rows : mapping of str to mapping, optional
+        NRMSE row per model (``replicates``, ``replicates_hold_q``): the label of a run's
+        replicate band, which is drawn only for a model that has a row.
 
     Returns
     -------
@@ -195,8 +241,12 @@ def free_run_figure(
         sim = factor * run["q_sim"].to_numpy()
         score = nrmse.get(model)
         text = "" if score is None else f" (NRMSE(q) {_percent(score)})"
+        band = set(REPLICATE_BAND) <= set(run) and model in (rows or {})
         for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
             ax.plot(t[part], sim[part], color=color, ls=style, lw=0.9, label=f"{model}{text}")
+            if band:
+                lo, hi = (factor * run[c].to_numpy()[part] for c in REPLICATE_BAND)
+                replicate_band(ax, t[part], lo, hi, rows[model], color)
         err.plot(t, q - sim, color=color, lw=0.6, label=model)
     if b > a:
         full.axvspan(t[a], t[b - 1], color="0.88", zorder=0)

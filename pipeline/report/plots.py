@@ -7,9 +7,9 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.report.figures import dynamic_window
+from debist.report.figures import dynamic_window, replicate_band
 from debist.report.tables import de_inputs
-from debist.validate import report_factor
+from debist.validate import REPLICATE_BAND, report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -79,10 +79,9 @@ def free_run_figure(
             ls="--",
             label=f"{row['model']} free run",
         )
-        if "q_sim_lo" in sim:
-            lo, hi = (factor * sim[c].to_numpy() for c in ("q_sim_lo", "q_sim_hi"))
-            label = f"{int(row['replicates'])} bootstrap replicates, 95 % (estimation only)"
-            ax.fill_between(t[s], lo[s], hi[s], color="tab:red", alpha=0.15, lw=0, label=label)
+        if set(REPLICATE_BAND) <= set(sim):
+            lo, hi = (factor * sim[c].to_numpy() for c in REPLICATE_BAND)
+            replicate_band(ax, t[s], lo[s], hi[s], row, "tab:red")
         ax.set_ylabel(f"q [{unit}]")
     ax1.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)

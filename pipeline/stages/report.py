@@ -40,6 +40,7 @@ from debist.report.html import (
 )
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
+from debist.validate import REPLICATE_BAND
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -129,6 +130,10 @@ class ReportResult:
     figures: dict[str, int]
 
 
+#: Columns of a model's free run that the report draws: q and its replicate band.
+_RUN_COLUMNS = ("q_sim", *REPLICATE_BAND)
+
+
 def _nrmse_rows(summaries: Mapping[str, Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Return the NRMSE table: compare's (which includes validate's rows), else validate's."""
     for stage in ("compare", "validate"):
@@ -187,10 +192,11 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
         measured = next(iter(runs.values()))[["t", "q"]]
         deriv = inputs.derivs[name]
         window = dynamic_window(deriv["t"].to_numpy(), deriv["q_ddot"].to_numpy(), cfg.zoom_window)
-        scores = {r["model"]: r.get("nrmse_q") for r in nrmse if r.get("dataset") == name}
+        rows = {r["model"]: r for r in nrmse if r.get("dataset") == name}
+        scores = {model: r.get("nrmse_q") for model, r in rows.items()}
         unit = _unit(inputs.tables[name]) if name in inputs.tables else "m"
-        runs = {model: run[["q_sim"]] for model, run in runs.items()}
-        args = (measured, runs, window, name, unit, scores)
+        runs = {m: run[[c for c in _RUN_COLUMNS if c in run]] for m, run in runs.items()}
+        args = (measured, runs, window, name, unit, scores, rows)
         job = FigureJob(free_run_figure, args, dpi=REPORT_DPI)
         what = (
             "Fig. 12, estimation data"
@@ -324,12 +330,13 @@ def _relative(source, folder) -> str:
 def _split_runs(frame: pd.DataFrame, model: str) -> dict[str, pd.DataFrame]:
     """Split one ``simulated/<data set>.parquet`` into the free run of each model it holds.
 
-    Its own model's ``q_sim`` and, from columns ``q_sim_<other>``, the other models the
-    validate stage ran beside it (analytical, equation-error).
+    Its own model's ``q_sim`` (with the band of its bootstrap replicates,
+    :data:`debist.validate.REPLICATE_BAND`) and, from the other columns ``q_sim_<other>``,
+    the other models the validate stage ran beside it (analytical, equation-error).
     """
     runs = {model: frame}
     for col in frame.columns:
-        if col.startswith("q_sim_"):
+        if col.startswith("q_sim_") and col not in REPLICATE_BAND:
             other = col[len("q_sim_") :]
             runs[other] = frame[["t", "q"]].assign(q_sim=frame[col].to_numpy())
     return runs

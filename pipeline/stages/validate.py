@@ -19,6 +19,7 @@ from debist.report.render import FigureJob, render_pngs
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate import (
+    REPLICATE_BAND,
     ValidateConfig,
     default_q_limit,
     mark_unstable,
@@ -104,7 +105,8 @@ def run_validate(
         The fit's regressor columns and its bootstrap replicates minus the estimate: up to
         ``[validate] replicates`` of them are simulated (:func:`debist.validate.
         replicate_spread`), and the rbf rows get ``replicates``, ``nrmse_q_lo``,
-        ``nrmse_q_hi`` and ``replicates_poor``, the free runs ``q_sim_lo`` and ``q_sim_hi``.
+        ``nrmse_q_hi``, ``replicates_poor`` and ``replicates_hold_q``, the free runs ``q_sim_lo``
+        and ``q_sim_hi``.
 
     Returns
     -------
@@ -130,8 +132,8 @@ def run_validate(
             model, columns, deviations[: cfg.replicates], datasets, cfg, q_limit
         )
         table = table.merge(spread, on="dataset", how="left", validate="one_to_one")
-        for ds, (lo, hi) in bands.items():
-            simulated[ds] = simulated[ds].assign(q_sim_lo=lo, q_sim_hi=hi)
+        for ds, band in bands.items():
+            simulated[ds] = simulated[ds].assign(**dict(zip(REPLICATE_BAND, band, strict=True)))
     others = [(baseline, "rbf-ls")] if baseline is not None else []
     if cfg.analytical:
         others.append((analytical, "analytical"))
@@ -169,7 +171,7 @@ def run_validate(
         name: FigureJob(
             free_run_figure,
             (
-                sim[[c for c in ("t", "q", "q_sim", "q_sim_lo", "q_sim_hi") if c in sim]],
+                sim[[c for c in ("t", "q", "q_sim", *REPLICATE_BAND) if c in sim]],
                 name,
                 table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
                 cfg.init_samples,
