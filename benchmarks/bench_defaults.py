@@ -3,7 +3,8 @@
 What it times (wall clock of whole ``debist`` processes, as a user sees them):
 
 1. ``debist run workflows/paper-experiment.toml --force`` with today's defaults, against the
-   same command with the defaults before issue 23's changes (``--set`` of every new default
+   same command with the defaults before the calibrated bands, the NARX peer, the slip
+   elements, the refinement and the replicates (``--set`` of every new default
    back to its old value: :data:`PREVIOUS`), in alternating pairs (A B A B ...) so that a
    drift of the machine's speed hits both; the median of each and the median of the pairwise
    ratios. Both write into their own output folders under ``--dir``; the rig logs are made
@@ -11,7 +12,7 @@ What it times (wall clock of whole ``debist`` processes, as a user sees them):
 2. ``debist fleet workflows/paper-experiment.toml --size 10 --seed 1`` and ``debist batch``
    of its members on ``--workers`` Dask workers, from a cold output folder.
 
-Targets (issue 23): the paper experiment at most twice the previous defaults' time, measured
+Targets: the paper experiment at most twice the previous defaults' time, measured
 in the same run; the fleet of 10 on 2 workers under 3 minutes.
 
 Run from the repository root::
@@ -31,9 +32,15 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment.toml"
-#: The defaults before issue 23, as ``--set`` values: bootstrap-only bands, no NARX row, no
-#: Maxwell-slip elements.
-PREVIOUS = ("identify.model_error=false", "compare.narx.enabled=false", "identify.slip=false")
+#: The defaults before those additions, as ``--set`` values: bootstrap-only bands, no NARX row, no
+#: Maxwell-slip elements, no simulation-error refinement, no bootstrap replicates run free.
+PREVIOUS = (
+    "identify.model_error=false",
+    "compare.narx.enabled=false",
+    "identify.slip=false",
+    "identify.refine=false",
+    "validate.replicates=0",
+)
 
 
 def _debist(*args: str) -> float:
