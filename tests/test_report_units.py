@@ -140,3 +140,26 @@ def test_sindy_legend_names_the_inputs_actual_unit(data):
     assert "h_i = v_i^2 [V^2], i = 1..2" in volts
     plain = fit_sindy(*args, v, DT, cfg, input_units=["1", "1"]).equations
     assert "h_i = v_i^2, i = 1..2" in plain and "[V" not in plain
+
+
+def test_the_refinement_row_names_why_it_was_rejected_and_shows_the_held_out_windows(data):
+    """A rejected refinement prints its own reason (held-out windows here, not "the full
+    records"), with the held-out windows' RMS; without held-out blocks those rows are absent."""
+    truth, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": truth.m_q}).summary
+    refine = {
+        "accepted": False, "nfev": 12, "window_rms_equation_error": 3e-4,
+        "window_rms_simulation_error": 5e-5, "holdout_rms_equation_error": 1.5e-4,
+        "holdout_rms_simulation_error": 4.4e-3, "full_rms_equation_error": 3e-4,
+        "full_rms_simulation_error": 2.9e-4,
+        "message": "rejected: the windows of the held-out estimation blocks got worse "
+                   "(0.00015 -> 0.0044 RMS)",
+    }  # fmt: skip
+    text = _render(identify_table({**summary, "refine": refine}))
+    assert "rejected: the windows of the held-out estimation blocks got worse (0.00015 -> " in text
+    assert "free-run RMS, held-out windows: simulation error [m]" in text
+    kept = {**refine, "accepted": True, "message": "`ftol` termination condition is satisfied.",
+            "holdout_rms_equation_error": float("nan"),
+            "holdout_rms_simulation_error": float("nan")}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": kept}))
+    assert "accepted, 12 evaluations" in text and "held-out" not in text

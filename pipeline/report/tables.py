@@ -309,19 +309,19 @@ def identify_table(summary: dict[str, Any]) -> Table:
     refine = summary.get("refine")
     if refine:
         pad = [""] if published else []
-        verdict = "accepted" if refine["accepted"] else "rejected (not better on the full records)"
+        # a rejection names its reason (whole record, held-out windows or stability)
+        verdict = "accepted" if refine["accepted"] else refine.get("message", "rejected")
         for label, key in [
             ("windows: equation error", "window_rms_equation_error"),
             ("windows: simulation error", "window_rms_simulation_error"),
+            ("held-out windows: equation error", "holdout_rms_equation_error"),
+            ("held-out windows: simulation error", "holdout_rms_simulation_error"),
             ("estimation: equation error", "full_rms_equation_error"),
             ("estimation: simulation error", "full_rms_simulation_error"),
         ]:
-            table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
-        table.add_row(
-            "refinement",
-            f"{verdict}, {refine['nfev']} evaluations",
-            *pad,
-        )
+            if math.isfinite(_num_or_nan(refine.get(key))):  # no held-out blocks: no such rows
+                table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
+        table.add_row("refinement", escape(f"{verdict}, {refine['nfev']} evaluations"), *pad)
     return table
 
 
