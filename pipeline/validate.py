@@ -350,10 +350,14 @@ def replicate_spread(
             np.repeat(qd0, B), substeps=cfg.substeps, interpolation=cfg.input_interpolation,
             q_limit=q_limit, engine=cfg.engine,
         )  # fmt: skip
+        s = slice(cfg.init_samples, None)
         for k, ds in enumerate(group):
             runs = sims[k * B : (k + 1) * B]
-            s = slice(cfg.init_samples, None)
             scores = np.array([np.inf if r.diverged else nrmse(ds.q[s], r.q[s]) for r in runs])
+            with warnings.catch_warnings():  # all-NaN samples (every replicate diverged): NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
+                lo, hi = bands[ds.name] = np.nanpercentile([r.q for r in runs], [2.5, 97.5], axis=0)
+            inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
             base = mean_baseline_nrmse(ds.q[s])
             rows.append(
                 {
@@ -362,14 +366,9 @@ def replicate_spread(
                     "nrmse_q_lo": float(np.percentile(scores, 2.5, method="lower")),
                     "nrmse_q_hi": float(np.percentile(scores, 97.5, method="higher")),
                     "replicates_poor": float(np.mean(scores > POOR_SHARE * base)),
+                    "replicates_hold_q": float(np.mean(inside)) if inside.size else np.nan,
                 }
             )
-            q = np.stack([r.q for r in runs])
-            with warnings.catch_warnings():  # all-NaN samples (every replicate diverged): NaN
-                warnings.simplefilter("ignore", RuntimeWarning)
-                lo, hi = bands[ds.name] = np.nanpercentile(q, [2.5, 97.5], axis=0)
-            inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
-            rows[-1]["replicates_hold_q"] = float(np.mean(inside)) if inside.size else np.nan
     return pd.DataFrame(rows), bands
 
 
