@@ -367,6 +367,13 @@ class RefineConfig:
         held out: no fitted window touches it, and the refinement is kept only if its
         windowed free-run error there falls (blocked cross-validation); 0: no held-out
         blocks, judged on the whole estimation records only.
+    prior : float
+        Weight of a ridge term that pulls the scaled parameters towards the least-squares
+        estimate (Tikhonov regularisation of the output-error fit): residual rows
+        ``prior * r_0 * sqrt(N) * (x - x_LS)``, with ``r_0`` the windows' RMS error at
+        ``x_LS`` and ``N`` their sample count, so that moving the parameters by one
+        output-sized term (``|x - x_LS| = 1`` in the scaled variables) costs ``prior^2``
+        times the windows' initial cost. 0: no prior (the plain simulation-error fit).
 
     Raises
     ------
@@ -383,6 +390,7 @@ class RefineConfig:
     refine_T_z: bool = True
     ftol: PositiveFloat = 1e-6
     holdout: Annotated[int, Field(ge=0)] = 4
+    prior: Annotated[float, Field(ge=0)] = 0.0
 
 
 def refine_config(
