@@ -327,6 +327,7 @@ def refine_model(
     r0 = evaluate(x0)[0]
     # ridge towards the least-squares estimate (Tikhonov), in the scaled variables
     ridge = rcfg.prior * rms(r0) * math.sqrt(r0.size)
+    ridge_jac = ridge * np.eye(x0.size)  # constant: built once, not per Jacobian
 
     def fun(x):
         calls[0] += 1
@@ -336,7 +337,7 @@ def refine_model(
 
     def jac(x):
         J = evaluate(x)[1]
-        return np.vstack([J, ridge * np.eye(x.size)]) if ridge > 0 else J
+        return np.vstack([J, ridge_jac]) if ridge > 0 else J
 
     lower = np.full(x0.size, -np.inf)  # the slip elements' stiffnesses stay >= 0, as in the fit
     lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
