@@ -163,3 +163,13 @@ def test_the_refinement_row_names_why_it_was_rejected_and_shows_the_held_out_win
             "holdout_rms_simulation_error": float("nan")}  # fmt: skip
     text = _render(identify_table({**summary, "refine": kept}))
     assert "accepted, 12 evaluations" in text and "held-out" not in text
+    # several ridge weights: the kept one and each weight's free-run error, rejections named
+    several = {**refine, "accepted": True, "prior": 30.0, "holdout_windows": 3,
+               "holdout_rms_simulation_error": 1.2e-4,
+               "candidates": [{"prior": 0.0, "accepted": False, "message": "rejected",
+                               "full_rms_simulation_error": 4.4e-3},
+                              {"prior": 30.0, "accepted": True, "message": "ftol",
+                               "full_rms_simulation_error": 1.2e-4}]}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": several}))
+    assert "refinement ridge prior: kept 30, estimation free-run RMS [m] per weight" in text
+    assert "0: 0.0044 (rejected); 30: 0.00012" in text

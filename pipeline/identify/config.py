@@ -367,13 +367,17 @@ class RefineConfig:
         held out: no fitted window touches it, and the refinement is kept only if its
         windowed free-run error there falls (blocked cross-validation); 0: no held-out
         blocks, judged on the whole estimation records only.
-    prior : float
+    prior : float or tuple of float
         Weight of a ridge term that pulls the scaled parameters towards the least-squares
         estimate (Tikhonov regularisation of the output-error fit): residual rows
         ``prior * r_0 * sqrt(N) * (x - x_LS)``, with ``r_0`` the windows' RMS error at
         ``x_LS`` and ``N`` their sample count, so that moving the parameters by one
         output-sized term (``|x - x_LS| = 1`` in the scaled variables) costs ``prior^2``
         times the windows' initial cost. 0: no prior (the plain simulation-error fit).
+        Several weights (a TOML list, e.g. ``[0, 30]``): one refinement per weight, each
+        judged as a single one (``holdout``), and of the accepted ones the one with the
+        lowest free-run error over the whole estimation records is kept (estimation data
+        only).
 
     Raises
     ------
@@ -390,7 +394,20 @@ class RefineConfig:
     refine_T_z: bool = True
     ftol: PositiveFloat = 1e-6
     holdout: Annotated[int, Field(ge=0)] = 4
-    prior: Annotated[float, Field(ge=0)] = 0.0
+    prior: float | Annotated[tuple[float, ...], AsTuple] = 0.0
+
+    def __post_init__(self) -> None:
+        weights = self.priors
+        if not weights or min(weights) < 0:
+            raise ConfigValueError(
+                "prior", "a weight >= 0 or a non-empty array of them",
+                list(weights) if isinstance(self.prior, tuple) else self.prior,
+            )  # fmt: skip
+
+    @property
+    def priors(self) -> tuple[float, ...]:
+        """The ridge weights to try, in the order given (one for a single ``prior``)."""
+        return tuple(self.prior) if isinstance(self.prior, tuple) else (float(self.prior),)
 
 
 def refine_config(

@@ -322,6 +322,17 @@ def identify_table(summary: dict[str, Any]) -> Table:
             if math.isfinite(_num_or_nan(refine.get(key))):  # no held-out blocks: no such rows
                 table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
         table.add_row("refinement", escape(f"{verdict}, {refine['nfev']} evaluations"), *pad)
+        if refine.get("candidates"):  # several ridge weights: each one's free-run error
+            tried = "; ".join(
+                f"{c['prior']:g}: {_fmt(_num_or_nan(c['full_rms_simulation_error']))}"
+                + ("" if c["accepted"] else " (rejected)")
+                for c in refine["candidates"]
+            )
+            kept = f"{refine['prior']:g}" if refine["accepted"] else "none"
+            label = f"refinement ridge prior: kept {kept}, estimation free-run RMS [{q}] per weight"
+            table.add_row(escape(label), escape(tried), *pad)
+        elif refine.get("prior"):
+            table.add_row("refinement ridge prior", _fmt(refine["prior"]), *pad)
     return table
 
 

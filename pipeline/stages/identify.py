@@ -156,6 +156,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "holdout_windows": res.holdout_windows,
             "nfev": res.nfev,
             "message": res.message,
+            "prior": res.prior,
+            **({"candidates": list(res.candidates)} if res.candidates else {}),
         }
         timings["refine"] = res.seconds
     model_error = model_error_table(cfg.backbone, cfg.effective_mass) if cfg.model_error else None
