@@ -190,9 +190,11 @@ def test_the_gains_are_accurate_near_both_wells_and_the_shipped_bands_do_not_vou
 @pytest.mark.slow
 def test_the_shipped_refinement_passes_its_guard_and_lowers_the_unseen_error(tmp_path):
     """The reduced paper experiment's simulation-error finish is kept (its held-out windows and
-    the free run over the whole estimation record both improve), and the refined model
-    free-runs the unseen record better than the least-squares model validated beside it
-    (measured 0.29 -> 0.12 % NRMSE(q))."""
+    the free run over the whole estimation record both improve), of the ridge weights tried the
+    accepted one with the lowest estimation free-run error, and the refined model free-runs the
+    unseen record better than the least-squares model validated beside it (measured 0.29 ->
+    0.22 % NRMSE(q) with prior 30 kept, whose estimation free run is 2 % better than prior 0's;
+    0.12 % with prior 0 alone)."""
     import json
 
     from conftest import invoke_cli
@@ -204,5 +206,9 @@ def test_the_shipped_refinement_passes_its_guard_and_lowers_the_unseen_error(tmp
     assert refine["accepted"], refine["message"]
     assert refine["holdout_rms_simulation_error"] < refine["holdout_rms_equation_error"]
     assert refine["full_rms_simulation_error"] <= refine["full_rms_equation_error"]
+    accepted = [c for c in refine["candidates"] if c["accepted"]]
+    best = min(accepted, key=lambda c: c["full_rms_simulation_error"])
+    assert refine["prior"] == best["prior"]
+    assert refine["full_rms_simulation_error"] == best["full_rms_simulation_error"]
     nrmse = pd.read_parquet(tmp_path / "validate/nrmse.parquet").set_index(["dataset", "model"])
-    assert nrmse.nrmse_q["validation", "rbf"] < 0.6 * nrmse.nrmse_q["validation", "rbf-ls"]
+    assert nrmse.nrmse_q["validation", "rbf"] < 0.85 * nrmse.nrmse_q["validation", "rbf-ls"]
