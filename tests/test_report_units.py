@@ -173,3 +173,9 @@ def test_the_refinement_row_names_why_it_was_rejected_and_shows_the_held_out_win
     text = _render(identify_table({**summary, "refine": several}))
     assert "refinement ridge prior: kept 30, estimation free-run RMS [m] per weight" in text
     assert "0: 0.0044 (rejected); 30: 0.00012" in text
+    # a weight never run (records shorter than one window) is not called diverged
+    unrun = {"prior": 0.0, "accepted": False, "message": "records shorter than one window",
+             "full_rms_simulation_error": float("nan"), "nfev": 0}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": {**several, "candidates": [
+        unrun, {**unrun, "prior": 30.0}]}}))  # fmt: skip
+    assert "0: - (rejected); 30: - (rejected)" in text and "diverged" not in text

@@ -81,8 +81,8 @@ class RefineResult:
         The ridge weight of this refinement (with several, the one chosen).
     candidates : tuple of dict
         With several ridge weights, per weight ``prior``, ``accepted``,
-        ``full_rms_simulation_error`` and ``holdout_rms_simulation_error`` [unit of q] and
-        ``message``; else empty.
+        ``full_rms_simulation_error`` and ``holdout_rms_simulation_error`` [unit of q],
+        ``nfev`` (0: not run) and ``message``; else empty.
     """
 
     model: RBFModel
@@ -274,15 +274,13 @@ def refine_model(
     if len(runs) == 1:
         return runs[0]
 
-    def score(run: RefineResult) -> float:
-        value = run.full_rms_refined
-        return float(value) if np.isfinite(value) else np.inf
-
     kept = [r for r in runs if r.accepted] or runs
-    best = min(kept, key=score)  # min keeps the first of equal scores: the order given
+    # NaN (diverged, or not run) last; min keeps the first of equal scores: the order given
+    best = min(kept, key=lambda r: np.nan_to_num(r.full_rms_refined, nan=np.inf))
     candidates = tuple(
         {"prior": r.prior, "accepted": r.accepted, "full_rms_simulation_error": r.full_rms_refined,
-         "holdout_rms_simulation_error": r.holdout_rms_refined, "message": r.message}
+         "holdout_rms_simulation_error": r.holdout_rms_refined, "nfev": r.nfev,
+         "message": r.message}
         for r in runs
     )  # fmt: skip
     return replace(best, candidates=candidates, seconds=sum(r.seconds for r in runs))

@@ -324,7 +324,9 @@ def identify_table(summary: dict[str, Any]) -> Table:
         table.add_row("refinement", escape(f"{verdict}, {refine['nfev']} evaluations"), *pad)
         if refine.get("candidates"):  # several ridge weights: each one's free-run error
             tried = "; ".join(
-                f"{c['prior']:g}: {_fmt(_num_or_nan(c['full_rms_simulation_error']))}"
+                f"{c['prior']:g}: "
+                # NaN is a diverged free run, unless the weight was never run (nfev 0)
+                + (_fmt(_num_or_nan(c["full_rms_simulation_error"])) if c.get("nfev", 1) else "-")
                 + ("" if c["accepted"] else " (rejected)")
                 for c in refine["candidates"]
             )
