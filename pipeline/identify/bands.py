@@ -87,7 +87,7 @@ from debist.identify.design import at_level
 from debist.identify.excitation import input_active, quasi_static
 from debist.identify.stability import _small_signal
 from debist.model.basis import RBFBasis
-from debist.model.terms import PhysicsPrior, term_table
+from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import input_map
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -371,12 +371,16 @@ def curve_maps(
     input_map_kind: str,
     coulomb_velocity: float,
     prior: PhysicsPrior | None = None,
+    level: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Linear maps from the regression parameters to the characteristic curves.
 
     Built from the term library (:func:`debist.model.terms.term_table`): the restoring
     force is the force side at rest (``z = 0``, ``h(v) = 0``), the damping the terms linear
-    in ``z`` at ``z = 1``, and ``g_j`` the input terms of input ``j`` at ``h(v_j) = 1``.
+    in ``z`` at ``z = 1``, and ``g_j`` the gain terms of input ``j`` at ``h(v_j) = 1`` (those
+    linear in ``h(v_j)``: a term in ``h(v_j)^2`` is not part of the small-signal gain). With
+    ``level`` the static force at that held input level too, the force side at rest minus every
+    input term.
 
     Parameters
     ----------
@@ -395,12 +399,15 @@ def curve_maps(
         v_c [unit of q / s].
     prior : PhysicsPrior, optional
         The analytical curves of ``physics_*`` terms.
+    level : ndarray, shape (n_inputs,), optional
+        Mapped inputs h(v_i) of a held level [V^2 or V].
 
     Returns
     -------
     dict of str to ndarray, shape (n, len(names))
         ``restoring`` (curve = map @ theta: ``c(q) q + F_0`` [N]), ``d`` [N s/m] and
-        ``g1`` .. ``gN`` [N/V^2 or N/V].
+        ``g1`` .. ``gN`` [N/V^2 or N/V]; with ``level`` also ``F``, the static force at that
+        level [N] (:meth:`debist.model.rbf.RBFModel.static_force`).
 
     References
     ----------
@@ -429,6 +436,10 @@ def curve_maps(
         own = (f"g{j + 1}[", f"input_gain{j + 1}", f"physics_gain{j + 1}")
         is_g = np.array([t.startswith(own) for t in terms], dtype=bool)
         maps[f"g{j + 1}"] = full(table.columns(q, np.zeros(n), h), is_g)
+    if level is not None:
+        sign = -np.array([term_sign(t) for t in terms])  # force side minus the input terms
+        held = np.broadcast_to(np.asarray(level, dtype=float), (n, n_inputs))
+        maps["F"] = full(table.columns(q, np.zeros(n), held) * sign, np.ones(len(terms), bool))
     return maps
 
 
@@ -915,19 +926,16 @@ def static_frame(
     Masoud & Maas 2025, Eq. 37, Fig. 4.
     """
     grid = np.linspace(model.q_range[0], model.q_range[1], n)
-    cur = model.curves(grid)
-    restoring = cur["cq"] + float(model.backbone.get("F_0", 0.0))
-    maps = curve_maps(
-        diag.columns, grid, model.basis, model.n_inputs, model.input_map,
-        model.coulomb_velocity, model.prior,
-    )  # fmt: skip
     q = np.concatenate([r.q for r in records])
     bound = {"F": friction_bound(model)}
     frames, intervals = [], []
     for k, level in enumerate(levels):
-        h = input_map(np.asarray(level, dtype=float)[None, :], model.input_map)[0]
-        point = restoring - cur["g"] @ h
-        linear = maps["restoring"] - sum(h[j] * maps[f"g{j + 1}"] for j in range(h.size))
+        h = input_map(np.asarray(level, dtype=float), model.input_map)
+        point = model.static_force(grid, level)
+        linear = curve_maps(
+            diag.columns, grid, model.basis, model.n_inputs, model.input_map,
+            model.coulomb_velocity, model.prior, level=h,
+        )["F"]  # fmt: skip
         # one-sided: at a held level the beam rests at one position, a cluster of samples
         # narrower than the RBF width, and F is marked within that width of it
         support = support_weights(grid, q, model.basis.sigma, at_level(records, level))
@@ -998,12 +1006,11 @@ def stiffness_bands(
     for i in np.flatnonzero(wells) if diag.theta_boot is not None else ():
         row = out.iloc[i]
         q = float(row["q"])
-        maps = curve_maps(
+        h = input_map(row[inputs].to_numpy(float), model.input_map)
+        force = curve_maps(
             diag.columns, np.array([q - step, q + step]), model.basis, model.n_inputs,
-            model.input_map, model.coulomb_velocity, model.prior,
-        )  # fmt: skip
-        h = input_map(row[inputs].to_numpy(float)[None, :], model.input_map)[0]
-        force = maps["restoring"] - sum(h[j] * maps[f"g{j + 1}"] for j in range(h.size))
+            model.input_map, model.coulomb_velocity, model.prior, level=h,
+        )["F"]  # fmt: skip
         k_map = (force[1] - force[0]) / (2.0 * step)
         dev = (diag.theta_boot - diag.theta) @ k_map
         k = float(row["k"])

@@ -49,7 +49,8 @@ class IdentifyConfig(SectionConfig):
     backbone : tuple of str
         Physical backbone terms identified in the same least squares: any of
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
-        "input_gain", and with a ``[physics]`` section the analytical model's curves
+        "input_gain", "input_quadratic" (g_h,i h(v_i)^2, an input force not separable as
+        g_i(q) h(v_i)), and with a ``[physics]`` section the analytical model's curves
         "physics_spring", "physics_damping", "physics_gain" (scaled; see
         :class:`debist.model.terms.PhysicsPrior`). With "clip" evaluation the
         model outside the estimation range is the backbone plus the RBF curves held at

@@ -649,6 +649,8 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         m_q = float(cfg.m_q)
         g_0 = np.array([value.get(f"input_gain{j + 1}", 0.0) for j in range(n_in)])
     backbone["g_0"] = g_0
+    if "input_quadratic" in cfg.backbone:
+        backbone["g_h"] = np.array([value[f"input_quadratic{j + 1}"] for j in range(n_in)])
     uses_prior = bool(set(PHYSICS_TERMS) & set(cfg.backbone))
     if uses_prior:
         backbone["s_g"] = np.array([value.get(f"physics_gain{j + 1}", 0.0) for j in range(n_in)])

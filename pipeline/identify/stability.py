@@ -55,7 +55,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from debist.errors import DebistError
 from debist.model.rbf import RBFModel
-from debist.model.termtable import input_map
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -223,13 +222,11 @@ def _levels(levels: Sequence[Sequence[float]], n_inputs: int) -> list[tuple[floa
 
 
 def _force(model: RBFModel, v: Sequence[float]) -> Callable[[ArrayLike], NDArray[np.float64]]:
-    """``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)`` [N] as a vectorised function of ``q``."""
-    h = input_map(np.asarray(v, dtype=float), model.input_map)
-    F_0 = float(model.backbone.get("F_0", 0.0))
+    """:meth:`RBFModel.static_force` at ``v`` [N] as a vectorised function of ``q``."""
+    v = np.asarray(v, dtype=float)
 
     def F(q: ArrayLike) -> NDArray[np.float64]:
-        cur = model.curves(np.atleast_1d(np.asarray(q, dtype=float)))
-        return cur["cq"] + F_0 - cur["g"] @ h
+        return model.static_force(q, v)
 
     return F
 
@@ -683,8 +680,9 @@ def switching_voltages(
         e_i = np.zeros(model.n_inputs)
         e_i[i] = 1.0
         span = (grid >= min(q)) & (grid <= max(q)) if len(q) > 1 else np.ones(grid.size, bool)
-        h_max = float(input_map(v_max * e_i, model.input_map)[i])
-        push = float(np.sign(np.mean(model.curves(grid[span])["g"][:, i] * h_max)))
+        on = grid[span]  # the way the input force at v_max pushes: the static force drops
+        drop = model.static_force(on, 0.0 * e_i) - model.static_force(on, v_max * e_i)
+        push = float(np.sign(np.mean(drop)))
 
         def indicator(v, push, q_w, q_s, e_i=e_i):
             F = _force(model, v * e_i)

@@ -15,10 +15,10 @@ from debist.model.friction import (
     slip_states,
 )
 from debist.model.terms import PhysicsPrior, term_sign, term_table
-from debist.model.termtable import TableModel
+from debist.model.termtable import TableModel, input_map
 
 #: Backbone entries stored as vectors (one value per input).
-_VECTORS = ("g_0", "s_g", "s_k")
+_VECTORS = ("g_0", "g_h", "s_g", "s_k")
 
 
 @dataclass(frozen=True)
@@ -60,8 +60,10 @@ class RBFModel:
         RBF weights of g_i(q) [N/V^2 or N/V] (zeros when inactive).
     backbone : dict of str to float or list
         ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c`` [N], ``F_0`` [N],
-        ``g_0`` (list, one per input), and the scales ``s_c``, ``s_d`` [-] and ``s_g``
-        (one per input) of the analytical curves; absent terms are 0.
+        ``g_0`` (list, one per input), ``g_h`` (list, one per input: the force
+        ``g_h,i h(v_i)^2`` of the backbone term ``input_quadratic`` [N/V^4]), and the
+        scales ``s_c``, ``s_d`` [-] and ``s_g`` (one per input) of the analytical curves;
+        absent terms are 0.
     q_range : tuple of float
         Range of q in the estimation data [unit of q].
     prior : PhysicsPrior or None
@@ -194,6 +196,34 @@ class RBFModel:
             g = g + g_p * np.asarray(bb.get("s_g", 0.0))
         return {"c": c, "d": d, "g": g, "cq": c * q, "dC_dq": 2.0 * g}
 
+    def static_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Return the static force at a held input level, zero where the beam is at rest.
+
+        ``F(q; v) = c(q) q + F_0 - sum_i (g_i(q) h(v_i) + g_h,i h(v_i)^2)``: the force-side
+        terms at rest (z = 0, q_dot = 0, creep and slip states relaxed) minus the input terms.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+        v : array_like, shape (n_inputs,)
+            The held inputs [V].
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            F [N, or unit of q / s^2 per unit mass]; its zeros are the equilibria at ``v``.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37 at rest, Fig. 4 (force-displacement curves).
+        """
+        q = np.atleast_1d(np.asarray(q, dtype=float))
+        h = input_map(np.asarray(v, dtype=float).reshape(-1), self.input_map)
+        cur = self.curves(q)
+        g_h = np.asarray(self.backbone.get("g_h", np.zeros(self.n_inputs)), dtype=float)
+        return cur["cq"] + float(self.backbone.get("F_0", 0.0)) - cur["g"] @ h - g_h @ h**2
+
     def accel(
         self,
         q: np.ndarray,
@@ -278,7 +308,8 @@ class RBFModel:
             if sym in bb:
                 names.append(name)
                 values.append(float(bb[sym]))
-        for sym, name in (("g_0", "input_gain"), ("s_g", "physics_gain")):
+        pairs = (("g_0", "input_gain"), ("g_h", "input_quadratic"), ("s_g", "physics_gain"))
+        for sym, name in pairs:
             for j, value in enumerate(np.atleast_1d(bb.get(sym, ()))):
                 if value:
                     names.append(f"{name}{j + 1}")
@@ -533,7 +564,7 @@ class RBFModel:
         g0 = np.asarray(self.backbone.get("g_0", np.zeros(self.n_inputs)), dtype=float)
         scalars = {k: float(v) for k, v in self.backbone.items() if k not in _VECTORS}
         backbone: dict[str, Any] = {"attrs": scalars, "g_0": g0}
-        for key in ("s_g", "s_k"):
+        for key in ("g_h", "s_g", "s_k"):
             if key in self.backbone:
                 backbone[key] = np.asarray(self.backbone[key], dtype=float)
         if self.prior is not None:
@@ -595,7 +626,7 @@ class RBFModel:
         a = m["attrs"]
         backbone: dict[str, Any] = dict(m["backbone"]["attrs"])
         backbone["g_0"] = np.asarray(m["backbone"]["g_0"], dtype=float)
-        for key in ("s_g", "s_k"):
+        for key in ("g_h", "s_g", "s_k"):
             if key in m["backbone"]:
                 backbone[key] = np.asarray(m["backbone"][key], dtype=float)
         prior = m["backbone"].get("prior")

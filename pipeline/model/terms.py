@@ -39,6 +39,7 @@ BACKBONE_TERMS = {
     "coulomb": "F_c tanh(z / v_c)",
     "offset": "F_0",
     "input_gain": "g_0,i h(v_i)",
+    "input_quadratic": "g_h,i h(v_i)^2",
     "physics_spring": "s_c c_phys(q) q",
     "physics_damping": "s_d d_phys(q) z",
     "physics_gain": "s_g,i g_phys,i(q) h(v_i)",
@@ -237,7 +238,7 @@ def column_names(
         ``physics_creep<j>``.
     inputs : list of str
         The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``input_gain<j>``,
-        ``physics_gain<j>``.
+        ``input_quadratic<j>``, ``physics_gain<j>``.
 
     References
     ----------
@@ -260,6 +261,8 @@ def column_names(
         inputs += [f"g{j + 1}[{i}]" for j in range(n_inputs) for i in range(M)]
     if "input_gain" in backbone:
         inputs += [f"input_gain{j + 1}" for j in range(n_inputs)]
+    if "input_quadratic" in backbone:
+        inputs += [f"input_quadratic{j + 1}" for j in range(n_inputs)]
     if "physics_gain" in backbone:
         inputs += [f"physics_gain{j + 1}" for j in range(n_inputs)]
     return force, inputs
@@ -400,6 +403,10 @@ _FORCE_SCALARS = {
 }
 
 
+#: Name prefixes of the input terms G(q, v), right of the balance (weight +theta).
+INPUT_TERMS = ("g", "input_gain", "input_quadratic", "physics_gain")
+
+
 def term_sign(name: str) -> float:
     """Sign of a term's weight in the acceleration: -1 on the force side, +1 for inputs.
 
@@ -411,9 +418,9 @@ def term_sign(name: str) -> float:
     Returns
     -------
     float
-        ``+1.0`` for the input terms (``g``, ``input_gain``, ``physics_gain``), else ``-1.0``.
+        ``+1.0`` for the input terms (:data:`INPUT_TERMS`), else ``-1.0``.
     """
-    return 1.0 if name.startswith(("g", "input_gain", "physics_gain")) else -1.0
+    return 1.0 if name.startswith(INPUT_TERMS) else -1.0
 
 
 def term_table(
@@ -438,7 +445,9 @@ def term_table(
         Column names as :func:`force_columns` and :func:`input_columns` give them:
         ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), the backbone
         names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
-        tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``physics_spring``
+        tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``input_quadratic<j>``
+        (h(v_j)^2: the input force's departure from the separable g_j(q) h(v_j) of Eq. 37,
+        the full model's DE pull bending the beam off the v = 0 path, Fig. 4), ``physics_spring``
         (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
         ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
         ``physics_creep<j>`` (k_phys,j(q) q_eps,j with the creep strain q_eps,j' =
@@ -535,6 +544,9 @@ def term_table(
             build.term(name, build.one(), qpow=qpow, skind=skind, spow=int(s == "z"))
         elif name.startswith("input_gain"):
             build.term(name, build.one(), hpow=h(int(name[len("input_gain") :]) - 1))
+        elif name.startswith("input_quadratic"):
+            j = int(name[len("input_quadratic") :]) - 1
+            build.term(name, build.one(), hpow=[2 * p for p in h(j)])
         elif name == "physics_spring":
             build.term(name, tabulated("c", _prior(prior).c), qpow=1)
         elif name == "physics_damping":
