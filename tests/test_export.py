@@ -81,6 +81,11 @@ def with_inertia(model, theta=(2.0, 900.0)):
     return replace(model, theta_inertia=np.array(theta))
 
 
+def with_quadratic(model, g_h=(-6e-15, 5e-15)):
+    """``model`` with the input force g_h,i h(v_i)^2 (backbone ``input_quadratic``)."""
+    return replace(model, backbone={**model.backbone, "g_h": np.array(g_h)})
+
+
 MODELS = {
     "lag+prior": lambda: rbf_model(),
     "T_z=0": lambda: rbf_model(T_z=0.0, prior=False),
@@ -90,6 +95,7 @@ MODELS = {
     "creep+slip+inertia": lambda: with_inertia(with_slip(example_rbf_model(creep_rate=3.7))),
     "T_z=0+inertia": lambda: with_inertia(rbf_model(T_z=0.0, prior=False)),
     "physics_creep+slip": lambda: with_physics_creep(with_slip(example_rbf_model())),
+    "input_quadratic": lambda: with_quadratic(rbf_model()),
 }
 
 
