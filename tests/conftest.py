@@ -312,6 +312,14 @@ def truth_model(rng):
     )
 
 
+def random_states(seed: int, n: int = 40):
+    """Seeded states and inputs inside the truth's range: q [m], q_dot [m/s], v (n, 2) [V]."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-0.012, 0.012, n)
+    q_dot = rng.uniform(-0.3, 0.3, n)
+    return q, q_dot, rng.uniform(0.0, 2500.0, (n, 2))
+
+
 def inside_class_record(truth, t):
     """Noise-free data of a model inside the class (solve_ivp DOP853, exact q'')."""
 

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import INSIDE_CLASS, curve_error, excitation, truth_model
+from conftest import INSIDE_CLASS, curve_error, excitation, random_states, truth_model
 from scipy.integrate import solve_ivp
 
 from debist.identify.config import IdentifyConfig
@@ -31,10 +31,7 @@ def test_the_acceleration_is_the_lagrangian_balance_solved_for_q_ddot():
     """q'' = (G - F - 1/2 m'(q) q_dot^2) / m(q), with F, G from the constant-mass model."""
     truth = truth_model(np.random.default_rng(2))
     model = _with_inertia(truth)
-    rng = np.random.default_rng(3)
-    q = rng.uniform(-0.012, 0.012, 40)
-    q_dot = rng.uniform(-0.3, 0.3, 40)
-    v = rng.uniform(0.0, 2500.0, (40, 2))
+    q, q_dot, v = random_states(3)
     balance = truth.accel(q, q_dot, v) * truth.m_q  # G - F at z = q_dot (T_z = 0)
     m = 1.0 + MU[0] * q + MU[1] * q**2
     dm = MU[0] + 2.0 * MU[1] * q

@@ -13,7 +13,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import INSIDE_CLASS, curve_error, excitation, inside_class_record, truth_model
+from conftest import (
+    INSIDE_CLASS,
+    curve_error,
+    excitation,
+    inside_class_record,
+    random_states,
+    truth_model,
+)
 from scipy.optimize import brentq
 
 from debist.identify.bands import curve_maps
@@ -42,10 +49,7 @@ def quadratic():
 def test_the_acceleration_adds_g_h_h_squared_to_the_separable_balance():
     truth = truth_model(np.random.default_rng(2))
     model = _with_quadratic(truth)
-    rng = np.random.default_rng(3)
-    q = rng.uniform(-0.012, 0.012, 40)
-    q_dot = rng.uniform(-0.3, 0.3, 40)
-    v = rng.uniform(0.0, 2500.0, (40, 2))
+    q, q_dot, v = random_states(3)
     want = truth.accel(q, q_dot, v) + (v**4 @ G_H) / truth.m_q
     np.testing.assert_allclose(model.accel(q, q_dot, v), want, rtol=1e-12, atol=1e-12)
     assert "input_quadratic1" in model.parameters()[0]
