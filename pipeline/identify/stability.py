@@ -224,11 +224,7 @@ def _levels(levels: Sequence[Sequence[float]], n_inputs: int) -> list[tuple[floa
 def _force(model: RBFModel, v: Sequence[float]) -> Callable[[ArrayLike], NDArray[np.float64]]:
     """:meth:`RBFModel.static_force` at ``v`` [N] as a vectorised function of ``q``."""
     v = np.asarray(v, dtype=float)
-
-    def F(q: ArrayLike) -> NDArray[np.float64]:
-        return model.static_force(q, v)
-
-    return F
+    return lambda q: model.static_force(q, v)
 
 
 def _search_range(model: RBFModel, q_range) -> tuple[float, float]:

@@ -100,7 +100,7 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         stiffness=unit("F/q"),
         damping=unit("F*s/q"),
         g_0=[unit("F/h", v) for v in inputs],
-        g_h=[pretty_unit(unit("F/h", v) + f"/({pretty_unit(v)}){power}") for v in inputs],
+        g_h=[unit("F/h**2", v) for v in inputs],
         s_g=["1"] * n_inputs,
         s_k=["1"] * n_inputs,
     )
