@@ -193,7 +193,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "bootstrap": {"replicates": cfg.bootstrap, "block": diag.block},
         "bands": {
             "label": band_label(
-                cfg.model_error, "physics_creep" in cfg.backbone, cfg.effective_mass
+                cfg.model_error,
+                "physics_creep" in cfg.backbone,
+                cfg.effective_mass,
+                "input_quadratic" in cfg.backbone,
             ),
             "stiffness_label": stiffness_label(cfg.model_error, cfg.effective_mass),
             "model_error": model_error or {},
