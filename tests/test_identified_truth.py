@@ -37,13 +37,6 @@ ACTIVE = 0.1  # v_i^2 above this fraction of its block maximum: v_i applied
 VISITED = (1.0, 99.0)  # [%] percentiles of the dwell positions: the interval visited
 
 
-def _zeros(q, f):
-    """Zeros of a tabulated curve by linear interpolation, with the sign of the slope."""
-    i = np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)
-    roots = q[i] - f[i] * (q[i + 1] - q[i]) / (f[i + 1] - f[i])
-    return roots, np.sign(f[i + 1] - f[i])
-
-
 @pytest.fixture(scope="module")
 def staircase_out(tmp_path_factory):
     """The output directory of one run of the staircase workflow."""
@@ -81,9 +74,9 @@ def _curves_and_truth(out: Path):
     import tomllib
 
     from debist.engine import artifacts
-    from debist.identify.excitation import quasi_static
     from debist.rig.experiment import RigConfig
     from debist.rig.profiles import make_profile
+    from debist.rig.visited import excitation_blocks, rest_points, visited_intervals
 
     curves = pd.read_parquet(out / "identify/curves.parquet")
     rig_truth = artifacts.read_h5(out / "rig/identification_truth.h5")
@@ -92,9 +85,8 @@ def _curves_and_truth(out: Path):
     q = curves.q.to_numpy()
     true = {name: np.interp(q, truth["q"], truth[key]) for name, key in CURVES.items()}
 
-    roots, slope = _zeros(truth["q"], truth["f"])
-    wells = roots[(slope > 0) & (roots > q[0]) & (roots < q[-1])]
-    barrier = roots[slope < 0][np.argmin(np.abs(roots[slope < 0]))]
+    wells, barrier = rest_points(truth["q"], truth["f"])
+    wells = wells[(wells > q[0]) & (wells < q[-1])]
     assert wells.size == 2 and wells[0] < barrier < wells[1]
 
     # the profile's sub-threshold blocks, on the log's time grid
@@ -103,21 +95,15 @@ def _curves_and_truth(out: Path):
     exp = rig.experiments["identification"]
     profile = make_profile(exp.profile, **exp.profile_kwargs())
     t, q_log = log.t.to_numpy(), log.q.to_numpy()
-    block = np.zeros(t.size, dtype=bool)
-    for label, start, stop in profile.segments:
-        if label != "rest" and not label.startswith("pulse"):
-            block |= (t >= start - 1e-9) & (t < stop - 1e-9)
-    dwell = quasi_static(rig_truth["states"]["x"][:, 1])  # the true q_dot, on the log's grid
-    assert dwell.size == t.size
+    block = excitation_blocks(profile.segments, t)
+    q_dot = rig_truth["states"]["q_dot"]  # the true q_dot, on the log's grid
+    assert q_dot.size == t.size
     required = {"restoring": [(w - HALF_WIDTH, w + HALF_WIDTH) for w in wells]}
     for i in (1, 2):
         h = log[f"v{i}"].to_numpy() ** 2
-        applied = block & (h >= ACTIVE * h[block].max()) & dwell
-        required[f"g{i}"] = []
-        for w in wells:
-            near = applied & (np.sign(q_log - barrier) == np.sign(w - barrier))
-            if near.sum() >= 20:
-                required[f"g{i}"].append(tuple(np.percentile(q_log[near], VISITED)))
+        required[f"g{i}"] = visited_intervals(
+            q_log, h, block, q_dot, wells, barrier, active=ACTIVE, percentiles=VISITED
+        )
     return curves, true, required
 
 
