@@ -19,7 +19,9 @@ of the separable form of Eq. 37 to 0.3 % up to 1 kV, the sub-threshold excitatio
 identifies g_i, and its 3 kV secant is within 5 % of them at the wells; there also the static
 force at each held input level, ``identify/static.parquet``, is compared with the full model's
 force-displacement curve at that level, Fig. 4), and the tangent stiffness k* at each well
-(:data:`debist.identify.bands.STIFFNESS_ERROR`). The unseen
+(:data:`debist.identify.bands.STIFFNESS_ERROR`). Each g_i is also scored over the q
+interval its sub-threshold excitation visits near each well (:mod:`debist.rig.visited`),
+marked or not: how much of it is marked, and the error there. The unseen
 free-run NRMSE(q) of every member's ``rbf`` row (and ``narx`` where present) is listed too.
 
 Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
@@ -84,6 +86,48 @@ def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
     if plant == "full":
         rows += _static_rows(wf, run)
     return rows + _stiffness_rows(run, truth)
+
+
+def _visited_rows(wf: Path, run: Path) -> list[dict]:
+    """g_i over the q interval its sub-threshold excitation visits near each well.
+
+    The intervals of :func:`debist.rig.visited.visited_intervals` (the identification log's
+    dwell positions where ``v_i^2`` is at least 10 % of its excitation-block maximum, 1st to
+    99th percentile, per well): one row per curve and well with the grid points inside, how
+    many are marked, and the largest and median ``|identified - true|`` over all of them as a
+    fraction of the true curve's range (marked or not: what marking there would show).
+    """
+    from debist.engine.fileformats import read_h5
+    from debist.rig.experiment import RigConfig
+    from debist.rig.profiles import make_profile
+    from debist.rig.visited import excitation_blocks, rest_points, visited_intervals
+
+    raw = tomllib.loads(wf.read_text())
+    exp = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).experiments["identification"]
+    segments = make_profile(exp.profile, **exp.profile_kwargs()).segments
+    rig = read_h5(run / "rig" / "identification_truth.h5")
+    truth = rig["curves"]
+    log = pd.read_parquet(run / "ingest" / "identification.parquet")
+    curves = pd.read_parquet(run / "identify" / "curves.parquet")
+    q = curves.q.to_numpy()
+    wells, barrier = rest_points(truth["q"], truth["f"])
+    block = excitation_blocks(segments, log.t.to_numpy())
+    rows = []
+    for name in ("g1", "g2"):
+        true = np.interp(q, truth["q"], truth[name])
+        err = np.abs(curves[name].to_numpy() - true) / np.ptp(true)
+        marked = curves[f"{name}_identified"].to_numpy()
+        h = log[f"v{name[1:]}"].to_numpy() ** 2
+        for lo, hi in visited_intervals(log.q.to_numpy(), h, block, rig["states"]["q_dot"],
+                                        wells, barrier):  # fmt: skip
+            inside = (q >= lo) & (q <= hi)
+            rows.append({
+                "curve": name, "q_lo": lo, "q_hi": hi, "points": int(inside.sum()),
+                "marked": int((inside & marked).sum()),
+                "max_error": float(err[inside].max()) if inside.any() else np.nan,
+                "median_error": float(np.median(err[inside])) if inside.any() else np.nan,
+            })  # fmt: skip
+    return rows
 
 
 def _stiffness_rows(run: Path, truth: dict) -> list[dict]:
@@ -238,12 +282,13 @@ def calibrate(
     members = _member_outputs(fleet)
     _set_identify(members, model_error, backbone, settings)
     _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
-    rows, nrmse = [], []
+    rows, nrmse, visited = [], [], []
     for wf, run in members:
         if not (run / "identify" / "curves.parquet").exists():
             nrmse.append({"member": wf.stem, "model": "rbf", "nrmse_q": np.nan, "failed": True})
             continue
         rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant)]
+        visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run)]
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
         for _, r in table[table.role == "validation"].iterrows():
             nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": float(r.nrmse_q)})
@@ -266,6 +311,7 @@ def calibrate(
         "curves": summary.reset_index().to_dict(orient="records"),
         "lacking": pooled,
         "members": scores.to_dict(orient="records"),
+        "visited": visited,
         "nrmse": nrmse,
     }
 
@@ -282,6 +328,7 @@ def _markdown(result: dict) -> str:
             f"| {c['curve']} | {c['marked']} | {100 * c['max_error']:.1f} / "
             f"{100 * c['median_error']:.1f} % | {100 * c['coverage']:.0f} % |"
         )
+    lines += _visited_markdown(result.get("visited", []))
     nr = pd.DataFrame(result["nrmse"])
     if not nr.empty:
         lines += ["", "| model | unseen NRMSE(q): median | max | members |", "|---|---|---|---|"]
@@ -291,6 +338,22 @@ def _markdown(result: dict) -> str:
                 f"| {g.nrmse_q.notna().sum()} |"
             )
     return "\n".join(lines)
+
+
+def _visited_markdown(visited: list[dict]) -> list[str]:
+    """Lines of the table of g_i over the intervals its sub-threshold excitation visits."""
+    if not visited:
+        return []
+    lines = ["", "| curve | visited well intervals | fully marked | points marked "
+             "| max / median error over the visited points (marked or not) |",
+             "|---|---|---|---|---|"]  # fmt: skip
+    for name, g in pd.DataFrame(visited).groupby("curve"):
+        full = int((g.marked == g.points).sum())
+        lines.append(
+            f"| {name} | {len(g)} | {full} | {g.marked.sum()} of {g.points.sum()} "
+            f"| {100 * g.max_error.max():.1f} / {100 * g.median_error.median():.1f} % |"
+        )
+    return lines
 
 
 #: Curves of the calibration -> key of :data:`debist.identify.bands.MODEL_ERROR`.
