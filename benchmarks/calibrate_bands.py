@@ -70,11 +70,16 @@ def _member_outputs(folder: Path) -> list[tuple[Path, Path]]:
     return out
 
 
-def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
+def _member_data(run: Path) -> tuple[pd.DataFrame, dict]:
+    """A member's identified curves and its rig truth, read once for every score."""
     from debist.engine.fileformats import read_h5
 
     curves = pd.read_parquet(run / "identify" / "curves.parquet")
-    truth = read_h5(run / "rig" / "identification_truth.h5")["curves"]
+    return curves, read_h5(run / "rig" / "identification_truth.h5")
+
+
+def _curve_rows(wf: Path, run: Path, plant: str, curves: pd.DataFrame, rig: dict) -> list[dict]:
+    truth = rig["curves"]
     q = curves.q.to_numpy()
     rows = []
     names = ["restoring", "d", "g1", "g2"]
@@ -88,7 +93,7 @@ def _curve_rows(wf: Path, run: Path, plant: str) -> list[dict]:
     return rows + _stiffness_rows(run, truth)
 
 
-def _visited_rows(wf: Path, run: Path) -> list[dict]:
+def _visited_rows(wf: Path, run: Path, curves: pd.DataFrame, rig: dict) -> list[dict]:
     """g_i over the q interval its sub-threshold excitation visits near each well.
 
     The intervals of :func:`debist.rig.visited.visited_intervals` (the identification log's
@@ -97,7 +102,6 @@ def _visited_rows(wf: Path, run: Path) -> list[dict]:
     many are marked, and the largest and median ``|identified - true|`` over all of them as a
     fraction of the true curve's range (marked or not: what marking there would show).
     """
-    from debist.engine.fileformats import read_h5
     from debist.rig.experiment import RigConfig
     from debist.rig.profiles import make_profile
     from debist.rig.visited import excitation_blocks, rest_points, visited_intervals
@@ -105,10 +109,8 @@ def _visited_rows(wf: Path, run: Path) -> list[dict]:
     raw = tomllib.loads(wf.read_text())
     exp = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).experiments["identification"]
     segments = make_profile(exp.profile, **exp.profile_kwargs()).segments
-    rig = read_h5(run / "rig" / "identification_truth.h5")
     truth = rig["curves"]
     log = pd.read_parquet(run / "ingest" / "identification.parquet")
-    curves = pd.read_parquet(run / "identify" / "curves.parquet")
     q = curves.q.to_numpy()
     wells, barrier = rest_points(truth["q"], truth["f"])
     block = excitation_blocks(segments, log.t.to_numpy())
@@ -287,8 +289,9 @@ def calibrate(
         if not (run / "identify" / "curves.parquet").exists():
             nrmse.append({"member": wf.stem, "model": "rbf", "nrmse_q": np.nan, "failed": True})
             continue
-        rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant)]
-        visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run)]
+        curves, rig = _member_data(run)
+        rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant, curves, rig)]
+        visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run, curves, rig)]
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
         for _, r in table[table.role == "validation"].iterrows():
             nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": float(r.nrmse_q)})
