@@ -384,6 +384,8 @@ def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
     assert band_label(False, creep=True) == band_label(False)
     assert "at 81-100 % there" in band_label(True, creep=True, quadratic=True)
     assert band_label(False, quadratic=True) == band_label(False)
+    assert "at 99-100 % there" in band_label(True, creep=True, quadratic_curve=True)
+    assert "at 81-100 % there" in band_label(True, quadratic=True, quadratic_curve=True)
 
 
 def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bistable_record):

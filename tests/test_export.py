@@ -86,6 +86,12 @@ def with_quadratic(model, g_h=(-6e-15, 5e-15)):
     return replace(model, backbone={**model.backbone, "g_h": np.array(g_h)})
 
 
+def with_quadratic_curve(model):
+    """``model`` with the input force g_h,i(q) h(v_i)^2 (RBF term ``gh``), larger near q = 0."""
+    shape = 3e-15 + 6e-15 * np.exp(-((model.basis.xi / 0.01) ** 2))
+    return replace(model, theta_gh=np.stack([-shape, shape]))
+
+
 MODELS = {
     "lag+prior": lambda: rbf_model(),
     "T_z=0": lambda: rbf_model(T_z=0.0, prior=False),
@@ -96,6 +102,7 @@ MODELS = {
     "T_z=0+inertia": lambda: with_inertia(rbf_model(T_z=0.0, prior=False)),
     "physics_creep+slip": lambda: with_physics_creep(with_slip(example_rbf_model())),
     "input_quadratic": lambda: with_quadratic(rbf_model()),
+    "gh": lambda: with_quadratic_curve(rbf_model()),
 }
 
 

@@ -45,7 +45,9 @@ class IdentifyConfig(SectionConfig):
     sigma_n : float
         Normalised width, sigma = sigma_n * delta_xi (paper: 0.5).
     rbf : tuple of str
-        RBF-weighted curves, a subset of ("c", "d", "g").
+        RBF-weighted curves, a subset of ("c", "d", "g", "gh"); ``"gh"`` is the input
+        force's second order in h(v_i), ``g_h,i(q) h(v_i)^2`` (not part of the small-signal
+        gain g_i).
     backbone : tuple of str
         Physical backbone terms identified in the same least squares: any of
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",

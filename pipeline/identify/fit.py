@@ -667,6 +667,7 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         theta_c=vec("c"),
         theta_d=vec("d"),
         theta_g=np.stack([vec(f"g{j + 1}") for j in range(n_in)]),
+        theta_gh=(np.stack([vec(f"gh{j + 1}") for j in range(n_in)]) if "gh" in cfg.rbf else None),
         backbone=backbone,
         q_range=(float(q_range[0]), float(q_range[1])),
         prior=_model_prior(cfg) if uses_prior else None,

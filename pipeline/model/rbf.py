@@ -25,20 +25,20 @@ _VECTORS = ("g_0", "g_h", "s_g", "s_k")
 class RBFModel:
     """m_q q'' + d(q) z + c(q) q + F_c tanh(z/v_c) + F_0 = sum_i g_i(q) h(v_i), z' = (q' - z)/T_z.
 
-    The fitted form of Eq. 37 with optional physical backbone: the curves are
-    the RBF sums of Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 +
-    k_3 q^2 + s_c c_phys``, ``d = Phi theta_d + d_v + s_d d_phys``,
-    ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``). With creep (``creep_rate > 0``) the
-    force side has the DEs' creep of Eq. 26 too, ``+ sum_j theta_creep,j w_j`` with the
-    creep states ``w_j' = phi_j(q) q' - lambda w_j`` (lambda = ``creep_rate``); the state is
-    then ``[q, q_dot, z, w_1..w_M]``. With Maxwell-slip elements (``slip_width``) the force
-    side has ``+ sum_e theta_slip,e delta_e``, the stiffnesses of elements whose deflections
-    delta_e follow q until they reach their break-away deflections Delta_e (Al-Bender,
-    Lampaert & Swevers 2005; :func:`debist.model.friction.slip_state_rate`); their states
-    follow ``z`` and the creep states. With a position-dependent inertia (``theta_inertia``)
-    the mass is ``m(q) = m_q + sum_a theta_inertia[a-1] q^a`` and the force side has the
-    Lagrangian ``1/2 m'(q) q_dot^2`` (:meth:`mass`; the curves stay forces, or forces per
-    ``m_q`` when ``m_q = 1``).
+    The fitted form of Eq. 37 with optional physical backbone: the curves are the RBF sums of
+    Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 + k_3 q^2 + s_c c_phys``, ``d = Phi
+    theta_d + d_v + s_d d_phys``, ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``; the input
+    force may have a second order in h(v_i), ``g_h,i(q) h(v_i)^2``, :meth:`quadratic_gain`).
+    With creep (``creep_rate > 0``) the force side has the DEs' creep of Eq. 26 too, ``+ sum_j
+    theta_creep,j w_j`` with the creep states ``w_j' = phi_j(q) q' - lambda w_j`` (lambda =
+    ``creep_rate``); the state is then ``[q, q_dot, z, w_1..w_M]``. With Maxwell-slip elements
+    (``slip_width``) the force side has ``+ sum_e theta_slip,e delta_e``, the stiffnesses of
+    elements whose deflections delta_e follow q until they reach their break-away deflections
+    Delta_e (Al-Bender, Lampaert & Swevers 2005; :func:`debist.model.friction.slip_state_rate`);
+    their states follow ``z`` and the creep states. With a position-dependent inertia
+    (``theta_inertia``) the mass is ``m(q) = m_q + sum_a theta_inertia[a-1] q^a`` and the force
+    side has the Lagrangian ``1/2 m'(q) q_dot^2`` (:meth:`mass`; the curves stay forces, or
+    forces per ``m_q`` when ``m_q = 1``).
 
     Parameters
     ----------
@@ -79,6 +79,9 @@ class RBFModel:
     theta_inertia : ndarray, shape (N,) or None
         Coefficients mu_a of the inertia m(q) = m_q + sum_(a=1..N) mu_a q^a [kg per unit of
         q^a] (None: the constant m_q of Eq. 37).
+    theta_gh : ndarray, shape (n_inputs, M) or None
+        RBF weights of the input force's second order in h(v_i), ``g_h,i(q) h(v_i)^2``
+        [N/V^4 with h = v^2] (the RBF term ``gh``; :meth:`quadratic_gain`); None: none.
 
     Notes
     -----
@@ -107,6 +110,7 @@ class RBFModel:
     slip_width: tuple[float, ...] = ()
     theta_slip: np.ndarray | None = None
     theta_inertia: np.ndarray | None = None
+    theta_gh: np.ndarray | None = None
 
     @property
     def has_inertia(self) -> bool:
@@ -199,7 +203,7 @@ class RBFModel:
     def static_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Return the static force at a held input level, zero where the beam is at rest.
 
-        ``F(q; v) = c(q) q + F_0 - sum_i (g_i(q) h(v_i) + g_h,i h(v_i)^2)``: the force-side
+        ``F(q; v) = c(q) q + F_0 - sum_i (g_i(q) h(v_i) + g_h,i(q) h(v_i)^2)``: the force-side
         terms at rest (z = 0, q_dot = 0, creep and slip states relaxed) minus the input terms.
 
         Parameters
@@ -221,8 +225,40 @@ class RBFModel:
         q = np.atleast_1d(np.asarray(q, dtype=float))
         h = input_map(np.asarray(v, dtype=float).reshape(-1), self.input_map)
         cur = self.curves(q)
+        quad = self.quadratic_gain(q) @ h**2
+        return cur["cq"] + float(self.backbone.get("F_0", 0.0)) - cur["g"] @ h - quad
+
+    def quadratic_gain(self, q: np.ndarray) -> np.ndarray:
+        """Return the input force's second order in h(v_i), ``g_h,i(q)``, at ``q``.
+
+        The input force of the model is ``sum_i (g_i(q) h(v_i) + g_h,i(q) h(v_i)^2)``: Eq. 37's
+        separable ``g_i(q) h(v_i)`` (the small-signal gain, :meth:`curves`) and its next order,
+        ``g_h,i(q) = g_h,i + Phi(q) theta_gh,i`` (the backbone term ``input_quadratic`` and the
+        RBF term ``gh``). On a DE actuator the large-signal force departs from the separable
+        one because the DEs' pull bends the beam off the v = 0 path (the force-displacement
+        curves of Fig. 4 at 3 kV are 72-97 % of ``1/2 dC_i/dq v^2`` between q = 0 and the
+        wells on the paper's prototype), by an amount that depends on q.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+
+        Returns
+        -------
+        ndarray, shape (n, n_inputs)
+            ``g_h,i(q)`` [N/V^4 with h = v^2]; zeros for a model with neither term.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 37 (the separable input force) and Fig. 4.
+        """
+        q = np.atleast_1d(np.asarray(q, dtype=float))
         g_h = np.asarray(self.backbone.get("g_h", np.zeros(self.n_inputs)), dtype=float)
-        return cur["cq"] + float(self.backbone.get("F_0", 0.0)) - cur["g"] @ h - g_h @ h**2
+        out = np.broadcast_to(g_h, (q.size, self.n_inputs)).copy()
+        if self.theta_gh is not None:
+            out += self.basis(q) @ np.asarray(self.theta_gh, dtype=float).T
+        return out
 
     def accel(
         self,
@@ -300,6 +336,9 @@ class RBFModel:
                     values.append(float(mu))
         for j in range(self.n_inputs):
             add(f"g{j + 1}", self.theta_g[j])
+        if self.theta_gh is not None:
+            for j in range(self.n_inputs):
+                add(f"gh{j + 1}", self.theta_gh[j])
         bb = self.backbone
         scalars = {"k_1": "linear_spring", "k_3": "cubic_spring", "d_v": "viscous",
                    "F_c": "coulomb", "F_0": "offset", "s_c": "physics_spring",
@@ -507,6 +546,8 @@ class RBFModel:
             vals += [np.asarray(self.theta_slip, dtype=float)]
         if self.has_inertia:
             vals += [np.asarray(self.theta_inertia, dtype=float)]
+        if self.theta_gh is not None:
+            vals += [np.asarray(self.theta_gh, dtype=float).ravel()]
         vals += [np.atleast_1d(np.asarray(v, dtype=float)) for v in self.backbone.values()]
         # the analytical curves are given, not fitted: only their scales count
         return int(sum(np.count_nonzero(v) for v in vals))
@@ -551,6 +592,7 @@ class RBFModel:
             self, m_q=self.m_q * s, theta_c=times(self.theta_c), theta_d=times(self.theta_d),
             theta_g=times(self.theta_g), backbone=backbone, theta_creep=times(self.theta_creep),
             theta_slip=times(self.theta_slip), theta_inertia=times(self.theta_inertia),
+            theta_gh=times(self.theta_gh),
         )  # fmt: skip
 
     def to_tree(self) -> dict[str, Any]:
@@ -586,6 +628,8 @@ class RBFModel:
                 "attrs": {"equation": "m(q) = m_q + sum_a theta_inertia[a-1] q^a"},
                 "theta_inertia": np.asarray(self.theta_inertia, dtype=float),
             }
+        if self.theta_gh is not None:
+            model["theta_gh"] = np.asarray(self.theta_gh, dtype=float)
         return {
             "attrs": {"model": "rbf", "equation": "Masoud & Maas 2025, Eq. 37-40"},
             "model": {
@@ -655,4 +699,5 @@ class RBFModel:
             slip_width=() if slip is None else tuple(np.asarray(slip["width"], float).tolist()),
             theta_slip=None if slip is None else np.asarray(slip["theta_slip"], float),
             theta_inertia=None if inertia is None else np.asarray(inertia["theta_inertia"], float),
+            theta_gh=np.asarray(m["theta_gh"], float) if "theta_gh" in m else None,
         )

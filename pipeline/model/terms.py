@@ -29,8 +29,9 @@ from debist.model.termtable import (
     TermTableBuilder,
 )
 
-#: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains).
-RBF_TERMS = ("c", "d", "g")
+#: RBF-weighted curves: c(q) (spring), d(q) (friction), g(q) (input gains), and g_h(q) (``gh``:
+#: the input force's second order in h(v), ``g_h,i(q) h(v_i)^2``).
+RBF_TERMS = ("c", "d", "g", "gh")
 #: Backbone force terms: name -> (description, unit of the coefficient per unit of q).
 BACKBONE_TERMS = {
     "linear_spring": "k_1 q",
@@ -237,8 +238,8 @@ def column_names(
         ``offset``, ``physics_spring``, ``physics_damping`` (in the order given), then
         ``physics_creep<j>``.
     inputs : list of str
-        The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``input_gain<j>``,
-        ``input_quadratic<j>``, ``physics_gain<j>``.
+        The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``gh<j>[i]``,
+        ``input_gain<j>``, ``input_quadratic<j>``, ``physics_gain<j>``.
 
     References
     ----------
@@ -259,6 +260,8 @@ def column_names(
     inputs: list[str] = []
     if "g" in rbf:
         inputs += [f"g{j + 1}[{i}]" for j in range(n_inputs) for i in range(M)]
+    if "gh" in rbf:
+        inputs += [f"gh{j + 1}[{i}]" for j in range(n_inputs) for i in range(M)]
     if "input_gain" in backbone:
         inputs += [f"input_gain{j + 1}" for j in range(n_inputs)]
     if "input_quadratic" in backbone:
@@ -443,7 +446,8 @@ def term_table(
     ----------
     names : sequence of str
         Column names as :func:`force_columns` and :func:`input_columns` give them:
-        ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), the backbone
+        ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), ``gh<j>[i]``
+        (Phi_i h(v_j)^2: ``input_quadratic`` as a curve of q), the backbone
         names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
         tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``input_quadratic<j>``
         (h(v_j)^2: the input force's departure from the separable g_j(q) h(v_j) of Eq. 37,
@@ -536,6 +540,8 @@ def term_table(
                 build.inertia(name, k)
             elif rbf.startswith("g") and rbf[1:].isdigit():
                 build.term(name, gauss(k), hpow=h(int(rbf[1:]) - 1))
+            elif rbf.startswith("gh") and rbf[2:].isdigit():
+                build.term(name, gauss(k), hpow=[2 * p for p in h(int(rbf[2:]) - 1)])
             else:
                 raise WorkflowError(f"unknown term {name!r}")
         elif name in _FORCE_SCALARS:

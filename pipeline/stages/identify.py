@@ -197,6 +197,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
                 "physics_creep" in cfg.backbone,
                 cfg.effective_mass,
                 "input_quadratic" in cfg.backbone,
+                "gh" in cfg.rbf,
             ),
             "stiffness_label": stiffness_label(cfg.model_error, cfg.effective_mass),
             "model_error": model_error or {},
