@@ -6,6 +6,7 @@ import atexit
 import os
 import shutil
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -132,7 +133,6 @@ def with_physics_creep(model, s_k=(0.8, 1.3), rate=3.7, k_bar=0.02):
     """``model`` with the DEs' creep of Eq. 26 in the analytical form (backbone
     ``physics_creep``, scales ``s_k``): k_1 = -40 - 2e3 q, k_2 = 40 - 2e3 q [1/m] on the
     model's prior grid (a zero prior on +-40 mm without one), ``k_bar`` [N m], ``rate`` [1/s]."""
-    from dataclasses import replace
 
     from debist.model.terms import PhysicsPrior
 
@@ -353,3 +353,21 @@ INSIDE_CLASS = {
     "max_condition": 1e10,
     "min_support": 0,
 }
+
+
+def with_quadratic(model, g_h=(-6e-15, 5e-15)):
+    """``model`` with the input force g_h,i h(v_i)^2 (backbone ``input_quadratic``): per unit
+    mass [m/s^2 / V^4], at 2.5 kV -0.23 and +0.20 m/s^2, each against its gain's sign."""
+    return replace(model, backbone={**model.backbone, "g_h": np.asarray(g_h, dtype=float)})
+
+
+def quadratic_curve_weights(basis) -> np.ndarray:
+    """Weights theta_gh (2, M) of g_h,i(q) per unit mass [m/s^2 / V^4]: -3e-15 .. -9e-15 for
+    DE 1 and the mirror for DE 2, each against its gain's sign, larger near q = 0."""
+    shape = 3e-15 + 6e-15 * np.exp(-((basis.xi / 0.01) ** 2))
+    return np.stack([-shape, shape])
+
+
+def with_quadratic_curve(model):
+    """``model`` with the input force g_h,i(q) h(v_i)^2 (RBF term ``gh``)."""
+    return replace(model, theta_gh=quadratic_curve_weights(model.basis))

@@ -18,7 +18,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import example_rbf_model, with_physics_creep, write_rig_csv
+from conftest import (
+    example_rbf_model,
+    with_physics_creep,
+    with_quadratic,
+    with_quadratic_curve,
+    write_rig_csv,
+)
 
 from debist.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
@@ -79,17 +85,6 @@ def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
 def with_inertia(model, theta=(2.0, 900.0)):
     """``model`` with the position-dependent mass m(q) = m_q + 2 q + 900 q^2 (inertia terms)."""
     return replace(model, theta_inertia=np.array(theta))
-
-
-def with_quadratic(model, g_h=(-6e-15, 5e-15)):
-    """``model`` with the input force g_h,i h(v_i)^2 (backbone ``input_quadratic``)."""
-    return replace(model, backbone={**model.backbone, "g_h": np.array(g_h)})
-
-
-def with_quadratic_curve(model):
-    """``model`` with the input force g_h,i(q) h(v_i)^2 (RBF term ``gh``), larger near q = 0."""
-    shape = 3e-15 + 6e-15 * np.exp(-((model.basis.xi / 0.01) ** 2))
-    return replace(model, theta_gh=np.stack([-shape, shape]))
 
 
 MODELS = {

@@ -20,6 +20,8 @@ from conftest import (
     inside_class_record,
     random_states,
     truth_model,
+    with_quadratic,
+    with_quadratic_curve,
 )
 from scipy.optimize import brentq
 
@@ -29,13 +31,10 @@ from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
 
-#: g_h,i per unit mass [m/s^2 / V^4]: at 2.5 kV -0.23 and +0.20 m/s^2, about a fifth of the
-#: truth's g_i h(v_i) there, each against its own gain's sign (the force saturates).
+#: g_h,i per unit mass [m/s^2 / V^4] (:func:`conftest.with_quadratic`'s): at 2.5 kV -0.23 and
+#: +0.20 m/s^2, about a fifth of the truth's g_i h(v_i) there, each against its gain's sign.
 G_H = np.array([-6e-15, 5e-15])
-
-
-def _with_quadratic(model: RBFModel, g_h=G_H) -> RBFModel:
-    return replace(model, backbone={**model.backbone, "g_h": np.asarray(g_h, dtype=float)})
+_with_quadratic = with_quadratic
 
 
 @pytest.fixture(scope="module")
@@ -103,12 +102,14 @@ def test_the_model_file_keeps_g_h_and_a_model_without_it_keeps_its_bytes():
     assert "g_h" not in RBFModel.from_tree(truth.to_tree()).backbone
 
 
+@pytest.mark.parametrize("term", [with_quadratic, with_quadratic_curve], ids=["constant", "gh"])
 @pytest.mark.parametrize("T_z", [0.0, 0.02])
-def test_the_compiled_kernel_runs_the_quadratic_term_like_the_numpy_engine(T_z):
-    """The term is h(v)^2 in the term table's input powers: the compiled kernel reads it from
-    the same arrays (to 1e-12 of the NumPy engine), and the term changes the runs."""
+def test_the_compiled_kernel_runs_the_quadratic_term_like_the_numpy_engine(T_z, term):
+    """The term is h(v)^2 in the term table's input powers (one coefficient, or the RBF curve
+    ``gh``): the compiled kernel reads it from the same arrays (to 1e-12 of the NumPy engine),
+    and the term changes the runs."""
     truth = replace(truth_model(np.random.default_rng(2)), T_z=T_z)
-    model = _with_quadratic(truth)
+    model = term(truth)
     assert model.table_model().table.term_hpow.max() == 2
     v = [excitation(np.arange(0.0, 6.0, 0.002))]
     q0, qd0 = np.array([-0.01]), np.zeros(1)

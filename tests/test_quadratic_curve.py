@@ -6,20 +6,20 @@ at 3 kV is 72 % of g_i(q) h(v_i) near q = 0 and 95-100 % in the wells on the pap
 The RBF term ``gh`` writes it as ``g_h,i(q) h(v_i)^2 = Phi(q) theta_gh,i h(v_i)^2``; g_i stays the
 small-signal gain. Checked here against independent computations: the acceleration against the
 balance by hand, the fit against data of a model with known g_h,i(q), the static force and the
-bands' linear map of it, the model file, and the compiled kernel against the NumPy engine.
+bands' linear map of it and the model file (the compiled kernel against the NumPy engine:
+``tests/test_input_quadratic.py``).
 """
-
-from dataclasses import replace
 
 import numpy as np
 import pytest
 from conftest import (
     INSIDE_CLASS,
     curve_error,
-    excitation,
     inside_class_record,
+    quadratic_curve_weights,
     random_states,
     truth_model,
+    with_quadratic_curve,
 )
 
 from debist.errors import WorkflowError
@@ -27,18 +27,9 @@ from debist.identify.bands import curve_maps
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel
-from debist.simulate.freerun import simulate
 
-
-def _theta_gh(basis) -> np.ndarray:
-    """Weights of g_h,i(q) per unit mass [m/s^2 / V^4]: -3e-15 .. -9e-15 for DE 1 and the
-    mirror for DE 2, each against its gain's sign (the force saturates), larger near q = 0."""
-    shape = 3e-15 + 6e-15 * np.exp(-((basis.xi / 0.01) ** 2))
-    return np.stack([-shape, shape])
-
-
-def _with_curve(model: RBFModel) -> RBFModel:
-    return replace(model, theta_gh=_theta_gh(model.basis))
+_theta_gh = quadratic_curve_weights
+_with_curve = with_quadratic_curve
 
 
 @pytest.fixture(scope="module")
@@ -113,20 +104,3 @@ def test_gh_alone_is_not_an_input_term():
     ``physics_gain`` is refused."""
     with pytest.raises(WorkflowError, match="input term"):
         IdentifyConfig.from_dict({**INSIDE_CLASS, "rbf": ["c", "d", "gh"]})
-
-
-@pytest.mark.parametrize("T_z", [0.0, 0.02])
-def test_the_compiled_kernel_runs_g_h_of_q_like_the_numpy_engine(T_z):
-    """The term is a Gaussian basis times h(v)^2 in the term table: the compiled kernel reads it
-    from the same arrays (to 1e-12 of the NumPy engine), and the term changes the runs."""
-    truth = replace(truth_model(np.random.default_rng(2)), T_z=T_z)
-    model = _with_curve(truth)
-    assert model.table_model().table.term_hpow.max() == 2
-    v = [excitation(np.arange(0.0, 6.0, 0.002))]
-    q0, qd0 = np.array([-0.01]), np.zeros(1)
-    ref = simulate(model, v, 0.002, q0, qd0, engine="numpy")[0]
-    new = simulate(model, v, 0.002, q0, qd0, engine="compiled")[0]
-    assert not ref.diverged and np.ptp(ref.q) > 5e-3
-    np.testing.assert_allclose(new.q, ref.q, rtol=0, atol=1e-12 * np.max(np.abs(ref.q)))
-    plain = simulate(truth, v, 0.002, q0, qd0, engine="numpy")[0]
-    assert np.max(np.abs(plain.q - ref.q)) > 1e-3 * np.ptp(ref.q)
