@@ -371,3 +371,20 @@ def quadratic_curve_weights(basis) -> np.ndarray:
 def with_quadratic_curve(model):
     """``model`` with the input force g_h,i(q) h(v_i)^2 (RBF term ``gh``)."""
     return replace(model, theta_gh=quadratic_curve_weights(model.basis))
+
+
+def with_physics_quadratic(model, s_gh=(0.7, 1.3)):
+    """``model`` with the backbone term ``physics_quadratic``: scales ``s_gh`` of a prior whose
+    g_h,i(q) has the shape of :func:`quadratic_curve_weights`' curve (-3e-15 .. -9e-15 per unit
+    mass [m/s^2 / V^4] for DE 1, the mirror for DE 2) on the model's prior grid (a zero prior
+    on +-40 mm without one)."""
+    from debist.model.terms import PhysicsPrior
+
+    prior = model.prior
+    if prior is None:
+        grid = np.linspace(-0.04, 0.04, 401)
+        prior = PhysicsPrior(grid, 0 * grid, 0 * grid, np.zeros((grid.size, 2)))
+    shape = 3e-15 + 6e-15 * np.exp(-((prior.q / 0.01) ** 2))
+    prior = replace(prior, gh=np.stack([-shape, shape], axis=1))
+    backbone = {**model.backbone, "s_gh": np.asarray(s_gh, dtype=float)}
+    return replace(model, prior=prior, backbone=backbone)

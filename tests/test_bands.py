@@ -382,10 +382,11 @@ def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
     assert f"at {MEASURED_COVERAGE_CREEP} there" in band_label(True, creep=True)
     assert f"at {MEASURED_COVERAGE_AS_FITTED} there" in band_label(True, effective_mass=False)
     assert band_label(False, creep=True) == band_label(False)
-    assert "at 81-100 % there" in band_label(True, creep=True, quadratic=True)
-    assert band_label(False, quadratic=True) == band_label(False)
-    assert "at 99-100 % there" in band_label(True, creep=True, quadratic_curve=True)
-    assert "at 81-100 % there" in band_label(True, quadratic=True, quadratic_curve=True)
+    assert "at 81-100 % there" in band_label(True, creep=True, terms=["input_quadratic"])
+    assert band_label(False, terms=["input_quadratic"]) == band_label(False)
+    assert "at 99-100 % there" in band_label(True, creep=True, terms=["c", "gh"])
+    assert "at 81-100 % there" in band_label(True, terms=["gh", "input_quadratic"])
+    assert "at 97-100 % there" in band_label(True, terms=["gh", "physics_quadratic", "offset"])
 
 
 def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bistable_record):

@@ -21,6 +21,7 @@ import pytest
 from conftest import (
     example_rbf_model,
     with_physics_creep,
+    with_physics_quadratic,
     with_quadratic,
     with_quadratic_curve,
     write_rig_csv,
@@ -98,6 +99,7 @@ MODELS = {
     "physics_creep+slip": lambda: with_physics_creep(with_slip(example_rbf_model())),
     "input_quadratic": lambda: with_quadratic(rbf_model()),
     "gh": lambda: with_quadratic_curve(rbf_model()),
+    "physics_quadratic": lambda: with_physics_quadratic(rbf_model(), s_gh=(4.0, 6.0)),
 }
 
 

@@ -75,7 +75,7 @@ _FORCE_SCALARS = (
 )
 _Z_TERMS = ("viscous", "coulomb", "physics_damping")
 #: Backbone terms that add one input column per input.
-_INPUT_VECTORS = ("input_gain", "input_quadratic", "physics_gain")
+_INPUT_VECTORS = ("input_gain", "input_quadratic", "physics_gain", "physics_quadratic")
 
 
 def format_bytes(nbytes: float) -> str:

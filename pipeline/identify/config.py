@@ -53,7 +53,8 @@ class IdentifyConfig(SectionConfig):
         "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
         "input_gain", "input_quadratic" (g_h,i h(v_i)^2, an input force not separable as
         g_i(q) h(v_i)), and with a ``[physics]`` section the analytical model's curves
-        "physics_spring", "physics_damping", "physics_gain" (scaled; see
+        "physics_spring", "physics_damping", "physics_gain", "physics_quadratic" (the full
+        model's large-signal DE force, needs ``input_map = "v2"``) (scaled; see
         :class:`debist.model.terms.PhysicsPrior`). With "clip" evaluation the
         model outside the estimation range is the backbone plus the RBF curves held at
         their edge values.
@@ -283,6 +284,12 @@ class IdentifyConfig(SectionConfig):
                 raise ConfigValueError(
                     "constraints", "statements like 'd >= 0', 'g1 >= 0', 'g2 <= 0'", text
                 )
+        if "physics_quadratic" in self.backbone and self.input_map != "v2":
+            raise ConfigValueError(
+                "backbone",
+                message="'physics_quadratic' is the DE force's second order in h = v^2: it needs "
+                f"input_map = 'v2', not {self.input_map!r}",
+            )
         if self.creep and "physics_creep" in self.backbone:
             raise ConfigValueError(
                 "creep",

@@ -654,6 +654,8 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
     uses_prior = bool(set(PHYSICS_TERMS) & set(cfg.backbone))
     if uses_prior:
         backbone["s_g"] = np.array([value.get(f"physics_gain{j + 1}", 0.0) for j in range(n_in)])
+    if "physics_quadratic" in cfg.backbone:
+        backbone["s_gh"] = np.array([value[f"physics_quadratic{j + 1}"] for j in range(n_in)])
     if "physics_creep" in cfg.backbone:  # one rate per model: the prior's (config refuses both)
         backbone["s_k"] = np.array([value[f"physics_creep{j + 1}"] for j in range(n_in)])
         creep_rate = cfg.prior.creep()[1]

@@ -146,8 +146,8 @@ def constraint_bounds(names: Sequence[str], constraints: Sequence[str]) -> tuple
     lower, upper : ndarray, shape (len(names),)
         ``0`` or ``-inf`` / ``+inf`` per column: the curve's RBF weights and backbone gain
         (``viscous``, ``input_gain<j>``) take the stated sign; the analytical curves' scales
-        (``physics_damping``, ``physics_gain<j>``) are non-negative (their curves carry
-        the sign).
+        (``physics_damping``, ``physics_gain<j>``, ``physics_quadratic<j>``) are non-negative
+        (their curves carry the sign).
 
     Raises
     ------
@@ -180,8 +180,10 @@ def constraint_bounds(names: Sequence[str], constraints: Sequence[str]) -> tuple
                 lower[i] = 0.0
             else:
                 upper[i] = 0.0
-        if physics in names:
-            lower[names.index(physics)] = 0.0
+        scales = [physics] + ([f"physics_quadratic{curve[1:]}"] if curve != "d" else [])
+        for name in scales:
+            if name in names:
+                lower[names.index(name)] = 0.0
     return lower, upper
 
 

@@ -18,7 +18,7 @@ from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import TableModel, input_map
 
 #: Backbone entries stored as vectors (one value per input).
-_VECTORS = ("g_0", "g_h", "s_g", "s_k")
+_VECTORS = ("g_0", "g_h", "s_g", "s_gh", "s_k")
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,9 @@ class RBFModel:
         ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c`` [N], ``F_0`` [N],
         ``g_0`` (list, one per input), ``g_h`` (list, one per input: the force
         ``g_h,i h(v_i)^2`` of the backbone term ``input_quadratic`` [N/V^4]), and the
-        scales ``s_c``, ``s_d`` [-] and ``s_g`` (one per input) of the analytical curves;
+        scales ``s_c``, ``s_d`` [-], ``s_g`` and ``s_gh`` (one per input) of the analytical
+        curves (``s_gh``: of the full model's second order ``g_h,phys,i(q)``, the backbone
+        term ``physics_quadratic``);
         absent terms are 0.
     q_range : tuple of float
         Range of q in the estimation data [unit of q].
@@ -233,11 +235,12 @@ class RBFModel:
 
         The input force of the model is ``sum_i (g_i(q) h(v_i) + g_h,i(q) h(v_i)^2)``: Eq. 37's
         separable ``g_i(q) h(v_i)`` (the small-signal gain, :meth:`curves`) and its next order,
-        ``g_h,i(q) = g_h,i + Phi(q) theta_gh,i`` (the backbone term ``input_quadratic`` and the
-        RBF term ``gh``). On a DE actuator the large-signal force departs from the separable
-        one because the DEs' pull bends the beam off the v = 0 path (the force-displacement
-        curves of Fig. 4 at 3 kV are 72-97 % of ``1/2 dC_i/dq v^2`` between q = 0 and the
-        wells on the paper's prototype), by an amount that depends on q.
+        ``g_h,i(q) = g_h,i + Phi(q) theta_gh,i + s_gh,i g_h,phys,i(q)`` (the backbone terms
+        ``input_quadratic`` and ``physics_quadratic``, the RBF term ``gh``). On a DE actuator
+        the large-signal force departs from the separable one because the DEs' pull bends the
+        beam off the v = 0 path (the force-displacement curves of Fig. 4 at 3 kV are 72-97 % of
+        ``1/2 dC_i/dq v^2`` between q = 0 and the wells on the paper's prototype), by an amount
+        that depends on q.
 
         Parameters
         ----------
@@ -258,6 +261,10 @@ class RBFModel:
         out = np.broadcast_to(g_h, (q.size, self.n_inputs)).copy()
         if self.theta_gh is not None:
             out += self.basis(q) @ np.asarray(self.theta_gh, dtype=float).T
+        if "s_gh" in self.backbone and self.prior is not None:
+            curves = self.prior.quadratic()
+            phys = np.column_stack([np.interp(q, self.prior.q, col) for col in curves.T])
+            out += phys * np.asarray(self.backbone["s_gh"], dtype=float)
         return out
 
     def accel(
@@ -347,7 +354,10 @@ class RBFModel:
             if sym in bb:
                 names.append(name)
                 values.append(float(bb[sym]))
-        pairs = (("g_0", "input_gain"), ("g_h", "input_quadratic"), ("s_g", "physics_gain"))
+        pairs = (
+            ("g_0", "input_gain"), ("g_h", "input_quadratic"), ("s_g", "physics_gain"),
+            ("s_gh", "physics_quadratic"),
+        )  # fmt: skip
         for sym, name in pairs:
             for j, value in enumerate(np.atleast_1d(bb.get(sym, ()))):
                 if value:
@@ -606,7 +616,7 @@ class RBFModel:
         g0 = np.asarray(self.backbone.get("g_0", np.zeros(self.n_inputs)), dtype=float)
         scalars = {k: float(v) for k, v in self.backbone.items() if k not in _VECTORS}
         backbone: dict[str, Any] = {"attrs": scalars, "g_0": g0}
-        for key in ("g_h", "s_g", "s_k"):
+        for key in ("g_h", "s_g", "s_gh", "s_k"):
             if key in self.backbone:
                 backbone[key] = np.asarray(self.backbone[key], dtype=float)
         if self.prior is not None:
@@ -670,7 +680,7 @@ class RBFModel:
         a = m["attrs"]
         backbone: dict[str, Any] = dict(m["backbone"]["attrs"])
         backbone["g_0"] = np.asarray(m["backbone"]["g_0"], dtype=float)
-        for key in ("g_h", "s_g", "s_k"):
+        for key in ("g_h", "s_g", "s_gh", "s_k"):
             if key in m["backbone"]:
                 backbone[key] = np.asarray(m["backbone"][key], dtype=float)
         prior = m["backbone"].get("prior")

@@ -44,10 +44,13 @@ BACKBONE_TERMS = {
     "physics_spring": "s_c c_phys(q) q",
     "physics_damping": "s_d d_phys(q) z",
     "physics_gain": "s_g,i g_phys,i(q) h(v_i)",
+    "physics_quadratic": "s_gh,i g_h,phys,i(q) h(v_i)^2",
     "physics_creep": "s_k,i k_phys,i(q) q_eps,i, q_eps,i' = k_phys,i(q) q_dot - lambda q_eps,i",
 }
 #: Backbone terms that take the analytical model's curves (a [physics] section).
-PHYSICS_TERMS = ("physics_spring", "physics_damping", "physics_gain", "physics_creep")
+PHYSICS_TERMS = (
+    "physics_spring", "physics_damping", "physics_gain", "physics_quadratic", "physics_creep",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -81,10 +84,16 @@ class PhysicsPrior:
         q_eps,i``.
     creep_rate : float, optional
         The analytical relaxation rate ``lambda = Y_MW / eta_MW`` of the creep strains [1/s].
+    gh : ndarray, shape (n, n_inputs), optional
+        Second order of the full model's static DE force in ``h = v_i^2``, ``g_h,i(q)``
+        [N/V^4] (``physics_quadratic``): the holding-force change at ``v_i`` is ``g_i(q) v_i^2
+        + g_h,i(q) v_i^4`` to 0.5 % of its 3 kV value on the paper's prototype; None: not
+        computed.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 26, 33, 37.
+    Masoud & Maas 2025, Eq. 18 (Fig. 4: the force-displacement curves at held voltages), 26,
+    33, 37.
     """
 
     q: np.ndarray
@@ -94,6 +103,7 @@ class PhysicsPrior:
     k: np.ndarray | None = None
     k_bar: float = 0.0
     creep_rate: float = 0.0
+    gh: np.ndarray | None = None
 
     def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Interpolate ``c, d`` (n,) and ``g`` (n, n_inputs) at ``q`` [m] (held outside)."""
@@ -108,6 +118,8 @@ class PhysicsPrior:
         tree = {"q": self.q, "c": self.c, "d": self.d, "g": self.g}
         if self.k is not None:  # only then: a prior without creep keeps its bytes
             tree.update(k=self.k, k_bar=np.array(self.k_bar), creep_rate=np.array(self.creep_rate))
+        if self.gh is not None:  # only then: a prior without it keeps its bytes
+            tree["gh"] = self.gh
         return tree
 
     @classmethod
@@ -118,7 +130,24 @@ class PhysicsPrior:
             arrays["k"] = np.asarray(tree["k"], dtype=float)
             arrays["k_bar"] = float(np.asarray(tree["k_bar"]))
             arrays["creep_rate"] = float(np.asarray(tree["creep_rate"]))
+        if "gh" in tree:
+            arrays["gh"] = np.asarray(tree["gh"], dtype=float)
         return cls(**arrays)
+
+    def quadratic(self) -> np.ndarray:
+        """Return the second-order curves ``g_h,i(q)`` (n, n_inputs) [N/V^4].
+
+        Raises
+        ------
+        WorkflowError
+            If the prior was built without them (``physics_quadratic`` not asked for).
+        """
+        if self.gh is None:
+            raise WorkflowError(
+                "backbone term physics_quadratic needs the full model's second-order DE force: "
+                "a [physics] prototype and the term in [identify] backbone"
+            )
+        return self.gh
 
     def creep(self) -> tuple[np.ndarray, float]:
         """Return the couplings k_i (n, n_inputs) [1/m] and the rate [1/s] of ``physics_creep``.
@@ -239,7 +268,8 @@ def column_names(
         ``physics_creep<j>``.
     inputs : list of str
         The input terms G(q, v) (right of the balance): ``g<j>[i]``, ``gh<j>[i]``,
-        ``input_gain<j>``, ``input_quadratic<j>``, ``physics_gain<j>``.
+        ``input_gain<j>``, ``input_quadratic<j>``, ``physics_gain<j>``,
+        ``physics_quadratic<j>``.
 
     References
     ----------
@@ -268,6 +298,8 @@ def column_names(
         inputs += [f"input_quadratic{j + 1}" for j in range(n_inputs)]
     if "physics_gain" in backbone:
         inputs += [f"physics_gain{j + 1}" for j in range(n_inputs)]
+    if "physics_quadratic" in backbone:
+        inputs += [f"physics_quadratic{j + 1}" for j in range(n_inputs)]
     return force, inputs
 
 
@@ -407,7 +439,7 @@ _FORCE_SCALARS = {
 
 
 #: Name prefixes of the input terms G(q, v), right of the balance (weight +theta).
-INPUT_TERMS = ("g", "input_gain", "input_quadratic", "physics_gain")
+INPUT_TERMS = ("g", "input_gain", "input_quadratic", "physics_gain", "physics_quadratic")
 
 
 def term_sign(name: str) -> float:
@@ -453,7 +485,8 @@ def term_table(
         (h(v_j)^2: the input force's departure from the separable g_j(q) h(v_j) of Eq. 37,
         the full model's DE pull bending the beam off the v = 0 path, Fig. 4), ``physics_spring``
         (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
-        ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
+        ``physics_quadratic<j>`` (g_h,phys,j h(v_j)^2: the full model's large-signal DE force,
+        Fig. 4), ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
         ``physics_creep<j>`` (k_phys,j(q) q_eps,j with the creep strain q_eps,j' =
         k_phys,j(q) q_dot - lambda q_eps,j of the prior, Eq. 26; one state per input, after
         the ``creep[i]`` states),
@@ -560,6 +593,10 @@ def term_table(
         elif name.startswith("physics_gain"):
             j = int(name[len("physics_gain") :]) - 1
             build.term(name, tabulated(f"g{j}", _prior(prior).g[:, j]), hpow=h(j))
+        elif name.startswith("physics_quadratic"):
+            j = int(name[len("physics_quadratic") :]) - 1
+            curve = _prior(prior).quadratic()[:, j]
+            build.term(name, tabulated(f"gh{j}", curve), hpow=[2 * p for p in h(j)])
         elif name.startswith("physics_creep") and strain:
             j = int(name[len("physics_creep") :]) - 1
             force_j = tabulated(f"k_bar k{j}", k_bar * _prior(prior).k[:, j])

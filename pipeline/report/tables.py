@@ -102,6 +102,7 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         g_0=[unit("F/h", v) for v in inputs],
         g_h=[unit("F/h**2", v) for v in inputs],
         s_g=["1"] * n_inputs,
+        s_gh=["1"] * n_inputs,
         s_k=["1"] * n_inputs,
     )
     return out
@@ -280,11 +281,12 @@ def identify_table(summary: dict[str, Any]) -> Table:
     for key, value in summary["backbone"].items():
         if not isinstance(value, list):
             rows.append((PARAMETER_LABELS.get(key, key), units.get(key, "?"), value, key))
-        elif key in ("g_0", "g_h", "s_g", "s_k") and any(value):
+        elif key in ("g_0", "g_h", "s_g", "s_gh", "s_k") and any(value):
             label = {
                 "g_0": "backbone coefficient (a basis term; g_i(q) in Fig. 14)",
                 "g_h": "input force quadratic in h(v_i), the departure from Eq. 37's g_i h(v_i),",
                 "s_g": "scale of the analytical g_i,",
+                "s_gh": "scale of the full model's DE force g_h,i(q) h(v_i)^2 (Fig. 4),",
                 "s_k": "scale of the analytical creep force k_bar k_i(q) q_eps,i (Eq. 26),",
             }[key]
             rows += [

@@ -124,7 +124,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     cfg = IdentifyConfig.from_dict(section)
     records = estimation_records(tables, derivs)
     if set(PHYSICS_TERMS) & set(cfg.backbone):
-        cfg = replace(cfg, prior=physics_prior(physics, records))
+        cfg = replace(
+            cfg,
+            prior=physics_prior(physics, records, quadratic="physics_quadratic" in cfg.backbone),
+        )
     search = None
     if cfg.auto is not None:  # [identify.auto]: the grid's choice replaces the given values
         grid, options = auto_settings(cfg)
@@ -196,8 +199,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
                 cfg.model_error,
                 "physics_creep" in cfg.backbone,
                 cfg.effective_mass,
-                "input_quadratic" in cfg.backbone,
-                "gh" in cfg.rbf,
+                (*cfg.backbone, *cfg.rbf),
             ),
             "stiffness_label": stiffness_label(cfg.model_error, cfg.effective_mass),
             "model_error": model_error or {},
