@@ -20,6 +20,7 @@ from conftest import (
     inside_class_record,
     random_states,
     truth_model,
+    with_physics_quadratic,
     with_quadratic,
     with_quadratic_curve,
 )
@@ -102,12 +103,16 @@ def test_the_model_file_keeps_g_h_and_a_model_without_it_keeps_its_bytes():
     assert "g_h" not in RBFModel.from_tree(truth.to_tree()).backbone
 
 
-@pytest.mark.parametrize("term", [with_quadratic, with_quadratic_curve], ids=["constant", "gh"])
+@pytest.mark.parametrize(
+    "term",
+    [with_quadratic, with_quadratic_curve, with_physics_quadratic],
+    ids=["constant", "gh", "physics_quadratic"],
+)
 @pytest.mark.parametrize("T_z", [0.0, 0.02])
 def test_the_compiled_kernel_runs_the_quadratic_term_like_the_numpy_engine(T_z, term):
-    """The term is h(v)^2 in the term table's input powers (one coefficient, or the RBF curve
-    ``gh``): the compiled kernel reads it from the same arrays (to 1e-12 of the NumPy engine),
-    and the term changes the runs."""
+    """The term is h(v)^2 in the term table's input powers (one coefficient, the RBF curve
+    ``gh`` or the scaled analytical curve of ``physics_quadratic``): the compiled kernel reads
+    it from the same arrays (to 1e-12 of the NumPy engine), and the term changes the runs."""
     truth = replace(truth_model(np.random.default_rng(2)), T_z=T_z)
     model = term(truth)
     assert model.table_model().table.term_hpow.max() == 2

@@ -6,7 +6,8 @@ held-voltage force-displacement curves of the analytical model, and the term
 ``s_gh,i g_h,phys,i(q) h(v_i)^2`` is linear in its scale. Checked here: the second-order fit
 against the force-displacement curves at a voltage it did not use, the acceleration against the
 balance by hand, the fit against noise-free data of a model with the term, the static force, the
-model file, the configuration and the compiled kernel against the NumPy engine.
+model file and the configuration (the compiled kernel against the NumPy engine:
+``tests/test_input_quadratic.py``).
 """
 
 from dataclasses import replace
@@ -16,7 +17,6 @@ import pytest
 from conftest import (
     INSIDE_CLASS,
     curve_error,
-    excitation,
     inside_class_record,
     random_states,
     truth_model,
@@ -28,7 +28,6 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.model.terms import PhysicsPrior
-from debist.simulate.freerun import simulate
 
 S_GH = np.array([0.7, 1.3])
 
@@ -115,20 +114,3 @@ def test_the_model_file_keeps_the_scales_and_a_prior_without_the_curve_keeps_its
 def test_the_term_needs_h_equal_v_squared():
     with pytest.raises(WorkflowError, match=r"input_map = .v2."):
         IdentifyConfig.from_dict({"backbone": ["physics_quadratic"], "input_map": "v"})
-
-
-@pytest.mark.parametrize("T_z", [0.0, 0.02])
-def test_the_compiled_kernel_runs_the_term_like_the_numpy_engine(T_z):
-    """A tabulated curve times h(v)^2 in the term table: the compiled kernel reads it from the
-    same arrays (to 1e-12 of the NumPy engine), and the term changes the runs."""
-    truth = replace(truth_model(np.random.default_rng(2)), T_z=T_z)
-    model = with_physics_quadratic(truth, S_GH)
-    assert model.table_model().table.term_hpow.max() == 2
-    v = [excitation(np.arange(0.0, 6.0, 0.002))]
-    q0, qd0 = np.array([-0.01]), np.zeros(1)
-    ref = simulate(model, v, 0.002, q0, qd0, engine="numpy")[0]
-    new = simulate(model, v, 0.002, q0, qd0, engine="compiled")[0]
-    assert not ref.diverged and np.ptp(ref.q) > 5e-3
-    np.testing.assert_allclose(new.q, ref.q, rtol=0, atol=1e-12 * np.max(np.abs(ref.q)))
-    plain = simulate(truth, v, 0.002, q0, qd0, engine="numpy")[0]
-    assert np.max(np.abs(plain.q - ref.q)) > 1e-3 * np.ptp(ref.q)
