@@ -337,6 +337,14 @@ def inside_class_record(truth, t):
     return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
 
 
+def truth_and_record(build):
+    """``build(truth_model(seed 2))`` and its noise-free 13 s record (:func:`inside_class_record`)
+    as an estimation :class:`~debist.identify.fit.Record`."""
+    truth = build(truth_model(np.random.default_rng(2)))
+    rec = inside_class_record(truth, np.arange(0.0, 13.0, 0.002))
+    return truth, Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
+
+
 def curve_error(model, truth, grid=None) -> float:
     """Largest error of ``c(q) q`` and ``g_i`` of ``model`` against ``truth``, relative to the
     truth's largest magnitude, on ``grid`` (default 50 points over +-12 mm)."""

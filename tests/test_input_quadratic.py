@@ -17,8 +17,8 @@ from conftest import (
     INSIDE_CLASS,
     curve_error,
     excitation,
-    inside_class_record,
     random_states,
+    truth_and_record,
     truth_model,
     with_physics_quadratic,
     with_quadratic,
@@ -28,7 +28,7 @@ from scipy.optimize import brentq
 
 from debist.identify.bands import curve_maps
 from debist.identify.config import IdentifyConfig
-from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
 
@@ -41,9 +41,7 @@ _with_quadratic = with_quadratic
 @pytest.fixture(scope="module")
 def quadratic():
     """The truth with :data:`G_H` and its noise-free record."""
-    truth = _with_quadratic(truth_model(np.random.default_rng(2)))
-    rec = inside_class_record(truth, np.arange(0.0, 13.0, 0.002))
-    return truth, Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
+    return truth_and_record(_with_quadratic)
 
 
 def test_the_acceleration_adds_g_h_h_squared_to_the_separable_balance():

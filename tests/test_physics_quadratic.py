@@ -17,15 +17,15 @@ import pytest
 from conftest import (
     INSIDE_CLASS,
     curve_error,
-    inside_class_record,
     random_states,
+    truth_and_record,
     truth_model,
     with_physics_quadratic,
 )
 
 from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
-from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.model.terms import PhysicsPrior
 
@@ -35,9 +35,7 @@ S_GH = np.array([0.7, 1.3])
 @pytest.fixture(scope="module")
 def curved():
     """The truth with the term and its noise-free record (inside the model class)."""
-    truth = with_physics_quadratic(truth_model(np.random.default_rng(2)), S_GH)
-    rec = inside_class_record(truth, np.arange(0.0, 13.0, 0.002))
-    return truth, Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
+    return truth_and_record(lambda truth: with_physics_quadratic(truth, S_GH))
 
 
 def test_the_second_order_reproduces_the_held_voltage_curves_at_a_voltage_it_did_not_use():

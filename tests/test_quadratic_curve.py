@@ -15,9 +15,9 @@ import pytest
 from conftest import (
     INSIDE_CLASS,
     curve_error,
-    inside_class_record,
     quadratic_curve_weights,
     random_states,
+    truth_and_record,
     truth_model,
     with_quadratic_curve,
 )
@@ -25,7 +25,7 @@ from conftest import (
 from debist.errors import WorkflowError
 from debist.identify.bands import curve_maps
 from debist.identify.config import IdentifyConfig
-from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
 
 _theta_gh = quadratic_curve_weights
@@ -35,9 +35,7 @@ _with_curve = with_quadratic_curve
 @pytest.fixture(scope="module")
 def curved():
     """The truth with g_h,i(q) and its noise-free record (inside the model class)."""
-    truth = _with_curve(truth_model(np.random.default_rng(2)))
-    rec = inside_class_record(truth, np.arange(0.0, 13.0, 0.002))
-    return truth, Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
+    return truth_and_record(_with_curve)
 
 
 def test_the_acceleration_adds_phi_theta_gh_h_squared_to_the_separable_balance():

@@ -262,9 +262,7 @@ class RBFModel:
         if self.theta_gh is not None:
             out += self.basis(q) @ np.asarray(self.theta_gh, dtype=float).T
         if "s_gh" in self.backbone and self.prior is not None:
-            curves = self.prior.quadratic()
-            phys = np.column_stack([np.interp(q, self.prior.q, col) for col in curves.T])
-            out += phys * np.asarray(self.backbone["s_gh"], dtype=float)
+            out += self.prior.quadratic(q) * np.asarray(self.backbone["s_gh"], dtype=float)
         return out
 
     def accel(

@@ -134,8 +134,17 @@ class PhysicsPrior:
             arrays["gh"] = np.asarray(tree["gh"], dtype=float)
         return cls(**arrays)
 
-    def quadratic(self) -> np.ndarray:
-        """Return the second-order curves ``g_h,i(q)`` (n, n_inputs) [N/V^4].
+    def quadratic(self, q: np.ndarray | None = None) -> np.ndarray:
+        """Return the second-order curves ``g_h,i`` of ``physics_quadratic`` [N/V^4].
+
+        Parameters
+        ----------
+        q : array_like, shape (m,), optional
+            Positions [m] to interpolate at (held outside the grid); None: the grid's values.
+
+        Returns
+        -------
+        ndarray, shape (n, n_inputs) or (m, n_inputs)
 
         Raises
         ------
@@ -147,7 +156,10 @@ class PhysicsPrior:
                 "backbone term physics_quadratic needs the full model's second-order DE force: "
                 "a [physics] prototype and the term in [identify] backbone"
             )
-        return self.gh
+        if q is None:
+            return self.gh
+        q = np.asarray(q, dtype=float)
+        return np.stack([np.interp(q, self.q, col) for col in self.gh.T], axis=-1)
 
     def creep(self) -> tuple[np.ndarray, float]:
         """Return the couplings k_i (n, n_inputs) [1/m] and the rate [1/s] of ``physics_creep``.
