@@ -31,7 +31,8 @@ Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
 It prints a Markdown table per plant and writes ``<dir>/calibration.json``. ``--add-backbone``
 adds terms to every member's backbone and ``--set KEY=VALUE`` sets any other ``[identify]`` key
 (e.g. ``--set weights_window=0.5``), so a setting's model error is calibrated on the fleets it
-would run on.
+would run on; a dotted key sets any other table's (e.g. ``--set
+rig.experiments.identification.ramps=[0,0,1,1]``).
 """
 
 from __future__ import annotations
@@ -242,21 +243,27 @@ def _set_identify(
     settings: dict | None = None,
 ) -> None:
     """Write ``[identify] model_error``, the extra ``backbone`` terms and ``settings`` into every
-    member's workflow file (a rewrite only where it changes)."""
+    member's workflow file (a rewrite only where it changes). A key of ``settings`` is an
+    ``[identify]`` key, or with dots a path from the file's root (e.g.
+    ``rig.experiments.identification.ramps``)."""
+    import copy
+
     import tomli_w
 
     for wf, _ in members:
-        raw = tomllib.loads(wf.read_text())
+        before = tomllib.loads(wf.read_text())
+        raw = copy.deepcopy(before)
         section = raw.setdefault("identify", {})
         terms = list(section.get("backbone", []))
-        wanted = {
-            **section,
-            **(settings or {}),
-            "model_error": on,
-            "backbone": terms + [t for t in backbone if t not in terms],
-        }
-        if wanted != {**section, "model_error": section.get("model_error", True)}:
-            raw["identify"] = wanted
+        section.update(model_error=on, backbone=terms + [t for t in backbone if t not in terms])
+        for key, value in (settings or {}).items():
+            *path, last = key.split(".") if "." in key else ("identify", key)
+            table = raw
+            for name in path:
+                table = table.setdefault(name, {})
+            table[last] = value
+        before.setdefault("identify", {}).setdefault("model_error", True)
+        if raw != before:
             wf.write_text(tomli_w.dumps(raw))
 
 
@@ -401,7 +408,8 @@ def main() -> None:
     )  # fmt: skip
     p.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
-        help="an [identify] key set in every member, VALUE in TOML (e.g. weights_window=0.5)",
+        help="an [identify] key set in every member, VALUE in TOML (e.g. weights_window=0.5); "
+        "a dotted KEY is a path from the workflow's root (rig.experiments.identification.ramps)",
     )  # fmt: skip
     args = p.parse_args()
     settings = {}

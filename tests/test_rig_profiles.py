@@ -89,6 +89,35 @@ def test_identification_pulses_alternate_and_reach_v_max(ident):
     assert np.count_nonzero(np.maximum(ident.r1, ident.r2) > 1000.0) == 2400 + 2400
 
 
+def test_ramped_identification_pulses_are_trapezoids(ident):
+    """``ramps`` cycled over the pulses: 0 keeps the rectangle of Fig. 11a, a ramp time r
+    gives a trapezoid (linear rise over r, flat, linear fall), 2 r longer; a cycle that no
+    longer fits is dropped (here the sixth: 0.5 + 5 cycles of 5.2 s + pulses 3.2 + 4 s)."""
+    np.testing.assert_array_equal(identification_profile(ramps=[0.0]).r1, ident.r1)
+    exc = identification_profile(ramps=(0.0, 0.0, 1.0, 1.0))
+    assert exc.switch_sides == (1, 2, 1, 2, 1)
+    np.testing.assert_allclose(exc.switch_times, [4.7, 10.5, 16.5, 24.7, 32.5], atol=1e-9)
+    pulses = [(a, b) for lab, a, b in exc.segments if lab.startswith("pulse")]
+    np.testing.assert_allclose([b - a for a, b in pulses], [0.6, 0.8, 3.0, 2.6, 0.8], atol=1e-9)
+    assert exc.segments[-1][0] == "noise"  # the 3.2 s left over: noise in the right well
+    for k, ((a, b), side) in enumerate(zip(pulses, exc.switch_sides, strict=True)):
+        k0, k1 = round(a / exc.hold), round(b / exc.hold)
+        on = (exc.r1 if side == 1 else exc.r2)[k0:k1]
+        if k in (2, 3):
+            tau = np.arange(k1 - k0) * exc.hold
+            expected = 3000.0 * np.clip(np.minimum(tau, (b - a) - tau) / 1.0, 0.0, 1.0)
+            np.testing.assert_allclose(on, expected, rtol=0, atol=1e-9)
+            assert on[500] == pytest.approx(1500.0)  # half-way up the 1 s ramp
+        else:
+            assert np.all(on == 3000.0)
+
+
+@pytest.mark.parametrize("ramps", [(), (-0.5,), (float("nan"),), ("1",), 1.0])
+def test_bad_ramps(ramps):
+    with pytest.raises(ValueError, match="ramps"):
+        identification_profile(ramps=ramps)
+
+
 def test_validation_pulses_alternate_and_reach_v_max(valid):
     assert valid.switch_sides == (1, 2, 1, 2)
     np.testing.assert_allclose(valid.switch_times, [6.0, 13.2, 21.2, 28.2], atol=1e-9)

@@ -8,6 +8,7 @@ import pytest
 from debist.engine import artifacts
 from debist.engine.runner import Runner
 from debist.errors import WorkflowError
+from debist.rig.profiles import make_profile
 from debist.workflow.loader import load_workflow
 
 WORKFLOW = """
@@ -126,6 +127,12 @@ def test_rig_workflow_errors(tmp_path):
         ({"plant": {"friction_q": 1}, "experiments": {"a": {}}}, r"\[rig.plant\] unknown key"),
         ({"experiments": {"a": {"seeed": 1}}}, r"\[rig.experiments.a\] unknown key 'seeed'"),
         ({"experiments": {"a": {"format": "6"}}}, r"\[rig.experiments.a\] format: .*got '6'"),
+        (
+            {"experiments": {"a": {"profile": "validation", "ramps": [1.0]}}},
+            r"\[rig.experiments.a\] ramps: only the identification profile has ramps",
+        ),
+        ({"experiments": {"a": {"ramps": []}}}, r"\[rig.experiments.a\] ramps: expected at least"),
+        ({"experiments": {"a": {"ramps": [-1]}}}, r"\[rig.experiments.a\] ramps\[0\]: .*>= 0"),
         ({"experiments": {}}, r"\[rig\] experiments: expected at least one \[rig.experiments"),
         ({"sample_time": -1, "experiments": {"a": {}}}, r"\[rig\] sample_time: .* > 0, got -1"),
     ],
@@ -135,3 +142,43 @@ def test_rig_section_errors_name_the_table(section, match):
 
     with pytest.raises(WorkflowError, match=match):
         RigConfig.from_dict(section, {})
+
+
+def test_ramps_reach_the_identification_profile():
+    from debist.rig.experiment import RigConfig
+
+    rig = RigConfig.from_dict({"experiments": {"a": {"ramps": [0, 1.5]}}}, {})
+    kwargs = rig.experiments["a"].profile_kwargs()
+    assert kwargs["ramps"] == (0.0, 1.5)
+    exc = make_profile("identification", **kwargs)
+    pulses = [b - a for lab, a, b in exc.segments if lab.startswith("pulse")]
+    assert pulses[:2] == pytest.approx([0.6, 0.8 + 2 * 1.5])
+
+
+def test_the_rig_builds_its_profile_from_every_experiment_setting(monkeypatch):
+    """run_experiment hands the experiment's whole profile_kwargs to the profile (a copy of
+    them once dropped ``ramps`` silently)."""
+    from debist.rig import experiment
+    from debist.rig.experiment import RigConfig
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(name, **kwargs):
+        seen.update(name=name, **kwargs)
+        raise Stop
+
+    monkeypatch.setattr(experiment, "make_profile", spy)
+    table = {"ramps": [0, 1.5], "v_sub": 900.0, "profile_seed": 7, "duration": 20.0}
+    rig = RigConfig.from_dict({"experiments": {"a": table}}, {})
+    with pytest.raises(Stop):
+        experiment.run_experiment(rig, "a")
+    assert seen == {"name": "identification", **rig.experiments["a"].profile_kwargs()}
+    assert (seen["ramps"], seen["v_sub"], seen["seed"], seen["duration"]) == (
+        (0.0, 1.5),
+        900.0,
+        7,
+        20.0,
+    )

@@ -19,6 +19,7 @@ import pydantic
 from pydantic import (
     AfterValidator,
     BeforeValidator,
+    Field,
     NonNegativeFloat,
     NonNegativeInt,
     PositiveFloat,
@@ -28,7 +29,7 @@ from debist.errors import WorkflowError
 from debist.physics.params import PrototypeParams
 from debist.rig.params import RigParams
 from debist.rig.profiles import PROFILES
-from debist.workflow.config import CONFIG, ConfigValueError, config_from_section
+from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 
 __all__ = ["ExperimentConfig", "RigConfig"]
 
@@ -64,6 +65,10 @@ class ExperimentConfig:
         DAC interval of the references [s].
     v_sub : float or None
         Peak of the sub-threshold excitation [V]; default the profile's.
+    ramps : tuple of float or None
+        Ramp times of the identification profile's switching pulses [s], cycled
+        (:func:`debist.rig.profiles.identification_profile`); default the profile's
+        rectangular pulses. Other profiles reject it.
     format : {"5", "7.3"}
         MAT file version of the recording.
     side : {-1, 1}
@@ -82,12 +87,17 @@ class ExperimentConfig:
     duration: PositiveFloat = 37.5
     hold: PositiveFloat = 1e-3
     v_sub: NonNegativeFloat | None = None
+    ramps: Annotated[tuple[NonNegativeFloat, ...] | None, AsTuple, Field(min_length=1)] = None
     format: Annotated[Literal["5", "7.3"], BeforeValidator(_format_str)] = "7.3"
     side: Annotated[int, AfterValidator(_side)] = -1
 
     def __post_init__(self) -> None:
         if self.profile not in PROFILES:
             raise ConfigValueError("profile", "one of " + ", ".join(PROFILES), self.profile)
+        if self.ramps is not None and self.profile != "identification":
+            raise ConfigValueError(
+                "ramps", message=f"only the identification profile has ramps, not {self.profile!r}"
+            )
 
     def profile_kwargs(self) -> dict[str, Any]:
         """Return the keyword arguments of :func:`debist.rig.profiles.make_profile`.
@@ -95,13 +105,16 @@ class ExperimentConfig:
         Returns
         -------
         dict
-            ``duration`` and ``hold`` [s], and ``seed`` and ``v_sub`` [V] when given.
+            ``duration`` and ``hold`` [s], and ``seed``, ``v_sub`` [V] and ``ramps`` [s]
+            when given.
         """
         kwargs: dict[str, Any] = {"duration": self.duration, "hold": self.hold}
         if self.profile_seed is not None:
             kwargs["seed"] = self.profile_seed
         if self.v_sub is not None:
             kwargs["v_sub"] = self.v_sub
+        if self.ramps is not None:
+            kwargs["ramps"] = self.ramps
         return kwargs
 
 

@@ -92,12 +92,7 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
         From :func:`debist.rig.run.simulate_rig` (e.g. no well on the start side).
     """
     exp = cfg.experiments[name]
-    kwargs: dict[str, Any] = {"duration": exp.duration, "hold": exp.hold}
-    if exp.profile_seed is not None:
-        kwargs["seed"] = exp.profile_seed
-    if exp.v_sub is not None:
-        kwargs["v_sub"] = exp.v_sub
-    prof = make_profile(exp.profile, **kwargs)
+    prof = make_profile(exp.profile, **exp.profile_kwargs())
     return simulate_rig(
         cfg.rig, prof.t, prof.r1, prof.r2, sample_time=cfg.sample_time, seed=exp.seed,
         side=exp.side,

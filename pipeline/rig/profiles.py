@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import inspect
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -190,6 +190,18 @@ def _positive(key: str, value: object) -> float:
     return x
 
 
+def _ramps(ramps: Sequence[float]) -> tuple[float, ...]:
+    """Check the ramp times of the switching pulses [s]: a non-empty list of times >= 0."""
+    if isinstance(ramps, str) or not isinstance(ramps, Sequence) or not ramps:
+        raise ValueError(f"`ramps` must be a non-empty list of times [s], got {ramps!r}")
+    for x in ramps:
+        if isinstance(x, bool) or not isinstance(x, int | float | np.integer | np.floating):
+            raise ValueError(f"`ramps` must hold numbers [s], got {x!r}")
+        if not (np.isfinite(x) and x >= 0.0):
+            raise ValueError(f"`ramps` must hold times >= 0 [s], got {x!r}")
+    return tuple(float(x) for x in ramps)
+
+
 def _grid(duration: float, hold: float, v_max: float, v_sub: float) -> int:
     """Check the common arguments; return the number of DAC samples."""
     duration = _positive("duration", duration)
@@ -307,6 +319,7 @@ def identification_profile(
     v_max: float = 3000.0,
     v_sub: float = 1000.0,
     seed: int = 0,
+    ramps: Sequence[float] = (0.0,),
 ) -> Excitation:
     """Broad-band identification profile of Fig. 11a: switching both ways plus random noise.
 
@@ -322,6 +335,11 @@ def identification_profile(
 
     and a last 1 s noise block in the left well. A longer ``duration`` repeats the cycle;
     the time left after the last full cycle is noise (when at least 1 s) or rest.
+
+    With ``ramps`` (not the paper's) the pulses are trapezoids: ``v`` rises linearly from 0
+    to ``v_max`` in the ramp time, holds, and falls back in the same time, so that the beam
+    creeps towards its switching threshold quasi-statically before it snaps over. Each ramp
+    lengthens its cycle by twice the ramp time; the cycles that no longer fit are dropped.
 
     A noise block is white Gaussian noise (``numpy.random.default_rng(seed)``, one
     independent stream per DE, so that ``g1`` and ``g2`` are separable) filtered by a
@@ -346,6 +364,10 @@ def identification_profile(
         what it says, below the prototype's switching threshold (about 1.45 kV for Table 1).
     seed : int
         Seed of :func:`numpy.random.default_rng`; the same seed gives identical arrays.
+    ramps : sequence of float
+        Ramp times of the switching pulses [s], >= 0, cycled over the pulses (e.g.
+        ``(0, 0, 1, 1)``: the third and fourth pulse of every four ramped over 1 s); default
+        ``(0,)``, the rectangular pulses of Fig. 11a.
 
     Returns
     -------
@@ -357,7 +379,8 @@ def identification_profile(
     ------
     ValueError
         Non-positive or non-finite arguments, ``v_max > 3000``, ``v_sub >= v_max``,
-        ``hold > 0.01``, ``duration`` not a multiple of ``hold`` or shorter than a cycle.
+        ``hold > 0.01``, ``duration`` not a multiple of ``hold`` or shorter than a cycle,
+        ``ramps`` empty or with a negative or non-finite time.
 
     References
     ----------
@@ -365,12 +388,18 @@ def identification_profile(
     10 ms, broad frequency spectrum, the whole measurement range covered).
     """
     n = _grid(duration, hold, v_max, v_sub)
+    ramps = _ramps(ramps)
     b = _Builder(n, float(hold))
     lead, block, gap, ring = 0.5, 4.0, 0.2, 1.0
-    if not b.fits(lead + block + gap + _ID_PULSES[0] + ring):
+
+    def pulse(i: int) -> tuple[float, float]:
+        """Flat time and ramp time of the i-th pulse [s]."""
+        return _ID_PULSES[i % len(_ID_PULSES)], ramps[i % len(ramps)]
+
+    if not b.fits(lead + block + gap + pulse(0)[0] + 2 * pulse(0)[1] + ring):
         raise ValueError(
             f"`duration` = {duration} s is shorter than one identification cycle "
-            f"({lead + block + gap + _ID_PULSES[0] + ring:g} s)"
+            f"({lead + block + gap + pulse(0)[0] + 2 * pulse(0)[1] + ring:g} s)"
         )
     rng = np.random.default_rng(seed)
     from scipy import signal
@@ -392,10 +421,10 @@ def identification_profile(
 
     b.add("rest", lead)
     i = 0
-    while b.fits(block + gap + _ID_PULSES[i % len(_ID_PULSES)] + ring):
+    while b.fits(block + gap + pulse(i)[0] + 2 * pulse(i)[1] + ring):
         noise_block(_ID_LEVELS[i % len(_ID_LEVELS)], block)
         b.add("rest", gap)
-        b.pulse(v_max, _ID_PULSES[i % len(_ID_PULSES)])
+        b.pulse(v_max, *pulse(i))
         b.add("rest", ring)
         i += 1
     left = (b.n - b.k) * b.hold
@@ -700,7 +729,8 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
         ``"identification"``, ``"validation"`` or ``"staircase"``.
     **kwargs
         Keyword arguments of the builder (``duration``, ``hold``, ``v_max``, ``v_sub``,
-        ``seed``; the staircase profile also ``v_deep``, ``step``, ``rows``, ``dither``).
+        ``seed``; the identification profile also ``ramps``, the staircase profile
+        ``v_deep``, ``step``, ``rows``, ``dither``).
 
     Returns
     -------
