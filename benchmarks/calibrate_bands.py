@@ -236,7 +236,7 @@ def _lacking(name, true, est, lo, hi, marked) -> np.ndarray:
     return np.sqrt(np.maximum(err**2 - reach**2, 0.0)) / level
 
 
-def _set_identify(
+def _set_members(
     members: list[tuple[Path, Path]],
     on: bool,
     backbone: tuple[str, ...],
@@ -246,13 +246,11 @@ def _set_identify(
     member's workflow file (a rewrite only where it changes). A key of ``settings`` is an
     ``[identify]`` key, or with dots a path from the file's root (e.g.
     ``rig.experiments.identification.ramps``)."""
-    import copy
-
     import tomli_w
 
     for wf, _ in members:
-        before = tomllib.loads(wf.read_text())
-        raw = copy.deepcopy(before)
+        text = wf.read_text()
+        before, raw = tomllib.loads(text), tomllib.loads(text)
         section = raw.setdefault("identify", {})
         terms = list(section.get("backbone", []))
         section.update(model_error=on, backbone=terms + [t for t in backbone if t not in terms])
@@ -262,6 +260,7 @@ def _set_identify(
             for name in path:
                 table = table.setdefault(name, {})
             table[last] = value
+        # an unset model_error is the default, true: setting it so is no change
         before.setdefault("identify", {}).setdefault("model_error", True)
         if raw != before:
             wf.write_text(tomli_w.dumps(raw))
@@ -289,7 +288,7 @@ def calibrate(
         _debist("fleet", str(PLANTS[plant]), "--size", str(size), "--seed", str(seed),
                 "--dir", str(fleet))  # fmt: skip
     members = _member_outputs(fleet)
-    _set_identify(members, model_error, backbone, settings)
+    _set_members(members, model_error, backbone, settings)
     _debist("-q", "batch", *(str(wf) for wf, _ in members), "--workers", str(workers))
     rows, nrmse, visited = [], [], []
     for wf, run in members:

@@ -32,7 +32,7 @@ def _member(tmp_path: Path) -> Path:
 
 def test_settings_backbone_and_model_error_reach_every_member(tmp_path):
     script, wf = _script(), _member(tmp_path)
-    script._set_identify([(wf, tmp_path)], False, ("physics_creep",), {"weights_window": 0.5})
+    script._set_members([(wf, tmp_path)], False, ("physics_creep",), {"weights_window": 0.5})
     identify = tomllib.loads(wf.read_text())["identify"]
     assert identify["backbone"] == ["linear_spring", "viscous", "physics_creep"]
     assert identify["model_error"] is False
@@ -43,24 +43,24 @@ def test_settings_backbone_and_model_error_reach_every_member(tmp_path):
 def test_a_dotted_setting_reaches_its_own_table(tmp_path):
     script, wf = _script(), _member(tmp_path)
     ramps = "rig.experiments.identification.ramps"
-    script._set_identify([(wf, tmp_path)], True, (), {ramps: [0.0, 1.0], "M": 8})
+    script._set_members([(wf, tmp_path)], True, (), {ramps: [0.0, 1.0], "M": 8})
     raw = tomllib.loads(wf.read_text())
     assert raw["rig"]["experiments"]["identification"]["ramps"] == [0.0, 1.0]
     assert raw["identify"]["M"] == 8 and "rig.experiments" not in str(raw["identify"])
     stamp = wf.stat().st_mtime_ns
-    script._set_identify([(wf, tmp_path)], True, (), {ramps: [0.0, 1.0], "M": 8})
+    script._set_members([(wf, tmp_path)], True, (), {ramps: [0.0, 1.0], "M": 8})
     assert wf.stat().st_mtime_ns == stamp  # already set: not rewritten
 
 
 def test_a_member_already_set_is_not_rewritten(tmp_path):
     script, wf = _script(), _member(tmp_path)
-    script._set_identify([(wf, tmp_path)], True, ("physics_creep",), {"weights_window": 0.5})
+    script._set_members([(wf, tmp_path)], True, ("physics_creep",), {"weights_window": 0.5})
     before = wf.read_bytes()
     wf.write_bytes(before)
     stamp = wf.stat().st_mtime_ns
-    script._set_identify([(wf, tmp_path)], True, ("physics_creep",), {"weights_window": 0.5})
+    script._set_members([(wf, tmp_path)], True, ("physics_creep",), {"weights_window": 0.5})
     assert wf.stat().st_mtime_ns == stamp and wf.read_bytes() == before
-    script._set_identify([(wf, tmp_path)], True, (), {"weights_window": 1.0})
+    script._set_members([(wf, tmp_path)], True, (), {"weights_window": 1.0})
     assert tomllib.loads(wf.read_text())["identify"]["weights_window"] == 1.0
 
 
