@@ -15,6 +15,7 @@ from debist.identify.regularise import (
     constraint_bounds,
     gcv_lambda,
     smoothness_operator,
+    weight_penalty,
 )
 
 
@@ -134,3 +135,28 @@ def test_a_penalised_replicate_is_the_penalised_fit_on_its_blocks():
         rows = np.concatenate([np.arange(30 * i, 30 * i + 30) for i in pick])
         ref = est.solve(X[rows] / scale, y[rows]) / scale
         np.testing.assert_allclose(boot[b], ref, rtol=1e-7, atol=1e-10)
+
+
+def test_the_penalty_acts_on_the_curve_weights_not_on_the_scaled_ones():
+    """A centre the data hardly reach has a small column norm. The penalty must hold its
+    weight theta_k to its neighbours (a large lambda leaves theta linear over the centres,
+    the null space of the second differences), which a penalty on the column-scaled
+    weights x = s theta does not: there theta_k = x_k / s_k is free to run off."""
+    rng = np.random.default_rng(8)
+    A = rng.standard_normal((200, 5)) * np.array([1.0, 1.0, 1e-3, 1.0, 1.0])
+    y = A @ np.array([1.0, 2.0, 3.0, 4.0, 5.0]) + 0.5 * rng.standard_normal(200)
+    names = [f"c[{k}]" for k in range(5)]
+    scale = np.linalg.norm(A, axis=0)
+    P = weight_penalty(smoothness_operator(names, 5), scale)
+    est = Estimator(P, 1e6, np.full(5, -np.inf), np.full(5, np.inf))
+    theta = est.solve(A / scale, y) / scale
+    D2 = smoothness_operator(names, 5)
+    assert np.max(np.abs(D2 @ theta)) < 1e-3 * np.max(np.abs(theta))
+    # the same lambda on the scaled weights leaves the hardly reached centre's theta off the line
+    x_only = Estimator(smoothness_operator(names, 5), 1e6, est.lower, est.upper)
+    theta_x = x_only.solve(A / scale, y) / scale
+    assert np.max(np.abs(D2 @ theta_x)) > 0.5 * np.max(np.abs(theta_x))
+    # lambda is dimensionless: a curve's unit (its columns scaled by k, theta by 1 / k) does
+    # not change the penalty on the scaled weights x = s theta
+    x = rng.standard_normal(5)
+    np.testing.assert_allclose(weight_penalty(D2, 7.0 * scale) @ x, P @ x, rtol=1e-12)

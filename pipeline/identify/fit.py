@@ -16,6 +16,7 @@ from debist.identify.regularise import (
     constraint_bounds,
     gcv_lambda,
     smoothness_operator,
+    weight_penalty,
 )
 from debist.metrics import rms
 from debist.model.basis import RBFBasis
@@ -576,10 +577,10 @@ def _estimator(psi, y, names, cfg: IdentifyConfig):
     lower, upper = constraint_bounds(names, cfg.constraints)
     # an element stiffness is a spring's (Al-Bender, Lampaert & Swevers 2005): k_e >= 0
     lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
-    penalty = smoothness_operator(names, cfg.M)
+    scale = np.linalg.norm(psi, axis=0)
+    penalty = weight_penalty(smoothness_operator(names, cfg.M), np.where(scale == 0, 1.0, scale))
     trace = np.empty((0, 3))
     if cfg.smoothing == "gcv" and penalty.shape[0]:
-        scale = np.linalg.norm(psi, axis=0)
         Q, R = np.linalg.qr(psi / scale)
         qty = Q.T @ y
         lam, trace = gcv_lambda(R, qty, float(y @ y - qty @ qty), y.size, penalty)

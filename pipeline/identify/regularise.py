@@ -16,8 +16,10 @@ Everything works on the column-scaled regressor ``A = Psi / s`` through its QR f
 ``A = Q R``: a (weighted) least-squares problem becomes the small system ``C x ~ d`` with
 ``C = L^T R`` for the Cholesky factor ``L`` of the weighted Gram ``Q^T W Q`` (``C = R`` with
 unit weights), so the point estimate and every bootstrap replicate use the same estimator at
-the cost of a ``p x p`` problem. ``lambda`` is dimensionless: the penalty acts on the scaled
-weights, whose columns have unit norm.
+the cost of a ``p x p`` problem. The penalty is written on the curve's weights theta and
+carried over to the scaled weights ``x = s theta`` (:func:`weight_penalty`), each curve's rows
+multiplied by the geometric mean of its column norms, so ``lambda`` is dimensionless and a
+centre the data hardly reach (small ``s``) cannot carry a wild weight at no cost.
 
 The residuals of Eq. 40 are correlated (derivatives, the zero-phase low-pass), so GCV's
 count of ``n`` independent rows overstates the information and leans towards little
@@ -54,7 +56,8 @@ class Estimator:
     Attributes
     ----------
     penalty : ndarray, shape (m, p)
-        Second-difference rows of the RBF curves (``m = 0``: no penalty).
+        Second-difference rows of the RBF curves on the scaled weights
+        (:func:`weight_penalty`; ``m = 0``: no penalty).
     lam : float
         Penalty weight lambda (dimensionless).
     lower, upper : ndarray, shape (p,)
@@ -129,6 +132,43 @@ def smoothness_operator(names: Sequence[str], M: int) -> np.ndarray:
             row[idx[k - 1]], row[idx[k]], row[idx[k + 1]] = 1.0, -2.0, 1.0
             rows.append(row)
     return np.array(rows).reshape(-1, len(names))
+
+
+def weight_penalty(penalty: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Carry a penalty on the weights theta over to the column-scaled weights ``x = s theta``.
+
+    The fit solves for ``x`` on the regressor ``Psi / s`` (unit column norms). A difference
+    penalty written on ``x`` itself (``||D_2 x||``) does not ask for a smooth curve: a centre
+    the data hardly reach has a small column norm ``s_k``, so a wild weight ``theta_k`` there
+    costs almost nothing, which is where a curve most needs the penalty. This returns the rows
+    ``P diag(1 / s)`` (the penalty on theta), each row multiplied by the geometric mean of
+    ``s`` over the columns it touches, so that lambda stays dimensionless and one lambda
+    weighs every curve alike whatever its unit.
+
+    Parameters
+    ----------
+    penalty : ndarray, shape (m, p)
+        Rows on theta (:func:`smoothness_operator`).
+    scale : ndarray, shape (p,)
+        Column norms ``s`` of the regressor (> 0).
+
+    Returns
+    -------
+    ndarray, shape (m, p)
+        Rows on the scaled weights ``x``.
+
+    References
+    ----------
+    Eilers & Marx 1996, Sec. 2 (the difference penalty acts on the basis coefficients of
+    the curve).
+    """
+    s = np.asarray(scale, dtype=float)
+    out = np.zeros(penalty.shape)
+    for i, row in enumerate(penalty):
+        cols = np.flatnonzero(row)
+        mean = float(np.exp(np.mean(np.log(s[cols])))) if cols.size else 1.0
+        out[i] = row / s * mean
+    return out
 
 
 def constraint_bounds(names: Sequence[str], constraints: Sequence[str]) -> tuple:
