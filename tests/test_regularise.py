@@ -147,7 +147,7 @@ def test_the_penalty_acts_on_the_curve_weights_not_on_the_scaled_ones():
     y = A @ np.array([1.0, 2.0, 3.0, 4.0, 5.0]) + 0.5 * rng.standard_normal(200)
     names = [f"c[{k}]" for k in range(5)]
     scale = np.linalg.norm(A, axis=0)
-    P = weight_penalty(smoothness_operator(names, 5), scale)
+    P = weight_penalty(smoothness_operator(names, 5), scale, names)
     est = Estimator(P, 1e6, np.full(5, -np.inf), np.full(5, np.inf))
     theta = est.solve(A / scale, y) / scale
     D2 = smoothness_operator(names, 5)
@@ -159,4 +159,12 @@ def test_the_penalty_acts_on_the_curve_weights_not_on_the_scaled_ones():
     # lambda is dimensionless: a curve's unit (its columns scaled by k, theta by 1 / k) does
     # not change the penalty on the scaled weights x = s theta
     x = rng.standard_normal(5)
-    np.testing.assert_allclose(weight_penalty(D2, 7.0 * scale) @ x, P @ x, rtol=1e-12)
+    np.testing.assert_allclose(weight_penalty(D2, 7.0 * scale, names) @ x, P @ x, rtol=1e-12)
+    # one factor per curve (the geometric mean of its norms), the rows of two curves apart
+    two = ["c[0]", "c[1]", "c[2]", "viscous", "g1[0]", "g1[1]", "g1[2]"]
+    s2 = np.array([1.0, 4.0, 2.0, 9.0, 1e-3, 1e-2, 1e-1])
+    theta2 = rng.standard_normal(7)
+    rows = weight_penalty(smoothness_operator(two, 3), s2, two) @ (s2 * theta2)
+    want = [2.0 * (theta2[0] - 2 * theta2[1] + theta2[2]),  # (1 * 4 * 2)^(1/3) = 2
+            1e-2 * (theta2[4] - 2 * theta2[5] + theta2[6])]  # fmt: skip
+    np.testing.assert_allclose(rows, want, rtol=1e-12)

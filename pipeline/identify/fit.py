@@ -578,7 +578,9 @@ def _estimator(psi, y, names, cfg: IdentifyConfig):
     # an element stiffness is a spring's (Al-Bender, Lampaert & Swevers 2005): k_e >= 0
     lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
     scale = np.linalg.norm(psi, axis=0)
-    penalty = weight_penalty(smoothness_operator(names, cfg.M), np.where(scale == 0, 1.0, scale))
+    penalty = weight_penalty(
+        smoothness_operator(names, cfg.M), np.where(scale == 0, 1.0, scale), names
+    )
     trace = np.empty((0, 3))
     if cfg.smoothing == "gcv" and penalty.shape[0]:
         Q, R = np.linalg.qr(psi / scale)

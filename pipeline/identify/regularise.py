@@ -134,15 +134,15 @@ def smoothness_operator(names: Sequence[str], M: int) -> np.ndarray:
     return np.array(rows).reshape(-1, len(names))
 
 
-def weight_penalty(penalty: np.ndarray, scale: np.ndarray) -> np.ndarray:
+def weight_penalty(penalty: np.ndarray, scale: np.ndarray, names: Sequence[str]) -> np.ndarray:
     """Carry a penalty on the weights theta over to the column-scaled weights ``x = s theta``.
 
     The fit solves for ``x`` on the regressor ``Psi / s`` (unit column norms). A difference
     penalty written on ``x`` itself (``||D_2 x||``) does not ask for a smooth curve: a centre
     the data hardly reach has a small column norm ``s_k``, so a wild weight ``theta_k`` there
     costs almost nothing, which is where a curve most needs the penalty. This returns the rows
-    ``P diag(1 / s)`` (the penalty on theta), each row multiplied by the geometric mean of
-    ``s`` over the columns it touches, so that lambda stays dimensionless and one lambda
+    ``P diag(1 / s)`` (the penalty on theta), every row of a curve multiplied by the geometric
+    mean of ``s`` over that curve's columns, so that lambda stays dimensionless and one lambda
     weighs every curve alike whatever its unit.
 
     Parameters
@@ -151,11 +151,14 @@ def weight_penalty(penalty: np.ndarray, scale: np.ndarray) -> np.ndarray:
         Rows on theta (:func:`smoothness_operator`).
     scale : ndarray, shape (p,)
         Column norms ``s`` of the regressor (> 0).
+    names : sequence of str, length p
+        Regression column names; a curve's columns are ``<curve>[k]``.
 
     Returns
     -------
     ndarray, shape (m, p)
-        Rows on the scaled weights ``x``.
+        Rows on the scaled weights ``x``: ``||rows @ x||^2 = sum_curves sbar_curve^2
+        ||D_2 theta_curve||^2``.
 
     References
     ----------
@@ -163,11 +166,14 @@ def weight_penalty(penalty: np.ndarray, scale: np.ndarray) -> np.ndarray:
     the curve).
     """
     s = np.asarray(scale, dtype=float)
+    prefix = [n.split("[")[0] if "[" in n else None for n in names]
     out = np.zeros(penalty.shape)
     for i, row in enumerate(penalty):
-        cols = np.flatnonzero(row)
-        mean = float(np.exp(np.mean(np.log(s[cols])))) if cols.size else 1.0
-        out[i] = row / s * mean
+        touched = np.flatnonzero(row)
+        if touched.size == 0:
+            continue
+        curve = [j for j, pre in enumerate(prefix) if pre == prefix[touched[0]]]
+        out[i] = row / s * float(np.exp(np.mean(np.log(s[curve]))))
     return out
 
 
