@@ -22,7 +22,10 @@ force-displacement curve at that level, Fig. 4), and the tangent stiffness k* at
 (:data:`debist.identify.bands.STIFFNESS_ERROR`). Each g_i is also scored over the q
 interval its sub-threshold excitation visits near each well (:mod:`debist.rig.visited`),
 marked or not: how much of it is marked, and the error there. The unseen
-free-run NRMSE(q) of every member's ``rbf`` row (and ``narx`` where present) is listed too.
+free-run NRMSE(q) of every member's ``rbf`` row (and ``narx`` where present) is listed too,
+and what the validate stage's bootstrap replicates say about it: with p_i the share of member
+i's replicates that lose the motion, the fleet's expected number of lost switches sum p_i and
+the chance that none is lost, prod (1 - p_i) (MATLAB's ``simsd`` idea, applied to a fleet).
 
 Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
 
@@ -299,8 +302,10 @@ def calibrate(
         rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant, curves, rig)]
         visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run, curves, rig)]
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
+        spread = _replicate_spread(run)
         for _, r in table[table.role == "validation"].iterrows():
-            nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": float(r.nrmse_q)})
+            extra = spread if r.model == "rbf" else {}
+            nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": r.nrmse_q, **extra})
     scores = pd.DataFrame(rows)
     lacking = scores.pop("lacking")
     summary = (
@@ -325,6 +330,36 @@ def calibrate(
     }
 
 
+def _replicate_spread(run: Path) -> dict:
+    """The validate stage's bootstrap replicates on the unseen record (``rbf`` row): the share
+    that lose the motion and the 95 % range of their NRMSE(q); empty without replicates."""
+    table = pd.read_parquet(run / "validate" / "nrmse.parquet")
+    row = table[(table.role == "validation") & (table.model == "rbf")]
+    if row.empty or "replicates_poor" not in row or not np.isfinite(row.replicates_poor.iloc[0]):
+        return {}
+    r = row.iloc[0]
+    return {"poor": float(r.replicates_poor), "lo": float(r.nrmse_q_lo), "hi": float(r.nrmse_q_hi)}
+
+
+def _replicates_markdown(nr: pd.DataFrame) -> list[str]:
+    """What the estimation uncertainty alone says about the fleet's unseen free runs: with
+    p_i the share of member i's replicates that lose the motion, sum p_i members are expected
+    to lose it and prod (1 - p_i) is the chance that none does (members independent)."""
+    rbf = nr[nr.model == "rbf"]
+    if "poor" not in rbf or rbf.poor.isna().all():
+        return []
+    rbf = rbf.dropna(subset=["poor"])
+    p = rbf.poor.to_numpy()
+    above = rbf.member[rbf.lo > 0.01].str[-3:].tolist()
+    return [
+        "",
+        f"Bootstrap replicates (unseen record, {len(rbf)} members): {p.sum():.2f} members expected"
+        f" to lose the motion, P(none does) = {np.prod(1.0 - p):.2f}; members at most 1 %:"
+        f" {int((rbf.nrmse_q <= 0.01).sum())}; members whose replicates' 95 % range lies above"
+        f" 1 %: {', '.join(above) or 'none'}",
+    ]
+
+
 def _markdown(result: dict) -> str:
     lines = [
         f"**{result['plant']} plant**, fleet of {result['size']} (seed {result['seed']})",
@@ -346,6 +381,7 @@ def _markdown(result: dict) -> str:
                 f"| {model} | {100 * g.nrmse_q.median():.2f} % | {100 * g.nrmse_q.max():.2f} % "
                 f"| {g.nrmse_q.notna().sum()} |"
             )
+        lines += _replicates_markdown(nr)
     return "\n".join(lines)
 
 

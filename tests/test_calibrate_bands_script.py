@@ -99,3 +99,27 @@ def test_the_visited_table_counts_wells_marked_points_and_errors():
     assert "| g1 | 2 | 1 | 7 of 10 | 15.0 / 3.0 % |" in lines
     assert "| g2 | 1 | 0 | 0 of 5 | 3.0 / 2.0 % |" in lines
     assert _script()._visited_markdown([]) == []
+
+
+def test_the_replicate_line_gives_the_expected_losses_and_the_chance_of_none():
+    """With shares p = 0.5, 0.2, 0 of the replicates losing the motion, 0.7 members are
+    expected to lose it and none does with probability 0.5 x 0.8 x 1 = 0.40; only the member
+    whose replicates all lie above 1 % is named; rows of other models are not counted."""
+    import pandas as pd
+
+    cols = ["member", "model", "nrmse_q", "poor", "lo", "hi"]
+    nr = pd.DataFrame(
+        [
+            ["m-000", "rbf", 0.025, 0.5, 0.014, 0.25],
+            ["m-001", "rbf", 0.004, 0.2, 0.003, 0.2],
+            ["m-002", "rbf", 0.002, 0.0, 0.002, 0.003],
+            ["m-000", "narx", 0.2, None, None, None],
+        ],
+        columns=cols,
+    )
+    (line,) = [x for x in _script()._replicates_markdown(nr) if x]
+    assert "0.70 members expected" in line
+    assert "P(none does) = 0.40" in line
+    assert "members at most 1 %: 2" in line
+    assert line.endswith("lies above 1 %: 000")
+    assert _script()._replicates_markdown(nr[nr.model == "narx"]) == []
