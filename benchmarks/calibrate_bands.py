@@ -302,10 +302,8 @@ def calibrate(
         rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant, curves, rig)]
         visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run, curves, rig)]
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
-        spread = _replicate_spread(run)
         for _, r in table[table.role == "validation"].iterrows():
-            extra = spread if r.model == "rbf" else {}
-            nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": r.nrmse_q, **extra})
+            nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": r.nrmse_q, **_spread(r)})
     scores = pd.DataFrame(rows)
     lacking = scores.pop("lacking")
     summary = (
@@ -330,15 +328,12 @@ def calibrate(
     }
 
 
-def _replicate_spread(run: Path) -> dict:
-    """The validate stage's bootstrap replicates on the unseen record (``rbf`` row): the share
-    that lose the motion and the 95 % range of their NRMSE(q); empty without replicates."""
-    table = pd.read_parquet(run / "validate" / "nrmse.parquet")
-    row = table[(table.role == "validation") & (table.model == "rbf")]
-    if row.empty or "replicates_poor" not in row or not np.isfinite(row.replicates_poor.iloc[0]):
+def _spread(row: pd.Series) -> dict:
+    """A compare-table row's bootstrap replicates (the validate stage's columns, ``rbf`` only):
+    the share that lose the motion and the 95 % range of their NRMSE(q); empty without them."""
+    if not np.isfinite(row.get("replicates_poor", np.nan)):
         return {}
-    r = row.iloc[0]
-    return {"poor": float(r.replicates_poor), "lo": float(r.nrmse_q_lo), "hi": float(r.nrmse_q_hi)}
+    return {"poor": row.replicates_poor, "lo": row.nrmse_q_lo, "hi": row.nrmse_q_hi}
 
 
 def _replicates_markdown(nr: pd.DataFrame) -> list[str]:
