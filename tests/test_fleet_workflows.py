@@ -3,6 +3,7 @@
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -19,7 +20,7 @@ TEMPLATE = ROOT / "workflows" / "paper-experiment.toml"
 
 def render(out: Path, n: int = 3, seed: int = 1) -> dict[str, str]:
     raw = tomllib.loads(TEMPLATE.read_text(encoding="utf-8"))
-    return fleet_workflows(raw, TEMPLATE.parent, out, n, seed=seed)
+    return dict(fleet_workflows(raw, TEMPLATE.parent, out, n, seed=seed))
 
 
 @pytest.mark.slow
@@ -89,3 +90,50 @@ def test_a_fleet_whose_logs_all_fail_ingest_is_refused_with_the_reason(tmp_path)
     with pytest.raises(FleetError, match=r"only 0 of 3 .* range limit"):
         viable_fleet(raw, TEMPLATE.parent, tmp_path, 1, seed=0)
     assert not list(tmp_path.glob("*.toml"))  # the scratch workflows are gone
+
+
+def test_a_member_switching_below_the_template_gets_its_sub_threshold_levels_scaled(tmp_path):
+    """Seed 1, member 0 switches at 682 V (its left well is shallow); the template's prototype
+    at 1244 V with the profiles' 1 kV: the member's levels become 1 kV x 682 / 1244."""
+    from debist.physics.params import PrototypeParams
+    from debist.physics.statics import switching_voltage
+
+    raw = tomllib.loads(TEMPLATE.read_text(encoding="utf-8"))
+    files = dict(fleet_workflows(raw, TEMPLATE.parent, tmp_path, 3, seed=1))
+    member = [tomllib.loads(text) for text in files.values()]
+    template = PrototypeParams.from_dict({**raw["physics"], **raw["rig"]["prototype"]})
+    v_template = min(switching_voltage(template, de) for de in (1, 2))
+    v_member = switching_voltage(PrototypeParams.from_dict(member[0]["rig"]["prototype"]), 1)
+    assert v_template == pytest.approx(1244.0, abs=1.0) and v_member == pytest.approx(682, abs=1)
+    expected = 1000.0 * v_member / v_template  # to the thresholds' 1 V bisection
+    levels = [e["v_sub"] for e in member[0]["rig"]["experiments"].values()]
+    assert levels == [pytest.approx(expected, abs=1.0)] * 2 and levels[0] == levels[1]
+    assert "static switching threshold 682 V" in member[0]["workflow"]["description"]
+    # member 2 switches at 1494 V, above the template: its experiments are the template's
+    assert member[2]["rig"]["experiments"] == raw["rig"]["experiments"]
+    # a level the template states is the one scaled
+    for exp in raw["rig"]["experiments"].values():
+        exp["v_sub"] = 800.0
+    _, again = next(fleet_workflows(raw, TEMPLATE.parent, tmp_path, 1, seed=1))
+    scaled = tomllib.loads(again)["rig"]["experiments"]["validation"]["v_sub"]
+    assert scaled == pytest.approx(0.8 * levels[0], abs=0.1)
+
+
+def test_the_scaled_levels_keep_the_validation_blocks_below_the_switch(tmp_path):
+    """The validation profile's last block (DE 1 triangle to v_sub, 30.1-35.1 s, beam in the
+    left well) snaps seed-1 member 0 over at the template's 1 kV; at its scaled level the
+    beam stays in the left well, as the profile intends."""
+    from debist.rig.config import RigConfig
+    from debist.rig.experiment import run_experiment
+
+    raw = tomllib.loads(TEMPLATE.read_text(encoding="utf-8"))
+    _, text = next(fleet_workflows(raw, TEMPLATE.parent, tmp_path, 1, seed=1))
+    rig = tomllib.loads(text)["rig"]
+    crossings = {}
+    for v_sub in (1000.0, rig["experiments"]["validation"]["v_sub"]):
+        rig["experiments"] = {"validation": {"profile": "validation", "seed": 2, "v_sub": v_sub}}
+        run = run_experiment(RigConfig.from_dict(rig, raw["physics"]), "validation")
+        block = (run.t > 30.1) & (run.t < 35.1)
+        assert run.q[block][0] < -2e-3  # the block starts in the left well
+        crossings[v_sub] = int(np.count_nonzero(np.diff(np.sign(run.q[block]))))
+    assert list(crossings.values()) == [1, 0], crossings

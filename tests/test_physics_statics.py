@@ -18,6 +18,8 @@ from debist.physics.statics import (
     equilibria,
     force_displacement,
     solve_equilibrium,
+    switches,
+    switching_voltage,
 )
 
 P = PrototypeParams.paper()
@@ -188,3 +190,31 @@ def test_opposite_offsets_keep_the_wells_mirrored():
     q_left, q_right = stable_wells(P.replace(dz_1=0.5e-3, dz_2=-0.5e-3))
     assert q_left == pytest.approx(-q_right, rel=1e-9)
     assert abs(q_right) > 10.5e-3  # anchors inwards stretch the DEs more (a > e_z): wider wells
+
+
+def test_switching_voltage_of_the_paper_prototype():
+    # the reduced model's analytical rows give 1425 V (test_design), an independent route
+    v1, v2 = switching_voltage(P, 1), switching_voltage(P, 2)
+    assert v1 == pytest.approx(1425.0, rel=3e-3)
+    assert v1 == pytest.approx(v2, abs=1.0)  # mirror symmetry, to the bisection's 1 V
+    assert switches(P, 1, v1) and not switches(P, 1, v1 - 1.0)  # the bracket it returns
+    assert switches(P, 2, v2) and not switches(P, 2, v2 - 1.0)
+
+
+def test_switching_voltage_follows_the_asymmetry_and_the_mirror():
+    # dz_1 + dz_2 > 0 moves the left well in (shallower, lower threshold for DE 1); the
+    # mirror image (dz_1, dz_2) -> (-dz_2, -dz_1) swaps the two DEs' thresholds
+    a = P.replace(dz_1=0.3e-3, dz_2=0.1e-3)
+    b = P.replace(dz_1=-0.1e-3, dz_2=-0.3e-3)
+    v1, v2 = switching_voltage(a, 1, tol=2.0), switching_voltage(a, 2, tol=2.0)
+    assert v1 < 1300.0 < 1500.0 < v2
+    assert switching_voltage(b, 2, tol=2.0) == pytest.approx(v1, abs=2.0)
+    assert switching_voltage(b, 1, tol=2.0) == pytest.approx(v2, abs=2.0)
+
+
+def test_switching_voltage_limits_and_errors():
+    assert switching_voltage(P, 1, v_max=1000.0) == np.inf  # 1 kV keeps the left well
+    with pytest.raises(ValueError, match="`de` must be 1 or 2"):
+        switching_voltage(P, 3)
+    with pytest.raises(ValueError, match="positive"):
+        switching_voltage(P, 1, tol=0.0)

@@ -89,23 +89,22 @@ def viable_fleet(
     Masoud & Maas 2025, Sec. 5.1 (the experiment each member repeats).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    draws = fleet_workflows(
-        template, template_dir, folder, size * (1 + EXTRA_DRAWS), seed=seed, scatter=scatter
-    )
+    n_draws = size * (1 + EXTRA_DRAWS)
+    draws = fleet_workflows(template, template_dir, folder, n_draws, seed=seed, scatter=scatter)
     kept: dict[str, str] = {}
     rejected: dict[str, str] = {}
-    for name, text in draws.items():
-        if len(kept) == size:
-            break
+    for name, text in draws if size > 0 else ():
         label = name.removesuffix(".toml")
         problem = _ingest_problem(text, folder, label)
         if problem is None:
             kept[name] = text
         else:
             rejected[label] = problem
+        if len(kept) == size:
+            break
     if len(kept) < size:
         raise FleetError(
-            f"only {len(kept)} of {len(draws)} drawn prototypes give logs that the template's "
+            f"only {len(kept)} of {n_draws} drawn prototypes give logs that the template's "
             f"ingest accepts (wanted {size}); first refusal: {next(iter(rejected.values()))}"
         )
     return kept, rejected

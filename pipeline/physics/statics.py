@@ -36,6 +36,8 @@ __all__ = [
     "equilibria",
     "force_displacement",
     "solve_equilibrium",
+    "switches",
+    "switching_voltage",
 ]
 
 FORCE_STATES = ((0.0, 0.0), (V_MAX, 0.0), (0.0, V_MAX), (V_MAX, V_MAX))
@@ -479,3 +481,89 @@ def equilibria(
         if res.converged[k] and np.all(lam[k] >= 1.0)
     ]
     return _dedup(eqs, ritz_basis(params.l).scale)
+
+
+def switches(params: PrototypeParams, de: int, v: float) -> bool:
+    """Whether ``v`` on one DE alone switches the beam: its well is gone (static, Eq. 15).
+
+    Parameters
+    ----------
+    params : PrototypeParams
+        Prototype parameters.
+    de : {1, 2}
+        The DE at ``v``, the other at 0 V, no load.
+    v : float
+        Voltage [V].
+
+    Returns
+    -------
+    bool
+        True if stable equilibria exist and all lie on the far side from that DE's well
+        (``q > 0`` for DE 1, ``q < 0`` for DE 2).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15, Section 3.3.4.
+    """
+    stable = [e for e in equilibria(params, **{f"v{de}": v}) if e.stable]
+    return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable)
+
+
+def switching_voltage(
+    params: PrototypeParams, de: int, *, v_max: float = V_MAX, tol: float = 1.0
+) -> float:
+    """Return the static switching threshold of one DE: the lowest voltage removing its well.
+
+    DE 1 (left) pushes the beam towards ``+q``: its threshold is the lowest ``v1`` (with
+    ``v2 = 0``, no load) at which every stable equilibrium of Eq. 15 has ``q > 0``, so the
+    left well is gone and the beam must snap to the right; DE 2 the same towards ``-q``.
+    Found by bisection on ``[0, v_max]`` (each step one :func:`equilibria` call); static and
+    without friction, so a slow ramp switches a real prototype at about this voltage, and
+    creep or a resonance lower (Sec. 3.3.4, Fig. 3).
+
+    Parameters
+    ----------
+    params : PrototypeParams
+        Prototype parameters (its anchor offsets ``dz_1``, ``dz_2`` included).
+    de : {1, 2}
+        The DE whose voltage rises.
+    v_max : float
+        Upper end of the search [V]; default the converters' 3 kV.
+    tol : float
+        Width of the final bracket [V].
+
+    Returns
+    -------
+    float
+        The threshold [V], to within ``tol`` above; ``0.0`` if the well on that DE's side
+        does not exist at 0 V, ``math.inf`` if ``v_max`` does not remove it.
+
+    Raises
+    ------
+    ValueError
+        If ``de`` is not 1 or 2, or ``v_max`` or ``tol`` is not positive.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15, Section 3.3.4 and Fig. 3 (the switching limit of the
+    operating range).
+
+    Examples
+    --------
+    >>> from debist.physics.params import PrototypeParams
+    >>> round(switching_voltage(PrototypeParams.paper(), 1, tol=10.0), -1)
+    1430.0
+    """
+    if de not in (1, 2):
+        raise ValueError(f"`de` must be 1 or 2, got {de!r}")
+    if not (v_max > 0 and tol > 0):
+        raise ValueError(f"`v_max` and `tol` must be positive, got {v_max!r} and {tol!r}")
+    if switches(params, de, 0.0):
+        return 0.0
+    if not switches(params, de, v_max):
+        return float("inf")
+    lo, hi = 0.0, float(v_max)
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if switches(params, de, mid) else (mid, hi)
+    return hi

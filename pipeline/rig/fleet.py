@@ -22,7 +22,7 @@ import numpy as np
 
 from debist.errors import DebistError, WorkflowError
 from debist.physics.params import V_MAX, PrototypeParams
-from debist.physics.statics import equilibria
+from debist.physics.statics import equilibria, switches
 from debist.rig.params import RigParams
 
 __all__ = ["DEFAULT_SCATTER", "FleetError", "is_bistable_and_switchable", "make_fleet"]
@@ -91,11 +91,7 @@ def is_bistable_and_switchable(
     right = [e for e in equilibria(p, F=-F) if e.stable and e.q > 0]
     if not right:
         return False
-    on1 = [e for e in equilibria(p, v1=v_switch) if e.stable]
-    if not on1 or any(e.q <= 0 for e in on1):
-        return False
-    on2 = [e for e in equilibria(p, v2=v_switch) if e.stable]
-    return bool(on2) and all(e.q < 0 for e in on2)
+    return switches(p, 1, v_switch) and switches(p, 2, v_switch)
 
 
 def _draw(rng: np.random.Generator, nominal: RigParams, spread: Mapping[str, float]) -> RigParams:

@@ -7,6 +7,15 @@ with the member's prototype in ``[rig.prototype]``, its friction in ``[rig.plant
 name and output folder. ``[physics]`` stays the nominal design, so each member's analytical
 row shows what the nominal model misses on that copy. ``debist batch`` then runs them on Dask.
 
+Every profile's sub-threshold blocks are meant to stay below the prototype's switching
+threshold (:mod:`debist.rig.profiles`). A lab sets their level for each copy it tests after a
+slow ramp has shown where that copy switches; a member whose static threshold (Eq. 15,
+:func:`debist.physics.statics.switching_voltage`, the lower of its two DEs) is below the
+template prototype's gets every experiment's ``v_sub`` scaled down by the ratio of the two
+thresholds, so it keeps the template's margin. Without it a member switching at 682 V had
+"sub-threshold" validation blocks at 1 kV that snapped it over, a quasi-static switch its
+identification record never contained.
+
 References
 ----------
 Masoud & Maas 2025, Table 1 (nominal prototype).
@@ -15,8 +24,9 @@ Masoud & Maas 2025, Table 1 (nominal prototype).
 from __future__ import annotations
 
 import copy
+import math
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,10 +35,63 @@ import tomli_w
 from debist.errors import WorkflowError
 from debist.names import check_file_name
 from debist.physics.params import PrototypeParams
+from debist.physics.statics import switching_voltage
 from debist.rig.fleet import make_fleet
 from debist.rig.params import RigParams
+from debist.rig.profiles import V_LIMIT, V_SUB
 
-__all__ = ["fleet_workflows"]
+__all__ = ["fleet_workflows", "lower_threshold", "sub_threshold_scale"]
+
+
+def lower_threshold(prototype: PrototypeParams, v_max: float = V_LIMIT) -> float:
+    """Return the lower of a prototype's two static switching thresholds [V].
+
+    Parameters
+    ----------
+    prototype : PrototypeParams
+        The prototype.
+    v_max : float
+        Upper end of the search [V]; default the converters' 3 kV.
+
+    Returns
+    -------
+    float
+        ``min`` over DE 1 and DE 2 of :func:`debist.physics.statics.switching_voltage`
+        (to 1 V); ``math.inf`` if neither switches at ``v_max``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15, Section 3.3.4.
+    """
+    return min(switching_voltage(prototype, de, v_max=v_max) for de in (1, 2))
+
+
+def sub_threshold_scale(member: PrototypeParams, v_template: float) -> tuple[float, float]:
+    """Factor on a fleet member's sub-threshold level that keeps the template's margin.
+
+    Parameters
+    ----------
+    member : PrototypeParams
+        The member's prototype.
+    v_template : float
+        The template prototype's :func:`lower_threshold` [V].
+
+    Returns
+    -------
+    scale : float
+        ``min(1, V_member / v_template)``; 1 when the member switches no lower than the
+        template (or the template does not switch at 3 kV, ``v_template`` infinite).
+    v_member : float
+        The member's :func:`lower_threshold` [V]; ``math.inf`` if not below ``v_template``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15, Section 3.3.4; Sec. 5.1 (the sub-threshold excitation).
+    """
+    if not math.isfinite(v_template):
+        return 1.0, math.inf
+    v_member = lower_threshold(member, v_template)  # inf when not below the template's
+    return min(1.0, v_member / v_template), v_member
 
 
 def fleet_workflows(
@@ -39,8 +102,12 @@ def fleet_workflows(
     *,
     seed: int,
     scatter: Mapping[str, float] | None = None,
-) -> dict[str, str]:
-    """Render one workflow per fleet member from a template workflow.
+) -> Iterator[tuple[str, str]]:
+    """Render one workflow per fleet member from a template workflow, member by member.
+
+    The template is checked and the prototypes drawn at the call; each member's threshold
+    and text only when the iterator reaches it, so a caller that stops early pays for what
+    it took (``dict(fleet_workflows(...))`` renders them all).
 
     Parameters
     ----------
@@ -60,8 +127,8 @@ def fleet_workflows(
 
     Returns
     -------
-    dict of str to str
-        File name (``<name>-<k>.toml``) -> TOML text, in fleet order.
+    iterator of tuple of str
+        File name (``<name>-<k>.toml``) and TOML text, in fleet order.
 
     Raises
     ------
@@ -86,16 +153,29 @@ def fleet_workflows(
     name = template.get("workflow", {}).get("name", "fleet")
     check_file_name(name, "[workflow] name of the fleet template")  # <name>-<k>.toml
     width = max(3, len(str(n - 1)))
-    out: dict[str, str] = {}
+    return _render(
+        template, template_dir, out_dir, members, lower_threshold(prototype), name, width, seed
+    )
+
+
+def _render(template, template_dir, out_dir, members, v_template, name, width, seed):
+    """Yield each member's file name and TOML text (:func:`fleet_workflows`)."""
     for k, member in enumerate(members):
+        scale, v_member = sub_threshold_scale(member.prototype, v_template)
         wf = copy.deepcopy(dict(template))
         label = f"{name}-{k:0{width}d}"
         head = dict(wf.get("workflow", {}))
         head.update(
             name=label,
-            description=f"member {k} of a fleet of {n} (seed {seed}) from {name}",
+            description=f"member {k} of the seed-{seed} fleet from {name}",
             output_dir=f"runs/{label}",
         )
+        if scale < 1.0:
+            head["description"] += (
+                f"; sub-threshold levels x {scale:.3f} (static switching threshold "
+                f"{v_member:.0f} V, below the template's)"
+            )
+            _scale_sub_threshold(wf, scale)
         wf["workflow"] = head
         plant = member.to_dict()
         wf["rig"] = dict(wf["rig"])
@@ -105,5 +185,12 @@ def fleet_workflows(
             if "source" in table:
                 source = (template_dir / table["source"]).resolve()
                 table["source"] = os.path.relpath(source, out_dir.resolve())
-        out[f"{label}.toml"] = tomli_w.dumps(wf)
-    return out
+        yield f"{label}.toml", tomli_w.dumps(wf)
+
+
+def _scale_sub_threshold(wf: dict[str, Any], scale: float) -> None:
+    """Set ``v_sub`` of every rig experiment to ``scale`` times the template's (in place)."""
+    rig = wf["rig"]
+    rig["experiments"] = {name: dict(exp) for name, exp in rig.get("experiments", {}).items()}
+    for exp in rig["experiments"].values():
+        exp["v_sub"] = round(scale * float(exp.get("v_sub", V_SUB)), 1)

@@ -50,6 +50,7 @@ from debist.errors import WorkflowError
 __all__ = [
     "PROFILES",
     "V_LIMIT",
+    "V_SUB",
     "Excitation",
     "identification_profile",
     "make_profile",
@@ -59,6 +60,10 @@ __all__ = [
 
 #: Largest voltage the rig's high-voltage converters deliver [V] (Sec. 5.1).
 V_LIMIT = 3000.0
+
+#: Default peak of the sub-threshold excitation of every profile [V]: about 0.7 of the Table 1
+#: prototype's static switching threshold (1.43 kV, Eq. 15).
+V_SUB = 1000.0
 
 #: Band of the identification profile's random excitation [Hz].
 _ID_BAND = (0.5, 20.0)
@@ -317,7 +322,7 @@ def identification_profile(
     duration: float = 37.5,
     hold: float = 1e-3,
     v_max: float = 3000.0,
-    v_sub: float = 1000.0,
+    v_sub: float = V_SUB,
     seed: int = 0,
     ramps: Sequence[float] = (0.0,),
 ) -> Excitation:
@@ -438,7 +443,7 @@ def validation_profile(
     duration: float = 37.5,
     hold: float = 1e-3,
     v_max: float = 3000.0,
-    v_sub: float = 1000.0,
+    v_sub: float = V_SUB,
     seed: int = 1,
 ) -> Excitation:
     """Build the validation profile: chirps, staircase, multisine, triangles, ramped pulses.
@@ -554,7 +559,7 @@ def staircase_profile(
     duration: float = 75.0,
     hold: float = 1e-3,
     v_max: float = 3000.0,
-    v_sub: float = 1000.0,
+    v_sub: float = V_SUB,
     seed: int = 0,
     v_deep: float | None = None,
     step: float = 1.0,
