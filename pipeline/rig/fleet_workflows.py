@@ -34,16 +34,16 @@ import tomli_w
 
 from debist.errors import WorkflowError
 from debist.names import check_file_name
-from debist.physics.params import PrototypeParams
+from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import switching_voltage
 from debist.rig.fleet import make_fleet
 from debist.rig.params import RigParams
-from debist.rig.profiles import V_LIMIT, V_SUB
+from debist.rig.profiles import V_SUB
 
 __all__ = ["fleet_workflows", "lower_threshold", "sub_threshold_scale"]
 
 
-def lower_threshold(prototype: PrototypeParams, v_max: float = V_LIMIT) -> float:
+def lower_threshold(prototype: PrototypeParams, v_max: float = V_MAX) -> float:
     """Return the lower of a prototype's two static switching thresholds [V].
 
     Parameters
@@ -152,14 +152,13 @@ def fleet_workflows(
     members = make_fleet(n, seed=seed, nominal=nominal, scatter=scatter)
     name = template.get("workflow", {}).get("name", "fleet")
     check_file_name(name, "[workflow] name of the fleet template")  # <name>-<k>.toml
-    width = max(3, len(str(n - 1)))
-    return _render(
-        template, template_dir, out_dir, members, lower_threshold(prototype), name, width, seed
-    )
+    v_template = lower_threshold(prototype)
+    return _render(template, template_dir, out_dir, members, v_template, name, seed)
 
 
-def _render(template, template_dir, out_dir, members, v_template, name, width, seed):
+def _render(template, template_dir, out_dir, members, v_template, name, seed):
     """Yield each member's file name and TOML text (:func:`fleet_workflows`)."""
+    width = max(3, len(str(len(members) - 1)))
     for k, member in enumerate(members):
         scale, v_member = sub_threshold_scale(member.prototype, v_template)
         wf = copy.deepcopy(dict(template))
