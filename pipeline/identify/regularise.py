@@ -166,14 +166,13 @@ def weight_penalty(penalty: np.ndarray, scale: np.ndarray, names: Sequence[str])
     the curve).
     """
     s = np.asarray(scale, dtype=float)
-    prefix = [n.split("[")[0] if "[" in n else None for n in names]
+    prefix = np.array([n.split("[")[0] if "[" in n else "" for n in names])
+    gmean = {pre: float(np.exp(np.mean(np.log(s[prefix == pre])))) for pre in set(prefix)}
     out = np.zeros(penalty.shape)
     for i, row in enumerate(penalty):
         touched = np.flatnonzero(row)
-        if touched.size == 0:
-            continue
-        curve = [j for j, pre in enumerate(prefix) if pre == prefix[touched[0]]]
-        out[i] = row / s * float(np.exp(np.mean(np.log(s[curve]))))
+        if touched.size:
+            out[i] = row / s * gmean[prefix[touched[0]]]
     return out
 
 
