@@ -123,3 +123,44 @@ def test_the_replicate_line_gives_the_expected_losses_and_the_chance_of_none():
     assert "members at most 1 %: 2" in line
     assert line.endswith("lies above 1 %: 000")
     assert _script()._replicates_markdown(nr[nr.model == "narx"]) == []
+
+
+def test_the_held_gain_rows_compare_with_the_small_signal_gain_and_the_secant(tmp_path):
+    """An identified g_i made 0.9 of the full model's 3 kV secant, against a small-signal
+    truth made 1.25 times the secant: the rows give 0.9, 0.72 and 0.8 at both wells, DE 1
+    (g_1 > 0, pushing +q) holds the beam at the right well and DE 2 at the left."""
+    import numpy as np
+    import pandas as pd
+
+    from debist.physics.statics import force_displacement
+    from debist.rig.experiment import RigConfig
+
+    script = _script()
+    wf = ROOT / "workflows" / "paper-experiment.toml"
+    raw = tomllib.loads(wf.read_text())
+    prototype = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).rig.prototype
+    (tmp_path / "identify").mkdir()
+    V = 3000.0
+    static = pd.DataFrame({"level": [0, 1], "v1": [V, 0.0], "v2": [0.0, V]})
+    static.to_parquet(tmp_path / "identify" / "static.parquet")
+    q = np.linspace(-14e-3, 14e-3, 57)
+    F0 = force_displacement(prototype, q, v1=0.0, v2=0.0).F
+    secant = {i: (F0 - force_displacement(prototype, q, **{f"v{i}": V}).F) / V**2 for i in (1, 2)}
+    assert np.all(secant[1] > 0) and np.all(secant[2] < 0)
+    truth = {"q": q, "f": 100.0 * (q + 9.5e-3) * q * (q - 11e-3)}
+    truth |= {f"g{i}": 1.25 * secant[i] for i in (1, 2)}
+    curves = pd.DataFrame({"q": q, "g1": 0.9 * secant[1], "g2": 0.9 * secant[2]})
+    rows = script._held_gain_rows(wf, tmp_path, curves, {"curves": truth})
+    assert [(r["curve"], round(r["well"] * 1e3, 1), r["holds"]) for r in rows] == [
+        ("g1", -9.5, False), ("g2", -9.5, True), ("g1", 11.0, True), ("g2", 11.0, False)
+    ]  # fmt: skip
+    for r in rows:
+        assert r["level"] == V
+        # interpolation on the 0.5 mm grid: the curves are smooth there
+        np.testing.assert_allclose(r["to_secant"], 0.9, rtol=2e-3)
+        np.testing.assert_allclose(r["to_small_signal"], 0.72, rtol=2e-3)
+        np.testing.assert_allclose(r["secant_to_small_signal"], 0.8, rtol=2e-3)
+    lines = script._held_markdown(rows)
+    row = "| g1 where it holds the beam (1 wells) | 0.72-0.72 (median 0.72) | 0.90-0.90"
+    assert sum(line.startswith(row) for line in lines) == 1
+    assert script._held_markdown([]) == []
