@@ -428,13 +428,17 @@ def _markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _table_head(*columns: str) -> list[str]:
+    """A blank line, then a Markdown table's header and rule for ``columns``."""
+    return ["", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
 def _visited_markdown(visited: list[dict]) -> list[str]:
     """Lines of the table of g_i over the intervals its sub-threshold excitation visits."""
     if not visited:
         return []
-    lines = ["", "| curve | visited well intervals | fully marked | points marked "
-             "| max / median error over the visited points (marked or not) |",
-             "|---|---|---|---|---|"]  # fmt: skip
+    lines = _table_head("curve", "visited well intervals", "fully marked", "points marked",
+                        "max / median error over the visited points (marked or not)")  # fmt: skip
     for name, g in pd.DataFrame(visited).groupby("curve"):
         full = int((g.marked == g.points).sum())
         lines.append(
@@ -448,9 +452,8 @@ def _held_markdown(held: list[dict]) -> list[str]:
     """Lines of the table of g_i at the wells against the small-signal gain and the secant."""
     if not held:
         return []
-    lines = ["", "| curve at the wells (+-0.7 mm) | identified / small-signal gain "
-             "| identified / held-level secant | secant / small-signal gain |",
-             "|---|---|---|---|"]  # fmt: skip
+    lines = _table_head("curve at the wells (+-0.7 mm)", "identified / small-signal gain",
+                        "identified / held-level secant", "secant / small-signal gain")  # fmt: skip
     cols = ("to_small_signal", "to_secant", "secant_to_small_signal")
     for (name, holds), g in pd.DataFrame(held).groupby(["curve", "holds"]):
         cells = [f"{g[c].min():.2f}-{g[c].max():.2f} (median {g[c].median():.2f})" for c in cols]
