@@ -83,7 +83,15 @@ def _member_data(run: Path) -> tuple[pd.DataFrame, dict]:
     return curves, read_h5(run / "rig" / "identification_truth.h5")
 
 
-def _curve_rows(wf: Path, run: Path, plant: str, curves: pd.DataFrame, rig: dict) -> list[dict]:
+def _rig_config(wf: Path):
+    """A member's ``[rig]`` (with its ``[physics]``) as the rig reads it, parsed once per member."""
+    from debist.rig.experiment import RigConfig
+
+    raw = tomllib.loads(wf.read_text())
+    return RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
+
+
+def _curve_rows(config, run: Path, plant: str, curves: pd.DataFrame, rig: dict) -> list[dict]:
     truth = rig["curves"]
     q = curves.q.to_numpy()
     rows = []
@@ -94,11 +102,11 @@ def _curve_rows(wf: Path, run: Path, plant: str, curves: pd.DataFrame, rig: dict
         est, lo, hi = (curves[c].to_numpy() for c in (name, f"{name}_lo", f"{name}_hi"))
         rows.append(_score(name, true, est, lo, hi, marked))
     if plant == "full":
-        rows += _static_rows(wf, run)
+        rows += _static_rows(config, run)
     return rows + _stiffness_rows(run, truth)
 
 
-def _visited_rows(wf: Path, run: Path, curves: pd.DataFrame, rig: dict) -> list[dict]:
+def _visited_rows(config, run: Path, curves: pd.DataFrame, rig: dict) -> list[dict]:
     """g_i over the q interval its sub-threshold excitation visits near each well.
 
     The intervals of :func:`debist.rig.visited.visited_intervals` (the identification log's
@@ -107,12 +115,10 @@ def _visited_rows(wf: Path, run: Path, curves: pd.DataFrame, rig: dict) -> list[
     many are marked, and the largest and median ``|identified - true|`` over all of them as a
     fraction of the true curve's range (marked or not: what marking there would show).
     """
-    from debist.rig.experiment import RigConfig
     from debist.rig.profiles import make_profile
     from debist.rig.visited import excitation_blocks, rest_points, visited_intervals
 
-    raw = tomllib.loads(wf.read_text())
-    exp = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).experiments["identification"]
+    exp = config.experiments["identification"]
     segments = make_profile(exp.profile, **exp.profile_kwargs()).segments
     truth = rig["curves"]
     log = pd.read_parquet(run / "ingest" / "identification.parquet")
@@ -163,13 +169,11 @@ def _stiffness_rows(run: Path, truth: dict) -> list[dict]:
     }]  # fmt: skip
 
 
-def _static_rows(wf: Path, run: Path) -> list[dict]:
+def _static_rows(config, run: Path) -> list[dict]:
     from debist.physics.statics import force_displacement
-    from debist.rig.experiment import RigConfig
 
-    raw = tomllib.loads(wf.read_text())
     static = pd.read_parquet(run / "identify" / "static.parquet")
-    prototype = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).rig.prototype
+    prototype = config.rig.prototype
     rows = []
     for _, part in static.groupby("level"):
         marked = part.F_identified.to_numpy()
@@ -187,7 +191,7 @@ def _static_rows(wf: Path, run: Path) -> list[dict]:
     return rows
 
 
-def _held_gain_rows(wf: Path, run: Path, curves: pd.DataFrame, rig: dict) -> list[dict]:
+def _held_gain_rows(config, run: Path, curves: pd.DataFrame, rig: dict) -> list[dict]:
     """The full plant's identified g_i at each true well against its two candidate truths.
 
     Per well (``rest_points`` of the true restoring force) and input i held in the log
@@ -200,11 +204,9 @@ def _held_gain_rows(wf: Path, run: Path, curves: pd.DataFrame, rig: dict) -> lis
     the other well it switches it over).
     """
     from debist.physics.statics import force_displacement
-    from debist.rig.experiment import RigConfig
     from debist.rig.visited import rest_points
 
-    raw = tomllib.loads(wf.read_text())
-    prototype = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).rig.prototype
+    prototype = config.rig.prototype
     static = pd.read_parquet(run / "identify" / "static.parquet")
     truth = rig["curves"]
     wells, barrier = rest_points(truth["q"], truth["f"])
@@ -343,10 +345,11 @@ def calibrate(
             nrmse.append({"member": wf.stem, "model": "rbf", "nrmse_q": np.nan, "failed": True})
             continue
         curves, rig = _member_data(run)
-        rows += [{"member": wf.stem, **r} for r in _curve_rows(wf, run, plant, curves, rig)]
-        visited += [{"member": wf.stem, **r} for r in _visited_rows(wf, run, curves, rig)]
+        config = _rig_config(wf)
+        rows += [{"member": wf.stem, **r} for r in _curve_rows(config, run, plant, curves, rig)]
+        visited += [{"member": wf.stem, **r} for r in _visited_rows(config, run, curves, rig)]
         if plant == "full":
-            held += [{"member": wf.stem, **r} for r in _held_gain_rows(wf, run, curves, rig)]
+            held += [{"member": wf.stem, **r} for r in _held_gain_rows(config, run, curves, rig)]
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
         for _, r in table[table.role == "validation"].iterrows():
             nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": r.nrmse_q, **_spread(r)})

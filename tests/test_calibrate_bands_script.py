@@ -150,7 +150,7 @@ def test_the_held_gain_rows_compare_with_the_small_signal_gain_and_the_secant(tm
     truth = {"q": q, "f": 100.0 * (q + 9.5e-3) * q * (q - 11e-3)}
     truth |= {f"g{i}": 1.25 * secant[i] for i in (1, 2)}
     curves = pd.DataFrame({"q": q, "g1": 0.9 * secant[1], "g2": 0.9 * secant[2]})
-    rows = script._held_gain_rows(wf, tmp_path, curves, {"curves": truth})
+    rows = script._held_gain_rows(script._rig_config(wf), tmp_path, curves, {"curves": truth})
     assert [(r["curve"], round(r["well"] * 1e3, 1), r["holds"]) for r in rows] == [
         ("g1", -9.5, False), ("g2", -9.5, True), ("g1", 11.0, True), ("g2", 11.0, False)
     ]  # fmt: skip
