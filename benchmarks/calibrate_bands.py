@@ -210,14 +210,13 @@ def _held_gain_rows(config, run: Path, curves: pd.DataFrame, rig: dict) -> list[
     static = pd.read_parquet(run / "identify" / "static.parquet")
     truth = rig["curves"]
     wells, barrier = rest_points(truth["q"], truth["f"])
+    levels = {i: float(static[f"v{i}"].max()) for i in (1, 2)}
+    levels = {i: held for i, held in levels.items() if held > 0}
     rows = []
     for well in wells:
         q = np.linspace(well - 0.7e-3, well + 0.7e-3, 9)
         at_rest = force_displacement(prototype, q, v1=0.0, v2=0.0).F
-        for i in (1, 2):
-            held = float(static[f"v{i}"].max())
-            if not held > 0:
-                continue
+        for i, held in levels.items():
             v = {"v1": held if i == 1 else 0.0, "v2": held if i == 2 else 0.0}
             secant = (at_rest - force_displacement(prototype, q, **v).F) / held**2
             small = np.interp(q, truth["q"], truth[f"g{i}"])
