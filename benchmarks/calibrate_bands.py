@@ -407,10 +407,9 @@ def _replicates_markdown(nr: pd.DataFrame) -> list[str]:
 def _markdown(result: dict) -> str:
     lines = [
         f"**{result['plant']} plant**, fleet of {result['size']} (seed {result['seed']})",
-        "",
-        "| curve | marked points | max / median error where marked | band holds the truth |",
-        "|---|---|---|---|",
-    ]
+        *_table_head("curve", "marked points", "max / median error where marked",
+                     "band holds the truth"),
+    ]  # fmt: skip
     for c in result["curves"]:
         lines.append(
             f"| {c['curve']} | {c['marked']} | {100 * c['max_error']:.1f} / "
@@ -420,7 +419,7 @@ def _markdown(result: dict) -> str:
     lines += _held_markdown(result.get("held", []))
     nr = pd.DataFrame(result["nrmse"])
     if not nr.empty:
-        lines += ["", "| model | unseen NRMSE(q): median | max | members |", "|---|---|---|---|"]
+        lines += _table_head("model", "unseen NRMSE(q): median", "max", "members")
         for model, g in nr.groupby("model"):
             lines.append(
                 f"| {model} | {100 * g.nrmse_q.median():.2f} % | {100 * g.nrmse_q.max():.2f} % "
@@ -478,8 +477,8 @@ def _model_error_table(results: list[dict]) -> str:
     for r in results:
         for name, values in r["lacking"].items():
             pooled.setdefault(GROUPS[name], []).extend(values)
-    lines = ["| curve | values (marked points; g: prototype curves) | model error (95th pct.) |",
-             "|---|---|---|"]  # fmt: skip
+    lines = _table_head("curve", "values (marked points; g: prototype curves)",
+                        "model error (95th pct.)")[1:]  # fmt: skip
     table = {}
     for key, values in pooled.items():
         table[key] = round(float(np.percentile(values, 95)), 3) if values else 0.0
