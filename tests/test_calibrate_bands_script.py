@@ -89,15 +89,15 @@ def test_a_gain_error_is_pooled_per_prototype_and_relative_to_the_local_gain():
 
 
 def test_the_visited_table_counts_wells_marked_points_and_errors():
-    """Two members' g_1 wells: one fully marked, one half; the errors' max and median."""
+    """Two members' g_1 wells: one fully marked, one half; within 10 %; the errors' max, median."""
     rows = [
         {"curve": "g1", "points": 4, "marked": 4, "max_error": 0.02, "median_error": 0.01},
         {"curve": "g1", "points": 6, "marked": 3, "max_error": 0.15, "median_error": 0.05},
         {"curve": "g2", "points": 5, "marked": 0, "max_error": 0.03, "median_error": 0.02},
     ]
     lines = _script()._visited_markdown(rows)
-    assert "| g1 | 2 | 1 | 7 of 10 | 15.0 / 3.0 % |" in lines
-    assert "| g2 | 1 | 0 | 0 of 5 | 3.0 / 2.0 % |" in lines
+    assert "| g1 | 2 | 1 | 7 of 10 | 1 | 15.0 / 3.0 % |" in lines
+    assert "| g2 | 1 | 0 | 0 of 5 | 1 | 3.0 / 2.0 % |" in lines
     assert _script()._visited_markdown([]) == []
 
 
