@@ -441,12 +441,12 @@ def _visited_markdown(visited: list[dict]) -> list[str]:
 
     ``within 10 %`` counts the intervals where the identified g_i is within :data:`WITHIN` of
     the true range at every grid point, marked or not: the most intervals that any mask could
-    mark while keeping the error where marked within 10 %, whatever its band.
+    mark while keeping the error where marked within that share, whatever its band.
     """
     if not visited:
         return []
     lines = _table_head("curve", "visited well intervals", "fully marked", "points marked",
-                        "within 10 % over the whole interval",
+                        f"within {100 * WITHIN:.0f} % over the whole interval",
                         "max / median error over the visited points (marked or not)")  # fmt: skip
     for name, g in pd.DataFrame(visited).groupby("curve"):
         full = int((g.marked == g.points).sum())
