@@ -312,7 +312,7 @@ class SimulationResult:
 
 
 def well_state(
-    params: PrototypeParams, side: int = -1, *, b: float | None = None
+    params: PrototypeParams, side: int = -1, *, b: float | None = None, F: float = 0.0
 ) -> NDArray[np.float64]:
     """State vector at rest in the left (``side=-1``) or right (``side=+1``) well, v = 0.
 
@@ -324,6 +324,8 @@ def well_state(
         Which well.
     b : float, optional
         Pre-strain screw position [m]; ``params.b`` if omitted.
+    F : float
+        Constant horizontal tip force [N] (as :func:`~debist.physics.statics.equilibria`).
 
     Returns
     -------
@@ -339,7 +341,7 @@ def well_state(
     ----------
     Masoud & Maas 2025, Eq. 15, 20.
     """
-    eqs = [e for e in equilibria(params, b=b) if e.stable and side * e.q > 1e-6]
+    eqs = [e for e in equilibria(params, b=b, F=F) if e.stable and side * e.q > 1e-6]
     if not eqs:
         raise ValueError(f"no stable equilibrium with sign(q) = {side} (b = {b})")
     e = max(eqs, key=lambda e: abs(e.q))

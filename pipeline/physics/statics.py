@@ -483,7 +483,7 @@ def equilibria(
     return _dedup(eqs, ritz_basis(params.l).scale)
 
 
-def switches(params: PrototypeParams, de: int, v: float) -> bool:
+def switches(params: PrototypeParams, de: int, v: float, *, F: float = 0.0) -> bool:
     """Whether ``v`` on one DE alone switches the beam: its well is gone (static, Eq. 15).
 
     Parameters
@@ -491,9 +491,11 @@ def switches(params: PrototypeParams, de: int, v: float) -> bool:
     params : PrototypeParams
         Prototype parameters.
     de : {1, 2}
-        The DE at ``v``, the other at 0 V, no load.
+        The DE at ``v``, the other at 0 V.
     v : float
         Voltage [V].
+    F : float
+        Constant horizontal tip force [N] (as :func:`equilibria`); default no load.
 
     Returns
     -------
@@ -505,12 +507,12 @@ def switches(params: PrototypeParams, de: int, v: float) -> bool:
     ----------
     Masoud & Maas 2025, Eq. 15, Section 3.3.4.
     """
-    stable = [e for e in equilibria(params, **{f"v{de}": v}) if e.stable]
+    stable = [e for e in equilibria(params, F=F, **{f"v{de}": v}) if e.stable]
     return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable)
 
 
 def switching_voltage(
-    params: PrototypeParams, de: int, *, v_max: float = V_MAX, tol: float = 1.0
+    params: PrototypeParams, de: int, *, v_max: float = V_MAX, tol: float = 1.0, F: float = 0.0
 ) -> float:
     """Return the static switching threshold of one DE: the lowest voltage removing its well.
 
@@ -531,6 +533,8 @@ def switching_voltage(
         Upper end of the search [V]; default the converters' 3 kV.
     tol : float
         Width of the final bracket [V].
+    F : float
+        Constant horizontal tip force [N] (as :func:`equilibria`); default no load.
 
     Returns
     -------
@@ -558,12 +562,12 @@ def switching_voltage(
         raise ValueError(f"`de` must be 1 or 2, got {de!r}")
     if not (v_max > 0 and tol > 0):
         raise ValueError(f"`v_max` and `tol` must be positive, got {v_max!r} and {tol!r}")
-    if switches(params, de, 0.0):
+    if switches(params, de, 0.0, F=F):
         return 0.0
-    if not switches(params, de, v_max):
+    if not switches(params, de, v_max, F=F):
         return float("inf")
     lo, hi = 0.0, float(v_max)
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if switches(params, de, mid) else (mid, hi)
+        lo, hi = (lo, mid) if switches(params, de, mid, F=F) else (mid, hi)
     return hi

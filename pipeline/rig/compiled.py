@@ -62,15 +62,16 @@ def pack_friction(plant: RigPlant) -> NDArray[np.float64]:
 
     Returns
     -------
-    ndarray, shape (2 + 2 n_friction,)
-        ``[c, p, k_1..k_n, k_1/F_1..k_n/F_n]``: viscous coefficient [N s/m], the exponent
-        of the regularised elements, the element stiffnesses [N/m] and ``k_i / F_i`` [1/m].
+    ndarray, shape (5 + 2 n_friction,)
+        ``[c, p, F_0, gain_1, gain_2, k_1..k_n, k_1/F_1..k_n/F_n]``: viscous coefficient
+        [N s/m], the exponent of the regularised elements, the constant tip force [N], the
+        DEs' electrostatic gains [-], the element stiffnesses [N/m] and ``k_i / F_i`` [1/m].
 
     References
     ----------
     Al-Bender, Lampaert & Swevers 2005 (GMS model).
     """
-    head = [plant._c, plant._p]
+    head = [plant._c, plant._p, plant._F0, plant._gain[0], plant._gain[1]]
     return np.concatenate([head, plant._k, plant._kF]).astype(float).reshape(-1)
 
 
@@ -135,8 +136,8 @@ def _stamped(stamp: str):
             State ``[q_m, q_m_dot, q_eps, z]``.
         fp : ndarray, shape (N_MODEL,)
             The full model (:func:`debist.physics.compiled.pack_model`).
-        fr : ndarray, shape (2 + 2 n_friction,)
-            The friction (:func:`pack_friction`).
+        fr : ndarray, shape (5 + 2 n_friction,)
+            The friction, tip force and DE gains (:func:`pack_friction`).
         d1, d2 : ndarray
             Tables of the HV drivers of DE 1 and DE 2 (:attr:`DriverOutput.table
             <debist.rig.drivers.DriverOutput.table>`), or empty: then ``w`` holds the
@@ -154,21 +155,21 @@ def _stamped(stamp: str):
         Masoud & Maas 2025, Eq. 19-23, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
         """
         stamp  # noqa: B018
-        w1 = driver_value(t, d1) ** 2 if d1.size else w[0]
-        w2 = driver_value(t, d2) ** 2 if d2.size else w[1]
+        w1 = fr[3] * (driver_value(t, d1) ** 2 if d1.size else w[0])
+        w2 = fr[4] * (driver_value(t, d2) ** 2 if d2.size else w[1])
         nf = x.size - 10
         c, p = fr[0], fr[1]
         qd = 0.0
         for i in range(4):
             qd += fp[_L + i] * x[4 + i]
-        F = 0.0
+        F = fr[2]
         for i in range(nf):
-            F -= fr[2 + i] * x[10 + i]
+            F -= fr[5 + i] * x[10 + i]
         F -= c * qd
         out = np.empty(x.size)
         _rhs_into(x[:10], w1, w2, F, fp, out)
         for i in range(nf):
-            out[10 + i] = _element_rate(qd, x[10 + i], fr[2 + nf + i], p)
+            out[10 + i] = _element_rate(qd, x[10 + i], fr[5 + nf + i], p)
         return out
 
     @nb.njit(cache=True)
@@ -194,8 +195,8 @@ def _stamped(stamp: str):
         Masoud & Maas 2025, Eq. 19-23, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005.
         """
         stamp  # noqa: B018
-        w1 = driver_value(t, d1) ** 2 if d1.size else w[0]
-        w2 = driver_value(t, d2) ** 2 if d2.size else w[1]
+        w1 = fr[3] * (driver_value(t, d1) ** 2 if d1.size else w[0])
+        w2 = fr[4] * (driver_value(t, d2) ** 2 if d2.size else w[1])
         n = x.size
         nf = n - 10
         c, p = fr[0], fr[1]
@@ -207,14 +208,14 @@ def _stamped(stamp: str):
         _cho_solve(M, MinvL)
         for i in range(4):
             for j in range(nf):
-                J[4 + i, 10 + j] = -MinvL[i, 0] * fr[2 + j]
+                J[4 + i, 10 + j] = -MinvL[i, 0] * fr[5 + j]
             for j in range(4):
                 J[4 + i, 4 + j] -= c * MinvL[i, 0] * fp[_L + j]
         qd = 0.0
         for i in range(4):
             qd += fp[_L + i] * x[4 + i]
         for i in range(nf):
-            g, dz = _element_partials(qd, x[10 + i], fr[2 + nf + i], p)
+            g, dz = _element_partials(qd, x[10 + i], fr[5 + nf + i], p)
             for j in range(4):
                 J[10 + i, 4 + j] = g * fp[_L + j]
             J[10 + i, 10 + i] = dz

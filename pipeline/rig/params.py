@@ -13,7 +13,7 @@ from dataclasses import field
 from typing import Annotated, ClassVar, Literal
 
 import pydantic
-from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt
+from pydantic import Field, FiniteFloat, NonNegativeFloat, PositiveFloat, PositiveInt
 
 from debist.physics.params import PrototypeParams
 from debist.workflow.config import (
@@ -83,6 +83,24 @@ class RigParams(SectionConfig):
     oversample : int
         Internal samples per log sample (sensors and plant output on the grid
         ``sample_time / oversample``); default 10.
+    gain_1, gain_2 : float
+        Electrostatic gain of DE 1 and DE 2 against the prototype's [-]: the DE force is
+        ``gain_i`` times the prototype's at the same voltage (a membrane whose permittivity or
+        electrode area differs by that factor); default 1.
+    force_offset : float
+        Constant horizontal force on the tip [N], positive towards +q (a tilted mount, a
+        cable); default 0.
+    sensor_offset : float
+        Zero offset of the laser [m]: it reads ``q + sensor_offset`` (the range is about its
+        own zero); default 0.
+    sensor_average : int
+        0 (default): the laser and the monitors are decimated by a zero-phase FIR (the rig's
+        anti-aliasing). ``N >= 1``: the logger stores the trailing mean of the laser's last
+        ``N`` internal samples (a moving-average FIR with a group delay of ``(N - 1) / 2``
+        internal samples) and the monitors' values at the log instants (point samples).
+    sensor_lag : float
+        Time constant of a first-order lag of the laser's output [s], applied on the internal
+        grid before the logger; default 0 (none).
 
     Raises
     ------
@@ -120,8 +138,19 @@ class RigParams(SectionConfig):
     sensor_noise: NonNegativeFloat = 1e-6
     monitor_noise: NonNegativeFloat = 2.0
     oversample: PositiveInt = 10
+    gain_1: Annotated[float, Field(gt=0, le=10)] = 1.0
+    gain_2: Annotated[float, Field(gt=0, le=10)] = 1.0
+    force_offset: FiniteFloat = 0.0
+    sensor_offset: FiniteFloat = 0.0
+    sensor_average: Annotated[int, Field(ge=0, le=1000)] = 0
+    sensor_lag: NonNegativeFloat = 0.0
 
     def __post_init__(self) -> None:
+        if self.sensor_average > 10 * self.oversample:
+            raise ConfigValueError(
+                "sensor_average", f"at most 10 oversample ({10 * self.oversample})",
+                self.sensor_average,
+            )  # fmt: skip
         if len(self.friction_k) != len(self.friction_F):
             raise ConfigValueError(
                 "friction_F",

@@ -52,6 +52,14 @@ from debist.rig.params import RigParams
 __all__ = ["RigPlant"]
 
 
+def _scaled(v, gain: float):
+    """``v`` itself for a unit gain, else ``t -> sqrt(gain) v(t)`` (the force goes with v^2)."""
+    if gain == 1.0:
+        return v
+    root = float(np.sqrt(gain))
+    return lambda t: root * v(t)
+
+
 class RigPlant:
     """Right-hand side and Jacobian of the plant: full model plus tip friction.
 
@@ -91,7 +99,12 @@ class RigPlant:
     def __init__(self, rig: RigParams, v1, v2, *, compiled: bool = True):
         self.rig = rig
         self.compiled = bool(compiled)
-        self.model = FullModel(rig.prototype, v1, v2, compiled=False)
+        self._drivers = (v1, v2)
+        self._gain = (rig.gain_1, rig.gain_2)
+        self._F0 = rig.force_offset
+        # the NumPy reference sees the voltages scaled so that v^2 carries the DE gain
+        scaled = [_scaled(v, g) for v, g in zip(self._drivers, self._gain, strict=True)]
+        self.model = FullModel(rig.prototype, *scaled, compiled=False)
         self.n_friction = rig.n_friction
         self.n_states = 10 + self.n_friction
         self._L = ritz_basis(rig.prototype.l).L
@@ -109,7 +122,7 @@ class RigPlant:
             from debist.rig import compiled as kern
 
             fp, fr = pack_model(self.model), kern.pack_friction(self)
-            v1, v2 = self.model.v1, self.model.v2
+            v1, v2 = self._drivers
             krhs, kjac = kern.plant_rhs, kern.plant_jac
             as_x = np.ascontiguousarray
             if isinstance(v1, DriverOutput) and isinstance(v2, DriverOutput):
@@ -146,12 +159,12 @@ class RigPlant:
         return self._compiled() if self.compiled else (self.rhs, self.jac)
 
     def rest_state(self, side: int) -> NDArray[np.float64]:
-        """State at rest in a well at ``v = 0``: relaxed creep, unloaded friction.
+        """Rest state in a well at ``v = 0`` under the tip force: relaxed creep, no friction load.
 
         Parameters
         ----------
         side : {-1, +1}
-            Which well (:func:`~debist.physics.dynamics.well_state`).
+            Which well (:func:`~debist.physics.dynamics.well_state` with ``force_offset``).
 
         Returns
         -------
@@ -163,7 +176,8 @@ class RigPlant:
         ValueError
             If there is no stable equilibrium on that side.
         """
-        return np.concatenate([well_state(self.rig.prototype, side), np.zeros(self.n_friction)])
+        x_well = well_state(self.rig.prototype, side, F=self._F0)
+        return np.concatenate([x_well, np.zeros(self.n_friction)])
 
     def atol_vector(self, atol: float, positions: float | None = None) -> NDArray[np.float64]:
         """Absolute tolerances of the states for the integrator (see :mod:`debist.rig.run`).
@@ -272,7 +286,8 @@ class RigPlant:
         z = x[10:]
         qd = float(self._L @ x[4:8])
         out = np.empty(self.n_states)
-        out[:10] = self.model.rhs(t, x[:10], F_extra=float(self.friction_force(x)))
+        F_tip = float(self.friction_force(x)) + self._F0
+        out[:10] = self.model.rhs(t, x[:10], F_extra=F_tip)
         pairs = zip(z, self._kF, strict=True)
         out[10:] = [gms.element_rate(qd, zi, kFi, self._p) for zi, kFi in pairs]
         return out

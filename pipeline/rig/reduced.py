@@ -132,6 +132,8 @@ class ReducedPlant:
         self._kF = self._k / np.array(rig.friction_F, dtype=float)
         self._p = rig.friction_exponent
         self._cv = rig.friction_c
+        self._gain1, self._gain2 = rig.gain_1, rig.gain_2
+        self._F0 = rig.force_offset
         self._kl, self._kFl = self._k.tolist(), self._kF.tolist()
 
     def _local(self, q: float) -> tuple[NDArray[np.float64], float]:
@@ -199,7 +201,8 @@ class ReducedPlant:
         """
         q, qd, e1, e2, *z = x.tolist()  # scalar arithmetic: a few states, many calls
         m, dm, d, f, g1, g2, k1, k2 = self.curves(q).tolist()
-        force = g1 * float(self.v1(t)) ** 2 + g2 * float(self.v2(t)) ** 2 - self._cv * qd
+        w1, w2 = self._gain1 * float(self.v1(t)) ** 2, self._gain2 * float(self.v2(t)) ** 2
+        force = g1 * w1 + g2 * w2 - self._cv * qd + self._F0
         force -= 0.5 * dm * qd * qd + d * qd + f + self._kbar * (k1 * e1 + k2 * e2)
         out = [qd, 0.0, k1 * qd - self._relax * e1, k2 * qd - self._relax * e2]
         p = self._p
@@ -228,9 +231,9 @@ class ReducedPlant:
         val, der = self.curves(q, der=True)
         m, dm, d, f, g1, g2, k1, k2 = val.tolist()
         dm_, ddm, dd, df, dg1, dg2, dk1, dk2 = der.tolist()
-        w1, w2 = float(self.v1(t)) ** 2, float(self.v2(t)) ** 2
+        w1, w2 = self._gain1 * float(self.v1(t)) ** 2, self._gain2 * float(self.v2(t)) ** 2
         kb, p = self._kbar, self._p
-        force = g1 * w1 + g2 * w2 - self._cv * qd
+        force = g1 * w1 + g2 * w2 - self._cv * qd + self._F0
         force -= sum(a * b for a, b in zip(self._kl, z, strict=True))
         force -= 0.5 * dm * qd * qd + d * qd + f + kb * (k1 * e1 + k2 * e2)
         dforce = dg1 * w1 + dg2 * w2 - 0.5 * ddm * qd * qd - dd * qd - df
@@ -271,8 +274,8 @@ class ReducedPlant:
         Parameters
         ----------
         side : {-1, +1}
-            Which well; the stable zero of ``f`` (``df/dq > 0``) with ``side * q > 1 um``
-            farthest from ``q = 0``.
+            Which well; the stable solution of ``f(q) = force_offset`` (``df/dq > 0``) with
+            ``side * q > 1 um`` farthest from ``q = 0``.
 
         Returns
         -------
@@ -289,7 +292,8 @@ class ReducedPlant:
         Masoud & Maas 2025, Eq. 26 (static equilibria).
         """
         f = interpolate.PPoly(self.spline.c[:, :, CURVES.index("f")], self._x, extrapolate=False)
-        roots = [r for r in f.roots() if side * r > 1e-6 and f.derivative()(r) > 0.0]
+        slope = f.derivative()
+        roots = [r for r in f.solve(self._F0) if side * r > 1e-6 and slope(r) > 0.0]
         if not roots:
             raise ValueError(f"no stable equilibrium of the reduced model with sign(q) = {side}")
         x0 = np.zeros(self.n_states)

@@ -160,6 +160,23 @@ def _decimate(y: NDArray[np.float64], factor: int) -> NDArray[np.float64]:
     return y if factor == 1 else signal.decimate(y, factor, ftype="fir", zero_phase=True)
 
 
+def _laser_lag(y: NDArray[np.float64], tau: float, dt: float) -> NDArray[np.float64]:
+    """First-order lag ``tau y_s' = y - y_s`` on the grid ``dt``, started at rest (ZOH form)."""
+    if tau <= 0.0:
+        return y
+    a = math.exp(-dt / tau)
+    out, _ = signal.lfilter([1.0 - a], [1.0, -a], y, zi=[a * y[0]])
+    return out
+
+
+def _trailing_mean(y: NDArray[np.float64], n: int) -> NDArray[np.float64]:
+    """Mean of ``y[k - n + 1 .. k]`` at every ``k >= n - 1`` (NaN before)."""
+    c = np.concatenate([[0.0], np.cumsum(y)])
+    out = np.full(y.size, np.nan)
+    out[n - 1 :] = (c[n:] - c[:-n]) / n
+    return out
+
+
 def simulate_rig(
     rig: RigParams,
     t_ref: ArrayLike,
@@ -188,13 +205,16 @@ def simulate_rig(
        :func:`scipy.integrate.solve_ivp` (Radau, BDF), split at the reference steps larger
        than ``step_threshold`` (:func:`~debist.physics.segments.solve_segments`), with
        output on the internal grid ``sample_time / oversample``.
-    3. The laser adds seeded white noise (``numpy.random.default_rng(seed)``), quantises to
+    3. The laser reads ``q + sensor_offset`` through a first-order lag ``sensor_lag``, adds
+       seeded white noise (``numpy.random.default_rng(seed)``), quantises to
        ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
-       noise. Every channel is decimated to ``sample_time`` by a zero-phase FIR
-       (:func:`scipy.signal.decimate`); the record is simulated ``11 sample_time`` beyond
-       both ends (at rest before, reference held after) so the filter sees no edge. The
-       laser reading is clipped again after the filter: when the true ``q`` leaves the
-       range the logged value saturates at ``+-sensor_range`` (flagged in ``saturated``).
+       noise. With ``sensor_average = 0`` every channel is decimated to ``sample_time`` by a
+       zero-phase FIR (:func:`scipy.signal.decimate`; the laser reading clipped again after
+       the filter); with ``N >= 1`` the log holds the trailing mean of the laser's last ``N``
+       internal samples and the monitors' values at the log instants. The record is
+       simulated ``11 sample_time`` beyond both ends (at rest before, reference held after)
+       so no filter sees an edge. When the true ``q`` leaves the range the logged value
+       saturates at ``+-sensor_range`` (flagged in ``saturated``).
 
     Parameters
     ----------
@@ -336,15 +356,20 @@ def simulate_rig(
     q_fine = plant.tip(X_all)
     v_fine = np.stack([d.values(t_fine) for d in drivers])
     rng = np.random.default_rng(seed)
-    y = q_fine + rng.normal(0.0, rig.sensor_noise, q_fine.size)
+    y = _laser_lag(q_fine + rig.sensor_offset, rig.sensor_lag, dt)
+    y = y + rng.normal(0.0, rig.sensor_noise, q_fine.size)
     if rig.sensor_resolution > 0:
         y = np.round(y / rig.sensor_resolution) * rig.sensor_resolution
     y = np.clip(y, -rig.sensor_range, rig.sensor_range)
     mon = v_fine + rng.normal(0.0, rig.monitor_noise, v_fine.shape)
-    log = slice(_PAD_LOG, _PAD_LOG + n_log)
-    q_log = np.clip(_decimate(y, os_)[log], -rig.sensor_range, rig.sensor_range)
-    mon_log = np.stack([_decimate(m, os_)[log] for m in mon])
     idx = pad + os_ * np.arange(n_log)  # log instants on the internal grid
+    if rig.sensor_average == 0:  # zero-phase FIR decimation of every channel
+        log = slice(_PAD_LOG, _PAD_LOG + n_log)
+        q_log = np.clip(_decimate(y, os_)[log], -rig.sensor_range, rig.sensor_range)
+        mon_log = np.stack([_decimate(m, os_)[log] for m in mon])
+    else:  # trailing block mean of the laser, point-sampled monitors
+        q_log = _trailing_mean(y, rig.sensor_average)[idx]
+        mon_log = mon[:, idx]
     t_log = t_fine[idx]
     X_log = X_all[idx]
     k_ref = np.clip(np.floor((t_log - t0) / hold + 1e-9).astype(int), 0, t_ref.size - 1)
@@ -380,9 +405,10 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     From the reduced model of the rig's prototype (:func:`debist.physics.reduced.
     reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
     ``dz_1``, ``dz_2`` is included), and the actuation force at the switching voltage from
-    the full model's static force-displacement curves (Fig. 4). Friction, the drivers and
-    the sensors are not part of these curves: they are what an identification of Eq. 37
-    cannot represent.
+    the full model's static force-displacement curves (Fig. 4). The rig's DE gains
+    ``gain_i`` scale ``g_i`` and its ``force_offset`` moves ``f``; friction, the drivers and
+    the sensors (``sensor_offset`` included: the curves are over the tip displacement, the
+    laser reads ``q + sensor_offset``) are not part of these curves.
 
     The two gains differ because the DE force is not of the separable form
     ``g_i(q) v_i^2`` of Eq. 26/37 for the full model: the DEs' pull bends the beam off the
@@ -421,14 +447,14 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     Masoud & Maas 2025, Eq. 18, 24-26, 33, 37, Fig. 4; docs/interpretation.md item 8.
     """
     if rig.model == "reduced":
-        return reduced_true_curves(rig, q_grid)
+        return _with_rig_forces(reduced_true_curves(rig, q_grid), rig)
     c = reduced_curves(rig.prototype, q_grid)
     F0 = force_displacement(rig.prototype, c.q).F
     secant = [
         (F0 - force_displacement(rig.prototype, c.q, **{f"v{i}": V_MAX}).F) / V_MAX**2
         for i in (1, 2)
     ]
-    return {
+    curves = {
         "q": c.q,
         "f": c.f,
         "c": c.c,
@@ -441,3 +467,27 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
         "d": c.d,
         "phi": c.phi,
     }
+    return _with_rig_forces(curves, rig)
+
+
+def _with_rig_forces(
+    curves: dict[str, NDArray[np.float64]], rig: RigParams
+) -> dict[str, NDArray[np.float64]]:
+    """Apply the rig's DE gains and constant tip force to the prototype's curves.
+
+    ``g_i`` (and the secants) scale by ``gain_i``; the force offset ``F_0`` moves the
+    restoring force to ``f - F_0`` (``m_q q_ddot + ... + f = g_1 v_1^2 + g_2 v_2^2 + F_0``),
+    ``c = f / q`` with it; ``k = df/dq`` is unchanged.
+    """
+    if rig.gain_1 == 1.0 and rig.gain_2 == 1.0 and rig.force_offset == 0.0:
+        return curves
+    out = dict(curves)
+    for i, gain in ((1, rig.gain_1), (2, rig.gain_2)):
+        out[f"g{i}"] = gain * curves[f"g{i}"]
+        out[f"g{i}_vmax"] = gain * curves[f"g{i}_vmax"]
+    q = np.asarray(curves["q"], dtype=float)
+    f = curves["f"] - rig.force_offset
+    small = np.abs(q) < 1e-12
+    out["f"] = f
+    out["c"] = np.where(small, curves["k"], f / np.where(small, 1.0, q))
+    return out
