@@ -226,10 +226,10 @@ def test_bad_arguments(builder, kwargs, match):
 
 
 def test_make_profile_registry_and_errors():
-    assert set(PROFILES) == {"identification", "validation", "staircase"}
+    assert set(PROFILES) == {"identification", "validation", "staircase", "steps", "sweep"}
     assert V_LIMIT == 3000.0
     with pytest.raises(
-        WorkflowError, match=r"profile 'chirp'.*identification, validation, staircase"
+        WorkflowError, match=r"profile 'chirp'.*identification, validation, staircase, steps"
     ):
         make_profile("chirp")
     with pytest.raises(WorkflowError, match=r"unknown parameter 'amplitude'.*v_max"):
@@ -248,3 +248,38 @@ def test_excitation_validates_its_arrays():
         Excitation(t, np.zeros(3), np.zeros(4), 0.01, "x")
     with pytest.raises(ValueError, match="switch_sides"):
         Excitation(t, np.zeros(4), np.zeros(4), 0.01, "x", switch_times=(0.0,), switch_sides=(3,))
+
+
+@pytest.mark.parametrize("name", ["steps", "sweep"])
+def test_steps_and_sweep_stay_sub_threshold_between_alternating_pulses(name):
+    e = make_profile(name, seed=4, duration=30.0, v_sub=800.0)
+    assert e.r1.shape == (30000,)
+    assert e.switch_sides == tuple(1 + i % 2 for i in range(len(e.switch_sides)))
+    assert len(e.switch_sides) >= 3
+    blocks = np.zeros(e.t.size, bool)
+    for label, start, stop in e.segments:
+        inside = (e.t >= start - 1e-9) & (e.t < stop - 1e-9)
+        if label.startswith("pulse"):
+            side = int(label[-1])
+            assert np.max((e.r1, e.r2)[side - 1][inside]) == 3000.0
+        elif label == name:
+            blocks |= inside
+    assert np.all(e.r1[blocks] <= 800.0 + 1e-9) and np.all(e.r2[blocks] <= 800.0 + 1e-9)
+    assert np.all(e.r1 >= 0.0) and np.all(e.r2 >= 0.0)
+    assert np.std(e.r1[blocks]) > 100.0 and np.std(e.r2[blocks]) > 100.0
+    again = make_profile(name, seed=4, duration=30.0, v_sub=800.0)
+    assert np.array_equal(again.r1, e.r1) and np.array_equal(again.r2, e.r2)
+
+
+def test_steps_hold_levels_and_sweeps_cover_their_band():
+    steps = make_profile("steps", seed=1, duration=20.0)
+    block = next((a, b) for label, a, b in steps.segments if label == "steps")
+    seg = steps.r1[(steps.t >= block[0]) & (steps.t < block[1])]
+    changes = np.count_nonzero(np.diff(seg))
+    assert 3 <= changes <= 5.0 / 0.2  # dwell times of 0.2-1.5 s in a 5 s block
+    sweep = make_profile("sweep", seed=1, duration=20.0, v_sub=1000.0)
+    a, b = next((a, b) for label, a, b in sweep.segments if label == "sweep")
+    x = sweep.r1[(sweep.t >= a) & (sweep.t < b)] - 500.0
+    crossings = np.count_nonzero(np.diff(np.sign(x)) != 0)
+    # a log sweep 0.3 -> 15 Hz over 6 s has about 2 * 6 * (15 - 0.3) / ln(50) = 45 crossings
+    assert 35 <= crossings <= 55

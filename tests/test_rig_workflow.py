@@ -123,7 +123,7 @@ def test_rig_workflow_errors(tmp_path):
 @pytest.mark.parametrize(
     ("section", "match"),
     [
-        ({"experiments": {"a": {"profile": "sweep"}}}, r"\[rig.experiments.a\] profile: .*'sweep'"),
+        ({"experiments": {"a": {"profile": "chirp"}}}, r"\[rig.experiments.a\] profile: .*'chirp'"),
         ({"plant": {"friction_q": 1}, "experiments": {"a": {}}}, r"\[rig.plant\] unknown key"),
         ({"experiments": {"a": {"seeed": 1}}}, r"\[rig.experiments.a\] unknown key 'seeed'"),
         ({"experiments": {"a": {"format": "6"}}}, r"\[rig.experiments.a\] format: .*got '6'"),

@@ -1,7 +1,7 @@
 """Excitation profiles of the virtual rig: reference voltages of DE 1 (left) and DE 2 (right).
 
 A profile is a pair of reference voltages ``r1``, ``r2`` sampled on the uniform grid of the
-rig's DAC (zero-order hold, interval ``hold``). Three profiles are defined, all built as a
+rig's DAC (zero-order hold, interval ``hold``). Five profiles are defined, all built as a
 sequence of episodes "sub-threshold block -> switching pulse -> free ring-down", with
 the pulses alternating between DE 1 (the beam moves to the right well) and DE 2 (back to the
 left well); the beam starts in the left well (the paper's experiment starts at q = -10 mm):
@@ -17,6 +17,10 @@ left well); the beam starts in the left well (the paper's experiment starts at q
     well until the beam settles (the DE pushing towards the barrier up to ``v_sub``, the
     one pushing deeper up to 3 kV), and pulses of three heights, so that ``g_i(q) v_i^2``
     is excited at several ``v_i^2`` over a few mm around each well.
+``steps``
+    Random sub-threshold voltage steps on both DEs between the pulses.
+``sweep``
+    Logarithmic sine sweeps on one DE at a time between the pulses.
 
 The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV; in the staircase
 profile the DE that pushes the beam deeper into its well goes higher, as it cannot switch). The
@@ -55,6 +59,8 @@ __all__ = [
     "identification_profile",
     "make_profile",
     "staircase_profile",
+    "steps_profile",
+    "sweep_profile",
     "validation_profile",
 ]
 
@@ -717,11 +723,169 @@ def staircase_profile(
     return b.finish("staircase")
 
 
+def _switching(
+    b: _Builder,
+    blocks: Sequence[tuple[str, float, Callable]],
+    v_max: float,
+    pulses: Sequence[tuple[float, float]],
+    lead: float,
+    ring: float,
+) -> None:
+    """Lay ``lead`` rest, then cycles "block, pulse, ring-down" until the record is full.
+
+    ``blocks`` are ``(label, seconds, fill)`` and ``pulses`` ``(flat, ramp)`` [s], both
+    cycled; a last block shorter than its cycle fills the remainder when it lasts >= 1 s.
+    """
+    b.add("rest", lead)
+    for i in itertools.count():
+        label, seconds, fill = blocks[i % len(blocks)]
+        flat, ramp = pulses[i % len(pulses)]
+        if not b.fits(seconds + flat + 2.0 * ramp + ring):
+            break
+        b.add(label, seconds, fill)
+        b.pulse(v_max, flat, ramp)
+        b.add("rest", ring)
+    left = (b.n - b.k) * b.hold
+    if left >= 1.0 - 1e-9:
+        label, _, fill = blocks[0]
+        b.add(label, left, fill)
+
+
+def steps_profile(
+    *,
+    duration: float = 37.5,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = V_SUB,
+    seed: int = 0,
+) -> Excitation:
+    """Build a random-step profile: sub-threshold voltage steps between switching pulses.
+
+    After 0.5 s rest, cycles of a 5 s block, a ``v_max`` pulse (0.6-1.0 s flat; every third
+    one ramped over 0.3 s) and 1.2 s ring-down, the pulses alternating DE 1 and DE 2. In a
+    block each DE holds levels drawn uniformly from ``[0, v_sub]`` for dwell times drawn
+    uniformly from 0.2-1.5 s, independently per DE (``numpy.random.default_rng(seed)``), so
+    that ``g_i(q) v_i^2`` is seen at many static levels and in its step responses.
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least one cycle (8.3 s).
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Height of the switching pulses [V], at most 3000.
+    v_sub : float
+        Largest step level [V], below ``v_max`` (and below the switching threshold).
+    seed : int
+        Seed of the levels and dwell times.
+
+    Returns
+    -------
+    Excitation
+        ``name = "steps"``; blocks labelled ``"steps"``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`identification_profile`.
+
+    References
+    ----------
+    Ljung 1999, System Identification, Sec. 13.3 (random binary and multilevel inputs).
+    """
+    n = _grid(duration, hold, v_max, v_sub)
+    b = _Builder(n, float(hold))
+    rng = np.random.default_rng(seed)
+    if not b.fits(0.5 + 5.0 + 1.6 + 1.2):
+        raise ValueError(f"`duration` = {duration} s is shorter than one steps cycle (8.3 s)")
+
+    def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        out = []
+        for _ in range(2):
+            edges = np.cumsum(rng.uniform(0.2, 1.5, size=int(tau[-1] / 0.2) + 2))
+            levels = rng.uniform(0.0, v_sub, size=edges.size + 1)
+            out.append(levels[np.searchsorted(edges, tau, side="right")])
+        return out[0], out[1]
+
+    pulses = ((0.6, 0.0), (0.8, 0.0), (0.7, 0.3), (1.0, 0.0), (0.6, 0.0), (0.8, 0.3))
+    _switching(b, [("steps", 5.0, fill)], v_max, pulses, lead=0.5, ring=1.2)
+    return b.finish("steps")
+
+
+def sweep_profile(
+    *,
+    duration: float = 37.5,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = V_SUB,
+    seed: int = 0,
+) -> Excitation:
+    """Build a sine-sweep profile: one DE swept at a time between switching pulses.
+
+    After 0.5 s rest, cycles of a 6 s block, a rectangular ``v_max`` pulse (0.8 s) and 1 s
+    ring-down, the pulses alternating DE 1 and DE 2. In a block one DE (alternating) follows
+    a logarithmic sine sweep 0.3 -> 15 Hz (or down, every other block) about the offset
+    ``v_sub / 2`` with amplitude ``v_sub / 2``; the other holds a level drawn uniformly from
+    ``[0, 0.6 v_sub]`` (``numpy.random.default_rng(seed)``).
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least one cycle (8.3 s).
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Height of the switching pulses [V], at most 3000.
+    v_sub : float
+        Peak of the sweeps [V], below ``v_max`` (and below the switching threshold).
+    seed : int
+        Seed of the other DE's levels.
+
+    Returns
+    -------
+    Excitation
+        ``name = "sweep"``; blocks labelled ``"sweep"``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`identification_profile`.
+
+    References
+    ----------
+    Pintelon & Schoukens 2012, System Identification: A Frequency Domain Approach, 2nd ed.,
+    Sec. 5.2 (swept sines).
+    """
+    from scipy import signal
+
+    n = _grid(duration, hold, v_max, v_sub)
+    b = _Builder(n, float(hold))
+    rng = np.random.default_rng(seed)
+    if not b.fits(0.5 + 6.0 + 0.8 + 1.0):
+        raise ValueError(f"`duration` = {duration} s is shorter than one sweep cycle (8.3 s)")
+    count = itertools.count()
+
+    def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        i = next(count)
+        f0, f1 = (0.3, 15.0) if i % 4 < 2 else (15.0, 0.3)
+        span = max(float(tau[-1]), hold)
+        swept = 0.5 * v_sub * (1.0 + signal.chirp(tau, f0, span, f1, method="logarithmic",
+                                                  phi=-90.0))  # fmt: skip
+        held = np.full_like(tau, rng.uniform(0.0, 0.6 * v_sub))
+        return (swept, held) if i % 2 == 0 else (held, swept)
+
+    _switching(b, [("sweep", 6.0, fill)], v_max, [(0.8, 0.0)], lead=0.5, ring=1.0)
+    return b.finish("sweep")
+
+
 #: Profile name -> builder; every builder takes keyword arguments only.
 PROFILES: dict[str, Callable[..., Excitation]] = {
     "identification": identification_profile,
     "validation": validation_profile,
     "staircase": staircase_profile,
+    "steps": steps_profile,
+    "sweep": sweep_profile,
 }
 
 
@@ -731,7 +895,8 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
     Parameters
     ----------
     name : str
-        ``"identification"``, ``"validation"`` or ``"staircase"``.
+        A key of :data:`PROFILES`: ``"identification"``, ``"validation"``,
+        ``"staircase"``, ``"steps"`` or ``"sweep"``.
     **kwargs
         Keyword arguments of the builder (``duration``, ``hold``, ``v_max``, ``v_sub``,
         ``seed``; the identification profile also ``ramps``, the staircase profile
@@ -757,10 +922,10 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
     --------
     >>> make_profile("identification", seed=3).r1.shape
     (37500,)
-    >>> make_profile("sweep")  # doctest: +ELLIPSIS
+    >>> make_profile("chirp")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: unknown excitation profile 'sweep'; known profiles: ...
+    debist.errors.WorkflowError: unknown excitation profile 'chirp'; known profiles: ...
     """
     if name not in PROFILES:
         raise WorkflowError(
