@@ -34,6 +34,7 @@ __all__ = [
     "diff",
     "export_model",
     "find_workflows",
+    "find_zoos",
     "fleet",
     "load_model",
     "load_workflow",
@@ -44,6 +45,8 @@ __all__ = [
     "status",
     "verify",
     "workflow_stages",
+    "zoo",
+    "zoo_report",
 ]
 
 

@@ -58,6 +58,7 @@ __all__ = [
     "diff",
     "export_model",
     "find_workflows",
+    "find_zoos",
     "fleet",
     "load_model",
     "load_workflow",
@@ -68,6 +69,8 @@ __all__ = [
     "status",
     "verify",
     "workflow_stages",
+    "zoo",
+    "zoo_report",
 ]
 
 PathLike = str | os.PathLike
@@ -557,6 +560,25 @@ def find_workflows(paths: PathLike | Iterable[PathLike]) -> list[Path]:
     return expand_workflows(paths)
 
 
+def find_zoos(paths: PathLike | Iterable[PathLike]) -> list[Path]:
+    """Return the zoo folders (``debist zoo``) among the entries of a batch.
+
+    Parameters
+    ----------
+    paths : path-like or iterable of path-like
+        The entries given to :func:`find_workflows`.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The entries that are folders holding a ``zoo.json``, in order.
+    """
+    from debist.engine.zooindex import ZOO_FILE
+
+    entries = [paths] if isinstance(paths, str | os.PathLike) else list(paths)
+    return [Path(p) for p in entries if (Path(p) / ZOO_FILE).is_file()]
+
+
 def batch_table(results: Iterable[Any]) -> pd.DataFrame:
     """Tabulate a batch's results, one row per workflow, failures included.
 
@@ -661,6 +683,73 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
     paths = artifacts.write_text_files(folder, files)
     return FleetResult(tuple(paths), dict(rejected))
+
+
+def zoo(size: int, *, seed: int, folder: PathLike) -> Any:
+    """Write a plant zoo: ``size`` virtual DE rigs drawn from ``seed``, each with its truth.
+
+    Each member gets its rig logs (MAT), a minimal workflow and its truth (``truth.json``,
+    ``truth.parquet``); run them with :func:`run_batch` on the folder, then
+    :func:`zoo_report`.
+
+    Parameters
+    ----------
+    size : int
+        Members, ``>= 1``.
+    seed : int
+        The zoo's seed, ``>= 0``; member ``i`` is the same whatever ``size``.
+    folder : path-like
+        New or empty folder, or a zoo of the same seed (kept, extended).
+
+    Returns
+    -------
+    debist.engine.zoo.ZooResult
+
+    Raises
+    ------
+    WorkflowError
+        A negative seed, ``size < 1``, or a folder that holds other files or another zoo.
+    debist.engine.zooindex.ZooError
+        A member without a viable draw.
+    """
+    from debist.engine.zoo import write_zoo
+
+    if size < 1 or seed < 0:
+        raise WorkflowError(f"zoo size must be >= 1 and seed >= 0, got {size} and {seed}")
+    return write_zoo(folder, size, seed)
+
+
+def zoo_report(folder: PathLike) -> tuple[Path, Path, pd.DataFrame, pd.DataFrame]:
+    """Write a zoo's table (``zoo.parquet``) and page (``zoo.html``) after its batch.
+
+    Parameters
+    ----------
+    folder : path-like
+        The zoo folder; members whose runs are missing or incomplete get a row that says so.
+
+    Returns
+    -------
+    table_path, page_path : pathlib.Path
+        The files written.
+    table : pandas.DataFrame
+        One row per member (:func:`debist.engine.zootable.zoo_table`).
+    summary : pandas.DataFrame
+        Medians and worst cases (:func:`debist.engine.zootable.zoo_summary`).
+
+    Raises
+    ------
+    debist.engine.zooindex.ZooError
+        If the folder is not a zoo.
+    """
+    from debist.engine.zootable import PAGE_FILE, write_zoo_table, zoo_summary
+    from debist.report.html import write_page
+    from debist.report.zoo import render_zoo
+
+    folder = Path(folder)
+    table_path, table = write_zoo_table(folder)
+    summary = zoo_summary(table)
+    page = write_page(folder / PAGE_FILE, render_zoo(table, summary, table.attrs))
+    return table_path, page, table, summary
 
 
 # ------------------------------------------------------------------- results

@@ -580,6 +580,33 @@ def fleet(
     )
 
 
+@app.command(cls=_Command)
+def zoo(
+    size: Annotated[int, typer.Option("--size", min=1, help="Number of members.")] = 20,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the zoo.")] = 1,
+    folder: Annotated[Path, typer.Option("--dir", help="Folder of the zoo.")] = Path("zoo"),
+) -> None:
+    """Write a plant zoo: seeded virtual DE rigs with their logs, minimal workflows and truth.
+
+    Members differ in plant (full or reduced), friction law, DE asymmetry, mass, damping,
+    drivers, sensor (block averaging, lag, noise, quantisation) and excitation. Seed 1 is
+    for choosing and tuning, seed 2 for checking out of sample. Run them with debist batch
+    on the folder; the batch then writes the zoo table (zoo.parquet, zoo.html).
+    """
+    from debist import api
+
+    with _guard():
+        made = api.zoo(size, seed=seed, folder=folder)
+    for name, why in made.rejected.items():
+        console.print(f"{escape(name)}: redrawn ({escape('; '.join(why))})")
+    kept = len(made.members) - len(made.written)
+    console.print(
+        f"wrote {len(made.written)} zoo members to {escape(str(folder))}"
+        + (f" ({kept} were there)" if kept else "")
+        + f"; run them with: debist batch {escape(str(folder))}"
+    )
+
+
 _stage_command(
     "analyze", "Design analysis of [physics] (Section 3): statics.h5 and Fig. 3-7 as PNG."
 )
@@ -858,8 +885,37 @@ def batch(
     index = api.batch_index(results)
     if index is not None:
         console.print(f"index of the reports: {escape(str(index))}")
+    for folder in api.find_zoos(paths):
+        _zoo_report(folder)
     if failed:
         raise typer.Exit(1)
+
+
+def _zoo_report(folder: Path) -> None:
+    """Write and print a zoo's table after its batch: medians and worst cases."""
+    from rich.table import Table
+
+    from debist import api
+
+    with _guard():
+        table_path, page, table, summary = api.zoo_report(folder)
+    shown = [c for c in ("floor_unseen", "rbf_unseen", "narx_unseen", "sindy_unseen",
+                         "restoring_max_error", "g1_max_error", "g2_max_error")
+             if c in summary.columns]  # fmt: skip
+    out = Table(title=f"Zoo {escape(str(folder))}: {len(table)} members, NRMSE(q) and errors [%]")
+    out.add_column("")
+    for column in shown:
+        out.add_column(column, justify="right")
+    for label in ("median", "worst"):
+        out.add_row(label, *(_zoo_cell(summary.loc[label, c]) for c in shown))
+    console.print(out)
+    console.print(f"zoo table: {escape(str(table_path))}; page: {escape(str(page))}")
+
+
+def _zoo_cell(value: float) -> str:
+    if value != value:  # NaN
+        return "n/a"
+    return "diverged" if value == float("inf") else f"{value:.2f}"
 
 
 def _warning_line(message, category, *_args, **_kwargs) -> str:

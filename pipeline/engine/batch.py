@@ -58,6 +58,7 @@ from typing import Any
 
 from debist.engine import preflight
 from debist.engine.runner import STAGES, Runner
+from debist.engine.zooindex import ZOO_FILE, zoo_workflows
 from debist.errors import DebistError, WorkflowError
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
 from debist.workflow.loader import load_workflow
@@ -202,7 +203,8 @@ def expand_workflows(paths_or_globs: str | os.PathLike | Iterable[str | os.PathL
     ----------
     paths_or_globs : path-like or iterable of path-like
         Each entry is a workflow file (taken as is), a directory (every ``*.toml``
-        directly inside it, sorted by name) or a glob pattern (``*``, ``?``, ``[...]``;
+        directly inside it, sorted by name; a zoo folder of ``debist zoo``: its members'
+        ``workflow.toml``, in member order) or a glob pattern (``*``, ``?``, ``[...]``;
         ``**`` recurses; sorted; a matched directory contributes its ``*.toml`` files).
 
     Returns
@@ -224,7 +226,9 @@ def expand_workflows(paths_or_globs: str | os.PathLike | Iterable[str | os.PathL
     found: dict[Path, None] = {}
     for entry in entries:
         path = Path(entry)
-        if path.is_dir():
+        if path.is_dir() and (path / ZOO_FILE).is_file():  # a zoo: its members' workflows
+            matches = zoo_workflows(path)
+        elif path.is_dir():
             matches = sorted(path.glob("*.toml"))
             if not matches:
                 raise WorkflowError(f"directory '{entry}' holds no *.toml workflow file")
