@@ -599,7 +599,11 @@ def batch_table(results: Iterable[Any]) -> pd.DataFrame:
     return summary_table(results)
 
 
-def batch_index(results: Sequence[Any], folder: PathLike | None = None) -> Path | None:
+def batch_index(
+    results: Sequence[Any],
+    folder: PathLike | None = None,
+    pages: Sequence[tuple[str, PathLike]] = (),
+) -> Path | None:
     """Write a batch's index page: one row per prototype, linking each one's report.
 
     Parameters
@@ -608,6 +612,8 @@ def batch_index(results: Sequence[Any], folder: PathLike | None = None) -> Path 
         From :func:`run_batch`.
     folder : path-like, optional
         Where ``index.html`` goes (default: the folder that holds every output folder).
+    pages : sequence of (str, path-like), optional
+        Other pages of the batch report to link (label, file), e.g. :func:`zoo_report`'s.
 
     Returns
     -------
@@ -617,7 +623,7 @@ def batch_index(results: Sequence[Any], folder: PathLike | None = None) -> Path 
     """
     from debist.engine.batch import write_index
 
-    return write_index(results, folder)
+    return write_index(results, folder, pages)
 
 
 @dataclass(frozen=True)

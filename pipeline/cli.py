@@ -882,17 +882,18 @@ def batch(
             escape("; ".join(x for x in (where + row.error, row.note) if x)),
         )
     console.print(table)
-    index = api.batch_index(results)
+    pages = [
+        (f"zoo table of {folder.name}", _zoo_report(folder)) for folder in api.find_zoos(paths)
+    ]
+    index = api.batch_index(results, pages=pages)
     if index is not None:
         console.print(f"index of the reports: {escape(str(index))}")
-    for folder in api.find_zoos(paths):
-        _zoo_report(folder)
     if failed:
         raise typer.Exit(1)
 
 
-def _zoo_report(folder: Path) -> None:
-    """Write and print a zoo's table after its batch: medians and worst cases."""
+def _zoo_report(folder: Path) -> Path:
+    """Write and print a zoo's table after its batch (medians and worst cases); its page."""
     from rich.table import Table
 
     from debist import api
@@ -910,6 +911,7 @@ def _zoo_report(folder: Path) -> None:
         out.add_row(label, *(_zoo_cell(summary.loc[label, c]) for c in shown))
     console.print(out)
     console.print(f"zoo table: {escape(str(table_path))}; page: {escape(str(page))}")
+    return page
 
 
 def _zoo_cell(value: float) -> str:

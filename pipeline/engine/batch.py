@@ -764,7 +764,9 @@ def summary_table(results: Iterable[BatchResult]) -> Any:
 
 
 def write_index(
-    results: Sequence[BatchResult], folder: str | os.PathLike | None = None
+    results: Sequence[BatchResult],
+    folder: str | os.PathLike | None = None,
+    pages: Sequence[tuple[str, str | os.PathLike]] = (),
 ) -> Path | None:
     """Write the batch's index page: one row per prototype, linking each one's report.
 
@@ -775,6 +777,9 @@ def write_index(
     folder : path-like, optional
         Where ``index.html`` goes; default the folder that holds every workflow's output
         folder (``runs/`` of a fleet from ``debist fleet``).
+    pages : sequence of (str, path-like), optional
+        Other pages of the batch report (label, file), linked from the index by their path
+        relative to it (e.g. a zoo's ``zoo.html``).
 
     Returns
     -------
@@ -814,4 +819,6 @@ def write_index(
                 note=r.note,
             )
         )
-    return write_page(folder / INDEX_FILE, render_index(rows))
+    links = [(label, Path(os.path.relpath(Path(page).resolve(), folder)).as_posix())
+             for label, page in pages]  # fmt: skip
+    return write_page(folder / INDEX_FILE, render_index(rows, links))

@@ -279,6 +279,8 @@ h1 { font-size: 1.5rem; }
 <p>One row per prototype: the free-run NRMSE(q) of the identified model on each data set
 (Eq. 41), its wells at rest and its switching levels (in each input's unit). Each name links
 to the prototype's report.</p>
+{% if pages %}<p>Also in this batch report: {% for label, href in pages %}<a href="{{ href }}">\
+{{ label }}</a>{% if not loop.last %}, {% endif %}{% endfor %}.</p>{% endif %}
 {% macro cell(text) %}{% set head, sep, tail = text.partition(" (") %}{{ head }}\
 {% if sep %}<span class="note"> ({{ tail }}</span>{% endif %}{% endmacro %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
@@ -648,13 +650,15 @@ def index_row(
     }
 
 
-def render_index(rows: Sequence[Mapping[str, Any]]) -> str:
+def render_index(rows: Sequence[Mapping[str, Any]], pages: Sequence[tuple[str, str]] = ()) -> str:
     """Render the batch index page: one row per prototype, linking each report.
 
     Parameters
     ----------
     rows : sequence of dict
         :func:`index_row` per prototype, in the batch's order.
+    pages : sequence of (str, str), optional
+        Other pages of the batch report: label and relative URL (e.g. the zoo table).
 
     Returns
     -------
@@ -672,7 +676,7 @@ def render_index(rows: Sequence[Mapping[str, Any]]) -> str:
         narx += [d for d in r.get("narx", {}) if d not in narx]
     failed = sum(r["status"] != "done" for r in rows)
     return _ENV.from_string(_INDEX).render(
-        rows=rows, datasets=datasets, narx_datasets=narx, failed=failed
+        rows=rows, datasets=datasets, narx_datasets=narx, failed=failed, pages=pages
     )
 
 
