@@ -306,6 +306,47 @@ def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig
     return theta, resid, rank, cond, S
 
 
+def supported_range(q: np.ndarray, cfg: IdentifyConfig, step: float = 0.01) -> tuple[float, float]:
+    """Return the operating range of Eq. 39 whose end centres the data support.
+
+    The range of ``q``, with each end moved inwards in steps of ``step`` times the range
+    until the end centre of the equidistant basis (Eq. 38-39 with ``cfg.M``,
+    ``cfg.sigma_n``) has at least ``cfg.min_support`` samples within one width: the few
+    samples of an overshoot peak then lie beyond the range, where the curves are held at
+    their edge values (``outside = "clip"``) or the RBF part vanishes (``"zero"``), instead
+    of failing the fit. A range the data support as it is comes back unchanged.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Positions of the estimation data [unit of q].
+    cfg : IdentifyConfig
+        ``M``, ``sigma_n``, ``outside`` and ``min_support``.
+    step : float
+        Fraction of the data range an end moves per iteration.
+
+    Returns
+    -------
+    tuple of float
+        ``(q_min, q_max)`` [unit of q].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-39 and Sec. 5.2 (excite every centre's part of the range).
+    """
+    lo, hi = float(q.min()), float(q.max())
+    span = hi - lo
+    if span <= 0 or cfg.min_support == 0:
+        return lo, hi
+    for _ in range(int(0.5 / step)):  # at most half the range from each end
+        support = RBFBasis.equidistant(lo, hi, cfg.M, cfg.sigma_n, cfg.outside).support(q)
+        if support[0] >= cfg.min_support and support[-1] >= cfg.min_support:
+            break
+        lo += step * span if support[0] < cfg.min_support else 0.0
+        hi -= step * span if support[-1] < cfg.min_support else 0.0
+    return lo, hi
+
+
 def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig) -> np.ndarray:
     support = basis.support(np.concatenate([r.q for r in records]))
     thin = np.flatnonzero(support < cfg.min_support)
@@ -397,7 +438,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     sizes = [r.q.size for r in records]
     preflight.check_identify(cfg, n_in, sum(sizes), max(sizes))
     q_all = np.concatenate([r.q for r in records])
-    q_range = cfg.q_range or (float(q_all.min()), float(q_all.max()))
+    q_range = cfg.q_range or supported_range(q_all, cfg)
     basis = RBFBasis.equidistant(q_range[0], q_range[1], cfg.M, cfg.sigma_n, cfg.outside)
     if cfg.slip is not False:
         cfg = replace(cfg, slip=slip_widths(cfg.slip, q_range))

@@ -30,7 +30,7 @@ from debist.identify.design import (
     mark_switching,
 )
 from debist.identify.excitation import check_excitation
-from debist.identify.fit import FitDiagnostics, fit_rbf_model
+from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range
 from debist.identify.mass import effective_mass
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
@@ -179,9 +179,12 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         cfg.model_error, cfg.effective_mass,
     )  # fmt: skip
     design["switching"] = mark_switching(design["switching"], curves)
+    q_data = np.concatenate([r.q for r in records])
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
+        "q_range": list(model.q_range),  # Eq. 39's range; narrower than the data's where
+        "q_data_range": [float(q_data.min()), float(q_data.max())],  # the ends lack support
         "condition": diag.condition,
         "rank": diag.rank,
         "n_columns": len(diag.columns),
@@ -248,7 +251,7 @@ def _excitation(records, cfg: IdentifyConfig, tables):
             path=Path(str(frame.attrs.get("source", "?"))),
             where="estimation data sets (" + ", ".join(r.name for r in records) + ")",
         )  # fmt: skip
-    lo, hi = cfg.q_range or (float(q.min()), float(q.max()))
+    lo, hi = cfg.q_range or supported_range(q, cfg)
     basis = RBFBasis.equidistant(lo, hi, cfg.M, cfg.sigma_n, cfg.outside)
     unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
     factor, name = report_factor(unit, "mm" if unit == "m" else None)
