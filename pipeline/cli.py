@@ -917,7 +917,7 @@ def _zoo_report(folder: Path) -> Path:
 def _zoo_cell(value: float) -> str:
     if value != value:  # NaN
         return "n/a"
-    return "diverged" if value == float("inf") else f"{value:.2f}"
+    return "no free run" if value == float("inf") else f"{value:.2f}"
 
 
 def _warning_line(message, category, *_args, **_kwargs) -> str:

@@ -4,7 +4,8 @@ After ``debist batch`` over a zoo folder (:mod:`debist.engine.zoo`), :func:`zoo_
 each member's truth and its run's checked artifacts and gives one row per member:
 
 - the unseen NRMSE(q) [%] (Eq. 41) of the identified model (``rbf``), the NARX peer and SINDy:
-  the mean over the unseen records and the worst one (``inf`` where a free run diverged),
+  the mean over the unseen records and the worst one (``inf`` where a free run diverged or
+  the model is unstable; ``*_status`` says which),
   whether a free run rests in the wrong well for 0.5 s or more on an unseen record
   (``*_lost_switch``), the NARX structure (terms, lags, degree);
 - the measurement floor [%]: the logged q against the true q (noise, quantisation, block
@@ -94,13 +95,15 @@ def _free_runs(run: Path, truth: dict, row: dict) -> None:
 
 
 def _percent(part, name: str) -> float:
-    """NRMSE(q) of one data set in percent; inf where the free run diverged."""
+    """NRMSE(q) of one data set in percent; inf where there is no free run to score.
+
+    A free run that diverged, or a model the validation calls unstable, has no finite
+    NRMSE: it counts as the worst score (its ``*_status`` column says which).
+    """
     if name not in part.index:
         return np.nan
     value = float(part.loc[name, "nrmse_q"])
-    if not np.isfinite(value) and bool(part.loc[name].get("diverged", False)):
-        return np.inf
-    return 100.0 * value
+    return 100.0 * value if np.isfinite(value) else np.inf
 
 
 def _lost(run: Path, stage: str, column: str, unseen: list[str], truth: dict) -> bool | None:

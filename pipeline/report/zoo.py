@@ -2,8 +2,9 @@
 
 A self-contained HTML page (no script, no external URL; a Content-Security-Policy that
 forbids scripts) written beside the batch index of a zoo (:mod:`debist.engine.zootable`).
-Every number says what it is: NRMSE(q) and errors in percent, ``diverged`` where a free run
-left its range, ``not marked`` where a curve is marked identified nowhere.
+Every number says what it is: NRMSE(q) and errors in percent, ``no free run`` where a free
+run diverged or the model is unstable, ``not marked`` where a curve is marked identified
+nowhere.
 
 References
 ----------
@@ -97,7 +98,7 @@ def _cell(column: str, value: Any) -> str:
             else ("yes" if value else "no")  # fmt: skip
     if isinstance(value, float):
         if math.isinf(value):
-            return "diverged"
+            return "no free run"  # diverged or unstable: the status column says which
         if math.isnan(value):
             return "not marked" if column.endswith(("_max_error", "_coverage")) else "n/a"
         if column in ("narx_terms", "narx_lag", "sensor_average"):
