@@ -7,25 +7,35 @@ model
     y(k) = sum_j theta_j prod (y(k - a), u_i(k - b))^powers,   total degree <= d,
 
 with output ``y = q`` and inputs ``u_i = h(v_i)`` (``v_i^2`` for DE actuators, or ``v_i``),
-its terms selected by forward regression with orthogonal least squares (FROLS) and the
-number of terms by an information criterion (SysIdentPy's ``FROLS``; Billings 2013, Ch. 3).
-Its structure (degree, lags, input map) is chosen on the estimation records alone: each
-candidate is fitted on the first ``1 - holdout`` of every estimation record and run free
-(from the measured first lags, driven by the measured inputs) on the rest; the candidate
-with the smallest NRMSE(q) (Eq. 41) there is refitted on the whole estimation records.
-Validation data never enter the choice.
+its terms ordered by forward regression with orthogonal least squares (FROLS; SysIdentPy's
+``FROLS``; Billings 2013, Ch. 3). The information criterion's minimum over the model sizes is
+found (the window of sizes grows until the criterion rises, never capped) and bounds the sizes
+tried; among those, the simulation error of the free run over the estimation records picks
+the model (:func:`fit_narx`; Piroddi & Spinelli 2003: a one-step criterion alone keeps terms
+that fit the sensor's coloured noise and lose the free run). Validation data never enter the
+choice.
 
-Data are scaled before the fit (``q`` to zero mean and unit standard deviation over the
-estimation records, each ``h(v_i)`` by its largest magnitude there), so that the polynomial
-terms are of comparable size for the orthogonalisation; predictions are scaled back. Records
-are joined end to end for the fit (the lags of a record's first samples then reach into the
-previous record: ``max_lag`` samples per record, a negligible share); at most ``max_samples``
-samples are fitted (the first of each record, in proportion to its length).
+Data are scaled before the fit (``q`` about the midrange of the estimation records, divided by
+its standard deviation there; each ``h(v_i)`` by its largest magnitude there), so that the
+polynomial terms are of comparable size for the orthogonalisation; predictions are scaled
+back. A polynomial NARX is not invariant to the origin of ``q`` (a shifted monomial of degree
+d mixes all lower degrees, so a sparse selection changes). The origin used here is a function
+of the data that moves with them: shifting every record by a constant ``c`` shifts the
+midrange by ``c``, the fit sees identical numbers, and every free run is the old one plus
+``c``, so NRMSE(q) is unchanged to rounding. The model is therefore independent of the
+sensor's zero. Scaling is harmless: FROLS's error reduction ratio does not depend on a
+column's scale, and the criterion's minimum moves only with ``log`` of it by a constant.
+Each record's regressor rows are built on that record alone (no lag reaches into another
+record) and stacked; at most ``max_samples`` samples are fitted (the first of each record, in
+proportion to its length). Free runs use a compiled recursion (:mod:`debist.model.narx_kernel`)
+equal to SysIdentPy's ``predict``.
 
 References
 ----------
 Billings, S. A., Nonlinear System Identification: NARMAX Methods in the Time, Frequency, and
-Spatio-Temporal Domains, Wiley 2013, Ch. 3 (FROLS); Lacerda, W. R., Martins, L. P. C. &
+Spatio-Temporal Domains, Wiley 2013, Ch. 3 (FROLS); Piroddi, L. & Spinelli, W., "An
+identification algorithm for polynomial NARX models based on simulation error minimization",
+Int. J. Control 76(17), 1767-1781, 2003; Lacerda, W. R., Martins, L. P. C. &
 Araujo, A. C., "SysIdentPy: A Python package for System Identification using NARMAX models",
 JOSS 5(54), 2384, 2020; Masoud & Maas 2025, Eq. 41.
 """
@@ -45,7 +55,7 @@ import pydantic
 from pydantic import Field, PositiveInt
 
 from debist.errors import DebistWarning, IdentificationError
-from debist.metrics import nrmse
+from debist.model.narx_kernel import factor_tables, narx_free_run
 from debist.model.termtable import input_map as apply_input_map
 from debist.workflow.config import CONFIG, AsTuple, SectionConfig
 
@@ -67,7 +77,8 @@ class NarxConfig(SectionConfig):
     enabled : bool
         Fit and run the NARX model (its rows join the NRMSE table).
     degree : tuple of int
-        Candidate total degrees of the polynomial.
+        Candidate total degrees of the polynomial (default 3: the cubic restoring force of a
+        bistable structure).
     lags : tuple of int
         Candidate lags: output lags 1..n and input lags 1..n [samples].
     input_maps : tuple of {"v2", "v"}, optional
@@ -76,9 +87,10 @@ class NarxConfig(SectionConfig):
     info_criteria : {"aic", "bic", "fpe", "lilc"}
         Information criterion of FROLS's number of terms.
     n_info_values : int
-        Largest number of terms FROLS considers.
+        First window of model sizes the criterion scores; it doubles while the criterion's
+        minimum lies at its end, up to the number of candidate terms.
     holdout : float
-        Share of each estimation record held out (its end) to choose the structure.
+        Unused, kept so that older workflows load.
     max_samples : int
         Most samples fitted per candidate (the first of each record).
 
@@ -90,8 +102,8 @@ class NarxConfig(SectionConfig):
     SECTION: ClassVar[str] = "[compare.narx]"
 
     enabled: bool = True
-    degree: Annotated[tuple[Annotated[int, Field(ge=1, le=4)], ...], AsTuple] = (2, 3)
-    lags: Annotated[tuple[Annotated[int, Field(ge=1, le=10)], ...], AsTuple] = (2, 3)
+    degree: Annotated[tuple[Annotated[int, Field(ge=1, le=4)], ...], AsTuple] = (3,)
+    lags: Annotated[tuple[Annotated[int, Field(ge=1, le=10)], ...], AsTuple] = (3,)
     input_maps: Annotated[tuple[Literal["v2", "v"], ...], AsTuple] | None = None
     info_criteria: Literal["aic", "bic", "fpe", "lilc"] = "aic"
     n_info_values: PositiveInt = 40
@@ -148,21 +160,22 @@ class NarxModel:
         h(v) of its inputs.
     degree, lag : int
         Its polynomial degree and lags [samples].
-    q_mean, q_std : float
-        Output scaling [unit of q].
+    q_origin, q_std : float
+        Output origin (the midrange of the estimation records) and scale [unit of q].
     h_scale : ndarray, shape (n_inputs,)
         Input scaling [unit of h].
     q_limit : float
         A free run beyond ``|q| > q_limit`` [unit of q] counts as diverged.
     candidates : pandas.DataFrame
-        The structure search: ``degree, lag, input_map, n_terms, holdout_nrmse_q, status``.
+        The search: ``degree, lag, input_map, n_terms, criterion_terms, free_run_nrmse_q,
+        status`` per structure and model size.
     """
 
     estimator: Any
     input_map: str
     degree: int
     lag: int
-    q_mean: float
+    q_origin: float
     q_std: float
     h_scale: np.ndarray
     q_limit: float
@@ -197,16 +210,37 @@ class NarxModel:
             That sample, -1 if none.
         """
         x = apply_input_map(np.asarray(v, dtype=float), self.input_map) / self.h_scale
-        y0 = ((np.asarray(q, dtype=float)[: self.max_lag] - self.q_mean) / self.q_std)[:, None]
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            y = self.estimator.predict(X=x, y=y0, steps_ahead=None)[:, 0]
-        q_sim = y * self.q_std + self.q_mean
+        y0 = (np.asarray(q, dtype=float)[: self.max_lag] - self.q_origin) / self.q_std
+        y, _ = self.simulate_scaled(y0, x)
+        q_sim = y * self.q_std + self.q_origin
         bad = ~np.isfinite(q_sim) | (np.abs(q_sim) > self.q_limit)
         at = int(np.argmax(bad)) if bad.any() else -1
         if at >= 0:
             q_sim[at:] = np.nan
         return q_sim, at
+
+    def simulate_scaled(self, y: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, int]:
+        """Run free in the scaled variables of the fit (``y`` scaled output, ``x`` scaled h(v)).
+
+        Parameters
+        ----------
+        y : ndarray, shape (n,)
+            Scaled output (only the first ``max_lag`` samples are read).
+        x : ndarray, shape (n, n_inputs)
+            Scaled inputs.
+
+        Returns
+        -------
+        y_sim : ndarray, shape (n,)
+            The free run; NaN from the first sample beyond the divergence bound.
+        diverged_at : int
+            That sample, -1 if none.
+        """
+        var, lag = factor_tables(self.estimator.final_model)
+        theta = np.asarray(self.estimator.theta, dtype=float).ravel()
+        bound = (self.q_limit + abs(self.q_origin)) / self.q_std
+        y0 = np.ascontiguousarray(y[: self.max_lag], dtype=float)
+        return narx_free_run(y0, np.ascontiguousarray(x, dtype=float), var, lag, theta, bound)
 
     def to_tree(self) -> dict[str, Any]:
         """HDF5 layout: structure, terms (SysIdentPy's regressor codes) and parameters."""
@@ -218,7 +252,7 @@ class NarxModel:
                 "input_map": self.input_map,
                 "degree": self.degree,
                 "lag": self.lag,
-                "q_mean": self.q_mean,
+                "q_origin": self.q_origin,
                 "q_std": self.q_std,
                 "q_limit": self.q_limit,
             },
@@ -230,33 +264,114 @@ class NarxModel:
         }
 
 
+def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any) -> np.ndarray:
+    """Information criterion of every nested least-squares model ``psi[:, :k]``, k = 1..n.
+
+    One thin QR decomposition of ``psi`` gives each prefix's residual: with ``Q``'s columns
+    ``q_j`` and ``c_j = q_j^T y``, the residual of the first ``k`` columns has the squared
+    norm ``||y||^2 - sum_{j<k} c_j^2`` and the mean ``mean(y) - sum_{j<k} mean(q_j) c_j``, so
+    its variance (``ddof = 1``, as SysIdentPy's ``information_criterion``) costs O(N) per size.
+
+    Parameters
+    ----------
+    psi : ndarray, shape (N, n)
+        Regressor columns in the order they enter (FROLS's ERR order).
+    y : ndarray, shape (N,)
+        Target.
+    criterion : callable
+        ``criterion(n_theta, n_samples, e_var)``, e.g. SysIdentPy's ``aic``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The criterion for 1..n terms; ``inf`` from the first column that is numerically
+        dependent on the ones before it.
+
+    References
+    ----------
+    Billings 2013, Ch. 3 (orthogonal least squares, the model size by an information
+    criterion); Golub & Van Loan, Matrix Computations, 4th ed., Sec. 5.3 (least squares by QR).
+    """
+    N, n = psi.shape
+    Q, R = np.linalg.qr(psi)
+    c = Q.T @ y
+    rss = float(y @ y) - np.cumsum(c**2)
+    mean = float(y.mean()) - np.cumsum(Q.mean(axis=0) * c)
+    e_var = np.maximum(rss - N * mean**2, 0.0) / (N - 1)
+    diag = np.abs(np.diag(R))
+    dependent = diag <= max(N, n) * np.finfo(float).eps * (diag.max() if n else 0.0)
+    out = np.array([criterion(k + 1, N, e_var[k]) if e_var[k] > 0 else -np.inf
+                    for k in range(n)])  # fmt: skip
+    if dependent.any():
+        out[int(np.argmax(dependent)) :] = np.inf
+    return out
+
+
 @functools.cache
 def _frols_class():
-    """SysIdentPy's FROLS with the information criterion of every model size from one pass.
+    """SysIdentPy's FROLS fitted on several records, with the criterion's minimum found.
 
-    FROLS adds terms greedily by their error reduction ratio, so the ``n``-term selection is
-    the first ``n`` terms of the ``n_info_values``-term one; SysIdentPy's
-    ``information_criterion`` reruns the selection for every ``n`` (quadratic in
-    ``n_info_values``, 6 s of the 7 s fit on the paper experiment). This subclass runs it once
-    and scores the nested prefixes by the same least squares and the same criterion, which
-    gives the same values (``tests/test_narx.py`` compares them).
+    :meth:`fit_records` builds each record's regressor matrix on its own (no lag reaches into
+    another record), stacks them, orders the candidate terms by FROLS's error reduction ratio
+    and scores every model size with the information criterion (:func:`prefix_criteria`). The
+    window of sizes starts at ``n_info_values`` and doubles while the criterion's minimum lies
+    at its end, up to the number of candidate terms: the term count is the criterion's
+    minimum, never a cap.
     """
     FROLS = _sysidentpy()[0]
+    from sysidentpy.utils.information_matrix import build_lagged_matrix
 
-    class NestedFROLS(FROLS):
-        def information_criterion(self, x, y):
-            n_info = min(self.n_info_values, x.shape[1])
-            self.n_info_values = n_info
-            _, _, psi, target = self._unpack_mss_output(self.run_mss_algorithm(x, y, n_info), y)
-            n_samples = y.shape[0] - self.max_lag
-            out = np.full(n_info, np.nan)
-            for i in range(n_info):
-                theta = self.estimator.optimize(psi[:, : i + 1], target)
-                e_var = float(np.var(target - psi[:, : i + 1] @ theta, ddof=1))
-                out[i] = self.info_criteria_function(i + 1, n_samples, e_var)
-            return out
+    class RecordsFROLS(FROLS):
+        def fit_records(self, xs: list[np.ndarray], ys: list[np.ndarray]):
+            self.max_lag = self._get_max_lag()
+            psi, target = [], []
+            for x, y in zip(xs, ys, strict=True):
+                lagged = build_lagged_matrix(x, y, self.xlag, self.ylag, self.model_type)
+                psi.append(
+                    self.basis_function.fit(
+                        lagged,
+                        self.max_lag,
+                        self.ylag,
+                        self.xlag,
+                        self.model_type,
+                        predefined_regressors=None,
+                    )
+                )
+                target.append(y[self.max_lag :, 0])  # fmt: skip
+            psi, target = np.vstack(psi), np.concatenate(target)
+            # SysIdentPy's routines drop the first max_lag rows of the target they are given
+            padded = np.concatenate([np.zeros(self.max_lag), target])[:, None]
+            self.n_inputs = xs[0].shape[1]
+            self.regressor_code = self.regressor_space(self.n_inputs)
+            n_cand, n = psi.shape[1], min(self.n_info_values, psi.shape[1])
+            while True:
+                err, piv, _ = self.run_mss_algorithm(psi, padded, n)
+                piv = np.asarray(piv, dtype=np.intp)[:n]
+                ic = prefix_criteria(psi[:, piv], target, self.info_criteria_function)
+                k = int(np.argmin(ic)) + 1
+                if k < n or n == n_cand:
+                    break
+                n = min(2 * n, n_cand)
+            self.info_values, self.err, self.pivv = ic, err, piv
+            self.n_terms_criterion = k
+            self._stack = (psi, target)
+            return self.truncate(k)
 
-    return NestedFROLS
+        def truncate(self, k: int):
+            """Keep the first ``k`` terms of FROLS's order, refitted by least squares."""
+            psi, target = self._stack
+            piv = self.pivv[:k]
+            self.n_terms = k
+            self.final_model = self.regressor_code[piv, :].copy()
+            self.theta = self.estimator.optimize(psi[:, piv], target[:, None])
+            return self
+
+        def release(self):
+            """Drop the stacked regressor kept for :meth:`truncate`."""
+            self._stack = None
+            return self
+
+    return RecordsFROLS
 
 
 def _estimator(degree: int, lag: int, n_inputs: int, cfg: NarxConfig):
@@ -274,18 +389,75 @@ def _estimator(degree: int, lag: int, n_inputs: int, cfg: NarxConfig):
 
 
 def _fit(pieces_q, pieces_x, degree, lag, cfg: NarxConfig):
-    """Fit one structure on the scaled pieces (joined; capped at ``max_samples``)."""
+    """Fit one structure on the scaled records (each capped in proportion, ``max_samples``)."""
     total = sum(p.size for p in pieces_q)
     keep = [max(lag + 2, int(cfg.max_samples * p.size / total)) for p in pieces_q]
-    y = np.concatenate([p[:k] for p, k in zip(pieces_q, keep, strict=True)])[:, None]
-    x = np.concatenate([p[:k] for p, k in zip(pieces_x, keep, strict=True)])
-    est = _estimator(degree, lag, x.shape[1], cfg)
+    ys = [p[:k, None] for p, k in zip(pieces_q, keep, strict=True)]
+    xs = [p[:k] for p, k in zip(pieces_x, keep, strict=True)]
+    est = _estimator(degree, lag, xs[0].shape[1], cfg)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        est.fit(X=x, y=y)
+        est.fit_records(xs, ys)
     if not np.all(np.isfinite(np.asarray(est.theta, dtype=float))):
         raise IdentificationError("non-finite parameters")
     return est
+
+
+#: Relative margin of the held-out score within which fewer terms are preferred.
+SIMPLER_WITHIN = 0.1
+
+
+def term_counts(k_criterion: int) -> list[int]:
+    """Model sizes the held-out free run compares: a geometric ladder up to the criterion's.
+
+    Parameters
+    ----------
+    k_criterion : int
+        The information criterion's minimum (the largest size tried).
+
+    Returns
+    -------
+    list of int
+        4, 6, 8, 12, 16, 24, ... below ``k_criterion``, and ``k_criterion``.
+    """
+    ladder = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192]
+    return [k for k in ladder if k < k_criterion] + [k_criterion]
+
+
+def _scaled_inputs(v, h_map: str) -> tuple[list[np.ndarray], np.ndarray]:
+    """Each record's ``h(v)`` divided by its largest magnitude over all records."""
+    h = [apply_input_map(r, h_map) for r in v]
+    scale = np.max(np.abs(np.concatenate(h)), axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    return [r / scale for r in h], scale
+
+
+def _free_run_score(model: NarxModel, ys, xs, span: float) -> float:
+    """NRMSE(q) of the free runs over the estimation records, pooled (inf if one diverged).
+
+    Each record runs from its first ``max_lag`` samples; the root of the summed squared
+    error over all records' samples, divided by the output span ``span`` (scaled units).
+    """
+    sse, count = 0.0, 0
+    for y, x in zip(ys, xs, strict=True):
+        sim, at = model.simulate_scaled(y, x)
+        if at >= 0:
+            return np.inf
+        sse += float(np.sum((sim - y)[model.max_lag :] ** 2))
+        count += y.size - model.max_lag
+    return float(np.sqrt(sse / count) / span)
+
+
+def _simplest_near_best(candidates: pd.DataFrame) -> dict | None:
+    """Pick the fewest terms whose free-run score is within :data:`SIMPLER_WITHIN` of the best.
+
+    None if no candidate ran free to the end of the estimation records.
+    """
+    ok = candidates[np.isfinite(candidates.free_run_nrmse_q)] if len(candidates) else candidates
+    if ok.empty:
+        return None
+    near = ok[ok.free_run_nrmse_q <= (1.0 + SIMPLER_WITHIN) * ok.free_run_nrmse_q.min()]
+    return near.sort_values(["n_terms", "degree", "lag", "free_run_nrmse_q"]).iloc[0].to_dict()
 
 
 def fit_narx(
@@ -296,6 +468,12 @@ def fit_narx(
     q_limit: float,
 ) -> NarxModel:
     """Choose and fit the polynomial NARX model on the estimation records.
+
+    Per candidate structure (input map, degree, lags), FROLS orders the terms on the stacked
+    records and the information criterion's minimum gives the largest model size; the sizes
+    of :func:`term_counts` up to it run free over the estimation records from each record's
+    first ``max_lag`` samples. The fewest terms within :data:`SIMPLER_WITHIN` of the best
+    free-run NRMSE(q) win, over every structure.
 
     Parameters
     ----------
@@ -318,59 +496,50 @@ def fit_narx(
     Raises
     ------
     IdentificationError
-        If every candidate failed to fit or diverged on the held-out data.
+        If every candidate failed to fit or diverged in its free run.
 
     References
     ----------
-    Billings 2013, Ch. 3 (FROLS); Masoud & Maas 2025, Eq. 41 (the score).
+    Billings 2013, Ch. 3 (FROLS); Piroddi & Spinelli 2003 (simulation error); Masoud & Maas
+    2025, Eq. 41 (the score).
     """
     q = [np.asarray(r, dtype=float) for r in q]
     v = [np.asarray(r, dtype=float).reshape(r.shape[0], -1) for r in v]
     maps = cfg.input_maps or (input_map,)
     q_all = np.concatenate(q)
-    q_mean, q_std = float(np.mean(q_all)), float(np.std(q_all)) or 1.0
-    rows, best = [], None
+    q_origin, q_std = float(0.5 * (q_all.max() + q_all.min())), float(np.std(q_all)) or 1.0
+    ys = [(r - q_origin) / q_std for r in q]
+    span = float(np.ptp(q_all)) / q_std or 1.0
+    rows, fits = [], {}
     for h_map, degree, lag in itertools.product(maps, cfg.degree, cfg.lags):
-        h = [apply_input_map(r, h_map) for r in v]
-        scale = np.max(np.abs(np.concatenate(h)), axis=0)
-        scale = np.where(scale > 0, scale, 1.0)
-        ys = [(r - q_mean) / q_std for r in q]
-        xs = [r / scale for r in h]
-        cut = [round((1.0 - cfg.holdout) * r.size) for r in q]
-        row = {"degree": degree, "lag": lag, "input_map": h_map, "n_terms": 0,
-               "holdout_nrmse_q": np.inf, "status": "ok"}  # fmt: skip
+        xs, scale = _scaled_inputs(v, h_map)
+        base = {"degree": degree, "lag": lag, "input_map": h_map}
         try:
-            est = _fit([y[:c] for y, c in zip(ys, cut, strict=True)],
-                       [x[:c] for x, c in zip(xs, cut, strict=True)], degree, lag, cfg)  # fmt: skip
-            model = NarxModel(est, h_map, degree, lag, q_mean, q_std, scale, q_limit)
-            row["n_terms"] = model.n_params
-            scores = []
-            for r_q, r_v, c in zip(q, v, cut, strict=True):
-                start = max(c - model.max_lag, 0)
-                sim, _ = model.simulate(r_q[start:], r_v[start:])
-                scores.append(nrmse(r_q[start:][model.max_lag :], sim[model.max_lag :]))
-            score = float(np.mean(scores))
-            row["holdout_nrmse_q"] = score if np.isfinite(score) else np.inf
-            row["status"] = "ok" if np.isfinite(score) else "diverged"
+            est = _fit(ys, xs, degree, lag, cfg)
         except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
-            row["status"] = f"fit failed: {exc}"
-        rows.append(row)
-        if np.isfinite(row["holdout_nrmse_q"]) and (
-            best is None or row["holdout_nrmse_q"] < best["holdout_nrmse_q"]
-        ):
-            best = row
+            rows.append({**base, "n_terms": 0, "criterion_terms": 0,
+                         "free_run_nrmse_q": np.inf, "status": f"fit failed: {exc}"})  # fmt: skip
+            continue
+        for size in term_counts(est.n_terms_criterion):
+            model = NarxModel(est.truncate(size), h_map, degree, lag, q_origin, q_std, scale,
+                              q_limit)  # fmt: skip
+            score = _free_run_score(model, ys, xs, span)
+            rows.append({**base, "n_terms": size, "criterion_terms": est.n_terms_criterion,
+                         "free_run_nrmse_q": score,
+                         "status": "ok" if np.isfinite(score) else "diverged"})  # fmt: skip
+        fits[h_map, degree, lag] = est, scale
     candidates = pd.DataFrame(rows)
+    best = _simplest_near_best(candidates)
     if best is None:
         raise IdentificationError(
-            "NARX: every candidate structure failed to fit or diverged on the held-out "
-            "estimation data"
+            "NARX: every candidate structure failed to fit or diverged in its free run over "
+            "the estimation records"
         )
-    h = [apply_input_map(r, best["input_map"]) for r in v]
-    scale = np.max(np.abs(np.concatenate(h)), axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    est = _fit([(r - q_mean) / q_std for r in q], [r / scale for r in h], best["degree"],
-               best["lag"], cfg)  # fmt: skip
+    est, scale = fits.pop((best["input_map"], best["degree"], best["lag"]))
+    est.truncate(int(best["n_terms"])).release()
+    for other, _ in fits.values():
+        other.release()
     if len(est.final_model) == 0:
         warnings.warn("NARX: the chosen structure selected no term", DebistWarning, stacklevel=2)
-    return NarxModel(est, best["input_map"], best["degree"], best["lag"], q_mean, q_std,
+    return NarxModel(est, best["input_map"], best["degree"], best["lag"], q_origin, q_std,
                      scale, q_limit, candidates)  # fmt: skip
