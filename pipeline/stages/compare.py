@@ -28,6 +28,7 @@ from debist.physics_stages import analytical_for
 from debist.records import estimation_records
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
+from debist.stages.sindy_choice import choose_sindy
 from debist.validate import ValidateConfig, default_q_limit, score_free_runs, validate_model
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -103,6 +104,9 @@ def run_compare(
     vcfg = ValidateConfig.from_dict(section["validate"])
     records = estimation_records(tables, derivs)
     progress.report("compare: SINDy fit", 0, 1)
+    q_unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
+    cfg, search = choose_sindy(records, cfg, sindy_section, vcfg, q_unit,
+                               _input_units(tables, records[0].v))  # fmt: skip
     model = fit_sindy(
         [r.q for r in records],
         [r.q_dot for r in records],
@@ -122,7 +126,10 @@ def run_compare(
     )
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
-    summary = {"equations": model.equations, "n_params": model.n_params}
+    summary = {"equations": model.equations, "n_params": model.n_params,
+               "degree": cfg.degree, "threshold": cfg.threshold,
+               "search": [{k: (None if v == np.inf else v) for k, v in r.items()}
+                          for r in search]}  # fmt: skip
     timings = {"fit": model.fit_time, "simulate": sim_time}
     narx, parts = None, [rbf_table, table]
     if ncfg.enabled:
