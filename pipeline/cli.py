@@ -909,6 +909,8 @@ def _zoo_report(folder: Path) -> Path:
         out.add_column(column, justify="right")
     for label in ("median", "worst"):
         out.add_row(label, *(_zoo_cell(summary.loc[label, c]) for c in shown))
+    out.add_row("no free run", *(f"{int(summary.loc['no_free_run', c])} of "
+                                 f"{int(summary.loc['count', c])}" for c in shown))  # fmt: skip
     console.print(out)
     console.print(f"zoo table: {escape(str(table_path))}; page: {escape(str(page))}")
     return page

@@ -207,9 +207,11 @@ def zoo_summary(table: Any) -> Any:
     Returns
     -------
     pandas.DataFrame
-        Rows ``median`` and ``worst`` (the largest NRMSE or error, the smallest coverage;
-        for the boolean columns the count of True in ``worst`` and the share in ``median``
-        is not given), one column per numeric column of the table.
+        Rows ``median`` (a member without a free run, inf, counts as the worst score, so
+        the median is inf once half the members have none), ``worst`` (the largest NRMSE or
+        error, the smallest coverage; for the boolean columns the count of True, and no
+        median), ``count`` (members with a value) and ``no_free_run`` (members whose value is
+        inf), one column per numeric column of the table.
     """
     import pandas as pd
 
@@ -220,10 +222,10 @@ def zoo_summary(table: Any) -> Any:
             flags = values.dropna().astype(bool)
             out[column] = {"median": np.nan, "worst": float(flags.sum()), "count": len(flags)}
         elif pd.api.types.is_numeric_dtype(values.dtype):
-            finite = values.replace([np.inf], np.nan)
             worst = values.min() if column.endswith("_coverage") else values.max()
-            out[column] = {"median": float(finite.median()), "worst": float(worst),
-                           "count": int(values.notna().sum())}  # fmt: skip
+            out[column] = {"median": float(values.median()), "worst": float(worst),
+                           "count": int(values.notna().sum()),
+                           "no_free_run": int(np.isinf(values).sum())}  # fmt: skip
     return pd.DataFrame(out)
 
 

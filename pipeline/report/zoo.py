@@ -138,6 +138,10 @@ def render_zoo(table: Any, summary: Any, attrs: Mapping[str, Any]) -> str:
             else:
                 cells.append(_cell(c, float(value)))
         summary_rows.append((label, cells))
+    summary_rows.append(("no free run", [
+        "" if c.endswith(("_lost_switch", "_near_wells"))
+        else f"{int(summary.loc['no_free_run', c])} of {int(summary.loc['count', c])}"
+        for c, _ in summary_cols]))  # fmt: skip
     seed = attrs.get("zoo", {}).get("seed", "?")
     return _ENV.from_string(_PAGE).render(
         seed=seed, n=len(table), columns=columns, rows=rows, text_cols=_TEXT,
