@@ -54,6 +54,11 @@ def test_nrmse_is_the_table_the_cli_prints_in_percent(synthetic_run):
     np.testing.assert_allclose(frame["NRMSE(q) [%]"], 100.0 * raw["nrmse_q"], rtol=1e-15)
     np.testing.assert_allclose(frame["NRMSE(q_dot) [%]"], 100.0 * raw["nrmse_q_dot"])
     assert set(frame["verdict"]) <= {"ok"} | {v for v in frame["verdict"] if v}
+    # a script reads the verdicts a person reads: the Parquet column is the display's word
+    assert frame["verdict"].tolist() == raw["verdict"].tolist()
+    assert all(isinstance(v, str) and v for v in raw["verdict"])
+    rbf = artifacts.read_parquet(root / "out/validate/nrmse.parquet")
+    assert rbf["verdict"].str.len().gt(0).all()
     # the CLI's own output of that run shows the same percentages, to its two decimals
     from conftest import invoke_cli
 

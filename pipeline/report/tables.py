@@ -371,7 +371,8 @@ def nrmse_table(rows: list[dict[str, Any]]) -> Table:
         ]
         extra = [str(r["n_params"])] if params else []
         rms_cell = failed if math.isnan(r["rms_q"]) else f"{_fmt(r['rms_q'])} {r['rms_unit']}"
-        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, verdict(r, rows))
+        word = r.get("verdict") or verdict(r, rows)
+        table.add_row(r["dataset"], r["role"], r["model"], *pct, rms_cell, *extra, word)
     return table
 
 
@@ -519,6 +520,32 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         v, m = min(better)
         words.append(f"worse than {m} ({100 * v:.2f} %)")
     return "; ".join(words) or "ok"
+
+
+def with_verdicts(table: Any) -> Any:
+    """Add a ``verdict`` column to an NRMSE table: the words the display prints for each row.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Rows of ``nrmse.parquet`` (a ``verdict`` column already there is recomputed: a row's
+        verdict depends on the other models' rows of its data set).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``table`` with ``verdict`` = :func:`verdict` of each row against the whole table.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> t = pd.DataFrame({"dataset": ["a", "a"], "model": ["rbf", "narx"], "status": "ok",
+    ...                   "nrmse_q": [0.30, 0.01], "nrmse_q_baseline": [0.25, 0.25]})
+    >>> with_verdicts(t).verdict.tolist()
+    ['not better than the mean (NRMSE 25.0 %): q is not predicted', 'ok']
+    """
+    rows = table.drop(columns="verdict", errors="ignore").to_dict(orient="records")
+    return table.assign(verdict=[verdict(r, rows) for r in rows])
 
 
 def published_table(

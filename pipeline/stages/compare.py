@@ -26,6 +26,7 @@ from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.physics_stages import analytical_for
 from debist.records import estimation_records
+from debist.report.tables import with_verdicts
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
 from debist.stages.sindy_choice import choose_sindy
@@ -228,16 +229,17 @@ def execute(ctx: StageInputs) -> StageOutput:
         ctx.stage_config("compare"),
         ctx.physics(),
     )
+    table = with_verdicts(res.table)
     outputs: dict[str, Any] = {
         "sindy.h5": H5Tree(res.model.to_tree()),
-        "nrmse.parquet": res.table,
+        "nrmse.parquet": table,
     }
     if res.narx is not None:
         outputs["narx.h5"] = H5Tree(res.narx.to_tree())
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
     summary = {
         **res.summary,
-        "table": res.table.to_dict(orient="records"),
+        "table": table.to_dict(orient="records"),
         "published": list(ctx.section("validate").get("published", [])),
         "order": [d.name for d in ctx.wf.datasets],
     }

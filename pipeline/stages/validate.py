@@ -16,6 +16,7 @@ from debist.model.rbf import RBFModel
 from debist.physics_stages import analytical_for
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
+from debist.report.tables import with_verdicts
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate import (
@@ -247,7 +248,8 @@ def execute(ctx: StageInputs) -> StageOutput:
         ctx.physics(),
         replicates,
     )
-    outputs: dict[str, Any] = {"nrmse.parquet": res.table}
+    table = with_verdicts(res.table)
+    outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:
         outputs["residuals.parquet"] = res.residuals
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
@@ -255,7 +257,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     pngs = render_pngs(list(res.plots.values()))
     outputs.update({f"plots/{n}.png": png for n, png in zip(res.plots, pngs, strict=True)})
     summary = {
-        "table": res.table.to_dict(orient="records"),
+        "table": table.to_dict(orient="records"),
         "published": list(section.get("published", [])),
         "order": [d.name for d in ctx.wf.datasets],
     }
