@@ -99,6 +99,9 @@ class FitDiagnostics:
         None with ``bootstrap = 0``.
     block : int
         The bootstrap's block length [samples] (0 without bootstrap).
+    dissipation : str
+        Empty, or why ``d >= 0`` was imposed (:func:`passive_damping`): the unconstrained
+        fit's smallest d(q) on the visited range and where.
     """
 
     n_samples: int
@@ -118,6 +121,7 @@ class FitDiagnostics:
     smoothing: float = 0.0
     gcv_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
     creep_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    dissipation: str = ""
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -478,6 +482,15 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         theta = estimator.solve(R, Q.T @ y) / scale
         resid = y - psi @ theta
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
+    dissipation = passive_damping(model, q_all, cfg)
+    if dissipation:
+        estimator, gcv_trace = _estimator(psi, y, names, replace(
+            cfg, constraints=(*cfg.constraints, "d >= 0")))  # fmt: skip
+        scale = np.linalg.norm(psi, axis=0)
+        Q, R = np.linalg.qr(psi / scale)
+        theta = estimator.solve(R, Q.T @ y) / scale
+        resid = y - psi @ theta
+        model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
         theta_boot, block = block_bootstrap(
@@ -502,8 +515,54 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         smoothing=estimator.lam,
         gcv_trace=gcv_trace,
         creep_trace=creep_trace,
+        dissipation=dissipation,
     )
     return model, diag, resid
+
+
+def passive_damping(model: RBFModel, q: np.ndarray, cfg: IdentifyConfig, n_grid: int = 801) -> str:
+    """Whether the fit must be redone with ``d(q) >= 0``, and why.
+
+    A passive mechanism dissipates: the damping curve of Eq. 37 is not negative where the
+    data are. Where the workflow states no sign for ``d`` (``[identify] constraints``) and
+    the least-squares fit has ``d(q) < 0`` somewhere on the visited range (an under-excited
+    record cannot separate damping from stiffness and mass, and a negative d makes the free
+    run gain energy), the fit is redone with the bounds of ``"d >= 0"``
+    (:func:`debist.identify.regularise.constraint_bounds`: non-negative RBF weights and
+    viscous gain, a sufficient condition).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The unconstrained fit.
+    q : ndarray, shape (n,)
+        Estimation positions [unit of q].
+    cfg : IdentifyConfig
+        ``rbf`` (has ``"d"``) and ``constraints``.
+    n_grid : int
+        Points of the visited range checked.
+
+    Returns
+    -------
+    str
+        Empty if nothing is imposed; otherwise the smallest d(q) [1/s] and where [unit of q].
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (d(q) z, the friction force); Khalil, Nonlinear Systems,
+    3rd ed., Sec. 4.1 (a mechanical system with non-negative damping does not gain energy).
+    """
+    if "d" not in cfg.rbf or any(str(c).lstrip().startswith("d") for c in cfg.constraints):
+        return ""
+    grid = np.linspace(float(np.nanmin(q)), float(np.nanmax(q)), n_grid)
+    d = model.curves(grid)["d"]
+    k = int(np.argmin(d))
+    if not d[k] < 0:
+        return ""
+    return (
+        f"d >= 0 imposed: the least-squares fit had d = {d[k]:.4g} 1/s at q = {grid[k]:.4g} "
+        "on the visited range"
+    )
 
 
 def slip_widths(slip: int | Sequence[float], q_range: Sequence[float]) -> tuple[float, ...]:

@@ -208,6 +208,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "model_error": model_error or {},
         },
         "smoothing": diag.smoothing,
+        **({"dissipation": diag.dissipation} if diag.dissipation else {}),
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
         **({"slip": _slip_summary(model)} if model.has_slip else {}),
