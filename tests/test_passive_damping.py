@@ -1,4 +1,4 @@
-"""A passive mechanism dissipates: d(q) >= 0 is imposed where least squares makes it negative."""
+"""Signs physics implies (d >= 0, a DE gain of one sign): kept where a fit breaks them."""
 
 import numpy as np
 
@@ -26,13 +26,14 @@ def test_negative_damping_from_least_squares_is_refitted_with_d_nonnegative(
     rec = _record(bistable_record, 6.0)
     grid = np.linspace(rec.q.min(), rec.q.max(), 401)
     with monkeypatch.context() as patch:
-        patch.setattr(fit, "passive_damping", lambda *a, **k: "")
+        patch.setattr(fit, "physical_signs", lambda *a, **k: ((), ""))
         free, _ = fit_rbf_model([rec], IdentifyConfig.from_dict(CFG))
     assert free.curves(grid)["d"].min() < -1.0
     model, diag = fit_rbf_model([rec], IdentifyConfig.from_dict(CFG))
     d = model.curves(grid)["d"]
     assert d.min() >= -1e-9
-    assert diag.dissipation.startswith("d >= 0 imposed: the least-squares fit had d = -")
+    assert diag.dissipation.startswith("imposed d >= 0")
+    assert "the least-squares fit had d = -" in diag.dissipation
 
 
 def test_a_dissipative_fit_is_left_as_least_squares_made_it(bistable_record):
@@ -45,9 +46,24 @@ def test_a_dissipative_fit_is_left_as_least_squares_made_it(bistable_record):
 
 
 def test_a_sign_the_workflow_states_for_d_is_its_own(bistable_record):
-    """Stated in the workflow, the bound is the workflow's: nothing is said to be imposed."""
+    """Stated in the workflow, the bound is the workflow's: d is not said to be imposed."""
     rec = _record(bistable_record, 6.0)
     cfg = IdentifyConfig.from_dict({**CFG, "constraints": ["d >= 0"]})
     model, diag = fit_rbf_model([rec], cfg)
-    assert diag.dissipation == ""
+    assert "d >= 0" not in diag.dissipation
     assert model.curves(np.linspace(rec.q.min(), rec.q.max(), 401))["d"].min() >= -1e-9
+
+
+def test_a_gain_that_changes_sign_on_the_visited_range_keeps_the_data_s_sign(bistable_record):
+    """Data of g1 = 2e-7 + 3e-5 q [m/s^2/V^2], zero at q = -6.7 mm inside the visited range:
+    least squares follows it across zero; the default keeps g1 >= 0, the direction q moves
+    when DE 1 is energised."""
+    rec = _record(bistable_record, 0.0)
+    extra = 2.4e-5 * rec.q * rec.v[:, 0] ** 2
+    rec = Record("bistable", rec.q, rec.q_dot, rec.q_ddot + extra, rec.v, rec.dt)
+    grid = np.linspace(rec.q.min(), rec.q.max(), 401)
+    model, diag = fit_rbf_model([rec], IdentifyConfig.from_dict(CFG))
+    assert diag.dissipation.startswith("imposed g1 >= 0")
+    assert "the least-squares fit had g1 = -" in diag.dissipation
+    g1 = np.asarray(model.curves(grid)["g"]).reshape(grid.size, -1)[:, 0]
+    assert g1.min() >= -1e-12 and g1.max() > 1e-7

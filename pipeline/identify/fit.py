@@ -100,8 +100,8 @@ class FitDiagnostics:
     block : int
         The bootstrap's block length [samples] (0 without bootstrap).
     dissipation : str
-        Empty, or why ``d >= 0`` was imposed (:func:`passive_damping`): the unconstrained
-        fit's smallest d(q) on the visited range and where.
+        Empty, or which signs were imposed and why (:func:`physical_signs`): what the
+        unconstrained fit had on the visited range, and where.
     """
 
     n_samples: int
@@ -482,10 +482,11 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         theta = estimator.solve(R, Q.T @ y) / scale
         resid = y - psi @ theta
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
-    dissipation = passive_damping(model, q_all, cfg)
-    if dissipation:
+    h_all = np.vstack([input_map(r.v, cfg.input_map) for r in records])
+    signs, dissipation = physical_signs(model, q_all, h_all, cfg)
+    if signs:
         estimator, gcv_trace = _estimator(psi, y, names, replace(
-            cfg, constraints=(*cfg.constraints, "d >= 0")))  # fmt: skip
+            cfg, constraints=(*cfg.constraints, *signs)))  # fmt: skip
         scale = np.linalg.norm(psi, axis=0)
         Q, R = np.linalg.qr(psi / scale)
         theta = estimator.solve(R, Q.T @ y) / scale
@@ -520,16 +521,28 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     return model, diag, resid
 
 
-def passive_damping(model: RBFModel, q: np.ndarray, cfg: IdentifyConfig, n_grid: int = 801) -> str:
-    """Whether the fit must be redone with ``d(q) >= 0``, and why.
+#: A gain reversed by less than this share of its largest magnitude on the visited range is
+#: taken as the fit's noise at the edge of the range, not as a broken sign.
+GAIN_REVERSAL = 0.1
+
+
+def physical_signs(
+    model: RBFModel, q: np.ndarray, h: np.ndarray, cfg: IdentifyConfig, n_grid: int = 801
+) -> tuple[tuple[str, ...], str]:
+    """Find the signs physics implies that a least-squares fit broke on the visited range.
 
     A passive mechanism dissipates: the damping curve of Eq. 37 is not negative where the
-    data are. Where the workflow states no sign for ``d`` (``[identify] constraints``) and
-    the least-squares fit has ``d(q) < 0`` somewhere on the visited range (an under-excited
-    record cannot separate damping from stiffness and mass, and a negative d makes the free
-    run gain energy), the fit is redone with the bounds of ``"d >= 0"``
-    (:func:`debist.identify.regularise.constraint_bounds`: non-negative RBF weights and
-    viscous gain, a sufficient condition).
+    data are (a negative d makes the free run gain energy). An actuator's force does not
+    change direction inside its range: for a DE (``input_map = "v2"``), ``g_i = (1/2)
+    dC_i/dq`` per unit mass (Eq. 35-37) keeps the sign of the capacitance's slope, which the
+    data show as the direction q moves when DE i is energised (the sign of the covariance of
+    ``v_i^2`` and q). Where the workflow states no sign for a curve (``[identify]
+    constraints``) and the fit breaks it on the visited range (d below zero; a gain reversed
+    by more than :data:`GAIN_REVERSAL` of its largest magnitude: an under-excited record
+    cannot separate damping from stiffness and mass, or a gain from the restoring force at
+    the edge of the range), the fit is redone with the bounds of the statements returned
+    (:func:`debist.identify.regularise.constraint_bounds`: the curve's RBF weights and
+    backbone gain take the sign, a sufficient condition).
 
     Parameters
     ----------
@@ -537,31 +550,54 @@ def passive_damping(model: RBFModel, q: np.ndarray, cfg: IdentifyConfig, n_grid:
         The unconstrained fit.
     q : ndarray, shape (n,)
         Estimation positions [unit of q].
+    h : ndarray, shape (n, n_inputs)
+        The inputs' h(v) at those samples [V^2 for ``"v2"``].
     cfg : IdentifyConfig
-        ``rbf`` (has ``"d"``) and ``constraints``.
+        ``rbf`` (the curves fitted), ``input_map`` and ``constraints`` (the signs the
+        workflow states).
     n_grid : int
         Points of the visited range checked.
 
     Returns
     -------
-    str
-        Empty if nothing is imposed; otherwise the smallest d(q) [1/s] and where [unit of q].
+    statements : tuple of str
+        Constraints to add, e.g. ``("d >= 0", "g2 <= 0")``; empty if none.
+    reason : str
+        What the fit had: each curve's value of the wrong sign farthest from zero, and where
+        [unit of q]; empty if none.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37 (d(q) z, the friction force); Khalil, Nonlinear Systems,
-    3rd ed., Sec. 4.1 (a mechanical system with non-negative damping does not gain energy).
+    Masoud & Maas 2025, Eq. 35-37 (g_i from dC_i/dq, d(q) z the friction force); Khalil,
+    Nonlinear Systems, 3rd ed., Sec. 4.1 (a mechanical system with non-negative damping
+    does not gain energy).
     """
-    if "d" not in cfg.rbf or any(str(c).lstrip().startswith("d") for c in cfg.constraints):
-        return ""
+    stated = {str(c).split()[0].split(">")[0].split("<")[0] for c in cfg.constraints}
     grid = np.linspace(float(np.nanmin(q)), float(np.nanmax(q)), n_grid)
-    d = model.curves(grid)["d"]
-    k = int(np.argmin(d))
-    if not d[k] < 0:
-        return ""
-    return (
-        f"d >= 0 imposed: the least-squares fit had d = {d[k]:.4g} 1/s at q = {grid[k]:.4g} "
-        "on the visited range"
+    curves = model.curves(grid)
+    statements, words = [], []
+    if "d" in cfg.rbf and "d" not in stated and "d" in curves:
+        k = int(np.argmin(curves["d"]))
+        if curves["d"][k] < 0:
+            statements.append("d >= 0")
+            words.append(f"d = {curves['d'][k]:.4g} 1/s at q = {grid[k]:.4g}")
+    if "g" in cfg.rbf and "g" in curves and cfg.input_map == "v2":
+        gains = np.asarray(curves["g"]).reshape(grid.size, -1)
+        h = np.asarray(h, dtype=float).reshape(q.size, -1)
+        for j in range(gains.shape[1]):
+            name, g = f"g{j + 1}", gains[:, j]
+            sign = np.sign(np.cov(h[:, j], q)[0, 1])
+            largest = float(np.max(np.abs(g)))
+            if name in stated or sign == 0 or np.all(g * sign >= -GAIN_REVERSAL * largest):
+                continue
+            k = int(np.argmin(g * sign))
+            statements.append(f"{name} {'>=' if sign > 0 else '<='} 0")
+            words.append(f"{name} = {g[k]:.4g} at q = {grid[k]:.4g}")
+    if not statements:
+        return (), ""
+    return tuple(statements), (
+        f"imposed {', '.join(statements)}: the least-squares fit had {'; '.join(words)} on "
+        "the visited range"
     )
 
 
