@@ -282,19 +282,33 @@ def test_index_rows_and_page(run):
     html = render_index(rows)
     parser = parse(html)
     assert "1 failed" in html and "IdentificationError: x &lt; y" in html
-    assert 'href="proto-0/report/report.html"' in html and html.count("<a ") == 1
+    assert 'href="./proto-0/report/report.html"' in html and html.count("<a ") == 1
     table = [r for r in parser.rows if len(r) == 6]
     assert table[0][0] == "prototype" and table[0][3] == "NRMSE(q) unseen"
     assert table[1] == ["proto-0", "fleet/proto-0.toml", "done", "1.13 %", "-9.516 mm",
                         "v1: 1976 V, v2: none"]  # fmt: skip
     assert table[2][3] == "-"
-    assert "http" not in html and "<script" not in html
+    assert "http:" not in html and "https:" not in html and "<script" not in html
     # the NARX peer's column beside the identified model's, with the verdict it earns
     peer = [*run["nrmse"], {**run["nrmse"][0], "model": "narx", "nrmse_q": 0.005}]
     row = index_row("p", "p.toml", "done", nrmse=peer, design=design)
     assert row["narx"] == {"unseen": "0.50 %"} and "worse than narx" in row["nrmse"]["unseen"]
     html = render_index([row])
     assert "<th>NARX NRMSE(q) unseen</th>" in html and "0.50 %" in html
+
+
+def test_batch_index_links_cannot_form_a_scheme_and_forbid_script():
+    """An output folder named like a URL scheme stays a folder name in the index's links,
+    and the page's Content-Security-Policy forbids script."""
+    import re
+
+    rows = [index_row("x", "x.toml", "done", link="javascript:alert(document.domain)/r.html"),
+            index_row("y", "y.toml", "done", link="a b/#?/r.html")]  # fmt: skip
+    html = render_index(rows, pages=[("zoo table", "data:text/html,x")])
+    hrefs = re.findall(r'href="([^"]*)"', html)
+    assert hrefs == ["./data%3Atext/html%2Cx", "./javascript%3Aalert%28document.domain%29/r.html",
+                     "./a%20b/%23%3F/r.html"]  # fmt: skip
+    assert "Content-Security-Policy" in html and "default-src 'none'" in html
 
 
 def test_batch_index_lists_only_identified_wells():

@@ -266,6 +266,7 @@ _INDEX = """<!DOCTYPE html>
 <head>
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
+<meta http-equiv="Content-Security-Policy" content="default-src 'none'; style-src 'unsafe-inline'">
 <title>debist batch: {{ rows|length }} prototypes</title>
 <style>
 body { font-family: system-ui, sans-serif; max-width: 72rem; margin: 0 auto; padding: 0.8rem;
@@ -663,7 +664,8 @@ def render_index(rows: Sequence[Mapping[str, Any]], pages: Sequence[tuple[str, s
     Returns
     -------
     str
-        A self-contained HTML document (no script, no external URL; the links are relative).
+        A self-contained HTML document (no script, no external URL; the links are relative,
+        :func:`relative_href`, and a Content-Security-Policy forbids script).
 
     References
     ----------
@@ -675,9 +677,50 @@ def render_index(rows: Sequence[Mapping[str, Any]], pages: Sequence[tuple[str, s
         datasets += [d for d in r["nrmse"] if d not in datasets]
         narx += [d for d in r.get("narx", {}) if d not in narx]
     failed = sum(r["status"] != "done" for r in rows)
+    rows = [{**r, "link": relative_href(r["link"]) if r.get("link") else None} for r in rows]
+    pages = [(label, relative_href(href)) for label, href in pages]
     return _ENV.from_string(_INDEX).render(
         rows=rows, datasets=datasets, narx_datasets=narx, failed=failed, pages=pages
     )
+
+
+def relative_href(path: str) -> str:
+    """Turn a relative file path into a link that can only name a file below the page.
+
+    Each segment is percent-encoded (a ``:``, ``?`` or ``#`` in a folder name is a
+    character of the name, not a scheme, query or fragment) and the result starts with
+    ``./``, so that no first segment can be read as a scheme (``javascript:...``).
+
+    Parameters
+    ----------
+    path : str
+        A POSIX path relative to the page's folder.
+
+    Returns
+    -------
+    str
+        The URL reference.
+
+    Raises
+    ------
+    ValueError
+        For an absolute path.
+
+    References
+    ----------
+    RFC 3986, Sec. 2.1 (percent-encoding) and Sec. 4.2 (a relative-path reference whose
+    first segment contains a colon is preceded by "./").
+
+    Examples
+    --------
+    >>> relative_href("javascript:alert(1)/report/report.html")
+    './javascript%3Aalert%281%29/report/report.html'
+    """
+    from urllib.parse import quote
+
+    if path.startswith("/"):
+        raise ValueError(f"not a relative path: {path!r}")
+    return "./" + "/".join(quote(part, safe="") for part in path.split("/"))
 
 
 def write_page(path: str | os.PathLike, html: str) -> Path:
