@@ -305,9 +305,11 @@ def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig
             f"reduce M (= {cfg.M}) or sigma_n (= {cfg.sigma_n}), or excite the range better"
         )
     keep = tol < S
-    theta = (Vt[keep].T @ ((U[:, keep].T @ y) / S[keep])) / scale
+    uty = U[:, keep].T @ y
+    theta = (Vt[keep].T @ (uty / S[keep])) / scale
     resid = y - psi @ theta
-    return theta, resid, rank, cond, S
+    # ||psi/scale x - y|| = ||S V^T x - U^T y|| up to a constant: the compressed problem
+    return theta, resid, rank, cond, S, (S[keep, None] * Vt[keep], uty)
 
 
 def supported_range(q: np.ndarray, cfg: IdentifyConfig, step: float = 0.01) -> tuple[float, float]:
@@ -474,7 +476,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     z_all = [friction_state(r.q_dot, r.dt, T_z) for r in records]
     w_all = _creep_columns(records, basis, rate) if rate > 0 else None
     psi, y, names = _system(records, z_all, basis, cfg, w_all)
-    theta, resid, rank, cond, S = _solve(psi, y, names, cfg, check=True)
+    theta, resid, rank, cond, S, compressed = _solve(psi, y, names, cfg, check=True)
     estimator, gcv_trace = _estimator(psi, y, names, cfg)
     if not estimator.plain:
         scale = np.linalg.norm(psi, axis=0)
@@ -488,8 +490,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         estimator, gcv_trace = _estimator(psi, y, names, replace(
             cfg, constraints=(*cfg.constraints, *signs)))  # fmt: skip
         scale = np.linalg.norm(psi, axis=0)
-        Q, R = np.linalg.qr(psi / scale)
-        theta = estimator.solve(R, Q.T @ y) / scale
+        theta = estimator.solve(*compressed) / np.where(scale == 0, 1.0, scale)
         resid = y - psi @ theta
         model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     theta_boot, block = None, 0
