@@ -195,3 +195,30 @@ def test_batch_helpers_find_tabulate_and_index(run_copy):
     index = debist.batch_index(results)
     assert index is not None and index.name == "index.html"
     assert "wf" in index.read_text() or results[0].name in index.read_text()
+
+
+@pytest.mark.parametrize("damage", [b"", b"[1, 2]", b"[" * 100_000])
+def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(run_copy, damage):
+    """An empty, non-object or 100,000-deep manifest: status says stale and why, verify
+    fails on it (exit 3 in the CLI), and run sets the folder aside untouched, recomputes the
+    stage, and leaves a run that verifies to the original digest."""
+    from conftest import invoke_cli
+
+    root, digest = run_copy
+    manifest = root / "out/compare/manifest.json"
+    manifest.write_bytes(damage)
+    from debist.engine.runner import Runner
+    from debist.workflow.loader import load_workflow
+
+    runner = Runner(load_workflow(root / "wf.toml"))
+    state = {s.stage: s for s in runner.status()}["compare"]
+    assert state.state == "stale" and state.reasons[0].kind == "damaged_manifest"
+    assert "is unreadable" in state.reasons[0].detail
+    assert any("compare/manifest.json" in p for p in runner.verify())
+    code, out = invoke_cli("verify", root / "wf.toml")
+    assert code == 3 and "Traceback" not in out
+    code, out = invoke_cli("run", root / "wf.toml")
+    assert code == 0, out
+    (aside,) = (root / "out").glob("compare.damaged-*")
+    assert (aside / "manifest.json").read_bytes() == damage
+    assert runner.verify() == [] and runner.digest() == digest

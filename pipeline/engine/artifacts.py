@@ -62,6 +62,7 @@ from debist.errors import ArtifactError, OutputDirError
 __all__ = [
     "MANIFEST",
     "SCHEMA_VERSION",
+    "SET_ASIDE",
     "SUMMARY",
     "SWAP_FOLDER",
     "TIMINGS",
@@ -82,6 +83,7 @@ __all__ = [
     "read_parquet",
     "read_summary",
     "remove_tree",
+    "set_aside",
     "sha256_file",
     "stage_key",
     "write_stage",
@@ -263,7 +265,9 @@ def read_manifest(stage_dir: str | os.PathLike) -> Manifest | None:
     Raises
     ------
     ArtifactError
-        If the manifest exists but cannot be parsed (or is of an older layout).
+        If the manifest exists but cannot be parsed: not JSON, not an object, nested too
+        deeply, or without the fields of a manifest (a damaged manifest: the stage is stale,
+        see :func:`set_aside`).
     """
     path = Path(stage_dir) / MANIFEST
     if not path.is_file():
@@ -284,6 +288,8 @@ def read_manifest(stage_dir: str | os.PathLike) -> Manifest | None:
                 "outputs": data["outputs"],
             }
         return Manifest(**data)
+    except RecursionError:
+        raise ArtifactError(f"manifest '{path}' is unreadable: nested too deeply") from None
     except (ValueError, TypeError, KeyError) as exc:
         raise ArtifactError(f"manifest '{path}' is unreadable: {exc}") from exc
 
@@ -429,6 +435,39 @@ def foreign_files(stage_dir: str | os.PathLike) -> list[str]:
         for path in sorted(root.rglob("*"))
         if not path.is_dir() and path.relative_to(root).as_posix() not in listed
     ]
+
+
+#: Name of a stage folder set aside by :func:`set_aside` (kept for the user, not verified).
+SET_ASIDE = re.compile(r"[A-Za-z_]+\.damaged-[0-9a-f]{8}")
+
+
+def set_aside(stage_dir: str | os.PathLike) -> Path:
+    """Move a stage folder whose manifest is damaged out of the way, keeping every file.
+
+    The folder is renamed to ``<stage>.damaged-<8 hex digits>`` beside it, so that the stage
+    can be recomputed and nothing in it is lost or overwritten.
+
+    Parameters
+    ----------
+    stage_dir : path-like
+        The stage folder.
+
+    Returns
+    -------
+    pathlib.Path
+        Where the folder now is.
+
+    References
+    ----------
+    POSIX ``rename(2)`` (one step on one file system).
+    """
+    root = Path(stage_dir)
+    while True:
+        target = root.with_name(f"{root.name}.damaged-{secrets.token_hex(4)}")
+        if not target.exists():
+            break
+    root.rename(target)
+    return target
 
 
 def write_stage(

@@ -17,7 +17,7 @@ import importlib
 import os
 import tempfile
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -56,7 +56,8 @@ class Reason:
         rerun), ``upstream_missing``, ``upstream_changed`` (recorded upstream manifests
         differ), ``artifact_missing``, ``artifact_modified``, ``artifact_unlisted``,
         ``config_changed``, ``input_changed``, ``code_changed``, ``library_changed``,
-        ``layout_changed`` (made by an older debist) and ``interrupted_run`` (leftovers).
+        ``layout_changed`` (made by an older debist), ``damaged_manifest`` (unreadable) and
+        ``interrupted_run`` (leftovers).
     detail : str
         The same in words, naming the keys, files or stages.
     """
@@ -314,7 +315,10 @@ class Runner:
         inputs: dict[str, str] = {}
         upstream: dict[str, str] = {}
         for up in self._upstream(stage):
-            manifest = artifacts.read_manifest(self.wf.stage_dir(up))
+            try:
+                manifest = artifacts.read_manifest(self.wf.stage_dir(up))
+            except ArtifactError:  # damaged: as good as missing
+                return None
             if manifest is None:
                 return None
             upstream[up] = artifacts.manifest_digest(self.wf.stage_dir(up))
@@ -408,7 +412,11 @@ class Runner:
     def _state(self, stage: str, rerun: set[str]) -> tuple[str, list[Reason]]:
         sdir = self.wf.stage_dir(stage)
         foreign = artifacts.foreign_files(sdir) if sdir.exists() else []
-        manifest = artifacts.read_manifest(sdir)
+        try:
+            manifest = artifacts.read_manifest(sdir)
+        except ArtifactError as exc:
+            return "stale", [Reason("damaged_manifest", f"{exc}; run sets the folder aside "
+                                    "and recomputes the stage")]  # fmt: skip
         if manifest is None:
             if foreign:
                 return "missing", [
@@ -532,6 +540,13 @@ class Runner:
         with outdir.writing(out, workflow=self.wf.name, wait=self.wait, **self._places()):
             for line in outdir.recover(out):
                 on_event("", "recovered", line)
+            damaged = {}
+            for s in selected:  # a damaged manifest: stale, its folder kept aside, recomputed
+                try:
+                    artifacts.read_manifest(self.wf.stage_dir(s))
+                except ArtifactError as exc:
+                    aside = artifacts.set_aside(self.wf.stage_dir(s))
+                    damaged[s] = f"{exc}; the folder was set aside as '{aside.name}'"
             foreign = {
                 s: found
                 for s in selected
@@ -546,7 +561,7 @@ class Runner:
                 )
             if stages is not None:
                 self._check_upstream(selected)
-            return self._run_locked(selected, force, on_event)
+            return self._run_locked(selected, force, on_event, damaged)
 
     def select(
         self,
@@ -617,8 +632,13 @@ class Runner:
                 )
 
     def _run_locked(
-        self, selected: list[str], force: bool, on_event: Event
+        self,
+        selected: list[str],
+        force: bool,
+        on_event: Event,
+        damaged: Mapping[str, str] | None = None,
     ) -> dict[str, artifacts.Manifest]:
+        damaged = damaged or {}
         manifests = {}
         for stage in STAGES:
             if stage not in selected:
@@ -646,7 +666,9 @@ class Runner:
                 summary = artifacts.read_summary(sdir, manifest)
                 manifests[stage] = replace(manifest, summary=summary)
                 continue
-            if manifest is None:
+            if stage in damaged:
+                why = damaged[stage]
+            elif manifest is None:
                 why = "never run"
             elif force:
                 why = "forced"
@@ -718,6 +740,7 @@ class Runner:
             if (
                 entry.is_dir()
                 and entry.name not in mine
+                and not artifacts.SET_ASIDE.fullmatch(entry.name)
                 and (entry.name in STAGES or (entry / artifacts.MANIFEST).exists())
             ):
                 problems.append(f"'{entry}': extra stage folder (not a stage of this workflow)")
