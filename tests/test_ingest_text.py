@@ -320,3 +320,16 @@ def test_ragged_rows_are_a_parse_error_naming_the_file(tmp_path):
     section["v1"] = {"name": "u", "unit": "V"}
     with pytest.raises(RigLogError, match=r"ragged.csv': cannot parse as delimited text"):
         load_rig_log(path, IngestSpec.from_dict(section))
+
+
+@pytest.mark.parametrize("header", ["t,q,q", "t;q; q", "t q q", '"t","q","q"'])
+def test_a_header_that_names_a_channel_twice_is_refused(tmp_path, header):
+    """pandas would read the second ``q`` as ``q.1`` and the mapping take the first one
+    silently; the file is refused, naming the channel and both columns."""
+    sep = {",": ",", ";": ";", " ": " "}[next(c for c in header if c in ",; ")]
+    path = tmp_path / "log.csv"
+    path.write_text(header + "\n" + "\n".join(sep.join(["0", "1", "2"]) for _ in range(4)) + "\n")
+    section = {"time": {"regex": "^t$", "unit": "s"}, "q": {"regex": "^q$", "unit": "mm"}}
+    with pytest.raises(RigLogError, match=r"'q' twice \(columns 1 and 2") as info:
+        load_rig_log(path, IngestSpec.from_dict({**section, "v1": {"column": 2, "unit": "V"}}))
+    assert str(path) in str(info.value)

@@ -235,6 +235,25 @@ def detect_header(line: str, delimiter: str, decimal: str = ".") -> bool:
     return False
 
 
+def _check_unique_header(line: str, sep: str, path: Path) -> None:
+    """Refuse a header that names a channel twice (pandas would rename the second ``q.1``)."""
+    import csv
+
+    if sep == "whitespace":
+        tokens = line.split()
+    else:
+        tokens = next(csv.reader([line], delimiter=sep, skipinitialspace=True), [])
+    seen: dict[str, int] = {}
+    for i, token in enumerate(t.strip() for t in tokens):
+        if token in seen:
+            raise RigLogError(
+                f"the header names channel {token!r} twice (columns {seen[token]} and {i}, "
+                "counted from 0): rename one, so that a channel means one column",
+                path=path,
+            )
+        seen[token] = i
+
+
 def _sample_lines(path: Path) -> list[str]:
     with open_binary(path) as fh:
         chunk = fh.read(_SAMPLE_BYTES)
@@ -443,9 +462,10 @@ def read_text(
     Raises
     ------
     RigLogError
-        No data line, a truncated last line (:func:`check_tail`, naming the line), a
-        decimal comma as delimiter, a column of numbers written with the other decimal
-        separator (naming the column, sample and value), or pandas cannot parse the
+        No data line, a truncated last line (:func:`check_tail`, naming the line), a header
+        that names a channel twice, a decimal comma as delimiter, a column of numbers
+        written with the other decimal separator (naming the column, sample and value), or
+        pandas cannot parse the
         file (e.g. a row with too many fields); the pandas message (with its line
         number) is quoted.
 
@@ -494,6 +514,7 @@ def read_text(
         ) from exc
     if has_header:
         names = [str(c).strip() for c in frame.columns]
+        _check_unique_header(lines[0], sep, path)
     else:
         names = [f"column {i}" for i in range(frame.shape[1])]
     _check_decimal(frame, names, dec, path)
