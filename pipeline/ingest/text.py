@@ -465,9 +465,8 @@ def read_text(
         No data line, a truncated last line (:func:`check_tail`, naming the line), a header
         that names a channel twice, a decimal comma as delimiter, a column of numbers
         written with the other decimal separator (naming the column, sample and value), or
-        pandas cannot parse the
-        file (e.g. a row with too many fields); the pandas message (with its line
-        number) is quoted.
+        pandas cannot parse the file (e.g. a row with too many fields); the pandas message
+        (with its line number) is quoted.
 
     References
     ----------
