@@ -281,3 +281,16 @@ def test_cli_refuses_huge_M_with_exit_code_2_naming_the_key(tmp_path, monkeypatc
     assert result.exit_code == 2, result.output
     assert "[identify] M = 100000" in result.output
     assert "the memory budget is 4 GB" in result.output
+
+
+def test_a_huge_bootstrap_is_refused_naming_bootstrap_not_M(budget):
+    """Where the bootstrap's replicates are what exceeds the budget, the refusal names
+    ``[identify] bootstrap``; with a modest bootstrap and a huge M it names M."""
+    records = _records(600)
+    cfg = IdentifyConfig.from_dict({"M": 4, "T_z": 0.0, "bootstrap": 1_000_000_000})
+    with pytest.raises(ResourceError, match=r"\[identify\] bootstrap = 1000000000") as info:
+        fit_rbf_model(records, cfg)
+    assert "M = 4" not in str(info.value)
+    big_m = IdentifyConfig.from_dict({"M": 200_000, "T_z": 0.0, "bootstrap": 10})
+    with pytest.raises(ResourceError, match=r"\[identify\] M = 200000"):
+        preflight.check_identify(big_m, 1, 600)

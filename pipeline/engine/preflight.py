@@ -292,26 +292,37 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
     LAPACK Users' Guide, 3rd ed., dgesdd work space; numpy.linalg.svd and qr
     (``_umath_linalg`` buffers).
     """
+    return _F8 * max(_identify_phases(cfg, n_inputs, rows, longest).values())
+
+
+def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) -> dict[str, int]:
+    """Elements of each phase of :func:`identify_bytes`, keyed by the setting that sizes it."""
     M = _terms(cfg)[0]
     p, p_force, p_z = _columns(cfg, n_inputs)
     n = int(rows)
     n_r = min(int(longest), n) if longest is not None else n
-    support = 2 * n * M
     block = M + 5 * p if cfg.lowpass is not None else M + 2 * p + p_force
     build = max(2 * n * p, (n - n_r) * p + n_r * block)
-    phases = [support, build, _solve_elements(n, p)]
+    sizes = [2 * n * M, build, _solve_elements(n, p)]
+    if cfg.T_z == "search" and p_z > 0:
+        p_f = p - p_z
+        sizes += [5 * n * p_f, 2 * n * p_f + 5 * n * p_z]
+    phases = {f"[identify] M = {M}": max(sizes)}
     if getattr(cfg, "bootstrap", 0) > 0:
         blocks, B = math.ceil(n ** (2.0 / 3.0)), int(cfg.bootstrap)
-        phases.append(5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks)
-    uses_z = p_z > 0
-    if cfg.T_z == "search" and uses_z:
-        p_f = p - p_z
-        phases += [5 * n * p_f, 2 * n * p_f + 5 * n * p_z]
-    return _F8 * max(phases)
+        phases[f"[identify] bootstrap = {B}"] = (
+            5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks
+        )
+    return phases
 
 
-def _identify_setting(cfg: Any) -> str:
-    return f"[identify] M = {_terms(cfg)[0]}"
+def _identify_setting(cfg: Any, n_inputs: int, rows: int, longest: int | None) -> str:
+    """Name the setting to change: bootstrap where the fit without it would fit the budget."""
+    phases = _identify_phases(cfg, n_inputs, rows, longest)
+    first, *rest = phases
+    if rest and _F8 * phases[first] <= memory_budget():
+        return rest[0]
+    return first
 
 
 def check_identify(
@@ -330,7 +341,9 @@ def check_identify(
     longest : int, optional
         Samples of the longest record.
     setting : str, optional
-        The key to name; default ``"[identify] M = <M>"``.
+        The key to name; default the setting that sizes the largest phase
+        (``"[identify] M = <M>"``, or ``"[identify] bootstrap = <B>"`` when the bootstrap's
+        replicates need the most).
 
     Raises
     ------
@@ -344,7 +357,7 @@ def check_identify(
     p, _ = identify_columns(cfg, n_inputs)
     check_memory(
         identify_bytes(cfg, n_inputs, rows, longest),
-        setting or _identify_setting(cfg),
+        setting or _identify_setting(cfg, n_inputs, rows, longest),
         f"the regressor of {rows} samples x {p} columns",
         "peak, with the SVD's copies",
     )
@@ -398,7 +411,7 @@ def check_identify_config(cfg: Any, n_inputs: int) -> None:
     p, _ = identify_columns(cfg, n_inputs)
     check_memory(
         identify_lower_bound(cfg, n_inputs),
-        _identify_setting(cfg),
+        f"[identify] M = {_terms(cfg)[0]}",
         f"the least squares of {p} columns (and so at least {p} samples)",
         "lower bound, whatever the data",
     )
