@@ -268,7 +268,7 @@ def test_batch_writes_an_index_of_the_reports(synthetic_run):
     assert f"index of the reports: {index}" in out.replace("\n", "")
     html = index.read_text(encoding="utf-8")
     page = parse(html)
-    assert page.urls == ["out/report/report.html"]
+    assert page.urls == ["./out/report/report.html"]
     assert (folder / page.urls[0]).is_file()
     rows = {r[0]: r for r in page.rows[1:]}
     summary = artifacts.read_summary(
@@ -279,7 +279,7 @@ def test_batch_writes_an_index_of_the_reports(synthetic_run):
         cell = rows["synthetic"][column]  # the value, and its verdict when it is not "ok"
         assert cell.split(" (")[0] == f"{100 * r['nrmse_q']:.2f} %"
     assert rows["broken"][2].startswith("failed")
-    assert "http" not in html and "<script" not in html
+    assert "http:" not in html and "https:" not in html and "<script" not in html
 
 
 CHROMEDRIVER = shutil.which("chromedriver")
