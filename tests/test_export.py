@@ -15,11 +15,13 @@ import shutil
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import (
     example_rbf_model,
+    invoke_cli,
     with_physics_creep,
     with_physics_quadratic,
     with_quadratic,
@@ -471,7 +473,19 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     with open(tmp_path / "out/identify/model.h5", "ab") as fh:
         fh.write(b"\0")
     code, out = invoke("export", wf, "--force")
-    assert code == 1 and "model.h5" in out and "stale" in out
+    assert code == 2 and "model.h5" in out and "stale" in out  # as `run --stages` says it
+
+
+def test_export_before_identify_is_refused_like_run_stages(tmp_path):
+    """Both a usage problem (exit 2): the stage export reads has never run."""
+    root = Path(__file__).resolve().parents[1]
+    shutil.copytree(root / "workflows", tmp_path / "workflows")
+    wf = tmp_path / "workflows" / "paper-experiment.toml"
+    code, out = invoke_cli("export", wf, "--format", "c", "--dest", tmp_path / "c")
+    assert code == 2 and "stage 'identify'" in out and "never run" in out
+    assert not (tmp_path / "c").exists()
+    code, out = invoke_cli("run", wf, "--stages", "validate")
+    assert code == 2
 
 
 #: Workflow names that try to break out of a comment, docstring, literal or template field.

@@ -12,7 +12,7 @@ Masoud & Maas 2025, Eq. 37-40 (the model exported).
 from __future__ import annotations
 
 from debist.engine import artifacts
-from debist.errors import ArtifactError, WorkflowError
+from debist.errors import WorkflowError
 from debist.export.c import c_sources
 from debist.export.common import ExportInfo
 from debist.export.matlab import matlab_source
@@ -76,10 +76,9 @@ def load_identified(runner):
     Raises
     ------
     WorkflowError
-        If the workflow has no identify stage (no data sets).
-    ArtifactError
-        If the identify stage is missing or stale (naming why: never run, outputs
-        changed such as a modified ``model.h5``, config or upstream changed).
+        If the workflow has no identify stage (no data sets), or the identify stage is
+        missing or stale (naming why: never run, outputs changed such as a modified
+        ``model.h5``, config or upstream changed), as ``run --stages`` refuses it.
     """
     wf = runner.wf
     if "identify" not in runner.stages():
@@ -88,8 +87,8 @@ def load_identified(runner):
         )
     state = next(s for s in runner.status() if s.stage == "identify")
     sdir = wf.stage_dir("identify")
-    if state.state != "up to date":
-        raise ArtifactError(
+    if state.state != "up to date":  # a usage problem, as `run --stages` says it (exit 2)
+        raise WorkflowError(
             f"stage 'identify' in '{sdir}' is {state.state} ({state.reason}): run "
             f"`debist identify {wf.path}` (or `debist run`) first"
         )
