@@ -413,7 +413,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     wf = tmp_path / "wf.toml"
     wf.write_text(WORKFLOW)
     code, out = invoke("export", wf)
-    assert code == 1 and "identify" in out and "never run" in out
+    assert code == 2 and "identify" in out and "never run" in out  # a usage error
 
     for stage in ("ingest", "differentiate", "identify"):
         code, out = invoke(stage, wf)
