@@ -357,3 +357,20 @@ def test_tvregdiff_method_unit_scaling(c):
         d1 = tvregdiff_derivatives(c * x, DT, config=scaled)
     np.testing.assert_allclose(d1.x_dot, c * d0.x_dot, rtol=1e-6, atol=1e-9 * c)
     np.testing.assert_allclose(d1.x_ddot, c * d0.x_ddot, rtol=1e-6, atol=1e-9 * c)
+
+
+def test_a_record_shorter_than_the_savgol_window_is_refused_naming_file_and_data_set():
+    """Ten samples against a window of 15: a one-line error with the file, the data set, its
+    length and the window, not scipy's bare ValueError."""
+    import pandas as pd
+
+    from debist.differentiate.tables import differentiate_tables
+    from debist.errors import RigLogError
+
+    frame = pd.DataFrame({"t": np.arange(10) * 0.01, "q": np.linspace(0, 1e-3, 10)})
+    frame.attrs["source"] = "logs/short.csv"
+    with pytest.raises(RigLogError) as info:
+        differentiate_tables({"short": frame}, {"method": "savgol", "window": 15})
+    text = str(info.value)
+    assert text.startswith("file 'logs/short.csv': data set 'short' (10 samples)")
+    assert "window" in text and "15" in text

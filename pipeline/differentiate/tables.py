@@ -19,7 +19,7 @@ import lazy_loader as lazy
 
 from debist.differentiate.base import differentiate
 from debist.engine import progress
-from debist.errors import ConvergenceWarning
+from debist.errors import ConvergenceWarning, RigLogError, WorkflowError
 from debist.tables import sample_time
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -50,7 +50,8 @@ def differentiate_tables(
     WorkflowError
         For an unknown method or parameter.
     RigLogError
-        For non-uniform sampling.
+        For non-uniform sampling, or a record the method's settings do not suit (fewer
+        samples than a Savitzky-Golay window), naming the file and the data set.
     """
     params = dict(section)
     method = params.pop("method", "tvregdiff")
@@ -63,7 +64,16 @@ def differentiate_tables(
         with warnings.catch_warnings():
             # Stopping at the configured iteration count is recorded as data (attrs).
             warnings.simplefilter("ignore", ConvergenceWarning)
-            res = differentiate(q, dt, method=method, params=params)
+            try:
+                res = differentiate(q, dt, method=method, params=params)
+            except (WorkflowError, RigLogError):
+                raise
+            except ValueError as exc:  # the record does not suit the method's settings
+                raise RigLogError(
+                    f"data set '{name}' ({q.size} samples): [differentiate] method = "
+                    f"{method!r}: {exc}",
+                    path=frame.attrs.get("source"),
+                ) from None
         deriv = pd.DataFrame(
             {
                 "t": frame["t"].to_numpy(),
