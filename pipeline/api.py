@@ -128,8 +128,14 @@ def load_workflow(
     ------
     WorkflowError
         One line naming the file, the section and the key: a missing or invalid file, an
-        unknown key, a value of the wrong type or range, a missing data file.
+        unknown key, a value of the wrong type or range, a missing data file; overrides
+        given as one string instead of a mapping or a list of strings.
     """
+    if isinstance(overrides, (str, bytes)):
+        raise WorkflowError(
+            f"overrides: expected a mapping {{'identify.M': 8}} or a list of 'KEY=VALUE' "
+            f"strings, got the string {overrides!r}; pass [{overrides!r}]"
+        )
     return _load_workflow(path, output_dir, overrides)
 
 

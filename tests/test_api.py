@@ -222,3 +222,13 @@ def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(run_copy, damag
     (aside,) = (root / "out").glob("compare.damaged-*")
     assert (aside / "manifest.json").read_bytes() == damage
     assert runner.verify() == [] and runner.digest() == digest
+
+
+def test_a_string_for_overrides_or_stages_is_refused_not_split_into_characters(run_copy):
+    """``overrides="identify.M=8"`` and ``stages="identify"`` were read character by
+    character; each is refused in one line that says what to pass instead."""
+    root, _ = run_copy
+    with pytest.raises(WorkflowError, match=r"^overrides: expected a mapping .* pass \['identify"):
+        debist.run(root / "wf.toml", overrides="identify.M=8")
+    with pytest.raises(WorkflowError, match=r"^stages: expected a list .* pass \['identify'\]"):
+        debist.run(root / "wf.toml", stages="identify")

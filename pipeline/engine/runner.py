@@ -587,10 +587,16 @@ class Runner:
         Raises
         ------
         WorkflowError
-            A list together with a range, an empty list, an unknown stage, a range end
+            A string instead of a list, a list together with a range, an empty list, an
+            unknown stage, a range end
             that is not a stage of this workflow, or ``start`` after ``until``; the message
             names the value and lists the valid stages.
         """
+        if isinstance(stages, (str, bytes)):
+            raise WorkflowError(
+                f"stages: expected a list of stage names, got the string {stages!r}; "
+                f"pass [{stages!r}]"
+            )
         if stages is None and start is None and until is None:
             return None
         if stages is not None and (start is not None or until is not None):
