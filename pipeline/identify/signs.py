@@ -1,0 +1,103 @@
+"""Signs physics implies for the curves of Eq. 37, kept where a least-squares fit breaks them.
+
+A passive mechanism dissipates (d(q) >= 0); a dielectric elastomer's gain ``g_i = (1/2)
+dC_i/dq`` per unit mass keeps one sign over its range. :func:`physical_signs` finds where an
+unconstrained fit breaks either on the visited range and returns the sign statements of
+``[identify] constraints`` that the fit is then redone with
+(:func:`debist.identify.fit.fit_rbf_model`).
+
+References
+----------
+Masoud & Maas 2025, Eq. 35-37; Khalil, Nonlinear Systems, 3rd ed., Sec. 4.1.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from debist.identify.config import IdentifyConfig
+    from debist.model.rbf import RBFModel
+
+__all__ = ["GAIN_REVERSAL", "physical_signs"]
+
+#: A gain reversed by less than this share of its largest magnitude on the visited range is
+#: taken as the fit's noise at the edge of the range, not as a broken sign.
+GAIN_REVERSAL = 0.1
+
+
+def physical_signs(
+    model: RBFModel, q: np.ndarray, h: np.ndarray, cfg: IdentifyConfig, n_grid: int = 801
+) -> tuple[tuple[str, ...], str]:
+    """Find the signs physics implies that a least-squares fit broke on the visited range.
+
+    A passive mechanism dissipates: the damping curve of Eq. 37 is not negative where the
+    data are (a negative d makes the free run gain energy). An actuator's force does not
+    change direction inside its range: for a DE (``input_map = "v2"``), ``g_i = (1/2)
+    dC_i/dq`` per unit mass (Eq. 35-37) keeps the sign of the capacitance's slope, which the
+    data show as the direction q moves when DE i is energised (the sign of the covariance of
+    ``v_i^2`` and q). Where the workflow states no sign for a curve (``[identify]
+    constraints``) and the fit breaks it on the visited range (d below zero; a gain reversed
+    by more than :data:`GAIN_REVERSAL` of its largest magnitude: an under-excited record
+    cannot separate damping from stiffness and mass, or a gain from the restoring force at
+    the edge of the range), the fit is redone with the bounds of the statements returned
+    (:func:`debist.identify.regularise.constraint_bounds`: the curve's RBF weights and
+    backbone gain take the sign, a sufficient condition).
+
+    Parameters
+    ----------
+    model : RBFModel
+        The unconstrained fit.
+    q : ndarray, shape (n,)
+        Estimation positions [unit of q].
+    h : ndarray, shape (n, n_inputs)
+        The inputs' h(v) at those samples [V^2 for ``"v2"``].
+    cfg : IdentifyConfig
+        ``rbf`` (the curves fitted), ``input_map`` and ``constraints`` (the signs the
+        workflow states).
+    n_grid : int
+        Points of the visited range checked.
+
+    Returns
+    -------
+    statements : tuple of str
+        Constraints to add, e.g. ``("d >= 0", "g2 <= 0")``; empty if none.
+    reason : str
+        What the fit had: each curve's value of the wrong sign farthest from zero, and where
+        [unit of q]; empty if none.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 35-37 (g_i from dC_i/dq, d(q) z the friction force); Khalil,
+    Nonlinear Systems, 3rd ed., Sec. 4.1 (a mechanical system with non-negative damping
+    does not gain energy).
+    """
+    stated = {str(c).split()[0].split(">")[0].split("<")[0] for c in cfg.constraints}
+    grid = np.linspace(float(np.nanmin(q)), float(np.nanmax(q)), n_grid)
+    curves = model.curves(grid)
+    statements, words = [], []
+    if "d" in cfg.rbf and "d" not in stated and "d" in curves:
+        k = int(np.argmin(curves["d"]))
+        if curves["d"][k] < 0:
+            statements.append("d >= 0")
+            words.append(f"d = {curves['d'][k]:.4g} 1/s at q = {grid[k]:.4g}")
+    if "g" in cfg.rbf and "g" in curves and cfg.input_map == "v2":
+        gains = np.asarray(curves["g"]).reshape(grid.size, -1)
+        h = np.asarray(h, dtype=float).reshape(q.size, -1)
+        for j in range(gains.shape[1]):
+            name, g = f"g{j + 1}", gains[:, j]
+            sign = np.sign(np.cov(h[:, j], q)[0, 1])
+            largest = float(np.max(np.abs(g)))
+            if name in stated or sign == 0 or np.all(g * sign >= -GAIN_REVERSAL * largest):
+                continue
+            k = int(np.argmin(g * sign))
+            statements.append(f"{name} {'>=' if sign > 0 else '<='} 0")
+            words.append(f"{name} = {g[k]:.4g} at q = {grid[k]:.4g}")
+    if not statements:
+        return (), ""
+    return tuple(statements), (
+        f"imposed {', '.join(statements)}: the least-squares fit had {'; '.join(words)} on "
+        "the visited range"
+    )
