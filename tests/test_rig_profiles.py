@@ -226,7 +226,7 @@ def test_bad_arguments(builder, kwargs, match):
 
 
 def test_make_profile_registry_and_errors():
-    assert set(PROFILES) == {"identification", "validation", "staircase", "steps", "sweep"}
+    assert set(PROFILES) == {"identification", "validation", "staircase", "steps", "sweep", "sine"}
     assert V_LIMIT == 3000.0
     with pytest.raises(
         WorkflowError, match=r"profile 'chirp'.*identification, validation, staircase, steps"

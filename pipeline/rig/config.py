@@ -69,6 +69,12 @@ class ExperimentConfig:
         Ramp times of the identification profile's switching pulses [s], cycled
         (:func:`debist.rig.profiles.identification_profile`); default the profile's
         rectangular pulses. Other profiles reject it.
+    frequency : float or None
+        Tone frequency of the ``sine`` profile [Hz] (:func:`debist.rig.profiles.sine_profile`);
+        default the profile's. Other profiles reject it.
+    switching : bool or None
+        The ``sine`` profile's antiphase tones on both DEs that switch the beam (true) or one
+        tone inside the well (false, its default). Other profiles reject it.
     format : {"5", "7.3"}
         MAT file version of the recording.
     side : {-1, 1}
@@ -88,6 +94,8 @@ class ExperimentConfig:
     hold: PositiveFloat = 1e-3
     v_sub: NonNegativeFloat | None = None
     ramps: Annotated[tuple[NonNegativeFloat, ...] | None, AsTuple, Field(min_length=1)] = None
+    frequency: PositiveFloat | None = None
+    switching: bool | None = None
     format: Annotated[Literal["5", "7.3"], BeforeValidator(_format_str)] = "7.3"
     side: Annotated[int, AfterValidator(_side)] = -1
 
@@ -98,6 +106,11 @@ class ExperimentConfig:
             raise ConfigValueError(
                 "ramps", message=f"only the identification profile has ramps, not {self.profile!r}"
             )
+        for key in ("frequency", "switching"):
+            if getattr(self, key) is not None and self.profile != "sine":
+                raise ConfigValueError(
+                    key, message=f"only the sine profile has {key}, not {self.profile!r}"
+                )
 
     def profile_kwargs(self) -> dict[str, Any]:
         """Return the keyword arguments of :func:`debist.rig.profiles.make_profile`.
@@ -105,8 +118,8 @@ class ExperimentConfig:
         Returns
         -------
         dict
-            ``duration`` and ``hold`` [s], and ``seed``, ``v_sub`` [V] and ``ramps`` [s]
-            when given.
+            ``duration`` and ``hold`` [s], and ``seed``, ``v_sub`` [V], ``ramps`` [s],
+            ``frequency`` [Hz] and ``switching`` when given.
         """
         kwargs: dict[str, Any] = {"duration": self.duration, "hold": self.hold}
         if self.profile_seed is not None:
@@ -115,6 +128,9 @@ class ExperimentConfig:
             kwargs["v_sub"] = self.v_sub
         if self.ramps is not None:
             kwargs["ramps"] = self.ramps
+        for key in ("frequency", "switching"):
+            if getattr(self, key) is not None:
+                kwargs[key] = getattr(self, key)
         return kwargs
 
 

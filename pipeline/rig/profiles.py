@@ -1,7 +1,7 @@
 """Excitation profiles of the virtual rig: reference voltages of DE 1 (left) and DE 2 (right).
 
 A profile is a pair of reference voltages ``r1``, ``r2`` sampled on the uniform grid of the
-rig's DAC (zero-order hold, interval ``hold``). Five profiles are defined, all built as a
+rig's DAC (zero-order hold, interval ``hold``). Six profiles are defined, the first five built as a
 sequence of episodes "sub-threshold block -> switching pulse -> free ring-down", with
 the pulses alternating between DE 1 (the beam moves to the right well) and DE 2 (back to the
 left well); the beam starts in the left well (the paper's experiment starts at q = -10 mm):
@@ -21,6 +21,12 @@ left well); the beam starts in the left well (the paper's experiment starts at q
     Random sub-threshold voltage steps on both DEs between the pulses.
 ``sweep``
     Logarithmic sine sweeps on one DE at a time between the pulses.
+``sine``
+    One frequency only, as a base-excited or single-tone experiment: DE 1 driven by a raised
+    cosine below the switching threshold (the beam stays in its well), or, with
+    ``switching = true``, both DEs in antiphase up to ``v_max`` (the beam switches twice a
+    period). The data then hold one spectral line of q: the case in which stiffness, mass
+    and damping cannot be told apart.
 
 The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV; in the staircase
 profile the DE that pushes the beam deeper into its well goes higher, as it cannot switch). The
@@ -58,6 +64,7 @@ __all__ = [
     "Excitation",
     "identification_profile",
     "make_profile",
+    "sine_profile",
     "staircase_profile",
     "steps_profile",
     "sweep_profile",
@@ -879,6 +886,85 @@ def sweep_profile(
     return b.finish("sweep")
 
 
+def sine_profile(
+    *,
+    duration: float = 20.0,
+    hold: float = 1e-3,
+    v_max: float = 3000.0,
+    v_sub: float = V_SUB,
+    seed: int = 0,
+    frequency: float | None = None,
+    switching: bool = False,
+) -> Excitation:
+    """Build a single-frequency profile: one tone, inside one well or switching.
+
+    After 0.5 s rest, ``switching = false``: DE 1 follows the raised cosine
+    ``v_sub (1 - cos(2 pi f t)) / 2`` (default ``f`` = 2 Hz) and DE 2 holds 0 V, so the beam
+    oscillates in the left well at ``f`` (``v_1^2`` adds the line ``2 f``).
+    ``switching = true``: DE 1 follows ``v_max (1 - cos(2 pi f t)) / 2`` and DE 2 the same
+    shifted by half a period (default ``f`` = 0.5 Hz), so each DE in turn pulls the beam over
+    the barrier: two switches a period. Nothing in it is random (``seed`` is accepted for a
+    common signature and ignored).
+
+    Parameters
+    ----------
+    duration : float
+        Length [s]; a multiple of ``hold``, at least 0.5 s rest plus two periods.
+    hold : float
+        DAC interval [s], at most 0.01.
+    v_max : float
+        Peak of the switching tone [V], at most 3000.
+    v_sub : float
+        Peak of the tone inside the well [V], below ``v_max``.
+    seed : int
+        Ignored.
+    frequency : float or None
+        Tone frequency ``f`` [Hz], above 0 and below a tenth of ``1 / hold``.
+    switching : bool
+        Antiphase tones on both DEs up to ``v_max`` instead of DE 1 below ``v_sub``.
+
+    Returns
+    -------
+    Excitation
+        ``name = "sine"``; one block labelled ``"sine"`` after the rest; the switch times
+        are the onsets of each half period in which a DE pulls (``switching``), else none.
+
+    Raises
+    ------
+    ValueError
+        As :func:`identification_profile`, or a frequency out of range, or a duration
+        shorter than 0.5 s plus two periods.
+
+    References
+    ----------
+    Pintelon & Schoukens 2012, System Identification: A Frequency Domain Approach, 2nd ed.,
+    Sec. 2.2 (a single line excites the frequency response at one frequency only).
+    """
+    n = _grid(duration, hold, v_max, v_sub)
+    f = (0.5 if switching else 2.0) if frequency is None else float(frequency)
+    if not (np.isfinite(f) and 0.0 < f < 0.1 / hold):
+        raise ValueError(f"`frequency` must be in (0, {0.1 / hold:g}) Hz, got {frequency}")
+    b = _Builder(n, float(hold))
+    if not b.fits(0.5 + 2.0 / f):
+        raise ValueError(f"`duration` = {duration} s is shorter than 0.5 s plus two periods")
+    b.add("rest", 0.5)
+    start = b.k * hold
+    peak = v_max if switching else v_sub
+
+    def fill(tau: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        r1 = 0.5 * peak * (1.0 - np.cos(2.0 * np.pi * f * tau))
+        r2 = 0.5 * peak * (1.0 + np.cos(2.0 * np.pi * f * tau)) if switching else 0.0 * tau
+        return r1, r2
+
+    b.add("sine", (b.n - b.k) * hold, fill)
+    if switching:  # DE 1 pulls in the first half period (from the left well), DE 2 in the next
+        half = 0.5 / f
+        for k, onset in enumerate(np.arange(start, b.n * hold, half)):
+            b.switch_times.append(float(np.round(onset / hold) * hold))
+            b.switch_sides.append(1 + k % 2)
+    return b.finish("sine")
+
+
 #: Profile name -> builder; every builder takes keyword arguments only.
 PROFILES: dict[str, Callable[..., Excitation]] = {
     "identification": identification_profile,
@@ -886,6 +972,7 @@ PROFILES: dict[str, Callable[..., Excitation]] = {
     "staircase": staircase_profile,
     "steps": steps_profile,
     "sweep": sweep_profile,
+    "sine": sine_profile,
 }
 
 
