@@ -297,6 +297,10 @@ class Runner:
         self._manifest(stage)
         return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
 
+    def summary(self, stage: str) -> dict[str, Any]:
+        """Read an upstream stage's ``summary.json`` (checked against its manifest)."""
+        return artifacts.read_summary(self.wf.stage_dir(stage), self._manifest(stage))
+
     def read_parquet(self, stage: str, rel: str) -> Any:
         """Read a Parquet artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
         self._manifest(stage)

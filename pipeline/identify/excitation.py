@@ -61,6 +61,7 @@ __all__ = [
     "check_excitation",
     "input_active",
     "quasi_static",
+    "under_excitation",
 ]
 
 #: Robust standard deviation of a zero-mean normal sample from the median of its magnitude.
@@ -77,6 +78,9 @@ NOISE_FACTOR = 6.0
 _LINE_RESOLVED = 0.5
 #: Shortest record for a spectrum [samples].
 _MIN_SPECTRUM = 32
+#: An input whose h(v_i) varies by less than this share of the most varied input's variance
+#: is idle (its monitor's noise only) and does not count in the periodicity check.
+_IDLE_INPUT = 1e-6
 
 
 @dataclass(frozen=True)
@@ -99,9 +103,14 @@ class ExcitationReport:
         ``channel``, ``variance`` [unit^2], ``f_peak`` [Hz] (power-weighted centre of the
         strongest cluster), ``n_lines`` (clusters of spectral bins carrying
         ``power_fraction`` of the power), ``bandwidth`` [Hz] (their total width), ``df``
-        [Hz] (resolution), ``single_line`` (bool).
+        [Hz] (resolution), ``single_line`` (bool), ``fundamental`` [Hz] (centre of the
+        lowest cluster), ``harmonic`` (bool: every cluster a line, at most ``line_bins``
+        wide, at a whole multiple of it).
     single_frequency : list of str
         Records whose response q is one spectral line.
+    periodic : list of str
+        Records that are not single lines but whose inputs and response repeat one period:
+        q and every excited input carry their power in harmonics of one fundamental.
     unsupported : dict of str to list of tuple of float
         Per curve (``c``, ``d``, ``g1`` ..) the q intervals ``(a, b)`` [unit of q] of merged
         runs of unsupported centres, ``(xi_a - sigma, xi_b + sigma)``.
@@ -133,6 +142,7 @@ class ExcitationReport:
     settings: dict = field(default_factory=dict)
     unit_scale: float = 1.0
     unit_name: str = "m"
+    periodic: list[str] = field(default_factory=list)
 
     def to_summary(self) -> dict:
         """Return a JSON-able summary, q values in the display unit.
@@ -143,7 +153,7 @@ class ExcitationReport:
             ``unit``, ``sigma``, ``settings``, ``centres`` (the table as a list of row
             dicts, ``centre`` scaled), ``unsupported`` (curve -> list of ``[a, b]``),
             ``transient_only`` (list of ``[a, b]``), ``spectra`` (list of row dicts),
-            ``single_frequency`` and ``warnings``.
+            ``single_frequency``, ``periodic`` and ``warnings``.
         """
         s = self.unit_scale
         table = self.table.assign(centre=self.table["centre"] * s)
@@ -158,6 +168,7 @@ class ExcitationReport:
             "transient_only": [[float(a * s), float(b * s)] for a, b in self.transient_intervals],
             "spectra": json.loads(self.spectra.to_json(orient="records")),
             "single_frequency": list(self.single_frequency),
+            "periodic": list(self.periodic),
             "warnings": list(self.warnings),
         }
 
@@ -203,6 +214,13 @@ def check_excitation(
        band at most half its frequency, so a line needs about 16 periods in the record
        at the default ``nperseg``). A record whose q is a single line is warned about: one
        frequency cannot separate stiffness from mass and damping (Ljung 1999, Sec. 13.2).
+       A record is *periodic* if q and every excited input (variance above 1e-6 of the most
+       varied one's: an idle input's monitor noise does not count) have each cluster a line
+       (at most ``line_bins`` bins) centred within
+       1.5 bins of a whole multiple of the lowest one and share that fundamental: a single
+       tone through a nonlinearity (its harmonics), whose data show one periodic orbit and
+       excite no other frequency (the input is persistently exciting of a low order only,
+       Ljung 1999, Sec. 13.2); it is warned about the same way.
     3. *Transient-only intervals.* A sample is in transit if ``|q_dot|`` exceeds
        ``fast_factor`` times a robust speed scale of its record: 1.4826 times the median
        of ``|q_dot|`` (the standard deviation of zero-mean normal velocities; the median is
@@ -331,6 +349,10 @@ def check_excitation(
         for row in spectra.itertuples()
         if row.channel == "q" and bool(row.single_line)
     ]
+    periodic = [
+        name for name in dict.fromkeys(spectra["record"].astype(str)) if name not in single
+        and _periodic(spectra[spectra["record"] == name])
+    ]  # fmt: skip
 
     fmt = _Formatter(sigma, unit_scale, unit_name)
     settings = {
@@ -348,10 +370,12 @@ def check_excitation(
     warnings = _warnings(
         table, basis, rbf, n_inputs, hmax, transient, spectra, single, settings, fmt
     )
+    warnings += [_periodic_warning(spectra, name) for name in periodic]
     return ExcitationReport(
         table=table,
         spectra=spectra,
         single_frequency=single,
+        periodic=periodic,
         unsupported=unsupported,
         transient_intervals=transient,
         warnings=warnings,
@@ -580,6 +604,8 @@ def _lines(x, fs, nperseg, power_fraction, line_bins) -> dict:
         "bandwidth": math.nan,
         "df": math.nan,
         "single_line": False,
+        "fundamental": math.nan,
+        "harmonic": False,
     }
     if x.size < _MIN_SPECTRUM or not np.ptp(x) > 0:
         return out
@@ -601,7 +627,96 @@ def _lines(x, fs, nperseg, power_fraction, line_bins) -> dict:
     narrow = int(sel[-1] - sel[0] + 1) <= line_bins
     resolved = out["bandwidth"] <= _LINE_RESOLVED * out["f_peak"]
     out["single_line"] = len(clusters) == 1 and narrow and resolved
+    centres = np.array([np.average(f[c], weights=p[c]) for c in clusters])
+    f0 = float(centres.min())
+    whole = np.maximum(np.round(centres / f0), 1.0)
+    out["fundamental"] = f0
+    lines = all(int(c[-1] - c[0] + 1) <= line_bins for c in clusters)  # lines, not bands
+    out["harmonic"] = lines and bool(np.all(np.abs(centres - whole * f0) <= 1.5 * out["df"]))
     return out
+
+
+def thin_data(report: ExcitationReport) -> bool:
+    """Whether a record of the report is one spectral line or one repeated period.
+
+    Parameters
+    ----------
+    report : ExcitationReport
+        The excitation check of the estimation records (:func:`check_excitation`).
+
+    Returns
+    -------
+    bool
+        True if any record is in ``single_frequency`` or ``periodic``.
+
+    References
+    ----------
+    Ljung 1999, System Identification, 2nd ed., Sec. 13.2 (persistent excitation).
+    """
+    return bool(report.single_frequency or report.periodic)
+
+
+def under_excitation(summary: dict) -> str:
+    """Say why the estimation data cannot separate the model's terms, or ``""``.
+
+    Parameters
+    ----------
+    summary : dict
+        The ``excitation`` entry of the identify summary (:meth:`ExcitationReport.to_summary`).
+
+    Returns
+    -------
+    str
+        E.g. ``"one spectral line at 2 Hz in 'estimation'"`` or ``"one period (2 s) repeated
+        in 'estimation'"`` (records joined by ``"; "``); ``""`` when no record is a single
+        line or periodic.
+
+    References
+    ----------
+    Ljung 1999, System Identification, 2nd ed., Sec. 13.2 (persistent excitation).
+
+    Examples
+    --------
+    >>> under_excitation({"single_frequency": ["a"], "spectra": [
+    ...     {"record": "a", "channel": "q", "f_peak": 2.0, "fundamental": 2.0}]})
+    "one spectral line at 2 Hz in 'a'"
+    >>> under_excitation({})
+    ''
+    """
+    rows = {(r["record"], r["channel"]): r for r in summary.get("spectra", [])}
+    words = [
+        f"one spectral line at {rows[(n, 'q')]['f_peak']:.3g} Hz in '{n}'"
+        for n in summary.get("single_frequency", [])
+    ]
+    words += [
+        f"one period ({1 / rows[(n, 'q')]['fundamental']:.3g} s) repeated in '{n}'"
+        for n in summary.get("periodic", [])
+    ]
+    return "; ".join(words)
+
+
+def _periodic(rows: pd.DataFrame) -> bool:
+    """Whether one record's q and excited inputs are harmonics of one fundamental."""
+    inputs = rows[rows["channel"] != "q"]["variance"]
+    floor = _IDLE_INPUT * (float(inputs.max()) if len(inputs) else 0.0)
+    rows = rows[(rows["variance"] > 0) & ((rows["channel"] == "q") | (rows["variance"] > floor))]
+    f0 = rows["fundamental"].to_numpy(dtype=float)
+    if rows.empty or "q" not in set(rows["channel"]) or not np.all(np.isfinite(f0)):
+        return False
+    same = np.all(np.abs(f0 - f0.min()) <= 1.5 * rows["df"].to_numpy(dtype=float))
+    return bool(rows["harmonic"].all() and same)
+
+
+def _periodic_warning(spectra: pd.DataFrame, name: str) -> str:
+    """Word the warning for a periodic record (:func:`_periodic`)."""
+    rows = spectra[(spectra["record"] == name) & (spectra["channel"] == "q")]
+    f0 = float(rows["fundamental"].iloc[0])
+    return (
+        f"record '{name}': its inputs and q repeat one period ({1 / f0:.3g} s: all their power "
+        f"is in harmonics of {f0:.3g} Hz): the data show one periodic orbit, which cannot "
+        "separate stiffness from mass and damping; excite with a multisine, a chirp or "
+        "band-limited noise"
+    )
 
 
 def _spectra(records, kind, nperseg, power_fraction, line_bins) -> pd.DataFrame:

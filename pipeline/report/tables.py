@@ -459,7 +459,7 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ----------
     row : dict
         A row of ``nrmse.parquet`` (``nrmse_q``, ``nrmse_q_baseline``, ``status``,
-        ``reason``, ``diverged``, ``model``, ``dataset``).
+        ``reason``, ``diverged``, ``model``, ``dataset``, ``under_excited``).
     rows : list of dict, optional
         The whole table: a row is also called worse than another model whose free run of
         the same data set has a lower NRMSE(q).
@@ -472,7 +472,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"fragile: ..."`` (the 97.5th percentile of the NRMSE(q) of the model's bootstrap
         replicates, :func:`debist.validate.replicate_spread`, is poor: more than 2.5 % of
         them lose the motion), ``"worse than <model> (x %)"``,
-        or ``"ok"``; the last three may combine.
+        or ``"ok"``; the last three may combine. A row whose ``under_excited`` names why the
+        estimation data cannot separate the model's terms (a single line, one period) starts
+        with ``"under-excited: <why>"``, which replaces ``"ok"``.
 
     Examples
     --------
@@ -488,8 +490,20 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "replicates": 100,
     ...          "replicates_poor": 0.01, "nrmse_q_hi": 0.0149})
     'ok'
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
+    ...          "under_excited": "one spectral line at 2 Hz in 'a'"})
+    "under-excited: one spectral line at 2 Hz in 'a'"
 
     """
+    words = _verdict(row, rows)
+    thin = row.get("under_excited")
+    if not isinstance(thin, str) or not thin:
+        return words
+    return f"under-excited: {thin}" + ("" if words == "ok" else f"; {words}")
+
+
+def _verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None) -> str:
+    """Word the verdict of :func:`verdict` without the under-excitation."""
     if row.get("status") == "unstable":
         return f"unstable: {row.get('reason', '')}"
     base = _num_or_nan(row.get("nrmse_q_baseline"))

@@ -222,14 +222,21 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, IdentificationError
         As :func:`run_compare`.
     """
+    validated = ctx.read_parquet("validate", "nrmse.parquet")
     res = run_compare(
         ctx.tables("ingest"),
         ctx.tables("differentiate"),
-        ctx.read_parquet("validate", "nrmse.parquet"),
+        validated,
         ctx.stage_config("compare"),
         ctx.physics(),
     )
-    table = with_verdicts(res.table)
+    # every model is fitted on the same estimation data: what they lack, each row says
+    thin = (
+        validated["under_excited"].iloc[0]
+        if "under_excited" in validated and len(validated)
+        else ""
+    )
+    table = with_verdicts(res.table.assign(under_excited=thin))
     outputs: dict[str, Any] = {
         "sindy.h5": H5Tree(res.model.to_tree()),
         "nrmse.parquet": table,

@@ -11,6 +11,7 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.datasets import validation_datasets
+from debist.identify.excitation import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
 from debist.physics_stages import analytical_for
@@ -248,7 +249,8 @@ def execute(ctx: StageInputs) -> StageOutput:
         ctx.physics(),
         replicates,
     )
-    table = with_verdicts(res.table)
+    thin = under_excitation(ctx.summary("identify").get("excitation", {}))
+    table = with_verdicts(res.table.assign(under_excited=thin))
     outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:
         outputs["residuals.parquet"] = res.residuals
