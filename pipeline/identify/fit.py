@@ -354,6 +354,44 @@ def supported_range(q: np.ndarray, cfg: IdentifyConfig, step: float = 0.01) -> t
     return lo, hi
 
 
+def supported_size(q: np.ndarray, cfg: IdentifyConfig) -> int:
+    """Return the most centres, at most ``cfg.M``, whose every centre the data support.
+
+    For ``M = cfg.M, cfg.M - 1, .., 2`` the equidistant basis over the supported range
+    (:func:`supported_range`, or ``cfg.q_range``) is built; the first whose every centre has
+    at least ``cfg.min_support`` samples within one width is taken. Fewer centres are wider
+    (``sigma = sigma_n`` times the spacing), so thin data (one tone inside a well, a short
+    record) get a coarser curve instead of a failed fit. Where not even two centres are
+    supported, ``cfg.M`` comes back and the fit names the thin centre.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Positions of the estimation data [unit of q].
+    cfg : IdentifyConfig
+        ``M``, ``sigma_n``, ``outside``, ``q_range``, ``min_support`` and ``rbf``.
+
+    Returns
+    -------
+    int
+        The number of centres, ``2 <= M <= cfg.M`` (``cfg.M`` without RBF curves or with
+        ``min_support = 0``).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-39 and Sec. 5.2 (excite every centre's part of the range).
+    """
+    if cfg.min_support == 0 or not set(cfg.rbf) & {"c", "d", "g"}:
+        return cfg.M
+    for m in range(cfg.M, 1, -1):
+        trial = replace(cfg, M=m)
+        lo, hi = cfg.q_range or supported_range(q, trial)
+        support = RBFBasis.equidistant(lo, hi, m, cfg.sigma_n, cfg.outside).support(q)
+        if support.min() >= cfg.min_support:
+            return m
+    return cfg.M
+
+
 def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig) -> np.ndarray:
     support = basis.support(np.concatenate([r.q for r in records]))
     thin = np.flatnonzero(support < cfg.min_support)

@@ -29,8 +29,8 @@ from debist.identify.design import (
     mark_identified,
     mark_switching,
 )
-from debist.identify.excitation import check_excitation
-from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range
+from debist.identify.excitation import check_excitation, thin_data
+from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range, supported_size
 from debist.identify.mass import effective_mass
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
@@ -133,7 +133,17 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         grid, options = auto_settings(cfg)
         search = select_hyperparameters(records, replace(cfg, auto=None), grid, **options)
         cfg = replace(cfg, auto=None, **search.chosen)
+    asked = cfg.M
+    cfg = replace(cfg, M=supported_size(np.concatenate([r.q for r in records]), cfg))
     excitation = _excitation(records, cfg, tables)
+    if search is None and "M" not in section and cfg.M > 2 and thin_data(excitation):
+        # one tone: the data cannot rank curve detail, the held-out free run can
+        search = select_hyperparameters(records, cfg, {"M": list(range(2, cfg.M + 1))})
+        cfg = replace(cfg, **search.chosen)
+        excitation = _excitation(records, cfg, tables)
+    if asked > cfg.M:  # thin data: fewer, wider centres rather than a failed fit
+        note = _basis_note(asked, cfg, excitation)
+        excitation = replace(excitation, warnings=[note, *excitation.warnings])
     t_fit = time.perf_counter()
     model, diag = fit_rbf_model(records, cfg)
     mass = None
@@ -208,6 +218,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "model_error": model_error or {},
         },
         "smoothing": diag.smoothing,
+        "basis": {"M_asked": asked, "M": cfg.M},
         **({"dissipation": diag.dissipation} if diag.dissipation else {}),
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
@@ -239,6 +250,16 @@ def _inertia_summary(model) -> dict[str, Any]:
     q = np.array([model.q_range[0], 0.0, model.q_range[1]])
     return {"mu": np.asarray(model.theta_inertia, dtype=float).tolist(), "q": q.tolist(),
             "m": model.mass(q).tolist()}  # fmt: skip
+
+
+def _basis_note(asked: int, cfg: IdentifyConfig, excitation) -> str:
+    """Say that the data support fewer centres than asked, and over which range."""
+    unit, sigma = excitation.unit_name, excitation.sigma * excitation.unit_scale
+    return (
+        f"M = {asked} centres are not all supported by the estimation data (min_support = "
+        f"{cfg.min_support} samples within one width): {cfg.M} centres of width {sigma:.3g} "
+        f"{unit} are fitted instead, so the curves are coarser; excite more of the range for more"
+    )
 
 
 def _excitation(records, cfg: IdentifyConfig, tables):
