@@ -179,3 +179,20 @@ def test_the_refinement_row_names_why_it_was_rejected_and_shows_the_held_out_win
     text = _render(identify_table({**summary, "refine": {**several, "candidates": [
         unrun, {**unrun, "prior": 30.0}]}}))  # fmt: skip
     assert "0: - (rejected); 30: - (rejected)" in text and "diverged" not in text
+
+
+def test_a_curve_identified_nowhere_says_why_with_the_calibrated_numbers():
+    from debist.report.tables import identified_text
+
+    bands = {
+        "bands": {"model_error": {"d": 0.652, "g": 0.576, "restoring": 0.04}, "tolerance": 0.2}
+    }
+    assert identified_text("d", [], bands) == (
+        "nowhere: its calibrated model error alone (65 % of its scale each side) is wider than "
+        "the band tolerance (20 %)"
+    )
+    # a gain's band is narrow enough only where |g| <= 0.2 / (2 * 0.576) = 17 % of its scale
+    assert "below 17 % of its scale" in identified_text("g2", [], bands)
+    assert "excitation warnings" in identified_text("restoring", [], bands)
+    assert identified_text("restoring", [[-0.2031, 0.20557]], bands) == "[-0.2031, 0.2056]"
+    assert identified_text("d", [], {}) == "nowhere"  # a summary from before the tolerance

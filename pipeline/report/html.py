@@ -30,6 +30,7 @@ from debist.errors import ArtifactError
 from debist.report.tables import (
     auto_line,
     equilibrium_kind,
+    identified_text,
     mass_rows,
     not_modelled,
     small_signal_cells,
@@ -416,8 +417,9 @@ def _model_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
         if key in summary:
             rows.append((label, _num(summary[key])))
     for name, spans in (summary.get("identified") or {}).items():
-        text = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans) or "nowhere"
-        rows.append((f"{name} identified on q in [{units['q']}]", text))
+        rows.append(
+            (f"{name} identified on q in [{units['q']}]", identified_text(name, spans, summary))
+        )
     return rows
 
 

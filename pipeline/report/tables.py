@@ -307,7 +307,7 @@ def identify_table(summary: dict[str, Any]) -> Table:
         value = f"{summary['rank']} / {summary['n_columns']}" if key is None else _fmt(summary[key])
         table.add_row(label, value, *([""] if published else []))
     for name, spans in (summary.get("identified") or {}).items():
-        text = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans) or "nowhere"
+        text = identified_text(name, spans, summary)
         label = escape(f"{name} identified on q [{q}] in")
         table.add_row(label, text, *([""] if published else []))
     refine = summary.get("refine")
@@ -534,6 +534,63 @@ def _verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None) -> str:
         v, m = min(better)
         words.append(f"worse than {m} ({100 * v:.2f} %)")
     return "; ".join(words) or "ok"
+
+
+def identified_text(name: str, spans: list, summary: dict[str, Any]) -> str:
+    """Word where a curve is identified, or why nowhere.
+
+    Parameters
+    ----------
+    name : str
+        Curve name (``restoring``, ``d``, ``g1`` ..).
+    spans : list of [float, float]
+        The intervals of q where it is marked identified [unit of q in the summary].
+    summary : dict
+        The identify summary (its ``bands``: ``model_error`` per curve kind and the band
+        ``tolerance``).
+
+    Returns
+    -------
+    str
+        ``"[a, b], [c, d]"``; or ``"nowhere: ..."`` with the reason the calibrated model error
+        gives when it alone makes the band too wide (a gain's model error is a share of its
+        local magnitude, so its band is narrow enough only where the gain is small).
+
+    References
+    ----------
+    Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63(3), 425-464 (model discrepancy beside
+    parameter uncertainty).
+
+    Examples
+    --------
+    >>> bands = {"bands": {"model_error": {"d": 0.652, "g": 0.576}, "tolerance": 0.2}}
+    >>> identified_text("d", [], bands)[:60]
+    'nowhere: its calibrated model error alone (65 % of its scale'
+    >>> identified_text("g1", [[0.1, 0.2]], bands)
+    '[0.1, 0.2]'
+    """
+    if spans:
+        return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans)
+    bands = summary.get("bands") or {}
+    kind = "g" if name[:1] == "g" and name[1:].isdigit() else name
+    err, tol = (bands.get("model_error") or {}).get(kind), bands.get("tolerance")
+    if err is None or tol is None:
+        return "nowhere"
+    if kind == "g":
+        return (
+            f"nowhere: its calibrated model error ({100 * err:.0f} % of the local gain) keeps the "
+            f"band within the tolerance ({100 * tol:.0f} % of its scale) only where the gain is "
+            f"below {100 * tol / (2 * err):.0f} % of its scale, where the data support it nowhere"
+        )
+    if 2 * err > tol:
+        return (
+            f"nowhere: its calibrated model error alone ({100 * err:.0f} % of its scale each side) "
+            f"is wider than the band tolerance ({100 * tol:.0f} %)"
+        )
+    return (
+        f"nowhere: its band is wider than the tolerance ({100 * tol:.0f} % of its scale) or the "
+        "data do not support it (the excitation warnings say where)"
+    )
 
 
 def with_verdicts(table: Any) -> Any:

@@ -216,6 +216,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             ),
             "stiffness_label": stiffness_label(cfg.model_error, cfg.effective_mass),
             "model_error": model_error or {},
+            "tolerance": cfg.band_tolerance,
         },
         "smoothing": diag.smoothing,
         "basis": {"M_asked": asked, "M": cfg.M},
