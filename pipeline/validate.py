@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -12,7 +11,7 @@ import numpy as np
 from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
-from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nrmse, rms
+from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
 from debist.simulate.freerun import FreeRunModel, SimulationResult, check_free_run, simulate
 from debist.workflow.sections import ValidateConfig
 
@@ -354,9 +353,8 @@ def replicate_spread(
         for k, ds in enumerate(group):
             runs = sims[k * B : (k + 1) * B]
             scores = np.array([np.inf if r.diverged else nrmse(ds.q[s], r.q[s]) for r in runs])
-            with warnings.catch_warnings():  # all-NaN samples (every replicate diverged): NaN
-                warnings.simplefilter("ignore", RuntimeWarning)
-                lo, hi = bands[ds.name] = np.nanpercentile([r.q for r in runs], [2.5, 97.5], axis=0)
+            # all-NaN samples (every replicate diverged): NaN
+            lo, hi = bands[ds.name] = nan_percentiles(np.array([r.q for r in runs]), (2.5, 97.5))
             inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
             base = mean_baseline_nrmse(ds.q[s])
             rows.append(

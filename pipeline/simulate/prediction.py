@@ -351,9 +351,11 @@ def _correlation(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     a = a - a.mean()
     b = b - b.mean()
     scale = n * np.sqrt(np.mean(a * a) * np.mean(b * b))
-    full = np.correlate(a, b, mode="full")  # index n - 1 + tau: sum_t a(t) b(t - tau)
-    mid = n - 1
-    return full[mid - max_lag : mid + max_lag + 1] / scale
+    # only the 2 max_lag + 1 lags asked for, O(n max_lag) (the full correlation is O(n^2)):
+    # padded[k : k + n] is b shifted by tau = max_lag - k, zeros beyond its ends
+    padded = np.concatenate([np.zeros(max_lag), b, np.zeros(max_lag)])
+    shifted = np.lib.stride_tricks.sliding_window_view(padded, n)
+    return (shifted @ a)[::-1] / scale
 
 
 def residual_analysis(errors: np.ndarray, v: np.ndarray, max_lag: int = 25) -> ResidualAnalysis:
