@@ -12,7 +12,14 @@ from debist.engine import progress
 from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
 from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
-from debist.simulate.freerun import FreeRunModel, SimulationResult, check_free_run, simulate
+from debist.simulate.freerun import (
+    FreeRunModel,
+    SimulationResult,
+    check_free_run,
+    prepare_inputs,
+    simulate,
+    substeps_needed,
+)
 from debist.workflow.sections import ValidateConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -284,6 +291,30 @@ def _initial_states(group: Sequence[DataSet], dt: float, init_samples: int):
     return np.array(q0), np.array(qd0)
 
 
+#: Bootstrap replicates simulated at once: their inputs and trajectories are held together,
+#: so a chunk bounds the memory of the replicate spread (B x samples x states at once
+#: otherwise), while the compiled kernel still runs a chunk in lock step.
+REPLICATE_CHUNK = 20
+
+
+def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limit):
+    """Free-run the replicates on one data set in chunks; return q (B, n) and diverged (B,)."""
+    B = deviations.shape[0]
+    fine = prepare_inputs([ds.v], ns, cfg.input_interpolation)
+    q_runs = np.empty((B, ds.q.size))
+    diverged = np.zeros(B, dtype=bool)
+    for a in range(0, B, REPLICATE_CHUNK):
+        dev = deviations[a : a + REPLICATE_CHUNK]
+        n = dev.shape[0]
+        sims = simulate(
+            model.replicate_table(list(columns), dev), fine.tile(n), dt, np.full(n, q0),
+            np.full(n, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
+        )  # fmt: skip
+        for j, r in enumerate(sims):
+            q_runs[a + j], diverged[a + j] = r.q, r.diverged
+    return q_runs, diverged
+
+
 def replicate_spread(
     model,
     columns: Sequence[str],
@@ -341,20 +372,23 @@ def replicate_spread(
     deviations = np.atleast_2d(np.asarray(deviations, dtype=float))
     B = deviations.shape[0]
     rows, bands = [], {}
+    s = slice(cfg.init_samples, None)
     for dt, group in _by_sample_time(datasets).items():
-        table = model.replicate_table(list(columns), np.tile(deviations, (len(group), 1)))
+        # one sub-step count for every replicate, as if all ran in one batch
+        ns = substeps_needed(model.replicate_table(list(columns), deviations), dt, cfg.substeps)
         q0, qd0 = _initial_states(group, dt, cfg.init_samples)
-        sims = simulate(
-            table, [ds.v for ds in group for _ in range(B)], dt, np.repeat(q0, B),
-            np.repeat(qd0, B), substeps=cfg.substeps, interpolation=cfg.input_interpolation,
-            q_limit=q_limit, engine=cfg.engine,
-        )  # fmt: skip
-        s = slice(cfg.init_samples, None)
         for k, ds in enumerate(group):
-            runs = sims[k * B : (k + 1) * B]
-            scores = np.array([np.inf if r.diverged else nrmse(ds.q[s], r.q[s]) for r in runs])
+            q_runs, diverged = _replicate_runs(
+                model, columns, deviations, ds, dt, ns, q0[k], qd0[k], cfg, q_limit
+            )
+            scores = np.array(
+                [
+                    np.inf if bad else nrmse(ds.q[s], q[s])
+                    for q, bad in zip(q_runs, diverged, strict=True)
+                ]
+            )
             # all-NaN samples (every replicate diverged): NaN
-            lo, hi = bands[ds.name] = nan_percentiles(np.array([r.q for r in runs]), (2.5, 97.5))
+            lo, hi = bands[ds.name] = nan_percentiles(q_runs, (2.5, 97.5))
             inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
             base = mean_baseline_nrmse(ds.q[s])
             rows.append(
