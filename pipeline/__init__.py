@@ -36,6 +36,8 @@ __all__ = [
     "find_workflows",
     "find_zoos",
     "fleet",
+    "init_workflow",
+    "list_channels",
     "load_model",
     "load_workflow",
     "open_run",
