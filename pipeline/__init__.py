@@ -32,6 +32,7 @@ __all__ = [
     "batch_index",
     "batch_table",
     "diff",
+    "example_workflow",
     "export_model",
     "find_workflows",
     "find_zoos",

@@ -56,6 +56,7 @@ __all__ = [
     "batch_index",
     "batch_table",
     "diff",
+    "example_workflow",
     "export_model",
     "find_workflows",
     "find_zoos",
@@ -871,6 +872,36 @@ def init_workflow(
         v = [v]
     request = MappingRequest(time, q, tuple(v), _unit_options(units), sample_time)
     return write(list(data), out, force=force, request=request)
+
+
+def example_workflow(name: str, folder: PathLike) -> Path:
+    """Copy a shipped example workflow (and the data it reads) into a folder; its path.
+
+    Parameters
+    ----------
+    name : str
+        ``"paper-experiment"`` (the paper's experiment on the virtual rig, no data),
+        ``"silverbox"``, ``"emps"``, ... (:func:`debist.workflow.examples.example_names`).
+    folder : path-like
+        Gets ``workflows/<name>.toml`` and ``data/...``; the runs go to
+        ``<folder>/runs/<name>``.
+
+    Returns
+    -------
+    pathlib.Path
+        The workflow file, ready for :func:`run`.
+
+    Raises
+    ------
+    WorkflowError
+        An unknown name.
+    OutputDirError
+        A file of the same name with other content is in the folder (never overwritten;
+        an identical one is kept).
+    """
+    from debist.workflow.examples import copy_example
+
+    return copy_example(name, folder)
 
 
 # ------------------------------------------------------------------- results

@@ -11,7 +11,7 @@ import pytest
 import scipy.io as sio
 
 import debist
-from debist.errors import RigLogError, WorkflowError
+from debist.errors import OutputDirError, RigLogError, WorkflowError
 from debist.ingest.survey import ChannelInfo, FileSurvey, guess_mapping
 from debist.workflow.loader import load_workflow
 
@@ -282,6 +282,61 @@ def test_the_api_lists_channels():
     assert found.format == "mat-v5"
     assert [c.name for c in found.channels] == ["gtau", "kp", "kv", "qg", "qm", "t", "vir"]
     assert found.channel("t").increasing and found.channel("gtau").samples == 1
+
+
+# ------------------------------------------------------ shipped examples
+
+
+def test_an_example_workflow_is_copied_byte_for_byte_with_its_data(tmp_path):
+    path = debist.example_workflow("silverbox", tmp_path / "ex")
+    assert path == tmp_path / "ex" / "workflows" / "silverbox.toml"
+    assert path.read_bytes() == (ROOT / "workflows" / "silverbox.toml").read_bytes()
+    data = tmp_path / "ex" / "data" / "silverbox"
+    assert sorted(p.name for p in data.iterdir()) == ["README.md", "SNLS80mV.csv.gz"]
+    assert (data / "SNLS80mV.csv.gz").read_bytes() == (
+        ROOT / "data" / "silverbox" / "SNLS80mV.csv.gz").read_bytes()  # fmt: skip
+    wf = load_workflow(path)
+    assert wf.output_dir == (tmp_path / "ex" / "runs" / "silverbox").resolve()
+    assert debist.example_workflow("silverbox", tmp_path / "ex") == path  # again: kept
+
+
+def test_an_example_never_overwrites_another_file(tmp_path):
+    path = debist.example_workflow("paper-experiment", tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["workflows"]  # no data needed
+    path.write_text("# edited\n", encoding="utf-8")
+    with pytest.raises(OutputDirError, match="exists and is not the shipped file"):
+        debist.example_workflow("paper-experiment", tmp_path)
+    assert path.read_text(encoding="utf-8") == "# edited\n"
+    with pytest.raises(WorkflowError, match="no example workflow 'nope'; the examples: emps"):
+        debist.example_workflow("nope", tmp_path)
+
+
+def test_every_shipped_workflow_and_its_data_are_package_data():
+    """pyproject's patterns carry every file an example reads (a wheel has them all)."""
+    from debist.workflow.examples import _data_files, example_names
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert config["package-dir"]["debist.examples.workflows"] == "workflows"
+    assert config["package-dir"]["debist.examples.data"] == "data"
+    patterns = config["package-data"]
+    packaged = {
+        p.relative_to(ROOT / "workflows").as_posix()
+        for pattern in patterns["debist.examples.workflows"]
+        for p in (ROOT / "workflows").glob(pattern)
+    }
+    assert packaged == {p.name for p in (ROOT / "workflows").glob("*.toml")}
+    assert set(example_names()) == {name[:-5] for name in packaged}
+    data = {
+        p.relative_to(ROOT / "data").as_posix()
+        for pattern in patterns["debist.examples.data"]
+        for p in (ROOT / "data").glob(pattern)
+    }
+    needed = {
+        f
+        for name in example_names()
+        for f, _ in _data_files((ROOT / "workflows" / f"{name}.toml").read_text(), name)
+    }
+    assert needed and needed <= data  # fmt: skip
 
 
 # ------------------------------------------------------------ end to end
