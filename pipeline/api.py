@@ -56,10 +56,13 @@ __all__ = [
     "batch_index",
     "batch_table",
     "diff",
+    "example_workflow",
     "export_model",
     "find_workflows",
     "find_zoos",
     "fleet",
+    "init_workflow",
+    "list_channels",
     "load_model",
     "load_workflow",
     "open_run",
@@ -762,6 +765,143 @@ def zoo_report(folder: PathLike) -> tuple[Path, Path, pd.DataFrame, pd.DataFrame
     summary = zoo_summary(table)
     page = write_page(folder / PAGE_FILE, render_zoo(table, summary, table.attrs))
     return table_path, page, table, summary
+
+
+# --------------------------------------------------------- first steps
+
+
+def list_channels(data: PathLike | Iterable[PathLike]) -> tuple[Any, ...]:
+    """List the channels of rig logs, with their units and value ranges (reads only).
+
+    Parameters
+    ----------
+    data : path-like or iterable of path-like
+        Rig logs in any format the ingest reads (MAT v5/v7.3, text, Parquet, MF4).
+
+    Returns
+    -------
+    tuple of debist.ingest.survey.FileSurvey
+        One per file, in the order given: its format, its channels (name, unit, samples,
+        smallest and largest value) and a recording's time bases.
+
+    Raises
+    ------
+    RigLogError
+        A file that cannot be read, naming it.
+    """
+    from debist.ingest.survey import survey_file
+
+    paths = [data] if isinstance(data, (str, os.PathLike)) else list(data)
+    return tuple(survey_file(Path(p)) for p in paths)
+
+
+def _unit_options(units: Mapping[str, str] | Sequence[str] | None) -> dict[str, str]:
+    """Return ``{"q": "mm"}`` from a mapping or from ``"ROLE=UNIT"`` strings."""
+    if units is None:
+        return {}
+    if isinstance(units, (str, bytes)):
+        raise WorkflowError(f"units: expected a mapping or a list of 'ROLE=UNIT', got {units!r}")
+    if isinstance(units, Mapping):
+        return {str(k): str(v) for k, v in units.items()}
+    out = {}
+    for item in units:
+        role, sep, unit = str(item).partition("=")
+        if not sep or not role.strip() or not unit.strip():
+            raise WorkflowError(f"--unit {item!r}: expected ROLE=UNIT, e.g. q=mm or v=kV")
+        out[role.strip()] = unit.strip()
+    return out
+
+
+def init_workflow(
+    data: Sequence[PathLike],
+    out: PathLike | None = None,
+    *,
+    force: bool = False,
+    time: str | None = None,
+    q: str | None = None,
+    v: Sequence[str] = (),
+    units: Mapping[str, str] | Sequence[str] | None = None,
+    sample_time: float | None = None,
+) -> Any:
+    """Write a first workflow for one's own rig logs (as ``debist init``).
+
+    The channels are mapped to ``time``, ``q``, ``v1``, ``v2`` by their names and units
+    (:func:`debist.ingest.survey.guess_mapping`) unless given; the first file becomes the
+    estimation data set, the others validation data sets; ``[report]`` is on. The workflow
+    is checked and every file ingested with it before it is written.
+
+    Parameters
+    ----------
+    data : sequence of path-like
+        Rig logs, the estimation file first.
+    out : path-like, optional
+        The workflow file; default ``debist.toml`` in the working folder. Never
+        overwritten without ``force``.
+    force : bool, optional
+        Replace an existing ``out``.
+    time, q : str, optional
+        Channel names that replace the guess (every file).
+    v : sequence of str, optional
+        The inputs' channel names, ``v1`` first.
+    units : mapping or sequence of str, optional
+        Units per role, ``{"q": "mm", "v": "kV"}`` or ``["q=mm", "v=kV"]`` (``v`` for
+        every input, or ``v1``, ``v2``, ...).
+    sample_time : float, optional
+        [s] for files without a time channel.
+
+    Returns
+    -------
+    debist.workflow.init.InitResult
+        The file written, its text and each data set's mapping with the reasons.
+
+    Raises
+    ------
+    WorkflowError
+        ``out`` exists (without ``force``); a channel that cannot be guessed or is
+        ambiguous (one line naming the file, its channels and the option to pass); a bad
+        unit.
+    RigLogError
+        A file that cannot be read or does not ingest with the mapping.
+    """
+    from debist.ingest.survey import MappingRequest
+    from debist.workflow.init import init_workflow as write
+
+    if isinstance(data, (str, os.PathLike)):
+        data = [data]
+    if isinstance(v, str):
+        v = [v]
+    request = MappingRequest(time, q, tuple(v), _unit_options(units), sample_time)
+    return write(list(data), out, force=force, request=request)
+
+
+def example_workflow(name: str, folder: PathLike) -> Path:
+    """Copy a shipped example workflow (and the data it reads) into a folder; its path.
+
+    Parameters
+    ----------
+    name : str
+        ``"paper-experiment"`` (the paper's experiment on the virtual rig, no data),
+        ``"silverbox"``, ``"emps"``, ... (:func:`debist.workflow.examples.example_names`).
+    folder : path-like
+        Gets ``workflows/<name>.toml`` and ``data/...``; the runs go to
+        ``<folder>/runs/<name>``.
+
+    Returns
+    -------
+    pathlib.Path
+        The workflow file, ready for :func:`run`.
+
+    Raises
+    ------
+    WorkflowError
+        An unknown name.
+    OutputDirError
+        A file of the same name with other content is in the folder (never overwritten;
+        an identical one is kept).
+    """
+    from debist.workflow.examples import copy_example
+
+    return copy_example(name, folder)
 
 
 # ------------------------------------------------------------------- results

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -551,6 +552,91 @@ _stage_command(
     "Run the virtual rig of [rig]: dSPACE MAT logs and truth files per experiment.",
     "simulate-rig",
 )
+
+
+def _channel_table(survey, roles: dict[str, str]):
+    """One rich table of a file's channels: unit, samples, range and the role it maps to."""
+    from rich.table import Table
+
+    title = f"{escape(str(survey.path))} ({survey.format})"
+    if survey.time_bases:
+        title += f", time base {escape(', '.join(survey.time_bases))}"
+    table = Table("channel", "unit", "samples", "min", "max", "maps to", title=title)
+    for c in survey.channels:
+        span = ("-", "-") if c.lo != c.lo else (f"{c.lo:.6g}", f"{c.hi:.6g}")
+        table.add_row(escape(c.name), escape(c.unit or "?"), str(c.samples), *span,
+                      roles.get(c.name, ""))  # fmt: skip
+    return table
+
+
+@app.command(cls=_Command)
+def init(
+    data: Annotated[
+        list[Path], typer.Argument(metavar="DATA", help="Rig logs: the estimation file first.")
+    ],
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", metavar="FILE", help="Workflow to write (default: debist.toml in this folder)."
+        ),
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing --out file.")] = False,
+    only_list: Annotated[
+        bool, typer.Option("--list", help="Only list the files' channels; write nothing.")
+    ] = False,
+    time: Annotated[
+        str | None, typer.Option("--time", metavar="NAME", help="The time channel.")
+    ] = None,
+    q: Annotated[
+        str | None, typer.Option("--q", metavar="NAME", help="The displacement q.")
+    ] = None,
+    v: Annotated[
+        list[str] | None,
+        typer.Option("--v", metavar="NAME", help="An input (repeat: v1 first, then v2, ...)."),
+    ] = None,
+    units: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--unit",
+            metavar="ROLE=UNIT",
+            help="Unit of a role as recorded: time=ms, q=mm, v=kV (every input) or v1=V "
+            "(repeatable).",
+        ),
+    ] = None,
+    sample_time: Annotated[
+        float | None,
+        typer.Option(
+            "--sample-time",
+            metavar="SECONDS",
+            help="Sample time [s] of files without a time channel.",
+        ),
+    ] = None,
+) -> None:
+    """Write a first workflow for your rig logs: [ingest] channels guessed, [report] on.
+
+    Lists each file's channels and maps time, q, v1, v2 by their names and units (the
+    guess is printed; --time, --q, --v and --unit change it). The first file is the
+    estimation data set, the others validation data sets. Never overwrites a file.
+    """
+    from debist import api
+
+    with _guard():
+        if only_list:
+            for survey in api.list_channels(data):
+                console.print(_channel_table(survey, {}))
+            return
+        done = api.init_workflow(data, out, force=force, time=time, q=q, v=v or (),
+                                 units=units, sample_time=sample_time)  # fmt: skip
+    for ds in done.datasets:
+        roles = {g.channel.name: g.role for g in ds.mapping.guesses}
+        console.print(_channel_table(ds.mapping.survey, roles))
+        console.print(f"{escape(ds.name)} ({ds.role}):")
+        for g in ds.mapping.guesses:
+            line = f"  {g.role:4s} <- {g.channel.name!r} [{g.unit}]  ({g.why}; unit {g.unit_why})"
+            console.print(escape(line), style="yellow" if g.assumed else None, soft_wrap=True)
+    console.print(escape(done.advice), soft_wrap=True)
+    path = str(done.path)
+    _essential(escape(f"wrote {path}; run it with: debist run {shlex.quote(path)}"))
 
 
 @app.command(cls=_Command)

@@ -23,14 +23,19 @@ def _python(code: str, cwd: Path) -> subprocess.CompletedProcess:
     )
 
 
+#: The packages of the example workflows and their data (package data only, no modules).
+EXAMPLES = {"debist.examples.workflows": "workflows", "debist.examples.data": "data"}
+
+
 def test_every_source_folder_is_a_listed_package():
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert config["package-dir"] == {"debist": "pipeline"}
+    assert config["package-dir"] == {"debist": "pipeline", **EXAMPLES}
     folders = sorted(
         ".".join(("debist", *p.parent.relative_to(ROOT / "pipeline").parts))
         for p in (ROOT / "pipeline").rglob("__init__.py")
     )
-    assert sorted(config["packages"]) == folders
+    assert sorted(config["packages"]) == sorted([*folders, *EXAMPLES])
+    assert not (ROOT / "pipeline" / "examples").exists()  # the wheel's name for them only
 
 
 def test_the_export_templates_are_package_data():
@@ -38,7 +43,8 @@ def test_the_export_templates_are_package_data():
     import importlib.resources
 
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert data["package-data"] == {"debist.export": ["templates/*.j2"]}
+    assert data["package-data"]["debist.export"] == ["templates/*.j2"]
+    assert set(data["package-data"]) == {"debist.export", *EXAMPLES}
     on_disk = sorted(p.name for p in (ROOT / "pipeline/export/templates").glob("*.j2"))
     found = importlib.resources.files("debist.export") / "templates"
     assert on_disk and sorted(p.name for p in found.iterdir()) == on_disk

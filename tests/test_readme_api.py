@@ -1,9 +1,8 @@
-"""The README's Python section, run as the script it is (a fresh folder, the shipped workflows)."""
+"""The README's Python section, run as the script it is, from an empty folder."""
 
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -29,8 +28,7 @@ def test_the_readme_names_only_what_the_api_exports():
 
 @pytest.mark.slow
 def test_the_readme_python_section_runs(tmp_path):
-    shutil.copytree(ROOT / "workflows", tmp_path / "workflows")
-    shutil.copytree(ROOT / "data", tmp_path / "data")
+    """Nothing of the checkout is copied: the script gets its workflow from the package."""
     (tmp_path / "example.py").write_text(readme_script(), encoding="utf-8")
     run = subprocess.run(
         [sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, timeout=1200
@@ -44,3 +42,6 @@ def test_the_readme_python_section_runs(tmp_path):
     assert len(members) == 3, out
     assert all(float(value) < 5.0 for _, value in members), members
     assert len(list((tmp_path / "fleet-api").glob("*.toml"))) == 3
+    shipped = tmp_path / "debist-example" / "workflows" / "paper-experiment.toml"
+    assert shipped.read_bytes() == (ROOT / "workflows" / "paper-experiment.toml").read_bytes()
+    assert (tmp_path / "debist-example" / "runs" / "paper-experiment" / "validate").is_dir()
