@@ -196,3 +196,23 @@ def test_a_curve_identified_nowhere_says_why_with_the_calibrated_numbers():
     assert "excitation warnings" in identified_text("restoring", [], bands)
     assert identified_text("restoring", [[-0.2031, 0.20557]], bands) == "[-0.2031, 0.2056]"
     assert identified_text("d", [], {}) == "nowhere"  # a summary from before the tolerance
+
+
+def test_a_thinned_trace_keeps_every_columns_extremes_and_a_short_one_is_unchanged():
+    from debist.report.figures import thin, thin_band
+
+    rng = np.random.default_rng(5)
+    t = np.arange(100_000) * 1e-3
+    y = np.cumsum(rng.normal(size=t.size))
+    y[50_000:50_010] = np.nan  # a gap stays a gap only where a whole column is missing
+    tt, yy = thin(t, y, bins=1000)
+    assert tt.size == yy.size == 2000
+    assert np.nanmax(yy) == np.nanmax(y) and np.nanmin(yy) == np.nanmin(y)
+    column = slice(100 * 137, 100 * 138)  # column 137 of 1000: samples 13700..13799
+    assert yy[2 * 137] == y[column].min() and yy[2 * 137 + 1] == y[column].max()
+    assert tt[2 * 137] == t[column].mean()
+    short = np.arange(10.0)
+    assert np.array_equal(thin(short, short, bins=1000)[1], short)
+    tb, lo, hi = thin_band(t, y - 1.0, y + 1.0, bins=1000)
+    assert tb.size == 1000 and np.all(lo <= hi)
+    assert hi[137] == y[column].max() + 1.0 and lo[137] == y[column].min() - 1.0

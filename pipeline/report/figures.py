@@ -131,16 +131,97 @@ def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit:
         (deriv["q_ddot"], f"q_ddot [{label}/s^2]"),
     )
     for ax, (values, ylabel) in zip(axes[:3], series, strict=True):
-        ax.plot(t, factor * values.to_numpy(), color="0.15", lw=0.6)
+        ax.plot(*thin(t, factor * values.to_numpy()), color="0.15", lw=0.6)
         ax.set_ylabel(ylabel, fontsize=8)
     for col, color in zip(inputs, ("tab:red", "tab:blue", "tab:green", "tab:orange"), strict=False):
-        axes[3].plot(t, 1e-3 * table[col].to_numpy(), color=color, lw=0.7, label=col)
+        axes[3].plot(*thin(t, 1e-3 * table[col].to_numpy()), color=color, lw=0.7, label=col)
     axes[3].set_ylabel("v_i [kV]", fontsize=8)
     if inputs:
         axes[3].legend(fontsize=7, loc="upper right")
     axes[3].set_xlabel("t [s]")
     axes[0].set_title(f"{name}: excitation and response", fontsize=10)
     return fig
+
+
+#: Columns a full-record trace is thinned to (:func:`thin`): about twice the pixel width of
+#: the widest axes at the report's resolution, so the thinned trace covers the same pixels.
+DISPLAY_BINS = 2000
+
+
+def thin(t: np.ndarray, y: np.ndarray, bins: int = DISPLAY_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """Thin a long trace to what a plot of ``bins`` columns shows: each column's min and max.
+
+    A line of n >> pixels samples is drawn as one vertical stroke per pixel column from its
+    lowest to its highest value; drawing only those two values per column gives the same
+    picture at a fraction of the cost (the min-max decimation of oscilloscopes and plotting
+    libraries for long time series).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Time [s], increasing.
+    y : ndarray, shape (n,)
+        Values (NaN where missing: a column of NaN only stays NaN).
+    bins : int
+        Columns; a trace of at most ``4 bins`` samples comes back unchanged.
+
+    Returns
+    -------
+    t, y : ndarray, shape (2 bins,) or (n,)
+        Per column its mean time twice, with its min and its max.
+
+    References
+    ----------
+    Steinarsson 2013, Downsampling Time Series for Visual Representation, MSc thesis,
+    University of Iceland (min-max and related decimations).
+
+    Examples
+    --------
+    >>> t = np.arange(16.0)
+    >>> thin(t, np.sin(t), bins=2)[1].round(3).tolist()
+    [-0.959, 0.909, -1.0, 0.991]
+    """
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    if t.size <= 4 * bins:
+        return t, y
+    edges = np.linspace(0, t.size, bins + 1).astype(np.intp)[:-1]
+    counts = np.diff(np.append(edges, t.size))
+    mid = np.add.reduceat(t, edges) / counts
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.fmin.reduceat(y, edges), np.fmax.reduceat(y, edges)
+    return np.repeat(mid, 2), np.column_stack([lo, hi]).ravel()
+
+
+def thin_band(
+    t: np.ndarray, lo: np.ndarray, hi: np.ndarray, bins: int = DISPLAY_BINS
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin a band to ``bins`` columns: per column the lowest ``lo`` and the highest ``hi``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Time [s], increasing.
+    lo, hi : ndarray, shape (n,)
+        Lower and upper edge (NaN where missing).
+    bins : int
+        Columns; a band of at most ``4 bins`` samples comes back unchanged.
+
+    Returns
+    -------
+    t, lo, hi : ndarray, shape (bins,) or (n,)
+        The column's mean time and its envelope (the band drawn covers what the full one does).
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size <= 4 * bins:
+        return t, np.asarray(lo), np.asarray(hi)
+    edges = np.linspace(0, t.size, bins + 1).astype(np.intp)[:-1]
+    counts = np.diff(np.append(edges, t.size))
+    with np.errstate(invalid="ignore"):
+        return (
+            np.add.reduceat(t, edges) / counts,
+            np.fmin.reduceat(np.asarray(lo, dtype=float), edges),
+            np.fmax.reduceat(np.asarray(hi, dtype=float), edges),
+        )
 
 
 def replicate_band(
@@ -235,7 +316,7 @@ def free_run_figure(
     fig = Figure(figsize=(10.5, 7.5), layout="constrained")
     full, zoom, err = fig.subplots(3, 1, height_ratios=(2, 2, 1.2))
     for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
-        ax.plot(t[part], q[part], color="0.15", lw=0.9, label="measured")
+        ax.plot(*thin(t[part], q[part]), color="0.15", lw=0.9, label="measured")
     for model, run in runs.items():
         color, style = MODEL_STYLES.get(model, ("tab:brown", "--"))
         sim = factor * run["q_sim"].to_numpy()
@@ -243,11 +324,13 @@ def free_run_figure(
         text = "" if score is None else f" (NRMSE(q) {_percent(score)})"
         band = set(REPLICATE_BAND) <= set(run) and model in (rows or {})
         for ax, part in ((full, slice(None)), (zoom, slice(a, b))):
-            ax.plot(t[part], sim[part], color=color, ls=style, lw=0.9, label=f"{model}{text}")
+            ax.plot(
+                *thin(t[part], sim[part]), color=color, ls=style, lw=0.9, label=f"{model}{text}"
+            )
             if band:
                 lo, hi = (factor * run[c].to_numpy()[part] for c in REPLICATE_BAND)
-                replicate_band(ax, t[part], lo, hi, rows[model], color)
-        err.plot(t, q - sim, color=color, lw=0.6, label=model)
+                replicate_band(ax, *thin_band(t[part], lo, hi), rows[model], color)
+        err.plot(*thin(t, q - sim), color=color, lw=0.6, label=model)
     if b > a:
         full.axvspan(t[a], t[b - 1], color="0.88", zorder=0)
         zoom.set_title(

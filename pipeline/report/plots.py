@@ -7,7 +7,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.report.figures import dynamic_window, replicate_band
+from debist.report.figures import dynamic_window, replicate_band, thin, thin_band
 from debist.report.tables import de_inputs
 from debist.validate import REPLICATE_BAND, report_factor
 
@@ -70,18 +70,14 @@ def free_run_figure(
     dt = float(t[1] - t[0]) if t.size > 1 else 1.0
     mid = slice(*dynamic_window(t, accel, 200 * dt))
     for ax, s in ((ax1, slice(None)), (ax_zoom, mid)):
-        ax.plot(t[s], q[s], color="0.2", lw=0.8, label="measured")
+        ax.plot(*thin(t[s], q[s]), color="0.2", lw=0.8, label="measured")
         ax.plot(
-            t[s],
-            q_sim[s],
-            color="tab:red",
-            lw=0.8,
-            ls="--",
+            *thin(t[s], q_sim[s]), color="tab:red", lw=0.8, ls="--",
             label=f"{row['model']} free run",
-        )
+        )  # fmt: skip
         if set(REPLICATE_BAND) <= set(sim):
             lo, hi = (factor * sim[c].to_numpy() for c in REPLICATE_BAND)
-            replicate_band(ax, t[s], lo[s], hi[s], row, "tab:red")
+            replicate_band(ax, *thin_band(t[s], lo[s], hi[s]), row, "tab:red")
         ax.set_ylabel(f"q [{unit}]")
     ax1.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
     ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)
@@ -91,7 +87,7 @@ def free_run_figure(
         f"RMS = {row['rms_q']:.4g} {row['rms_unit']}" + ("  (diverged)" if row["diverged"] else ""),
         fontsize=10,
     )
-    ax2.plot(t, q - q_sim, color="tab:blue", lw=0.6)
+    ax2.plot(*thin(t, q - q_sim), color="tab:blue", lw=0.6)
     ax2.set_ylabel(f"error [{unit}]")
     ax2.set_xlabel("t [s]")
     if init_samples:
