@@ -363,6 +363,7 @@ class Runner:
             "workflow_file": self.wf.path,
             "sources": [d.source for d in self.wf.datasets if not d.rig],
             "stages": STAGES,
+            "overrides": self.wf.overrides,
         }
 
     def blocker(self) -> str | None:
