@@ -347,7 +347,7 @@ def diff(
     -------
     dict
         ``"runs"``: the two folders compared, as strings; ``"config"``: rows ``{stage, key,
-        a, b}`` of the settings that differ;
+        a, b}`` of the settings that differ once each side's defaults are filled in;
         ``"nrmse"``: rows ``{dataset, model, metric, a, b, change}`` in percent [%] (see
         :func:`debist.engine.rundiff.diff_runs`).
 

@@ -722,7 +722,8 @@ def diff(
     """Show the settings and the NRMSE rows that differ between two runs (reads only).
 
     Either two output folders, or a workflow and --set options: `debist diff WF --set
-    identify.M=6` compares the run with those settings with the workflow's own run.
+    identify.M=6` compares the run with those settings with the workflow's own run. A
+    setting stated on one side and left to its default on the other does not differ.
     """
     from rich.table import Table
 

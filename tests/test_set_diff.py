@@ -100,6 +100,43 @@ def test_a_folder_marked_for_other_overrides_is_refused(base, tmp_path):
         outdir.check_output_dir(tmp_path / "own", workflow="synthetic", overrides=mine, **places)
 
 
+def fake_run(folder, configs):
+    """An output folder with one manifest per stage, recording ``configs[stage]``."""
+    for stage, config in configs.items():
+        artifacts.write_stage(
+            folder / stage, stage=stage, key="k", code="c", versions={}, config=config,
+            inputs={}, upstream={}, outputs={}, summary={},
+        )  # fmt: skip
+    return folder
+
+
+def test_diff_shows_only_settings_that_differ_once_defaults_are_filled_in(tmp_path):
+    a = fake_run(tmp_path / "a", {
+        "differentiate": {"method": "tvregdiff", "alpha": 1},
+        "validate": {"substeps": 2},
+        "compare": {"sindy": {"degree": 3, "narx": {}}, "validate": {"substeps": 2}},
+    })  # fmt: skip
+    b = fake_run(tmp_path / "b", {
+        "differentiate": {"alpha": 1.0},  # method left to its default, 1 written as 1.0
+        "validate": {},
+        "compare": {"sindy": {"degree": 3}, "validate": {}},  # [compare.narx] absent
+    })  # fmt: skip
+    found = debist.diff(a, b)
+    assert found["config"] == [] and found["runs"] == [str(a), str(b)]
+    c = fake_run(tmp_path / "c", {
+        "differentiate": {"method": "tvregdiff", "alpha": 1},
+        "validate": {"substeps": 4, "engine": "compiled"},
+        "compare": {"sindy": {"degree": 3, "narx": {"enabled": False}}, "validate": {}},
+    })  # fmt: skip
+    rows = debist.diff(b, c)["config"]
+    assert rows == [
+        {"stage": "validate", "key": "substeps", "a": 2, "b": 4},
+        {"stage": "compare", "key": "sindy.narx.enabled", "a": True, "b": False},
+    ]
+    code, out = invoke("diff", b, c)
+    assert code == 0 and "substeps" in out and "None" not in out and "engine" not in out
+
+
 def test_diff_of_a_workflow_needs_its_overrides(base):
     with pytest.raises(WorkflowError, match="give a second output folder, or a workflow file"):
         debist.diff(base / "wf.toml")
