@@ -477,6 +477,8 @@ def _run(
                 on_progress=_events(wf, display, ran),
             )
         _report(wf, result.manifests, ran)
+        if select is not None:  # `debist run`, not a stage command
+            _report_line(wf, result.manifests, workflow)
         if result.digest is not None:
             _essential(f"run digest: [bold]{result.digest}[/bold]")
             line = _verify_command(workflow, result.digest, out, sets)
@@ -491,6 +493,22 @@ def _verify_command(workflow: Path, digest: str, out: Path | None, sets: list[st
     for item in sets or ():
         words += ["--set", item]
     return shlex.join(words)
+
+
+def _report_line(wf, manifests, workflow: Path) -> None:
+    """Say where the run's report is, or that the workflow writes none and how to get one."""
+    from debist.report.html import REPORT_FILE
+
+    if "report" in manifests:
+        console.print(
+            f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}", soft_wrap=True
+        )
+    elif "report" not in wf.sections:
+        text = (
+            f"no report written: workflow '{workflow}' has no [report] section; add the line "
+            "[report] to it for one HTML page of the run (report/report.html)"
+        )
+        console.print(escape(text), soft_wrap=True)
 
 
 @app.command(cls=_Command)

@@ -146,6 +146,14 @@ def test_diff_of_a_workflow_needs_its_overrides(base):
     assert code == 2 and "--set KEY=VALUE" in out
 
 
+def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
+    shutil.copytree(base, tmp_path / "p")
+    code, out = invoke("run", tmp_path / "p" / "wf.toml")
+    assert code == 0, out
+    assert "no report written" in out and "has no [report] section" in out
+    assert "add the line [report] to it" in out
+
+
 @pytest.mark.slow
 def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_path):
     shutil.copytree(base, tmp_path / "my project")
