@@ -365,14 +365,16 @@ def _events(wf, display: _Display | None, ran: set[str]):
 
 
 def _print_timings(stage_dir: Path) -> None:
-    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``)."""
+    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``), and the sum."""
     try:
         timings = json.loads((stage_dir / "timings.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return
     parts = [f"{k} {v:.2f} s" for k, v in timings.items() if k != "stage" and isinstance(v, float)]
+    total = timings.get("stage") if isinstance(timings, dict) else None
     if parts:
-        console.print(f"[dim]  timings: {escape(', '.join(parts))}[/dim]", soft_wrap=True)
+        text = ", ".join(parts) + (f" (stage {total:.2f} s)" if isinstance(total, float) else "")
+        console.print(f"[dim]  timings: {escape(text)}[/dim]", soft_wrap=True)
 
 
 def _convergence_notice(wf, manifests) -> str | None:
