@@ -322,28 +322,63 @@ def run_blocker(
     return Runner(_workflow(workflow, overrides, output_dir)).blocker()
 
 
-def diff(run_a: PathLike, run_b: PathLike) -> dict[str, list[dict[str, Any]]]:
-    """Compare two runs' output folders: the settings and the NRMSE that differ (reads only).
+def diff(
+    run_a: PathLike,
+    run_b: PathLike | None = None,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> dict[str, list[Any]]:
+    """Compare two runs: the settings and the NRMSE that differ (reads only).
+
+    Either two output folders, or a workflow file and ``overrides``: the run with those
+    overrides (its folder beside the output folder, see
+    :func:`debist.workflow.loader.override_folder`) against the workflow's own run.
 
     Parameters
     ----------
-    run_a, run_b : path-like
-        Output folders of two runs.
+    run_a : path-like
+        The output folder of a run, or (with ``run_b`` None) a workflow file.
+    run_b : path-like, optional
+        The output folder of another run.
+    overrides : mapping or sequence of str, optional
+        With a workflow file: the settings of the run compared with the workflow's own.
+    output_dir : path-like, optional
+        With a workflow file: replaces ``[workflow] output_dir`` (as for :func:`run`).
 
     Returns
     -------
     dict
-        ``"config"``: rows ``{stage, key, a, b}``; ``"nrmse"``: rows ``{dataset, model,
-        metric, a, b, change}`` in percent [%] (see :func:`debist.engine.rundiff.diff_runs`).
+        ``"runs"``: the two folders compared, as strings; ``"config"``: rows ``{stage, key,
+        a, b}`` of the settings that differ once each side's defaults are filled in;
+        ``"nrmse"``: rows ``{dataset, model, metric, a, b, change}`` in percent [%] (see
+        :func:`debist.engine.rundiff.diff_runs`).
 
     Raises
     ------
     WorkflowError
-        If a folder holds no stage manifest.
+        A folder holds no stage manifest; a workflow file without overrides, overrides
+        with two folders, or a bad workflow or override.
     """
     from debist.engine.rundiff import diff_runs
 
-    return diff_runs(run_a, run_b)
+    if run_b is None:
+        if not overrides:
+            raise WorkflowError(
+                f"diff '{run_a}': give a second output folder, or a workflow file with the "
+                "overrides (--set KEY=VALUE) whose run to compare with the workflow's own"
+            )
+        if not Path(run_a).is_file():
+            raise WorkflowError(f"diff '{run_a}': with overrides, expected a workflow file")
+        run_a, run_b = (
+            load_workflow(run_a, given, output_dir=output_dir).output_dir
+            for given in (None, overrides)
+        )
+    elif overrides or output_dir is not None:
+        raise WorkflowError(
+            "diff: overrides and output_dir go with a workflow file, not with two output folders"
+        )
+    return {"runs": [str(run_a), str(run_b)], **diff_runs(run_a, run_b)}
 
 
 @dataclass(frozen=True)

@@ -115,7 +115,10 @@ SetOpt = Annotated[
         "-S",
         metavar="KEY=VALUE",
         help="Change one setting of the workflow for this command, e.g. identify.M=8 "
-        "(repeatable; checked like the file; the manifests record the values used).",
+        "(repeatable; checked like the file; the manifests record the values used). The run "
+        "goes to its own folder beside the output folder, <output_dir>.set-<8 hex of the "
+        "settings' sha256>; the workflow's own run is never touched, and the same --set "
+        "finds that folder again.",
     ),
 ]
 WaitOpt = Annotated[
@@ -362,14 +365,16 @@ def _events(wf, display: _Display | None, ran: set[str]):
 
 
 def _print_timings(stage_dir: Path) -> None:
-    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``)."""
+    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``), and the sum."""
     try:
         timings = json.loads((stage_dir / "timings.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return
     parts = [f"{k} {v:.2f} s" for k, v in timings.items() if k != "stage" and isinstance(v, float)]
+    total = timings.get("stage") if isinstance(timings, dict) else None
     if parts:
-        console.print(f"[dim]  timings: {escape(', '.join(parts))}[/dim]", soft_wrap=True)
+        text = ", ".join(parts) + (f" (stage {total:.2f} s)" if isinstance(total, float) else "")
+        console.print(f"[dim]  timings: {escape(text)}[/dim]", soft_wrap=True)
 
 
 def _convergence_notice(wf, manifests) -> str | None:
@@ -451,6 +456,12 @@ def _run(
     start = until = None
     with _guard():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
+        if wf.overrides:
+            console.print(
+                f"--set: this run writes to {escape(str(wf.output_dir))} (beside the "
+                "workflow's output folder, which stays as it is)",
+                soft_wrap=True,
+            )
         if select is not None:
             listed, start, until = select["stages"], select["start"], select["until"]
             stages = (
@@ -468,13 +479,38 @@ def _run(
                 on_progress=_events(wf, display, ran),
             )
         _report(wf, result.manifests, ran)
+        if select is not None:  # `debist run`, not a stage command
+            _report_line(wf, result.manifests, workflow)
         if result.digest is not None:
             _essential(f"run digest: [bold]{result.digest}[/bold]")
-            console.print(
-                f"[dim]check it later with: debist verify {escape(str(workflow))} "
-                f"--digest {result.digest}[/dim]",
-                soft_wrap=True,
-            )
+            line = _verify_command(workflow, result.digest, out, sets)
+            console.print(f"[dim]check it later with: {escape(line)}[/dim]", soft_wrap=True)
+
+
+def _verify_command(workflow: Path, digest: str, out: Path | None, sets: list[str] | None) -> str:
+    """Return the ``debist verify`` command line of a run, shell-quoted to paste as it is."""
+    words = ["debist", "verify", str(workflow), "--digest", digest]
+    if out is not None:
+        words += ["--out", str(out)]
+    for item in sets or ():
+        words += ["--set", item]
+    return shlex.join(words)
+
+
+def _report_line(wf, manifests, workflow: Path) -> None:
+    """Say where the run's report is, or that the workflow writes none and how to get one."""
+    from debist.report.html import REPORT_FILE
+
+    if "report" in manifests:
+        console.print(
+            f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}", soft_wrap=True
+        )
+    elif "report" not in wf.sections:
+        text = (
+            f"no report written: workflow '{workflow}' has no [report] section; add the line "
+            "[report] to it for one HTML page of the run (report/report.html)"
+        )
+        console.print(escape(text), soft_wrap=True)
 
 
 @app.command(cls=_Command)
@@ -504,7 +540,9 @@ def run(
 
     --stages, or --from and --until, run a part of the workflow (no digest then); a stage
     whose upstream stage outside the part is missing or stale is refused (exit 2). --set
-    changes a setting for this run only (verify and status then need the same --set).
+    changes a setting for this run only: the run goes to its own folder beside the output
+    folder (<output_dir>.set-<8 hex>), which status, verify, report, export and diff find
+    with the same --set; the workflow's own run is not touched.
     """
     select = {"stages": stages, "start": start, "until": until}
     _run(workflow, None, force, out, wait, select, sets)
@@ -512,9 +550,13 @@ def run(
 
 def _stage_command(name: str, help_text: str, command: str | None = None) -> None:
     def command_fn(
-        workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+        workflow: WorkflowArg,
+        force: ForceOpt = False,
+        out: OutOpt = None,
+        wait: WaitOpt = False,
+        sets: SetOpt = None,
     ) -> None:
-        _run(workflow, [name], force, out, wait)
+        _run(workflow, [name], force, out, wait, sets=sets)
 
     command_fn.__doc__ = help_text
     app.command(command or name, cls=_Command)(command_fn)
@@ -771,17 +813,30 @@ def verify(
 
 @app.command(cls=_Command)
 def diff(
-    run_a: Annotated[Path, typer.Argument(metavar="RUN_A", help="Output folder of a run.")],
-    run_b: Annotated[Path, typer.Argument(metavar="RUN_B", help="Output folder of another.")],
+    run_a: Annotated[
+        Path,
+        typer.Argument(metavar="RUN_A", help="Output folder of a run, or a workflow with --set."),
+    ],
+    run_b: Annotated[
+        Path | None, typer.Argument(metavar="RUN_B", help="Output folder of another run.")
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
+    sets: SetOpt = None,
+    out: OutOpt = None,
 ) -> None:
-    """Show the settings and the NRMSE rows that differ between two runs (reads only)."""
+    """Show the settings and the NRMSE rows that differ between two runs (reads only).
+
+    Either two output folders, or a workflow and --set options: `debist diff WF --set
+    identify.M=6` compares the run with those settings with the workflow's own run. A
+    setting stated on one side and left to its default on the other does not differ.
+    """
     from rich.table import Table
 
     from debist import api
 
     with _guard():
-        found = api.diff(run_a, run_b)
+        found = api.diff(run_a, run_b, overrides=sets or None, output_dir=out)
+    name_a, name_b = found["runs"]
     if as_json:
         typer.echo(json.dumps(found, indent=2, default=str))
         return
@@ -789,7 +844,8 @@ def diff(
         console.print("the two runs have the same settings and NRMSE")
         return
     if found["config"]:
-        table = Table("stage", "setting", str(run_a), str(run_b), title="settings that differ")
+        heads = ("stage", "setting", escape(name_a), escape(name_b))
+        table = Table(*heads, title="settings that differ")
         for r in found["config"]:
             table.add_row(r["stage"], r["key"], escape(str(r["a"])), escape(str(r["b"])))
         console.print(table)
@@ -807,7 +863,11 @@ def diff(
 
 @app.command(cls=_Command)
 def report(
-    workflow: WorkflowArg, force: ForceOpt = False, out: OutOpt = None, wait: WaitOpt = False
+    workflow: WorkflowArg,
+    force: ForceOpt = False,
+    out: OutOpt = None,
+    wait: WaitOpt = False,
+    sets: SetOpt = None,
 ) -> None:
     """Run the report stage: one self-contained HTML page of the run (needs a [report] section).
 
@@ -819,13 +879,13 @@ def report(
     from debist.report.html import REPORT_FILE
 
     with _guard():
-        wf = api.load_workflow(workflow, output_dir=out)
+        wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if "report" not in api.workflow_stages(wf):
             raise WorkflowError(
                 f"[report] workflow '{workflow}' has no [report] section: add an empty "
                 "`[report]` table to it (`debist run` then writes the report too)"
             )
-    _run(workflow, ["report"], force, out, wait)
+    _run(workflow, ["report"], force, out, wait, sets=sets)
     console.print(f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}")
 
 
@@ -857,6 +917,7 @@ def export(
         bool, typer.Option("--force", help="Replace existing files of the same names.")
     ] = False,
     out: OutOpt = None,
+    sets: SetOpt = None,
 ) -> None:
     """Write the identified model as self-contained C99, MATLAB or NumPy code for a controller.
 
@@ -866,7 +927,9 @@ def export(
 
     with _guard():
         try:
-            done = api.export_model(workflow, fmt.value, dest=dest, force=force, output_dir=out)
+            done = api.export_model(
+                workflow, fmt.value, dest=dest, force=force, overrides=sets or None, output_dir=out
+            )
         except OutputDirError as exc:
             if force:
                 raise

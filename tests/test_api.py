@@ -77,9 +77,12 @@ def test_overrides_change_the_run_and_are_recorded(run_copy):
     assert result.manifests["identify"].config["M"] == 6
     assert "identify" in {e.stage for e in events if e.what == "done"}
     assert result.model.rbf.basis.xi.size == 6
-    # the same overrides verify; the file's own settings no longer do
-    assert debist.verify(root / "wf.toml", overrides={"identify.M": 6}).ok
-    assert not debist.verify(root / "wf.toml").ok
+    # the run has its own folder beside the workflow's, whose run stays as it was
+    assert result.output_dir.parent == root and result.output_dir.name.startswith("out.set-")
+    assert debist.verify(root / "wf.toml", result.digest, overrides={"identify.M": 6}).ok
+    assert debist.verify(root / "wf.toml", digest).ok
+    assert debist.open_run(root / "wf.toml").model.rbf.basis.xi.size == 8
+    assert debist.open_run(root / "wf.toml", overrides=["identify.M=6"]).digest == result.digest
     with pytest.raises(WorkflowError, match="identify"):
         debist.load_workflow(root / "wf.toml", {"identify.M": "many"})
 
@@ -181,7 +184,8 @@ def test_the_cli_commands_are_the_apis_calls(run_copy, tmp_path):
         debist.export_model(wf, "python", dest=tmp_path / "exp")
     assert debist.export_model(wf, "python", dest=tmp_path / "exp", force=True).files == done.files
     # diff of a run with itself: nothing differs
-    assert debist.diff(root / "out", root / "out") == {"config": [], "nrmse": []}
+    found = debist.diff(root / "out", root / "out")
+    assert found == {"runs": [str(root / "out")] * 2, "config": [], "nrmse": []}
 
 
 def test_batch_helpers_find_tabulate_and_index(run_copy):

@@ -1,6 +1,7 @@
 """Global options of the debist CLI."""
 
 import re
+import shutil
 from importlib.metadata import version
 
 import pytest
@@ -45,7 +46,7 @@ def test_quiet_prints_only_the_run_digest_and_verbose_says_why(project):
 
     out = " ".join(CliRunner().invoke(app, ["-v", "identify", wf, "--force"]).output.split())
     assert "Running stage 'identify' ... (forced)" in out
-    fit = re.search(r"timings: fit (\d+\.\d+) s", out)
+    fit = re.search(r"timings: .*\bfit (\d+\.\d+) s", out)
     assert fit is not None and float(fit.group(1)) > 0, out
     assert "timings:" not in CliRunner().invoke(app, ["identify", wf, "--force"]).output
 
@@ -83,3 +84,22 @@ def test_the_convergence_notice_names_the_keys_to_change(project):
     )
     out = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
     assert "Stage 'differentiate' done" in out and "iteration limit" not in out
+
+
+def test_verbose_timings_account_for_the_stage_wall_time(synthetic_run, tmp_path):
+    """The parts ``-v`` shows (the stage's own, ``import``, ``other``, ``write``) add up to the
+    wall time the stage line reports, within the rounding of the display."""
+    shutil.copytree(synthetic_run[0], tmp_path / "p")
+    wf = str(tmp_path / "p" / "wf.toml")
+    result = CliRunner().invoke(app, ["-v", "validate", wf, "--force"])
+    assert result.exit_code == 0, result.output
+    out = " ".join(result.output.split())
+    total = float(re.search(r"Stage 'validate' done \((\d+\.\d+) s\)", out).group(1))
+    line = re.search(r"timings: (.*?) \(stage (\d+\.\d+) s\)", out)
+    parts = dict(re.findall(r"([a-z][a-z -]*?) (\d+\.\d+) s(?:, |$)", line.group(1)))
+    for name in ("read inputs", "simulate", "replicates", "plots", "import", "other", "write"):
+        assert name in parts, parts
+    shown = sum(float(v) for v in parts.values())
+    slack = 0.005 * len(parts) + 0.01  # each part and the total rounded to 0.01 s
+    assert 0.9 * total - slack <= shown <= total + slack, (shown, total, parts)
+    assert abs(float(line.group(2)) - total) <= 0.05 * total + slack

@@ -224,6 +224,7 @@ def test_report_reruns_only_when_its_inputs_change(synthetic_run):
     before = page.read_bytes()
     code, out = invoke("run", wf)
     assert code == 0 and "Stage 'report' is up to date" in out and digest in out
+    assert f"report: {page}" in out and "no report written" not in out
     code, out = invoke("report", wf)
     assert code == 0 and "Stage 'report' is up to date" in out and str(page) in out
     page.write_text("<html>edited</html>")

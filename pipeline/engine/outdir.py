@@ -1,7 +1,8 @@
 """The output folder of a workflow: who owns it, one writer at a time, leftovers, the digest.
 
 debist writes only into a folder it owns: one it created (and marked with
-``.debist-output.json``, which names the workflow), an empty one, or one that holds nothing
+``.debist-output.json``, which names the workflow file and, for a run with ``--set``, the
+settings overridden), an empty one, or one that holds nothing
 but debist's stage folders (an output folder of an earlier version, adopted). It refuses the
 file system root, the user's home folder, the workflow's own folder and any folder that holds
 the workflow's data sources. One process writes at a time: a lock file per output folder
@@ -22,7 +23,7 @@ import shutil
 import socket
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -63,6 +64,10 @@ def _marker(out: Path) -> dict:
         return {}
 
 
+def _canonical(tree: Mapping) -> str:
+    return json.dumps(tree, sort_keys=True, separators=(",", ":"), default=str)
+
+
 def _marker_workflow(out: Path) -> str | None:
     name = _marker(out).get("workflow")
     return None if name is None else str(name)
@@ -72,6 +77,15 @@ def _marker_file(out: Path) -> Path | None:
     """Return the workflow file the marker names (stored relative to the folder), resolved."""
     rel = _marker(out).get("workflow_file")
     return (out / rel).resolve() if isinstance(rel, str) else None
+
+
+def _describe(overrides: Mapping) -> str:
+    """Name a run's settings: the workflow as it is, or its ``--set`` options."""
+    if not overrides:
+        return "the workflow file as it is (no --set)"
+    from debist.workflow.overrides import override_args
+
+    return "--set " + " --set ".join(override_args(overrides))
 
 
 def _debist_layout(out: Path, stages: Sequence[str]) -> bool:
@@ -95,12 +109,15 @@ def check_output_dir(
     sources: Sequence[str | os.PathLike] = (),
     stages: Sequence[str] = (),
     workflow_file: str | os.PathLike | None = None,
+    overrides: Mapping | None = None,
 ) -> None:
     """Refuse an output folder debist must not write into (nothing is created).
 
     An output folder belongs to the workflow *file* that made it (its marker records the
     file's path relative to the folder, so a project moved as a whole keeps its runs), not
-    to a ``[workflow] name``, which two different workflows may share.
+    to a ``[workflow] name``, which two different workflows may share; and to the settings
+    overridden for its run (none for the workflow's own folder), so a run with other
+    ``--set`` options never writes into it.
 
     Parameters
     ----------
@@ -117,14 +134,16 @@ def check_output_dir(
         version).
     workflow_file : path-like, optional
         The workflow file (absolute): the folder's owner.
+    overrides : mapping, optional
+        The settings overridden for this run, as nested tables (none: the file as it is).
 
     Raises
     ------
     OutputDirError
         If ``out`` is the file system root, the home folder, the workflow's folder, holds
         a data source, is a file, is marked for another workflow file (or, for a marker
-        of an older debist that names no file, another workflow name), or exists, is not
-        empty and is not debist's.
+        of an older debist that names no file, another workflow name) or for other
+        overridden settings, or exists, is not empty and is not debist's.
     """
     out = Path(out)
     places = {Path(out.anchor): "the file system root", Path.home().resolve(): "your home folder"}
@@ -158,6 +177,12 @@ def check_output_dir(
                 f"output folder '{out}' belongs to workflow {owner!r} (see its {MARKER}), not "
                 f"{workflow!r}: give this workflow its own output_dir"
             )
+        theirs = _marker(out).get("overrides") or {}
+        if _canonical(theirs) != _canonical(overrides or {}):
+            raise OutputDirError(
+                f"output folder '{out}' holds the run of {_describe(theirs)} (see its {MARKER}),"
+                f" not of {_describe(overrides or {})}: give this run its own output folder"
+            )
         return
     entries = sorted(p.name for p in out.iterdir())
     if entries and not _debist_layout(out, stages):
@@ -175,6 +200,7 @@ def claim_output_dir(
     *,
     workflow: str,
     workflow_file: str | os.PathLike | None = None,
+    overrides: Mapping | None = None,
     **places,
 ) -> None:
     """Check an output folder (:func:`check_output_dir`), create it and mark it as debist's.
@@ -187,6 +213,8 @@ def claim_output_dir(
         The workflow's name, recorded in the marker.
     workflow_file : path-like, optional
         The workflow file (absolute), recorded relative to ``out`` as the owner.
+    overrides : mapping, optional
+        The settings overridden for this run (nested tables), recorded when there are any.
     **places
         ``workflow_dir``, ``sources`` and ``stages`` of :func:`check_output_dir`.
 
@@ -196,11 +224,15 @@ def claim_output_dir(
         As :func:`check_output_dir`.
     """
     out = Path(out)
-    check_output_dir(out, workflow=workflow, workflow_file=workflow_file, **places)
+    check_output_dir(
+        out, workflow=workflow, workflow_file=workflow_file, overrides=overrides, **places
+    )
     out.mkdir(parents=True, exist_ok=True)
     record = {"debist": "output folder", "workflow": workflow}
     if workflow_file is not None:
         record["workflow_file"] = os.path.relpath(Path(workflow_file).resolve(), out.resolve())
+    if overrides:
+        record["overrides"] = json.loads(_canonical(overrides))
     if _marker(out) != record:
         atomic_write(out / MARKER, json.dumps(record, indent=2) + "\n")
 
@@ -220,7 +252,8 @@ def writing(
     wait : bool, optional
         Wait for another writer instead of failing.
     **places
-        ``workflow_dir``, ``sources`` and ``stages`` of :func:`check_output_dir`.
+        ``workflow_dir``, ``sources``, ``stages``, ``workflow_file`` and ``overrides`` of
+        :func:`claim_output_dir`.
 
     Yields
     ------

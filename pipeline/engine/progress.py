@@ -1,10 +1,11 @@
-"""Progress of long computations, reported to whoever listens (the CLI draws it).
+"""Progress of long computations, reported to whoever listens; the wall times of parts.
 
 Library code calls :func:`report` (or passes :func:`reporter` down to a loop) with a task
 label and the work done so far; nothing happens unless a caller installed a listener with
 :func:`listening`. The listener lives in a context variable, so concurrent runs in one
 process (threads, asyncio tasks) each see their own, and a library user who installs none
-pays one lookup per report.
+pays one lookup per report. A stage times its parts with a :class:`Stopwatch` (its
+``timings``, which ``-v`` shows).
 
 Examples
 --------
@@ -22,13 +23,14 @@ Python documentation, :mod:`contextvars`.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from functools import partial
 from typing import Any
 
-__all__ = ["Listener", "listening", "report", "reporter", "tracking_time"]
+__all__ = ["Listener", "Stopwatch", "listening", "report", "reporter", "tracking_time"]
 
 #: A listener: called as ``listener(task, done, total)``; ``total`` 0 when unknown.
 Listener = Callable[[str, int, int], None]
@@ -141,3 +143,49 @@ def tracking_time(
         return fun(t, *args)
 
     return wrapped
+
+
+class Stopwatch:
+    """Wall times of the consecutive parts of a computation [s], for a stage's ``timings``.
+
+    Each :meth:`lap` gives the time since the previous lap (or the start) to a part, so the
+    parts add up to the time the computation took, and nothing is counted twice. A part
+    named twice gets the sum of its laps.
+
+    Attributes
+    ----------
+    times : dict of str to float
+        Part name to its wall time [s], in the order the parts first ended.
+
+    References
+    ----------
+    Python documentation, :func:`time.perf_counter`.
+
+    Examples
+    --------
+    >>> watch = Stopwatch()
+    >>> watch.lap("read inputs")
+    >>> watch.lap("simulate")
+    >>> list(watch.times), all(t >= 0 for t in watch.times.values())
+    (['read inputs', 'simulate'], True)
+    """
+
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def lap(self, part: str) -> None:
+        """Give the time since the previous lap (or the start or :meth:`restart`) to ``part``.
+
+        Parameters
+        ----------
+        part : str
+            The part's name, e.g. ``"plots"``.
+        """
+        now = time.perf_counter()
+        self.times[part] = self.times.get(part, 0.0) + (now - self._last)
+        self._last = now
+
+    def restart(self) -> None:
+        """Start the next part now: the time since the previous lap goes to no part."""
+        self._last = time.perf_counter()

@@ -1,7 +1,9 @@
 """Two runs side by side: the settings and the NRMSE rows that differ (dvc's params/metrics diff).
 
 Reads only the runs' manifests (the resolved configuration each stage ran with) and their
-NRMSE tables (``compare/nrmse.parquet``, else ``validate/nrmse.parquet``).
+NRMSE tables (``compare/nrmse.parquet``, else ``validate/nrmse.parquet``). Settings are
+compared after each side's defaults are filled in (:func:`debist.workflow.defaults.
+with_defaults`), and numbers by value (``2`` and ``2.0`` are the same setting).
 
 References
 ----------
@@ -21,6 +23,7 @@ import lazy_loader as lazy
 from debist.engine import artifacts
 from debist.engine.registry import names
 from debist.errors import WorkflowError
+from debist.workflow.defaults import with_defaults
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -50,10 +53,24 @@ def _nrmse(run: Path) -> pd.DataFrame | None:
     return None
 
 
+def _number_free(value: Any) -> Any:
+    """Numbers as floats (``2`` and ``2.0`` alike), recursively; booleans stay booleans."""
+    if isinstance(value, bool) or value is None:
+        return value
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, Mapping):
+        return {k: _number_free(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_number_free(v) for v in value]
+    return value
+
+
 def _same(a: Any, b: Any) -> bool:
     if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
         return True
-    return artifacts.canonical_json(a) == artifacts.canonical_json(b)
+    canon = artifacts.canonical_json
+    return canon(_number_free(a)) == canon(_number_free(b))
 
 
 def diff_runs(run_a: str | Path, run_b: str | Path) -> dict[str, list[dict[str, Any]]]:
@@ -67,8 +84,9 @@ def diff_runs(run_a: str | Path, run_b: str | Path) -> dict[str, list[dict[str, 
     Returns
     -------
     dict
-        ``"config"``: rows ``{stage, key, a, b}`` for every setting that differs (a stage
-        only one run has shows ``key = "(stage)"``); ``"nrmse"``: rows ``{dataset, model,
+        ``"config"``: rows ``{stage, key, a, b}`` for every setting that differs once
+        both sides' defaults are filled in (a stage only one run has shows ``key =
+        "(stage)"``); ``"nrmse"``: rows ``{dataset, model,
         metric, a, b, change}`` with the NRMSE in percent [%] (None where a run lacks the
         row), for every value that differs.
 
@@ -92,7 +110,7 @@ def diff_runs(run_a: str | Path, run_b: str | Path) -> dict[str, list[dict[str, 
                  "b": found[1] is not None}
             )  # fmt: skip
             continue
-        a, b = (_flat(m.config) for m in found)
+        a, b = (_flat(with_defaults(stage, m.config)) for m in found)
         for key in sorted(set(a) | set(b)):
             if not _same(a.get(key), b.get(key)):
                 config.append({"stage": stage, "key": key, "a": a.get(key), "b": b.get(key)})

@@ -14,6 +14,7 @@ Masoud & Maas 2025, Front. Robot. AI 12, Table 2, Fig. 11-15.
 from __future__ import annotations
 
 import os
+import shlex
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +42,7 @@ from debist.report.html import (
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
 from debist.validate import REPLICATE_BAND
+from debist.workflow.overrides import override_args
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -305,7 +307,10 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
     ]
     provenance = {
         "digest": outdir.run_digest(wf.output_dir, upstream),
-        "verify": f"debist verify {wf.path.name}",
+        "verify": shlex.join(
+            ["debist", "verify", wf.path.name]
+            + [word for arg in override_args(wf.overrides) for word in ("--set", arg)]
+        ),
         "stages": {
             s: (m.key, artifacts.manifest_digest(wf.stage_dir(s))) for s, m in manifests.items()
         },

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import lazy_loader as lazy
 import numpy as np
 
 from debist.datasets import validation_datasets
+from debist.engine.progress import Stopwatch
 from debist.identify.excitation import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
@@ -51,8 +51,10 @@ class ValidateResult:
         Measured and simulated trajectories per data set.
     plots : dict of str to debist.report.render.FigureJob
         Measured vs simulated q per data set, to draw (:func:`debist.report.plots.free_run_figure`).
-    sim_time : float
-        Wall time of the free runs [s].
+    timings : dict of str to float
+        Wall times of the parts [s], adding up to the call's: ``prepare``, ``simulate`` (the
+        model's free runs), ``replicates`` (the bootstrap replicates' free runs), ``other
+        models`` (``rbf-ls``, ``analytical``), ``k-step and residuals``, ``stability``.
     residuals : pandas.DataFrame or None
         The residual analysis's correlations (:func:`debist.simulate.prediction.prediction_table`),
         None with ``predict_steps = 0``.
@@ -61,8 +63,13 @@ class ValidateResult:
     table: pd.DataFrame
     simulated: dict[str, pd.DataFrame]
     plots: dict[str, FigureJob]
-    sim_time: float = 0.0
+    timings: dict[str, float] = field(default_factory=dict)
     residuals: pd.DataFrame | None = None
+
+    @property
+    def sim_time(self) -> float:
+        """Wall time of the model's free runs [s] (``timings["simulate"]``)."""
+        return self.timings.get("simulate", 0.0)
 
     @property
     def figures(self) -> dict[str, Any]:
@@ -119,15 +126,16 @@ def run_validate(
     WorkflowError
         For an invalid section, or physics that does not fit the data.
     """
+    watch = Stopwatch()
     cfg = ValidateConfig.from_dict(section)
     q_limit = cfg.q_limit if cfg.q_limit is not None else default_q_limit(model.q_range)
     datasets = validation_datasets(tables, derivs)
     analytical = analytical_for(physics, datasets, cfg)
     phi = analytical.phi if analytical is not None else None
-    t0 = time.perf_counter()
+    watch.lap("prepare")
     table, simulated = validate_model(model, "rbf", datasets, cfg, q_limit, phi)
-    sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
+    watch.lap("simulate")
     if replicates is not None and cfg.replicates > 0:
         columns, deviations = replicates
         spread, bands = replicate_spread(
@@ -136,6 +144,7 @@ def run_validate(
         table = table.merge(spread, on="dataset", how="left", validate="one_to_one")
         for ds, band in bands.items():
             simulated[ds] = simulated[ds].assign(**dict(zip(REPLICATE_BAND, band, strict=True)))
+        watch.lap("replicates")
     others = [(baseline, "rbf-ls")] if baseline is not None else []
     if cfg.analytical:
         others.append((analytical, "analytical"))
@@ -147,6 +156,8 @@ def run_validate(
             simulated[ds] = simulated[ds].assign(
                 **{f"{col}_{name}": run[col].to_numpy() for col in SIM_COLUMNS}
             )
+    if others:
+        watch.lap("other models")
     residuals = None
     if cfg.predict_steps:
         scored = [
@@ -160,6 +171,7 @@ def run_validate(
         scores = pd.concat([s for s, _ in scored], ignore_index=True)
         table = table.merge(scores, on=["dataset", "model"], how="left", validate="one_to_one")
         residuals = pd.concat([c for _, c in scored], ignore_index=True)
+        watch.lap("k-step and residuals")
     table["reason"] = ""
     q_est, qd_est = estimation_motion(tables, derivs)
     for other, name in [(model, "rbf"), *others]:
@@ -184,7 +196,8 @@ def run_validate(
         )
         for name, sim in simulated.items()
     }
-    return ValidateResult(table, simulated, plots, sim_time, residuals)
+    watch.lap("stability")
+    return ValidateResult(table, simulated, plots, watch.times, residuals)
 
 
 def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
@@ -230,6 +243,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError
         As :func:`run_validate`.
     """
+    watch = Stopwatch()
     tree = ctx.read_h5("identify", "model.h5")
     model = RBFModel.from_tree(tree)
     ls = tree.get("equation_error")
@@ -240,16 +254,11 @@ def execute(ctx: StageInputs) -> StageOutput:
     if "theta_boot" in diag and "theta" in diag:
         columns = np.asarray(diag["columns"]).astype(str).tolist()
         replicates = (columns, np.asarray(diag["theta_boot"]) - np.asarray(diag["theta"]))
-    res = run_validate(
-        model,
-        ctx.tables("ingest"),
-        ctx.tables("differentiate"),
-        section,
-        baseline,
-        ctx.physics(),
-        replicates,
-    )
+    tables, derivs = ctx.tables("ingest"), ctx.tables("differentiate")
     thin = under_excitation(ctx.summary("identify").get("excitation", {}))
+    watch.lap("read inputs")
+    res = run_validate(model, tables, derivs, section, baseline, ctx.physics(), replicates)
+    watch.restart()  # its own parts are in res.timings
     table = with_verdicts(res.table.assign(under_excited=thin))
     outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:
@@ -258,9 +267,15 @@ def execute(ctx: StageInputs) -> StageOutput:
     # drawn in parallel processes: the same PNG bytes as one after the other
     pngs = render_pngs(list(res.plots.values()))
     outputs.update({f"plots/{n}.png": png for n, png in zip(res.plots, pngs, strict=True)})
+    watch.lap("plots")
     summary = {
         "table": table.to_dict(orient="records"),
         "published": list(section.get("published", [])),
         "order": [d.name for d in ctx.wf.datasets],
     }
-    return StageOutput(outputs, summary, {"simulate": res.sim_time})
+    timings = {
+        "read inputs": watch.times["read inputs"],
+        **res.timings,
+        "plots": watch.times["plots"],
+    }
+    return StageOutput(outputs, summary, timings)

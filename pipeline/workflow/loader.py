@@ -34,6 +34,7 @@ A minimal workflow::
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import tomllib
@@ -44,6 +45,7 @@ from typing import Any
 
 from debist.errors import WorkflowError
 from debist.names import check_file_name
+from debist.workflow.overrides import override_folder, toml_value
 from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
@@ -91,6 +93,10 @@ class Workflow:
         Data sets in file order; empty for a design analysis (``[physics]`` only).
     sections : dict
         The stage sections (``differentiate``, ``identify``, ``validate``, ...).
+    overrides : dict
+        The settings overridden for this run, as nested tables (``{"identify": {"M": 8}}``;
+        empty for the file as it is). With overrides, ``output_dir`` is the folder of
+        :func:`debist.workflow.overrides.override_folder` beside the workflow's own.
     """
 
     path: Path
@@ -98,6 +104,7 @@ class Workflow:
     output_dir: Path
     datasets: tuple[DatasetSpec, ...]
     sections: dict[str, dict[str, Any]] = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
 
     def section(self, name: str) -> dict[str, Any]:
         """Return a stage section (empty if absent)."""
@@ -137,13 +144,6 @@ def _read(path: Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
-
-
-def _toml_value(value: Any) -> str:
-    """One value as TOML text (for a ``{"identify.M": 8}`` override)."""
-    import tomli_w
-
-    return tomli_w.dumps({"v": value}).partition("=")[2].strip()
 
 
 def _output_dir(path: Path, what: str) -> Path:
@@ -230,7 +230,9 @@ def load_workflow(
     overrides : mapping or sequence of str, optional
         Settings that replace the file's, checked by the same schema: ``{"identify.M": 8}``
         (dotted keys), nested tables, or ``["identify.M=8"]`` (:func:`parse_overrides`).
-        The stages see the merged workflow, so their manifests record the values used.
+        The stages see the merged workflow, so their manifests record the values used; the
+        run goes to its own folder beside the output folder
+        (:func:`debist.workflow.overrides.override_folder`).
 
     Returns
     -------
@@ -247,12 +249,14 @@ def load_workflow(
     """
     path = _resolve(Path(path), "workflow file")
     raw = _read(path)
+    changed: dict[str, Any] = {}
     if overrides:
         if isinstance(overrides, Mapping):
-            items = [f"{k}={_toml_value(v)}" for k, v in overrides.items()]
+            items = [f"{k}={toml_value(v)}" for k, v in overrides.items()]
         else:
             items = list(overrides)
-        _merge(raw, parse_overrides(items))
+        changed = parse_overrides(items)
+        _merge(raw, copy.deepcopy(changed))
     try:
         checked = check_workflow(raw)
     except WorkflowError as exc:  # keep the class (a ResourceError stays one)
@@ -267,6 +271,7 @@ def load_workflow(
     else:  # the name becomes a folder name: runs/<name>
         check_file_name(name, f"{path}: [workflow] name (no output_dir given)")
         out = _output_dir(base / "runs" / name, "[workflow] output_dir")
+    out = override_folder(out, changed)
     datasets = []
     for ds_name, (entry, _) in checked.datasets.items():
         table = raw["datasets"][ds_name]
@@ -288,4 +293,4 @@ def load_workflow(
         ingest = {**raw.get("ingest", {}), **overrides}
         datasets.append(DatasetSpec(ds_name, source, entry.role, ingest, entry.rig))
     sections = {k: v for k, v in raw.items() if k not in ("workflow", "ingest", "datasets")}
-    return Workflow(path, name, out, tuple(datasets), sections)
+    return Workflow(path, name, out, tuple(datasets), sections, changed)
