@@ -26,6 +26,7 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-staircase.toml"
@@ -48,13 +49,14 @@ def staircase_out(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def staircase_boot_out(staircase_out, staircase):
-    """The same run with bootstrap-only bands (``model_error = false``): identify rerun in
-    place, after :func:`staircase` has read the shipped run's curves."""
+    """The same run with bootstrap-only bands (``model_error = false``), in its own folder
+    beside the shipped run's."""
     args = ["run", str(WORKFLOW), "--out", str(staircase_out), "--until", "identify",
             "-S", "identify.model_error=false"]  # fmt: skip
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
-    return staircase_out
+    # a run with --set writes beside the original run, never into it
+    return override_folder(staircase_out, {"identify": {"model_error": False}})
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ import pytest
 
 from debist.errors import WorkflowError
 from debist.identify.excitation import input_active
+from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment.toml"
@@ -64,7 +65,7 @@ def paper_until_identify(tmp_path_factory):
         "run", WORKFLOW, "--out", out, "--until", "identify", "-S", "identify.model_error=false"
     )
     assert code == 0, text
-    return out
+    return override_folder(out, {"identify": {"model_error": False}})  # beside "out"
 
 
 def _sub_threshold_intervals(out: Path, i: int) -> list[tuple[float, float]]:

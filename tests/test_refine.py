@@ -149,7 +149,7 @@ def test_several_priors_keep_the_accepted_run_with_the_lowest_estimation_free_ru
     assert full == pytest.approx([r.full_rms_refined for r in single], rel=1e-12)
     # the strongest prior barely moves the parameters: its free run stays the least squares'
     assert full[0] == max(full) and full[0] == pytest.approx(chosen.full_rms_ls, rel=1e-2)
-    assert chosen.seconds >= best.seconds
+    assert np.isfinite(chosen.seconds) and chosen.seconds > 0  # (a sum of runs: not timed here)
     assert refine_config({"prior": [0, 30]}).priors == (0.0, 30.0)
     for bad in ([], [0, -1]):
         with pytest.raises(WorkflowError, match="prior"):

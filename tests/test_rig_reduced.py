@@ -14,6 +14,7 @@ from debist.rig.params import RigParams
 from debist.rig.reduced import Q_MAX, ReducedPlant
 from debist.rig.run import make_plant, simulate_rig, true_curves
 from debist.simulate.freerun import simulate
+from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-reduced.toml"
@@ -167,8 +168,9 @@ def test_the_gains_are_accurate_near_both_wells_and_the_shipped_bands_do_not_vou
     code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "identify",
                             "-S", "identify.model_error=false")  # fmt: skip
     assert code == 0, text
-    curves = pd.read_parquet(tmp_path / "identify/curves.parquet")
-    truth = artifacts.read_h5(tmp_path / "rig/identification_truth.h5")["curves"]
+    run = override_folder(tmp_path, {"identify": {"model_error": False}})  # beside tmp_path
+    curves = pd.read_parquet(run / "identify/curves.parquet")
+    truth = artifacts.read_h5(run / "rig/identification_truth.h5")["curves"]
     q = curves.q.to_numpy()
     f = np.interp(q, truth["q"], truth["f"])
     up = np.flatnonzero((f[:-1] < 0) & (f[1:] >= 0))  # the stable zeros: the wells
@@ -202,7 +204,8 @@ def test_the_shipped_refinement_passes_its_guard_and_lowers_the_unseen_error(tmp
     code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "validate",
                             "-S", "validate.replicates=0")  # fmt: skip
     assert code == 0, text
-    refine = json.loads((tmp_path / "identify/summary.json").read_text())["refine"]
+    run = override_folder(tmp_path, {"validate": {"replicates": 0}})  # beside tmp_path
+    refine = json.loads((run / "identify/summary.json").read_text())["refine"]
     assert refine["accepted"], refine["message"]
     assert refine["holdout_rms_simulation_error"] < refine["holdout_rms_equation_error"]
     assert refine["full_rms_simulation_error"] <= refine["full_rms_equation_error"]
@@ -210,5 +213,5 @@ def test_the_shipped_refinement_passes_its_guard_and_lowers_the_unseen_error(tmp
     best = min(accepted, key=lambda c: c["full_rms_simulation_error"])
     assert refine["prior"] == best["prior"]
     assert refine["full_rms_simulation_error"] == best["full_rms_simulation_error"]
-    nrmse = pd.read_parquet(tmp_path / "validate/nrmse.parquet").set_index(["dataset", "model"])
+    nrmse = pd.read_parquet(run / "validate/nrmse.parquet").set_index(["dataset", "model"])
     assert nrmse.nrmse_q["validation", "rbf"] < 0.85 * nrmse.nrmse_q["validation", "rbf-ls"]

@@ -134,7 +134,9 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         search = select_hyperparameters(records, replace(cfg, auto=None), grid, **options)
         cfg = replace(cfg, auto=None, **search.chosen)
     asked = cfg.M
-    cfg = replace(cfg, M=supported_size(np.concatenate([r.q for r in records]), cfg))
+    q_all = np.concatenate([r.q for r in records])
+    if np.ptp(q_all) > 0:  # (a motionless q is a data error, named by the excitation check)
+        cfg = replace(cfg, M=supported_size(q_all, cfg))
     excitation = _excitation(records, cfg, tables)
     if search is None and "M" not in section and cfg.M > 2 and thin_data(excitation):
         # one tone: the data cannot rank curve detail, the held-out free run can
