@@ -678,12 +678,13 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     import tomllib
 
     from debist.engine.fleetrun import viable_fleet
+    from debist.workflow import tomltext
 
     template, folder = Path(template), Path(folder)
     if size < 1:
         raise WorkflowError(f"fleet size must be at least 1, got {size}")
     try:
-        raw = tomllib.loads(template.read_text(encoding="utf-8"))
+        raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
     existing = sorted(folder.glob("*.toml")) if folder.is_dir() else []

@@ -44,6 +44,7 @@ from typing import Any
 
 from debist.errors import WorkflowError
 from debist.names import check_file_name
+from debist.workflow import tomltext
 from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
@@ -134,7 +135,7 @@ def _read(path: Path) -> dict[str, Any]:
     except OSError as exc:
         raise WorkflowError(f"{where} cannot be read: {exc.strerror or exc}") from None
     try:
-        return tomllib.loads(text)
+        return tomltext.loads(text, where)
     except tomllib.TOMLDecodeError as exc:
         raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
 
@@ -179,7 +180,8 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     Raises
     ------
     WorkflowError
-        If an item has no ``=`` or its key is not a TOML key.
+        If an item has no ``=``, its key is not a TOML key or its value nests arrays or
+        inline tables deeper than :data:`debist.workflow.tomltext.MAX_NESTING`.
 
     Examples
     --------
@@ -192,7 +194,7 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
         if not sep or not key.strip():
             raise WorkflowError(f"--set {item!r}: expected KEY=VALUE, e.g. identify.M=8")
         try:
-            table = tomllib.loads(f"{key.strip()} = {value.strip()}")
+            table = tomltext.loads(f"{key.strip()} = {value.strip()}", "--set")
         except tomllib.TOMLDecodeError:
             try:
                 table = tomllib.loads(f"{key.strip()} = {json.dumps(value.strip())}")
@@ -239,8 +241,9 @@ def load_workflow(
     Raises
     ------
     WorkflowError
-        In one line: the file is missing, a directory, not UTF-8, not valid TOML or a
-        symlink loop; a section or key is unknown or a value invalid
+        In one line: the file is missing, a directory, not UTF-8, not valid TOML, nested
+        deeper than :data:`debist.workflow.tomltext.MAX_NESTING` or a symlink loop; a
+        section or key is unknown or a value invalid
         (:func:`debist.workflow.schema.check_workflow`: ``[section] key: expected ..., got ...``);
         a source file is missing, a directory or a symlink loop; the output folder is a
         file (or lies inside one) or a symlink loop.

@@ -1,0 +1,56 @@
+"""Hostile or careless inputs: each refused in one line (or warned about), never a traceback."""
+
+import pytest
+from conftest import SYNTHETIC_WORKFLOW
+from typer.testing import CliRunner
+
+from debist.cli import app
+from debist.errors import WorkflowError
+from debist.workflow.tomltext import MAX_NESTING, check_nesting
+
+
+def invoke(*args):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, " ".join(result.output.split())
+
+
+def deep(n, open_="[", close="]"):
+    return open_ * n + close * n
+
+
+# -- nesting bound of the workflow TOML -------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("line", "key"),
+    [
+        (f"M = {deep(500)}", "[identify] M"),
+        ("extra = { a = " + "{ b = " * 499 + "1" + " }" * 500, "[identify] extra"),
+        ("extra = [\n" + "[\n" * 499 + "]\n" * 500, "[identify] extra"),
+    ],
+)
+def test_deeply_nested_workflow_value_is_refused_before_parsing(tmp_path, line, key):
+    text = SYNTHETIC_WORKFLOW.format(alpha=1e-6).replace("M = 8", line)
+    (tmp_path / "wf.toml").write_text(text)
+    code, out = invoke("status", tmp_path / "wf.toml")
+    assert code == 2
+    assert "wf.toml" in out and key in out and f"deeper than {MAX_NESTING} levels" in out
+    assert "Traceback" not in out and "RecursionError" not in out
+
+
+def test_deeply_nested_set_value_is_refused(tmp_path):
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    code, out = invoke("status", tmp_path / "wf.toml", "--set", f"identify.M={deep(500)}")
+    assert code == 2
+    assert "--set" in out and "identify.M" in out and f"deeper than {MAX_NESTING}" in out
+
+
+def test_nesting_scan_counts_only_brackets_of_values():
+    ok = (
+        "[datasets.a]\n[[validate.published]]\n"
+        f's = \'{deep(100)}\'\nm = """\n{deep(100)}\n"""\n# {deep(100)}\n'
+        f"x = {deep(MAX_NESTING)}\n"
+    )
+    check_nesting(ok, "wf.toml")
+    with pytest.raises(WorkflowError, match=r"wf.toml: \[validate.published\] y .* \(line 9\)"):
+        check_nesting(ok + f"y = {deep(MAX_NESTING + 1, '{a=', '}')}", "wf.toml")
