@@ -1,5 +1,8 @@
 """Hostile or careless inputs: each refused in one line (or warned about), never a traceback."""
 
+import gzip
+
+import numpy as np
 import pytest
 from conftest import SYNTHETIC_WORKFLOW
 from typer.testing import CliRunner
@@ -54,3 +57,44 @@ def test_nesting_scan_counts_only_brackets_of_values():
     check_nesting(ok, "wf.toml")
     with pytest.raises(WorkflowError, match=r"wf.toml: \[validate.published\] y .* \(line 9\)"):
         check_nesting(ok + f"y = {deep(MAX_NESTING + 1, '{a=', '}')}", "wf.toml")
+
+
+# -- gzip rig logs ----------------------------------------------------------------------------
+
+
+def write_gz_workflow(folder, payload):
+    (folder / "rig.csv.gz").write_bytes(payload)
+    text = SYNTHETIC_WORKFLOW.format(alpha=1e-6).replace('"rig.csv"', '"rig.csv.gz"')
+    (folder / "wf.toml").write_text(text)
+    return folder / "wf.toml"
+
+
+def rig_csv_text(n=6600):
+    rows = [f"{2.0 * i:.1f},{np.sin(i / 50):.6f},{i % 7 / 3:.4f},0.0000" for i in range(n)]
+    return "time_ms,laser,v_left,v_right\n" + "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.5, 0.9])
+def test_a_gzip_log_cut_short_is_a_one_line_data_error(tmp_path, keep):
+    whole = gzip.compress(rig_csv_text().encode())
+    wf = write_gz_workflow(tmp_path, whole[: int(keep * len(whole))])
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 1
+    assert "rig.csv.gz" in out and "truncated gzip" in out and "Aborted" not in out
+    assert not (tmp_path / "out" / "ingest").exists()
+
+
+def test_a_corrupt_gzip_stream_is_named(tmp_path):
+    whole = bytearray(gzip.compress(rig_csv_text().encode()))
+    whole[len(whole) // 2 : len(whole) // 2 + 64] = bytes(64)  # a block of zeros mid-stream
+    wf = write_gz_workflow(tmp_path, bytes(whole))
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 1
+    assert "rig.csv.gz" in out and "corrupt gzip: CRC check failed" in out
+
+
+def test_the_whole_gzip_log_is_read(tmp_path):
+    wf = write_gz_workflow(tmp_path, gzip.compress(rig_csv_text().encode()))
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 0, out
+    assert (tmp_path / "out" / "ingest" / "estimation.parquet").is_file()
