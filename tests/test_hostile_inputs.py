@@ -1,6 +1,7 @@
 """Hostile or careless inputs: each refused in one line (or warned about), never a traceback."""
 
 import gzip
+import io
 
 import numpy as np
 import pytest
@@ -8,7 +9,9 @@ from conftest import SYNTHETIC_WORKFLOW
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.errors import WorkflowError
+from debist.engine.preflight import BUDGET_ENV
+from debist.errors import RigLogError, WorkflowError
+from debist.ingest.compressed import open_gzip
 from debist.workflow.tomltext import MAX_NESTING, check_nesting
 
 
@@ -98,3 +101,44 @@ def test_the_whole_gzip_log_is_read(tmp_path):
     code, out = invoke("run", wf, "--stages", "ingest")
     assert code == 0, out
     assert (tmp_path / "out" / "ingest" / "estimation.parquet").is_file()
+
+
+def gzip_bomb(mib):
+    """``mib`` MiB of ``0\\n`` lines, gzip'd to about 1/1000 of that."""
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb") as gz:
+        chunk = b"0\n" * (1 << 19)
+        for _ in range(mib):
+            gz.write(chunk)
+    return buf.getvalue()
+
+
+def test_a_gzip_bomb_is_refused_at_the_decompressed_limit(tmp_path, monkeypatch):
+    monkeypatch.setenv(BUDGET_ENV, "0.12")  # 120 MB: 10 MB of text at 12 bytes per byte
+    bomb = gzip_bomb(50)
+    assert len(bomb) < 100_000
+    wf = write_gz_workflow(tmp_path, bomb)
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 1
+    assert "rig.csv.gz" in out and "decompresses to more than 10 MB" in out
+    assert "memory budget of 120 MB" in out and BUDGET_ENV in out
+    assert not (tmp_path / "out" / "ingest").exists()
+
+
+def test_the_decompressed_limit_stops_reading_at_the_limit(tmp_path):
+    (tmp_path / "bomb.gz").write_bytes(gzip_bomb(8))
+    read = 0
+    with (
+        pytest.raises(RigLogError, match=r"bomb.gz.*more than 2.1 MB"),
+        open_gzip(tmp_path / "bomb.gz", limit=2_100_000) as fh,
+    ):
+        while chunk := fh.read(1 << 16):
+            read += len(chunk)
+    assert 2_000_000 <= read <= 2_100_000
+
+
+def test_a_log_within_a_low_budget_is_read(tmp_path, monkeypatch):
+    monkeypatch.setenv(BUDGET_ENV, "0.12")
+    wf = write_gz_workflow(tmp_path, gzip.compress(rig_csv_text().encode()))
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 0, out

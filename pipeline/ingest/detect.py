@@ -74,7 +74,8 @@ def open_binary(path: Path):
     OSError
         If the file cannot be opened.
     RigLogError
-        While reading a gzip stream that is cut short or corrupt
+        While reading a gzip stream that is cut short, corrupt or decompresses to more
+        than :func:`~debist.ingest.compressed.decompressed_limit`
         (:class:`~debist.ingest.compressed.GzipLog`).
     """
     return open_gzip(path) if is_gzip(path) else open(path, "rb")
