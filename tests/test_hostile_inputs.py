@@ -12,6 +12,7 @@ from debist.cli import app
 from debist.engine.preflight import BUDGET_ENV
 from debist.errors import RigLogError, WorkflowError
 from debist.ingest.compressed import open_gzip
+from debist.ingest.patterns import MATCH_SECONDS, search_names
 from debist.workflow.tomltext import MAX_NESTING, check_nesting
 
 
@@ -142,3 +143,37 @@ def test_a_log_within_a_low_budget_is_read(tmp_path, monkeypatch):
     wf = write_gz_workflow(tmp_path, gzip.compress(rig_csv_text().encode()))
     code, out = invoke("run", wf, "--stages", "ingest")
     assert code == 0, out
+
+
+# -- user regexes -----------------------------------------------------------------------------
+
+
+def write_regex_workflow(folder, pattern, long_name):
+    text = rig_csv_text(200).replace("laser", long_name, 1)
+    (folder / "rig.csv").write_text(text)
+    wf = SYNTHETIC_WORKFLOW.format(alpha=1e-6).replace(
+        'q = { name = "laser", unit = "mm" }', f"q = {{ regex = '{pattern}', unit = \"mm\" }}"
+    )
+    (folder / "wf.toml").write_text(wf)
+    return folder / "wf.toml"
+
+
+def test_a_catastrophically_backtracking_regex_is_refused_naming_key_and_pattern(tmp_path):
+    wf = write_regex_workflow(tmp_path, "^(a|aa)+$", "a" * 3000 + "!")
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 2
+    assert "rig.csv" in out and "`q` = regex '^(a|aa)+$'" in out
+    assert f"did not finish within {MATCH_SECONDS:g} s" in out and "3001 characters" in out
+
+
+def test_nested_repeats_on_a_long_header_finish(tmp_path):
+    wf = write_regex_workflow(tmp_path, "^(a+)+$", "a" * 3000 + "!")
+    code, out = invoke("run", wf, "--stages", "ingest")
+    assert code == 1
+    assert "`q` = regex '^(a+)+$' matches no channel" in out
+
+
+def test_a_sound_regex_still_selects_its_channel():
+    names = ["time_ms", "Model Root/DE1/v_mon", "Model Root/DE2/v_mon", "Laser/q"]
+    assert search_names(r"DE\d/v_mon$", names, "`v1`") == [1, 2]
+    assert search_names("^Laser/", names, "`q`") == [3]
