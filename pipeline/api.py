@@ -35,8 +35,16 @@ import numpy as np
 
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
+from debist.arguments import (
+    check_callable,
+    check_flag,
+    check_int,
+    check_names,
+    check_path,
+    check_str,
+)
 from debist.engine import artifacts, progress
-from debist.errors import ArtifactError, WorkflowError
+from debist.errors import ArgumentError, ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
@@ -132,7 +140,7 @@ def load_workflow(
         given as one string instead of a mapping or a list of strings.
     """
     if isinstance(overrides, (str, bytes)):
-        raise WorkflowError(
+        raise ArgumentError(
             f"overrides: expected a mapping {{'identify.M': 8}} or a list of 'KEY=VALUE' "
             f"strings, got the string {overrides!r}; pass [{overrides!r}]"
         )
@@ -205,6 +213,11 @@ def run(
     """
     from debist.engine.runner import Runner
 
+    stages = check_names(stages, "stages", what="stage names")
+    check_str(start, "start", optional=True, example="'identify'")
+    check_str(until, "until", optional=True, example="'validate'")
+    force, wait = check_flag(force, "force"), check_flag(wait, "wait")
+    check_callable(on_progress, "on_progress")
     wf = _workflow(workflow, overrides, output_dir)
     runner = Runner(wf, wait=wait)
     stages = runner.select(stages, start=start, until=until)  # names checked, in order
@@ -340,7 +353,7 @@ def diff(run_a: PathLike, run_b: PathLike) -> dict[str, list[dict[str, Any]]]:
     """
     from debist.engine.rundiff import diff_runs
 
-    return diff_runs(run_a, run_b)
+    return diff_runs(check_path(run_a, "run_a"), check_path(run_b, "run_b"))
 
 
 @dataclass(frozen=True)
@@ -408,6 +421,9 @@ def export_model(
     from debist.engine.runner import Runner
     from debist.export.files import export_files, load_identified
 
+    check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
+    dest = check_path(dest, "dest", optional=True)
+    force = check_flag(force, "force")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     folder = runner.wf.output_dir
     with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
@@ -477,6 +493,7 @@ def verify(
     """
     from debist.engine.runner import Runner
 
+    check_str(digest, "digest", optional=True, example="result.digest")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     return Verification(tuple(runner.verify(digest)), tuple(runner.version_notes()))
 
@@ -529,6 +546,13 @@ def run_batch(
     from debist.engine.batch import expand_workflows
     from debist.engine.batch import run_batch as _run_batch
 
+    stages = check_names(stages, "stages", what="stage names")
+    force = check_flag(force, "force")
+    check_str(scheduler, "scheduler", optional=True, example="'processes'")
+    if workers is not None:
+        workers = check_int(workers, "workers", minimum=1)
+    check_str(address, "address", optional=True, example="'tcp://host:8786'")
+    check_callable(on_done, "on_done")
     files = expand_workflows(workflows)
     if not files:
         raise WorkflowError(f"no workflow file found in {workflows!r}")
@@ -680,9 +704,8 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     from debist.engine.fleetrun import viable_fleet
     from debist.workflow import tomltext
 
-    template, folder = Path(template), Path(folder)
-    if size < 1:
-        raise WorkflowError(f"fleet size must be at least 1, got {size}")
+    template, folder = check_path(template, "template"), check_path(folder, "folder")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed")
     try:
         raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
@@ -727,8 +750,8 @@ def zoo(size: int, *, seed: int, folder: PathLike) -> Any:
     """
     from debist.engine.zoo import write_zoo
 
-    if size < 1 or seed < 0:
-        raise WorkflowError(f"zoo size must be >= 1 and seed >= 0, got {size} and {seed}")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed", minimum=0)
+    folder = check_path(folder, "folder")
     return write_zoo(folder, size, seed)
 
 
@@ -1177,7 +1200,7 @@ def load_model(path: PathLike) -> Model:
     ArtifactError
         No model there, or a ``model.h5`` that does not hash to its manifest.
     """
-    path = Path(path)
+    path = check_path(path, "path")
     folder = path if path.is_dir() else None
     if folder is not None and (folder / "identify").is_dir():
         folder = folder / "identify"

@@ -19,6 +19,10 @@ class WorkflowError(DebistError, ValueError):
     """A workflow file or one of its sections is invalid (unknown key, wrong type, bad value)."""
 
 
+class ArgumentError(WorkflowError, TypeError):
+    """An argument of a Python API function has the wrong type (named, its value echoed)."""
+
+
 class ResourceError(WorkflowError):
     """A setting would make a stage allocate more memory than the budget allows.
 

@@ -8,9 +8,10 @@ import pytest
 from conftest import SYNTHETIC_WORKFLOW
 from typer.testing import CliRunner
 
+import debist
 from debist.cli import app
 from debist.engine.preflight import BUDGET_ENV
-from debist.errors import RigLogError, WorkflowError
+from debist.errors import ArgumentError, RigLogError, WorkflowError
 from debist.ingest.compressed import open_gzip
 from debist.ingest.patterns import MATCH_SECONDS, search_names
 from debist.workflow.tomltext import MAX_NESTING, check_nesting
@@ -177,3 +178,66 @@ def test_a_sound_regex_still_selects_its_channel():
     names = ["time_ms", "Model Root/DE1/v_mon", "Model Root/DE2/v_mon", "Laser/q"]
     assert search_names(r"DE\d/v_mon$", names, "`v1`") == [1, 2]
     assert search_names("^Laser/", names, "`q`") == [3]
+
+
+# -- Python API arguments ---------------------------------------------------------------------
+
+
+@pytest.fixture
+def synthetic_wf(tmp_path):
+    (tmp_path / "rig.csv").write_text(rig_csv_text(10))
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    return tmp_path / "wf.toml"
+
+
+@pytest.mark.parametrize(
+    ("nested", "dotted"),
+    [
+        ({"identify": {"M": 5}}, ["identify.M=5"]),
+        ({"compare.narx": {"enabled": False}}, ["compare.narx.enabled=false"]),
+        ({"compare": {"narx": {"enabled": False}}}, ["compare.narx.enabled=false"]),
+        (
+            {"identify.M": 6, "identify": {"sigma_n": 0.25}, "validate": {"substeps": 4}},
+            ["identify.M=6", "identify.sigma_n=0.25", "validate.substeps=4"],
+        ),
+        ({"identify": {"M": np.int64(7)}}, ["identify.M=7"]),
+    ],
+)
+def test_table_valued_overrides_mean_the_dotted_keys(synthetic_wf, nested, dotted):
+    by_table = debist.load_workflow(synthetic_wf, nested)
+    by_keys = debist.load_workflow(synthetic_wf, dotted)
+    assert by_table.sections == by_keys.sections
+    assert by_table.sections != debist.load_workflow(synthetic_wf).sections
+
+
+def test_nested_overrides_keep_the_rest_of_the_section(synthetic_wf):
+    wf = debist.load_workflow(synthetic_wf, {"identify": {"M": 5}})
+    assert wf.sections["identify"] == {
+        "M": 5, "sigma_n": 0.5, "T_z": 0.0, "trim": 50, "max_condition": 1e10
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("overrides", [{"identify.M": None}, {"identify": {"M": None}}])
+def test_none_as_an_override_is_refused_naming_the_key(synthetic_wf, overrides):
+    with pytest.raises(WorkflowError, match=r"'identify\.M' = None, but TOML has no null"):
+        debist.load_workflow(synthetic_wf, overrides)
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda wf: debist.verify(wf, 12345), r"digest: expected a str .*got int 12345"),
+        (lambda wf: debist.run(wf, stages=5), r"stages: expected a list of stage names, got int 5"),
+        (lambda wf: debist.status(wf, overrides=[("identify.M", 5)]), r"got tuple \('identify"),
+        (lambda wf: debist.status(wf, overrides={"identify.M": {1, 2}}), r"of type set, not a"),
+        (lambda wf: debist.load_workflow(5), r"workflow: expected a path .*got int 5"),
+        (lambda wf: debist.export_model(wf, 3), r"fmt: expected a str .*got int 3"),
+        (lambda wf: debist.fleet(wf, "3", folder="f"), r"size: expected an int, got str '3'"),
+        (lambda wf: debist.load_model(None), r"path: expected a path .*got NoneType None"),
+    ],
+)
+def test_api_arguments_of_the_wrong_type_are_refused_in_one_line(synthetic_wf, call, message):
+    with pytest.raises(ArgumentError, match=message) as info:
+        call(synthetic_wf)
+    assert isinstance(info.value, TypeError) and isinstance(info.value, WorkflowError)
+    assert "\n" not in str(info.value)

@@ -42,9 +42,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from debist.errors import WorkflowError
+from debist.arguments import check_path
+from debist.errors import ArgumentError, WorkflowError
 from debist.names import check_file_name
 from debist.workflow import tomltext
+from debist.workflow.overrides import overrides_table
 from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
@@ -140,11 +142,20 @@ def _read(path: Path) -> dict[str, Any]:
         raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
 
 
-def _toml_value(value: Any) -> str:
-    """One value as TOML text (for a ``{"identify.M": 8}`` override)."""
-    import tomli_w
-
-    return tomli_w.dumps({"v": value}).partition("=")[2].strip()
+def _items(overrides: object) -> list[str]:
+    """Return the ``KEY=VALUE`` strings of a sequence of overrides, each checked."""
+    if isinstance(overrides, str | bytes) or not isinstance(overrides, Sequence):
+        raise ArgumentError(
+            f"overrides: expected a mapping {{'identify.M': 8}} or a list of 'KEY=VALUE' "
+            f"strings, got {type(overrides).__name__} {overrides!r}"
+        )
+    for item in overrides:
+        if not isinstance(item, str):
+            raise ArgumentError(
+                f"overrides: expected 'KEY=VALUE' strings such as 'identify.M=8', got "
+                f"{type(item).__name__} {item!r}"
+            )
+    return list(overrides)
 
 
 def _output_dir(path: Path, what: str) -> Path:
@@ -153,7 +164,7 @@ def _output_dir(path: Path, what: str) -> Path:
     for parent in (out, *out.parents):
         if os.path.lexists(parent):
             if not parent.is_dir():
-                raise WorkflowError(
+                raise ArgumentError(
                     f"{what} '{out}' cannot be a folder: '{parent}' is a file, not a directory"
                 )
             break
@@ -231,7 +242,9 @@ def load_workflow(
         Overrides ``[workflow] output_dir``.
     overrides : mapping or sequence of str, optional
         Settings that replace the file's, checked by the same schema: ``{"identify.M": 8}``
-        (dotted keys), nested tables, or ``["identify.M=8"]`` (:func:`parse_overrides`).
+        (dotted keys), nested mappings meaning the same (``{"identify": {"M": 8}}``,
+        :func:`debist.workflow.overrides.overrides_table`), or ``["identify.M=8"]``
+        (:func:`parse_overrides`).
         The stages see the merged workflow, so their manifests record the values used.
 
     Returns
@@ -246,16 +259,17 @@ def load_workflow(
         section or key is unknown or a value invalid
         (:func:`debist.workflow.schema.check_workflow`: ``[section] key: expected ..., got ...``);
         a source file is missing, a directory or a symlink loop; the output folder is a
-        file (or lies inside one) or a symlink loop.
+        file (or lies inside one) or a symlink loop; ``path`` or ``output_dir`` not a path;
+        an override that is not a TOML key and value (``None``: TOML has no null).
     """
+    check_path(path, "workflow")
+    check_path(output_dir, "output_dir", optional=True)
     path = _resolve(Path(path), "workflow file")
     raw = _read(path)
-    if overrides:
-        if isinstance(overrides, Mapping):
-            items = [f"{k}={_toml_value(v)}" for k, v in overrides.items()]
-        else:
-            items = list(overrides)
-        _merge(raw, parse_overrides(items))
+    if isinstance(overrides, Mapping):
+        _merge(raw, overrides_table(overrides))
+    elif overrides:
+        _merge(raw, parse_overrides(_items(overrides)))
     try:
         checked = check_workflow(raw)
     except WorkflowError as exc:  # keep the class (a ResourceError stays one)
