@@ -408,7 +408,10 @@ def export_model(
     WorkflowError
         A bad workflow, or an identify stage that is missing or stale.
     OutputDirError
-        A file exists (without ``force``), or a name resolves outside ``dest``.
+        A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
+        is a folder no run writes into either: the file system root, the home folder, the
+        workflow file's folder or one that holds a data source
+        (:func:`debist.engine.outdir.check_place`).
 
     References
     ----------
@@ -426,10 +429,18 @@ def export_model(
     force = check_flag(force, "force")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     folder = runner.wf.output_dir
+    if dest is not None:
+        outdir.check_place(
+            dest.resolve(),
+            workflow_dir=runner.wf.path.parent,
+            sources=[d.source for d in runner.wf.datasets if not d.rig],
+            what="export folder (dest)",
+            advice="the model's files go into a folder of their own; choose one for dest",
+        )
     with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
         files = export_files(model, fmt, info)
-        target = Path(dest) if dest is not None else folder / "export"
+        target = dest if dest is not None else folder / "export"
         if force:
             target.mkdir(parents=True, exist_ok=True)
             for name, text in files.items():

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 import debist
 from debist.cli import app
 from debist.engine.preflight import BUDGET_ENV
-from debist.errors import ArgumentError, RigLogError, WorkflowError
+from debist.errors import ArgumentError, OutputDirError, RigLogError, WorkflowError
 from debist.ingest.compressed import open_gzip
 from debist.ingest.patterns import MATCH_SECONDS, search_names
 from debist.workflow.tomltext import MAX_NESTING, check_nesting
@@ -241,3 +241,29 @@ def test_api_arguments_of_the_wrong_type_are_refused_in_one_line(synthetic_wf, c
         call(synthetic_wf)
     assert isinstance(info.value, TypeError) and isinstance(info.value, WorkflowError)
     assert "\n" not in str(info.value)
+
+
+# -- export destination -----------------------------------------------------------------------
+
+
+def test_export_refuses_the_file_system_root(synthetic_wf):
+    # no run exists: were the check missing, export would stop at the missing identify
+    # stage, never write into /
+    with pytest.raises(OutputDirError, match=r"export folder \(dest\) '/' is the file system root"):
+        debist.export_model(synthetic_wf, "c", dest="/")
+
+
+def test_export_refuses_the_home_folder(synthetic_wf, tmp_path, monkeypatch):
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    with pytest.raises(OutputDirError, match=r"export folder \(dest\) '.*home' is your home"):
+        debist.export_model(synthetic_wf, "python", dest=home)
+    assert list(home.iterdir()) == []
+
+
+def test_export_refuses_the_workflow_folder_and_the_data_folder(synthetic_wf, tmp_path):
+    with pytest.raises(OutputDirError, match="is the workflow file's own folder"):
+        debist.export_model(synthetic_wf, "c", dest=tmp_path)
+    code, out = invoke("export", synthetic_wf, "--format", "c", "--dest", tmp_path.parent)
+    assert code == 2 and "holds the data source" in out and "rig.csv" in out
