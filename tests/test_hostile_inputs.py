@@ -2,18 +2,29 @@
 
 import gzip
 import io
+import json
+import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import SYNTHETIC_WORKFLOW
 from typer.testing import CliRunner
 
 import debist
 from debist.cli import app
+from debist.differentiate.tables import differentiate_tables
 from debist.engine.preflight import BUDGET_ENV
-from debist.errors import ArgumentError, OutputDirError, RigLogError, WorkflowError
+from debist.errors import (
+    ArgumentError,
+    OutputDirError,
+    PlausibilityWarning,
+    RigLogError,
+    WorkflowError,
+)
 from debist.ingest.compressed import open_gzip
 from debist.ingest.patterns import MATCH_SECONDS, search_names
+from debist.ingest.stroke import check_stroke
 from debist.workflow.tomltext import MAX_NESTING, check_nesting
 
 
@@ -74,8 +85,10 @@ def write_gz_workflow(folder, payload):
     return folder / "wf.toml"
 
 
-def rig_csv_text(n=6600):
-    rows = [f"{2.0 * i:.1f},{np.sin(i / 50):.6f},{i % 7 / 3:.4f},0.0000" for i in range(n)]
+def rig_csv_text(n=6600, amplitude=1.0):
+    rows = [
+        f"{2.0 * i:.1f},{amplitude * np.sin(i / 50):.6f},{i % 7 / 3:.4f},0.0000" for i in range(n)
+    ]
     return "time_ms,laser,v_left,v_right\n" + "\n".join(rows) + "\n"
 
 
@@ -267,3 +280,46 @@ def test_export_refuses_the_workflow_folder_and_the_data_folder(synthetic_wf, tm
         debist.export_model(synthetic_wf, "c", dest=tmp_path)
     code, out = invoke("export", synthetic_wf, "--format", "c", "--dest", tmp_path.parent)
     assert code == 2 and "holds the data source" in out and "rig.csv" in out
+
+
+# -- informational warnings -------------------------------------------------------------------
+
+
+def test_a_spectral_cutoff_above_nyquist_is_warned_about():
+    t = np.arange(400) * 2e-3  # 500 Hz sampling: Nyquist 250 Hz
+    frame = pd.DataFrame({"t": t, "q": np.sin(2 * np.pi * 3 * t)})
+    frame.attrs["source"] = "rig.csv"
+    section = {"method": "spectral", "cutoff_hz": 400.0}
+    with pytest.warns(PlausibilityWarning) as caught:
+        differentiate_tables({"estimation": frame}, section)
+    (message,) = [str(w.message) for w in caught if w.category is PlausibilityWarning]
+    assert "file 'rig.csv', data set 'estimation'" in message
+    assert "[differentiate] cutoff_hz = 400 Hz" in message and "Nyquist frequency 250 Hz" in message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PlausibilityWarning)
+        differentiate_tables({"estimation": frame}, {"method": "spectral", "cutoff_hz": 200.0})
+
+
+def test_q_in_mm_declared_as_m_is_warned_about_in_the_cli_and_the_ingest_summary(tmp_path):
+    (tmp_path / "rig.csv").write_text(rig_csv_text(amplitude=10.0))  # +-10: mm, really
+    wf = SYNTHETIC_WORKFLOW.format(alpha=1e-6).replace(
+        'q = { name = "laser", unit = "mm" }', 'q = { name = "laser", unit = "m" }'
+    )
+    (tmp_path / "wf.toml").write_text(wf)
+    with pytest.warns(PlausibilityWarning, match=r"`q` spans 20 m peak to peak"):
+        code, out = invoke("run", tmp_path / "wf.toml", "--stages", "ingest")
+    assert code == 0, out
+    summary = json.loads((tmp_path / "out" / "ingest" / "summary.json").read_text())
+    (note,) = [w for w in summary["warnings"] if "spans 20 m" in w]
+    assert "file 'rig.csv', channel 'laser'" in note and "`q.unit` = 'm'" in note
+    assert "read in 'mm' it would span 20 mm" in note
+
+
+def test_a_stroke_below_a_tenth_of_a_micrometre_names_the_plausible_unit():
+    q = 0.01 * np.sin(np.linspace(0, 6, 200))  # +-10 mm, written in m, declared in nm
+    with pytest.warns(PlausibilityWarning, match=r"read in 'm' it would span 0.02 m"):
+        check_stroke(q * 1e-9, unit="nm", channel="laser", path="rig.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PlausibilityWarning)
+        check_stroke(q, unit="m", channel="laser", path="rig.csv")  # 20 mm: plausible
+        check_stroke(np.zeros(5), unit="m", channel="laser", path="rig.csv")  # motionless
