@@ -22,6 +22,8 @@ from debist.errors import (
     RigLogError,
     WorkflowError,
 )
+from debist.identify import config as identify_config
+from debist.identify.config import MAX_GRID_VALUES
 from debist.ingest.compressed import open_gzip
 from debist.ingest.patterns import MATCH_SECONDS, search_names
 from debist.ingest.stroke import check_stroke
@@ -323,3 +325,30 @@ def test_a_stroke_below_a_tenth_of_a_micrometre_names_the_plausible_unit():
         warnings.simplefilter("error", PlausibilityWarning)
         check_stroke(q, unit="m", channel="laser", path="rig.csv")  # 20 mm: plausible
         check_stroke(np.zeros(5), unit="m", channel="laser", path="rig.csv")  # motionless
+
+
+# -- [identify.auto] list length --------------------------------------------------------------
+
+
+def test_a_huge_identify_auto_list_is_refused_naming_key_and_limit(synthetic_wf):
+    values = ", ".join(str(4 + k % 20) for k in range(100_000))
+    synthetic_wf.write_text(synthetic_wf.read_text() + f"\n[identify.auto]\nM = [{values}]\n")
+    with pytest.raises(
+        WorkflowError, match=r"\[identify.auto\]: M has 100000 values; at most 1000"
+    ):
+        debist.load_workflow(synthetic_wf)
+    code, out = invoke("status", synthetic_wf)
+    assert code == 2 and f"at most {MAX_GRID_VALUES} are accepted" in out
+
+
+def test_grid_values_are_validated_once_each(synthetic_wf, monkeypatch):
+    calls = []
+    real = identify_config.candidate_config
+    monkeypatch.setattr(
+        identify_config, "candidate_config", lambda *a: calls.append(a[1]) or real(*a)
+    )
+    values = ", ".join(str(v) for v in [6, 8, 10] * 300)
+    synthetic_wf.write_text(synthetic_wf.read_text() + f"\n[identify.auto]\nM = [{values}]\n")
+    wf = debist.load_workflow(synthetic_wf)
+    assert len(wf.sections["identify"]["auto"]["M"]) == 900
+    assert calls == [{"M": 6}, {"M": 8}, {"M": 10}]
