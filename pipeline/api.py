@@ -35,8 +35,16 @@ import numpy as np
 
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
+from debist.arguments import (
+    check_callable,
+    check_flag,
+    check_int,
+    check_names,
+    check_path,
+    check_str,
+)
 from debist.engine import artifacts, progress
-from debist.errors import ArtifactError, WorkflowError
+from debist.errors import ArgumentError, ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
@@ -135,7 +143,7 @@ def load_workflow(
         given as one string instead of a mapping or a list of strings.
     """
     if isinstance(overrides, (str, bytes)):
-        raise WorkflowError(
+        raise ArgumentError(
             f"overrides: expected a mapping {{'identify.M': 8}} or a list of 'KEY=VALUE' "
             f"strings, got the string {overrides!r}; pass [{overrides!r}]"
         )
@@ -208,6 +216,11 @@ def run(
     """
     from debist.engine.runner import Runner
 
+    stages = check_names(stages, "stages", what="stage names")
+    check_str(start, "start", optional=True, example="'identify'")
+    check_str(until, "until", optional=True, example="'validate'")
+    force, wait = check_flag(force, "force"), check_flag(wait, "wait")
+    check_callable(on_progress, "on_progress")
     wf = _workflow(workflow, overrides, output_dir)
     runner = Runner(wf, wait=wait)
     stages = runner.select(stages, start=start, until=until)  # names checked, in order
@@ -362,6 +375,7 @@ def diff(
     """
     from debist.engine.rundiff import diff_runs
 
+    run_a = check_path(run_a, "run_a")
     if run_b is None:
         if not overrides:
             raise WorkflowError(
@@ -378,6 +392,7 @@ def diff(
         raise WorkflowError(
             "diff: overrides and output_dir go with a workflow file, not with two output folders"
         )
+    run_b = check_path(run_b, "run_b")
     return {"runs": [str(run_a), str(run_b)], **diff_runs(run_a, run_b)}
 
 
@@ -433,7 +448,10 @@ def export_model(
     WorkflowError
         A bad workflow, or an identify stage that is missing or stale.
     OutputDirError
-        A file exists (without ``force``), or a name resolves outside ``dest``.
+        A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
+        is a folder no run writes into either: the file system root, the home folder, the
+        workflow file's folder or one that holds a data source
+        (:func:`debist.engine.outdir.check_place`).
 
     References
     ----------
@@ -446,12 +464,23 @@ def export_model(
     from debist.engine.runner import Runner
     from debist.export.files import export_files, load_identified
 
+    check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
+    dest = check_path(dest, "dest", optional=True)
+    force = check_flag(force, "force")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     folder = runner.wf.output_dir
+    if dest is not None:
+        outdir.check_place(
+            dest.resolve(),
+            workflow_dir=runner.wf.path.parent,
+            sources=[d.source for d in runner.wf.datasets if not d.rig],
+            what="export folder (dest)",
+            advice="the model's files go into a folder of their own; choose one for dest",
+        )
     with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
         files = export_files(model, fmt, info)
-        target = Path(dest) if dest is not None else folder / "export"
+        target = dest if dest is not None else folder / "export"
         if force:
             target.mkdir(parents=True, exist_ok=True)
             for name, text in files.items():
@@ -515,6 +544,7 @@ def verify(
     """
     from debist.engine.runner import Runner
 
+    check_str(digest, "digest", optional=True, example="result.digest")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     return Verification(tuple(runner.verify(digest)), tuple(runner.version_notes()))
 
@@ -567,6 +597,13 @@ def run_batch(
     from debist.engine.batch import expand_workflows
     from debist.engine.batch import run_batch as _run_batch
 
+    stages = check_names(stages, "stages", what="stage names")
+    force = check_flag(force, "force")
+    check_str(scheduler, "scheduler", optional=True, example="'processes'")
+    if workers is not None:
+        workers = check_int(workers, "workers", minimum=1)
+    check_str(address, "address", optional=True, example="'tcp://host:8786'")
+    check_callable(on_done, "on_done")
     files = expand_workflows(workflows)
     if not files:
         raise WorkflowError(f"no workflow file found in {workflows!r}")
@@ -716,12 +753,12 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     import tomllib
 
     from debist.engine.fleetrun import viable_fleet
+    from debist.workflow import tomltext
 
-    template, folder = Path(template), Path(folder)
-    if size < 1:
-        raise WorkflowError(f"fleet size must be at least 1, got {size}")
+    template, folder = check_path(template, "template"), check_path(folder, "folder")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed")
     try:
-        raw = tomllib.loads(template.read_text(encoding="utf-8"))
+        raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
     existing = sorted(folder.glob("*.toml")) if folder.is_dir() else []
@@ -764,8 +801,8 @@ def zoo(size: int, *, seed: int, folder: PathLike) -> Any:
     """
     from debist.engine.zoo import write_zoo
 
-    if size < 1 or seed < 0:
-        raise WorkflowError(f"zoo size must be >= 1 and seed >= 0, got {size} and {seed}")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed", minimum=0)
+    folder = check_path(folder, "folder")
     return write_zoo(folder, size, seed)
 
 
@@ -1351,7 +1388,7 @@ def load_model(path: PathLike) -> Model:
     ArtifactError
         No model there, or a ``model.h5`` that does not hash to its manifest.
     """
-    path = Path(path)
+    path = check_path(path, "path")
     folder = path if path.is_dir() else None
     if folder is not None and (folder / "identify").is_dir():
         folder = folder / "identify"

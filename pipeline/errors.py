@@ -9,6 +9,8 @@ channel or the parameter and echo the offending value.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 
 class DebistError(Exception):
@@ -17,6 +19,10 @@ class DebistError(Exception):
 
 class WorkflowError(DebistError, ValueError):
     """A workflow file or one of its sections is invalid (unknown key, wrong type, bad value)."""
+
+
+class ArgumentError(WorkflowError, TypeError):
+    """An argument of a Python API function has the wrong type (named, its value echoed)."""
 
 
 class ResourceError(WorkflowError):
@@ -183,5 +189,60 @@ class UnitMismatchWarning(DebistWarning):
     """A file declares another unit of the same quantity than the workflow: converted from it."""
 
 
+class PlausibilityWarning(DebistWarning):
+    """A setting or a record is accepted but looks like a slip.
+
+    E.g. a low-pass cutoff at or above the Nyquist frequency (it filters nothing), or a
+    stroke that fits another length unit than the one declared.
+    """
+
+
 class ConvergenceWarning(DebistWarning):
     """An iterative method stopped before meeting its tolerance; the result says so too."""
+
+
+@contextmanager
+def recording_warnings() -> Iterator[list[str]]:
+    """Collect the messages of debist's warnings while passing every warning on as usual.
+
+    Inside the block each :class:`DebistWarning` is shown once per message, whatever the
+    filters outside say (the list goes into a stage's hashed summary, which must not depend
+    on them; a stage run twice in one process records the same list), and its message is
+    appended to the yielded list; other warnings behave as outside. A stage puts the list
+    in its summary, so the warnings stay with its artifacts after the console has scrolled
+    away.
+
+    Yields
+    ------
+    list of str
+        The messages, in order, each once.
+
+    References
+    ----------
+    Python documentation, :mod:`warnings` (``catch_warnings``, ``showwarning``).
+
+    Examples
+    --------
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as shown, recording_warnings() as notes:
+    ...     warnings.warn("cutoff above Nyquist", PlausibilityWarning)
+    >>> notes, len(shown)
+    (['cutoff above Nyquist'], 1)
+    """
+    import warnings
+
+    notes: list[str] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", DebistWarning)
+        passed_on = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, DebistWarning):
+                text = str(message)
+                if text in notes:
+                    return
+                notes.append(text)
+            passed_on(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield notes

@@ -19,13 +19,28 @@ import lazy_loader as lazy
 
 from debist.differentiate.base import differentiate
 from debist.engine import progress
-from debist.errors import ConvergenceWarning, RigLogError, WorkflowError
+from debist.errors import ConvergenceWarning, PlausibilityWarning, RigLogError, WorkflowError
 from debist.tables import sample_time
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
 __all__ = ["differentiate_tables"]
+
+
+def _check_cutoff(cutoff_hz: float | None, dt: float, name: str, source: str | None) -> None:
+    """Warn when a low-pass cutoff [Hz] is at or above the record's Nyquist frequency."""
+    nyquist = 0.5 / dt
+    if cutoff_hz is None or cutoff_hz < nyquist:
+        return
+    where = f"file '{source}', " if source else ""
+    warnings.warn(
+        f"{where}data set '{name}': [differentiate] cutoff_hz = {cutoff_hz:g} Hz is not below "
+        f"the Nyquist frequency {nyquist:.6g} Hz of its samples (dt = {dt:.6g} s), so the "
+        f"low-pass removes nothing; set it below {nyquist:.6g} Hz to smooth the derivatives",
+        PlausibilityWarning,
+        stacklevel=3,
+    )
 
 
 def differentiate_tables(
@@ -52,6 +67,12 @@ def differentiate_tables(
     RigLogError
         For non-uniform sampling, or a record the method's settings do not suit (fewer
         samples than a Savitzky-Golay window), naming the file and the data set.
+
+    Warns
+    -----
+    PlausibilityWarning
+        When ``cutoff_hz`` (``method = "spectral"``) is not below a record's Nyquist
+        frequency ``1 / (2 dt)`` (Shannon 1949): the low-pass then removes nothing.
     """
     params = dict(section)
     method = params.pop("method", "tvregdiff")
@@ -74,6 +95,7 @@ def differentiate_tables(
                     f"{method!r}: {exc}",
                     path=frame.attrs.get("source"),
                 ) from None
+        _check_cutoff(res.info.get("cutoff_hz"), dt, name, frame.attrs.get("source"))
         deriv = pd.DataFrame(
             {
                 "t": frame["t"].to_numpy(),

@@ -37,6 +37,7 @@ __all__ = [
     "LOCK",
     "MARKER",
     "check_output_dir",
+    "check_place",
     "claim_output_dir",
     "describe_leftover",
     "leftovers",
@@ -101,6 +102,57 @@ def _debist_layout(out: Path, stages: Sequence[str]) -> bool:
     return True
 
 
+def check_place(
+    out: str | os.PathLike,
+    *,
+    workflow_dir: str | os.PathLike,
+    sources: Sequence[str | os.PathLike] = (),
+    what: str = "output folder",
+    advice: str = "debist writes its stage folders only into a folder of their own; set "
+    "[workflow] output_dir or --out to one",
+) -> None:
+    """Refuse a folder no debist command writes into: a user's folder or the data's.
+
+    Parameters
+    ----------
+    out : path-like
+        The folder (absolute, resolved).
+    workflow_dir : path-like
+        The folder of the workflow file.
+    sources : sequence of path-like
+        The workflow's data source files.
+    what : str, optional
+        What the folder is for, for the message (``"export folder (dest)"``).
+    advice : str, optional
+        What to do instead, for the message.
+
+    Raises
+    ------
+    OutputDirError
+        If ``out`` is the file system root, the home folder (:meth:`pathlib.Path.home`),
+        the workflow file's folder, or holds one of ``sources``.
+
+    Examples
+    --------
+    >>> try:
+    ...     check_place("/", workflow_dir="/tmp/wf", what="export folder", advice="use another")
+    ... except OutputDirError as exc:
+    ...     print(exc)
+    export folder '/' is the file system root: use another
+    """
+    out = Path(out)
+    places = {Path(out.anchor): "the file system root", Path.home().resolve(): "your home folder"}
+    places[Path(workflow_dir).resolve()] = "the workflow file's own folder"
+    if out in places:
+        raise OutputDirError(f"{what} '{out}' is {places[out]}: {advice}")
+    for source in sources:
+        if Path(source).resolve().is_relative_to(out):
+            raise OutputDirError(
+                f"{what} '{out}' holds the data source '{source}': choose a folder apart from "
+                "the data"
+            )
+
+
 def check_output_dir(
     out: str | os.PathLike,
     *,
@@ -141,24 +193,12 @@ def check_output_dir(
     ------
     OutputDirError
         If ``out`` is the file system root, the home folder, the workflow's folder, holds
-        a data source, is a file, is marked for another workflow file (or, for a marker
-        of an older debist that names no file, another workflow name) or for other
-        overridden settings, or exists, is not empty and is not debist's.
+        a data source (:func:`check_place`), is a file, is marked for another workflow
+        file (or, for a marker of an older debist that names no file, another workflow
+        name) or for other overridden settings, or exists, is not empty and is not debist's.
     """
     out = Path(out)
-    places = {Path(out.anchor): "the file system root", Path.home().resolve(): "your home folder"}
-    places[Path(workflow_dir).resolve()] = "the workflow file's own folder"
-    if out in places:
-        raise OutputDirError(
-            f"output folder '{out}' is {places[out]}: debist writes its stage folders only "
-            "into a folder of their own; set [workflow] output_dir or --out to one"
-        )
-    for source in sources:
-        if Path(source).resolve().is_relative_to(out):
-            raise OutputDirError(
-                f"output folder '{out}' holds the data source '{source}': choose an output "
-                "folder apart from the data"
-            )
+    check_place(out, workflow_dir=workflow_dir, sources=sources)
     if out.exists() and not out.is_dir():
         raise OutputDirError(f"output folder '{out}' is a file, not a folder")
     if not out.is_dir():

@@ -37,6 +37,7 @@ __all__ = [
     "BUDGET_ENV",
     "DEFLATE_MAX_RATIO",
     "RAM_FRACTION",
+    "TEXT_PARSE_RATIO",
     "check_identify",
     "check_identify_config",
     "check_memory",
@@ -57,6 +58,11 @@ RAM_FRACTION = 0.5
 #: Largest expansion of the deflate format: one stored byte decodes to at most about
 #: 1032 bytes (RFC 1951; a 258-byte match coded in 2 bits). Used for compressed data sets.
 DEFLATE_MAX_RATIO = 1032
+#: Most memory pandas' C parser needs per byte of a text log [bytes/byte]: peak RSS
+#: minus the start, for 30 MB of one-character fields (``0\n``, ``0,0,0,0\n``) 7.2-7.4,
+#: for 20 MB 10.5 (pandas 3.1, numpy 2.3); fields of 3-4 characters need 3. Bounds the
+#: decompressed size of a gzip'd log (:mod:`debist.ingest.compressed`).
+TEXT_PARSE_RATIO = 12
 #: Bytes of one float64.
 _F8 = 8
 _GB = 1e9

@@ -447,6 +447,11 @@ def refine_config(
     return config_from_section(RefineConfig, {} if section is True else section, where)
 
 
+#: Most candidate values of one field in a hyper-parameter grid (``[identify.auto]``): each
+#: is at least one cross-validated fit, and a longer list is a slip, not a search.
+MAX_GRID_VALUES = 1000
+
+
 def candidate_config(base: IdentifyConfig, setting: Mapping[str, Any]) -> IdentifyConfig:
     """Return the base configuration with a candidate's values, without bootstrap.
 
@@ -495,7 +500,8 @@ def check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[
     Raises
     ------
     WorkflowError
-        An empty grid, an unknown field, a field without values or an invalid value.
+        An empty grid, an unknown field, a field without values or with more than
+        :data:`MAX_GRID_VALUES`, or an invalid value.
     """
     known = {f.name for f in fields(IdentifyConfig)} - {"prior", "bootstrap", "auto", "refine"}
     out = {}
@@ -509,8 +515,16 @@ def check_grid(base: IdentifyConfig, grid: Mapping[str, Sequence[Any]]) -> dict[
         values = list(values) if isinstance(values, list | tuple) else [values]
         if not values:
             raise WorkflowError(f"[identify] hyper-parameter grid: {key} has no values")
+        if len(values) > MAX_GRID_VALUES:
+            raise WorkflowError(
+                f"[identify] hyper-parameter grid: {key} has {len(values)} values; at most "
+                f"{MAX_GRID_VALUES} are accepted (each candidate is a cross-validated fit)"
+            )
+        checked = set()
         for v in values:
-            candidate_config(base, {key: v})  # refuse an invalid value before any fit
+            if repr(v) not in checked:  # refuse an invalid value before any fit, once each
+                candidate_config(base, {key: v})
+                checked.add(repr(v))
         out[key] = values
     return out
 

@@ -47,6 +47,7 @@ from debist.ingest.checks import (
 )
 from debist.ingest.resample import resample_segment, uniform_grid
 from debist.ingest.spec import IngestSpec, ResampleSpec
+from debist.ingest.stroke import check_stroke
 from debist.ingest.units import lookup_unit
 from debist.ingest.validity import cut_faults, fault_mask
 
@@ -102,13 +103,15 @@ def _resample(
 
 
 def _check_values(c, values: np.ndarray, t: np.ndarray, index: np.ndarray, path: Path) -> None:
-    """Plausible magnitudes for every channel; q keeps one scale."""
+    """Plausible magnitudes for every channel; q keeps one scale and a plausible stroke."""
     entry = lookup_unit(c.unit)
     quantity = entry.quantity if entry is not None else None
     check_plausible(values, t, index, role=c.role, quantity=quantity, unit=c.unit,
                     channel=c.source, path=path)  # fmt: skip
     if c.role == "q":
         check_scale_jump(values, t, index, role="q", channel=c.source, path=path)
+        if quantity == "length":
+            check_stroke(values, unit=c.file_unit, channel=c.source, path=path)
 
 
 def _single_base(mapped: Mapped, spec: IngestSpec, path: Path) -> list[Segment]:

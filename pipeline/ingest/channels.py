@@ -19,6 +19,7 @@ import numpy as np
 
 from debist.errors import RigLogError, UnitMismatchWarning
 from debist.ingest.checks import printed_resolution
+from debist.ingest.patterns import search_names
 from debist.ingest.raw import RawChannel, RawLog
 from debist.ingest.spec import ChannelSpec, IngestSpec
 from debist.ingest.units import (
@@ -186,6 +187,9 @@ def select_channel(
         not a plain MAT file, no such variable (the variables and their shapes listed), a
         matrix without ``column``, a column index beyond the variable's shape (naming
         variable, shape and index).
+    WorkflowError
+        A regex that does not finish matching within
+        :data:`~debist.ingest.patterns.MATCH_SECONDS` (naming the file, key and pattern).
     """
     key = "time" if spec.role == "t" else spec.role
     if spec.var is not None:
@@ -240,8 +244,8 @@ def select_channel(
                 channel=spec.name,
             )
         return hits[0]
-    pattern = re.compile(str(spec.regex))
-    hits = [c for c in candidates if pattern.search(c.name)]
+    where = f"file '{log.path}': `{key}`"
+    hits = [candidates[i] for i in search_names(str(spec.regex), names, where)]
     if len(hits) != 1:
         found = (
             f"matches {len(hits)} {what}s: {_listing([c.name for c in hits])}"

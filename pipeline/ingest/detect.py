@@ -26,10 +26,10 @@ The MathWorks, "MAT-File Format", MATLAB documentation (version 7, 2019), sectio
 
 from __future__ import annotations
 
-import gzip
 from pathlib import Path
 
 from debist.errors import RigLogError
+from debist.ingest.compressed import open_gzip
 
 __all__ = ["HDF5_SIGNATURE", "detect_format", "sniff_format"]
 
@@ -73,8 +73,12 @@ def open_binary(path: Path):
     ------
     OSError
         If the file cannot be opened.
+    RigLogError
+        While reading a gzip stream that is cut short, corrupt or decompresses to more
+        than :func:`~debist.ingest.compressed.decompressed_limit`
+        (:class:`~debist.ingest.compressed.GzipLog`).
     """
-    return gzip.open(path, "rb") if is_gzip(path) else open(path, "rb")
+    return open_gzip(path) if is_gzip(path) else open(path, "rb")
 
 
 def is_gzip(path: Path) -> bool:
@@ -173,7 +177,8 @@ def detect_format(path: Path, declared: str = "auto") -> str:
     Raises
     ------
     RigLogError
-        Naming the file: missing, empty, unreadable, a truncated MAT header, content that
+        Naming the file: missing, empty, unreadable, a truncated MAT header or gzip
+        stream, content that
         contradicts the declared format, or an unrecognised binary format.
     """
     try:
@@ -183,8 +188,6 @@ def detect_format(path: Path, declared: str = "auto") -> str:
         raise RigLogError("no such file", path=path) from None
     except OSError as exc:
         raise RigLogError(f"cannot open ({exc.strerror or exc})", path=path) from exc
-    except EOFError as exc:
-        raise RigLogError(f"truncated gzip stream ({exc})", path=path) from exc
     if not head:
         raise RigLogError("empty file (0 bytes)", path=path)
     try:

@@ -61,6 +61,7 @@ from pydantic import (
 )
 
 from debist.errors import WorkflowError
+from debist.ingest.patterns import check_pattern
 from debist.ingest.units import (
     EXAMPLES,
     canonical_unit,
@@ -152,10 +153,9 @@ def _si_unit(unit: str) -> str:
 
 def _regex(pattern: str) -> str:
     try:
-        re.compile(pattern)
-    except re.error as exc:
+        return check_pattern(pattern)
+    except ValueError as exc:
         raise ConfigValueError(None, f"a valid regular expression ({exc})") from None
-    return pattern
 
 
 def _nonzero(value: float) -> float:

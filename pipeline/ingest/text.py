@@ -369,9 +369,10 @@ def check_tail(path: Path, delimiter: str, header: bool, decimal: str = ".") -> 
     RigLogError
         Naming the file and the line number, if the last non-blank line has fewer
         fields than the lines before it, or (without a final newline) its last field
-        looks cut by rules a-e of the module notes.
-    OSError, EOFError
-        If the file cannot be read or its gzip stream is cut.
+        looks cut by rules a-e of the module notes; a gzip stream cut short or corrupt
+        (:class:`~debist.ingest.compressed.GzipLog`).
+    OSError
+        If the file cannot be read.
 
     References
     ----------
@@ -462,7 +463,8 @@ def read_text(
     Raises
     ------
     RigLogError
-        No data line, a truncated last line (:func:`check_tail`, naming the line), a header
+        No data line, a truncated last line (:func:`check_tail`, naming the line), a gzip
+        stream cut short or corrupt (:class:`~debist.ingest.compressed.GzipLog`), a header
         that names a channel twice, a decimal comma as delimiter, a column of numbers
         written with the other decimal separator (naming the column, sample and value), or
         pandas cannot parse the file (e.g. a row with too many fields); the pandas message
@@ -491,20 +493,22 @@ def read_text(
     has_header = detect_header(lines[0], sep, dec) if header is None else header
     try:
         check_tail(path, sep, has_header, dec)
-    except (OSError, EOFError) as exc:
+    except OSError as exc:
         raise RigLogError(f"cannot read ({type(exc).__name__}: {exc})", path=path) from exc
     try:
-        frame = pd.read_csv(
-            path,
-            sep=r"\s+" if sep == "whitespace" else sep,
-            decimal=dec,
-            header=0 if has_header else None,
-            engine="c",
-            encoding="utf-8-sig",
-            compression="gzip" if is_gzip(path) else None,
-            skip_blank_lines=True,
-            skipinitialspace=sep != "whitespace",
-        )
+        with open_binary(path) as fh:
+            frame = pd.read_csv(
+                fh,
+                sep=r"\s+" if sep == "whitespace" else sep,
+                decimal=dec,
+                header=0 if has_header else None,
+                engine="c",
+                encoding="utf-8-sig",
+                skip_blank_lines=True,
+                skipinitialspace=sep != "whitespace",
+            )
+    except RigLogError:
+        raise
     except (ValueError, OSError, EOFError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         raise RigLogError(
             f"cannot parse as delimited text (delimiter {sep!r}, decimal {dec!r}): "

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import lazy_loader as lazy
 
+from debist.errors import recording_warnings
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec
@@ -86,15 +87,21 @@ def execute(ctx: StageInputs) -> StageOutput:
     Returns
     -------
     StageOutput
-        ``<table>.parquet`` per table; summary: samples per table.
+        ``<table>.parquet`` per table; summary: samples per table and, when there were
+        any, the messages of the warnings ingest gave (a stroke implausible for the
+        declared unit, a sensor's default range, a unit the file declares otherwise).
 
     Raises
     ------
     RigLogError, WorkflowError
         As :func:`run_ingest`.
     """
-    tables = run_ingest(ctx.wf.datasets, ctx.wf.path.parent)
-    return StageOutput(
-        {f"{n}.parquet": f for n, f in tables.items()},
-        {"datasets": {n: len(f) for n, f in tables.items()}},
-    )
+    with recording_warnings() as notes:
+        tables = run_ingest(ctx.wf.datasets, ctx.wf.path.parent)
+    summary: dict = {"datasets": {n: len(f) for n, f in tables.items()}}
+    if notes:  # the sources as recorded (relative), so that clones give the same bytes
+        for ds in ctx.wf.datasets:
+            recorded = _recorded_source(ds, ctx.wf.path.parent)
+            notes = [n.replace(f"'{ds.source}'", f"'{recorded}'") for n in notes]
+        summary["warnings"] = notes
+    return StageOutput({f"{n}.parquet": f for n, f in tables.items()}, summary)

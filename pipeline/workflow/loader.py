@@ -43,9 +43,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from debist.errors import WorkflowError
+from debist.arguments import check_path
+from debist.errors import ArgumentError, WorkflowError
 from debist.names import check_file_name
-from debist.workflow.overrides import override_folder, toml_value
+from debist.workflow import tomltext
+from debist.workflow.overrides import override_folder, overrides_table
 from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow
 
 __all__ = ["DATALESS", "ROLES", "SECTIONS", "DatasetSpec", "Workflow", "load_workflow"]
@@ -141,9 +143,25 @@ def _read(path: Path) -> dict[str, Any]:
     except OSError as exc:
         raise WorkflowError(f"{where} cannot be read: {exc.strerror or exc}") from None
     try:
-        return tomllib.loads(text)
+        return tomltext.loads(text, where)
     except tomllib.TOMLDecodeError as exc:
         raise WorkflowError(f"{where} is not valid TOML: {exc}") from None
+
+
+def _items(overrides: object) -> list[str]:
+    """Return the ``KEY=VALUE`` strings of a sequence of overrides, each checked."""
+    if isinstance(overrides, str | bytes) or not isinstance(overrides, Sequence):
+        raise ArgumentError(
+            f"overrides: expected a mapping {{'identify.M': 8}} or a list of 'KEY=VALUE' "
+            f"strings, got {type(overrides).__name__} {overrides!r}"
+        )
+    for item in overrides:
+        if not isinstance(item, str):
+            raise ArgumentError(
+                f"overrides: expected 'KEY=VALUE' strings such as 'identify.M=8', got "
+                f"{type(item).__name__} {item!r}"
+            )
+    return list(overrides)
 
 
 def _output_dir(path: Path, what: str) -> Path:
@@ -152,7 +170,7 @@ def _output_dir(path: Path, what: str) -> Path:
     for parent in (out, *out.parents):
         if os.path.lexists(parent):
             if not parent.is_dir():
-                raise WorkflowError(
+                raise ArgumentError(
                     f"{what} '{out}' cannot be a folder: '{parent}' is a file, not a directory"
                 )
             break
@@ -179,7 +197,8 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     Raises
     ------
     WorkflowError
-        If an item has no ``=`` or its key is not a TOML key.
+        If an item has no ``=``, its key is not a TOML key or its value nests arrays or
+        inline tables deeper than :data:`debist.workflow.tomltext.MAX_NESTING`.
 
     Examples
     --------
@@ -192,7 +211,7 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
         if not sep or not key.strip():
             raise WorkflowError(f"--set {item!r}: expected KEY=VALUE, e.g. identify.M=8")
         try:
-            table = tomllib.loads(f"{key.strip()} = {value.strip()}")
+            table = tomltext.loads(f"{key.strip()} = {value.strip()}", "--set")
         except tomllib.TOMLDecodeError:
             try:
                 table = tomllib.loads(f"{key.strip()} = {json.dumps(value.strip())}")
@@ -229,9 +248,10 @@ def load_workflow(
         Overrides ``[workflow] output_dir``.
     overrides : mapping or sequence of str, optional
         Settings that replace the file's, checked by the same schema: ``{"identify.M": 8}``
-        (dotted keys), nested tables, or ``["identify.M=8"]`` (:func:`parse_overrides`).
-        The stages see the merged workflow, so their manifests record the values used; the
-        run goes to its own folder beside the output folder
+        (dotted keys), nested mappings meaning the same (``{"identify": {"M": 8}}``,
+        :func:`debist.workflow.overrides.overrides_table`), or ``["identify.M=8"]``
+        (:func:`parse_overrides`). The stages see the merged workflow, so their manifests
+        record the values used; the run goes to its own folder beside the output folder
         (:func:`debist.workflow.overrides.override_folder`).
 
     Returns
@@ -241,21 +261,24 @@ def load_workflow(
     Raises
     ------
     WorkflowError
-        In one line: the file is missing, a directory, not UTF-8, not valid TOML or a
-        symlink loop; a section or key is unknown or a value invalid
+        In one line: the file is missing, a directory, not UTF-8, not valid TOML, nested
+        deeper than :data:`debist.workflow.tomltext.MAX_NESTING` or a symlink loop; a
+        section or key is unknown or a value invalid
         (:func:`debist.workflow.schema.check_workflow`: ``[section] key: expected ..., got ...``);
         a source file is missing, a directory or a symlink loop; the output folder is a
-        file (or lies inside one) or a symlink loop.
+        file (or lies inside one) or a symlink loop; ``path`` or ``output_dir`` not a path;
+        an override that is not a TOML key and value (``None``: TOML has no null).
     """
+    check_path(path, "workflow")
+    check_path(output_dir, "output_dir", optional=True)
     path = _resolve(Path(path), "workflow file")
     raw = _read(path)
     changed: dict[str, Any] = {}
-    if overrides:
-        if isinstance(overrides, Mapping):
-            items = [f"{k}={toml_value(v)}" for k, v in overrides.items()]
-        else:
-            items = list(overrides)
-        changed = parse_overrides(items)
+    if isinstance(overrides, Mapping):
+        changed = overrides_table(overrides)
+    elif overrides:
+        changed = parse_overrides(_items(overrides))
+    if changed:
         _merge(raw, copy.deepcopy(changed))
     try:
         checked = check_workflow(raw)
