@@ -829,6 +829,17 @@ def report(
     console.print(f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}")
 
 
+@app.command(cls=_Command)
+def schema() -> None:
+    """Print the JSON Schema of a workflow file: every section and key, its type and default.
+
+    For editors that check TOML against a schema, and for the workflow-key reference.
+    """
+    from debist import api
+
+    typer.echo(json.dumps(api.workflow_schema(), indent=2))
+
+
 class ExportFormat(StrEnum):
     """Formats of ``debist export``: C99 header and source, a MATLAB function, a NumPy module."""
 
