@@ -54,6 +54,7 @@ def test_every_shipped_workflow_is_valid_under_the_schema(path, validator):
          ["datasets", "a", "q"], "unti"),
         ({"physics": {}, "identify": {"auto": {"bootstrap": [10]}}}, ["identify", "auto"],
          "bootstrap"),
+        ({"physics": {}, "identify": {"prior": 1.0}}, ["identify"], "prior"),
         ({"physiks": {}}, [], "physiks"),
     ],
 )  # fmt: skip
@@ -72,7 +73,8 @@ def test_every_key_of_the_config_classes_is_in_the_schema_with_a_description():
     defs = schema["$defs"]
     assert list(schema["properties"]) == list(SECTIONS)
     identify = defs["IdentifyConfig"]["properties"]
-    assert set(identify) == {f.name for f in dataclasses.fields(IdentifyConfig)}
+    keys = {f.name for f in dataclasses.fields(IdentifyConfig)} - set(IdentifyConfig.INTERNAL)
+    assert set(identify) == keys and "prior" not in identify  # set by the stage, not a key
     assert set(OPTION_KEYS) <= set(defs["IngestSpec"]["properties"])  # "slice" by its key
     assert "sample_slice" not in defs["IngestSpec"]["properties"]
     assert set(defs["RigParams"]["properties"]) == {

@@ -46,7 +46,8 @@ __all__ = ["SCHEMA_ID", "workflow_schema"]
 
 #: The ``$schema`` of the returned document.
 SCHEMA_ID = "https://json-schema.org/draft/2020-12/schema"
-#: Fields of the config classes that no workflow key sets (the stages fill them in).
+#: Fields of the config classes that no workflow key sets (the stages fill them in), besides
+#: those a class lists in its ``INTERNAL``.
 _INTERNAL = {"ChannelSpec": ("role",), "IngestSpec": ("channels",), "RigParams": ("prototype",)}
 #: [identify] keys that [identify.auto] does not vary (see debist.identify.config.check_grid).
 _NOT_AUTO = ("prior", "bootstrap", "auto", "refine")
@@ -98,7 +99,7 @@ def _document(out: dict[str, Any], cls: type) -> dict[str, Any]:
         text = params.get(aliases.get(key, key), "")
         rule = prop.get("description")  # the type in words, as the error messages say it
         prop["description"] = f"{text} Expected: {rule}." if text and rule else text or rule
-    for name in _INTERNAL.get(cls.__name__, ()):
+    for name in (*getattr(cls, "INTERNAL", ()), *_INTERNAL.get(cls.__name__, ())):
         out.get("properties", {}).pop(name, None)
         if name in out.get("required", ()):
             out["required"].remove(name)
@@ -123,6 +124,10 @@ def _ingest(defs: dict[str, Any]) -> None:
         + defs["ChannelSpec"]["description"]
     )
     defs["IngestSpec"]["additionalProperties"] = _ref("ChannelSpec")
+    defs["IngestSpec"]["description"] = (
+        "How every data set's rig log is read (a data set's own keys replace these): the "
+        "format and its options, and one channel table per column (`q`, `v1` ... `vN`)."
+    )
     dataset = copy.deepcopy(defs["IngestSpec"])
     dataset["properties"] = {**defs["DatasetEntry"]["properties"], **dataset["properties"]}
     dataset["title"] = "Dataset"
