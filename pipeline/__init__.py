@@ -47,6 +47,7 @@ __all__ = [
     "run_blocker",
     "status",
     "verify",
+    "workflow_schema",
     "workflow_stages",
     "zoo",
     "zoo_report",

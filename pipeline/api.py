@@ -79,6 +79,7 @@ __all__ = [
     "run_blocker",
     "status",
     "verify",
+    "workflow_schema",
     "workflow_stages",
     "zoo",
     "zoo_report",
@@ -394,6 +395,30 @@ def diff(
         )
     run_b = check_path(run_b, "run_b")
     return {"runs": [str(run_a), str(run_b)], **diff_runs(run_a, run_b)}
+
+
+def workflow_schema() -> dict[str, Any]:
+    """Return the JSON Schema of a workflow file, as ``debist schema`` prints it.
+
+    Returns
+    -------
+    dict
+        A JSON Schema (draft 2020-12): every section, sub-table and key a workflow may
+        have, with its type, range, default and description (see
+        :func:`debist.workflow.jsonschema.workflow_schema`).
+
+    References
+    ----------
+    JSON Schema 2020-12 (https://json-schema.org/draft/2020-12/json-schema-core).
+
+    Examples
+    --------
+    >>> workflow_schema()["properties"]["identify"]
+    {'$ref': '#/$defs/IdentifyConfig'}
+    """
+    from debist.workflow.jsonschema import workflow_schema as schema
+
+    return schema()
 
 
 @dataclass(frozen=True)

@@ -871,9 +871,9 @@ def report(
 ) -> None:
     """Run the report stage: one self-contained HTML page of the run (needs a [report] section).
 
-    Writes <output_dir>/report/report.html (tables, figures, provenance) from the artifacts of
-    the workflow's stages, which must be up to date; `debist run` makes it as its last step,
-    and `debist verify` checks it like every artifact.
+    Writes report/report.html in the output folder (tables, figures, provenance) from the
+    artifacts of the workflow's stages, which must be up to date; `debist run` makes it as its
+    last step, and `debist verify` checks it like every artifact.
     """
     from debist import api
     from debist.report.html import REPORT_FILE
@@ -887,6 +887,17 @@ def report(
             )
     _run(workflow, ["report"], force, out, wait, sets=sets)
     console.print(f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}")
+
+
+@app.command(cls=_Command)
+def schema() -> None:
+    """Print the JSON Schema of a workflow file: every section and key, its type and default.
+
+    For editors that check TOML against a schema, and for the workflow-key reference.
+    """
+    from debist import api
+
+    typer.echo(json.dumps(api.workflow_schema(), indent=2))
 
 
 class ExportFormat(StrEnum):
@@ -911,7 +922,9 @@ def export(
     ] = ExportFormat.c,
     dest: Annotated[
         Path | None,
-        typer.Option("--dest", help="Folder for the files (default: <output_dir>/export)."),
+        typer.Option(
+            "--dest", help="Folder for the files (default: export/ in the output folder)."
+        ),
     ] = None,
     force: Annotated[
         bool, typer.Option("--force", help="Replace existing files of the same names.")

@@ -17,7 +17,7 @@ curve comes out scaled by about the same lambda. Multiplying the mass and every 
 invariant under it) and puts the curves back on the physical scale: the effective mass at the
 wells' natural frequency is then m_q. On the virtual rig's full plant (seed-1 calibration fleet)
 lambda is 0.74-0.88 and the identified k* and g_i at the wells move from 0.64-0.90 of the truth to
-0.82-1.12 (0.88-1.19 on the independent seed-2 fleet); see the README.
+0.82-1.12 (0.88-1.19 on the independent seed-2 fleet); see docs/explanation/trust.md.
 
 References
 ----------

@@ -195,7 +195,7 @@ def render(name: str, datasets: Sequence[InitDataSet], sample_time: float | None
         "# the estimation data set, the others are validation data sets (free runs, never fitted).",
         "# Paths are relative to this file. Check the channel mapping in [ingest]: the comment",
         "# beside each channel says what the guess rests on. Every setting not written here is",
-        "# debist's default (README, 'Workflow files'). Run it with: debist run <this file>",
+        "# debist's default (docs/reference/workflow-keys.md). Run it with: debist run <this file>",
         "",
         "[workflow]",
         _line(f"name = {toml_value(name)}"),

@@ -1,4 +1,4 @@
-"""The README's Python section, run as the script it is, from an empty folder."""
+"""The Python API page's script (docs/how-to/python-api.md), run as it is, from an empty folder."""
 
 from __future__ import annotations
 
@@ -12,24 +12,29 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def readme_script() -> str:
-    """The first Python block under the README's "Python API" heading."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("## Python API", 1)[1]
+PAGE = ROOT / "docs" / "how-to" / "python-api.md"
+
+
+def page_script() -> str:
+    """The first Python block of the Python API page, under its "Python API" heading."""
+    text = PAGE.read_text(encoding="utf-8")
+    section = text.split("# Python API", 1)[1]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-def test_the_readme_names_only_what_the_api_exports():
+def test_the_page_names_only_what_the_api_exports():
     import debist
 
-    called = set(re.findall(r"debist\.([a-z_]+)\(", readme_script()))
+    script = page_script()
+    called = set(re.findall(r"debist\.([a-z_]+)\(", script))
     assert called and called <= set(debist.__all__)
+    assert 'if __name__ == "__main__":' in script  # Dask's workers re-import it
 
 
 @pytest.mark.slow
-def test_the_readme_python_section_runs(tmp_path):
+def test_the_page_script_runs(tmp_path):
     """Nothing of the checkout is copied: the script gets its workflow from the package."""
-    (tmp_path / "example.py").write_text(readme_script(), encoding="utf-8")
+    (tmp_path / "example.py").write_text(page_script(), encoding="utf-8")
     run = subprocess.run(
         [sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, timeout=1200
     )
