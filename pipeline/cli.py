@@ -116,8 +116,9 @@ SetOpt = Annotated[
         metavar="KEY=VALUE",
         help="Change one setting of the workflow for this command, e.g. identify.M=8 "
         "(repeatable; checked like the file; the manifests record the values used). The run "
-        "goes to its own folder beside the output folder, <output_dir>.set-<8 hex of the "
-        "settings' sha256>; the workflow's own run is never touched, and the same --set "
+        "goes to its own folder beside the output folder, named after it plus '.set-' and 8 "
+        "hex digits of the settings' sha256; the workflow's own run is never touched, and "
+        "the same --set "
         "finds that folder again.",
     ),
 ]
@@ -541,8 +542,8 @@ def run(
     --stages, or --from and --until, run a part of the workflow (no digest then); a stage
     whose upstream stage outside the part is missing or stale is refused (exit 2). --set
     changes a setting for this run only: the run goes to its own folder beside the output
-    folder (<output_dir>.set-<8 hex>), which status, verify, report, export and diff find
-    with the same --set; the workflow's own run is not touched.
+    folder (its name plus .set- and 8 hex digits), which status, verify, report, export and
+    diff find with the same --set; the workflow's own run is not touched.
     """
     select = {"stages": stages, "start": start, "until": until}
     _run(workflow, None, force, out, wait, select, sets)
