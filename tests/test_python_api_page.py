@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from debist.workflow.overrides import override_folder
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -49,4 +51,8 @@ def test_the_page_script_runs(tmp_path):
     assert len(list((tmp_path / "fleet-api").glob("*.toml"))) == 3
     shipped = tmp_path / "debist-example" / "workflows" / "paper-experiment.toml"
     assert shipped.read_bytes() == (ROOT / "workflows" / "paper-experiment.toml").read_bytes()
-    assert (tmp_path / "debist-example" / "runs" / "paper-experiment" / "validate").is_dir()
+    # the script's run has overrides: its own folder beside the workflow's output folder
+    runs = tmp_path / "debist-example" / "runs"
+    own = override_folder(runs / "paper-experiment", {"validate": {"predict_steps": 20}})
+    assert (own / "validate").is_dir()
+    assert not (runs / "paper-experiment").exists()  # the workflow's own run was never made
