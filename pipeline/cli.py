@@ -417,7 +417,10 @@ def _report(wf, manifests, ran: set[str]) -> None:
     if "identify" in manifests:
         console.print(report.identify_table(manifests["identify"].summary))
         design = report.design_table(manifests["identify"].summary)
-        if design is not None:
+        if design is not None and console.width < report.DESIGN_TABLE_WIDTH:
+            for line in report.design_lines(manifests["identify"].summary):
+                console.print(line, markup=False)
+        elif design is not None:
             console.print(design)
         for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")

@@ -216,3 +216,26 @@ def test_a_thinned_trace_keeps_every_columns_extremes_and_a_short_one_is_unchang
     tb, lo, hi = thin_band(t, y - 1.0, y + 1.0, bins=1000)
     assert tb.size == 1000 and np.all(lo <= hi)
     assert hi[137] == y[column].max() + 1.0 and lo[137] == y[column].min() - 1.0
+
+
+def test_the_design_table_reads_as_lines_in_a_narrow_terminal():
+    from debist.report.tables import design_lines
+
+    well = {"model": "rbf", "level": 0, "static_stable": True, "stable": True, "identified": True,
+            "q": -0.0095, "v1": 0.0, "v2": 0.0, "d": 0.33, "k": 10.6, "k_lo": 8.4, "k_hi": 12.9,
+            "f_n": 2.3, "zeta": 0.22, "barrier": 1.5e-4, "d_identified": False}  # fmt: skip
+    summary = {
+        "units": {"q": "m", "v1": "V", "v2": "V", "per_unit_mass": False},
+        "design": {"verdict": "stable", "reason": "1 visited well(s)", "equilibria": [well],
+                   "switching": [{"model": "rbf", "input": 1, "v_switch": 1282.0,
+                                  "identified": True}]},
+    }  # fmt: skip
+    lines = design_lines(summary)
+    assert lines[0].startswith("Equilibria and switching")
+    assert lines[1] == (
+        "  rbf well at q* = -0.0095 m (inputs 0, 0): d(q*) 0.33 N s/m (not identified), "
+        "k* 10.6 N/m (8.4-12.9), f_n 2.3 Hz, zeta 0.22 (not identified), barrier 0.00015 J"
+    )
+    assert lines[2] == "  rbf switching voltage, input 1: 1282 V"
+    assert lines[-1].startswith("identified model: stable")
+    assert design_lines({}) == []

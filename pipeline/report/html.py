@@ -227,7 +227,9 @@ f_n = sqrt(k*/m_q)/(2 pi); {{ design.k_band }}.</p>
 
 <h2 id="s11">{{ sections[10] }}</h2>
 {% if digest %}
-<p>Digest of the stages shown: <code>{{ digest }}</code></p>
+<p>Digest of the stages shown: <code>{{ digest }}</code>. It differs from the run digest
+that <code>debist run</code> printed, and must: the run digest also covers this page's own
+manifest, which a page cannot contain.</p>
 {% else %}<p>No digest: not every stage shown has run.</p>{% endif %}
 {% if verify %}<p>Verify this page and the artifacts it shows with: <code>{{ verify }}</code>
 (in the workflow's folder; add <code>--digest</code> with the run digest that

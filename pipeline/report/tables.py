@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from rich.markup import escape
@@ -754,7 +754,9 @@ def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, s
     ]  # fmt: skip
 
 
-def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str]:
+def small_signal_cells(
+    row: dict[str, Any], fmt: Callable[..., str], units: Sequence[str] | None = None
+) -> list[str]:
     """Cells ``d``, ``k*``, ``f_n``, ``zeta``, ``barrier`` of a design-table row.
 
     Empty but at a well (``static_stable``); ``k*`` and ``f_n`` carry their 95 % band in
@@ -768,6 +770,9 @@ def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str
         One equilibria record of the identify summary's ``design``.
     fmt : callable
         Number formatter ``fmt(value, digits) -> str``.
+    units : sequence of str, length 5, optional
+        A unit to write after each value (before its band); default none (a table header
+        carries them).
 
     Returns
     -------
@@ -776,8 +781,10 @@ def small_signal_cells(row: dict[str, Any], fmt: Callable[..., str]) -> list[str
     if not row.get("static_stable"):
         return [""] * 5
     cells = []
-    for key in ("d", "k", "f_n", "zeta", "barrier"):
+    for i, key in enumerate(("d", "k", "f_n", "zeta", "barrier")):
         text = fmt(row.get(key))
+        if units and units[i] and row.get(key) is not None:
+            text += f" {units[i]}"
         lo, hi = _num_or_nan(row.get(f"{key}_lo")), _num_or_nan(row.get(f"{key}_hi"))
         if math.isfinite(lo) and math.isfinite(hi):
             text += f" ({fmt(lo, 3)}-{fmt(hi, 3)})"
@@ -880,6 +887,56 @@ def switching_note(row: dict[str, Any]) -> str:
         i = row.get("input")
         return f" (not identified: g{i} or the restoring force between the well and the fold)"
     return ""
+
+
+#: Console width [characters] below which the design table is printed as lines
+#: (:func:`design_lines`): its nine columns need about 120 to stay readable.
+DESIGN_TABLE_WIDTH = 120
+
+
+def design_lines(summary: dict[str, Any]) -> list[str]:
+    """Word the design table of :func:`design_table` one line per row, for a narrow terminal.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``design`` entry).
+
+    Returns
+    -------
+    list of str
+        A title line, one line per equilibrium (``model kind at q* = ... [unit] (inputs ...):
+        d(q*) ..., k* ..., f_n ..., zeta ..., barrier ...``) and per switching level, and the
+        caption; empty without design numbers.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 3.3, Eq. 37.
+    """
+    table = design_table(summary)
+    if table is None:
+        return []
+    units = summary_units(summary)
+    names = ("d(q*)", "k*", "f_n", "zeta", "barrier")
+    unit = (units["damping"], units["stiffness"], "Hz", "", units["barrier"])
+    lines = [str(table.title) + ":"]
+    for r in summary["design"]["equilibria"]:
+        if r["level"] != 0 and not r["static_stable"]:
+            continue
+        volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
+        cells = small_signal_cells(r, _fmt, unit)
+        parts = [f"{n} {c}" for n, c in zip(names, cells, strict=True) if c and c != "-"]
+        lines.append(
+            f"  {r['model']} {equilibrium_kind(r)} at q* = {_fmt(r['q'])} {units['q']} "
+            f"(inputs {volts})" + (": " + ", ".join(parts) if parts else "")
+        )
+    for r in summary["design"]["switching"]:
+        u = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
+        text = f"{_fmt(r['v_switch'], 4)} {u}" if r["v_switch"] is not None else r["reason"]
+        word = switching_word(units, r["input"])
+        lines.append(f"  {r['model']} {word}, input {r['input']}: {text}{switching_note(r)}")
+    lines.append(str(table.caption))
+    return lines
 
 
 def design_table(summary: dict[str, Any]) -> Table | None:
