@@ -339,7 +339,9 @@ def free_run_figure(
             fontsize=9,
         )
     full.set_title(f"{name}: measured and free-run q", fontsize=10)
-    full.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    # under the axes, across the figure: beside them a long label took 40 % of their width
+    handles, labels = full.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncols=3, frameon=False)
     for ax in (full, zoom):
         ax.set_ylabel(f"q [{label}]", fontsize=8)
     err.set_ylabel(f"error [{label}]", fontsize=8)

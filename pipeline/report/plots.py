@@ -79,7 +79,8 @@ def free_run_figure(
             lo, hi = (factor * sim[c].to_numpy() for c in REPLICATE_BAND)
             replicate_band(ax, *thin_band(t[s], lo[s], hi[s]), row, "tab:red")
         ax.set_ylabel(f"q [{unit}]")
-    ax1.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False)
+    handles, labels = ax1.get_legend_handles_labels()  # under the axes: full width for them
+    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8, frameon=False)
     ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)
     ax_zoom.set_title(f"zoom: t = {t[mid][0]:.3g} ... {t[mid][-1]:.3g} s", fontsize=9)
     ax1.set_title(
