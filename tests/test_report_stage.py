@@ -415,7 +415,7 @@ def test_the_replicate_band_stays_with_its_model_and_says_what_it_held():
     np.testing.assert_array_equal(runs["rbf"]["q_sim_hi"], t + 1e-3)
     rows = {"rbf": {"replicates": 40, "replicates_hold_q": 0.625}}
     fig = free_run_figure(frame[["t", "q"]], runs, (10, 30), "val", "m", {"rbf": 0.01}, rows)
-    labels = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
+    labels = [text.get_text() for text in fig.legends[0].get_texts()]
     band = "40 bootstrap replicates, middle 95 % (estimation only; holds 62 % of q here)"
     assert band in labels and not any(lab.startswith(("lo", "hi")) for lab in labels)
     shaded = [c for c in fig.axes[0].collections if c.get_label() == band]
