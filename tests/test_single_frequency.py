@@ -6,7 +6,7 @@ import pytest
 import tomli_w
 
 from debist import api
-from debist.identify.excitation import _lines, _periodic, under_excitation
+from debist.identify.spectrum import channel_lines, is_periodic, under_excitation
 from debist.report.tables import verdict
 from debist.rig.profiles import make_profile
 from debist.rig.zoo import draw_member, sub_threshold
@@ -18,7 +18,7 @@ T = np.arange(0.0, 20.0, 1.0 / FS)
 def _spectrum(record, **channels):
     return pd.DataFrame(
         [
-            {"record": record, "channel": k, **_lines(x, FS, None, 0.95, 6)}
+            {"record": record, "channel": k, **channel_lines(x, FS, None, 0.95, 6)}
             for k, x in channels.items()
         ]
     )
@@ -31,11 +31,11 @@ def test_a_tone_through_a_nonlinearity_is_periodic_and_noise_is_not():
     assert rows["harmonic"].all()
     assert np.allclose(rows["fundamental"], 0.5, atol=0.1)
     assert not rows.loc[rows.channel == "q", "single_line"].item()  # more than one line
-    assert _periodic(rows)
+    assert is_periodic(rows)
     noise = np.random.default_rng(3).normal(size=T.size)
-    assert not _periodic(_spectrum("b", q=q, h1=noise))  # a broad-band input
+    assert not is_periodic(_spectrum("b", q=q, h1=noise))  # a broad-band input
     other = 0.5 * (1.0 - np.cos(2.0 * np.pi * 1.3 * T))
-    assert not _periodic(_spectrum("c", q=q, h1=tone**2, h2=other**2))  # two fundamentals
+    assert not is_periodic(_spectrum("c", q=q, h1=tone**2, h2=other**2))  # two fundamentals
 
 
 def test_the_sine_profile_switches_twice_a_period_or_stays_below_v_sub():

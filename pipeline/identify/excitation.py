@@ -42,13 +42,18 @@ import numpy as np
 
 from debist import metrics
 from debist.errors import WorkflowError
+from debist.identify.spectrum import (
+    is_periodic,
+    periodic_warning,
+    record_spectra,
+    under_excitation,
+)
 from debist.model.basis import RBFBasis, gaussian
 from debist.model.terms import RBF_TERMS
 from debist.model.termtable import input_map
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
-signal = lazy.load("scipy.signal", suppress_warning=True)
 
 if TYPE_CHECKING:  # the fit module may import this one
     from debist.identify.fit import Record
@@ -61,7 +66,7 @@ __all__ = [
     "check_excitation",
     "input_active",
     "quasi_static",
-    "under_excitation",
+    "under_excitation",  # (from debist.identify.spectrum)
 ]
 
 #: Robust standard deviation of a zero-mean normal sample from the median of its magnitude.
@@ -73,14 +78,6 @@ FAST_FACTOR = 3.0
 OFF_FRACTION = 0.03
 #: ... and by more than this many robust standard deviations of the off level's noise.
 NOISE_FACTOR = 6.0
-#: A line is resolved if its band is at most this fraction of its frequency (else it is
-#: the low-frequency end of a broad spectrum, e.g. the slow switching between the wells).
-_LINE_RESOLVED = 0.5
-#: Shortest record for a spectrum [samples].
-_MIN_SPECTRUM = 32
-#: An input whose h(v_i) varies by less than this share of the most varied input's variance
-#: is idle (its monitor's noise only) and does not count in the periodicity check.
-_IDLE_INPUT = 1e-6
 
 
 @dataclass(frozen=True)
@@ -343,7 +340,7 @@ def check_excitation(
     width = float(bin_width) if bin_width is not None else sigma / 2.0
     transient = _transient_intervals(q, slow, width, sigma, min_samples, quasi_static_fraction)
 
-    spectra = _spectra(records, input_map_kind, nperseg, power_fraction, line_bins)
+    spectra = record_spectra(records, input_map_kind, nperseg, power_fraction, line_bins)
     single = [
         str(row.record)
         for row in spectra.itertuples()
@@ -351,7 +348,7 @@ def check_excitation(
     ]
     periodic = [
         name for name in dict.fromkeys(spectra["record"].astype(str)) if name not in single
-        and _periodic(spectra[spectra["record"] == name])
+        and is_periodic(spectra[spectra["record"] == name])
     ]  # fmt: skip
 
     fmt = _Formatter(sigma, unit_scale, unit_name)
@@ -370,7 +367,7 @@ def check_excitation(
     warnings = _warnings(
         table, basis, rbf, n_inputs, hmax, transient, spectra, single, settings, fmt
     )
-    warnings += [_periodic_warning(spectra, name) for name in periodic]
+    warnings += [periodic_warning(spectra, name) for name in periodic]
     return ExcitationReport(
         table=table,
         spectra=spectra,
@@ -590,52 +587,6 @@ def _transient_intervals(q, slow, width, sigma, min_samples, fraction):
     ]
 
 
-def _default_nperseg(n: int) -> int:
-    return min(n, max(256, n // 2))
-
-
-def _lines(x, fs, nperseg, power_fraction, line_bins) -> dict:
-    """Spectral-line summary of one channel from its Welch PSD."""
-    x = np.asarray(x, dtype=float)
-    out = {
-        "variance": float(np.var(x)) if x.size else 0.0,
-        "f_peak": math.nan,
-        "n_lines": 0,
-        "bandwidth": math.nan,
-        "df": math.nan,
-        "single_line": False,
-        "fundamental": math.nan,
-        "harmonic": False,
-    }
-    if x.size < _MIN_SPECTRUM or not np.ptp(x) > 0:
-        return out
-    seg = min(x.size, int(nperseg) if nperseg else _default_nperseg(x.size))
-    f, p = signal.welch(x, fs=fs, window="hann", nperseg=seg, detrend="constant")
-    f, p = f[1:], p[1:]
-    out["df"] = fs / seg
-    total = float(p.sum())
-    if not total > 0:
-        return out
-    order = np.argsort(-p, kind="stable")
-    k = min(p.size, int(np.searchsorted(np.cumsum(p[order]), power_fraction * total)) + 1)
-    sel = np.sort(order[:k])
-    clusters = np.split(sel, np.flatnonzero(np.diff(sel) > 2) + 1)
-    strongest = next(c for c in clusters if order[0] in c)
-    out["f_peak"] = float(np.average(f[strongest], weights=p[strongest]))
-    out["n_lines"] = len(clusters)
-    out["bandwidth"] = float(k * fs / seg)
-    narrow = int(sel[-1] - sel[0] + 1) <= line_bins
-    resolved = out["bandwidth"] <= _LINE_RESOLVED * out["f_peak"]
-    out["single_line"] = len(clusters) == 1 and narrow and resolved
-    centres = np.array([np.average(f[c], weights=p[c]) for c in clusters])
-    f0 = float(centres.min())
-    whole = np.maximum(np.round(centres / f0), 1.0)
-    out["fundamental"] = f0
-    lines = all(int(c[-1] - c[0] + 1) <= line_bins for c in clusters)  # lines, not bands
-    out["harmonic"] = lines and bool(np.all(np.abs(centres - whole * f0) <= 1.5 * out["df"]))
-    return out
-
-
 def thin_data(report: ExcitationReport) -> bool:
     """Whether a record of the report is one spectral line or one repeated period.
 
@@ -654,81 +605,6 @@ def thin_data(report: ExcitationReport) -> bool:
     Ljung 1999, System Identification, 2nd ed., Sec. 13.2 (persistent excitation).
     """
     return bool(report.single_frequency or report.periodic)
-
-
-def under_excitation(summary: dict) -> str:
-    """Say why the estimation data cannot separate the model's terms, or ``""``.
-
-    Parameters
-    ----------
-    summary : dict
-        The ``excitation`` entry of the identify summary (:meth:`ExcitationReport.to_summary`).
-
-    Returns
-    -------
-    str
-        E.g. ``"one spectral line at 2 Hz in 'estimation'"`` or ``"one period (2 s) repeated
-        in 'estimation'"`` (records joined by ``"; "``); ``""`` when no record is a single
-        line or periodic.
-
-    References
-    ----------
-    Ljung 1999, System Identification, 2nd ed., Sec. 13.2 (persistent excitation).
-
-    Examples
-    --------
-    >>> under_excitation({"single_frequency": ["a"], "spectra": [
-    ...     {"record": "a", "channel": "q", "f_peak": 2.0, "fundamental": 2.0}]})
-    "one spectral line at 2 Hz in 'a'"
-    >>> under_excitation({})
-    ''
-    """
-    rows = {(r["record"], r["channel"]): r for r in summary.get("spectra", [])}
-    words = [
-        f"one spectral line at {rows[(n, 'q')]['f_peak']:.3g} Hz in '{n}'"
-        for n in summary.get("single_frequency", [])
-    ]
-    words += [
-        f"one period ({1 / rows[(n, 'q')]['fundamental']:.3g} s) repeated in '{n}'"
-        for n in summary.get("periodic", [])
-    ]
-    return "; ".join(words)
-
-
-def _periodic(rows: pd.DataFrame) -> bool:
-    """Whether one record's q and excited inputs are harmonics of one fundamental."""
-    inputs = rows[rows["channel"] != "q"]["variance"]
-    floor = _IDLE_INPUT * (float(inputs.max()) if len(inputs) else 0.0)
-    rows = rows[(rows["variance"] > 0) & ((rows["channel"] == "q") | (rows["variance"] > floor))]
-    f0 = rows["fundamental"].to_numpy(dtype=float)
-    if rows.empty or "q" not in set(rows["channel"]) or not np.all(np.isfinite(f0)):
-        return False
-    same = np.all(np.abs(f0 - f0.min()) <= 1.5 * rows["df"].to_numpy(dtype=float))
-    return bool(rows["harmonic"].all() and same)
-
-
-def _periodic_warning(spectra: pd.DataFrame, name: str) -> str:
-    """Word the warning for a periodic record (:func:`_periodic`)."""
-    rows = spectra[(spectra["record"] == name) & (spectra["channel"] == "q")]
-    f0 = float(rows["fundamental"].iloc[0])
-    return (
-        f"record '{name}': its inputs and q repeat one period ({1 / f0:.3g} s: all their power "
-        f"is in harmonics of {f0:.3g} Hz): the data show one periodic orbit, which cannot "
-        "separate stiffness from mass and damping; excite with a multisine, a chirp or "
-        "band-limited noise"
-    )
-
-
-def _spectra(records, kind, nperseg, power_fraction, line_bins) -> pd.DataFrame:
-    rows = []
-    for r in records:
-        fs = 1.0 / float(r.dt)
-        hv = input_map(np.asarray(r.v, dtype=float).reshape(len(r.q), -1), kind)
-        channels = {"q": r.q} | {f"h{j + 1}": hv[:, j] for j in range(hv.shape[1])}
-        for name, x in channels.items():
-            summary = _lines(x, fs, nperseg, power_fraction, line_bins)
-            rows.append({"record": r.name, "channel": name, **summary})
-    return pd.DataFrame(rows)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import numpy as np
 
 from debist.datasets import validation_datasets
 from debist.engine.progress import Stopwatch
-from debist.identify.excitation import under_excitation
+from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
 from debist.physics_stages import analytical_for
