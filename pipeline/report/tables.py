@@ -894,6 +894,34 @@ def switching_note(row: dict[str, Any]) -> str:
 DESIGN_TABLE_WIDTH = 120
 
 
+def _wells(design: dict[str, Any]):
+    """Yield the equilibria shown with their inputs as text (at held levels only wells)."""
+    for r in design["equilibria"]:
+        if r["level"] != 0 and not r["static_stable"]:
+            continue  # at held levels only the wells
+        yield r, ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
+
+
+def _switching_text(r: dict[str, Any], units: dict[str, Any]) -> str:
+    """Word a switching row: its level with unit (or why there is none) and its caveat."""
+    unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
+    text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]
+    return text + switching_note(r)
+
+
+def _design_heading(summary: dict[str, Any]) -> tuple[str, str]:
+    """Title and caption (plain text) of the design table."""
+    design = summary["design"]
+    analytical = any(r.get("model") == "analytical" for r in design["equilibria"])
+    title = "Equilibria and switching (identified" + (" beside analytical)" if analytical else ")")
+    caption = (
+        f"identified model: {design['verdict']} ({design['reason']}); at each well the "
+        "total damping d(q*), the tangent stiffness k* = dF/dq and f_n = sqrt(k*/m_q)/(2 pi); "
+        + stiffness_caption(summary)
+    )
+    return title, caption
+
+
 def design_lines(summary: dict[str, Any]) -> list[str]:
     """Word the design table of :func:`design_table` one line per row, for a narrow terminal.
 
@@ -913,17 +941,14 @@ def design_lines(summary: dict[str, Any]) -> list[str]:
     ----------
     Masoud & Maas 2025, Sec. 3.3, Eq. 37.
     """
-    table = design_table(summary)
-    if table is None:
+    if not summary.get("design"):
         return []
     units = summary_units(summary)
+    title, caption = _design_heading(summary)
     names = ("d(q*)", "k*", "f_n", "zeta", "barrier")
     unit = (units["damping"], units["stiffness"], "Hz", "", units["barrier"])
-    lines = [str(table.title) + ":"]
-    for r in summary["design"]["equilibria"]:
-        if r["level"] != 0 and not r["static_stable"]:
-            continue
-        volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
+    lines = [title + ":"]
+    for r, volts in _wells(summary["design"]):
         cells = small_signal_cells(r, _fmt, unit)
         parts = [f"{n} {c}" for n, c in zip(names, cells, strict=True) if c and c != "-"]
         lines.append(
@@ -931,12 +956,9 @@ def design_lines(summary: dict[str, Any]) -> list[str]:
             f"(inputs {volts})" + (": " + ", ".join(parts) if parts else "")
         )
     for r in summary["design"]["switching"]:
-        u = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
-        text = f"{_fmt(r['v_switch'], 4)} {u}" if r["v_switch"] is not None else r["reason"]
         word = switching_word(units, r["input"])
-        lines.append(f"  {r['model']} {word}, input {r['input']}: {text}{switching_note(r)}")
-    lines.append(str(table.caption))
-    return lines
+        lines.append(f"  {r['model']} {word}, input {r['input']}: {_switching_text(r, units)}")
+    return [*lines, caption]
 
 
 def design_table(summary: dict[str, Any]) -> Table | None:
@@ -961,16 +983,8 @@ def design_table(summary: dict[str, Any]) -> Table | None:
         return None
     units = summary_units(summary)
     inputs = sorted(set(units["inputs"])) or ["V"]
-    analytical = any(r.get("model") == "analytical" for r in design["equilibria"])
-    title = "Equilibria and switching (identified" + (" beside analytical)" if analytical else ")")
-    table = Table(
-        title=title,
-        caption=escape(
-            f"identified model: {design['verdict']} ({design['reason']}); at each well the "
-            "total damping d(q*), the tangent stiffness k* = dF/dq and f_n = sqrt(k*/m_q)/(2 pi); "
-            + stiffness_caption(summary)
-        ),
-    )
+    title, caption = _design_heading(summary)
+    table = Table(title=title, caption=escape(caption))
     cols = (
         "model",
         f"inputs [{', '.join(inputs)}]",
@@ -984,18 +998,12 @@ def design_table(summary: dict[str, Any]) -> Table | None:
     )
     for i, col in enumerate(cols):
         table.add_column(escape(col), justify="left" if i in (0, 3) else "right")
-    for r in design["equilibria"]:
-        if r["level"] != 0 and not r["static_stable"]:
-            continue  # at held levels only the wells
-        volts = ", ".join(_fmt(r[k], 4) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
+    for r, volts in _wells(design):
         small = small_signal_cells(r, _fmt)
         table.add_row(r["model"], volts, _fmt(r["q"]), equilibrium_kind(r), *small)
     for r in design["switching"]:
-        unit = dict(enumerate(units["inputs"], 1)).get(r["input"], "V")
-        text = f"{_fmt(r['v_switch'], 4)} {unit}" if r["v_switch"] is not None else r["reason"]
-        text = escape(text + switching_note(r))
         label = f"{switching_word(units, r['input'])}, input {r['input']}"
-        table.add_row(r["model"], label, "", text, *[""] * 5)
+        table.add_row(r["model"], label, "", escape(_switching_text(r, units)), *[""] * 5)
     return table
 
 
