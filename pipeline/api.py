@@ -6,8 +6,8 @@ script uses them directly::
     import debist
 
     result = debist.run("workflows/silverbox.toml", overrides={"identify.M": 8})
-    print(result.digest)
-    print(result.nrmse)                      # the table `debist run` prints, in percent
+    digest = result.digest                   # what `debist verify --digest` checks
+    table = result.nrmse                     # the table `debist run` prints, in percent
     model = result.model                     # or debist.load_model("runs/silverbox")
     sim = model.simulate(t, v, q0=0.0, q_dot0=0.0)
 
