@@ -432,7 +432,7 @@ def _report(wf, manifests, ran: set[str]) -> None:
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
         line = report.auto_line(manifests["identify"].summary)
         if line:
-            warn = manifests["identify"].summary["auto"].get("undecided")
+            warn = manifests["identify"].summary.get("auto", {}).get("undecided")
             console.print(escape(line), style="yellow" if warn else None)
     last = "compare" if "compare" in manifests else "validate"
     if "compare" in manifests:

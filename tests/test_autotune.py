@@ -236,7 +236,7 @@ def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypa
     around the best so far, evaluates 5 + 2 + 2 = 9 distinct settings."""
     import debist.identify.autotune as autotune
 
-    def fake(records, cfg, fold_list, substeps, window):
+    def fake(records, cfg, fold_list, substeps, window, adapt=False):
         score = abs(cfg.M - 8) + abs(cfg.sigma_n - 1.0) + (cfg.smoothing or 0.0)
         return {"scores": np.full(len(fold_list), 0.01 + score), "lambda": 0.0,
                 "status": "ok", "message": ""}  # fmt: skip

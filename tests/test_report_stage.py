@@ -197,7 +197,8 @@ def test_run_writes_a_hashed_report(synthetic_run):
     assert artifacts.sha256_bytes(html.encode()) == manifest.outputs["report.html"]
     page = parse(html)
     assert all(f">{h}</h2>" in html for h in SECTIONS)
-    assert len(page.imgs) == 1 + 2 + 1  # Fig. 11a (one estimation set), two free runs, Fig. 14
+    # Fig. 11a (one estimation set), two free runs, Fig. 14, the held-out choice of `slip`
+    assert len(page.imgs) == 1 + 2 + 1 + 1
     for src in page.imgs:
         assert np.std(decode(src)[..., :3]) > 0.05
     assert all(u.startswith(("data:image/png;base64,", "#")) for u in page.urls)

@@ -22,7 +22,9 @@ free-run error, estimated on the estimation records alone by blocked cross-valid
   ``trim`` samples are neither fitted nor scored;
 * a fit that raises :class:`~debist.errors.IdentificationError` (rank deficient, badly
   conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
-  table says which;
+  table says which; when ``M`` is not searched, a fold fits the centres its training
+  pieces support (as the stage does for the whole data), and a fold no candidate scores
+  is left out of every candidate's mean (it cannot rank them);
 * the chosen setting is the most parsimonious one whose mean score is within one standard
   error of the best mean (the one-standard-error rule; Hastie, Tibshirani & Friedman,
   *The Elements of Statistical Learning*, 2nd ed., Springer 2009, Sec. 7.10).
@@ -60,7 +62,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import lazy_loader as lazy
@@ -75,7 +77,7 @@ from debist.identify.config import (
     candidate_config,
     check_grid,
 )
-from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.fit import Record, fit_rbf_model, supported_size
 from debist.metrics import nrmse
 from debist.model.terms import column_names
 from debist.simulate.prediction import restarted_runs
@@ -270,7 +272,8 @@ class AutoResult:
             ``chosen``, ``strategy``, ``folds``, ``best``, ``threshold``, ``n_candidates``
             and ``candidates``: per row its settings, ``n_params``, ``lambda``, ``mean``,
             ``se``, ``folds`` (list), ``status``, ``message``; ``undecided``
-            (:func:`undecided`). No wall time (reproducible).
+            (:func:`undecided`); ``unscored_folds`` (1-based folds no candidate scored,
+            left out of ``mean`` and ``se``: :func:`scored_folds`). No wall time.
         """
         k = self.folds
         rows = []
@@ -296,6 +299,7 @@ class AutoResult:
             "n_candidates": len(rows),
             "candidates": rows,
             "undecided": undecided(self),
+            "unscored_folds": list(self.table.attrs.get("unscored_folds", [])),
         }
 
 
@@ -384,11 +388,28 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     return float(np.mean(scores)), False
 
 
-def _evaluate(records, cfg: IdentifyConfig, fold_list, substeps, window) -> dict[str, Any]:
+def _fold_basis(train: Sequence[Record], cfg: IdentifyConfig) -> IdentifyConfig:
+    """Return the fold's configuration with no more centres than its training supports.
+
+    A held-out block takes its samples away from the centres it covers; the fold then fits
+    the most centres its training data support (:func:`debist.identify.fit.supported_size`),
+    as the stage does for the whole data, instead of failing for every candidate alike.
+    """
+    q = np.concatenate([p.q for p in train])
+    if not cfg.rbf or np.ptp(q) <= 0:
+        return cfg
+    return replace(cfg, M=min(cfg.M, supported_size(q, cfg)))
+
+
+def _evaluate(
+    records, cfg: IdentifyConfig, fold_list, substeps, window, adapt: bool = False
+) -> dict[str, Any]:
     """Fit on each fold's training pieces and score the held-out block's free run.
 
     A fit that raises ends the candidate (its later folds stay NaN: not evaluated); a
     diverged free run scores that fold ``inf`` and the other folds are still evaluated.
+    With ``adapt`` (``M`` not among the candidates) each fold fits the centres its
+    training pieces support (:func:`_fold_basis`).
     """
     scores = np.full(len(fold_list), np.nan)
     lams: list[float] = []
@@ -403,7 +424,7 @@ def _evaluate(records, cfg: IdentifyConfig, fold_list, substeps, window) -> dict
                 raise IdentificationError(
                     f"no training piece is longer than 2 trim + 10 = {minimum - 1} samples"
                 )
-            model, diag = fit_rbf_model(train, cfg)
+            model, diag = fit_rbf_model(train, _fold_basis(train, cfg) if adapt else cfg)
         except (IdentificationError, np.linalg.LinAlgError) as exc:
             scores[fold.index] = np.inf
             status, message = "fit failed", f"fold {fold.index + 1}: {exc}"
@@ -444,6 +465,7 @@ def select_hyperparameters(
     substeps: int = 2,
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    fallback: bool = False,
 ) -> AutoResult:
     """Choose RBF hyper-parameters by blocked cross-validation of the free-run error.
 
@@ -485,6 +507,9 @@ def select_hyperparameters(
     progress : callable, optional
         Called as ``progress(done, total)`` [candidates]; default: the listener of
         :mod:`debist.engine.progress` (task "hyper-parameters"), if any.
+    fallback : bool, optional
+        When every candidate fails or diverges, choose ``base_cfg``'s own values (or the
+        first candidate) instead of raising; the result is then :func:`undecided`.
 
     Returns
     -------
@@ -497,7 +522,7 @@ def select_hyperparameters(
         If the grid is empty, names an unknown field or holds an invalid value (before any
         fit), ``folds < 2``, or a record is too short for the folds.
     IdentificationError
-        If every candidate failed or diverged.
+        If every candidate failed or diverged (and not ``fallback``).
     ResourceError
         If a free run would exceed the memory budget.
 
@@ -534,7 +559,8 @@ def select_hyperparameters(
         key = tuple(_freeze(setting[k]) for k in keys)
         if key not in cache:
             cfg = candidate_config(base_cfg, setting)
-            cache[key] = {**_evaluate(records, cfg, fold_list, substeps, window), "cfg": cfg}
+            scored = _evaluate(records, cfg, fold_list, substeps, window, "M" not in keys)
+            cache[key] = {**scored, "cfg": cfg}
             order.append(dict(setting))
             report(len(order), total)
         return cache[key]
@@ -551,7 +577,14 @@ def select_hyperparameters(
                 current = sweep[int(np.argmin(means))]
     report(total, total)
     table = _table(order, cache, keys, n_in, len(fold_list))
-    chosen = one_standard_error(table)
+    try:
+        chosen = one_standard_error(table)
+    except IdentificationError:
+        if not fallback:
+            raise
+        own = {k: _freeze(getattr(base_cfg, k)) for k in keys}
+        same = [i for i, s in enumerate(order) if {k: _freeze(s[k]) for k in keys} == own]
+        chosen = same[0] if same else 0
     best = int(table["mean"].astype(float).idxmin())
     threshold = float(table.loc[best, "mean"] + np.nan_to_num(table.loc[best, "se"]))
     table["within_1se"] = table["mean"] <= threshold
@@ -568,14 +601,42 @@ def select_hyperparameters(
     )
 
 
+def scored_folds(scores: np.ndarray) -> np.ndarray:
+    """Folds that can rank the candidates: where at least one candidate scored.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (n_candidates, n_folds)
+        Fold scores [-]; ``inf`` for a failed fit or a diverged free run, NaN for a fold
+        not evaluated.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_folds,)
+        False for a fold where no candidate has a finite score (a held-out block that
+        every candidate loses, e.g. one with a switch no training piece shows: it says
+        nothing about which candidate is better), unless fewer than two folds would remain,
+        in which case every fold counts.
+
+    References
+    ----------
+    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
+    Sec. 7.10 (K-fold cross-validation).
+    """
+    used = np.isfinite(scores).any(axis=0)
+    return used if used.sum() >= 2 else np.ones(scores.shape[1], dtype=bool)
+
+
 def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
     rows = [cache[tuple(_freeze(s[key]) for key in keys)] for s in order]
     cfgs = [r["cfg"] for r in rows]
     scores = np.array([r["scores"] for r in rows]).reshape(len(rows), k)
-    finite = np.isfinite(scores).all(axis=1)  # a failed or unevaluated fold: mean inf
-    mean = np.where(finite, scores.mean(axis=1), np.inf)
+    used = scored_folds(scores)
+    kept = scores[:, used]
+    finite = np.isfinite(kept).all(axis=1)  # a failed or unevaluated fold: mean inf
+    mean = np.where(finite, kept.mean(axis=1), np.inf)
     se = np.full(len(rows), np.inf)
-    se[finite] = scores[finite].std(axis=1, ddof=1) / np.sqrt(k)
+    se[finite] = kept[finite].std(axis=1, ddof=1) / np.sqrt(used.sum())
     data: dict[str, Any] = {"candidate": np.arange(len(rows))}
     for name in dict.fromkeys(["M", "sigma_n", "lowpass", "smoothing", *keys]):
         data[name] = _column([getattr(c, name) for c in cfgs])
@@ -587,7 +648,9 @@ def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
         data[f"fold_{j + 1}"] = scores[:, j]
     data["status"] = [r["status"] for r in rows]
     data["message"] = [r["message"] for r in rows]
-    return pd.DataFrame(data)
+    frame = pd.DataFrame(data)
+    frame.attrs["unscored_folds"] = [j + 1 for j in range(k) if not used[j]]
+    return frame
 
 
 def undecided(search: AutoResult) -> bool:

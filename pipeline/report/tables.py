@@ -839,11 +839,12 @@ def auto_line(summary: dict[str, Any]) -> str:
     str
         The chosen setting, the number of candidates and folds, the best mean score with its
         standard error; when the folds disagree (``undecided``) a warning that the choice
-        is not supported by the estimation data.
+        is not supported by the estimation data; and the candidates left out before the
+        search (``auto_skipped``).
     """
-    auto = summary.get("auto")
+    auto, skipped = summary.get("auto"), summary.get("auto_skipped", "")
     if not auto:
-        return ""
+        return f"hyper-parameters: {skipped}" if skipped else ""
     chosen = ", ".join(f"{k} = {v!r}" for k, v in auto["chosen"].items())
     best = auto["candidates"][auto["best"]]
     score = (
@@ -860,7 +861,7 @@ def auto_line(summary: dict[str, Any]) -> str:
             ": undecided, the folds disagree (one lost a switch?), so the one-standard-error "
             "rule admits nearly every candidate; the estimation data do not support the choice"
         )
-    return line
+    return f"{line}; {skipped}" if skipped else line
 
 
 def switching_note(row: dict[str, Any]) -> str:

@@ -13,6 +13,7 @@ import numpy as np
 
 from debist.engine.artifacts import Figure, H5Tree
 from debist.engine.fileformats import REPORT_DPI
+from debist.errors import IdentificationError
 from debist.identify.autotune import auto_settings, select_hyperparameters
 from debist.identify.bands import (
     band_label,
@@ -22,7 +23,7 @@ from debist.identify.bands import (
     stiffness_bands,
     stiffness_label,
 )
-from debist.identify.config import IdentifyConfig
+from debist.identify.config import IdentifyConfig, held_out_grid
 from debist.identify.design import (
     design_numbers,
     held_levels,
@@ -128,11 +129,12 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             cfg,
             prior=physics_prior(physics, records, quadratic="physics_quadratic" in cfg.backbone),
         )
-    search = None
+    search, grid = None, held_out_grid(section)
     if cfg.auto is not None:  # [identify.auto]: the grid's choice replaces the given values
         grid, options = auto_settings(cfg)
         search = select_hyperparameters(records, replace(cfg, auto=None), grid, **options)
         cfg = replace(cfg, auto=None, **search.chosen)
+        grid = {}
     asked = cfg.M
     q_all = np.concatenate([r.q for r in records])
     if np.ptp(q_all) > 0:  # (a motionless q is a data error, named by the excitation check)
@@ -140,9 +142,15 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     excitation = _excitation(records, cfg, tables)
     if search is None and "M" not in section and cfg.M > 2 and thin_data(excitation):
         # one tone: the data cannot rank curve detail, the held-out free run can
-        search = select_hyperparameters(records, cfg, {"M": list(range(2, cfg.M + 1))})
+        grid["M"] = list(range(2, cfg.M + 1))
+    t_choice = time.perf_counter()
+    grid, inert = _drop_inert_slip(records, cfg, grid)
+    t_choice = time.perf_counter() - t_choice
+    if grid:  # the settings the workflow leaves to debist, chosen on held-out data
+        search = select_hyperparameters(records, cfg, grid, fallback=True)
         cfg = replace(cfg, **search.chosen)
-        excitation = _excitation(records, cfg, tables)
+        if "M" in grid:
+            excitation = _excitation(records, cfg, tables)
     if asked > cfg.M:  # thin data: fewer, wider centres rather than a failed fit
         note = _basis_note(asked, cfg, excitation)
         excitation = replace(excitation, warnings=[note, *excitation.warnings])
@@ -153,8 +161,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, mass = effective_mass(model, diag)
         cfg = replace(cfg, m_q=model.m_q)  # the rigid mass, for the refinement
     timings = {"fit": time.perf_counter() - t_fit}
-    if search is not None:
-        timings["hyper-parameters"] = search.seconds
+    if search is not None or inert:
+        timings["hyper-parameters"] = t_choice + (search.seconds if search else 0.0)
     ls_model, refine = model, None
     rcfg = refine_config(cfg.refine)
     if rcfg is not None:
@@ -240,7 +248,47 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     }
     if search is not None:
         summary["auto"] = search.to_summary()
+    if inert:
+        summary["auto_skipped"] = inert
     return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
+
+
+def _drop_inert_slip(records, cfg: IdentifyConfig, grid: dict[str, list]):
+    """Drop slip-element candidates the least squares gives zero stiffness on the whole data.
+
+    The stiffnesses k_e >= 0 of the Maxwell-slip elements are bounded below by zero; where
+    the fit on all estimation records puts every one at that bound, the candidate is the
+    model without elements and needs no cross-validation (a rig without hysteresis in q).
+
+    Returns
+    -------
+    grid : dict
+        The grid without those candidates (without ``slip`` if only ``False`` is left).
+    note : str
+        What was dropped and why, or ``""``.
+    """
+    if "slip" not in grid or cfg.n_slip:
+        return grid, ""
+    counts = [c for c in grid["slip"] if c is not False]
+    inert = []
+    for count in counts:
+        try:
+            model, _ = fit_rbf_model(records, replace(cfg, slip=count, bootstrap=0))
+        except IdentificationError:
+            continue
+        if not np.any(np.asarray(model.theta_slip) > 0):
+            inert.append(count)
+    if not inert:
+        return grid, ""
+    kept = [c for c in grid["slip"] if c not in inert]
+    out = {k: v for k, v in grid.items() if k != "slip"}
+    if kept != [False]:
+        out["slip"] = kept
+    listed = ", ".join(str(c) for c in inert)
+    return out, (
+        f"slip = {listed}: the least squares on the estimation data gives every element "
+        "zero stiffness (no hysteresis to explain), so these are the model without elements"
+    )
 
 
 def _slip_summary(model) -> dict[str, Any]:

@@ -73,7 +73,8 @@ IMAGES = (
         "identify",
         "plots/autotune.png",
         "study",
-        "[identify.auto]: held-out free-run NRMSE of each candidate by blocked cross-validation "
+        "Settings chosen on held-out data (the workflow's [identify.auto] or debist's): "
+        "held-out free-run NRMSE of each candidate by blocked cross-validation "
         "(Fig. 11b, 11c generalised), with the one-standard-error bound and the choice",
     ),
     ("analyze", None, "analyze", "Design analysis"),
