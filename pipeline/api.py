@@ -35,7 +35,7 @@ import numpy as np
 
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
-from debist.arguments import (
+from debist.core.arguments import (
     check_callable,
     check_flag,
     check_int,
@@ -43,8 +43,8 @@ from debist.arguments import (
     check_path,
     check_str,
 )
+from debist.core.errors import ArgumentError, ArtifactError, WorkflowError
 from debist.engine import artifacts, progress
-from debist.errors import ArgumentError, ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 

@@ -1,7 +1,7 @@
 """The ``debist`` command line: a thin Typer adapter over :mod:`debist`.
 
 Parses arguments, loads the workflow, calls the runner, prints with rich, and maps
-debist's exceptions to exit codes in one place (:func:`debist.errors.exit_code`): 0 done,
+debist's exceptions to exit codes in one place (:func:`debist.core.errors.exit_code`): 0 done,
 1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
 or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
 
@@ -33,7 +33,7 @@ from typer.core import TyperCommand, TyperGroup
 
 # debist's other modules are imported inside the commands, not here, so that `debist --help`
 # and a bad argument answer at once instead of after loading numpy, pandas and scipy.
-from debist.errors import (
+from debist.core.errors import (
     DebistError,
     Interrupted,
     OutputDirError,

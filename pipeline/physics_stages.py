@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.model.terms import PHYSICS_TERMS, PhysicsPrior
 from debist.physics.freerun import analytical_model
 from debist.physics.reduced import reduced_curves

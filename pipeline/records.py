@@ -10,7 +10,7 @@ Masoud & Maas 2025, Eq. 40.
 
 from __future__ import annotations
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.fit import Record
 from debist.tables import input_columns
 

@@ -23,11 +23,11 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.datasets import validation_datasets
 from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.engine import preflight, progress
-from debist.errors import IdentificationError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.metrics import rms

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.errors import WorkflowError
 from debist.engine import progress
-from debist.errors import WorkflowError
 from debist.ingest.units import lookup_unit
 from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
 from debist.simulate.freerun import (

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from debist.core.errors import WorkflowError
 from debist.engine import artifacts
 from debist.engine.batch import (
     BatchResult,
@@ -19,7 +20,6 @@ from debist.engine.batch import (
     write_index,
 )
 from debist.engine.outdir import OWN_FILES
-from debist.errors import WorkflowError
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ["ingest", "differentiate", "identify", "validate"]

@@ -29,7 +29,7 @@ from conftest import (
     write_rig_csv,
 )
 
-from debist.errors import ArtifactError, WorkflowError
+from debist.core.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
 from debist.export.common import ExportInfo, curve_table
 from debist.export.files import export_files

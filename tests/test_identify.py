@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
 
-from debist.errors import IdentificationError, WorkflowError
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.basis import RBFBasis

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import debist.ingest.load as ingest
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
 from debist.ingest.checks import printed_resolution, time_rtol
 from debist.ingest.load import load_rig_log
 from debist.ingest.resample import resample_segment

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced, simulate_reduced

@@ -23,7 +23,7 @@ from conftest import (
     with_physics_quadratic,
 )
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel

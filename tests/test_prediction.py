@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import linalg, stats
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.simulate.freerun import simulate
 from debist.simulate.prediction import _correlation, k_step_prediction, residual_analysis
 

@@ -13,8 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.core.errors import ResourceError, WorkflowError
 from debist.engine import preflight
-from debist.errors import ResourceError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model

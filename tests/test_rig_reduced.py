@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 
-from debist.errors import WorkflowError, exit_code
+from debist.core.errors import WorkflowError, exit_code
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.reduced import fit_reduced
 from debist.rig.params import RigParams

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import INSIDE_CLASS, curve_error, example_rbf_model, excitation, truth_model
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model, slip_widths
 from debist.model.friction import slip_clip, slip_state_rate, slip_states

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.studies import StudyConfig, alpha_study, derivative_roughness, rbf_grid_study
 
 IDENTIFY = {"T_z": 0.0, "backbone": ["linear_spring", "cubic_spring", "viscous"]}

@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from debist import __version__
+from debist.core.errors import ArtifactError, OutputDirError
 from debist.engine.faults import fault_point
 from debist.engine.fileformats import (
     Figure,
@@ -58,7 +59,6 @@ from debist.engine.fileformats import (
     sha256_file,
     write_output,
 )
-from debist.errors import ArtifactError, OutputDirError
 
 __all__ = [
     "MANIFEST",

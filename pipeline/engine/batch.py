@@ -56,10 +56,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from debist.core.errors import DebistError, WorkflowError
 from debist.engine import preflight
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
-from debist.errors import DebistError, WorkflowError
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
 from debist.workflow.loader import load_workflow
 
@@ -124,7 +124,7 @@ class BatchResult:
         ``"<ExceptionClass>: <message>"`` for a failed item (the last line of its
         traceback); empty when done.
     traceback : str
-        The full traceback of an unexpected (non-:class:`~debist.errors.DebistError`)
+        The full traceback of an unexpected (non-:class:`~debist.core.errors.DebistError`)
         exception; empty otherwise.
     output_dir : pathlib.Path or None
         The workflow's artifact root (None when the file could not be loaded).
@@ -334,7 +334,7 @@ def run_workflow_item(
     Returns
     -------
     BatchResult
-        Never raises for a failing workflow: a :class:`~debist.errors.DebistError`
+        Never raises for a failing workflow: a :class:`~debist.core.errors.DebistError`
         or any other ``Exception`` comes back as ``status="failed"`` with its class
         and message (and the traceback for an unexpected one).
     """

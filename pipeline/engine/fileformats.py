@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
 
 __all__ = [
     "REPORT_DPI",

@@ -25,17 +25,17 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from debist.engine import artifacts, outdir, registry
-from debist.engine.faults import fault_point
-from debist.engine.fileformats import write_output
-from debist.engine.fingerprint import code_fingerprint
-from debist.errors import (
+from debist.core.errors import (
     ArtifactError,
     DebistError,
     OutputDirError,
     RunLockedError,
     WorkflowError,
 )
+from debist.engine import artifacts, outdir, registry
+from debist.engine.faults import fault_point
+from debist.engine.fileformats import write_output
+from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
 from debist.workflow.loader import Workflow
 

@@ -24,7 +24,7 @@ import jinja2
 import numpy as np
 
 from debist import __version__
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
 from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
 
 __all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]

@@ -20,7 +20,7 @@ free-run error, estimated on the estimation records alone by blocked cross-valid
   block, which had made every candidate's score 11 % +- 10 % on the paper experiment
   (Bock & Plitt 1984; Ribeiro et al., Automatica 121, 2020); a record's first and last
   ``trim`` samples are neither fitted nor scored;
-* a fit that raises :class:`~debist.errors.IdentificationError` (rank deficient, badly
+* a fit that raises :class:`~debist.core.errors.IdentificationError` (rank deficient, badly
   conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
   table says which;
 * the chosen setting is the most parsimonious one whose mean score is within one standard
@@ -66,8 +66,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.engine import progress as _progress
-from debist.errors import IdentificationError, WorkflowError
 from debist.identify.config import (
     DEFAULT_WINDOW,
     IdentifyConfig,

@@ -9,7 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.regularise import CONSTRAINT
 from debist.model.terms import check_terms
 from debist.workflow.config import (
@@ -334,7 +334,7 @@ class IdentifyConfig(SectionConfig):
         >>> IdentifyConfig.from_dict({"M": "ten"})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
+        debist.core.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
         """
         if isinstance(section, Mapping) and "prior" in section:
             given = cls.SECTION if where is None else where

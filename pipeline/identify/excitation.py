@@ -41,7 +41,7 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist import metrics
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.spectrum import (
     is_periodic,
     periodic_warning,

@@ -7,8 +7,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from debist.core.errors import IdentificationError
 from debist.engine import preflight
-from debist.errors import IdentificationError
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
 from debist.identify.regularise import (

@@ -30,7 +30,7 @@ from pathlib import Path
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.channels import Mapped
 from debist.ingest.checks import (
     check_enough,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import RigLogError, UnitMismatchWarning
+from debist.core.errors import RigLogError, UnitMismatchWarning
 from debist.ingest.checks import printed_resolution
 from debist.ingest.patterns import search_names
 from debist.ingest.raw import RawChannel, RawLog

@@ -10,7 +10,7 @@ check, pandas itself) reads through it, so the limit holds whoever reads, and a 
 refused after reading at most the limit, long before memory runs out.
 
 A stream cut short (a copy interrupted half-way) or corrupt raises a
-:class:`~debist.errors.RigLogError` naming the file, where :mod:`gzip` raises
+:class:`~debist.core.errors.RigLogError` naming the file, where :mod:`gzip` raises
 ``EOFError`` (which command-line frameworks take for end of input) or ``zlib.error``.
 
 References
@@ -26,8 +26,8 @@ import io
 import zlib
 from pathlib import Path
 
+from debist.core.errors import RigLogError
 from debist.engine.preflight import BUDGET_ENV, TEXT_PARSE_RATIO, format_bytes, memory_budget
-from debist.errors import RigLogError
 
 __all__ = ["GzipLog", "decompressed_limit", "open_gzip"]
 

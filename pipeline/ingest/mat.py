@@ -47,8 +47,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.errors import DebistError, RigLogError
 from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
-from debist.errors import DebistError, RigLogError
 from debist.ingest.mat73 import load_mat73
 from debist.ingest.raw import RawChannel, RawLog
 

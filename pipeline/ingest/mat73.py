@@ -55,8 +55,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.errors import RigLogError
 from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
-from debist.errors import RigLogError
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 h5py = lazy.load("h5py")

@@ -2,7 +2,7 @@
 
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
 parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.workflow.config`) and rejects
-anything it does not understand with a one-line :class:`~debist.errors.WorkflowError`
+anything it does not understand with a one-line :class:`~debist.core.errors.WorkflowError`
 naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
 Schema (every key optional unless marked required)::
@@ -60,7 +60,7 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.ingest.patterns import check_pattern
 from debist.ingest.units import (
     EXAMPLES,
@@ -345,11 +345,11 @@ class ChannelSpec:
         >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "bananas"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
+        debist.core.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
         >>> ChannelSpec.from_dict("t", {"name": "t", "unit": "mm"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... (length [m])
+        debist.core.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... [m])
         """
         key = "time" if role == "t" else role
         label = _label(where, key)
@@ -581,7 +581,7 @@ class IngestSpec:
         >>> IngestSpec.from_dict({"smaple_time": 1e-3})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
+        debist.core.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
         """
         if not isinstance(section, Mapping):
             raise WorkflowError(f"{_label(where, '')} expected a table, got {section!r}")

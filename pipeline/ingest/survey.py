@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
 from debist.ingest.cache import RawLogCache
 from debist.ingest.channels import to_float
 from debist.ingest.load import read_raw

@@ -54,7 +54,7 @@ import numpy as np
 import pydantic
 from pydantic import Field, PositiveInt
 
-from debist.errors import DebistWarning, IdentificationError
+from debist.core.errors import DebistWarning, IdentificationError
 from debist.model.narx_kernel import factor_tables, narx_free_run
 from debist.model.termtable import input_map as apply_input_map
 from debist.workflow.config import CONFIG, AsTuple, SectionConfig

@@ -35,8 +35,8 @@ import numpy as np
 import pydantic
 from pydantic import NonNegativeFloat, PositiveInt
 
+from debist.core.errors import ConvergenceWarning, IdentificationError, WorkflowError
 from debist.engine.preflight import check_memory, sindy_bytes
-from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
 from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
 from debist.workflow.config import CONFIG, SectionConfig
 

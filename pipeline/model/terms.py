@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states
 from debist.model.termtable import (

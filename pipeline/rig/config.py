@@ -25,7 +25,7 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.physics.params import PrototypeParams
 from debist.rig.params import RigParams
 from debist.rig.profiles import PROFILES
@@ -193,7 +193,7 @@ class RigConfig:
         >>> RigConfig.from_dict({"experiments": {"a": {"seed": "1"}}}, {})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
+        debist.core.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
         """
         head = config_from_section(_RigSection, section, "[rig]")
         PrototypeParams.from_dict(physics)

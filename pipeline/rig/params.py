@@ -198,7 +198,7 @@ class RigParams(SectionConfig):
         >>> RigParams.from_dict({"oversample": 2.5})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
+        debist.core.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
         """
         where = cls.SECTION if where is None else where
         if isinstance(section, Mapping) and isinstance(section.get("prototype"), Mapping):

@@ -17,9 +17,9 @@ from typing import Protocol
 
 import numpy as np
 
+from debist.core.errors import WorkflowError
 from debist.engine import preflight
 from debist.engine import progress as _progress
-from debist.errors import WorkflowError
 from debist.simulate import rk4
 
 INTERPOLATIONS = ("bandlimited", "linear")

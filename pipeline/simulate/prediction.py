@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.metrics import nrmse
 from debist.simulate.freerun import (
     FineInputs,

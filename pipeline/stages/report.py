@@ -22,10 +22,10 @@ from typing import Any
 
 import lazy_loader as lazy
 
+from debist.core.errors import ArtifactError
 from debist.engine import artifacts, outdir
 from debist.engine.fileformats import REPORT_DPI
 from debist.engine.registry import stage as registry_stage
-from debist.errors import ArtifactError
 from debist.identify.bands import BOOTSTRAP_LABEL
 from debist.report.figures import (
     dynamic_window,

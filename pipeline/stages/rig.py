@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from debist.core.errors import DebistError
 from debist.engine.artifacts import FileWriter, H5Tree
-from debist.errors import DebistError
 from debist.rig.dspace import write_recording
 from debist.rig.experiment import (
     CREATED,

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import IdentificationError
+from debist.core.errors import IdentificationError
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.validate import DataSet, ValidateConfig, default_q_limit, validate_model
 

@@ -6,7 +6,7 @@ merge them (a data set's ingest is ``[ingest]`` updated by its own keys, ``[comp
 takes ``input_map`` from ``[identify]``, ``[study.identify]`` updates ``[identify]``), so
 a workflow that loads has no wrong type, unknown key or out-of-range value left for a
 stage to trip over. The first problem found is raised as a one-line
-:class:`~debist.errors.WorkflowError`::
+:class:`~debist.core.errors.WorkflowError`::
 
     [identify] M: expected an integer, got 'ten'
     [datasets.estimation] source: expected a string, got 5
@@ -27,17 +27,17 @@ from typing import Annotated, Any, Literal
 
 import pydantic
 
+from debist.core.errors import WorkflowError
+from debist.core.names import check_file_name
 from debist.differentiate.base import CONFIGS
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.engine import preflight
-from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.ingest.spec import OPTION_KEYS, IngestSpec
 from debist.ingest.units import UNITS
 from debist.model.narx import NarxConfig
 from debist.model.sindy import SindyConfig
 from debist.model.terms import PHYSICS_TERMS
-from debist.names import check_file_name
 from debist.physics.config import AnalyzeConfig
 from debist.physics.params import PrototypeParams
 from debist.rig.config import RigConfig
@@ -372,7 +372,7 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     >>> check_workflow({"physics": {}, "compare": {"degre": 2}})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
+    debist.core.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
     """
     _tables(raw)
     head = config_from_section(WorkflowHead, raw.get("workflow", {}), "[workflow]")
