@@ -6,7 +6,7 @@ no stage imports another stage.
 
 from __future__ import annotations
 
-from debist.tables import input_columns
+from debist.core.tables import input_columns
 from debist.validate import DataSet
 
 __all__ = ["validation_datasets"]

@@ -11,8 +11,8 @@ Masoud & Maas 2025, Eq. 40.
 from __future__ import annotations
 
 from debist.core.errors import WorkflowError
+from debist.core.tables import input_columns
 from debist.identify.fit import Record
-from debist.tables import input_columns
 
 __all__ = ["estimation_records"]
 

@@ -24,17 +24,17 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.errors import IdentificationError, WorkflowError
+from debist.core.metrics import rms
+from debist.core.tables import input_columns
 from debist.datasets import validation_datasets
 from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.engine import preflight, progress
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
-from debist.metrics import rms
 from debist.model.rbf import RBFModel
 from debist.records import estimation_records
 from debist.report.study_plots import alpha_figure, grid_figure
-from debist.tables import input_columns
 from debist.validate import DataSet, ValidateConfig, validate_model
 from debist.workflow.sections import StudyConfig
 

@@ -9,9 +9,9 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.errors import WorkflowError
+from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
 from debist.engine import progress
 from debist.ingest.units import lookup_unit
-from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
 from debist.simulate.freerun import (
     FreeRunModel,
     SimulationResult,
@@ -356,7 +356,7 @@ def replicate_spread(
         One row per data set: ``dataset``, ``replicates`` (B), ``nrmse_q_lo``, ``nrmse_q_hi``
         (the 2.5th and 97.5th order statistics of the replicates' NRMSE(q), a diverged
         replicate counting as infinite), ``replicates_poor`` (the share whose NRMSE(q) is
-        above :data:`debist.metrics.POOR_SHARE` of the mean baseline's, or diverged).
+        above :data:`debist.core.metrics.POOR_SHARE` of the mean baseline's, or diverged).
         ``replicates_hold_q``: the share of the scored samples whose measured q lies inside
         the replicates' band (what the band held on this data set).
     bands : dict of str to ndarray, shape (2, n)

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from debist.core.errors import WorkflowError
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.report.tables import not_modelled, verdict
 

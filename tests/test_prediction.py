@@ -259,7 +259,7 @@ def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bis
     """The multiple-shooting score of [identify.auto]: a model whose input gain is too weak to
     switch misses the record after its first lost switch in one free run, but only the
     windows that hold a switch when every window restarts from the measured state."""
-    from debist.metrics import nrmse
+    from debist.core.metrics import nrmse
     from debist.simulate.prediction import restarted_runs
     from debist.validate import DataSet
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from debist.metrics import nrmse, rms
+from debist.core.metrics import nrmse, rms
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate, upsample_inputs

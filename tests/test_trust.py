@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from conftest import double_well, duffing_record, logged_tables
 
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.report.tables import nrmse_table
 from debist.stages.validate import run_validate
 from debist.validate import default_q_limit

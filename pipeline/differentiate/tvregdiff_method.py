@@ -11,10 +11,10 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
+from debist.core.metrics import rms
 from debist.differentiate.result import Derivatives, check_signal
 from debist.differentiate.tvregdiff import tvregdiff
 from debist.ingest.units import lookup_unit
-from debist.metrics import rms
 from debist.workflow.config import CONFIG, ConfigValueError, SectionConfig
 
 

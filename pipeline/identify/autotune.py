@@ -67,6 +67,7 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.errors import IdentificationError, WorkflowError
+from debist.core.metrics import nrmse
 from debist.engine import progress as _progress
 from debist.identify.config import (
     DEFAULT_WINDOW,
@@ -76,7 +77,6 @@ from debist.identify.config import (
     check_grid,
 )
 from debist.identify.fit import Record, fit_rbf_model
-from debist.metrics import nrmse
 from debist.model.terms import column_names
 from debist.simulate.prediction import restarted_runs
 from debist.validate import default_q_limit

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import lazy_loader as lazy
 import numpy as np
 
-from debist import metrics
+from debist.core import metrics
 from debist.core.errors import WorkflowError
 from debist.identify.spectrum import (
     is_periodic,

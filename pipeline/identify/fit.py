@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from debist.core.errors import IdentificationError
+from debist.core.metrics import rms
 from debist.engine import preflight
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
@@ -19,7 +20,6 @@ from debist.identify.regularise import (
     weight_penalty,
 )
 from debist.identify.signs import physical_signs
-from debist.metrics import rms
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states, friction_state, slip_states
 from debist.model.rbf import RBFModel

@@ -36,11 +36,11 @@ from dataclasses import dataclass, replace
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.metrics import rms
 from debist.engine import preflight, progress
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
 from debist.identify.stability import model_is_stable
-from debist.metrics import rms
 from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
 from debist.model.termtable import TableModel

@@ -35,7 +35,7 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.errors import WorkflowError
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
