@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING, Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import artifacts, progress
+
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
 from debist.core.arguments import (
@@ -44,7 +46,6 @@ from debist.core.arguments import (
     check_str,
 )
 from debist.core.errors import ArgumentError, ArtifactError, WorkflowError
-from debist.engine import artifacts, progress
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
@@ -484,8 +485,8 @@ def export_model(
     """
     from contextlib import nullcontext
 
+    from debist.core.fileformats import atomic_write
     from debist.engine import outdir
-    from debist.engine.fileformats import atomic_write
     from debist.engine.runner import Runner
     from debist.export.files import export_files, load_identified
 

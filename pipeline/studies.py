@@ -23,13 +23,13 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import preflight, progress
 from debist.core.errors import IdentificationError, WorkflowError
 from debist.core.metrics import rms
 from debist.core.tables import input_columns
 from debist.datasets import validation_datasets
 from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
-from debist.engine import preflight, progress
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel

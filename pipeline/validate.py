@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import progress
 from debist.core.errors import WorkflowError
 from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
-from debist.engine import progress
 from debist.ingest.units import lookup_unit
 from debist.simulate.freerun import (
     FreeRunModel,

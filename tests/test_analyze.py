@@ -8,8 +8,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine import artifacts
 from debist.engine.runner import Runner
 from debist.workflow.loader import load_workflow
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine import artifacts
 from debist.engine.batch import (
     BatchResult,
     expand_workflows,

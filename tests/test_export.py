@@ -403,7 +403,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     from typer.testing import CliRunner
 
     from debist.cli import app
-    from debist.engine import artifacts
+    from debist.core import artifacts
 
     def invoke(*args):
         result = CliRunner().invoke(app, [str(a) for a in args])

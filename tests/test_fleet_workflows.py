@@ -8,8 +8,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.core.artifacts import write_text_files
 from debist.core.errors import OutputDirError, WorkflowError
-from debist.engine.artifacts import write_text_files
 from debist.engine.runner import Runner
 from debist.rig.fleet_workflows import fleet_workflows
 from debist.workflow.loader import load_workflow

@@ -20,8 +20,8 @@ from debist.core.errors import (
     RigLogError,
     WorkflowError,
 )
+from debist.core.preflight import BUDGET_ENV
 from debist.differentiate.tables import differentiate_tables
-from debist.engine.preflight import BUDGET_ENV
 from debist.identify import config as identify_config
 from debist.identify.config import MAX_GRID_VALUES
 from debist.ingest.compressed import open_gzip

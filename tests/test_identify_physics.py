@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine import artifacts
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel

@@ -13,8 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.core import preflight
 from debist.core.errors import ResourceError, WorkflowError
-from debist.engine import preflight
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
@@ -124,7 +124,7 @@ def test_data_free_lower_bound_refuses_huge_M_and_passes_the_shipped_ones(budget
 def test_estimate_agrees_with_the_measured_peak_of_a_real_fit():
     """tracemalloc sees 3 of the 5 regressor-sized arrays alive at the SVD (numpy's LAPACK
     copies are malloc'ed outside it): the estimate is 1.5 times its peak. Against the peak
-    resident size (see debist.engine.preflight) it is within 7 %."""
+    resident size (see debist.core.preflight) it is within 7 %."""
     records = _records(6000, n_rec=2)
     cfg = IdentifyConfig.from_dict({"M": 30, "T_z": 0.0, "max_condition": 1e300})
     estimate = preflight.identify_bytes(cfg, 1, 12000, 6000)

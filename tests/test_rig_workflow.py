@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine import artifacts
 from debist.engine.runner import Runner
 from debist.rig.profiles import make_profile
 from debist.workflow.loader import load_workflow

@@ -137,7 +137,7 @@ def test_slip_config_the_default_grid_and_the_model_file():
         with pytest.raises(WorkflowError, match=r"\[identify\] slip: expected"):
             IdentifyConfig.from_dict({"slip": bad})
     assert IdentifyConfig.from_dict({}).slip is False
-    from debist.engine.preflight import identify_columns
+    from debist.core.preflight import identify_columns
 
     plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
     assert identify_columns(IdentifyConfig.from_dict({"slip": 4}), 2)[0] == plain_cols + 4

@@ -14,7 +14,7 @@ import os
 import pint
 import pytest
 
-from debist.engine import cache as user_cache
+from debist.core import cache as user_cache
 from debist.engine import fingerprint
 from debist.engine.registry import STAGES
 from debist.ingest import units

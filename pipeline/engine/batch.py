@@ -56,8 +56,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from debist.core import preflight
 from debist.core.errors import DebistError, WorkflowError
-from debist.engine import preflight
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
@@ -566,7 +566,7 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
         one BLAS/OpenMP thread (``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and
         ``OPENBLAS_NUM_THREADS`` = 1, unless this process's environment sets them), each
         with an equal share of the memory budget (``DEBIST_MEMORY_BUDGET_GB``, unless set
-        here: :func:`debist.engine.preflight.memory_budget`), and inherit the rest of this
+        here: :func:`debist.core.preflight.memory_budget`), and inherit the rest of this
         process's environment. The cluster's logs are silenced
         (its failures come back as task errors), and the environment variables that the
         nannies set in this process are restored on exit.

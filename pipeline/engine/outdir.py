@@ -27,10 +27,10 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+from debist.core import artifacts
+from debist.core.artifacts import SWAP_FOLDER
 from debist.core.errors import OutputDirError, RunLockedError
-from debist.engine import artifacts
-from debist.engine.artifacts import SWAP_FOLDER
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 
 __all__ = [
     "HOLDER",

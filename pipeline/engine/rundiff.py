@@ -20,8 +20,8 @@ from typing import Any
 
 import lazy_loader as lazy
 
+from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine import artifacts
 from debist.engine.registry import names
 from debist.workflow.defaults import with_defaults
 

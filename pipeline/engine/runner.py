@@ -25,6 +25,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
+from debist.core import artifacts
 from debist.core.errors import (
     ArtifactError,
     DebistError,
@@ -32,9 +33,9 @@ from debist.core.errors import (
     RunLockedError,
     WorkflowError,
 )
-from debist.engine import artifacts, outdir, registry
-from debist.engine.faults import fault_point
-from debist.engine.fileformats import write_output
+from debist.core.faults import fault_point
+from debist.core.fileformats import write_output
+from debist.engine import outdir, registry
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
 from debist.workflow.loader import Workflow
@@ -293,7 +294,7 @@ class Runner:
         }
 
     def read_h5(self, stage: str, rel: str) -> dict[str, Any]:
-        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
+        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.core.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
 
@@ -302,7 +303,7 @@ class Runner:
         return artifacts.read_summary(self.wf.stage_dir(stage), self._manifest(stage))
 
     def read_parquet(self, stage: str, rel: str) -> Any:
-        """Read a Parquet artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
+        """Read a Parquet artifact of an upstream stage (see :mod:`debist.core.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
 

@@ -66,9 +66,9 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import progress as _progress
 from debist.core.errors import IdentificationError, WorkflowError
 from debist.core.metrics import nrmse
-from debist.engine import progress as _progress
 from debist.identify.config import (
     DEFAULT_WINDOW,
     IdentifyConfig,
@@ -484,7 +484,7 @@ def select_hyperparameters(
         random (kept for a stable signature should a randomised strategy be added).
     progress : callable, optional
         Called as ``progress(done, total)`` [candidates]; default: the listener of
-        :mod:`debist.engine.progress` (task "hyper-parameters"), if any.
+        :mod:`debist.core.progress` (task "hyper-parameters"), if any.
 
     Returns
     -------

@@ -2,7 +2,7 @@
 
 The excitation overview (Fig. 11a of the paper), the free runs of every model against the
 measurement (Fig. 12 on estimation data, Fig. 15 on unseen data) with a zoom on the most
-dynamic window (Fig. 13); :func:`debist.engine.fileformats.png_bytes` turns each into the same
+dynamic window (Fig. 13); :func:`debist.core.fileformats.png_bytes` turns each into the same
 PNG bytes on every call (no time stamp, no software tag), so that the report is a pure
 function of its inputs.
 

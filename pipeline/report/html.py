@@ -26,7 +26,7 @@ from typing import Any
 import jinja2
 
 from debist.core.errors import ArtifactError
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 from debist.report.tables import (
     auto_line,
     equilibrium_kind,

@@ -1,7 +1,7 @@
 """Terminal reports of a workflow's results: rich tables built from the stages' summaries.
 
 Every number printed comes from a stage's ``summary.json``, read only after its sha256 was
-checked against the stage's manifest (:func:`debist.engine.artifacts.read_summary`); wall times,
+checked against the stage's manifest (:func:`debist.core.artifacts.read_summary`); wall times,
 which no hash covers, are not printed here.
 """
 

@@ -3,7 +3,7 @@
 Each stage module holds the stage's pure ``run_<stage>`` function (arrays and configuration
 in, a result out; no file IO, no printing) and an ``execute(ctx)`` adapter that takes the
 stage's inputs from a :class:`StageInputs` (the runner, which reads them through
-:mod:`debist.engine.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
+:mod:`debist.core.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
 ingest reads files itself, because reading rig logs is what it is for.
 
 The registry :data:`debist.engine.registry.STAGES` names each stage's module; a stage's key hashes
@@ -34,8 +34,8 @@ class StageOutput:
     ----------
     outputs : dict of str to object
         Output path relative to the stage folder to value: a pandas DataFrame (Parquet),
-        :class:`debist.engine.artifacts.H5Tree`, :class:`debist.engine.artifacts.Figure`,
-        :class:`debist.engine.artifacts.FileWriter`, ``str`` or ``bytes``.
+        :class:`debist.core.artifacts.H5Tree`, :class:`debist.core.artifacts.Figure`,
+        :class:`debist.core.artifacts.FileWriter`, ``str`` or ``bytes``.
     summary : dict
         Small JSON-compatible results the reports print (written as the hashed output
         ``summary.json``); reproducible values only, no wall times.
@@ -58,7 +58,7 @@ class StageInputs(Protocol):
     """What a stage's ``execute`` may read: the workflow and the upstream stages' artifacts.
 
     Implemented by :class:`debist.engine.runner.Runner`; every read goes through
-    :mod:`debist.engine.artifacts`.
+    :mod:`debist.core.artifacts`.
     """
 
     wf: Workflow

@@ -6,8 +6,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from debist.engine.artifacts import Figure, H5Tree
-from debist.engine.fileformats import REPORT_DPI
+from debist.core.artifacts import Figure, H5Tree
+from debist.core.fileformats import REPORT_DPI
 from debist.physics.analysis import (
     AnalyzeConfig,
     analysis_figures,

@@ -18,10 +18,10 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import progress
+from debist.core.artifacts import H5Tree
 from debist.core.errors import DebistWarning, IdentificationError
 from debist.datasets import validation_datasets
-from debist.engine import progress
-from debist.engine.artifacts import H5Tree
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.physics_stages import analytical_for

@@ -11,8 +11,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine.artifacts import Figure, H5Tree
-from debist.engine.fileformats import REPORT_DPI
+from debist.core.artifacts import Figure, H5Tree
+from debist.core.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, select_hyperparameters
 from debist.identify.bands import (
     band_label,

@@ -22,9 +22,10 @@ from typing import Any
 
 import lazy_loader as lazy
 
+from debist.core import artifacts
 from debist.core.errors import ArtifactError
-from debist.engine import artifacts, outdir
-from debist.engine.fileformats import REPORT_DPI
+from debist.core.fileformats import REPORT_DPI
+from debist.engine import outdir
 from debist.engine.registry import stage as registry_stage
 from debist.identify.bands import BOOTSTRAP_LABEL
 from debist.report.figures import (

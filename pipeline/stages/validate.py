@@ -9,8 +9,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core.progress import Stopwatch
 from debist.datasets import validation_datasets
-from debist.engine.progress import Stopwatch
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel

@@ -28,7 +28,7 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 
 from debist.core.errors import OutputDirError, WorkflowError
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 
 __all__ = ["copy_example", "example_names"]
 

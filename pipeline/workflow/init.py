@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from debist.core.errors import RigLogError, WorkflowError
+from debist.core.fileformats import atomic_write
 from debist.core.names import is_file_name
-from debist.engine.fileformats import atomic_write
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec

@@ -27,11 +27,11 @@ from typing import Annotated, Any, Literal
 
 import pydantic
 
+from debist.core import preflight
 from debist.core.errors import WorkflowError
 from debist.core.names import check_file_name
 from debist.differentiate.base import CONFIGS
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
-from debist.engine import preflight
 from debist.identify.config import IdentifyConfig
 from debist.ingest.spec import OPTION_KEYS, IngestSpec
 from debist.ingest.units import UNITS

@@ -22,7 +22,7 @@ from typing import Any
 
 import platformdirs
 
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 
 __all__ = ["cache_dir", "read_json", "write_json"]
 

@@ -47,8 +47,8 @@ from typing import Any
 
 from debist import __version__
 from debist.core.errors import ArtifactError, OutputDirError
-from debist.engine.faults import fault_point
-from debist.engine.fileformats import (
+from debist.core.faults import fault_point
+from debist.core.fileformats import (
     Figure,
     FileWriter,
     H5Tree,
@@ -502,7 +502,7 @@ def write_stage(
     upstream : mapping of str to str
         Upstream stage to the sha256 of its manifest.
     outputs : mapping of str to object
-        Relative output path to value (see :func:`debist.engine.fileformats.write_output`).
+        Relative output path to value (see :func:`debist.core.fileformats.write_output`).
     summary : mapping, optional
         Small JSON-compatible results for reports, written as ``summary.json``.
     timings : mapping of str to float, optional
