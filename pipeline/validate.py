@@ -11,7 +11,7 @@ import numpy as np
 from debist.core import progress
 from debist.core.errors import WorkflowError
 from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
-from debist.ingest.units import lookup_unit
+from debist.core.units import lookup_unit
 from debist.simulate.freerun import (
     FreeRunModel,
     SimulationResult,

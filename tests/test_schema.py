@@ -12,8 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
+from debist.core.config import config_from_section, unknown_key_message
 from debist.core.errors import WorkflowError
-from debist.workflow.config import config_from_section, unknown_key_message
 from debist.workflow.loader import load_workflow
 from debist.workflow.schema import SECTIONS, check_workflow
 

@@ -15,9 +15,9 @@ import pint
 import pytest
 
 from debist.core import cache as user_cache
+from debist.core import units
 from debist.engine import fingerprint
 from debist.engine.registry import STAGES
-from debist.ingest import units
 
 
 @pytest.fixture

@@ -9,10 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
-from debist.core.errors import WorkflowError
-from debist.identify.regularise import CONSTRAINT
-from debist.model.terms import check_terms
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
@@ -20,6 +17,9 @@ from debist.workflow.config import (
     SectionConfig,
     config_from_section,
 )
+from debist.core.errors import WorkflowError
+from debist.identify.regularise import CONSTRAINT
+from debist.model.terms import check_terms
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'

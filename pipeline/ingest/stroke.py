@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from debist.core.errors import PlausibilityWarning
-from debist.ingest.units import lookup_unit
+from debist.core.units import lookup_unit
 
 __all__ = ["STROKE_MAX", "STROKE_MIN", "check_stroke"]
 

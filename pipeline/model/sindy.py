@@ -35,10 +35,10 @@ import numpy as np
 import pydantic
 from pydantic import NonNegativeFloat, PositiveInt
 
+from debist.core.config import CONFIG, SectionConfig
 from debist.core.errors import ConvergenceWarning, IdentificationError, WorkflowError
 from debist.core.preflight import check_memory, sindy_bytes
 from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
-from debist.workflow.config import CONFIG, SectionConfig
 
 OPTIMIZERS = ("STLSQ", "SR3")
 

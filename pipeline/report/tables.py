@@ -16,7 +16,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from debist.core.metrics import POOR_SHARE
-from debist.ingest.units import lookup_unit, pretty_unit
+from debist.core.units import lookup_unit, pretty_unit
 
 #: How identified quantities are labelled in reports (summary key -> label). The backbone's
 #: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the

@@ -15,13 +15,13 @@ from typing import Annotated, ClassVar, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeFloat, PositiveFloat, PositiveInt
 
-from debist.physics.params import PrototypeParams
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
     SectionConfig,
 )
+from debist.physics.params import PrototypeParams
 
 __all__ = ["RigParams"]
 

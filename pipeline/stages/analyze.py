@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from debist.core.artifacts import Figure, H5Tree
+from debist.core.config import config_from_section
 from debist.core.fileformats import REPORT_DPI
 from debist.physics.analysis import (
     AnalyzeConfig,
@@ -16,7 +17,6 @@ from debist.physics.analysis import (
 )
 from debist.physics.params import PrototypeParams
 from debist.stages import StageInputs, StageOutput
-from debist.workflow.config import config_from_section
 
 __all__ = ["AnalyzeResult", "execute", "run_analyze"]
 

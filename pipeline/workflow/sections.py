@@ -3,7 +3,7 @@
 Their domain code (:mod:`debist.validate`, :mod:`debist.studies`, :mod:`debist.report.html`)
 loads the simulator, the whole identification or the page templates; the configuration
 classes live here, so that checking a workflow loads none of them. Both are built by
-:meth:`debist.workflow.config.SectionConfig.from_dict`.
+:meth:`debist.core.config.SectionConfig.from_dict`.
 
 References
 ----------
@@ -18,13 +18,13 @@ import pydantic
 from pydantic import BeforeValidator, Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 from typing_extensions import TypedDict
 
-from debist.ingest.units import lookup_unit
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
     SectionConfig,
 )
+from debist.core.units import lookup_unit
 
 __all__ = ["PublishedResult", "ReportConfig", "StudyConfig", "ValidateConfig"]
 
