@@ -1312,7 +1312,7 @@ class Model:
         Masoud & Maas 2025, Sec. 5.2 (free-run simulation).
         """
         from debist.simulate.freerun import simulate
-        from debist.validate import default_q_limit
+        from debist.validate.freerun import default_q_limit
 
         t = np.asarray(t, dtype=float)
         v = np.asarray(v, dtype=float)

@@ -25,7 +25,8 @@ from debist.physics.statics import force_displacement
 
 if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
     from debist.identify.fit import Record
-    from debist.validate import DataSet, ValidateConfig
+    from debist.validate.config import ValidateConfig
+    from debist.validate.freerun import DataSet
 
 __all__ = ["analytical_for", "physics_mass", "physics_prior", "quadratic_force"]
 

@@ -27,7 +27,6 @@ from debist.core import preflight, progress
 from debist.core.errors import IdentificationError, WorkflowError
 from debist.core.metrics import rms
 from debist.core.tables import input_columns
-from debist.datasets import validation_datasets
 from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.identify.config import IdentifyConfig
@@ -35,7 +34,9 @@ from debist.identify.fit import Record, fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.records import estimation_records
 from debist.report.study_plots import alpha_figure, grid_figure
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import DataSet, validate_model
 from debist.workflow.sections import StudyConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -202,7 +203,7 @@ def rbf_grid_study(
     identify_section : mapping
         The ``[identify]`` section (see :class:`~debist.identify.config.IdentifyConfig`).
     validate_section : mapping
-        The ``[validate]`` section (see :class:`~debist.validate.ValidateConfig`).
+        The ``[validate]`` section (see :class:`~debist.validate.config.ValidateConfig`).
     cfg : StudyConfig
         The grids, ``free_run`` and ``max_samples``.
 

@@ -165,7 +165,8 @@ def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     import debist.stages.compare as compare_stage
     from debist.records import Record
     from debist.stages.compare import _narx_rows
-    from debist.validate import DataSet, ValidateConfig
+    from debist.validate.config import ValidateConfig
+    from debist.validate.freerun import DataSet
 
     monkeypatch.setattr(compare_stage, "narx_available", lambda: False)
     rec = bistable_record

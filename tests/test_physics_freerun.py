@@ -9,7 +9,8 @@ from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced, simulate_reduced
 from debist.physics_stages import analytical_for
 from debist.simulate.freerun import simulate
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.freerun import DataSet, validate_model
 
 P = PrototypeParams.paper()
 DT = 1e-3

@@ -20,7 +20,8 @@ from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.studies import StudyConfig, rbf_grid_study
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.freerun import DataSet, validate_model
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Bytes a refused call may allocate at most (a few small arrays, no regressor).

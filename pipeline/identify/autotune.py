@@ -79,7 +79,7 @@ from debist.identify.config import (
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.terms import column_names
 from debist.simulate.prediction import restarted_runs
-from debist.validate import default_q_limit
+from debist.validate.freerun import default_q_limit
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -470,7 +470,7 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"unstable: ..."``, ``"diverged: ..."``, ``"not better than the mean ..."``,
         ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
         ``"fragile: ..."`` (the 97.5th percentile of the NRMSE(q) of the model's bootstrap
-        replicates, :func:`debist.validate.replicate_spread`, is poor: more than 2.5 % of
+        replicates, :func:`debist.validate.freerun.replicate_spread`, is poor: more than 2.5 % of
         them lose the motion), ``"worse than <model> (x %)"``,
         or ``"ok"``; the last three may combine. A row whose ``under_excited`` names why the
         estimation data cannot separate the model's terms (a single line, one period) starts

@@ -21,7 +21,6 @@ import numpy as np
 from debist.core import progress
 from debist.core.artifacts import H5Tree
 from debist.core.errors import DebistWarning, IdentificationError
-from debist.datasets import validation_datasets
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.physics_stages import analytical_for
@@ -30,7 +29,9 @@ from debist.report.tables import with_verdicts
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
 from debist.stages.sindy_choice import choose_sindy
-from debist.validate import ValidateConfig, default_q_limit, score_free_runs, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import default_q_limit, score_free_runs, validate_model
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -43,7 +43,7 @@ from debist.report.plots import curves_figure
 from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
-from debist.validate import report_factor
+from debist.validate.freerun import report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

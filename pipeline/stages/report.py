@@ -42,7 +42,7 @@ from debist.report.html import (
 )
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
-from debist.validate import REPLICATE_BAND
+from debist.validate.freerun import REPLICATE_BAND
 from debist.workflow.overrides import override_args
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -337,7 +337,7 @@ def _split_runs(frame: pd.DataFrame, model: str) -> dict[str, pd.DataFrame]:
     """Split one ``simulated/<data set>.parquet`` into the free run of each model it holds.
 
     Its own model's ``q_sim`` (with the band of its bootstrap replicates,
-    :data:`debist.validate.REPLICATE_BAND`) and, from the other columns ``q_sim_<other>``,
+    :data:`debist.validate.freerun.REPLICATE_BAND`) and, from the other columns ``q_sim_<other>``,
     the other models the validate stage ran beside it (analytical, equation-error).
     """
     runs = {model: frame}

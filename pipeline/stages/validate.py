@@ -10,7 +10,6 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.progress import Stopwatch
-from debist.datasets import validation_datasets
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
@@ -20,7 +19,8 @@ from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
-from debist.validate import (
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import (
     REPLICATE_BAND,
     ValidateConfig,
     default_q_limit,
@@ -112,7 +112,7 @@ def run_validate(
         parameters, Eq. 26) is scored as model ``"analytical"``.
     replicates : tuple of (list of str, ndarray of shape (B, p)), optional
         The fit's regressor columns and its bootstrap replicates minus the estimate: up to
-        ``[validate] replicates`` of them are simulated (:func:`debist.validate.
+        ``[validate] replicates`` of them are simulated (:func:`debist.validate.freerun.
         replicate_spread`), and the rbf rows get ``replicates``, ``nrmse_q_lo``,
         ``nrmse_q_hi``, ``replicates_poor`` and ``replicates_hold_q``, the free runs ``q_sim_lo``
         and ``q_sim_hi``.

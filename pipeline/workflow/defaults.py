@@ -25,7 +25,8 @@ from debist.model.narx import NarxConfig
 from debist.model.sindy import SindyConfig
 from debist.physics.config import AnalyzeConfig
 from debist.rig.config import RigConfig
-from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
+from debist.validate.config import ValidateConfig
+from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = ["class_defaults", "with_defaults"]
 
@@ -50,7 +51,7 @@ def class_defaults(cls: type) -> dict[str, Any]:
     ----------
     cls : type
         A pydantic dataclass of :mod:`debist.core.config` (e.g.
-        :class:`debist.workflow.sections.ValidateConfig`).
+        :class:`debist.validate.config.ValidateConfig`).
 
     Returns
     -------
@@ -59,7 +60,7 @@ def class_defaults(cls: type) -> dict[str, Any]:
 
     Examples
     --------
-    >>> from debist.workflow.sections import ValidateConfig
+    >>> from debist.validate.config import ValidateConfig
     >>> class_defaults(ValidateConfig)["substeps"]
     2
     """

@@ -43,7 +43,8 @@ from debist.physics.config import AnalyzeConfig
 from debist.physics.params import PrototypeParams
 from debist.rig.config import RigConfig
 from debist.rig.profiles import make_profile
-from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
+from debist.validate.config import ValidateConfig
+from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = [
     "DATALESS",

@@ -7,7 +7,7 @@ no stage imports another stage.
 from __future__ import annotations
 
 from debist.core.tables import input_columns
-from debist.validate import DataSet
+from debist.validate.freerun import DataSet
 
 __all__ = ["validation_datasets"]
 

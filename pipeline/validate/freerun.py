@@ -20,7 +20,7 @@ from debist.simulate.freerun import (
     simulate,
     substeps_needed,
 )
-from debist.workflow.sections import ValidateConfig
+from debist.validate.config import ValidateConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -149,6 +149,11 @@ def default_q_limit(q_range: tuple[float, float]) -> float:
     -------
     float
         ``2 max(|q_lo|, |q_hi|)`` [unit of q].
+
+    Examples
+    --------
+    >>> default_q_limit((-1.5, 4.0))
+    8.0
     """
     return 2.0 * max(abs(float(q_range[0])), abs(float(q_range[1])))
 
