@@ -31,8 +31,8 @@ from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.records import estimation_records
 from debist.model.rbf import RBFModel
-from debist.records import estimation_records
 from debist.report.study_plots import alpha_figure, grid_figure
 from debist.validate.config import ValidateConfig
 from debist.validate.datasets import validation_datasets

@@ -241,8 +241,8 @@ def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase_boot, stairc
     """
     import tomllib
 
+    from debist.identify.physics_prior import physics_mass
     from debist.physics.params import PrototypeParams
-    from debist.physics_stages import physics_mass
     from debist.stages.identify import run_identify
 
     curves, true, _ = staircase_boot

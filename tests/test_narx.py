@@ -163,7 +163,7 @@ def test_verdicts_name_narx_and_its_unmodelled_columns_are_not_divergence():
 def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     """The stage never drops the peer silently: its rows carry the reason and NaN numbers."""
     import debist.stages.compare as compare_stage
-    from debist.records import Record
+    from debist.identify.records import Record
     from debist.stages.compare import _narx_rows
     from debist.validate.config import ValidateConfig
     from debist.validate.freerun import DataSet

@@ -21,10 +21,10 @@ import numpy as np
 from debist.core import progress
 from debist.core.artifacts import H5Tree
 from debist.core.errors import DebistWarning, IdentificationError
+from debist.identify.physics_prior import analytical_for
+from debist.identify.records import estimation_records
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
-from debist.physics_stages import analytical_for
-from debist.records import estimation_records
 from debist.report.tables import with_verdicts
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput

@@ -32,13 +32,13 @@ from debist.identify.design import (
 from debist.identify.excitation import check_excitation, thin_data
 from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range, supported_size
 from debist.identify.mass import effective_mass
+from debist.identify.physics_prior import physics_mass, physics_prior
+from debist.identify.records import estimation_records
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS
 from debist.physics.reduced import reduced_curves
-from debist.physics_stages import physics_mass, physics_prior
-from debist.records import estimation_records
 from debist.report.plots import curves_figure
 from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units

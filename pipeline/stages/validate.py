@@ -10,10 +10,10 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.progress import Stopwatch
+from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
-from debist.physics_stages import analytical_for
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
