@@ -19,7 +19,7 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
 from debist.model.sindy import SindyConfig, fit_sindy
-from debist.studies import StudyConfig, rbf_grid_study
+from debist.stages.studies import StudyConfig, rbf_grid_study
 from debist.validate.config import ValidateConfig
 from debist.validate.freerun import DataSet, validate_model
 

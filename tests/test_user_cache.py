@@ -17,7 +17,7 @@ import pytest
 from debist.core import cache as user_cache
 from debist.core import units
 from debist.engine import fingerprint
-from debist.engine.registry import STAGES
+from debist.stages.registry import STAGES
 
 
 @pytest.fixture

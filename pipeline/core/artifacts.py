@@ -15,8 +15,8 @@ killed in between (SIGKILL, power loss) leaves ``.<stage>.tmp-*`` or ``.<stage>.
 only ever replaced when every file in it is listed by its manifest: a file debist did not
 write is never deleted.
 
-The output folder as a whole (its owner, its lock, the recovery of leftovers and the run
-digest) is :mod:`debist.engine.outdir`.
+The output folder as a whole (its owner, its lock and the recovery of leftovers) is
+:mod:`debist.engine.outdir`; the run's digest over the stages' manifests is :func:`run_digest`.
 
 References
 ----------
@@ -84,6 +84,7 @@ __all__ = [
     "read_parquet",
     "read_summary",
     "remove_tree",
+    "run_digest",
     "set_aside",
     "sha256_file",
     "stage_key",
@@ -310,6 +311,31 @@ def manifest_digest(stage_dir: str | os.PathLike) -> str | None:
     """
     path = Path(stage_dir) / MANIFEST
     return sha256_file(path) if path.is_file() else None
+
+
+def run_digest(output_dir: str | os.PathLike, stages: Sequence[str]) -> str | None:
+    """Return the digest of a run: sha256 over its stages' manifests, in stage order.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The workflow's output folder.
+    stages : sequence of str
+        The workflow's stages, in execution order.
+
+    Returns
+    -------
+    str or None
+        sha256 of the lines ``"<stage> <sha256 of manifest.json>"``; None when a stage has
+        no manifest.
+    """
+    lines = []
+    for stage in stages:
+        digest = manifest_digest(Path(output_dir) / stage)
+        if digest is None:
+            return None
+        lines.append(f"{stage} {digest}\n")
+    return sha256_bytes("".join(lines).encode())
 
 
 def read_summary(stage_dir: str | os.PathLike, manifest: Manifest) -> dict[str, Any]:

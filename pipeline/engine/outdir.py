@@ -29,6 +29,7 @@ from pathlib import Path
 
 from debist.core import artifacts
 from debist.core.artifacts import SWAP_FOLDER
+from debist.core.artifacts import run_digest as run_digest  # the run's digest, named here too
 from debist.core.errors import OutputDirError, RunLockedError
 from debist.core.fileformats import atomic_write
 
@@ -500,28 +501,3 @@ def recover(output_dir: str | os.PathLike) -> list[str]:
             artifacts.remove_tree(path)
             done.append(f"removed '{path.name}' (unfinished outputs of an interrupted run)")
     return done
-
-
-def run_digest(output_dir: str | os.PathLike, stages: Sequence[str]) -> str | None:
-    """Return the digest of a run: sha256 over its stages' manifests, in stage order.
-
-    Parameters
-    ----------
-    output_dir : path-like
-        The workflow's output folder.
-    stages : sequence of str
-        The workflow's stages, in execution order.
-
-    Returns
-    -------
-    str or None
-        sha256 of the lines ``"<stage> <sha256 of manifest.json>"``; None when a stage has
-        no manifest.
-    """
-    lines = []
-    for stage in stages:
-        digest = artifacts.manifest_digest(Path(output_dir) / stage)
-        if digest is None:
-            return None
-        lines.append(f"{stage} {digest}\n")
-    return artifacts.sha256_bytes("".join(lines).encode())

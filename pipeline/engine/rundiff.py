@@ -22,7 +22,7 @@ import lazy_loader as lazy
 
 from debist.core import artifacts
 from debist.core.errors import WorkflowError
-from debist.engine.registry import names
+from debist.stages.registry import names
 from debist.workflow.defaults import with_defaults
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI

@@ -35,9 +35,10 @@ from debist.core.errors import (
 )
 from debist.core.faults import fault_point
 from debist.core.fileformats import write_output
-from debist.engine import outdir, registry
+from debist.engine import outdir
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
+from debist.stages import registry
 from debist.workflow.loader import Workflow
 
 #: Stage names in execution order.
@@ -719,7 +720,7 @@ class Runner:
     # ---------------------------------------------------------------- verify
     def digest(self) -> str | None:
         """Return the run digest over this workflow's stages (None when one is missing)."""
-        return outdir.run_digest(self.wf.output_dir, self.stages())
+        return artifacts.run_digest(self.wf.output_dir, self.stages())
 
     def verify(self, digest: str | None = None) -> list[str]:
         """Check every artifact, every manifest and the chain (and a quoted digest).

@@ -42,7 +42,7 @@ class ExportInfo:
     workflow : str
         The workflow's name.
     run_digest : str or None
-        The run digest (:func:`debist.engine.outdir.run_digest`); None when a stage of the
+        The run digest (:func:`debist.core.artifacts.run_digest`); None when a stage of the
         workflow has not run.
     identify_manifest : str or None
         sha256 of ``identify/manifest.json`` (names the identified model even without a

@@ -1,6 +1,6 @@
 """Identification records built from the stages' tables (the rows of Eq. 40).
 
-Shared by the identify, compare and study stages and by :mod:`debist.studies`: a small
+Shared by the identify, compare and study stages and by :mod:`debist.stages.studies`: a small
 module they import, so that no stage imports another stage.
 
 References

@@ -6,10 +6,12 @@ stage's inputs from a :class:`StageInputs` (the runner, which reads them through
 :mod:`debist.core.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
 ingest reads files itself, because reading rig logs is what it is for.
 
-The registry :data:`debist.engine.registry.STAGES` names each stage's module; a stage's key hashes
-the source of that module and of every ``pipeline`` module it imports, transitively
+The registry :data:`debist.stages.registry.STAGES` names each stage's module; a stage's key
+hashes the source of that module and of every ``pipeline`` module it imports, transitively
 (:func:`debist.engine.fingerprint.code_fingerprint`), so this package's ``__init__`` imports
-nothing: a stage's code is exactly what its own module reaches.
+nothing: a stage's code is exactly what its own module reaches. Beside the stage modules sit
+what several of them share: :mod:`.registry` (the stage graph), :mod:`.studies` (the
+hyper-parameter studies of the study stage) and :mod:`.sindy_choice`.
 """
 
 from __future__ import annotations

@@ -25,8 +25,6 @@ import lazy_loader as lazy
 from debist.core import artifacts
 from debist.core.errors import ArtifactError
 from debist.core.fileformats import REPORT_DPI
-from debist.engine import outdir
-from debist.engine.registry import stage as registry_stage
 from debist.identify.bands import BOOTSTRAP_LABEL
 from debist.report.figures import (
     dynamic_window,
@@ -42,6 +40,7 @@ from debist.report.html import (
 )
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
+from debist.stages.registry import stage as registry_stage
 from debist.validate.freerun import REPLICATE_BAND
 from debist.workflow.overrides import override_args
 
@@ -307,7 +306,7 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
         for d in wf.datasets
     ]
     provenance = {
-        "digest": outdir.run_digest(wf.output_dir, upstream),
+        "digest": artifacts.run_digest(wf.output_dir, upstream),
         "verify": shlex.join(
             ["debist", "verify", wf.path.name]
             + [word for arg in override_args(wf.overrides) for word in ("--set", arg)]

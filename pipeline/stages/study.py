@@ -8,7 +8,7 @@ from typing import Any
 from debist.core.artifacts import Figure
 from debist.core.fileformats import REPORT_DPI
 from debist.stages import StageInputs, StageOutput
-from debist.studies import StudyConfig, alpha_study, rbf_grid_study
+from debist.stages.studies import StudyConfig, alpha_study, rbf_grid_study
 
 __all__ = ["execute", "run_study"]
 

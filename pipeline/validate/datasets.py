@@ -1,6 +1,6 @@
 """Validation data sets built from the stages' tables (what every free run is scored on).
 
-Shared by the validate, compare and study stages and by :mod:`debist.studies`, so that
+Shared by the validate, compare and study stages and by :mod:`debist.stages.studies`, so that
 no stage imports another stage.
 """
 

@@ -1,8 +1,9 @@
-"""The ``[validate]``, ``[study]`` and ``[report]`` tables.
+"""The ``[study]`` and ``[report]`` tables.
 
-Their domain code (:mod:`debist.validate.freerun`, :mod:`debist.studies`, :mod:`debist.report.html`)
-loads the simulator, the whole identification or the page templates; the configuration
-classes live here, so that checking a workflow loads none of them. Both are built by
+Their code (:mod:`debist.stages.studies`, :mod:`debist.report.html`) loads the whole
+identification or the page templates; the configuration classes live here, so that checking
+a workflow loads none of them (the ``[validate]`` table is :mod:`debist.validate.config`).
+Both are built by
 :meth:`debist.core.config.SectionConfig.from_dict`.
 
 References
