@@ -32,6 +32,7 @@ from debist.core.artifacts import SWAP_FOLDER
 from debist.core.artifacts import run_digest as run_digest  # the run's digest, named here too
 from debist.core.errors import OutputDirError, RunLockedError
 from debist.core.fileformats import atomic_write
+from debist.workflow.overrides import override_args
 
 __all__ = [
     "HOLDER",
@@ -85,8 +86,6 @@ def _describe(overrides: Mapping) -> str:
     """Name a run's settings: the workflow as it is, or its ``--set`` options."""
     if not overrides:
         return "the workflow file as it is (no --set)"
-    from debist.workflow.overrides import override_args
-
     return "--set " + " --set ".join(override_args(overrides))
 
 
