@@ -12,7 +12,7 @@ discarded; the commands take turns, so a slow spell of the machine hits all of t
 measured in the same run: the bare interpreter (``python -c pass``) and the import of the
 libraries every debist command needs (numpy, pydantic, typer and rich), the floor no CLI
 built on them can go under. "cold cache" is the no-op run with an empty user cache
-(:mod:`debist.engine.cache`), i.e. the first command after an install or a code change.
+(:mod:`debist.core.cache`), i.e. the first command after an install or a code change.
 """
 
 from __future__ import annotations

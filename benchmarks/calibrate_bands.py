@@ -79,7 +79,7 @@ def _member_outputs(folder: Path) -> list[tuple[Path, Path]]:
 
 def _member_data(run: Path) -> tuple[pd.DataFrame, dict]:
     """A member's identified curves and its rig truth, read once for every score."""
-    from debist.engine.fileformats import read_h5
+    from debist.core.fileformats import read_h5
 
     curves = pd.read_parquet(run / "identify" / "curves.parquet")
     return curves, read_h5(run / "rig" / "identification_truth.h5")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.model.narx import NarxConfig, _sysidentpy, fit_narx
 
 

@@ -9,7 +9,7 @@ The library behind the ``debist`` command line, and its Python API (:mod:`debist
     result.model.simulate(t, v, q0=0.0, q_dot0=0.0)
 
 Every stage is a pure function in one of the sub-packages; file input and output live in
-:mod:`debist.engine.artifacts` and the readers of :mod:`debist.ingest`. The names below load
+:mod:`debist.core.artifacts` and the readers of :mod:`debist.ingest`. The names below load
 lazily, so ``import debist`` stays cheap (the command line imports what it needs).
 
 References

@@ -33,9 +33,11 @@ from typing import TYPE_CHECKING, Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import artifacts, progress
+
 # The stages' machinery (runner, batch, the model and its simulator) is imported inside the
 # functions that use it: `import debist` loads this module lazily and must stay light.
-from debist.arguments import (
+from debist.core.arguments import (
     check_callable,
     check_flag,
     check_int,
@@ -43,8 +45,7 @@ from debist.arguments import (
     check_path,
     check_str,
 )
-from debist.engine import artifacts, progress
-from debist.errors import ArgumentError, ArtifactError, WorkflowError
+from debist.core.errors import ArgumentError, ArtifactError, WorkflowError
 from debist.workflow.loader import Workflow
 from debist.workflow.loader import load_workflow as _load_workflow
 
@@ -484,8 +485,8 @@ def export_model(
     """
     from contextlib import nullcontext
 
+    from debist.core.fileformats import atomic_write
     from debist.engine import outdir
-    from debist.engine.fileformats import atomic_write
     from debist.engine.runner import Runner
     from debist.export.files import export_files, load_identified
 
@@ -1311,7 +1312,7 @@ class Model:
         Masoud & Maas 2025, Sec. 5.2 (free-run simulation).
         """
         from debist.simulate.freerun import simulate
-        from debist.validate import default_q_limit
+        from debist.validate.freerun import default_q_limit
 
         t = np.asarray(t, dtype=float)
         v = np.asarray(v, dtype=float)

@@ -1,11 +1,11 @@
 """The ``debist`` command line: a thin Typer adapter over :mod:`debist`.
 
 Parses arguments, loads the workflow, calls the runner, prints with rich, and maps
-debist's exceptions to exit codes in one place (:func:`debist.errors.exit_code`): 0 done,
+debist's exceptions to exit codes in one place (:func:`debist.core.errors.exit_code`): 0 done,
 1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
 or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
 
-Long steps report through :mod:`debist.engine.progress`; the CLI draws those reports as rich
+Long steps report through :mod:`debist.core.progress`; the CLI draws those reports as rich
 progress bars on stderr when stderr is a terminal (not with ``-q``). Help texts are plain
 text (Typer's ``rich_markup_mode=None``), so workflow sections such as ``[rig]`` and units
 such as ``[s]`` print literally instead of being taken for rich markup.
@@ -33,7 +33,7 @@ from typer.core import TyperCommand, TyperGroup
 
 # debist's other modules are imported inside the commands, not here, so that `debist --help`
 # and a bad argument answer at once instead of after loading numpy, pandas and scipy.
-from debist.errors import (
+from debist.core.errors import (
     DebistError,
     Interrupted,
     OutputDirError,
@@ -173,7 +173,7 @@ def _options(
     _level["value"] = -1 if quiet else (1 if verbose else 0)
     console.quiet = quiet
     if memory_budget is not None:
-        from debist.engine.preflight import BUDGET_ENV
+        from debist.core.preflight import BUDGET_ENV
 
         os.environ[BUDGET_ENV] = repr(float(memory_budget))  # batch workers inherit it
 
@@ -248,7 +248,7 @@ def _bar_columns(label) -> tuple:
 
 
 class _Display:
-    """Progress reports (:mod:`debist.engine.progress`) drawn as rich progress bars, one per task.
+    """Progress reports (:mod:`debist.core.progress`) drawn as rich progress bars, one per task.
 
     A row reads ``stage: task``, a bar, ``done/total``, the elapsed time and rich's
     estimate of the time left. A row goes when its task reaches its total; when a stage
@@ -280,7 +280,7 @@ class _Display:
         self._lock = threading.Lock()
 
     def listen(self, task: str, done: int, total: int) -> None:
-        """Show one report (the :data:`debist.engine.progress.Listener` signature)."""
+        """Show one report (the :data:`debist.core.progress.Listener` signature)."""
         label = (
             task
             if not self.stage or task.startswith(f"{self.stage}:")
@@ -318,7 +318,7 @@ class _Display:
 @contextmanager
 def _progress() -> Iterator[_Display | None]:
     """Draw the progress reports made inside the block, if there is a terminal to draw on."""
-    from debist.engine.progress import listening
+    from debist.core.progress import listening
 
     target = _progress_console()
     if target is None:

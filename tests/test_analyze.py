@@ -8,9 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine import artifacts
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
 from debist.engine.runner import Runner
-from debist.errors import WorkflowError
 from debist.workflow.loader import load_workflow
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 
 import debist
-from debist.engine import artifacts
-from debist.errors import ArtifactError, OutputDirError, WorkflowError
+from debist.core import artifacts
+from debist.core.errors import ArtifactError, OutputDirError, WorkflowError
 
 
 @pytest.fixture

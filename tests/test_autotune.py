@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 
-from debist.errors import IdentificationError, WorkflowError
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.identify.autotune import (
     auto_settings,
     blocked_folds,

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from debist.engine import artifacts
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
 from debist.engine.batch import (
     BatchResult,
     expand_workflows,
@@ -19,7 +20,6 @@ from debist.engine.batch import (
     write_index,
 )
 from debist.engine.outdir import OWN_FILES
-from debist.errors import WorkflowError
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ["ingest", "differentiate", "identify", "validate"]

@@ -11,7 +11,7 @@ from rich.console import Console
 from typer.testing import CliRunner
 
 from debist import cli
-from debist.engine import progress
+from debist.core import progress
 from debist.physics.segments import solve_segments
 
 REFINE = """

@@ -12,12 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from debist.core.errors import ConvergenceWarning, WorkflowError
 from debist.differentiate.base import CONFIGS, DIFFERENTIATORS, differentiate
 from debist.differentiate.result import Derivatives
 from debist.differentiate.savgol import SavGolConfig, savgol_derivatives
 from debist.differentiate.spectral import SpectralConfig, lowpass_gain, spectral_derivatives
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig, tvregdiff_derivatives
-from debist.errors import ConvergenceWarning, WorkflowError
 
 DT, N = 0.01, 1000
 T = np.arange(N) * DT
@@ -52,7 +52,7 @@ ERROR_BOUNDS = [
 ]
 
 
-@pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
+@pytest.mark.filterwarnings("ignore::debist.core.errors.ConvergenceWarning")
 @pytest.mark.parametrize(("method", "params", "sigma", "part", "bounds"), ERROR_BOUNDS)
 def test_error_bounds_on_noisy_sines(method, params, sigma, part, bounds):
     x = X + sigma * np.random.default_rng(42).standard_normal(N)
@@ -61,7 +61,7 @@ def test_error_bounds_on_noisy_sines(method, params, sigma, part, bounds):
     assert np.all(np.less_equal(errors, bounds)), f"{method} {params} sigma={sigma}: {errors}"
 
 
-@pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
+@pytest.mark.filterwarnings("ignore::debist.core.errors.ConvergenceWarning")
 @pytest.mark.parametrize("method", sorted(DIFFERENTIATORS))
 def test_every_method_honours_the_contract(method):
     f = DIFFERENTIATORS[method]
@@ -364,8 +364,8 @@ def test_a_record_shorter_than_the_savgol_window_is_refused_naming_file_and_data
     length and the window, not scipy's bare ValueError."""
     import pandas as pd
 
+    from debist.core.errors import RigLogError
     from debist.differentiate.tables import differentiate_tables
-    from debist.errors import RigLogError
 
     frame = pd.DataFrame({"t": np.arange(10) * 0.01, "q": np.linspace(0, 1e-3, 10)})
     frame.attrs["source"] = "logs/short.csv"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import K1, M_Q, D, double_well
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import FitDiagnostics
 from debist.identify.mass import effective_mass, effective_mass_ratio

@@ -9,7 +9,7 @@ from conftest import DUFFING_T_END, duffing_record
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.excitation import check_excitation
 from debist.identify.fit import Record
 from debist.model.basis import RBFBasis

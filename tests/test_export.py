@@ -29,7 +29,7 @@ from conftest import (
     write_rig_csv,
 )
 
-from debist.errors import ArtifactError, WorkflowError
+from debist.core.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
 from debist.export.common import ExportInfo, curve_table
 from debist.export.files import export_files
@@ -403,7 +403,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     from typer.testing import CliRunner
 
     from debist.cli import app
-    from debist.engine import artifacts
+    from debist.core import artifacts
 
     def invoke(*args):
         result = CliRunner().invoke(app, [str(a) for a in args])

@@ -8,9 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine.artifacts import write_text_files
+from debist.core.artifacts import write_text_files
+from debist.core.errors import OutputDirError, WorkflowError
 from debist.engine.runner import Runner
-from debist.errors import OutputDirError, WorkflowError
 from debist.rig.fleet_workflows import fleet_workflows
 from debist.workflow.loader import load_workflow
 

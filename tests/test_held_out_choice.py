@@ -14,7 +14,7 @@ import pytest
 from conftest import INSIDE_CLASS, truth_model
 from test_slip import _slip_record, _with_slip
 
-from debist.errors import IdentificationError
+from debist.core.errors import IdentificationError
 from debist.identify.autotune import (
     _evaluate,
     blocked_folds,

@@ -13,15 +13,15 @@ from typer.testing import CliRunner
 
 import debist
 from debist.cli import app
-from debist.differentiate.tables import differentiate_tables
-from debist.engine.preflight import BUDGET_ENV
-from debist.errors import (
+from debist.core.errors import (
     ArgumentError,
     OutputDirError,
     PlausibilityWarning,
     RigLogError,
     WorkflowError,
 )
+from debist.core.preflight import BUDGET_ENV
+from debist.differentiate.tables import differentiate_tables
 from debist.identify import config as identify_config
 from debist.identify.config import MAX_GRID_VALUES
 from debist.ingest.compressed import open_gzip

@@ -9,9 +9,9 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine.artifacts import write_stage
-from debist.errors import OutputDirError, WorkflowError
-from debist.names import check_file_name
+from debist.core.artifacts import write_stage
+from debist.core.errors import OutputDirError, WorkflowError
+from debist.core.names import check_file_name
 from debist.workflow.loader import load_workflow
 
 HOSTILE = ["../../victim", "/tmp/x/abs", "unseen/part1", "a\x00b", ".hidden", "", "..", "CON"]

@@ -10,7 +10,7 @@ from html.parser import HTMLParser
 import pytest
 from matplotlib.figure import Figure
 
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
 from debist.report.html import (
     FIGURE_GROUPS,
     PNG_SIGNATURE,

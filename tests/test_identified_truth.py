@@ -75,7 +75,7 @@ def _curves_and_truth(out: Path):
     """The run's curves, the truth on their grid, the regions."""
     import tomllib
 
-    from debist.engine import artifacts
+    from debist.core import artifacts
     from debist.rig.experiment import RigConfig
     from debist.rig.profiles import make_profile
     from debist.rig.visited import excitation_blocks, rest_points, visited_intervals
@@ -208,7 +208,7 @@ def _unmodelled_force(out: Path, n: int, m_q: float) -> np.ndarray:
     """
     import tomllib
 
-    from debist.engine import artifacts
+    from debist.core import artifacts
     from debist.rig.experiment import RigConfig
     from debist.rig.reduced import ReducedPlant
 
@@ -241,8 +241,8 @@ def test_the_g_error_is_bias_from_the_dynamics_eq37_lacks(staircase_boot, stairc
     """
     import tomllib
 
+    from debist.identify.physics_prior import physics_mass
     from debist.physics.params import PrototypeParams
-    from debist.physics_stages import physics_mass
     from debist.stages.identify import run_identify
 
     curves, true, _ = staircase_boot

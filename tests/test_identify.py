@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
 
-from debist.errors import IdentificationError, WorkflowError
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.model.basis import RBFBasis
@@ -293,7 +293,7 @@ def test_creep_config_and_model_tree(bistable_record):
     with pytest.raises(WorkflowError, match=r"\[identify\] creep_bounds: expected \[lo, hi\]"):
         IdentifyConfig.from_dict({"creep_bounds": [5.0, 1.0]})
     assert IdentifyConfig.from_dict({}).creep is False
-    from debist.engine.preflight import identify_columns
+    from debist.core.preflight import identify_columns
 
     plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
     assert identify_columns(IdentifyConfig.from_dict({"creep": "search"}), 2)[0] == plain_cols + 10

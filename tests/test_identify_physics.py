@@ -5,15 +5,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from debist.engine import artifacts
-from debist.errors import WorkflowError
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
+from debist.identify.physics_prior import physics_prior
 from debist.model.rbf import RBFModel
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced
-from debist.physics_stages import physics_prior
 from debist.simulate.freerun import simulate
 
 P = PrototypeParams.paper()
@@ -86,8 +86,8 @@ def test_physics_terms_need_physics(record):
 
 
 def test_m_q_physics_is_the_analytical_mass_at_zero():
+    from debist.identify.physics_prior import physics_mass
     from debist.physics.reduced import reduced_curves
-    from debist.physics_stages import physics_mass
 
     assert physics_mass(P) == pytest.approx(float(reduced_curves(P, np.array([0.0])).m_q[0]))
     assert 0.040 < physics_mass(P) < 0.041  # tip mass 40 g plus the beam's share

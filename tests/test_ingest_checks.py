@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from debist.errors import RigLogError, UnitMismatchWarning
+from debist.core.errors import RigLogError, UnitMismatchWarning
 from debist.ingest.checks import find_gaps, split_segments
 from debist.ingest.detect import detect_format, sniff_format
 from debist.ingest.load import load_rig_log

@@ -7,7 +7,7 @@ import gzip
 import numpy as np
 import pytest
 
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec
 from debist.ingest.text import detect_decimal, detect_dialect

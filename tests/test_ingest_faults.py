@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from debist.errors import RigLogError, WorkflowError, exit_code
+from debist.core.errors import RigLogError, WorkflowError, exit_code
 from debist.ingest.load import load_rig_log
 from debist.ingest.spec import IngestSpec
 

@@ -7,7 +7,7 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.checks import check_plausible, check_scale_jump
 
 
@@ -83,7 +83,7 @@ def test_a_motionless_q_is_a_data_error_naming_file_and_channel(project):
 
 def test_a_laser_error_code_beyond_the_ild2300_range_is_refused_without_a_range(project):
     """The channel names a known sensor: its documented +-25 mm is the default `range`."""
-    from debist.errors import DebistWarning
+    from debist.core.errors import DebistWarning
 
     def rename(log):
         log.insert(1, "ILD2300 distance", log.pop("laser"))  # same column, the sensor's name

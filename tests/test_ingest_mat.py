@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from debist.errors import ResourceError, RigLogError, UnitMismatchWarning
+from debist.core.errors import ResourceError, RigLogError, UnitMismatchWarning
 from debist.ingest.channels import map_channels
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.mat import interpret_mat, read_mat

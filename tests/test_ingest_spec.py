@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.ingest.load import RIG_LOG_FORMATS
 from debist.ingest.spec import ChannelSpec, IngestSpec, ResampleSpec
 

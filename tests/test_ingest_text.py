@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import debist.ingest.load as ingest
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
+from debist.core.units import UNITS, lookup_unit
 from debist.ingest.checks import printed_resolution, time_rtol
 from debist.ingest.load import load_rig_log
 from debist.ingest.resample import resample_segment
 from debist.ingest.spec import IngestSpec
-from debist.ingest.units import UNITS, lookup_unit
 from debist.stages.ingest import run_ingest
 from debist.workflow.loader import DatasetSpec
 

@@ -11,7 +11,7 @@ import pytest
 import scipy.io as sio
 
 import debist
-from debist.errors import OutputDirError, RigLogError, WorkflowError
+from debist.core.errors import OutputDirError, RigLogError, WorkflowError
 from debist.ingest.survey import ChannelInfo, FileSurvey, guess_mapping
 from debist.workflow.loader import load_workflow
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import example_rbf_model, with_physics_creep
 
-from debist.engine import progress
+from debist.core import progress
 from debist.model.sindy import SindyModel
 from debist.model.terms import force_columns, input_columns, term_table
 from debist.physics.freerun import analytical_model

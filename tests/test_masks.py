@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.excitation import input_active
 from debist.workflow.overrides import override_folder
 

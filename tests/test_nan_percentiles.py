@@ -5,7 +5,7 @@ import warnings
 import numpy as np
 import pytest
 
-from debist.metrics import nan_percentiles
+from debist.core.metrics import nan_percentiles
 from debist.simulate.prediction import _correlation
 
 

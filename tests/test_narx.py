@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from debist.errors import WorkflowError
-from debist.metrics import nrmse
+from debist.core.errors import WorkflowError
+from debist.core.metrics import nrmse
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.report.tables import not_modelled, verdict
 
@@ -163,9 +163,10 @@ def test_verdicts_name_narx_and_its_unmodelled_columns_are_not_divergence():
 def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     """The stage never drops the peer silently: its rows carry the reason and NaN numbers."""
     import debist.stages.compare as compare_stage
-    from debist.records import Record
+    from debist.identify.records import Record
     from debist.stages.compare import _narx_rows
-    from debist.validate import DataSet, ValidateConfig
+    from debist.validate.config import ValidateConfig
+    from debist.validate.freerun import DataSet
 
     monkeypatch.setattr(compare_stage, "narx_available", lambda: False)
     rec = bistable_record

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 from conftest import invoke_cli
 
-from debist.engine import artifacts, outdir
+from debist.core import artifacts
+from debist.engine import outdir
 
 invoke = invoke_cli
 

@@ -101,9 +101,9 @@ def test_the_model_file_keeps_the_creep_and_a_prior_without_it_keeps_its_bytes()
 
 def test_the_prior_from_physics_has_the_reduced_models_creep():
     """k_i(q) of the analytical reduced model, k_bar = V_DE Y_MW, lambda = Y_MW / eta_MW."""
+    from debist.identify.physics_prior import physics_prior
     from debist.physics.params import PrototypeParams
     from debist.physics.reduced import reduced_curves
-    from debist.physics_stages import physics_prior
 
     physics = PrototypeParams()
     record = Record("r", np.linspace(-0.01, 0.01, 50), np.zeros(50), np.zeros(50),

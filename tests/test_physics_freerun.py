@@ -3,13 +3,14 @@
 import numpy as np
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
+from debist.identify.physics_prior import analytical_for
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced, simulate_reduced
-from debist.physics_stages import analytical_for
 from debist.simulate.freerun import simulate
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.freerun import DataSet, validate_model
 
 P = PrototypeParams.paper()
 DT = 1e-3

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.physics.params import V_MAX, PrototypeParams
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -23,7 +23,7 @@ from conftest import (
     with_physics_quadratic,
 )
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
@@ -43,10 +43,10 @@ def test_the_second_order_reproduces_the_held_voltage_curves_at_a_voltage_it_did
     steps of 0.5 kV) is ``g_1 v^2 + g_h,1 v^4`` to 3 % of its largest value (g_1 = 1/2 dC_1/dq
     of the reduced model; measured 2.0 %), and the separable ``g_1 v^2`` alone is off by more
     than 10 % (measured 17 %); DE 2's curve is minus DE 1's mirrored (the symmetric prototype)."""
+    from debist.identify.physics_prior import quadratic_force
     from debist.physics.params import PrototypeParams
     from debist.physics.reduced import reduced_curves
     from debist.physics.statics import force_displacement
-    from debist.physics_stages import quadratic_force
 
     physics = PrototypeParams(b=23e-3)
     q = np.linspace(-0.015, 0.015, 61)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.physics.kinematics import pitch_angle, ritz_basis
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.reduced import (

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import linalg, stats
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.simulate.freerun import simulate
 from debist.simulate.prediction import _correlation, k_step_prediction, residual_analysis
 
@@ -165,7 +165,7 @@ class Truth:
 
 def test_the_true_plant_predicts_its_own_record_to_integration_error(bistable_record):
     from debist.simulate.prediction import prediction_table
-    from debist.validate import DataSet
+    from debist.validate.freerun import DataSet
 
     rec = bistable_record
     n = 2000
@@ -237,7 +237,7 @@ def test_restarted_windows_of_a_free_run_repeat_it_sample_for_sample(bistable_re
     """Windows restarted from a free run's own states, with the inputs interpolated over the
     whole record, are that free run's stretches (the same arithmetic)."""
     from debist.simulate.prediction import restarted_runs
-    from debist.validate import DataSet
+    from debist.validate.freerun import DataSet
 
     rec, n = bistable_record, 3000
     (run,) = simulate(
@@ -259,9 +259,9 @@ def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bis
     """The multiple-shooting score of [identify.auto]: a model whose input gain is too weak to
     switch misses the record after its first lost switch in one free run, but only the
     windows that hold a switch when every window restarts from the measured state."""
-    from debist.metrics import nrmse
+    from debist.core.metrics import nrmse
     from debist.simulate.prediction import restarted_runs
-    from debist.validate import DataSet
+    from debist.validate.freerun import DataSet
 
     class Weak(Truth):
         def rhs(self, x, v):

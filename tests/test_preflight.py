@@ -13,14 +13,15 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine import preflight
-from debist.errors import ResourceError, WorkflowError
+from debist.core import preflight
+from debist.core.errors import ResourceError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_model
 from debist.model.sindy import SindyConfig, fit_sindy
-from debist.studies import StudyConfig, rbf_grid_study
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.stages.studies import StudyConfig, rbf_grid_study
+from debist.validate.config import ValidateConfig
+from debist.validate.freerun import DataSet, validate_model
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Bytes a refused call may allocate at most (a few small arrays, no regressor).
@@ -124,7 +125,7 @@ def test_data_free_lower_bound_refuses_huge_M_and_passes_the_shipped_ones(budget
 def test_estimate_agrees_with_the_measured_peak_of_a_real_fit():
     """tracemalloc sees 3 of the 5 regressor-sized arrays alive at the SVD (numpy's LAPACK
     copies are malloc'ed outside it): the estimate is 1.5 times its peak. Against the peak
-    resident size (see debist.engine.preflight) it is within 7 %."""
+    resident size (see debist.core.preflight) it is within 7 %."""
     records = _records(6000, n_rec=2)
     cfg = IdentifyConfig.from_dict({"M": 30, "T_z": 0.0, "max_condition": 1e300})
     estimate = preflight.identify_bytes(cfg, 1, 12000, 6000)

@@ -22,7 +22,7 @@ from conftest import (
     with_quadratic_curve,
 )
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.bands import curve_maps
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import fit_rbf_model

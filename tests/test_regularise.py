@@ -5,7 +5,7 @@ import pytest
 from conftest import bistable_truth
 from scipy.optimize import lsq_linear
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from debist.engine import forking
-from debist.engine.forking import fork_workers
+from debist.core import forking
+from debist.core.forking import fork_workers
 from debist.report import render
 from debist.report.render import FigureJob, render_pngs
 

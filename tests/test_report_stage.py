@@ -20,9 +20,10 @@ from matplotlib.image import imread
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine import artifacts, outdir
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
+from debist.engine import outdir
 from debist.engine.runner import Runner
-from debist.errors import WorkflowError
 from debist.report.figures import dynamic_window
 from debist.report.html import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
 from debist.stages.report import ReportInputs, run_report

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.physics.dynamics import well_state
 from debist.physics.kinematics import ritz_basis
 from debist.physics.statics import equilibria

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import equilibria
 from debist.rig.fleet import FleetError, is_bistable_and_switchable, make_fleet

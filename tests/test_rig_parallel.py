@@ -8,9 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from debist.engine import forking, progress
-from debist.engine.forking import fork_workers
-from debist.errors import WorkflowError
+from debist.core import forking, progress
+from debist.core.errors import WorkflowError
+from debist.core.forking import fork_workers
 from debist.rig.experiment import RigConfig, run_experiment, run_experiments
 
 SECTION = {

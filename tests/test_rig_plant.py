@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from debist.errors import DebistWarning, WorkflowError
+from debist.core.errors import DebistWarning, WorkflowError
 from debist.physics.dynamics import FullModel, well_state
 from debist.physics.kinematics import ritz_basis
 from debist.physics.params import PrototypeParams

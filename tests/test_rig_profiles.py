@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.rig.profiles import (
     PROFILES,
     V_LIMIT,

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 
-from debist.errors import WorkflowError, exit_code
+from debist.core.errors import WorkflowError, exit_code
 from debist.physics.freerun import AnalyticalModel
 from debist.physics.reduced import fit_reduced
 from debist.rig.params import RigParams
@@ -114,8 +114,8 @@ def test_pulse_on_de1_switches_from_the_left_to_the_right_well(switching):
 
 
 def test_rig_stage_writes_the_exact_curves_with_the_mass_they_are_per(tmp_path):
-    from debist.engine.artifacts import read_h5
-    from debist.engine.fileformats import write_output
+    from debist.core.artifacts import read_h5
+    from debist.core.fileformats import write_output
     from debist.stages.rig import run_rig
 
     section = {"plant": {"model": "reduced"}, "prototype": {"dz_1": 0.15e-3, "dz_2": 0.05e-3},
@@ -159,7 +159,7 @@ def test_the_gains_are_accurate_near_both_wells_and_the_shipped_bands_do_not_vou
     truth at the wells."""
     from conftest import invoke_cli
 
-    from debist.engine import artifacts
+    from debist.core import artifacts
 
     code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "identify")
     assert code == 0, text

@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.rig.profiles import make_profile, staircase_profile
 
 UNIT = np.sqrt([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])  # levels: v^2 in equal steps

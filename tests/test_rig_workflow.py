@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from debist.engine import artifacts
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
 from debist.engine.runner import Runner
-from debist.errors import WorkflowError
 from debist.rig.profiles import make_profile
 from debist.workflow.loader import load_workflow
 

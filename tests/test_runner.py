@@ -9,7 +9,7 @@ from conftest import SYNTHETIC_WORKFLOW, write_rig_csv
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine import artifacts
+from debist.core import artifacts
 
 
 @pytest.fixture

@@ -22,9 +22,10 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.engine import artifacts, outdir
+from debist.core import artifacts
+from debist.engine import outdir
 from debist.engine.fingerprint import code_fingerprint, module_closure
-from debist.engine.registry import STAGES
+from debist.stages.registry import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.errors import WorkflowError
-from debist.workflow.config import config_from_section, unknown_key_message
+from debist.core.config import config_from_section, unknown_key_message
+from debist.core.errors import WorkflowError
 from debist.workflow.loader import load_workflow
 from debist.workflow.schema import SECTIONS, check_workflow
 
@@ -467,7 +467,7 @@ def test_unknown_key_message_suggests_only_close_keys():
 
 def test_config_from_section_message_format():
     from debist.differentiate.savgol import SavGolConfig
-    from debist.validate import ValidateConfig
+    from debist.validate.config import ValidateConfig
 
     def message(cls, section, where="[x]"):
         with pytest.raises(WorkflowError) as err:
@@ -497,7 +497,7 @@ def test_literals_follow_the_registries():
     from debist.rig.dspace import MAT_VERSIONS
     from debist.rig.experiment import ExperimentConfig
     from debist.simulate.freerun import INTERPOLATIONS
-    from debist.validate import ValidateConfig
+    from debist.validate.config import ValidateConfig
 
     def choices(cls, name):
         annotation = cls.__pydantic_fields__[name].annotation

@@ -9,8 +9,9 @@ import pytest
 from conftest import invoke_cli
 
 import debist
-from debist.engine import artifacts, outdir
-from debist.errors import OutputDirError, WorkflowError
+from debist.core import artifacts
+from debist.core.errors import OutputDirError, WorkflowError
+from debist.engine import outdir
 from debist.workflow.loader import load_workflow, parse_overrides
 from debist.workflow.overrides import override_args, override_digest
 

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from debist.metrics import nrmse, rms
+from debist.core.metrics import nrmse, rms
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate, upsample_inputs
-from debist.validate import initial_state
+from debist.validate.freerun import initial_state
 
 
 def oscillator(k1=(2 * np.pi * 3.0) ** 2, dv=2.0, T_z=0.0):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from debist.errors import IdentificationError, WorkflowError
+from debist.core.errors import IdentificationError, WorkflowError
 from debist.model.sindy import SindyConfig, SindyModel, fit_sindy
 from debist.simulate.freerun import simulate
 

@@ -5,7 +5,7 @@ import numpy as np
 from debist.identify.fit import Record
 from debist.model.sindy import SindyConfig
 from debist.stages.sindy_choice import DEGREES, THRESHOLDS, choose_sindy
-from debist.workflow.sections import ValidateConfig
+from debist.validate.config import ValidateConfig
 
 
 def _record(rec):

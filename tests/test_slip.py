@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import INSIDE_CLASS, curve_error, example_rbf_model, excitation, truth_model
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model, slip_widths
 from debist.model.friction import slip_clip, slip_state_rate, slip_states
@@ -137,7 +137,7 @@ def test_slip_config_the_default_grid_and_the_model_file():
         with pytest.raises(WorkflowError, match=r"\[identify\] slip: expected"):
             IdentifyConfig.from_dict({"slip": bad})
     assert IdentifyConfig.from_dict({}).slip is False
-    from debist.engine.preflight import identify_columns
+    from debist.core.preflight import identify_columns
 
     plain_cols = identify_columns(IdentifyConfig.from_dict({}), 2)[0]
     assert identify_columns(IdentifyConfig.from_dict({"slip": 4}), 2)[0] == plain_cols + 4

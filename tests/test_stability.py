@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import F_MAX, K1, K3, M_Q, Q_RANGE, D, G, double_well
 
-from debist.errors import DebistError
+from debist.core.errors import DebistError
 from debist.identify.stability import (
     StabilityError,
     equilibria,

@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from debist.errors import WorkflowError
-from debist.studies import StudyConfig, alpha_study, derivative_roughness, rbf_grid_study
+from debist.core.errors import WorkflowError
+from debist.stages.studies import StudyConfig, alpha_study, derivative_roughness, rbf_grid_study
 
 IDENTIFY = {"T_z": 0.0, "backbone": ["linear_spring", "cubic_spring", "viscous"]}
 TVR = {"method": "tvregdiff", "alpha": 1e-5, "iterations": 10, "ep": 1e-12}
@@ -193,7 +193,7 @@ def test_roughness_of_a_line_is_zero_and_of_noise_is_large():
 
 
 def test_alpha_figure_survives_an_all_failed_study():
-    from debist.studies import alpha_figure
+    from debist.stages.studies import alpha_figure
 
     nan = [np.nan, np.nan]
     failed = "centre xi_1 has only 3 samples"

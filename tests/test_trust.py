@@ -7,10 +7,10 @@ import pandas as pd
 import pytest
 from conftest import double_well, duffing_record, logged_tables
 
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.report.tables import nrmse_table
 from debist.stages.validate import run_validate
-from debist.validate import default_q_limit
+from debist.validate.freerun import default_q_limit
 
 
 def test_a_model_with_negative_damping_at_its_wells_is_unstable_not_a_number():

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 from scipy.sparse.linalg import spsolve
 
+from debist.core.errors import ConvergenceWarning
 from debist.differentiate._tvr_solve import (
     large_bands,
     small_kkt,
@@ -18,9 +19,8 @@ from debist.differentiate._tvr_solve import (
     solve_small,
 )
 from debist.differentiate.tvregdiff import TVRegDiffResult, tv_functional, tvregdiff
-from debist.errors import ConvergenceWarning
 
-quiet = pytest.mark.filterwarnings("ignore::debist.errors.ConvergenceWarning")
+quiet = pytest.mark.filterwarnings("ignore::debist.core.errors.ConvergenceWarning")
 
 
 # Dense operators written from Chartrand's definitions (reference only, small n).

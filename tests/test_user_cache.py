@@ -14,10 +14,10 @@ import os
 import pint
 import pytest
 
-from debist.engine import cache as user_cache
+from debist.core import cache as user_cache
+from debist.core import units
 from debist.engine import fingerprint
-from debist.engine.registry import STAGES
-from debist.ingest import units
+from debist.stages.registry import STAGES
 
 
 @pytest.fixture
@@ -91,7 +91,7 @@ def test_a_stale_or_forged_entry_is_parsed_again(cache):
 def test_a_corrupt_or_unwritable_cache_costs_only_time(cache):
     expected = fingerprint.module_closure("debist.stages.validate")
     _fresh_process()
-    (cache / "imports-v1.json").write_text('{"debist.validate": [')  # truncated
+    (cache / "imports-v1.json").write_text('{"debist.validate.freerun": [')  # truncated
     assert fingerprint.module_closure("debist.stages.validate") == expected
     _fresh_process()
     blocked = cache.parent / "a-file"

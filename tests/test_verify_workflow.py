@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from conftest import invoke_cli
 
-from debist.engine import artifacts
+from debist.core import artifacts
 
 STAGES = ["ingest", "differentiate", "identify", "validate", "compare"]
 

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.ingest.spec import OPTION_KEYS
 from debist.rig.params import RigParams

@@ -79,7 +79,7 @@ PAPER_TABLE2_RBF = {
 @pytest.fixture(scope="module")
 def paper_experiment(tmp_path_factory):
     """One run of workflows/paper-experiment.toml: output, folder and the curves vs truth."""
-    from debist.engine import artifacts
+    from debist.core import artifacts
     from debist.model.rbf import RBFModel
 
     out_dir = tmp_path_factory.mktemp("paper-experiment")
@@ -130,7 +130,7 @@ def test_paper_experiment_input_gains_match_the_truth(paper_experiment):
     """g_i against the 3 kV secant of Fig. 4 (what the switching pulses see) over the bins
     where v_i is applied (above 10 % of its peak, >= 20 samples)."""
     _, out_dir, _, model, _ = paper_experiment
-    from debist.engine import artifacts
+    from debist.core import artifacts
 
     truth = artifacts.read_h5(out_dir / "rig/identification_truth.h5")["curves"]
     data = pd.read_parquet(out_dir / "ingest/identification.parquet")

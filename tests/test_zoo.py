@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 
 from debist import api
+from debist.core.errors import OutputDirError, WorkflowError
 from debist.engine.batch import expand_workflows
 from debist.engine.zoo import member_workflow, write_zoo
 from debist.engine.zooindex import ZooError, read_zoo
-from debist.errors import OutputDirError, WorkflowError
 from debist.physics.params import PrototypeParams
 from debist.rig.run import true_curves
 from debist.rig.zoo import ESTIMATION_PROFILES, draw_member, member_ok

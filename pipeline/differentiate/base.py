@@ -14,11 +14,11 @@ from typing import Any
 
 from numpy.typing import ArrayLike
 
+from debist.core.errors import WorkflowError
 from debist.differentiate.result import Derivatives
 from debist.differentiate.savgol import SavGolConfig, savgol_derivatives
 from debist.differentiate.spectral import SpectralConfig, spectral_derivatives
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig, tvregdiff_derivatives
-from debist.errors import WorkflowError
 
 __all__ = ["CONFIGS", "DIFFERENTIATORS", "Derivatives", "differentiate"]
 
@@ -86,7 +86,7 @@ def differentiate(
     >>> differentiate(t, 0.01, method="savgol", params={"windw": 11})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [differentiate] unknown key 'windw'; did you mean 'window'? ...
+    debist.core.errors.WorkflowError: [differentiate] unknown key 'windw'; did you mean 'window'...
     """
     if method not in DIFFERENTIATORS:
         raise WorkflowError(

@@ -8,8 +8,8 @@ import pydantic
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from debist.core.config import CONFIG, ConfigValueError, SectionConfig
 from debist.differentiate.result import Derivatives, check_signal
-from debist.workflow.config import CONFIG, ConfigValueError, SectionConfig
 
 __all__ = ["SavGolConfig", "savgol_derivatives"]
 

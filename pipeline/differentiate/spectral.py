@@ -9,8 +9,8 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, PositiveFloat
 
+from debist.core.config import CONFIG, SectionConfig
 from debist.differentiate.result import Derivatives, check_signal
-from debist.workflow.config import CONFIG, SectionConfig
 
 __all__ = ["SpectralConfig", "lowpass_gain", "spectral_derivatives"]
 

@@ -17,10 +17,10 @@ from typing import Any
 
 import lazy_loader as lazy
 
+from debist.core import progress
+from debist.core.errors import ConvergenceWarning, PlausibilityWarning, RigLogError, WorkflowError
+from debist.core.tables import sample_time
 from debist.differentiate.base import differentiate
-from debist.engine import progress
-from debist.errors import ConvergenceWarning, PlausibilityWarning, RigLogError, WorkflowError
-from debist.tables import sample_time
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

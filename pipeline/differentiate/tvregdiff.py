@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from debist.core.errors import ConvergenceWarning
 from debist.differentiate._tvr_solve import solve_large, solve_small
 from debist.differentiate.result import check_int, check_positive
-from debist.errors import ConvergenceWarning
 
 __all__ = ["TVRegDiffResult", "tv_functional", "tvregdiff"]
 

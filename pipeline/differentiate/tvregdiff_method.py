@@ -11,11 +11,11 @@ import pydantic
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
+from debist.core.config import CONFIG, ConfigValueError, SectionConfig
+from debist.core.metrics import rms
+from debist.core.units import lookup_unit
 from debist.differentiate.result import Derivatives, check_signal
 from debist.differentiate.tvregdiff import tvregdiff
-from debist.ingest.units import lookup_unit
-from debist.metrics import rms
-from debist.workflow.config import CONFIG, ConfigValueError, SectionConfig
 
 
 def unit_factor(symbol: str) -> float | None:

@@ -56,10 +56,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from debist.engine import preflight
+from debist.core import preflight
+from debist.core.errors import DebistError, WorkflowError
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
-from debist.errors import DebistError, WorkflowError
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
 from debist.workflow.loader import load_workflow
 
@@ -124,7 +124,7 @@ class BatchResult:
         ``"<ExceptionClass>: <message>"`` for a failed item (the last line of its
         traceback); empty when done.
     traceback : str
-        The full traceback of an unexpected (non-:class:`~debist.errors.DebistError`)
+        The full traceback of an unexpected (non-:class:`~debist.core.errors.DebistError`)
         exception; empty otherwise.
     output_dir : pathlib.Path or None
         The workflow's artifact root (None when the file could not be loaded).
@@ -334,7 +334,7 @@ def run_workflow_item(
     Returns
     -------
     BatchResult
-        Never raises for a failing workflow: a :class:`~debist.errors.DebistError`
+        Never raises for a failing workflow: a :class:`~debist.core.errors.DebistError`
         or any other ``Exception`` comes back as ``status="failed"`` with its class
         and message (and the traceback for an unexpected one).
     """
@@ -566,7 +566,7 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
         one BLAS/OpenMP thread (``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and
         ``OPENBLAS_NUM_THREADS`` = 1, unless this process's environment sets them), each
         with an equal share of the memory budget (``DEBIST_MEMORY_BUDGET_GB``, unless set
-        here: :func:`debist.engine.preflight.memory_budget`), and inherit the rest of this
+        here: :func:`debist.core.preflight.memory_budget`), and inherit the rest of this
         process's environment. The cluster's logs are silenced
         (its failures come back as task errors), and the environment variables that the
         nannies set in this process are restored on exit.

@@ -8,7 +8,7 @@ transitively, found by reading the import statements of the sources (:mod:`ast`;
 imports inside functions count, imports under ``if TYPE_CHECKING:`` do not, since they
 never run). Importing ``a.b.c`` also runs ``a/__init__`` and ``a/b/__init__``, so those
 count too. Parsing every source costs about 0.2 s, so the import names found in a source are
-kept in the user cache (:mod:`debist.engine.cache`) under the sha256 of that source: a
+kept in the user cache (:mod:`debist.core.cache`) under the sha256 of that source: a
 source that changes is parsed again, and the fingerprint itself always hashes the sources
 as they are.
 
@@ -26,7 +26,7 @@ import os
 from functools import cache
 from pathlib import Path
 
-from debist.engine import cache as user_cache
+from debist.core import cache as user_cache
 
 __all__ = ["code_fingerprint", "module_closure"]
 

@@ -16,8 +16,8 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
+from debist.core.errors import DebistError
 from debist.engine.runner import Runner
-from debist.errors import DebistError
 from debist.rig.fleet import FleetError
 from debist.rig.fleet_workflows import fleet_workflows
 from debist.workflow.loader import load_workflow

@@ -27,10 +27,12 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from debist.engine import artifacts
-from debist.engine.artifacts import SWAP_FOLDER
-from debist.engine.fileformats import atomic_write
-from debist.errors import OutputDirError, RunLockedError
+from debist.core import artifacts
+from debist.core.artifacts import SWAP_FOLDER
+from debist.core.artifacts import run_digest as run_digest  # the run's digest, named here too
+from debist.core.errors import OutputDirError, RunLockedError
+from debist.core.fileformats import atomic_write
+from debist.workflow.overrides import override_args
 
 __all__ = [
     "HOLDER",
@@ -84,8 +86,6 @@ def _describe(overrides: Mapping) -> str:
     """Name a run's settings: the workflow as it is, or its ``--set`` options."""
     if not overrides:
         return "the workflow file as it is (no --set)"
-    from debist.workflow.overrides import override_args
-
     return "--set " + " --set ".join(override_args(overrides))
 
 
@@ -500,28 +500,3 @@ def recover(output_dir: str | os.PathLike) -> list[str]:
             artifacts.remove_tree(path)
             done.append(f"removed '{path.name}' (unfinished outputs of an interrupted run)")
     return done
-
-
-def run_digest(output_dir: str | os.PathLike, stages: Sequence[str]) -> str | None:
-    """Return the digest of a run: sha256 over its stages' manifests, in stage order.
-
-    Parameters
-    ----------
-    output_dir : path-like
-        The workflow's output folder.
-    stages : sequence of str
-        The workflow's stages, in execution order.
-
-    Returns
-    -------
-    str or None
-        sha256 of the lines ``"<stage> <sha256 of manifest.json>"``; None when a stage has
-        no manifest.
-    """
-    lines = []
-    for stage in stages:
-        digest = artifacts.manifest_digest(Path(output_dir) / stage)
-        if digest is None:
-            return None
-        lines.append(f"{stage} {digest}\n")
-    return artifacts.sha256_bytes("".join(lines).encode())

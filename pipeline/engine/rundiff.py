@@ -20,9 +20,9 @@ from typing import Any
 
 import lazy_loader as lazy
 
-from debist.engine import artifacts
-from debist.engine.registry import names
-from debist.errors import WorkflowError
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
+from debist.stages.registry import names
 from debist.workflow.defaults import with_defaults
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI

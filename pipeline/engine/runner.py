@@ -25,18 +25,20 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from debist.engine import artifacts, outdir, registry
-from debist.engine.faults import fault_point
-from debist.engine.fileformats import write_output
-from debist.engine.fingerprint import code_fingerprint
-from debist.errors import (
+from debist.core import artifacts
+from debist.core.errors import (
     ArtifactError,
     DebistError,
     OutputDirError,
     RunLockedError,
     WorkflowError,
 )
+from debist.core.faults import fault_point
+from debist.core.fileformats import write_output
+from debist.engine import outdir
+from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
+from debist.stages import registry
 from debist.workflow.loader import Workflow
 
 #: Stage names in execution order.
@@ -293,7 +295,7 @@ class Runner:
         }
 
     def read_h5(self, stage: str, rel: str) -> dict[str, Any]:
-        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
+        """Read an HDF5 artifact of an upstream stage (see :mod:`debist.core.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_h5(self.wf.stage_dir(stage) / rel)
 
@@ -302,7 +304,7 @@ class Runner:
         return artifacts.read_summary(self.wf.stage_dir(stage), self._manifest(stage))
 
     def read_parquet(self, stage: str, rel: str) -> Any:
-        """Read a Parquet artifact of an upstream stage (see :mod:`debist.engine.artifacts`)."""
+        """Read a Parquet artifact of an upstream stage (see :mod:`debist.core.artifacts`)."""
         self._manifest(stage)
         return artifacts.read_parquet(self.wf.stage_dir(stage) / rel)
 
@@ -718,7 +720,7 @@ class Runner:
     # ---------------------------------------------------------------- verify
     def digest(self) -> str | None:
         """Return the run digest over this workflow's stages (None when one is missing)."""
-        return outdir.run_digest(self.wf.output_dir, self.stages())
+        return artifacts.run_digest(self.wf.output_dir, self.stages())
 
     def verify(self, digest: str | None = None) -> list[str]:
         """Check every artifact, every manifest and the chain (and a quoted digest).

@@ -32,12 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from debist.engine import progress
-from debist.engine.artifacts import remove_tree
-from debist.engine.fileformats import atomic_write, canonical_json, write_output
+from debist.core import progress
+from debist.core.artifacts import remove_tree
+from debist.core.errors import OutputDirError
+from debist.core.fileformats import atomic_write, canonical_json, write_output
+from debist.core.metrics import nrmse
 from debist.engine.zooindex import MEMBER_WORKFLOW, ZOO_FILE, ZooError, read_zoo
-from debist.errors import OutputDirError
-from debist.metrics import nrmse
 from debist.rig.config import RigConfig
 from debist.rig.dspace import write_recording
 from debist.rig.experiment import CREATED, rig_recording, run_experiments

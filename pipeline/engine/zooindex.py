@@ -11,7 +11,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from debist.errors import DebistError, WorkflowError
+from debist.core.errors import DebistError, WorkflowError
+from debist.core.names import check_file_name
 
 __all__ = ["MEMBER_WORKFLOW", "ZOO_FILE", "ZooError", "read_zoo", "zoo_workflows"]
 
@@ -43,8 +44,6 @@ def read_zoo(folder: str | os.PathLike) -> dict[str, Any] | None:
     ZooError
         If ``zoo.json`` is not a zoo index, or a member name is not a plain file name.
     """
-    from debist.names import check_file_name
-
     path = Path(folder) / ZOO_FILE
     if not path.is_file():
         return None

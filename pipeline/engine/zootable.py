@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from debist.engine.artifacts import checked_output, read_manifest, read_summary
-from debist.engine.fileformats import read_parquet, write_output
+from debist.core.artifacts import checked_output, read_manifest, read_summary
+from debist.core.errors import ArtifactError
+from debist.core.fileformats import read_parquet, write_output
 from debist.engine.zooindex import ZooError, read_zoo
-from debist.errors import ArtifactError
 from debist.rig.truthscore import curve_score, lost_switch, marked_near
 
 __all__ = [

@@ -24,7 +24,7 @@ import jinja2
 import numpy as np
 
 from debist import __version__
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
 from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
 
 __all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]
@@ -42,7 +42,7 @@ class ExportInfo:
     workflow : str
         The workflow's name.
     run_digest : str or None
-        The run digest (:func:`debist.engine.outdir.run_digest`); None when a stage of the
+        The run digest (:func:`debist.core.artifacts.run_digest`); None when a stage of the
         workflow has not run.
     identify_manifest : str or None
         sha256 of ``identify/manifest.json`` (names the identified model even without a

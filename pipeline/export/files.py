@@ -11,8 +11,8 @@ Masoud & Maas 2025, Eq. 37-40 (the model exported).
 
 from __future__ import annotations
 
-from debist.engine import artifacts
-from debist.errors import WorkflowError
+from debist.core import artifacts
+from debist.core.errors import WorkflowError
 from debist.export.c import c_sources
 from debist.export.common import ExportInfo
 from debist.export.matlab import matlab_source

@@ -20,7 +20,7 @@ free-run error, estimated on the estimation records alone by blocked cross-valid
   block, which had made every candidate's score 11 % +- 10 % on the paper experiment
   (Bock & Plitt 1984; Ribeiro et al., Automatica 121, 2020); a record's first and last
   ``trim`` samples are neither fitted nor scored;
-* a fit that raises :class:`~debist.errors.IdentificationError` (rank deficient, badly
+* a fit that raises :class:`~debist.core.errors.IdentificationError` (rank deficient, badly
   conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
   table says which; when ``M`` is not searched, a fold fits the centres its training
   pieces support (as the stage does for the whole data), and a fold no candidate scores
@@ -68,8 +68,9 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine import progress as _progress
-from debist.errors import IdentificationError, WorkflowError
+from debist.core import progress as _progress
+from debist.core.errors import IdentificationError, WorkflowError
+from debist.core.metrics import nrmse
 from debist.identify.config import (
     DEFAULT_WINDOW,
     IdentifyConfig,
@@ -78,10 +79,9 @@ from debist.identify.config import (
     check_grid,
 )
 from debist.identify.fit import Record, fit_rbf_model, supported_size
-from debist.metrics import nrmse
 from debist.model.terms import column_names
 from debist.simulate.prediction import restarted_runs
-from debist.validate import default_q_limit
+from debist.validate.freerun import default_q_limit
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -506,7 +506,7 @@ def select_hyperparameters(
         random (kept for a stable signature should a randomised strategy be added).
     progress : callable, optional
         Called as ``progress(done, total)`` [candidates]; default: the listener of
-        :mod:`debist.engine.progress` (task "hyper-parameters"), if any.
+        :mod:`debist.core.progress` (task "hyper-parameters"), if any.
     fallback : bool, optional
         When every candidate fails or diverges, choose ``base_cfg``'s own values (or the
         first candidate) instead of raising; the result is then :func:`undecided`.

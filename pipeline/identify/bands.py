@@ -82,7 +82,7 @@ from collections.abc import Collection, Sequence
 import lazy_loader as lazy
 import numpy as np
 
-from debist import metrics
+from debist.core import metrics
 from debist.identify.design import at_level
 from debist.identify.excitation import input_active, quasi_static
 from debist.identify.stability import _small_signal

@@ -9,10 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeInt, PositiveFloat, PositiveInt
 
-from debist.errors import WorkflowError
-from debist.identify.regularise import CONSTRAINT
-from debist.model.terms import check_terms
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
@@ -20,6 +17,9 @@ from debist.workflow.config import (
     SectionConfig,
     config_from_section,
 )
+from debist.core.errors import WorkflowError
+from debist.identify.regularise import CONSTRAINT
+from debist.model.terms import check_terms
 
 #: Workflow-facing description of ``T_z`` (its type is a union).
 _T_Z = 'a time >= 0 [s] or "search"'
@@ -334,7 +334,7 @@ class IdentifyConfig(SectionConfig):
         >>> IdentifyConfig.from_dict({"M": "ten"})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
+        debist.core.errors.WorkflowError: [identify] M: expected an integer, got 'ten'
         """
         if isinstance(section, Mapping) and "prior" in section:
             given = cls.SECTION if where is None else where

@@ -18,11 +18,11 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.identify.physics_prior import physics_mass, physics_prior
 from debist.identify.stability import stability_table, switching_voltages
 from debist.model.rbf import RBFModel
 from debist.model.terms import PhysicsPrior
 from debist.physics.params import V_MAX
-from debist.physics_stages import physics_mass, physics_prior
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

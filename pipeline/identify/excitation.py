@@ -20,7 +20,7 @@ rests on the inertia and damping of those transients alone.
 Units: the tables, intervals and ``sigma`` of the report are in the records' unit of q
 (SI, [m], as the records carry it); the warnings and :meth:`ExcitationReport.to_summary`
 are in a display unit given by ``unit_scale`` and ``unit_name`` (e.g. ``1e3, "mm"``, the
-factor of :func:`debist.validate.report_factor`).
+factor of :func:`debist.validate.freerun.report_factor`).
 
 References
 ----------
@@ -40,8 +40,8 @@ from typing import TYPE_CHECKING
 import lazy_loader as lazy
 import numpy as np
 
-from debist import metrics
-from debist.errors import WorkflowError
+from debist.core import metrics
+from debist.core.errors import WorkflowError
 from debist.identify.spectrum import (
     is_periodic,
     periodic_warning,

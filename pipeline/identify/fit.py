@@ -7,8 +7,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from debist.engine import preflight
-from debist.errors import IdentificationError
+from debist.core import preflight
+from debist.core.errors import IdentificationError
+from debist.core.metrics import rms
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
 from debist.identify.regularise import (
@@ -19,7 +20,6 @@ from debist.identify.regularise import (
     weight_penalty,
 )
 from debist.identify.signs import physical_signs
-from debist.metrics import rms
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states, friction_state, slip_states
 from debist.model.rbf import RBFModel
@@ -462,7 +462,7 @@ def fit_rbf_model(
         ``lowpass`` is not below a record's Nyquist frequency.
     ResourceError
         If the least squares would need more memory than the budget
-        (:func:`debist.engine.preflight.check_identify`), before anything is allocated.
+        (:func:`debist.core.preflight.check_identify`), before anything is allocated.
 
     References
     ----------

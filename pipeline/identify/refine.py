@@ -36,11 +36,11 @@ from dataclasses import dataclass, replace
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine import preflight, progress
+from debist.core import preflight, progress
+from debist.core.metrics import rms
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
 from debist.identify.stability import model_is_stable
-from debist.metrics import rms
 from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
 from debist.model.termtable import TableModel
@@ -308,7 +308,7 @@ def _refine_once(model: RBFModel, diag: FitDiagnostics, records: Sequence[Record
     rate and break-away deflections stay fixed; the element stiffnesses stay >= 0), each
     window starting from their states along the record (``RBFModel.measured_states``).
     Before anything is allocated, settings whose batched simulations exceed the memory
-    budget are refused (``ResourceError``, :mod:`debist.engine.preflight`).
+    budget are refused (``ResourceError``, :mod:`debist.core.preflight`).
     """
     # the fit's settings with the slip elements resolved to the model's break-away deflections
     cfg = replace(cfg, slip=tuple(model.slip_width) if model.has_slip else False)
@@ -490,8 +490,8 @@ def _check_memory(model: RBFModel, diag: FitDiagnostics, records: Sequence[Recor
     Raises
     ------
     ResourceError
-        If :func:`debist.engine.preflight.refine_bytes` for the window runs, or
-        :func:`debist.engine.preflight.free_run_bytes` for the free runs over the whole records,
+        If :func:`debist.core.preflight.refine_bytes` for the window runs, or
+        :func:`debist.core.preflight.free_run_bytes` for the free runs over the whole records,
         exceeds the budget, naming the ``[identify.refine]`` keys.
 
     Notes

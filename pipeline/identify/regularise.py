@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 #: Accepted constraint statements: "d >= 0", "g1 >= 0", "g2 <= 0".
 CONSTRAINT = re.compile(r"^\s*(d|g\d+)\s*(>=|<=)\s*0\s*$")

@@ -53,7 +53,7 @@ import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.errors import DebistError
+from debist.core.errors import DebistError
 from debist.model.rbf import RBFModel
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI

@@ -30,7 +30,8 @@ from pathlib import Path
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
+from debist.core.units import lookup_unit
 from debist.ingest.channels import Mapped
 from debist.ingest.checks import (
     check_enough,
@@ -48,7 +49,6 @@ from debist.ingest.checks import (
 from debist.ingest.resample import resample_segment, uniform_grid
 from debist.ingest.spec import IngestSpec, ResampleSpec
 from debist.ingest.stroke import check_stroke
-from debist.ingest.units import lookup_unit
 from debist.ingest.validity import cut_faults, fault_mask
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI

@@ -3,7 +3,7 @@
 Pure functions of a :class:`~debist.ingest.raw.RawLog` and an
 :class:`~debist.ingest.spec.IngestSpec`: select each channel (by exact name, regex,
 column index, or a MAT variable and its column), convert it to float64 and to SI
-(``x * factor(unit) * scale``, the factor from pint, :mod:`debist.ingest.units`), check
+(``x * factor(unit) * scale``, the factor from pint, :mod:`debist.core.units`), check
 that the result is a quantity the column can hold, and attach it to its time base.
 """
 
@@ -17,18 +17,18 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import RigLogError, UnitMismatchWarning
-from debist.ingest.checks import printed_resolution
-from debist.ingest.patterns import search_names
-from debist.ingest.raw import RawChannel, RawLog
-from debist.ingest.spec import ChannelSpec, IngestSpec
-from debist.ingest.units import (
+from debist.core.errors import RigLogError, UnitMismatchWarning
+from debist.core.units import (
     EXAMPLES,
     canonical_unit,
     describe_quantities,
     lookup_unit,
     role_quantities,
 )
+from debist.ingest.checks import printed_resolution
+from debist.ingest.patterns import search_names
+from debist.ingest.raw import RawChannel, RawLog
+from debist.ingest.spec import ChannelSpec, IngestSpec
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -1,6 +1,6 @@
 """Validation of a selected rig-log table: selection size, finiteness, time base, gaps.
 
-Pure functions on arrays. Each check raises :class:`~debist.errors.RigLogError` naming
+Pure functions on arrays. Each check raises :class:`~debist.core.errors.RigLogError` naming
 the file, the channel and the offending value; sample indices in messages are 0-based
 indices into the file (before slicing), times are in seconds as recorded.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 
 __all__ = [
     "GAP_RTOL",
@@ -276,7 +276,7 @@ def check_scale_jump(
     ...                  path=Path("log.csv"))
     Traceback (most recent call last):
     ...
-    debist.errors.RigLogError: file 'log.csv', channel 'x': `q` changes scale by 10^-3 ...
+    debist.core.errors.RigLogError: file 'log.csv', channel 'x': `q` changes scale by 10^-3 ...
     """
     x = np.asarray(values, dtype=float)
     if x.size < 2 * _SLIP_WINDOW:

@@ -4,13 +4,13 @@ A gzip stream does not say how large it decompresses to (the trailer's ``ISIZE``
 size modulo 2^32 and anyone can write it), and deflate expands up to about 1032 times
 (RFC 1951), so a 2 MB file may hold 3 GB of text. :func:`open_gzip` therefore counts the
 decompressed bytes as they are read and stops at :func:`decompressed_limit`: the memory
-budget divided by :data:`~debist.engine.preflight.TEXT_PARSE_RATIO`, the most memory
+budget divided by :data:`~debist.core.preflight.TEXT_PARSE_RATIO`, the most memory
 pandas needs per byte of text. Every reader of text logs (format detection, the tail
 check, pandas itself) reads through it, so the limit holds whoever reads, and a bomb is
 refused after reading at most the limit, long before memory runs out.
 
 A stream cut short (a copy interrupted half-way) or corrupt raises a
-:class:`~debist.errors.RigLogError` naming the file, where :mod:`gzip` raises
+:class:`~debist.core.errors.RigLogError` naming the file, where :mod:`gzip` raises
 ``EOFError`` (which command-line frameworks take for end of input) or ``zlib.error``.
 
 References
@@ -26,8 +26,8 @@ import io
 import zlib
 from pathlib import Path
 
-from debist.engine.preflight import BUDGET_ENV, TEXT_PARSE_RATIO, format_bytes, memory_budget
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
+from debist.core.preflight import BUDGET_ENV, TEXT_PARSE_RATIO, format_bytes, memory_budget
 
 __all__ = ["GzipLog", "decompressed_limit", "open_gzip"]
 
@@ -40,8 +40,8 @@ def decompressed_limit() -> int:
     Returns
     -------
     int
-        :func:`~debist.engine.preflight.memory_budget` divided by
-        :data:`~debist.engine.preflight.TEXT_PARSE_RATIO` [bytes].
+        :func:`~debist.core.preflight.memory_budget` divided by
+        :data:`~debist.core.preflight.TEXT_PARSE_RATIO` [bytes].
 
     Raises
     ------

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.compressed import open_gzip
 
 __all__ = ["HDF5_SIGNATURE", "detect_format", "sniff_format"]

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import lazy_loader as lazy
 
+from debist.core.units import UNITS
 from debist.ingest.assemble import assemble, to_frame
 from debist.ingest.cache import RawLogCache
 from debist.ingest.channels import map_channels
@@ -27,7 +28,6 @@ from debist.ingest.parquet import read_parquet
 from debist.ingest.raw import RawLog
 from debist.ingest.spec import FORMATS, ChannelSpec, IngestSpec, ResampleSpec
 from debist.ingest.text import read_text
-from debist.ingest.units import UNITS
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -25,7 +25,7 @@ Matrix variables
 
 Before a v4/v5/v7 file is loaded, :func:`scipy.io.whosmat` lists each variable's shape
 and class without reading its data; a file whose variables declare more bytes than it
-can hold (its size times :data:`~debist.engine.preflight.DEFLATE_MAX_RATIO`, since v7
+can hold (its size times :data:`~debist.core.preflight.DEFLATE_MAX_RATIO`, since v7
 variables may be zlib-compressed) is refused as truncated or forged, and the declared
 total is checked against the memory budget. v7.3 files are bounded the same way by
 :func:`~debist.ingest.mat73.load_mat73`.
@@ -47,8 +47,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
-from debist.errors import DebistError, RigLogError
+from debist.core.errors import DebistError, RigLogError
+from debist.core.preflight import DEFLATE_MAX_RATIO, check_memory
 from debist.ingest.mat73 import load_mat73
 from debist.ingest.raw import RawChannel, RawLog
 
@@ -241,7 +241,7 @@ def check_declared(path: Path, fmt: str) -> int:
     Raises
     ------
     RigLogError
-        If they exceed the file size times :data:`~debist.engine.preflight.DEFLATE_MAX_RATIO`
+        If they exceed the file size times :data:`~debist.core.preflight.DEFLATE_MAX_RATIO`
         (v5/v7, which may be compressed) or the file size (v4), naming the largest
         variable and its declared shape and size.
     ResourceError

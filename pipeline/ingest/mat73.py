@@ -28,7 +28,7 @@ Before any data is read, :func:`load_mat73` walks the objects the decoder will v
 
 - a data set declares more bytes than can be stored for it: more than its allocated
   storage (``H5Dget_storage_size``) or the file when uncompressed, or more than
-  :data:`~debist.engine.preflight.DEFLATE_MAX_RATIO` times its stored bytes when filtered
+  :data:`~debist.core.preflight.DEFLATE_MAX_RATIO` times its stored bytes when filtered
   (deflate cannot expand more), or its contiguous storage lies beyond the end of the
   file: a forged or truncated file (``RigLogError``);
 - the decoder would visit more than :data:`MAX_OBJECTS` objects, counting every path
@@ -36,7 +36,7 @@ Before any data is read, :func:`load_mat73` walks the objects the decoder will v
   times over decodes into an exponentially large tree), or read more than that many
   references, or a reference cycle (``RigLogError``);
 - the data it would read, counted per visit, exceeds the memory budget
-  (:func:`debist.engine.preflight.check_memory`, ``ResourceError``).
+  (:func:`debist.core.preflight.check_memory`, ``ResourceError``).
 
 References
 ----------
@@ -55,8 +55,8 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine.preflight import DEFLATE_MAX_RATIO, check_memory
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
+from debist.core.preflight import DEFLATE_MAX_RATIO, check_memory
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 h5py = lazy.load("h5py")

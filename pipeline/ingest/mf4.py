@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.raw import RawChannel, RawLog
 
 __all__ = ["read_mf4"]

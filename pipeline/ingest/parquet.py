@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.raw import RawChannel, RawLog
 
 if TYPE_CHECKING:

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import lazy_loader as lazy
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 # the library below loads on first use (lazy_loader): start-up of the CLI
 regex = lazy.load("regex")

@@ -29,7 +29,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.checks import TIME_RTOL_MAX, time_rtol
 
 __all__ = ["MAX_DOWN", "UNIFORM_RTOL", "resample_segment", "uniform_grid"]

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from debist.ingest.units import lookup_unit
+from debist.core.units import lookup_unit
 
 __all__ = ["KNOWN_SENSORS", "KnownSensor", "default_range"]
 

@@ -1,8 +1,8 @@
 """Configuration of the ingest stage: which file format, which channels, which checks.
 
 :meth:`IngestSpec.from_dict` turns the ``[ingest]`` section of a workflow file (a dict
-parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.workflow.config`) and rejects
-anything it does not understand with a one-line :class:`~debist.errors.WorkflowError`
+parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.core.config`) and rejects
+anything it does not understand with a one-line :class:`~debist.core.errors.WorkflowError`
 naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
 Schema (every key optional unless marked required)::
@@ -31,9 +31,9 @@ column index, text and Parquet files) or ``var`` (a MAT file's numeric variable,
 ``column``: the 0-based column of an n x k matrix variable, rows being samples, e.g.
 ``q = { var = "X3", column = 1 }`` for the values of an n x 2 ``[t, value]`` variable), plus
 ``unit`` (any unit pint parses, e.g. ``"mm"``, ``"mm/s"``, ``"g0"``, ``"kV"``, ``"m/s^2"``,
-``"deg"``, ``"1"``; see :mod:`debist.ingest.units`), ``scale`` (extra factor) and ``si_unit``
+``"deg"``, ``"1"``; see :mod:`debist.core.units`), ``scale`` (extra factor) and ``si_unit``
 (the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration).
-The quantity of the result must suit the column (:func:`debist.ingest.units.role_quantities`):
+The quantity of the result must suit the column (:func:`debist.core.units.role_quantities`):
 the time a time, ``q`` a length, angle, dimensionless value or voltage, an input a voltage,
 acceleration, force, pressure, current, length or dimensionless value; ``q = { unit = "N" }`` or
 ``time = { unit = "mm" }`` is refused naming ``[ingest] q.unit``. Further keys are
@@ -60,17 +60,7 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist.errors import WorkflowError
-from debist.ingest.patterns import check_pattern
-from debist.ingest.units import (
-    EXAMPLES,
-    canonical_unit,
-    describe_quantities,
-    lookup_unit,
-    role_quantities,
-    si_symbol,
-)
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
@@ -78,6 +68,16 @@ from debist.workflow.config import (
     config_from_section,
     unknown_key_message,
 )
+from debist.core.errors import WorkflowError
+from debist.core.units import (
+    EXAMPLES,
+    canonical_unit,
+    describe_quantities,
+    lookup_unit,
+    role_quantities,
+    si_symbol,
+)
+from debist.ingest.patterns import check_pattern
 
 __all__ = [
     "FAULT_POLICIES",
@@ -246,7 +246,7 @@ class ChannelSpec:
 
     References
     ----------
-    pint (https://pint.readthedocs.io) parses the units, see :mod:`debist.ingest.units`.
+    pint (https://pint.readthedocs.io) parses the units, see :mod:`debist.core.units`.
     """
 
     role: str
@@ -345,11 +345,11 @@ class ChannelSpec:
         >>> ChannelSpec.from_dict("q", {"column": 1, "unit": "bananas"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
+        debist.core.errors.WorkflowError: [ingest] q.unit: expected a unit pint parses, ...'bananas'
         >>> ChannelSpec.from_dict("t", {"name": "t", "unit": "mm"})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... (length [m])
+        debist.core.errors.WorkflowError: [ingest] time.unit: expected a time [s] unit ... [m])
         """
         key = "time" if role == "t" else role
         label = _label(where, key)
@@ -437,7 +437,7 @@ def _channel(key: str, table: object, where: Where, extra: bool) -> ChannelSpec:
         raise
 
 
-#: pydantic configuration of :class:`IngestSpec`: as :data:`~debist.workflow.config.CONFIG`, and
+#: pydantic configuration of :class:`IngestSpec`: as :data:`~debist.core.config.CONFIG`, and
 #: ``sample_slice`` may be given by its workflow key ``slice`` or by its name.
 _INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
 
@@ -581,7 +581,7 @@ class IngestSpec:
         >>> IngestSpec.from_dict({"smaple_time": 1e-3})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
+        debist.core.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
         """
         if not isinstance(section, Mapping):
             raise WorkflowError(f"{_label(where, '')} expected a table, got {section!r}")

@@ -6,7 +6,7 @@ micrometres to centimetres. A log written in mm but declared in m passes every h
 up to 100 m (:data:`~debist.ingest.checks.PLAUSIBLE`), and one in m declared in um looks
 like a motionless record. After conversion to SI, a peak-to-peak ``q`` above
 :data:`STROKE_MAX` or below :data:`STROKE_MIN` is accepted but warned about
-(:class:`~debist.errors.PlausibilityWarning`), naming the file, the channel, the declared
+(:class:`~debist.core.errors.PlausibilityWarning`), naming the file, the channel, the declared
 unit and the unit in which the stroke would be typical.
 
 References
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.errors import PlausibilityWarning
-from debist.ingest.units import lookup_unit
+from debist.core.errors import PlausibilityWarning
+from debist.core.units import lookup_unit
 
 __all__ = ["STROKE_MAX", "STROKE_MIN", "check_stroke"]
 

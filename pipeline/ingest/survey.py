@@ -23,7 +23,7 @@ reads a file except :func:`survey_file`; nothing prints.
 References
 ----------
 Masoud & Maas 2025, Sec. 5.1 (the rig: laser displacement q, two DE voltages v1, v2);
-pint (https://pint.readthedocs.io), through :func:`debist.ingest.units.lookup_unit`.
+pint (https://pint.readthedocs.io), through :func:`debist.core.units.lookup_unit`.
 """
 
 from __future__ import annotations
@@ -35,13 +35,13 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
+from debist.core.units import lookup_unit
 from debist.ingest.cache import RawLogCache
 from debist.ingest.channels import to_float
 from debist.ingest.load import read_raw
 from debist.ingest.raw import RawLog
 from debist.ingest.spec import ChannelSpec, IngestSpec
-from debist.ingest.units import lookup_unit
 
 __all__ = [
     "ChannelInfo",

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import lazy_loader as lazy
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.detect import is_gzip, open_binary
 from debist.ingest.raw import RawChannel, RawLog
 

@@ -18,7 +18,7 @@ A sensor fault is a run of samples of one channel that cannot be a measurement:
   A run that is also a range fault is reported as a range fault.
 
 The data set's ``faults`` key chooses the policy: ``"error"`` raises a
-:class:`~debist.errors.RigLogError` naming the file, the channel, the first run's sample
+:class:`~debist.core.errors.RigLogError` naming the file, the channel, the first run's sample
 range, times and value; ``"split"`` removes every faulty sample (of any channel) from the
 table and keeps the segments in between, dropping those shorter than ``min_segment``
 exactly as gap splitting does (:func:`cut_faults`).
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.errors import DebistWarning, RigLogError
+from debist.core.errors import DebistWarning, RigLogError
 from debist.ingest.channels import Column
 from debist.ingest.sensors import default_range
 from debist.ingest.spec import ChannelSpec, IngestSpec

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 
 def gaussian(dq, sigma):

@@ -54,10 +54,10 @@ import numpy as np
 import pydantic
 from pydantic import Field, PositiveInt
 
-from debist.errors import DebistWarning, IdentificationError
+from debist.core.config import CONFIG, AsTuple, SectionConfig
+from debist.core.errors import DebistWarning, IdentificationError
 from debist.model.narx_kernel import factor_tables, narx_free_run
 from debist.model.termtable import input_map as apply_input_map
-from debist.workflow.config import CONFIG, AsTuple, SectionConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -668,7 +668,7 @@ class RBFModel:
         Parameters
         ----------
         tree : dict
-            As returned by :meth:`to_tree` or :func:`debist.engine.artifacts.read_h5`.
+            As returned by :meth:`to_tree` or :func:`debist.core.artifacts.read_h5`.
 
         Returns
         -------

@@ -35,10 +35,10 @@ import numpy as np
 import pydantic
 from pydantic import NonNegativeFloat, PositiveInt
 
-from debist.engine.preflight import check_memory, sindy_bytes
-from debist.errors import ConvergenceWarning, IdentificationError, WorkflowError
+from debist.core.config import CONFIG, SectionConfig
+from debist.core.errors import ConvergenceWarning, IdentificationError, WorkflowError
+from debist.core.preflight import check_memory, sindy_bytes
 from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
-from debist.workflow.config import CONFIG, SectionConfig
 
 OPTIMIZERS = ("STLSQ", "SR3")
 
@@ -291,7 +291,7 @@ class SindyModel:
         Parameters
         ----------
         tree : mapping
-            As returned by :meth:`to_tree` or :func:`debist.engine.artifacts.read_h5`.
+            As returned by :meth:`to_tree` or :func:`debist.core.artifacts.read_h5`.
 
         Returns
         -------

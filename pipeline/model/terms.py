@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states
 from debist.model.termtable import (
@@ -88,7 +88,7 @@ class PhysicsPrior:
         Second order of the full model's static DE force in ``h = v_i^2``, ``g_h,i(q)``
         [N/V^4] (``physics_quadratic``): the holding-force change at ``v_i`` is ``g_i(q) v_i^2
         + g_h,i(q) v_i^4`` to 1.1 % of its largest value over 0.5-3 kV on the paper's prototype
-        (:func:`debist.physics_stages.quadratic_force`); None: not computed.
+        (:func:`debist.identify.physics_prior.quadratic_force`); None: not computed.
 
     References
     ----------

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.model.basis import gaussian
 from debist.model.friction import (
     creep_state_rate,

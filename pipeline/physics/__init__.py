@@ -16,8 +16,9 @@ dynamics
     Full state-space model (Eq. 19-23), simulation, SVD mode analysis (Fig. 6a).
 reduced
     Reduced one-coordinate model (Eq. 24-26), its curves, full vs reduced (Fig. 7).
-plots
-    Matplotlib figures of the above (imports matplotlib; not imported here).
+analysis
+    The design analysis of Section 3 in one call (Fig. 3-7); its figures are drawn by
+    :mod:`debist.report.physics_plots`.
 
 The interpretations of the printed equations follow ``docs/interpretation.md`` and are
 documented where they are used.

@@ -31,7 +31,7 @@ from debist.physics.reduced import (
 )
 from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
 
-__all__ = ["Analysis", "AnalyzeConfig", "analysis_figures", "analysis_tree", "run_analysis"]
+__all__ = ["Analysis", "AnalyzeConfig", "analysis_tree", "run_analysis"]
 
 
 @dataclass(frozen=True)
@@ -187,30 +187,3 @@ def analysis_tree(result: Analysis) -> dict[str, Any]:
             "dC_dq": c.dC_dq,
         }
     return tree
-
-
-def analysis_figures(result: Analysis) -> dict[str, Any]:
-    """Draw the figures of the analysis (matplotlib), named after the paper's.
-
-    Parameters
-    ----------
-    result : Analysis
-        From :func:`run_analysis`.
-
-    Returns
-    -------
-    dict of str to matplotlib.figure.Figure
-        ``fig3_prestrain``, ``fig4_force_displacement``, ``fig5_capacitance``,
-        ``fig6a_modes``, ``fig7_full_vs_reduced`` and ``reduced_curves``.
-    """
-    # here, not at the top: matplotlib loads only when a figure is drawn
-    from debist.report import physics_plots as plots
-
-    return {
-        "fig3_prestrain": plots.plot_prestrain_sweep(result.sweep),
-        "fig4_force_displacement": plots.plot_force_displacement(result.curves),
-        "fig5_capacitance": plots.plot_capacitance(result.curves[0]),
-        "fig6a_modes": plots.plot_modes(result.modes),
-        "fig7_full_vs_reduced": plots.plot_comparison(result.comparison),
-        "reduced_curves": plots.plot_reduced_curves(result.reduced),
-    }

@@ -15,7 +15,7 @@ from typing import Annotated, ClassVar
 import pydantic
 from pydantic import Field, PositiveFloat
 
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     ConfigValueError,
     Interval,

@@ -27,7 +27,7 @@ from typing import ClassVar
 import pydantic
 from pydantic import FiniteFloat, NonNegativeFloat, PositiveFloat
 
-from debist.workflow.config import CONFIG, SectionConfig
+from debist.core.config import CONFIG, SectionConfig
 
 __all__ = ["V_MAX", "PrototypeParams"]
 

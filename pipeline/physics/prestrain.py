@@ -21,7 +21,7 @@ import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.errors import ConvergenceWarning
+from debist.core.errors import ConvergenceWarning
 from debist.physics.energy import potential
 from debist.physics.kinematics import ritz_basis
 from debist.physics.params import V_MAX, PrototypeParams

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.polynomial import Chebyshev
 from numpy.typing import ArrayLike, NDArray
 
-from debist.metrics import nrmse
+from debist.core.metrics import nrmse
 from debist.physics.dynamics import FullModel, SimulationResult, simulate, well_state
 from debist.physics.energy import potential
 from debist.physics.kinematics import ritz_basis

@@ -33,7 +33,7 @@ import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.engine import progress
+from debist.core import progress
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 integrate = lazy.load("scipy.integrate", suppress_warning=True)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.errors import ConvergenceWarning, DebistError
+from debist.core.errors import ConvergenceWarning, DebistError
 from debist.physics._newton import newton
 from debist.physics.energy import capacitances, potential, scalar_gradient_hessian
 from debist.physics.kinematics import ritz_basis

@@ -2,7 +2,7 @@
 
 The excitation overview (Fig. 11a of the paper), the free runs of every model against the
 measurement (Fig. 12 on estimation data, Fig. 15 on unseen data) with a zoom on the most
-dynamic window (Fig. 13); :func:`debist.engine.fileformats.png_bytes` turns each into the same
+dynamic window (Fig. 13); :func:`debist.core.fileformats.png_bytes` turns each into the same
 PNG bytes on every call (no time stamp, no software tag), so that the report is a pure
 function of its inputs.
 
@@ -21,7 +21,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.validate import REPLICATE_BAND
+from debist.validate.freerun import REPLICATE_BAND
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -237,7 +237,7 @@ def replicate_band(
         Time [s].
     lo, hi : ndarray, shape (n,)
         The replicates' pointwise 2.5 and 97.5 percentiles of q [display unit]
-        (:func:`debist.validate.replicate_spread`).
+        (:func:`debist.validate.freerun.replicate_spread`).
     row : mapping
         The model's NRMSE row on the data set: ``replicates`` (count) and
         ``replicates_hold_q`` (share of the samples whose measured q the band holds; absent

@@ -25,8 +25,8 @@ from typing import Any
 
 import jinja2
 
-from debist.engine.fileformats import atomic_write
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
+from debist.core.fileformats import atomic_write
 from debist.report.tables import (
     auto_line,
     equilibrium_kind,

@@ -16,12 +16,14 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from debist.physics.analysis import Analysis
 from debist.physics.dynamics import ModeAnalysis
 from debist.physics.prestrain import PrestrainSweep, equilibrium_branches
 from debist.physics.reduced import Comparison, ReducedCurves
 from debist.physics.statics import ForceCurve
 
 __all__ = [
+    "analysis_figures",
     "plot_capacitance",
     "plot_comparison",
     "plot_force_displacement",
@@ -282,3 +284,27 @@ def plot_reduced_curves(curves: ReducedCurves) -> Figure:
         ax.set_xlabel("tip displacement $q$ [mm]")
     fig.suptitle("Reduced-model characteristic curves")
     return fig
+
+
+def analysis_figures(result: Analysis) -> dict[str, Figure]:
+    """Draw the figures of the analysis (matplotlib), named after the paper's.
+
+    Parameters
+    ----------
+    result : Analysis
+        From :func:`debist.physics.analysis.run_analysis`.
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        ``fig3_prestrain``, ``fig4_force_displacement``, ``fig5_capacitance``,
+        ``fig6a_modes``, ``fig7_full_vs_reduced`` and ``reduced_curves``.
+    """
+    return {
+        "fig3_prestrain": plot_prestrain_sweep(result.sweep),
+        "fig4_force_displacement": plot_force_displacement(result.curves),
+        "fig5_capacitance": plot_capacitance(result.curves[0]),
+        "fig6a_modes": plot_modes(result.modes),
+        "fig7_full_vs_reduced": plot_comparison(result.comparison),
+        "reduced_curves": plot_reduced_curves(result.reduced),
+    }

@@ -9,7 +9,7 @@ import numpy as np
 
 from debist.report.figures import dynamic_window, replicate_band, thin, thin_band
 from debist.report.tables import de_inputs
-from debist.validate import REPLICATE_BAND, report_factor
+from debist.validate.freerun import REPLICATE_BAND, report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -31,7 +31,7 @@ def free_run_figure(
     sim : pandas.DataFrame
         Columns ``t [s], q, q_sim`` (q in ``unit``), optionally ``q_sim_lo, q_sim_hi``: the
         2.5 and 97.5 percentiles of the bootstrap replicates' free runs (shaded, labelled
-        as what they are: :func:`debist.validate.replicate_spread`).
+        as what they are: :func:`debist.validate.freerun.replicate_spread`).
     name : str
         Data set name (title).
     row : pandas.Series
@@ -57,7 +57,7 @@ def free_run_figure(
     Raises
     ------
     WorkflowError
-        If ``report_unit`` cannot express q (:func:`debist.validate.report_factor`).
+        If ``report_unit`` cannot express q (:func:`debist.validate.freerun.report_factor`).
     """
     from matplotlib.figure import Figure
 

@@ -4,9 +4,9 @@ A stage that writes several figures (the validate stage's free runs, the report'
 12, 13 and 15) spends most of its time in matplotlib's layout and Agg rendering, on one
 core. :func:`render_pngs` draws the figures of a list in worker processes, one per core:
 each figure is drawn and rendered by the same code in a copy of the same process (POSIX
-``fork``), so its bytes are those of a serial rendering (:func:`debist.engine.fileformats.
+``fork``), so its bytes are those of a serial rendering (:func:`debist.core.fileformats.
 png_bytes`). Where forking is unsafe or pointless the figures are rendered here, one after
-the other (:func:`debist.engine.forking.fork_workers`).
+the other (:func:`debist.core.forking.fork_workers`).
 
 References
 ----------
@@ -23,8 +23,8 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
-from debist.engine.fileformats import png_bytes
-from debist.engine.forking import fork_context, fork_workers
+from debist.core.fileformats import png_bytes
+from debist.core.forking import fork_context, fork_workers
 
 __all__ = ["FigureJob", "render_pngs"]
 
@@ -61,7 +61,7 @@ class FigureJob:
         return self.draw(*self.args, **dict(self.kwargs))
 
     def png(self) -> bytes:
-        """Draw the figure and render it to PNG bytes (:func:`debist.engine.fileformats.png_bytes`).
+        """Draw the figure and render it to PNG bytes (:func:`debist.core.fileformats.png_bytes`).
 
         Returns
         -------

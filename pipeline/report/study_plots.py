@@ -1,6 +1,6 @@
 """Figures of the hyper-parameter studies and searches (Masoud & Maas 2025, Fig. 11b and 11c).
 
-Pure plotting: each function takes a study table from :mod:`debist.studies` and
+Pure plotting: each function takes a study table from :mod:`debist.stages.studies` and
 returns a matplotlib figure; saving is the caller's (the artifacts module).
 """
 

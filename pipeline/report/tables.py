@@ -1,7 +1,7 @@
 """Terminal reports of a workflow's results: rich tables built from the stages' summaries.
 
 Every number printed comes from a stage's ``summary.json``, read only after its sha256 was
-checked against the stage's manifest (:func:`debist.engine.artifacts.read_summary`); wall times,
+checked against the stage's manifest (:func:`debist.core.artifacts.read_summary`); wall times,
 which no hash covers, are not printed here.
 """
 
@@ -15,8 +15,8 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
-from debist.ingest.units import lookup_unit, pretty_unit
-from debist.metrics import POOR_SHARE
+from debist.core.metrics import POOR_SHARE
+from debist.core.units import lookup_unit, pretty_unit
 
 #: How identified quantities are labelled in reports (summary key -> label). The backbone's
 #: polynomial coefficients are basis terms the RBF sums add to, not the beam's physics: the
@@ -468,9 +468,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     -------
     str
         ``"unstable: ..."``, ``"diverged: ..."``, ``"not better than the mean ..."``,
-        ``"poor: ..."`` (above :data:`~debist.metrics.POOR_SHARE` of the mean's NRMSE),
+        ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
         ``"fragile: ..."`` (the 97.5th percentile of the NRMSE(q) of the model's bootstrap
-        replicates, :func:`debist.validate.replicate_spread`, is poor: more than 2.5 % of
+        replicates, :func:`debist.validate.freerun.replicate_spread`, is poor: more than 2.5 % of
         them lose the motion), ``"worse than <model> (x %)"``,
         or ``"ok"``; the last three may combine. A row whose ``under_excited`` names why the
         estimation data cannot separate the model's terms (a single line, one period) starts

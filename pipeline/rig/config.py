@@ -1,6 +1,6 @@
 """The ``[rig]`` table: the experiments, the prototype and the plant of the virtual rig.
 
-The configuration classes only (pydantic, see :class:`debist.workflow.config.SectionConfig`),
+The configuration classes only (pydantic, see :class:`debist.core.config.SectionConfig`),
 apart from :mod:`debist.rig.experiment` that runs them, so that checking a workflow does not
 load the plant, the drivers and the recorder.
 
@@ -25,11 +25,11 @@ from pydantic import (
     PositiveFloat,
 )
 
-from debist.errors import WorkflowError
+from debist.core.config import CONFIG, AsTuple, ConfigValueError, config_from_section
+from debist.core.errors import WorkflowError
 from debist.physics.params import PrototypeParams
 from debist.rig.params import RigParams
 from debist.rig.profiles import PROFILES
-from debist.workflow.config import CONFIG, AsTuple, ConfigValueError, config_from_section
 
 __all__ = ["ExperimentConfig", "RigConfig"]
 
@@ -193,7 +193,7 @@ class RigConfig:
         >>> RigConfig.from_dict({"experiments": {"a": {"seed": "1"}}}, {})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
+        debist.core.errors.WorkflowError: [rig.experiments.a] seed: expected an integer, got '1'
         """
         head = config_from_section(_RigSection, section, "[rig]")
         PrototypeParams.from_dict(physics)

@@ -67,7 +67,7 @@ import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 h5py = lazy.load("h5py")

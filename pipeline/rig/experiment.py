@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from debist.engine import progress
-from debist.engine.forking import fork_context, fork_workers
+from debist.core import progress
+from debist.core.forking import fork_context, fork_workers
 from debist.rig.config import ExperimentConfig, RigConfig
 from debist.rig.dspace import Channel, recording
 from debist.rig.profiles import make_profile
@@ -117,7 +117,7 @@ def run_experiments(
     The experiments are independent (each starts at rest with its own seeds), so they run
     in forked worker processes (:class:`concurrent.futures.ProcessPoolExecutor`), one per
     core; each result is the same as a serial run's (the same deterministic computation in
-    another process). Serially where :func:`debist.engine.forking.fork_workers` says forking is
+    another process). Serially where :func:`debist.core.forking.fork_workers` says forking is
     unsafe (inside a daemonic worker: ``debist batch`` already runs one prototype per worker;
     outside the main thread; on platforms without ``fork``).
 

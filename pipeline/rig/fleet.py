@@ -20,7 +20,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from debist.errors import DebistError, WorkflowError
+from debist.core.errors import DebistError, WorkflowError
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import equilibria, switches
 from debist.rig.params import RigParams

@@ -32,8 +32,8 @@ from typing import Any
 
 import tomli_w
 
-from debist.errors import WorkflowError
-from debist.names import check_file_name
+from debist.core.errors import WorkflowError
+from debist.core.names import check_file_name
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import switching_voltage
 from debist.rig.fleet import make_fleet
@@ -135,7 +135,7 @@ def fleet_workflows(
     WorkflowError
         If the template has no ``[rig]`` section or an invalid one, ``n``/``scatter``
         are invalid, or its name is not a plain file name
-        (:func:`debist.names.check_file_name`).
+        (:func:`debist.core.names.check_file_name`).
     FleetError
         If the scatter leaves too few working prototypes.
 

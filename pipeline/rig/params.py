@@ -15,13 +15,13 @@ from typing import Annotated, ClassVar, Literal
 import pydantic
 from pydantic import Field, FiniteFloat, NonNegativeFloat, PositiveFloat, PositiveInt
 
-from debist.physics.params import PrototypeParams
-from debist.workflow.config import (
+from debist.core.config import (
     CONFIG,
     AsTuple,
     ConfigValueError,
     SectionConfig,
 )
+from debist.physics.params import PrototypeParams
 
 __all__ = ["RigParams"]
 
@@ -198,7 +198,7 @@ class RigParams(SectionConfig):
         >>> RigParams.from_dict({"oversample": 2.5})
         Traceback (most recent call last):
         ...
-        debist.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
+        debist.core.errors.WorkflowError: [rig.plant] oversample: expected an integer, got 2.5
         """
         where = cls.SECTION if where is None else where
         if isinstance(section, Mapping) and isinstance(section.get("prototype"), Mapping):

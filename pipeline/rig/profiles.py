@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 __all__ = [
     "PROFILES",
@@ -1012,7 +1012,7 @@ def make_profile(name: str, **kwargs: Any) -> Excitation:
     >>> make_profile("chirp")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: unknown excitation profile 'chirp'; known profiles: ...
+    debist.core.errors.WorkflowError: unknown excitation profile 'chirp'; known profiles: ...
     """
     if name not in PROFILES:
         raise WorkflowError(

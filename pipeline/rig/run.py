@@ -28,7 +28,7 @@ import lazy_loader as lazy
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.errors import DebistWarning
+from debist.core.errors import DebistWarning
 from debist.physics.params import V_MAX
 from debist.physics.reduced import reduced_curves
 from debist.physics.segments import ODEINT, solve_segments

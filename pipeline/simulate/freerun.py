@@ -17,9 +17,9 @@ from typing import Protocol
 
 import numpy as np
 
-from debist.engine import preflight
-from debist.engine import progress as _progress
-from debist.errors import WorkflowError
+from debist.core import preflight
+from debist.core import progress as _progress
+from debist.core.errors import WorkflowError
 from debist.simulate import rk4
 
 INTERPOLATIONS = ("bandlimited", "linear")
@@ -243,7 +243,7 @@ def check_free_run(
     Raises
     ------
     ResourceError
-        If :func:`debist.engine.preflight.free_run_bytes` exceeds the budget, before any
+        If :func:`debist.core.preflight.free_run_bytes` exceeds the budget, before any
         array is built.
 
     References
@@ -305,7 +305,7 @@ def simulate(
     progress : callable, optional
         Called as ``progress(done, total)`` [samples] while the compiled engine integrates
         long records (between chunks of :data:`debist.simulate.kernel.CHUNK` samples); default:
-        report to the listener of :mod:`debist.engine.progress` as task "free run", if any.
+        report to the listener of :mod:`debist.core.progress` as task "free run", if any.
     x0 : ndarray, shape (B, n_states), optional
         Whole initial states (e.g. a friction state estimated from the record); default
         ``model.initial_state(q0, q_dot0)``.

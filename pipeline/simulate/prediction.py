@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import WorkflowError
-from debist.metrics import nrmse
+from debist.core.errors import WorkflowError
+from debist.core.metrics import nrmse
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
@@ -43,7 +43,7 @@ from debist.simulate.freerun import (
     simulate,
     substeps_needed,
 )
-from debist.validate import DataSet
+from debist.validate.freerun import DataSet
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -459,7 +459,7 @@ def prediction_table(
         The model.
     model_name : str
         Its row label ("rbf", "sindy", ...).
-    datasets : sequence of debist.validate.DataSet
+    datasets : sequence of debist.validate.freerun.DataSet
         Measured data with the differentiate stage's ``q_dot``.
     k : int
         Horizon of the k-step NRMSE [samples], ``>= 1``.

@@ -3,13 +3,15 @@
 Each stage module holds the stage's pure ``run_<stage>`` function (arrays and configuration
 in, a result out; no file IO, no printing) and an ``execute(ctx)`` adapter that takes the
 stage's inputs from a :class:`StageInputs` (the runner, which reads them through
-:mod:`debist.engine.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
+:mod:`debist.core.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
 ingest reads files itself, because reading rig logs is what it is for.
 
-The registry :data:`debist.engine.registry.STAGES` names each stage's module; a stage's key hashes
-the source of that module and of every ``pipeline`` module it imports, transitively
+The registry :data:`debist.stages.registry.STAGES` names each stage's module; a stage's key
+hashes the source of that module and of every ``pipeline`` module it imports, transitively
 (:func:`debist.engine.fingerprint.code_fingerprint`), so this package's ``__init__`` imports
-nothing: a stage's code is exactly what its own module reaches.
+nothing: a stage's code is exactly what its own module reaches. Beside the stage modules sit
+what several of them share: :mod:`.registry` (the stage graph), :mod:`.studies` (the
+hyper-parameter studies of the study stage) and :mod:`.sindy_choice`.
 """
 
 from __future__ import annotations
@@ -34,8 +36,8 @@ class StageOutput:
     ----------
     outputs : dict of str to object
         Output path relative to the stage folder to value: a pandas DataFrame (Parquet),
-        :class:`debist.engine.artifacts.H5Tree`, :class:`debist.engine.artifacts.Figure`,
-        :class:`debist.engine.artifacts.FileWriter`, ``str`` or ``bytes``.
+        :class:`debist.core.artifacts.H5Tree`, :class:`debist.core.artifacts.Figure`,
+        :class:`debist.core.artifacts.FileWriter`, ``str`` or ``bytes``.
     summary : dict
         Small JSON-compatible results the reports print (written as the hashed output
         ``summary.json``); reproducible values only, no wall times.
@@ -58,7 +60,7 @@ class StageInputs(Protocol):
     """What a stage's ``execute`` may read: the workflow and the upstream stages' artifacts.
 
     Implemented by :class:`debist.engine.runner.Runner`; every read goes through
-    :mod:`debist.engine.artifacts`.
+    :mod:`debist.core.artifacts`.
     """
 
     wf: Workflow

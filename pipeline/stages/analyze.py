@@ -6,17 +6,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from debist.engine.artifacts import Figure, H5Tree
-from debist.engine.fileformats import REPORT_DPI
-from debist.physics.analysis import (
-    AnalyzeConfig,
-    analysis_figures,
-    analysis_tree,
-    run_analysis,
-)
+from debist.core.artifacts import Figure, H5Tree
+from debist.core.config import config_from_section
+from debist.core.fileformats import REPORT_DPI
+from debist.physics.analysis import AnalyzeConfig, analysis_tree, run_analysis
 from debist.physics.params import PrototypeParams
+from debist.report.physics_plots import analysis_figures
 from debist.stages import StageInputs, StageOutput
-from debist.workflow.config import config_from_section
 
 __all__ = ["AnalyzeResult", "execute", "run_analyze"]
 

@@ -18,19 +18,20 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.datasets import validation_datasets
-from debist.engine import progress
-from debist.engine.artifacts import H5Tree
-from debist.errors import DebistWarning, IdentificationError
+from debist.core import progress
+from debist.core.artifacts import H5Tree
+from debist.core.errors import DebistWarning, IdentificationError
+from debist.identify.physics_prior import analytical_for
+from debist.identify.records import estimation_records
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
-from debist.physics_stages import analytical_for
-from debist.records import estimation_records
 from debist.report.tables import with_verdicts
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
 from debist.stages.sindy_choice import choose_sindy
-from debist.validate import ValidateConfig, default_q_limit, score_free_runs, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import default_q_limit, score_free_runs, validate_model
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

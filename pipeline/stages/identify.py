@@ -11,9 +11,9 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine.artifacts import Figure, H5Tree
-from debist.engine.fileformats import REPORT_DPI
-from debist.errors import IdentificationError
+from debist.core.artifacts import Figure, H5Tree
+from debist.core.errors import IdentificationError
+from debist.core.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, select_hyperparameters
 from debist.identify.bands import (
     band_label,
@@ -33,18 +33,18 @@ from debist.identify.design import (
 from debist.identify.excitation import check_excitation, thin_data
 from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range, supported_size
 from debist.identify.mass import effective_mass
+from debist.identify.physics_prior import physics_mass, physics_prior
+from debist.identify.records import estimation_records
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS
 from debist.physics.reduced import reduced_curves
-from debist.physics_stages import physics_mass, physics_prior
-from debist.records import estimation_records
 from debist.report.plots import curves_figure
 from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
-from debist.validate import report_factor
+from debist.validate.freerun import report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

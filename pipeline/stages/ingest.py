@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import lazy_loader as lazy
 
-from debist.errors import recording_warnings
+from debist.core.errors import recording_warnings
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec

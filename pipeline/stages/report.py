@@ -22,10 +22,9 @@ from typing import Any
 
 import lazy_loader as lazy
 
-from debist.engine import artifacts, outdir
-from debist.engine.fileformats import REPORT_DPI
-from debist.engine.registry import stage as registry_stage
-from debist.errors import ArtifactError
+from debist.core import artifacts
+from debist.core.errors import ArtifactError
+from debist.core.fileformats import REPORT_DPI
 from debist.identify.bands import BOOTSTRAP_LABEL
 from debist.report.figures import (
     dynamic_window,
@@ -41,7 +40,8 @@ from debist.report.html import (
 )
 from debist.report.render import FigureJob, render_pngs
 from debist.stages import StageInputs, StageOutput
-from debist.validate import REPLICATE_BAND
+from debist.stages.registry import stage as registry_stage
+from debist.validate.freerun import REPLICATE_BAND
 from debist.workflow.overrides import override_args
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -307,7 +307,7 @@ def gather_run(ctx: StageInputs, upstream: list[str]) -> ReportInputs:
         for d in wf.datasets
     ]
     provenance = {
-        "digest": outdir.run_digest(wf.output_dir, upstream),
+        "digest": artifacts.run_digest(wf.output_dir, upstream),
         "verify": shlex.join(
             ["debist", "verify", wf.path.name]
             + [word for arg in override_args(wf.overrides) for word in ("--set", arg)]
@@ -337,7 +337,7 @@ def _split_runs(frame: pd.DataFrame, model: str) -> dict[str, pd.DataFrame]:
     """Split one ``simulated/<data set>.parquet`` into the free run of each model it holds.
 
     Its own model's ``q_sim`` (with the band of its bootstrap replicates,
-    :data:`debist.validate.REPLICATE_BAND`) and, from the other columns ``q_sim_<other>``,
+    :data:`debist.validate.freerun.REPLICATE_BAND`) and, from the other columns ``q_sim_<other>``,
     the other models the validate stage ran beside it (analytical, equation-error).
     """
     runs = {model: frame}

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from debist.engine.artifacts import FileWriter, H5Tree
-from debist.errors import DebistError
+from debist.core.artifacts import FileWriter, H5Tree
+from debist.core.errors import DebistError
 from debist.rig.dspace import write_recording
 from debist.rig.experiment import (
     CREATED,
@@ -33,8 +33,8 @@ class RigResult:
     Attributes
     ----------
     outputs : dict
-        ``<experiment>.mat`` (:class:`debist.engine.artifacts.FileWriter` of the MAT writer) and
-        ``<experiment>_truth.h5`` (:class:`debist.engine.artifacts.H5Tree`) per experiment; its
+        ``<experiment>.mat`` (:class:`debist.core.artifacts.FileWriter` of the MAT writer) and
+        ``<experiment>_truth.h5`` (:class:`debist.core.artifacts.H5Tree`) per experiment; its
         ``curves`` group holds the true curves (:func:`debist.rig.run.true_curves`) with
         the plant ``model`` and the mass they are per in its attributes
         (:func:`debist.rig.reduced.truth_attrs`).

@@ -27,9 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import IdentificationError
+from debist.core.errors import IdentificationError
 from debist.model.sindy import SindyConfig, fit_sindy
-from debist.validate import DataSet, ValidateConfig, default_q_limit, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.freerun import DataSet, default_q_limit, validate_model
 
 __all__ = ["DEGREES", "DIVERGED_SCORE", "FOLDS", "SIMPLER_WITHIN", "THRESHOLDS", "choose_sindy"]
 

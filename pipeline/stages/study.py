@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from debist.engine.artifacts import Figure
-from debist.engine.fileformats import REPORT_DPI
+from debist.core.artifacts import Figure
+from debist.core.fileformats import REPORT_DPI
 from debist.stages import StageInputs, StageOutput
-from debist.studies import StudyConfig, alpha_study, rbf_grid_study
+from debist.stages.studies import StudyConfig, alpha_study, rbf_grid_study
 
 __all__ = ["execute", "run_study"]
 

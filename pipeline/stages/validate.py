@@ -9,18 +9,18 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.datasets import validation_datasets
-from debist.engine.progress import Stopwatch
+from debist.core.progress import Stopwatch
+from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
-from debist.physics_stages import analytical_for
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
 from debist.simulate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
-from debist.validate import (
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import (
     REPLICATE_BAND,
     ValidateConfig,
     default_q_limit,
@@ -112,7 +112,7 @@ def run_validate(
         parameters, Eq. 26) is scored as model ``"analytical"``.
     replicates : tuple of (list of str, ndarray of shape (B, p)), optional
         The fit's regressor columns and its bootstrap replicates minus the estimate: up to
-        ``[validate] replicates`` of them are simulated (:func:`debist.validate.
+        ``[validate] replicates`` of them are simulated (:func:`debist.validate.freerun.
         replicate_spread`), and the rbf rows get ``replicates``, ``nrmse_q_lo``,
         ``nrmse_q_hi``, ``replicates_poor`` and ``replicates_hold_q``, the free runs ``q_sim_lo``
         and ``q_sim_hi``.

@@ -3,7 +3,7 @@
 A manifest records the settings of a stage as the workflow states them (a key left out is
 not recorded), so two runs of which one states ``substeps = 2`` and the other leaves the
 key to its default of 2 ran alike. :func:`with_defaults` fills in the defaults of each
-table's configuration class (:mod:`debist.workflow.config`), so comparing two runs
+table's configuration class (:mod:`debist.core.config`), so comparing two runs
 (:func:`debist.engine.rundiff.diff_runs`) shows only the settings that made a difference.
 
 References
@@ -25,7 +25,8 @@ from debist.model.narx import NarxConfig
 from debist.model.sindy import SindyConfig
 from debist.physics.config import AnalyzeConfig
 from debist.rig.config import RigConfig
-from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
+from debist.validate.config import ValidateConfig
+from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = ["class_defaults", "with_defaults"]
 
@@ -49,8 +50,8 @@ def class_defaults(cls: type) -> dict[str, Any]:
     Parameters
     ----------
     cls : type
-        A pydantic dataclass of :mod:`debist.workflow.config` (e.g.
-        :class:`debist.workflow.sections.ValidateConfig`).
+        A pydantic dataclass of :mod:`debist.core.config` (e.g.
+        :class:`debist.validate.config.ValidateConfig`).
 
     Returns
     -------
@@ -59,7 +60,7 @@ def class_defaults(cls: type) -> dict[str, Any]:
 
     Examples
     --------
-    >>> from debist.workflow.sections import ValidateConfig
+    >>> from debist.validate.config import ValidateConfig
     >>> class_defaults(ValidateConfig)["substeps"]
     2
     """

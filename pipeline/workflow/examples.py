@@ -27,8 +27,8 @@ from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
 
-from debist.engine.fileformats import atomic_write
-from debist.errors import OutputDirError, WorkflowError
+from debist.core.errors import OutputDirError, WorkflowError
+from debist.core.fileformats import atomic_write
 
 __all__ = ["copy_example", "example_names"]
 

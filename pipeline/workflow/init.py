@@ -30,8 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from debist.engine.fileformats import atomic_write
-from debist.errors import RigLogError, WorkflowError
+from debist.core.errors import RigLogError, WorkflowError
+from debist.core.fileformats import atomic_write
+from debist.core.names import is_file_name
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
 from debist.ingest.spec import IngestSpec
@@ -42,7 +43,6 @@ from debist.ingest.survey import (
     role_kind,
     survey_file,
 )
-from debist.names import is_file_name
 from debist.workflow.schema import check_workflow
 
 __all__ = ["DEFAULT_OUT", "InitDataSet", "InitResult", "init_workflow", "toml_value"]

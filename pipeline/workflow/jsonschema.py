@@ -39,8 +39,9 @@ from debist.physics.config import AnalyzeConfig
 from debist.physics.params import PrototypeParams
 from debist.rig.config import ExperimentConfig
 from debist.rig.params import RigParams
+from debist.validate.config import ValidateConfig
 from debist.workflow.schema import SECTIONS, DatasetEntry, WorkflowHead
-from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
+from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = ["SCHEMA_ID", "workflow_schema"]
 

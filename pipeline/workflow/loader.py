@@ -43,9 +43,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from debist.arguments import check_path
-from debist.errors import ArgumentError, WorkflowError
-from debist.names import check_file_name
+from debist.core.arguments import check_path
+from debist.core.errors import ArgumentError, WorkflowError
+from debist.core.names import check_file_name
 from debist.workflow import tomltext
 from debist.workflow.overrides import override_folder, overrides_table
 from debist.workflow.schema import DATALESS, ROLES, SECTIONS, check_workflow

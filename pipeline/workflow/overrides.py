@@ -29,7 +29,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from debist.errors import ArgumentError, WorkflowError
+from debist.core.errors import ArgumentError, WorkflowError
 from debist.workflow.tomltext import MAX_NESTING
 
 __all__ = [

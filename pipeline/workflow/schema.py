@@ -1,12 +1,12 @@
 """The workflow schema: every section of a parsed workflow file checked before any stage runs.
 
 :func:`check_workflow` builds each section's typed configuration, the same classes the
-stages build (:mod:`debist.workflow.config`), from the parsed TOML, merged the way the stages
+stages build (:mod:`debist.core.config`), from the parsed TOML, merged the way the stages
 merge them (a data set's ingest is ``[ingest]`` updated by its own keys, ``[compare]``
 takes ``input_map`` from ``[identify]``, ``[study.identify]`` updates ``[identify]``), so
 a workflow that loads has no wrong type, unknown key or out-of-range value left for a
 stage to trip over. The first problem found is raised as a one-line
-:class:`~debist.errors.WorkflowError`::
+:class:`~debist.core.errors.WorkflowError`::
 
     [identify] M: expected an integer, got 'ten'
     [datasets.estimation] source: expected a string, got 5
@@ -27,23 +27,24 @@ from typing import Annotated, Any, Literal
 
 import pydantic
 
+from debist.core import preflight
+from debist.core.config import CONFIG, config_from_section, unknown_key_message
+from debist.core.errors import WorkflowError
+from debist.core.names import check_file_name
+from debist.core.units import UNITS
 from debist.differentiate.base import CONFIGS
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
-from debist.engine import preflight
-from debist.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.ingest.spec import OPTION_KEYS, IngestSpec
-from debist.ingest.units import UNITS
 from debist.model.narx import NarxConfig
 from debist.model.sindy import SindyConfig
 from debist.model.terms import PHYSICS_TERMS
-from debist.names import check_file_name
 from debist.physics.config import AnalyzeConfig
 from debist.physics.params import PrototypeParams
 from debist.rig.config import RigConfig
 from debist.rig.profiles import make_profile
-from debist.workflow.config import CONFIG, config_from_section, unknown_key_message
-from debist.workflow.sections import ReportConfig, StudyConfig, ValidateConfig
+from debist.validate.config import ValidateConfig
+from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = [
     "DATALESS",
@@ -372,7 +373,7 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     >>> check_workflow({"physics": {}, "compare": {"degre": 2}})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
+    debist.core.errors.WorkflowError: [compare] unknown key 'degre'; did you mean 'degree'? ...
     """
     _tables(raw)
     head = config_from_section(WorkflowHead, raw.get("workflow", {}), "[workflow]")

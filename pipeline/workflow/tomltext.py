@@ -13,7 +13,7 @@ import re
 import tomllib
 from typing import Any
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 __all__ = ["MAX_NESTING", "check_nesting", "loads"]
 

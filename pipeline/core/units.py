@@ -34,7 +34,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from debist.engine import cache as user_cache
+from debist.core import cache as user_cache
 
 if TYPE_CHECKING:
     import pint
@@ -135,7 +135,7 @@ def registry() -> pint.UnitRegistry:
     pint.UnitRegistry
         The default definitions. Importing pint takes about 0.25 s, so it is loaded only
         when a unit is looked up; its parsed definitions are kept in the user cache
-        (:func:`debist.engine.cache.cache_dir`, pint's own disk cache), which saves another
+        (:func:`debist.core.cache.cache_dir`, pint's own disk cache), which saves another
         0.2 s. A cache that cannot be created or read is passed over: the definitions are
         parsed again.
 
@@ -228,7 +228,7 @@ def lookup_unit(symbol: str) -> Unit | None:
         Factor to SI, SI symbol and quantity; None for text pint does not parse as a
         unit, a number (``"2 mm"``), an empty string, or a unit with an offset to SI
         (``"degC"``). pint's answer for each symbol is remembered in the user cache
-        (:mod:`debist.engine.cache`) under pint's version and this module's source, so a
+        (:mod:`debist.core.cache`) under pint's version and this module's source, so a
         workflow loads without importing pint (0.25 s) once its units have been seen.
 
     Examples

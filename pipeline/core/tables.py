@@ -5,7 +5,7 @@ from __future__ import annotations
 import lazy_loader as lazy
 import numpy as np
 
-from debist.errors import RigLogError
+from debist.core.errors import RigLogError
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

@@ -5,7 +5,7 @@ Every stage's configuration is a frozen pydantic dataclass built with :data:`CON
 no ``inf`` or ``nan``). Range constraints are pydantic ``Field`` constraints; rules that
 involve several fields live in ``__post_init__`` and raise :class:`ConfigValueError`.
 :func:`config_from_section` builds one from a workflow section and turns pydantic's
-:class:`~pydantic.ValidationError` into a one-line :class:`~debist.errors.WorkflowError`;
+:class:`~pydantic.ValidationError` into a one-line :class:`~debist.core.errors.WorkflowError`;
 :class:`SectionConfig` is the one base whose ``from_dict`` does that for a class that names
 its table (``SECTION = "[validate]"``)::
 
@@ -30,7 +30,7 @@ from typing import Annotated, Any, ClassVar, Self, TypeVar
 import pydantic
 from pydantic import BeforeValidator, ConfigDict, Field
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 __all__ = [
     "CONFIG",
@@ -399,7 +399,7 @@ def config_from_section(
     >>> config_from_section(SindyConfig, {"degree": "3"}, "[compare]")
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [compare] degree: expected an integer, got '3'
+    debist.core.errors.WorkflowError: [compare] degree: expected an integer, got '3'
     """
     label = where if callable(where) else (lambda _key, w=where: w)
     if not isinstance(section, Mapping):
@@ -469,7 +469,7 @@ class SectionConfig:
     >>> Demo.from_dict({"m": 3})
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [demo] unknown key 'm' (known keys: n)
+    debist.core.errors.WorkflowError: [demo] unknown key 'm' (known keys: n)
     """
 
     SECTION: ClassVar[str] = ""

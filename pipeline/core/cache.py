@@ -2,7 +2,7 @@
 
 Two things live there: the import lists of debist's own modules, keyed by the sha256 of each
 module's source (:mod:`debist.engine.fingerprint`), and pint's parsed unit definitions
-(:func:`debist.ingest.units.registry`). Both are recomputed when missing, unreadable or not
+(:func:`debist.core.units.registry`). Both are recomputed when missing, unreadable or not
 writable, so deleting the folder, a read-only home or a full disk cost only start-up time.
 The folder is ``$DEBIST_CACHE_DIR`` when set, else the platform's user cache folder
 (``~/.cache/debist`` on Linux, by platformdirs).
@@ -22,7 +22,7 @@ from typing import Any
 
 import platformdirs
 
-from debist.engine.fileformats import atomic_write
+from debist.core.fileformats import atomic_write
 
 __all__ = ["cache_dir", "read_json", "write_json"]
 

@@ -23,19 +23,20 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.datasets import validation_datasets
+from debist.core import preflight, progress
+from debist.core.errors import IdentificationError, WorkflowError
+from debist.core.metrics import rms
+from debist.core.tables import input_columns
 from debist.differentiate.tables import differentiate_tables
 from debist.differentiate.tvregdiff_method import TVRegDiffConfig
-from debist.engine import preflight, progress
-from debist.errors import IdentificationError, WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
-from debist.metrics import rms
+from debist.identify.records import estimation_records
 from debist.model.rbf import RBFModel
-from debist.records import estimation_records
 from debist.report.study_plots import alpha_figure, grid_figure
-from debist.tables import input_columns
-from debist.validate import DataSet, ValidateConfig, validate_model
+from debist.validate.config import ValidateConfig
+from debist.validate.datasets import validation_datasets
+from debist.validate.freerun import DataSet, validate_model
 from debist.workflow.sections import StudyConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -202,7 +203,7 @@ def rbf_grid_study(
     identify_section : mapping
         The ``[identify]`` section (see :class:`~debist.identify.config.IdentifyConfig`).
     validate_section : mapping
-        The ``[validate]`` section (see :class:`~debist.validate.ValidateConfig`).
+        The ``[validate]`` section (see :class:`~debist.validate.config.ValidateConfig`).
     cfg : StudyConfig
         The grids, ``free_run`` and ``max_samples``.
 

@@ -1,6 +1,6 @@
 """Identification records built from the stages' tables (the rows of Eq. 40).
 
-Shared by the identify, compare and study stages and by :mod:`debist.studies`: a small
+Shared by the identify, compare and study stages and by :mod:`debist.stages.studies`: a small
 module they import, so that no stage imports another stage.
 
 References
@@ -10,9 +10,9 @@ Masoud & Maas 2025, Eq. 40.
 
 from __future__ import annotations
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
+from debist.core.tables import input_columns
 from debist.identify.fit import Record
-from debist.tables import input_columns
 
 __all__ = ["estimation_records"]
 

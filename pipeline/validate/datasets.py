@@ -1,13 +1,13 @@
 """Validation data sets built from the stages' tables (what every free run is scored on).
 
-Shared by the validate, compare and study stages and by :mod:`debist.studies`, so that
+Shared by the validate, compare and study stages and by :mod:`debist.stages.studies`, so that
 no stage imports another stage.
 """
 
 from __future__ import annotations
 
-from debist.tables import input_columns
-from debist.validate import DataSet
+from debist.core.tables import input_columns
+from debist.validate.freerun import DataSet
 
 __all__ = ["validation_datasets"]
 

@@ -2,7 +2,7 @@
 
 Every function that builds arrays whose size a workflow key controls calls one of the
 checks below first, so that a setting such as ``[identify] M = 100000`` is refused in
-microseconds with a :class:`~debist.errors.ResourceError` (a ``WorkflowError``, exit
+microseconds with a :class:`~debist.core.errors.ResourceError` (a ``WorkflowError``, exit
 code 2) that names the key and the estimate, instead of ending in the kernel's
 out-of-memory killer. The estimates count the float64 arrays the code builds, copy by
 copy (see each function's Notes), and take the largest of a stage's phases.
@@ -31,7 +31,7 @@ from typing import Any
 
 import psutil
 
-from debist.errors import ResourceError, WorkflowError
+from debist.core.errors import ResourceError, WorkflowError
 
 __all__ = [
     "BUDGET_ENV",

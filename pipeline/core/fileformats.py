@@ -1,6 +1,6 @@
 """Reading and writing the file formats of stage outputs: Parquet, HDF5, PNG, text.
 
-Used by :mod:`debist.engine.artifacts` only (which re-exports the readers); written
+Used by :mod:`debist.core.artifacts` (which re-exports the readers) and the stages; written
 byte-reproducibly: Parquet with fixed column order and dtypes, zstd, no index,
 provenance in the key-value metadata; HDF5 without object time stamps; PNG without
 the software tag; canonical JSON with sorted keys.
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from debist.errors import ArtifactError
+from debist.core.errors import ArtifactError
 
 __all__ = [
     "REPORT_DPI",

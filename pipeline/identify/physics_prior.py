@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 from debist.model.terms import PHYSICS_TERMS, PhysicsPrior
 from debist.physics.freerun import analytical_model
 from debist.physics.reduced import reduced_curves
@@ -25,7 +25,8 @@ from debist.physics.statics import force_displacement
 
 if TYPE_CHECKING:  # types only: the identify stage must not depend on the validation code
     from debist.identify.fit import Record
-    from debist.validate import DataSet, ValidateConfig
+    from debist.validate.config import ValidateConfig
+    from debist.validate.freerun import DataSet
 
 __all__ = ["analytical_for", "physics_mass", "physics_prior", "quadratic_force"]
 

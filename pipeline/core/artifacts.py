@@ -15,8 +15,8 @@ killed in between (SIGKILL, power loss) leaves ``.<stage>.tmp-*`` or ``.<stage>.
 only ever replaced when every file in it is listed by its manifest: a file debist did not
 write is never deleted.
 
-The output folder as a whole (its owner, its lock, the recovery of leftovers and the run
-digest) is :mod:`debist.engine.outdir`.
+The output folder as a whole (its owner, its lock and the recovery of leftovers) is
+:mod:`debist.engine.outdir`; the run's digest over the stages' manifests is :func:`run_digest`.
 
 References
 ----------
@@ -46,8 +46,9 @@ from pathlib import Path
 from typing import Any
 
 from debist import __version__
-from debist.engine.faults import fault_point
-from debist.engine.fileformats import (
+from debist.core.errors import ArtifactError, OutputDirError
+from debist.core.faults import fault_point
+from debist.core.fileformats import (
     Figure,
     FileWriter,
     H5Tree,
@@ -58,7 +59,6 @@ from debist.engine.fileformats import (
     sha256_file,
     write_output,
 )
-from debist.errors import ArtifactError, OutputDirError
 
 __all__ = [
     "MANIFEST",
@@ -84,6 +84,7 @@ __all__ = [
     "read_parquet",
     "read_summary",
     "remove_tree",
+    "run_digest",
     "set_aside",
     "sha256_file",
     "stage_key",
@@ -312,6 +313,31 @@ def manifest_digest(stage_dir: str | os.PathLike) -> str | None:
     return sha256_file(path) if path.is_file() else None
 
 
+def run_digest(output_dir: str | os.PathLike, stages: Sequence[str]) -> str | None:
+    """Return the digest of a run: sha256 over its stages' manifests, in stage order.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The workflow's output folder.
+    stages : sequence of str
+        The workflow's stages, in execution order.
+
+    Returns
+    -------
+    str or None
+        sha256 of the lines ``"<stage> <sha256 of manifest.json>"``; None when a stage has
+        no manifest.
+    """
+    lines = []
+    for stage in stages:
+        digest = manifest_digest(Path(output_dir) / stage)
+        if digest is None:
+            return None
+        lines.append(f"{stage} {digest}\n")
+    return sha256_bytes("".join(lines).encode())
+
+
 def read_summary(stage_dir: str | os.PathLike, manifest: Manifest) -> dict[str, Any]:
     """Read a stage's ``summary.json`` after checking it against its manifest.
 
@@ -502,7 +528,7 @@ def write_stage(
     upstream : mapping of str to str
         Upstream stage to the sha256 of its manifest.
     outputs : mapping of str to object
-        Relative output path to value (see :func:`debist.engine.fileformats.write_output`).
+        Relative output path to value (see :func:`debist.core.fileformats.write_output`).
     summary : mapping, optional
         Small JSON-compatible results for reports, written as ``summary.json``.
     timings : mapping of str to float, optional

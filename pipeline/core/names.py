@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 
-from debist.errors import WorkflowError
+from debist.core.errors import WorkflowError
 
 __all__ = ["MAX_LENGTH", "check_file_name", "is_file_name"]
 
@@ -79,7 +79,7 @@ def check_file_name(name: object, where: str) -> str:
     >>> check_file_name("../../victim", "[datasets]")
     Traceback (most recent call last):
     ...
-    debist.errors.WorkflowError: [datasets] '../../victim': a name that becomes a file name ...
+    debist.core.errors.WorkflowError: [datasets] '../../victim': a name that becomes a file name ...
     """
     if is_file_name(name):
         return str(name)

@@ -1,7 +1,7 @@
 """Checks of the Python API's arguments: one line naming the argument, never a deep error.
 
 The functions of :mod:`debist.api` call these first, so that ``debist.verify(wf, 12345)``
-or ``debist.fleet(wf, "3", ...)`` is refused with :class:`~debist.errors.ArgumentError`
+or ``debist.fleet(wf, "3", ...)`` is refused with :class:`~debist.core.errors.ArgumentError`
 (a ``TypeError`` and a ``WorkflowError``) naming the argument and echoing its value,
 instead of a ``TypeError`` from deep inside the library.
 
@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from debist.errors import ArgumentError, WorkflowError
+from debist.core.errors import ArgumentError, WorkflowError
 
 __all__ = ["check_callable", "check_flag", "check_int", "check_names", "check_path", "check_str"]
 

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import lazy_loader as lazy
 import numpy as np
 
-from debist.engine import progress
-from debist.errors import WorkflowError
-from debist.ingest.units import lookup_unit
-from debist.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
+from debist.core import progress
+from debist.core.errors import WorkflowError
+from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
+from debist.core.units import lookup_unit
 from debist.simulate.freerun import (
     FreeRunModel,
     SimulationResult,
@@ -20,7 +20,7 @@ from debist.simulate.freerun import (
     simulate,
     substeps_needed,
 )
-from debist.workflow.sections import ValidateConfig
+from debist.validate.config import ValidateConfig
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -149,6 +149,11 @@ def default_q_limit(q_range: tuple[float, float]) -> float:
     -------
     float
         ``2 max(|q_lo|, |q_hi|)`` [unit of q].
+
+    Examples
+    --------
+    >>> default_q_limit((-1.5, 4.0))
+    8.0
     """
     return 2.0 * max(abs(float(q_range[0])), abs(float(q_range[1])))
 
@@ -356,7 +361,7 @@ def replicate_spread(
         One row per data set: ``dataset``, ``replicates`` (B), ``nrmse_q_lo``, ``nrmse_q_hi``
         (the 2.5th and 97.5th order statistics of the replicates' NRMSE(q), a diverged
         replicate counting as infinite), ``replicates_poor`` (the share whose NRMSE(q) is
-        above :data:`debist.metrics.POOR_SHARE` of the mean baseline's, or diverged).
+        above :data:`debist.core.metrics.POOR_SHARE` of the mean baseline's, or diverged).
         ``replicates_hold_q``: the share of the scored samples whose measured q lies inside
         the replicates' band (what the band held on this data set).
     bands : dict of str to ndarray, shape (2, n)
