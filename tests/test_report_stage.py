@@ -376,7 +376,7 @@ def test_chromium_lays_the_report_out_at_desktop_and_phone_width(synthetic_run, 
         assert all(t["cue"] for t in m["tables"]), m["tables"]
     else:
         assert not any(t["cue"] for t in m["tables"])
-    assert len(m["imgs"]) == 4
+    assert len(m["imgs"]) == 5  # four figures and the held-out choice of slip
     for img in m["imgs"]:
         assert img["complete"] and img["natural"] > 0, img
         assert img["natural"] >= 1.95 * img["css"], img  # drawn for a 2x (HiDPI) screen
