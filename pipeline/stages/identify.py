@@ -12,9 +12,8 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.artifacts import Figure, H5Tree
-from debist.core.errors import IdentificationError
 from debist.core.fileformats import REPORT_DPI
-from debist.identify.autotune import auto_settings, select_hyperparameters
+from debist.identify.autotune import auto_settings, drop_inert_slip, select_hyperparameters
 from debist.identify.bands import (
     band_label,
     curves_frame,
@@ -144,7 +143,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         # one tone: the data cannot rank curve detail, the held-out free run can
         grid["M"] = list(range(2, cfg.M + 1))
     t_choice = time.perf_counter()
-    grid, inert = _drop_inert_slip(records, cfg, grid)
+    grid, inert = drop_inert_slip(records, cfg, grid)
     t_choice = time.perf_counter() - t_choice
     if grid:  # the settings the workflow leaves to debist, chosen on held-out data
         search = select_hyperparameters(records, cfg, grid, fallback=True)
@@ -251,44 +250,6 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     if inert:
         summary["auto_skipped"] = inert
     return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
-
-
-def _drop_inert_slip(records, cfg: IdentifyConfig, grid: dict[str, list]):
-    """Drop slip-element candidates the least squares gives zero stiffness on the whole data.
-
-    The stiffnesses k_e >= 0 of the Maxwell-slip elements are bounded below by zero; where
-    the fit on all estimation records puts every one at that bound, the candidate is the
-    model without elements and needs no cross-validation (a rig without hysteresis in q).
-
-    Returns
-    -------
-    grid : dict
-        The grid without those candidates (without ``slip`` if only ``False`` is left).
-    note : str
-        What was dropped and why, or ``""``.
-    """
-    if "slip" not in grid or cfg.n_slip:
-        return grid, ""
-    counts = [c for c in grid["slip"] if c is not False]
-    inert = []
-    for count in counts:
-        try:
-            model, _ = fit_rbf_model(records, replace(cfg, slip=count, bootstrap=0))
-        except IdentificationError:
-            continue
-        if not np.any(np.asarray(model.theta_slip) > 0):
-            inert.append(count)
-    if not inert:
-        return grid, ""
-    kept = [c for c in grid["slip"] if c not in inert]
-    out = {k: v for k, v in grid.items() if k != "slip"}
-    if kept != [False]:
-        out["slip"] = kept
-    listed = ", ".join(str(c) for c in inert)
-    return out, (
-        f"slip = {listed}: the least squares on the estimation data gives every element "
-        "zero stiffness (no hysteresis to explain), so these are the model without elements"
-    )
 
 
 def _slip_summary(model) -> dict[str, Any]:
