@@ -80,7 +80,7 @@ def test_rbf_model_with_creep_states_in_both_engines_and_its_term_table(T_z, sub
     """The creep of Eq. 26 as M extra states w_j' = phi_j(q) q_dot - lambda w_j: the model's
     own rhs, its term table's NumPy rhs and the compiled kernel agree to 1e-12."""
     model = rbf_model(T_z, creep_rate=3.7)
-    assert model.n_states == 13 and model.kernel_arrays().n_states == 13
+    assert model.n_states == 13 and kernel.kernel_arrays(model).n_states == 13
     records = [inputs(1500, 0), inputs(900, 1)]
     q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
     ref, new = both(model, records, q0, qd0, substeps=substeps)
@@ -308,7 +308,7 @@ def test_physics_creep_in_the_compiled_kernel_serial_and_in_lockstep(two_threads
     if slip:
         plain = replace(plain, slip_width=SLIP[0], theta_slip=np.array(SLIP[1]))
     model = with_physics_creep(plain)
-    assert model.n_states == plain.n_states + 2 == model.kernel_arrays().n_states
+    assert model.n_states == plain.n_states + 2 == kernel.kernel_arrays(model).n_states
     records = [inputs(800, 0), inputs(600, 1)]
     q0, qd0 = np.array([-0.01, 0.009]), np.array([0.0, 0.01])
     ref, new = both(model, records, q0, qd0, substeps=2)
@@ -330,12 +330,12 @@ def test_the_kernel_groups_the_inertia_terms_last_and_checks_their_form():
     from debist.model.termtable import S_ACC, TableModel, TermTableBuilder
 
     plain, model = inertia_models(0.02, False)
-    arrays, table = model.kernel_arrays(), model.table_model().table
-    assert arrays.lay[kernel._NA] == 2 and plain.kernel_arrays().lay[kernel._NA] == 0
+    arrays, table = kernel.kernel_arrays(model), model.table_model().table
+    assert arrays.lay[kernel._NA] == 2 and kernel.kernel_arrays(plain).lay[kernel._NA] == 0
     order = [table.names[j] for j in arrays.term_order]
     assert order[-2:] == ["inertia[1]", "inertia[2]"]
     plain_table = plain.table_model().table
-    assert order[:-2] == [plain_table.names[j] for j in plain.kernel_arrays().term_order]
+    assert order[:-2] == [plain_table.names[j] for j in kernel.kernel_arrays(plain).term_order]
     for hpow, qpow in (([1], 1), ([0], 0)):
         build = TermTableBuilder(1, "v")
         build.term("bad", build.one(), qpow=qpow, skind=S_ACC, hpow=hpow)
@@ -391,16 +391,20 @@ def test_forward_sensitivities_are_the_derivative_of_the_free_run(extra, T_z):
     lengths = np.array([300, 300])
 
     def q_of(p):
-        states = kernel.free_run(build(p).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
+        states = kernel.free_run(kernel.kernel_arrays(build(p)), fine, lengths, DT, 2, x0, np.inf)[
+            0
+        ]
         return states[..., 0]
 
     q, dq = kernel.free_run_sensitivity(
-        build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf, np.arange(n), signs, n,
+        kernel.kernel_arrays(build(p0)), fine, lengths, DT, 2, x0, np.inf, np.arange(n), signs, n,
         n + 1 if lagged else -1, p0.size,
     )  # fmt: skip
     np.testing.assert_array_equal(q, q_of(p0))
     if "slip" in extra:  # the elements stick and slip along the runs: the test covers both
-        states = kernel.free_run(build(p0).kernel_arrays(), fine, lengths, DT, 2, x0, np.inf)[0]
+        states = kernel.free_run(kernel.kernel_arrays(build(p0)), fine, lengths, DT, 2, x0, np.inf)[
+            0
+        ]
         at_width = np.isclose(np.abs(states[..., -3:]), SLIP[0], rtol=1e-12, atol=0)
         assert 0.05 < at_width.mean() < 0.95
     for i in range(p0.size):

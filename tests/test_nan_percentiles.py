@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from debist.core.metrics import nan_percentiles
-from debist.simulate.prediction import _correlation
+from debist.validate.prediction import _correlation
 
 
 @pytest.mark.parametrize("shape", [(100, 2000), (7, 300), (1, 40), (2, 9)])

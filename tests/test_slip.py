@@ -19,6 +19,7 @@ from debist.identify.fit import Record, fit_rbf_model, slip_widths
 from debist.model.friction import slip_clip, slip_state_rate, slip_states
 from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
+from debist.simulate.kernel import kernel_arrays
 
 WIDTHS = (2e-4, 8e-4, 3.2e-3)
 
@@ -79,7 +80,7 @@ def test_a_model_with_slip_elements_in_both_engines_and_its_term_table(T_z, subs
     kernel (serial and lock-step) agree to 1e-12; the elements load to their break-away
     deflections and never past them, and their force changes the trajectory."""
     model = _with_slip(example_rbf_model(T_z))
-    assert model.n_states == 6 and model.kernel_arrays().n_states == 6
+    assert model.n_states == 6 and kernel_arrays(model).n_states == 6
     records = [_inputs(1500, 0), _inputs(900, 1), _inputs(700, 2)]
     q0, qd0 = np.array([-0.01, 0.009, 0.0]), np.array([0.0, 0.01, 0.0])
     ref = simulate(model, records, 0.01, q0, qd0, engine="numpy", substeps=substeps)

@@ -80,7 +80,7 @@ from debist.identify.config import (
 )
 from debist.identify.fit import Record, fit_rbf_model, supported_size
 from debist.model.terms import column_names
-from debist.simulate.prediction import restarted_runs
+from debist.validate.prediction import restarted_runs
 from debist.validate.freerun import default_q_limit
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
@@ -364,7 +364,7 @@ def _fold_score(model, records, spans, substeps, window) -> tuple[float, bool]:
     """Mean NRMSE(q) of the held-out spans' restarted windows; (inf, True) if one diverged.
 
     Each span is tiled by windows of ``window`` samples, each run free from the measured
-    state at its start (:func:`debist.simulate.prediction.restarted_runs`); the span's score is
+    state at its start (:func:`debist.validate.prediction.restarted_runs`); the span's score is
     NRMSE(q) (Eq. 41) of the windows' runs against the measurement, normalised by the span's
     range.
     """
@@ -475,7 +475,7 @@ def select_hyperparameters(
     (:func:`blocked_folds`); per candidate and fold the model is fitted on the other blocks
     (each remaining contiguous piece a record, trimmed by ``trim``) and run free on the
     held-out block in windows of ``window`` samples, each restarted from the measured state
-    at its start (multiple shooting: :func:`debist.simulate.prediction.restarted_runs`); the fold's
+    at its start (multiple shooting: :func:`debist.validate.prediction.restarted_runs`); the fold's
     score is NRMSE(q) of Eq. 41 of those runs (mean over the records). A failed fit or a
     diverged window scores ``inf``. The choice is the most parsimonious candidate within one
     standard error of the best mean (:func:`one_standard_error`; order :data:`PARSIMONY`).

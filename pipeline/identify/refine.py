@@ -45,8 +45,8 @@ from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
 from debist.model.termtable import TableModel
 from debist.simulate.freerun import check_free_run, prepare_inputs, simulate
-from debist.simulate.kernel import free_run_sensitivity
-from debist.simulate.prediction import restarted_runs
+from debist.simulate.kernel import free_run_sensitivity, kernel_arrays
+from debist.validate.prediction import restarted_runs
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 optimize = lazy.load("scipy.optimize", suppress_warning=True)
@@ -365,7 +365,7 @@ def _refine_once(model: RBFModel, diag: FitDiagnostics, records: Sequence[Record
                 model.creep_rate, model.slip_width,
             )  # fmt: skip
             q_sim, dq = free_run_sensitivity(
-                batch.kernel_arrays(), fine.values, lengths, dt, fine.substeps, x_start,
+                kernel_arrays(batch), fine.values, lengths, dt, fine.substeps, x_start,
                 q_limit, np.array(term_param), np.array(signs),
                 names.index("m_q") if identify_mass else -1,
                 len(names) if log_tz else -1, xs.size,

@@ -434,16 +434,10 @@ class RBFModel:
         signs = np.array([term_sign(n) for n in names])
         return TableModel(table, signs * weights, mass, np.array([self.T_z]))
 
-    def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:mod:`debist.simulate.kernel`), built once."""
-        return self._kernel
-
     @cached_property
-    def _kernel(self):
-        # here, not at the top: numba loads and compiles the kernel on first use only
-        from debist.simulate.kernel import table_arrays
-
-        return table_arrays(self.table_model())
+    def kernel_table(self) -> TableModel:
+        """The model as the compiled free-run kernel takes it (:meth:`table_model`), built once."""
+        return self.table_model()
 
     def initial_state(self, q0: np.ndarray, q_dot0: np.ndarray) -> np.ndarray:
         """State ``[q, q_dot, z, w]`` at rest relative to the friction filter (z = q_dot).

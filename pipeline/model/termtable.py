@@ -547,14 +547,10 @@ class TableModel:
             out = min(out, 1.5 / self.table.creep_rate)
         return out
 
-    def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel (:func:`debist.simulate.kernel.table_arrays`)."""
-        # here, not at the top: numba loads and compiles the kernel on first use only
-        from debist.simulate.kernel import (
-            table_arrays,  # here, not at the top: numba loads on first use
-        )
-
-        return table_arrays(self)
+    @property
+    def kernel_table(self) -> TableModel:
+        """The model as the compiled free-run kernel takes it: itself."""
+        return self
 
     def mass_of(self, q: np.ndarray) -> np.ndarray:
         """Return the mass m(q) = m - sum_(j inertia) w_j q^a_j (B,) [kg] at ``q`` (B,)."""

@@ -118,12 +118,21 @@ class AnalyticalModel:
         e2 = k2 * qd - self._relax * x[:, 3]
         return np.stack([qd, qdd, e1, e2], axis=1), qdd
 
-    def kernel_arrays(self):
-        """Arrays of the compiled free-run kernel: the splines of all curves but phi."""
-        # here, not at the top: numba loads and compiles the kernel on first use only
-        from debist.simulate.kernel import spline_arrays
+    def kernel_splines(self) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Return the model as the compiled free-run kernel takes it (its ``spline_arrays``).
 
-        return spline_arrays(self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar)
+        Returns
+        -------
+        x : ndarray, shape (n,)
+            Breakpoints [m].
+        c : ndarray, shape (4, n - 1, 8)
+            Cubic coefficients of ``m_q, dm_q/dq, d, f, g1, g2, k1, k2``.
+        relax : float
+            ``Y_MW / eta_MW`` [1/s].
+        kbar : float
+            ``V_DE Y_MW`` [J].
+        """
+        return self._spl.x, self._spl.c[:, :, :8], self._relax, self._kbar
 
     def max_step(self) -> float:
         """Largest stable RK4 step [s] (2.5 / fastest linearised rate of the curves)."""

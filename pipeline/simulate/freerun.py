@@ -4,8 +4,8 @@ One fixed-step classical Runge-Kutta integrator with sub-steps, driven by the
 measured inputs interpolated band-limited (polyphase FIR, the default) or
 linearly, never by a zero-order hold that delays the input by half a sample.
 Several records are simulated at once as a batch. Two engines run the same scheme: the
-compiled kernel (:mod:`debist.simulate.kernel`, the default, for every model that hands it its
-arrays through ``kernel_arrays()``) and the NumPy reference, vectorised over the batch and
+compiled kernel (:mod:`debist.simulate.kernel`, the default, for every model with a
+``kernel_table`` or ``kernel_splines``) and the NumPy reference, vectorised over the batch and
 calling the model's own ``rhs``; they agree to rounding.
 """
 
@@ -300,8 +300,8 @@ def simulate(
         A trajectory with ``|q| > q_limit`` or a non-finite state counts as
         diverged and is not integrated further.
     engine : {"compiled", "numpy"}, optional
-        The compiled kernel (models with ``kernel_arrays()``; others run on the NumPy
-        engine), or the NumPy reference engine.
+        The compiled kernel (models with ``kernel_table`` or ``kernel_splines``; others run
+        on the NumPy engine), or the NumPy reference engine.
     progress : callable, optional
         Called as ``progress(done, total)`` [samples] while the compiled engine integrates
         long records (between chunks of :data:`debist.simulate.kernel.CHUNK` samples); default:
@@ -352,7 +352,9 @@ def simulate(
     if x0 is None:
         x0 = model.initial_state(np.asarray(q0, float), np.asarray(q_dot0, float))
     x0 = np.atleast_2d(np.asarray(x0, dtype=float))
-    if engine == "compiled" and hasattr(model, "kernel_arrays"):
+    if engine == "compiled" and (
+        hasattr(model, "kernel_table") or hasattr(model, "kernel_splines")
+    ):
         return _integrate_compiled(model, prepared, dt, x0, q_limit, progress)
     with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected and reported below
         return _integrate(model, prepared, dt, x0, q_limit)
@@ -384,11 +386,11 @@ def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
 def _integrate_compiled(model, prepared, dt, x0, q_limit, progress):
     """Integrate with the compiled kernel over the prepared input grid (see :func:`simulate`)."""
     # here, not at the top: numba loads and compiles the kernel on first use only
-    from debist.simulate.kernel import free_run
+    from debist.simulate.kernel import free_run, kernel_arrays
 
     lengths = np.asarray(prepared.lengths, dtype=np.int64)
     states, acc, dead = free_run(
-        model.kernel_arrays(), prepared.values, lengths, dt, prepared.substeps,
+        kernel_arrays(model), prepared.values, lengths, dt, prepared.substeps,
         x0, q_limit, progress,
     )  # fmt: skip
     return _results(states, acc, dead, prepared.lengths, prepared.substeps)

@@ -368,6 +368,33 @@ def spline_arrays(x: np.ndarray, c: np.ndarray, relax: float, kbar: float) -> Ke
     return KernelArrays(KIND_SPLINE, 4, fp, ip, lay, 8)
 
 
+def kernel_arrays(model) -> KernelArrays:
+    """Kernel arrays of any model the compiled engine runs.
+
+    Parameters
+    ----------
+    model : object
+        A model with ``kernel_table`` (a :class:`debist.model.termtable.TableModel`: the RBF
+        and SINDy models, a term table itself) or ``kernel_splines()`` (the analytical reduced
+        model of :mod:`debist.physics.freerun`).
+
+    Returns
+    -------
+    KernelArrays
+
+    Raises
+    ------
+    TypeError
+        If the model has neither.
+    """
+    splines = getattr(model, "kernel_splines", None)
+    if splines is not None:
+        return spline_arrays(*splines())
+    if not hasattr(model, "kernel_table"):
+        raise TypeError(f"{type(model).__name__} has no compiled form")
+    return table_arrays(model.kernel_table)
+
+
 # ------------------------------------------------------------------------------ right-hand sides
 
 

@@ -17,7 +17,7 @@ from debist.model.rbf import RBFModel
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
-from debist.simulate.prediction import prediction_table
+from debist.validate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate.datasets import validation_datasets
 from debist.validate.freerun import (
@@ -56,7 +56,7 @@ class ValidateResult:
         model's free runs), ``replicates`` (the bootstrap replicates' free runs), ``other
         models`` (``rbf-ls``, ``analytical``), ``k-step and residuals``, ``stability``.
     residuals : pandas.DataFrame or None
-        The residual analysis's correlations (:func:`debist.simulate.prediction.prediction_table`),
+        The residual analysis's correlations (:func:`debist.validate.prediction.prediction_table`),
         None with ``predict_steps = 0``.
     """
 
