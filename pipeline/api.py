@@ -1381,8 +1381,7 @@ class Model:
             natural frequency ``f_n``, stability
             (:func:`debist.identify.stability.stability_table`), without bands: the bands of
             ``k`` and ``f_n`` at the wells the data hold (``k_lo``, ``k_hi``, ``f_n_lo``,
-            ``f_n_hi``; on the virtual rig the identified ``k`` ran 4-34 % low) are in
-            :attr:`Result.equilibria`.
+            ``f_n_hi``) are in :attr:`Result.equilibria`.
 
         Raises
         ------

@@ -532,9 +532,8 @@ def write_stage(
     summary : mapping, optional
         Small JSON-compatible results for reports, written as ``summary.json``.
     timings : mapping of str to float, optional
-        Wall times [s] of the stage's parts and in all (``stage``), written to the unhashed
-        ``timings.json``; the time this call takes to write the outputs is added as
-        ``write``, and to ``stage``.
+        Wall times [s] of the stage's parts and in all (``stage``), for the unhashed
+        ``timings.json``; this call's writing time is added as ``write``.
 
     Returns
     -------
@@ -544,14 +543,11 @@ def write_stage(
     Raises
     ------
     OutputDirError
-        If the existing stage folder holds files its manifest does not list (named;
-        nothing is written, moved or deleted).
+        If the existing stage folder holds files its manifest does not list (nothing is
+        touched), an output name is not a relative path inside the stage folder, or the
+        stage folder is a symbolic link.
     TypeError
         If an output has no writer. Nothing is left behind in that case.
-    OutputDirError
-        If an output name is not a relative path inside the stage folder (absolute,
-        ``..``, a NUL byte): every write resolves inside the output folder; or the stage
-        folder is a symbolic link.
     """
     final = Path(stage_dir)
     if final.is_symlink():

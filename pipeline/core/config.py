@@ -366,12 +366,9 @@ def config_from_section(
     section : mapping of str to value
         The keys given in the workflow.
     where : str or callable
-        Where the section sits, for the messages (e.g. ``"[identify]"``), or a function
-        of the top-level key giving that label.
-    prefix : str, optional
-        Put before every key in the messages (e.g. ``"q."`` for a channel table).
-    known_label : str, optional
-        Introduces the known keys in an unknown-key message.
+        Where the section sits (e.g. ``"[identify]"``), or a function of the key giving it.
+    prefix, known_label : str, optional
+        Put before every key in the messages (e.g. ``"q."``); introduces the known keys.
     internal : sequence of str, optional
         Fields that are not workflow keys: refused in ``section``, filled from ``extra``.
     extra : mapping, optional
@@ -385,9 +382,8 @@ def config_from_section(
     Raises
     ------
     WorkflowError
-        On a section that is not a table, an unknown key (with the closest known key as
-        a suggestion), a value of the wrong type, out of range, or breaking a rule of the
-        class: ``[section] key: expected ..., got ...``.
+        On a section that is not a table, an unknown key (suggesting the closest), or a
+        value of the wrong type, out of range or breaking a rule of the class.
 
     References
     ----------

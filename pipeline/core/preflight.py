@@ -272,26 +272,9 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
 
     Notes
     -----
-    With n rows, p columns, k = min(n, p), M centres (float64 elements):
-
-    - support check (``RBFBasis.support``): ``|q - xi|`` and its temporary, 2 n M;
-    - regressor build (``_system``): the stacked copy of the per-record blocks, 2 n p, or,
-      while the longest record (n_r rows) is built after the others, their blocks and its
-      basis, force (p_F columns) and input blocks, the negated force block and the joined
-      block, (n - n_r) p + n_r (M + 2 p + p_F); with ``lowpass``, instead of the negated
-      block, ``sosfiltfilt``'s padded, filtered and reversed copies (3 n_r p, measured),
-      (n - n_r) p + n_r (M + 5 p);
-    - T_z search (variable projection): the fixed columns (p_f = p - p_z), numpy's QR
-      (copy, LAPACK buffer, Q buffer and Q), 5 n p_f; then per evaluation those two
-      plus 5 n p_z for the z columns, their projection and ``lstsq``'s copies;
-    - SVD solve (``_solve``): the regressor, its column-scaled copy, LAPACK's copy of it,
-      U and V^T twice (LAPACK buffers and numpy outputs) and gesdd's work space,
-      3 n p + 2 k (n + p) + 5 k^2;
-    - block bootstrap of the bands (``bootstrap = B > 0``): the regressor, numpy's QR of
-      its scaled copy (copy, LAPACK buffer, Q buffer and Q), the per-block Grams of Q
-      (``n / b`` blocks of ``p^2``, block length ``b >= n^(1/3)``), the replicates' Grams
-      and their copy in the solve, and the block counts,
-      5 n p + n^(2/3) p^2 + 2 B p^2 + B n^(2/3).
+    The largest of five phases (support check, regressor build, T_z search, SVD solve,
+    block bootstrap), each counted in float64 elements of n rows, p columns and M centres;
+    the formulas: docs/explanation/implementation.md.
 
     References
     ----------

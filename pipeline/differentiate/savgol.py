@@ -58,10 +58,9 @@ _DEFAULT = SavGolConfig()
 def savgol_derivatives(x: ArrayLike, dt: float, *, config: SavGolConfig = _DEFAULT) -> Derivatives:
     """Smoothed signal and two derivatives by Savitzky-Golay filtering.
 
-    Each output sample is the value, first or second derivative at that sample of the
-    least-squares polynomial of degree ``polyorder`` over the centred ``window``
-    (:func:`scipy.signal.savgol_filter`, ``mode="interp"``: within half a window of
-    either end, the polynomial fitted to the first or last ``window`` samples).
+    Value and derivatives of the least-squares polynomial of degree ``polyorder`` over the
+    centred ``window`` (:func:`scipy.signal.savgol_filter`, ``mode="interp"`` at the ends):
+    exact for polynomials of degree ``<= polyorder``, everywhere including the ends.
 
     Parameters
     ----------
@@ -83,14 +82,9 @@ def savgol_derivatives(x: ArrayLike, dt: float, *, config: SavGolConfig = _DEFAU
     ValueError
         If ``x`` or ``dt`` is invalid or ``x`` is shorter than the window.
 
-    Notes
-    -----
-    Exact for polynomials of degree ``<= polyorder``, everywhere including the ends.
-
     References
     ----------
-    .. [1] Savitzky, A. & Golay, M. J. E. (1964). Smoothing and differentiation of data
-       by simplified least squares procedures. Anal. Chem. 36(8), 1627-1639.
+    Savitzky & Golay 1964, Anal. Chem. 36(8), 1627-1639.
 
     Examples
     --------

@@ -100,10 +100,7 @@ def spectral_derivatives(
 
     The (extended) record is transformed by a real FFT, multiplied by the low-pass gain
     and by ``i omega`` (``x_dot``) or ``-omega^2`` (``x_ddot``), and transformed back.
-    With ``extension="odd"`` the line through the end points is subtracted first and
-    its value, slope and zero curvature are added back; the remainder is extended
-    oddly to period ``2 (n - 1) dt``. The Nyquist bin of an even-length transform is
-    dropped from ``x_dot`` (its derivative is not defined by the samples).
+    Extensions and accuracy at the ends: docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -118,32 +115,19 @@ def spectral_derivatives(
     -------
     Derivatives
         ``x_hat`` [unit] (low-passed), ``x_dot`` [unit/s], ``x_ddot`` [unit/s^2];
-        ``converged`` is True; ``info`` holds ``n_fft``, ``cutoff_hz``, ``taper``,
-        ``extension``.
+        ``converged`` is True; ``info`` the FFT length and settings.
 
     Raises
     ------
     ValueError
         If ``x`` or ``dt`` is invalid.
 
-    Notes
-    -----
-    Exact (to rounding) for a record that, after the extension, is band-limited below
-    ``(1 - taper) * cutoff_hz``: with ``"periodic"`` a sum of sines with whole numbers
-    of periods in ``n dt``; with ``"odd"`` a line plus sines ``sin(pi k t / ((n-1) dt))``.
-    The odd extension has a continuous first derivative but a jump of ``2 r''`` in the
-    second at the ends, so ``x_ddot`` is least accurate in the first and last few
-    cutoff periods unless the signal's curvature vanishes there. With ``"odd"``,
-    ``x_hat`` equals ``x`` at the first and last samples (the extension pins them), so
-    their noise is not smoothed.
-
     References
     ----------
-    .. [1] Trefethen, L. N. (2000). Spectral Methods in MATLAB. SIAM, Ch. 3.
+    Trefethen, L. N. (2000). Spectral Methods in MATLAB. SIAM, Ch. 3.
 
     Examples
     --------
-    >>> import numpy as np
     >>> t = np.arange(100) * 0.01
     >>> x = np.sin(2 * np.pi * t)
     >>> d = spectral_derivatives(x, 0.01, config=SpectralConfig(extension="periodic"))

@@ -150,12 +150,8 @@ def tvregdiff(
 ) -> TVRegDiffResult:
     """Differentiate noisy data by total-variation regularisation (Chartrand 2011).
 
-    Minimises ``F(u) = alpha * TV_ep(u) + 1/2 ||A u - (f - f_0)||^2`` (see
-    :func:`tv_functional`) by lagged diffusivity: iteration ``k`` solves
-    ``(alpha L_k + A^T A) u_{k+1} = A^T (f - f_0)`` with ``L_k = D^T Q_k D`` (times ``dx``
-    for ``"small"``) and ``Q_k = diag(1 / sqrt((D u_k)^2 + ep))``. The operators ``D``,
-    ``A`` and the default ``u0`` are Chartrand's; the linear system is solved exactly in
-    O(n) (banded, bandwidth 2) instead of by preconditioned conjugate gradients.
+    Minimises ``alpha * TV_ep(u) + 1/2 ||A u - (f - f_0)||^2`` (:func:`tv_functional`) by
+    lagged diffusivity; solver, units, alignment: docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -164,86 +160,33 @@ def tvregdiff(
     iterations : int
         Maximum number of lagged-diffusivity iterations, ``>= 1``.
     alpha : float
-        Regularisation weight, ``> 0`` [data unit * dx unit]. Its meaning depends on the
-        units of ``data`` and on ``dx``: scaling the data by ``c`` is equivalent to
-        ``alpha -> c * alpha``, ``ep -> c**2 * ep``.
+        Regularisation weight, ``> 0`` [data unit * dx unit].
     u0 : array_like, shape (n + 1,) for ``"small"``, (n,) for ``"large"``, optional
-        Initial iterate, in the units of the returned ``u``. Default: Chartrand's naive
-        derivative without scaling, ``[0, diff(f), 0]`` for ``"small"`` and
-        ``[0, diff(f)] / dx`` for ``"large"`` (Chartrand's code takes the large-scale
-        ``u0`` in internal units ``u * dx``; the default iterate is the same).
+        Initial iterate in the units of ``u``; default Chartrand's naive derivative.
     scale : {"small", "large"}, optional
-        Chartrand's two discretisations (case-insensitive). ``"small"``: ``u`` at the
-        ``n + 1`` cell edges, trapezoid antiderivative. ``"large"``: ``u`` at the ``n``
-        samples, rectangle-rule antiderivative (cumulative sum).
-    ep : float, optional
-        Smoothing of the total variation, ``> 0``. It is added to ``(diff(u) / dx)^2``
-        [(data unit / dx unit^2)^2] for ``"small"`` but to ``diff(u)^2``
-        [(data unit / dx unit)^2] for ``"large"``: ``"small"`` with ``ep`` smooths like
-        ``"large"`` with ``ep * dx**2``.
-    dx : float, optional
-        Grid spacing [dx unit, e.g. s], ``> 0``. Default ``1 / n`` as in Chartrand's code.
-    tol : float, optional
-        Iteration stops once ``||u_{k+1} - u_k|| / ||u_{k+1}|| < tol``.
+        ``"small"``: ``u`` at the ``n + 1`` cell edges; ``"large"``: ``u`` at the samples.
+    ep, dx, tol : float, optional
+        TV smoothing (> 0); grid spacing [e.g. s] (default ``1 / n``); relative-change tolerance.
 
     Returns
     -------
     TVRegDiffResult
-        ``u`` (raw convention), ``derivative`` (aligned with the samples), ``converged``,
-        ``n_iter``, ``functional`` and ``rel_change`` histories.
+        ``u``, ``derivative`` (at the samples), ``converged``, ``n_iter`` and the histories.
 
     Raises
     ------
     ValueError
-        If ``data`` is not 1-D, has fewer than 3 samples or non-finite values, or if
-        ``iterations``, ``alpha``, ``ep``, ``dx``, ``tol``, ``scale`` or ``u0`` is invalid.
+        If ``data`` is not 1-D, finite and >= 3 samples, or another argument is invalid.
 
     Warns
     -----
     ConvergenceWarning
-        If the relative change is still ``>= tol`` after ``iterations`` iterations (the
-        result is returned with ``converged=False``; a fixed small number of iterations,
-        as Chartrand uses, is legitimate).
-
-    Notes
-    -----
-    Each step minimises a quadratic majoriser of ``F`` (Vogel & Oman 1996), so
-    ``functional`` is non-increasing.
-
-    ``"large"`` solves for ``y = A u``: ``(alpha M^T Q M + I) y = f - f_0`` with ``M`` a
-    second difference (pentadiagonal, symmetric positive definite,
-    :func:`scipy.linalg.solveh_banded`). ``"small"`` solves an interleaved saddle-point
-    system of size ``2 n + 1`` and bandwidth 2 by banded LU with partial pivoting
-    (:func:`scipy.linalg.solve_banded`).
-
-    Alignment (tested). ``"small"`` matches the trapezoid integral of ``u`` from edge 0
-    to edge ``k + 1`` with ``f_k - f_0``, so edge ``k + 1`` sits at sample ``k`` and
-    ``derivative = u[1:]``; edge 0 lies one cell before the first sample and ``u[0]``
-    is an artefact of fitting ``f_0 - f_0`` over that cell. (The mean of adjacent edges
-    would lag by half a sample.) ``"large"`` matches ``dx * cumsum(u)`` with ``f - f_0``,
-    so ``u_k`` is a backward difference quotient, ``u_k ~ f'(t_k - dx/2)``;
-    ``derivative`` interpolates to the samples, ``(u_k + u_{k+1}) / 2``, and extrapolates
-    linearly at the ends (``u_0`` is ``(fit_0 - f_0) / dx``, not a derivative, and is not
-    used).
+        If the relative change is still ``>= tol`` after ``iterations`` (``converged=False``).
 
     References
     ----------
-    .. [1] Chartrand, R. (2011). Numerical differentiation of noisy, nonsmooth data.
-       ISRN Applied Mathematics 2011, 164564.
-    .. [2] Rudin, L. I., Osher, S. & Fatemi, E. (1992). Nonlinear total variation based
-       noise removal algorithms. Physica D 60, 259-268.
-    .. [3] Vogel, C. R. & Oman, M. E. (1996). Iterative methods for total variation
-       denoising. SIAM J. Sci. Comput. 17(1), 227-238.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> t = np.arange(200) * 0.01
-    >>> res = tvregdiff(t**2, 300, 1e-4, scale="large", dx=0.01)
-    >>> res.converged, res.u.shape, res.derivative.shape
-    (True, (200,), (200,))
-    >>> bool(np.allclose(res.derivative[20:180], 2 * t[20:180], atol=1e-4))
-    True
+    Chartrand 2011, ISRN Appl. Math. 2011, 164564; Rudin, Osher & Fatemi 1992, Physica D 60,
+    259-268; Vogel & Oman 1996, SIAM J. Sci. Comput. 17(1), 227-238.
     """
     f = _check_data(data)
     n = f.size

@@ -35,49 +35,21 @@ def _lower(value: object) -> object:
 class TVRegDiffConfig(SectionConfig):
     """Settings of the ``"tvregdiff"`` differentiator.
 
-    The default ``ep`` is the paper's ``1e-6`` for a position in millimetres, converted to
-    metres (scaling the data by ``c`` maps ``alpha -> c alpha``, ``ep -> c**2 ep``; here
-    ``c = 1e-3``), with ``dx = dt``. The default ``alpha`` is ``"auto"``
-    (:func:`auto_alpha`); the paper's ``alpha = 0.01`` for q in mm is ``alpha = 0.01,
-    unit = "mm"`` (or ``1e-5`` for q in m).
-
-    Parameters
-    ----------
-    alpha : float or "auto", optional
-        Regularisation weight of the first derivative [unit s], ``> 0``; ``"auto"``
-        chooses it per record from ``alpha_grid`` (:func:`auto_alpha`).
-    iterations : int, optional
-        Maximum lagged-diffusivity iterations of the first derivative, ``>= 1``.
-    scale : {"large", "small"}, optional
-        Chartrand's discretisation, for both passes.
-    ep : float, optional
-        TV smoothing of the first pass, ``> 0`` [(unit/s)^2 for ``"large"``,
-        (unit/s^2)^2 for ``"small"``].
-    alpha2 : float, optional
-        Regularisation weight of the second pass (x_dot -> x_ddot) [unit], default
-        ``alpha``. The second pass differentiates x_dot [unit/s], so the same number
-        regularises differently: choose it for the velocity's scale.
-    iterations2 : int, optional
-        Maximum iterations of the second pass, default ``iterations``.
-    ep2 : float, optional
-        TV smoothing of the second pass, default ``ep``.
-    tol : float, optional
-        Relative-change tolerance of both passes.
-    unit : str, optional
-        Unit of ``x`` in which ``alpha``, ``ep`` (and the second-pass values) are stated,
-        e.g. ``"mm"`` to use the paper's ``alpha = 0.01``, ``ep = 1e-6`` as printed: the SI
-        signal is expressed in that unit for the computation and the derivatives are
-        converted back, which is exactly the rescaling above. Default: the SI unit of ``x``.
-    alpha_grid : tuple of float, optional
-        Candidates of ``alpha = "auto"`` [unit s]; default the paper's alpha times
-        ``10^1 .. 10^-3`` in half decades (:data:`AUTO_GRID_MM`, stated in mm s and
-        converted to ``unit``).
-
     Raises
     ------
     pydantic.ValidationError
         If a value has the wrong type or is out of range (a ``ValueError``;
         :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
+
+    Notes
+    -----
+    Each field is one key of ``[differentiate]``, documented under its declaration. The default
+    ``ep`` is the paper's ``1e-6`` for q in mm, converted to m; the paper's ``alpha = 0.01`` is
+    ``alpha = 0.01, unit = "mm"``: docs/explanation/implementation.md.
+
+    References
+    ----------
+    Chartrand 2011, ISRN Appl. Math. 2011, 164564; Masoud & Maas 2025, Section 5.
 
     Examples
     --------
@@ -89,15 +61,32 @@ class TVRegDiffConfig(SectionConfig):
     KNOWN_LABEL: ClassVar[str] = "known keys of method 'tvregdiff'"
 
     alpha: PositiveFloat | Literal["auto"] = "auto"
+    """Regularisation weight of the first derivative [unit s], > 0; "auto" chooses it per record
+    from alpha_grid.
+    """
     iterations: PositiveInt = 10
+    """Maximum lagged-diffusivity iterations of the first derivative, >= 1."""
     scale: Annotated[Literal["large", "small"], BeforeValidator(_lower)] = "large"
+    """Chartrand's discretisation, for both passes."""
     ep: PositiveFloat = 1e-12
+    """TV smoothing of the first pass, > 0 [(unit/s)^2 for "large", (unit/s^2)^2 for "small"].
+    """
     alpha2: PositiveFloat | None = None
+    """Regularisation weight of the second pass (x_dot -> x_ddot) [unit]; default alpha."""
     iterations2: PositiveInt | None = None
+    """Maximum iterations of the second pass; default iterations."""
     ep2: PositiveFloat | None = None
+    """TV smoothing of the second pass; default ep."""
     tol: PositiveFloat = 1e-6
+    """Relative-change tolerance of both passes."""
     unit: str | None = None
+    """Unit of x in which alpha and ep are stated, e.g. "mm" for the paper's alpha = 0.01, ep =
+    1e-6; default the SI unit of x.
+    """
     alpha_grid: tuple[PositiveFloat, ...] | None = None
+    """Candidates of alpha = "auto" [unit s]; default the paper's alpha times 10^1 .. 10^-3 in half
+    decades.
+    """
 
     def __post_init__(self) -> None:
         if self.unit is not None and unit_factor(self.unit) is None:
@@ -194,12 +183,6 @@ def tvregdiff_derivatives(
 ) -> Derivatives:
     """Smoothed signal and two derivatives by TVRegDiff, applied twice.
 
-    ``x_dot`` is :func:`~debist.differentiate.tvregdiff.tvregdiff` of ``x``
-    (``dx = dt``), ``x_ddot`` is ``tvregdiff`` of ``x_dot`` with the second-pass
-    settings, both taken at the sample instants (``TVRegDiffResult.derivative``).
-    ``x_hat`` is the cumulative trapezoid integral of ``x_dot`` plus the constant that
-    fits ``x`` in least squares (so ``x_hat`` is consistent with ``x_dot``).
-
     Parameters
     ----------
     x : array_like, shape (n,) [unit]
@@ -207,16 +190,14 @@ def tvregdiff_derivatives(
     dt : float
         Sample time [s].
     config : TVRegDiffConfig, optional
-        Settings. ``alpha`` depends on the unit of ``x`` and on ``dt``: scaling ``x`` by
-        ``c`` needs ``alpha -> c alpha`` and ``ep -> c**2 ep`` for the same result.
+        Settings; ``alpha`` depends on the unit of ``x`` and on ``dt``.
 
     Returns
     -------
     Derivatives
-        ``x_hat`` [unit], ``x_dot`` [unit/s], ``x_ddot`` [unit/s^2]; ``converged`` is
-        True when both passes met ``tol``; ``info`` holds ``n_iter``, ``n_iter2``,
-        ``functional``, ``functional2`` (final values), ``rel_change``, ``rel_change2``
-        and the settings used.
+        ``x_dot`` [unit/s] (:func:`~debist.differentiate.tvregdiff.tvregdiff` of ``x``),
+        ``x_ddot`` [unit/s^2] (of ``x_dot``, second-pass settings), ``x_hat`` [unit] (the
+        integral of ``x_dot`` fitted to ``x``); ``converged``; ``info``.
 
     Raises
     ------
@@ -230,14 +211,10 @@ def tvregdiff_derivatives(
 
     References
     ----------
-    .. [1] Chartrand, R. (2011). Numerical differentiation of noisy, nonsmooth data.
-       ISRN Applied Mathematics 2011, 164564.
-    .. [2] Masoud, A. & Maas, J. (2025). Front. Robot. AI 12, Section 5 (alpha = 0.01,
-       ep = 1e-6).
+    Chartrand 2011, ISRN Appl. Math. 2011, 164564; Masoud & Maas 2025, Section 5.
 
     Examples
     --------
-    >>> import numpy as np
     >>> t = np.arange(300) * 0.01
     >>> cfg = TVRegDiffConfig(alpha=1e-6, iterations=50, ep=1e-8, tol=1e-3)
     >>> d = tvregdiff_derivatives(0.5 * t**2, 0.01, config=cfg)

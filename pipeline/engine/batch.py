@@ -1,43 +1,17 @@
 """Batch runs: many workflows (one per prototype) on Dask, locally or on a cluster.
 
-Each workflow is one Dask task that loads the workflow file and runs its stages with
-:class:`debist.engine.runner.Runner` in a worker, with the runner's content-hash caching (a
-rerun skips up-to-date stages). One failing workflow never stops the others: its error
-comes back in its :class:`BatchResult`, and so does a worker process that dies while
-running it (a crash in native code, the out-of-memory killer, ``kill -9``). Every
-workflow writes only to its own ``output_dir`` (checked before anything runs), so a
-parallel batch writes the same bytes as a serial one.
-
-The scheduling is Dask's. By default (``scheduler="processes"``) a batch starts a
-``distributed.LocalCluster`` of single-threaded worker processes, each watched by a
-nanny that restarts it when it dies; the scheduler retries a workflow whose worker died
-once, and reports it failed (``KilledWorker``) when its second worker dies too, while the
-other workflows go on. ``"threads"`` and ``"synchronous"`` are the local schedulers of
-``dask.compute`` (one process: a crash there ends the batch), and ``"distributed"``
-with an ``address`` uses an existing Dask cluster past one machine. Progress is shown by
-the caller from the ``on_done`` callbacks (e.g. a ``rich.progress`` bar), or on the
-console with ``progress=True``.
-
-Examples
---------
-A script that runs every prototype of a folder on two local worker processes (the
-``__main__`` guard is needed because worker processes are spawned)::
-
-    from debist.engine.batch import expand_workflows, run_batch, summary_table
-
-    if __name__ == "__main__":
-        results = run_batch(expand_workflows(["workflows/protos/"]), workers=2)
-        summary_table(results).to_csv("batch-summary.csv", index=False)
+Each workflow is one Dask task running its stages with :class:`debist.engine.runner.Runner`
+(with its caching). One failing workflow never stops the others: its error, or the death of
+its worker process, comes back in its :class:`BatchResult`. Every workflow writes only to
+its own ``output_dir``, so a parallel batch writes the same bytes as a serial one. The
+schedulers, and a script that runs a folder of prototypes:
+docs/explanation/implementation.md.
 
 References
 ----------
 Dask documentation: "Scheduling" (https://docs.dask.org/en/stable/scheduling.html),
-"Delayed" (https://docs.dask.org/en/stable/delayed.html), "Diagnostics (local)"
-(https://docs.dask.org/en/stable/diagnostics-local.html), "Futures"
-(https://docs.dask.org/en/stable/futures.html); dask.distributed "LocalCluster",
-"Nanny", "Why did my worker die?" (``KilledWorker``, ``allowed-failures``:
-https://distributed.dask.org/en/stable/killed.html) and "Configuration"
-(https://distributed.dask.org/en/stable/).
+"Delayed", "Diagnostics (local)", "Futures"; dask.distributed "LocalCluster", "Nanny",
+"Why did my worker die?" (https://distributed.dask.org/en/stable/killed.html).
 """
 
 from __future__ import annotations
@@ -415,70 +389,38 @@ def run_batch(
     ----------
     workflow_paths : iterable of path-like
         Workflow files (see :func:`expand_workflows` for directories and patterns).
-    stages : sequence of str, optional
-        Stages to consider in every workflow (default: each workflow's own stages).
-    force : bool, optional
-        Rerun up-to-date stages too.
+    stages, force : sequence of str, bool, optional
+        Stages to consider in every workflow (default its own); rerun up-to-date stages too.
     scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
-        Default ``"processes"``, or ``"distributed"`` when ``address`` is given.
-
-        * ``"processes"`` starts a local ``distributed.LocalCluster`` of ``workers``
-          single-threaded worker processes, each under a nanny that restarts it when it
-          dies (about a second of start-up). A workflow whose worker process dies (killed
-          by a signal, or out of memory: the nanny also restarts a worker past 95 % of
-          its share of the machine's memory) is retried once on a fresh worker and
-          reported failed when that one dies too; the other workflows run on.
-        * ``"distributed"`` sends the workflows to the Dask cluster at ``address``
-          (without an address it is ``"processes"``).
-        * ``"threads"`` shares one process (the validate and study stages draw with
-          matplotlib's pyplot, which is not thread-safe: prefer processes for those),
-          and ``"synchronous"`` runs in the calling thread (debugging). With these two,
-          a crash of the process ends the batch.
-
-        Spawned workers re-import the calling script: call from under
-        ``if __name__ == "__main__":``.
+        A local cluster of worker processes (default; a worker that dies is retried once), the
+        cluster at ``address``, threads, or the calling thread (docs/explanation/implementation.md).
+        Spawned workers re-import the calling script: call under ``if __name__ == "__main__":``.
     workers : int, optional
-        Worker processes of the local cluster, or threads of ``"threads"`` (default:
-        ``min(number of workflows, CPU count)``). Ignored by ``"synchronous"`` and
-        with ``address`` (the cluster has its workers).
+        Worker processes or threads; default ``min(number of workflows, CPU count)``.
     address : str, optional
-        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``. Its
-        workers must import this version of debist and see the workflow files and their
-        data at the same absolute paths; start them with ``--nthreads 1`` (pyplot) and a
-        nanny (the default of ``dask worker``). How often a workflow whose worker died is
-        retried there is that scheduler's ``distributed.scheduler.allowed-failures``.
+        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``.
     on_done : callable, optional
-        Called as ``on_done(result)`` in the calling thread each time a workflow
-        finishes (done or failed), in completion order (e.g. to advance a
-        ``rich.progress`` bar).
+        Called as ``on_done(result)`` in the calling thread as each workflow finishes.
     progress : bool, optional
-        Show a console progress bar: ``dask.diagnostics.ProgressBar`` for ``"threads"``
-        and ``"synchronous"``, and a ``rich.progress`` bar of the same format, advanced
-        as workflows finish, on a cluster.
+        Show a console progress bar.
 
     Returns
     -------
     list of BatchResult
-        One per workflow, in input order; failed workflows included, those whose worker
-        processes died with ``error`` ``"KilledWorker: worker process died twice while
-        running it (...)"``.
+        One per workflow, in input order, failed ones included (a twice-dead worker's with
+        ``error`` ``"KilledWorker: ..."``).
 
     Raises
     ------
     WorkflowError
-        Before anything runs: an unknown scheduler or stage, ``workers < 1``,
-        ``address`` with a local scheduler, two workflows writing to the same output
-        directory, the ``distributed`` package missing (the message says
-        ``pip install distributed``), or a cluster that cannot be reached.
+        Before anything runs: an unknown scheduler or stage, ``workers < 1``, ``address`` with
+        a local scheduler, two workflows with one output directory, ``distributed`` missing,
+        or a cluster that cannot be reached.
 
     References
     ----------
-    ``dask.delayed`` and ``dask.compute(..., scheduler=, num_workers=)``:
-    https://docs.dask.org/en/stable/scheduling.html; ``dask.diagnostics.Callback`` and
-    ``ProgressBar``: https://docs.dask.org/en/stable/diagnostics-local.html;
-    ``distributed.LocalCluster``, ``Client.submit``, ``as_completed``, ``KilledWorker``
-    and the configuration ``distributed.scheduler.allowed-failures``,
-    ``distributed.nanny.pre-spawn-environ``: https://distributed.dask.org/en/stable/.
+    Dask "Scheduling" (https://docs.dask.org/en/stable/scheduling.html); dask.distributed
+    ``LocalCluster``, ``KilledWorker``, ``allowed-failures`` (https://distributed.dask.org).
     """
     paths = [Path(p).resolve() for p in workflow_paths]
     if scheduler is None:

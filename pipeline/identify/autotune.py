@@ -1,52 +1,21 @@
 """Automatic hyper-parameters of the RBF identification by blocked cross-validation.
 
-The hyper-parameters of Eq. 37-40 (``M``, ``sigma_n``, the filtered equation error's
-``lowpass``, the smoothness penalty) decide between a free run that follows the rig to 1 %
-and one that misses it by 30 %, and the equation error of the least squares cannot tell:
-more centres always lower it. This module chooses them by what the model is used for, the
-free-run error, estimated on the estimation records alone by blocked cross-validation:
+Chooses ``M``, ``sigma_n``, ``lowpass`` and the smoothness penalty by the free-run error
+estimated on the estimation records alone:
 
-* each estimation record is cut into ``folds`` contiguous time blocks; fold ``k`` holds
-  out block ``k`` of every record and fits on the rest, each record's remaining contiguous
-  pieces becoming records of their own (every piece is trimmed by ``trim`` at both ends by
-  :func:`debist.identify.fit.fit_rbf_model`, which is also the gap between the training
-  rows and the held-out block; the low-pass of the filtered equation error runs per piece,
-  so no held-out sample enters a training row through the filter);
-* the fitted model runs free on the held-out block in windows of ``window`` samples (default
-  300, as ``[identify.refine] length``), each restarted from the measured state at its
-  start (q, q_dot and the friction state filtered from q_dot), driven by the block's
-  measured inputs, and scores NRMSE(q) (Eq. 41) of the windows' runs on the block: multiple
-  shooting, so a switch one candidate loses costs it one window instead of the rest of the
-  block, which had made every candidate's score 11 % +- 10 % on the paper experiment
-  (Bock & Plitt 1984; Ribeiro et al., Automatica 121, 2020); a record's first and last
-  ``trim`` samples are neither fitted nor scored;
-* a fit that raises :class:`~debist.core.errors.IdentificationError` (rank deficient, badly
-  conditioned, a centre without data) or a free run that diverges scores ``+inf``, and the
-  table says which; when ``M`` is not searched, a fold fits the centres its training
-  pieces support (as the stage does for the whole data), and a fold no candidate scores
-  is left out of every candidate's mean (it cannot rank them);
+* each estimation record is cut into ``folds`` contiguous time blocks; fold ``k`` holds out
+  block ``k`` of every record and fits on the remaining pieces (each trimmed by ``trim``);
+* the fitted model runs free on the held-out block in windows of ``window`` samples, each
+  restarted from the measured state, and scores NRMSE(q) (Eq. 41) over the windows
+  (multiple shooting);
+* a fit that raises :class:`~debist.core.errors.IdentificationError` or a free run that
+  diverges scores ``+inf``;
 * the chosen setting is the most parsimonious one whose mean score is within one standard
-  error of the best mean (the one-standard-error rule; Hastie, Tibshirani & Friedman,
-  *The Elements of Statistical Learning*, 2nd ed., Springer 2009, Sec. 7.10).
+  error of the best (the one-standard-error rule), in the order of :data:`PARSIMONY`:
+  fewer regressor columns, wider RBFs, stronger smoothing, lower ``lowpass`` corner.
 
-Parsimony order (:data:`PARSIMONY`): fewer least-squares parameters first (regressor
-columns; ``M`` and the terms set them), then wider RBFs (larger ``sigma_n``: smoother
-curves), then stronger smoothing (larger penalty weight lambda; with ``"gcv"`` the lambda
-GCV chose, averaged over the folds), then a lower ``lowpass`` corner (``None``, no filter,
-counts as the highest corner), finally the lower mean score.
-
-Candidates (:data:`MAX_PRODUCT`): the cartesian product of the grid when it has at most
-40 settings; otherwise one coordinate sweep: the parameters in the grid's order, each over
-all its values with the others held at the current setting, which starts at the base
-configuration and moves to the best mean score after each sweep (about the sum, not the
-product, of the grid's lengths). The one-standard-error rule then chooses among all
-evaluated settings.
-
-The differentiation stage's TVRegDiff ``alpha`` is not tuned here: the derivatives
-``q_dot`` and ``q_ddot`` are inputs of the records (computed once, on the whole record, by
-an earlier stage); a search over it belongs to the stage level. Their global computation
-is the one channel through which a held-out block informs the neighbouring training rows,
-over a few correlation lengths of the derivative error; ``trim`` widens the gap.
+Grids of more than :data:`MAX_PRODUCT` settings are swept one coordinate at a time.
+Rationale: docs/explanation/implementation.md.
 
 References
 ----------
@@ -471,47 +440,24 @@ def select_hyperparameters(
 ) -> AutoResult:
     """Choose RBF hyper-parameters by blocked cross-validation of the free-run error.
 
-    Only the estimation records are used: each is cut into ``folds`` contiguous time blocks
-    (:func:`blocked_folds`); per candidate and fold the model is fitted on the other blocks
-    (each remaining contiguous piece a record, trimmed by ``trim``) and run free on the
-    held-out block in windows of ``window`` samples, each restarted from the measured state
-    at its start (multiple shooting: :func:`debist.validate.prediction.restarted_runs`); the fold's
-    score is NRMSE(q) of Eq. 41 of those runs (mean over the records). A failed fit or a
-    diverged window scores ``inf``. The choice is the most parsimonious candidate within one
-    standard error of the best mean (:func:`one_standard_error`; order :data:`PARSIMONY`).
-    Candidates: the cartesian product of ``grid`` if it has at most :data:`MAX_PRODUCT`
-    settings, else one coordinate sweep from ``base_cfg`` (see the module docstring). The fits use
-    ``bootstrap = 0``.
-
-    TVRegDiff's ``alpha`` cannot be tuned here: ``q_dot`` and ``q_ddot`` are inputs (the
-    differentiation stage's output); tuning it needs the stage level.
+    Per candidate and fold (:func:`blocked_folds`) the model is fitted on the other blocks and
+    scored by NRMSE(q) (Eq. 41) of restarted windows on the held-out block; the most
+    parsimonious candidate within one standard error of the best is chosen.
 
     Parameters
     ----------
     records : sequence of Record
         Estimation records (never validation data).
     base_cfg : IdentifyConfig
-        The configuration the candidates modify (``m_q`` a number, as
-        :func:`debist.identify.fit.fit_rbf_model` takes it).
+        The configuration the candidates modify (``m_q`` a number).
     grid : mapping of str to list
-        Values per :class:`IdentifyConfig` field, e.g. ``{"M": [6, 8, 10, 12], "sigma_n":
-        [0.5, 1.0], "lowpass": [None, 5.0, 10.0], "smoothing": [0.0, "gcv"]}``.
-    folds : int, optional
-        Blocks per record (K of K-fold), at least 2.
-    window : int, optional
-        Samples per restarted window of the score [samples]; a window longer than the
-        held-out block is one free run over the block.
-    substeps : int, optional
-        RK4 steps per sample of the free runs.
-    seed : int, optional
-        Unused: the folds are contiguous blocks and the fits deterministic, so nothing is
-        random (kept for a stable signature should a randomised strategy be added).
+        Values per :class:`IdentifyConfig` field, e.g. ``{"M": [6, 8, 10], "sigma_n": [0.5, 1.0]}``.
+    folds, window, substeps, seed : int, optional
+        Blocks per record (>= 2), samples per restarted window, RK4 steps per sample; unused.
     progress : callable, optional
-        Called as ``progress(done, total)`` [candidates]; default: the listener of
-        :mod:`debist.core.progress` (task "hyper-parameters"), if any.
+        Called as ``progress(done, total)`` [candidates]; default the listener, if any.
     fallback : bool, optional
-        When every candidate fails or diverges, choose ``base_cfg``'s own values (or the
-        first candidate) instead of raising; the result is then :func:`undecided`.
+        When every candidate fails, choose ``base_cfg``'s own values instead of raising.
 
     Returns
     -------
@@ -521,8 +467,7 @@ def select_hyperparameters(
     Raises
     ------
     WorkflowError
-        If the grid is empty, names an unknown field or holds an invalid value (before any
-        fit), ``folds < 2``, or a record is too short for the folds.
+        If the grid is empty, unknown or invalid, ``folds < 2``, or a record is too short.
     IdentificationError
         If every candidate failed or diverged (and not ``fallback``).
     ResourceError
@@ -530,9 +475,7 @@ def select_hyperparameters(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37-41, Fig. 11b, 11c; Hastie, Tibshirani & Friedman, The
-    Elements of Statistical Learning, 2nd ed., 2009, Sec. 7.10; Bergmeir & Benitez 2012,
-    Inf. Sci. 191, 192-213.
+    Masoud & Maas 2025, Eq. 37-41, Fig. 11b, 11c; Hastie, Tibshirani & Friedman 2009, Sec. 7.10.
     """
     import time
 

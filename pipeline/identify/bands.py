@@ -1,67 +1,20 @@
 """Uncertainty of the identified curves: block bootstrap of the least squares, bands, masks.
 
-The equation errors of Eq. 40 are strongly autocorrelated (derivatives from TVRegDiff, the
-zero-phase low-pass of the filtered equation error), so the textbook covariance
-``s^2 (Psi^T Psi)^-1`` is far too optimistic. The parameters are instead re-estimated on
-``B`` resamples of the regression rows made of contiguous blocks (non-overlapping blocks
-within each estimation record, drawn with replacement; Carlstein 1986, Kuensch 1989), whose
-length covers the residuals' correlation time. Every curve of the model is a linear map of
-the parameters (:func:`curve_maps`, built from the term library that also builds the
-regressor), so each replicate gives a curve and the pointwise 2.5 and 97.5 percentiles give
-a 95 % band (percentile bootstrap, Efron & Tibshirani 1993, Ch. 13). The band is
-conditional on the identified ``T_z`` and on the derivatives; it measures how well the data
-pin the parameters down, not the model error.
+The parameters are re-estimated on ``B`` resamples of the regression rows made of contiguous
+blocks (non-overlapping within each estimation record, drawn with replacement), long enough
+to cover the residuals' correlation time. Every curve is a linear map of the parameters
+(:func:`curve_maps`), so each replicate gives a curve and the pointwise 2.5 and 97.5
+percentiles a 95 % band. Two further half-widths are added in quadrature: the friction
+bound ``|F_c| + sum_e k_e Delta_e`` of the static forces (:func:`friction_bound`) and a
+model error calibrated on the virtual rig (:func:`model_error_table`).
 
-One model error is bounded from the model itself: with a Coulomb friction term (backbone
-``coulomb``, level ``F_c``) or Maxwell-slip elements (slip forces ``k_e Delta_e``) the beam
-rests wherever the static force stays within the friction's reach, so a static force
-identified from where the beam came to rest, the restoring force ``c(q) q + F_0`` and the
-static force at a held level, is known only to +-``|F_c| + sum_e k_e Delta_e``
-(:func:`friction_bound`). That bound is added to both sides of their bands in quadrature
-(root sum of squares of the two half-widths, JCGM 100:2008 Sec. 5.1.2). On the virtual
-rig's reduced plant (Maxwell-slip friction with a 2 mN breakaway force) it raised the share
-of marked points whose bootstrap band holds the true restoring force from 78 % to 99 % with a
-Coulomb term, and from 69 % to 100 % with four slip elements beside it.
+A curve is *identified* at ``q`` where (1) the data support it: the Gaussian-weighted
+number of estimation samples near ``q`` (the kernel of Eq. 38) is at least ``min_support``
+on each side of ``q`` (for ``g_i`` only quasi-static samples where input ``i`` excites the
+beam, for ``d`` only samples in motion), and (2) its band is at most ``band_tolerance``
+times the curve's scale, the larger of its range and its largest magnitude.
 
-The rest of the model error is calibrated where the truth is known. A resampling band covers
-the model class's best approximation, not a truth outside it (Wasserman 2006, Sec. 5.7): the
-q-dependent inertia and DE creep that Eq. 37 lacks bias the curves, g_i by a median 4-7 % of
-its range on the virtual rig, and the bootstrap bands alone held the truth at 0-92 % of the
-marked points, depending on the curve. Each curve's band therefore also gets a model-error
-half-width, a fraction of the curve's scale, for a gain g_i of its local magnitude
-(:data:`MODEL_ERROR`: the 95th percentile of what the bootstrap band lacked over two
-calibration fleets, full and reduced plant; for g_i over the prototypes, each adding its
-largest), added in quadrature. The tables are calibrated per model: with and without the
-analytical creep term (``physics_creep``, :data:`MODEL_ERROR_CREEP`), with and without the
-effective-mass scale of :mod:`debist.identify.mass` (``_AS_FITTED``: the lagged damping's
-apparent mass scales the full plant's curves down by 12-26 %, and g_i's error is then beyond
-half the band tolerance nearly everywhere); :func:`model_error_table` picks one. On the fleets
-the bands then hold the truth at :data:`MEASURED_COVERAGE` of the marked points
-(:data:`MEASURED_COVERAGE_CREEP` with the creep term); d and the static force, whose model
-error is wider than half the band tolerance, are marked nowhere, which is what the data and Eq.
-37 support.
-``[identify] model_error = false`` gives the bootstrap bands alone (labelled with what they
-hold).
-
-A curve is *identified* at ``q`` where (1) the data support it: the Gaussian-weighted number
-of estimation samples near ``q`` (the kernel of Eq. 38, width sigma) is at least
-``min_support`` on each side of ``q`` counted apart (twice the smaller side: a point at the
-edge of the data, where the curve is extrapolated from one side, is not supported; on the
-seed-1 calibration fleets this cut the largest error where marked from 7.9 / 7.6 to 4.8 /
-4.5 % of the range for the restoring force, full / reduced plant, and from 37 / 47 to 14 /
-16 % for g_1 / g_2, whose largest errors lay at the inner and outer ends of the intervals
-the beam visits), counting for ``g_i`` only quasi-static samples where input ``i`` excites
-the beam, sub-threshold levels included (:func:`debist.identify.excitation.input_active`:
-``v_i`` clearly off its own off level, not just above a share of its largest value that only
-the switching pulses reach) and for ``d`` only samples in motion (``|q_dot|`` above 10 % of
-its RMS); and (2) the band is narrow: its width is at most ``band_tolerance`` times
-the curve's scale, the larger of its range and its largest magnitude, taken for the
-restoring force and d over the points the data reach (one-sided count: the range of a force
-crossing zero at a well grows over the well's flanks) and for ``g_i`` over the supported
-points (a gain's scale is its magnitude, which one RBF width past the data's edge is an
-extrapolation: on the full plant's seed-1 calibration fleet up to three times the truth,
-which let bands wider than the true curve's range pass as narrow, with errors where marked
-up to 15.7 % of the range).
+Why, and how the model-error tables were calibrated: docs/explanation/calibration.md.
 
 References
 ----------
@@ -69,9 +22,9 @@ Masoud & Maas 2025, Eq. 37-40; Carlstein 1986, Ann. Statist. 14(3), 1171-1179;
 Kuensch 1989, Ann. Statist. 17(3), 1217-1241; Politis & White 2004, Econometric Reviews
 23(1), 53-70 (block length from the correlation time); Efron & Tibshirani 1993, An
 Introduction to the Bootstrap, Ch. 13 (percentile intervals); Wasserman 2006, All of
-Nonparametric Statistics, Springer, Sec. 5.7 (bands cover the smoothed curve: the bias problem);
-Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63(3), 425-464 (a model-discrepancy term beside
-parameter uncertainty, calibrated against a known truth).
+Nonparametric Statistics, Springer, Sec. 5.7 (bands cover the smoothed curve); JCGM
+100:2008 Sec. 5.1.2 (root sum of squares); Kennedy & O'Hagan 2001, J. R. Stat. Soc. B
+63(3), 425-464 (a model-discrepancy term calibrated against a known truth).
 """
 
 from __future__ import annotations
@@ -93,98 +46,31 @@ from debist.model.termtable import input_map
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
-#: Model-error half-width of each curve's band, as a fraction of the curve's scale (the larger
-#: of its range and its largest magnitude, see :func:`curves_frame`), for the gains g_i of
-#: their local magnitude ``|g_i(q)|`` (:func:`error_level`): per curve the 95th percentile,
-#: over the marked grid points of a calibration fleet, of the half-width that the bootstrap
-#: band lacks to hold the truth (added in quadrature, as below). Measured on the virtual rig
-#: (``benchmarks/calibrate_bands.py --size 10 --seed 1 --model-error off --set
-#: effective_mass=true``: a fleet of each plant, full and reduced, run with the DE workflows'
-#: settings without the analytical creep term, Maxwell-slip elements included, the effective-mass
-#: scale of :mod:`debist.identify.mass` applied, masks with two-sided support, g_i's scale over
-#: its supported points, 2026-11-23). For g_i the pool holds one value per prototype's curve,
-#: the largest over its marked points: a gain error is a property of the whole curve, and a
-#: pointwise percentile let the prototype of ten whose g_2 is 18-26 % low fall outside its band
-#: at all its marked points (seed-1 full plant: 82 % of g_2's points inside; 89 % so).
-#: As a fraction of g_i's scale the same points gave 0.10, half the band tolerance, which no
-#: band can then pass; as a fraction of the local magnitude the band is narrow where the gain
-#: is small (near the well on the far side from its DE) and wide where it is large.
-#: ``g`` on both plants: against 1/2 dC_i/dq on the reduced plant and the small-signal gains on
-#: the full one (whose DE force is separable to 0.3 % below 1 kV); ``F`` the static force at the
-#: held levels, from the full plant, whose mask keeps the one-sided support (see
-#: :func:`static_frame`). What the bands with this term hold on an independent fleet
-#: (``--seed 2``) is :data:`MEASURED_COVERAGE`. Without the effective-mass scale the curves are
-#: biased low (:data:`MODEL_ERROR_AS_FITTED`). Re-measured on the seed-1 fleets whose members each
-#: get their own sub-threshold level (``debist fleet``, 2026-11-24): 0.038 / 0.537 / 0.213 / 0.117
-#: (restoring / d / g / F). Each entry is the wider of its two calibrations, as for
-#: :data:`MODEL_ERROR_CREEP`: g_i takes the re-measured 0.213 (0.205 before 2026-11-24), the
-#: others keep their first values. With 0.205 the seed-1 full fleet's g_2 was marked at four
-#: points of the prototype whose g_2 is 0.74-0.82 of the truth, 9.0-11.1 % of the range off and
-#: outside the band; with 0.213 their bands are 2-3 % wider than the tolerance and they are
-#: not marked (nor 12 points of four other prototypes, inside their bands): a margin of a few
-#: per cent, not a cure of that bias. The g_i bands then hold the truth at 100 % of their
-#: marked points on the seed-1, 2 and 3 full-plant fleets, within 7.7 % of the range.
+#: Model-error half-width per curve, a fraction of its scale (of ``|g_i(q)|`` for the gains),
+#: calibrated on the virtual rig's seed-1 fleets (see docs/explanation/calibration.md).
 MODEL_ERROR = {"restoring": 0.041, "d": 0.539, "g": 0.213, "F": 0.118}
-#: What the bands of :data:`MODEL_ERROR` hold on the independent full-plant fleet (``--seed 2``,
-#: ten prototypes, the shipped ``paper-experiment.toml``, 2026-11-23): the share of marked grid
-#: points whose band holds the true curve: restoring force 97 % (546 points), g_1 / g_2 100 %
-#: (160 / 96 points, max / median error 5.5 / 1.7 % and 8.6 / 1.5 % of the range); d and the
-#: static force marked nowhere. On the seed-1 fleet itself g_2 held the truth at 89 % of its
-#: 96 points (9 of the 11 outside on the prototype whose g_2 is 18-26 % low), with g_i's model
-#: error at 0.205. With 0.213, on the full-plant fleets of seeds 1, 2 and 3 as generated since
-#: 2026-11-24 (each member its own sub-threshold level; ``benchmarks/calibrate_bands.py --size 10
-#: --seed S --plants full``): restoring force 99 / 99 / 100 %, g_1 and g_2 100 % on each (max
-#: error where marked 7.7 / 6.2 / 6.0 % of the range); d and the static force marked nowhere.
-#: The label carries the lowest figure measured for this table, the restoring force's 97 %.
+#: Share of marked points whose :data:`MODEL_ERROR` band held the truth on independent fleets.
 MEASURED_COVERAGE = "97-100 %"
-#: The model error of a model with the analytical creep term (backbone ``physics_creep``): the
-#: same calibration on fleets of both plants run with it (``--add-backbone physics_creep --set
-#: effective_mass=true``, 2026-11-23). Re-measured on the 2026-11-24 fleets: 0.007 / 0.411 / 0.306 /
-#: 0.120 (restoring / d / g / F); the wider shipped values are kept.
+#: The model error of a model with the analytical creep term (backbone ``physics_creep``).
 MODEL_ERROR_CREEP = {"restoring": 0.02, "d": 0.451, "g": 0.317, "F": 0.125}
-#: What the bands of :data:`MODEL_ERROR_CREEP` hold on the independent reduced-plant fleet
-#: (``--seed 2``, the shipped ``paper-experiment-reduced.toml``, 2026-11-23): the restoring
-#: force at 100 % of its 442 marked points, g_1 / g_2 at 100 % of 21 / 2 (max error 2.7 / 1.9 %
-#: of the range); d marked nowhere (g_i's error, 0.317 of the local gain, comes from the full
-#: plant with the creep term, whose g_1 ran up to 28 % off).
+#: What the bands of :data:`MODEL_ERROR_CREEP` held on an independent fleet.
 MEASURED_COVERAGE_CREEP = "100 %"
-#: The model error of a model fitted without the effective-mass scale (``effective_mass =
-#: false``, the paper's Eq. 37 as fitted): the same calibration (2026-11-23). The full plant's
-#: g_i and k* are then 0.64-0.90 of the truth at the wells (the lagged damping's apparent mass
-#: scales every force down): g_i's error is then more than half the band tolerance wherever the
-#: gain is above 0.17 of its scale, and the seed-2 fleets marked it nowhere.
+#: The model error without the effective-mass scale (``effective_mass = false``).
 MODEL_ERROR_AS_FITTED = {"restoring": 0.088, "d": 0.652, "g": 0.576, "F": 0.205}
 #: ... with ``physics_creep``.
 MODEL_ERROR_CREEP_AS_FITTED = {"restoring": 0.086, "d": 0.451, "g": 0.553, "F": 0.185}
-#: What those bands held on the seed-2 fleets (restoring force 98 % full, 100 % reduced; d, g_i
-#: and F marked nowhere).
+#: What the as-fitted tables' bands held on independent fleets.
 MEASURED_COVERAGE_AS_FITTED = "98-100 %"
-#: Model error of the tangent stiffness ``k* = dF/dq`` at an identified well, as a fraction of
-#: ``|k*|``: the 95th percentile of ``|k*_true / k*_identified - 1|`` over the wells at rest of
-#: the seed-1 calibration fleets (``benchmarks/calibrate_bands.py``, both plants, 40 wells, with
-#: the effective-mass scale: 0.162 without and 0.207 with ``physics_creep``, the larger kept,
-#: 2026-11-23). The identified k* was 0.80-1.12 of the slope of the true restoring force at the
-#: same well; on the independent seed-2 fleets 0.83-1.19, inside its band at 40 of 40 wells.
+#: Model error of the tangent stiffness ``k* = dF/dq`` at a well, a fraction of ``|k*|``
+#: (95th percentile over the wells of the calibration fleets).
 STIFFNESS_ERROR = 0.207
-#: The same without the effective-mass scale: the identified k* was 4-34 % below the truth.
+#: The same without the effective-mass scale.
 STIFFNESS_ERROR_AS_FITTED = 0.476
-#: What the shipped tables' bands hold for a model with the backbone term ``input_quadratic``
-#: (calibrated without it): on the full-plant fleets of seeds 1-3 (``--add-backbone
-#: input_quadratic``, the shipped ``paper-experiment.toml`` otherwise, 2026-11-24) 92-100 % of
-#: the marked points of every curve; on the seed-1 reduced-plant fleet (with ``physics_creep``)
-#: g_1 at 81 % of its 68 points, the others at 99-100 %.
+#: What the shared tables' bands held with the backbone term ``input_quadratic``.
 MEASURED_COVERAGE_QUADRATIC = "81-100 %"
-#: What the shipped tables' bands hold for a model with the RBF term ``gh`` (the input force's
-#: second order in h(v) as a curve of q; calibrated without it): on the seed-1 fleets of both
-#: plants (``--set 'rbf=["c","d","gh"]' --add-backbone physics_gain``, the shipped workflows
-#: otherwise, 2026-11-24) restoring force 99 / 99 %, g_1 100 / 100 %, g_2 100 % (full; marked
-#: nowhere on the reduced plant), k* 20 of 20 wells on each.
+#: What the shared tables' bands held with the RBF term ``gh``.
 MEASURED_COVERAGE_GH = "99-100 %"
-#: What the shipped tables' bands hold for a model with the backbone term ``physics_quadratic``
-#: (the full model's large-signal DE force, scaled; calibrated without it): on the seed-1 fleets
-#: of both plants and the seed-2 full-plant fleet (``--add-backbone physics_quadratic``, the
-#: shipped workflows otherwise, 2026-11-24) restoring force 99 / 98 / 97 %, g_1 100 / 100 /
-#: 100 %, g_2 100 % (full; nowhere on the reduced plant), k* 20 of 20 wells on each.
+#: What the shared tables' bands held with ``physics_quadratic``.
 MEASURED_COVERAGE_PHYSICS_QUADRATIC = "97-100 %"
 #: Measured coverage of a model with one of these terms (the shared tables were calibrated
 #: without them): term name -> coverage.
@@ -257,10 +143,8 @@ _BAND_TEMPLATE = (
     "{coverage} there)"
 )
 BAND_LABEL = _BAND_TEMPLATE.format(coverage=MEASURED_COVERAGE)
-#: The label of a bootstrap-only band (``[identify] model_error = false``): its measured coverage
-#: on the calibration fleets (``--seed 1``, both plants, two-sided support, with and without the
-#: effective-mass scale and the creep term, 2026-11-23): 0 % for the full plant's g_1 as
-#: fitted, up to 92 % for the full plant's restoring force with both.
+#: The label of a bootstrap-only band (``[identify] model_error = false``), with its measured
+#: coverage on the calibration fleets.
 BOOTSTRAP_LABEL = (
     "bootstrap band (nominal 95 %; holds the truth at only 0-92 % on the virtual rig, "
     "depending on the curve)"
@@ -316,9 +200,7 @@ def _model_error(table: dict[str, float] | None, name: str) -> float:
     return float(table.get(name, table.get(name.rstrip("0123456789"), 0.0)))
 
 
-#: Curves whose model error is a fraction of their local magnitude, not of their scale: the
-#: gains g_i, one-signed, whose bias on the virtual rig is a gain error (the identified g_i is
-#: 0.82-1.11 of the truth at the wells: the DE force's load dependence and creep scale it).
+#: Curves whose model error is a fraction of their local magnitude, not of their scale (gains).
 RELATIVE_MODEL_ERROR = ("g",)
 
 
@@ -712,29 +594,20 @@ def curve_bands(
     theta_boot : ndarray, shape (B, p) or None
         Bootstrap replicates; None: no band (every point unidentified).
     support : dict of str to ndarray, shape (m,)
-        :func:`support_weights` per curve: a point is supported where it is at least
-        ``min_support``.
+        :func:`support_weights` per curve; supported where at least ``min_support``.
     min_support : float
         Smallest supported weight.
     band_tolerance : float
-        Largest band width relative to the curve's scale over the points the data reach
-        (``reach``, default the supported points): the larger of its range and its largest
-        magnitude there (a gain ``g_i`` of one sign that hardly varies has a small range but
-        is identified when its band is narrow against its magnitude).
+        Largest band width relative to the curve's scale over ``reach`` (the larger of its
+        range and its largest magnitude there).
     systematic : dict of str to float, optional
-        Per curve a bound of its systematic error (unit of the curve), added to each side
-        of the bootstrap band in quadrature (:func:`friction_bound`); default none.
+        Per curve a bound of its systematic error [unit of the curve] (:func:`friction_bound`).
     model_error : dict of str to float, optional
-        Per curve (``g`` for every ``g_i``) a model-error half-width as a fraction of the
-        curve's scale, for the gains of their local magnitude (:func:`error_level`;
-        :data:`MODEL_ERROR`), added in quadrature like ``systematic``; default none (a
-        bootstrap-only band).
+        Per curve (``g`` for every ``g_i``) a model-error fraction (:func:`error_level`,
+        :data:`MODEL_ERROR`); default none (a bootstrap-only band).
     reach : dict of str to ndarray, shape (m,), optional
-        Per curve the weights whose points (at least ``min_support``) the curve's scale is
-        taken over; :func:`curves_frame` passes a one-sided :func:`support_weights` (a
-        superset of the two-sided ``support``) for the restoring force and d, so a mask kept
-        off the data's edges does not shrink the scale it is judged against, and ``support``
-        itself for ``g_i``; default ``support``.
+        Per curve the weights whose supported points the scale is taken over; default
+        ``support``.
 
     Returns
     -------
@@ -931,22 +804,11 @@ def static_frame(
 ) -> tuple[pd.DataFrame, list[dict]]:
     """Tabulate the static force of the identified model at held levels, with bands, masks.
 
-    At a constant input ``v`` the beam rests where the static force of Eq. 37,
-    ``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)``, vanishes; an external force ``F``
-    holds it at ``q`` (the identified counterpart of the force-displacement curves of
-    Fig. 4). ``F`` is a linear map of the parameters like every curve, so it gets the
-    bootstrap band of :func:`curve_bands`. It is *identified* at ``q`` where the data
-    dwelt near ``q`` at that level (the Gaussian-weighted count of samples at the level,
-    :func:`debist.identify.design.at_level`, is at least ``min_support``, counted on both
-    sides together: at a held level the beam rests at one position, a cluster of samples
-    narrower than the RBF width, which a two-sided count would reduce to itself; one
-    switching transit at the level passes too fast to count, but a level held through
-    several switches, as the 3 kV pulses of the paper's identification profile, adds up its
-    transits' samples and is counted over the transit too, where the static force of Eq. 37
-    is a compromise of the fast dynamics: the full plant's calibration fleet, whose F model
-    error was measured there, shows it) and the band is narrow. Away from where
-    the data held a level, ``g_i h(v_i)`` is an extrapolation in amplitude: a DE's force is
-    of the separable form ``g_i(q) v_i^2`` only approximately (the full model's is not).
+    At a constant input ``v`` an external force
+    ``F(q; v) = c(q) q + F_0 - sum_i g_i(q) h(v_i)`` holds the beam at ``q`` (Eq. 37 at rest;
+    the identified counterpart of Fig. 4). ``F`` gets the bootstrap band of :func:`curve_bands`
+    and is identified at ``q`` where the data dwelt near ``q`` at that level (two sides counted
+    together, :func:`debist.identify.design.at_level`) and the band is narrow.
 
     Parameters
     ----------
@@ -966,9 +828,8 @@ def static_frame(
     Returns
     -------
     frame : pandas.DataFrame
-        Long format, one row per level and grid point: ``level`` (index into ``levels``),
-        ``v1..vN`` [V], ``q`` [m], ``F``, ``F_lo``, ``F_hi`` [N, or N/kg for ``m_q = 1``]
-        and ``F_identified``.
+        One row per level and grid point: ``level``, ``v1..vN`` [V], ``q`` [m], ``F``,
+        ``F_lo``, ``F_hi`` [N, or N/kg for ``m_q = 1``] and ``F_identified``.
     intervals : list of dict
         Per level ``{"v": [...], "identified": [[q_a, q_b], ...]}``.
 

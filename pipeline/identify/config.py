@@ -38,202 +38,147 @@ _M_Q = 'a mass > 0 [kg], "identify", or "physics" (with a [physics] section)'
 class IdentifyConfig(SectionConfig):
     """Hyper-parameters of the RBF identification (Masoud & Maas 2025, Sec. 4.2).
 
-    Parameters
-    ----------
-    M : int
-        Number of RBF centres per curve (paper: 10).
-    sigma_n : float
-        Normalised width, sigma = sigma_n * delta_xi (paper: 0.5).
-    rbf : tuple of str
-        RBF-weighted curves, a subset of ("c", "d", "g", "gh"); ``"gh"`` is the input
-        force's second order in h(v_i), ``g_h,i(q) h(v_i)^2`` (not part of the small-signal
-        gain g_i).
-    backbone : tuple of str
-        Physical backbone terms identified in the same least squares: any of
-        "linear_spring", "cubic_spring", "viscous", "coulomb", "offset",
-        "input_gain", "input_quadratic" (g_h,i h(v_i)^2, an input force not separable as
-        g_i(q) h(v_i)), and with a ``[physics]`` section the analytical model's curves
-        "physics_spring", "physics_damping", "physics_gain", "physics_quadratic" (the full
-        model's large-signal DE force, needs ``input_map = "v2"``) (scaled; see
-        :class:`debist.model.terms.PhysicsPrior`). With "clip" evaluation the
-        model outside the estimation range is the backbone plus the RBF curves held at
-        their edge values.
-    input_map : {"v2", "v"}
-        h(v) = v^2 (DE actuators, default) or v (rigs whose force is linear in v).
-    outside : {"clip", "zero"}
-        RBF evaluation outside the estimation range.
-    T_z : float or "search"
-        Friction time constant [s]; ``"search"`` runs the bounded outer search,
-        0 fixes z = q_dot.
-    T_z_bounds : tuple of float or None
-        Search interval [s]; default [dt, 100 dt] of the estimation data.
-    creep : False, float or "search"
-        The DEs' Maxwell creep (Masoud & Maas 2025, Eq. 26) as an identified force term:
-        ``sum_j creep_j w_j`` with the creep states w_j' = phi_j(q) q_dot - lambda w_j
-        (k_bar_i constant, k_i(q) in the RBF basis), weights by the same least squares.
-        A number fixes the relaxation rate lambda = Y_MW / eta_MW [1/s]; ``"search"`` finds
-        it by a bounded search like T_z; false (default): Eq. 37 without creep.
-    creep_bounds : tuple of float or None
-        Search interval of lambda [1/s]; default [1 / (duration of the longest estimation
-        record), 1 / (10 dt)].
-    slip : False, int or tuple of float
-        Generalised Maxwell-slip friction (Al-Bender, Lampaert & Swevers 2005) as identified
-        force terms ``sum_e k_e delta_e``: elements of fixed break-away deflections Delta_e
-        whose stiffnesses k_e >= 0 the same least squares finds, beside the friction state z
-        of Eq. 37. A number N places N deflections geometrically on :data:`SLIP_GRID` times
-        the estimation range of q; a list gives them [unit of q], ascending; false
-        (default): Eq. 37's friction only.
-    inertia : int or tuple of int
-        A position-dependent inertia m(q) = m_q + sum_a mu_a q^a [kg, kg/m^a] with the
-        Lagrangian force 1/2 m'(q) q_dot^2, the coefficients mu_a identified by the same
-        least squares (q_ddot-weighted columns): a degree N (powers a = 1..N) or a list of
-        powers (e.g. [2]: a symmetric m(q)); 0 (default): the constant m_q of Eq. 37.
-    m_q : float or "identify"
-        Generalised mass [kg]; 1 identifies the curves per unit mass. With
-        "identify", ``input_gain`` must fix the input gains instead. In a workflow,
-        ``"physics"`` takes the analytical model's ``m_q`` at ``q = 0`` (the identify
-        stage resolves it from ``[physics]``).
-    input_gain : tuple of float or None
-        Known gains g_0,i [N/V or N/V^2] when ``m_q = "identify"``.
-    coulomb_velocity : float
-        v_c of the smoothed Coulomb term tanh(z/v_c) [unit of q / s].
-    trim : int
-        Samples dropped at each end of each estimation record (edge effects of
-        the derivatives).
-    lowpass : float or None
-        Corner frequency [Hz] of a zero-phase low-pass (4th-order Butterworth, applied
-        forwards and backwards) on both sides of Eq. 40 per record: the filtered
-        equation error. The model is linear in its parameters, so filtering every
-        regressor column and the output keeps the parameters; it only weights the
-        frequency band where the one-coordinate model holds. ``None``: no filter.
-        Below the Nyquist frequency of every record.
-    weights_window : float or None
-        Weighted least squares [s]: a first ordinary fit's equation error, its local RMS over
-        this window, and the fit again with each sample's error divided by that RMS where it
-        is above its median (:func:`debist.identify.fit.variance_weights`; the switching
-        transients' error is several times the typical one). ``None``: ordinary least
-        squares (the paper).
-    effective_mass : bool
-        Rescale the fitted model so that its effective mass at the wells is ``m_q``: the
-        lagged friction state gives ``d z`` an apparent mass ``-d T_z / (1 + (omega T_z)^2)``,
-        which scales every identified force down by the same ratio; the mass and all weights
-        are multiplied by its inverse, which leaves every free run unchanged
-        (:mod:`debist.identify.mass`). False (the paper): the curves as fitted. Not with
-        ``m_q = "identify"``.
-    q_range : tuple of float or None
-        Operating range of Eq. 39 [unit of q]; default the estimation data range.
-    max_condition : float
-        Largest accepted condition number of the column-scaled regressor.
-    min_support : int
-        Fewest samples within one width of every centre.
-    published : dict
-        Published parameter values to print next to the identified ones.
-    refine : dict, bool or None
-        ``[identify.refine]``: refine the least-squares parameters by minimising the
-        windowed free-run error on the estimation data (see
-        :class:`debist.identify.refine.RefineConfig`); absent or false: no refinement.
-    auto : dict or None
-        ``[identify.auto]``: choose hyper-parameters by blocked cross-validation of the
-        free-run error on the estimation records before the fit
-        (:func:`debist.identify.autotune.auto_settings`): candidate lists per field, e.g.
-        ``{"M": [6, 8, 10], "sigma_n": [0.5, 1.0]}``, and optionally ``folds`` (default 4);
-        absent: the values given are used.
-    smoothing : float or "gcv"
-        Weight lambda of a second-difference penalty on each RBF curve's weights
-        (:mod:`debist.identify.regularise`; dimensionless, on the column-scaled weights);
-        ``"gcv"`` chooses it by generalised cross-validation; 0 (default): the paper's plain
-        least squares.
-    constraints : tuple of str
-        Sign statements on the curves, ``"d >= 0"``, ``"g1 >= 0"``, ``"g2 <= 0"``, imposed
-        on their weights (bounded least squares); empty by default.
-    bootstrap : int
-        Block-bootstrap replicates of the least squares for the curves' 95 % bands
-        (:mod:`debist.identify.bands`); 0: no bands, and no curve is marked identified.
-    bootstrap_seed : int
-        Seed of the bootstrap's random generator.
-    band_tolerance : float
-        A curve is identified where its band is at most this fraction of its range (and
-        the data support it; :mod:`debist.identify.bands`).
-    model_error : bool
-        Add the model error calibrated on the virtual rig
-        (:data:`debist.identify.bands.MODEL_ERROR`) to the bootstrap bands, so that they
-        hold the truth at their measured coverage; false: bootstrap-only bands (the
-        estimation scatter alone).
-    prior : PhysicsPrior or None
-        The analytical model's curves for the ``physics_*`` terms; set by the identify
-        stage from the workflow's ``[physics]`` section, not a workflow key.
-
     Raises
     ------
     pydantic.ValidationError
         If a value has the wrong type, is out of range or the terms do not make a model
         (a ``ValueError``; :meth:`from_dict` raises a ``WorkflowError`` naming the key).
+
+    Notes
+    -----
+    Each field is one key of the ``[identify]`` workflow section, documented under its
+    declaration and in the workflow key reference. Why the settings are what they are:
+    docs/explanation/settings.md and docs/explanation/terms.md.
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 4.2, Eq. 37-40; Al-Bender, Lampaert & Swevers 2005, IEEE Trans.
+    Autom. Control 50(11) (generalised Maxwell slip).
     """
 
     SECTION: ClassVar[str] = "[identify]"
     INTERNAL: ClassVar[tuple[str, ...]] = ("prior",)
 
     M: Annotated[int, Field(ge=2)] = 10
+    """Number of RBF centres per curve (paper: 10)."""
     sigma_n: PositiveFloat = 0.5
+    """Normalised RBF width, sigma = sigma_n * delta_xi (paper: 0.5)."""
     rbf: Annotated[tuple[str, ...], AsTuple] = ("c", "d", "g")
+    """RBF-weighted curves, a subset of ("c", "d", "g", "gh"); "gh" is the input force's second
+    order in h(v_i), g_h,i(q) h(v_i)^2.
+    """
     backbone: Annotated[tuple[str, ...], AsTuple] = ("linear_spring", "cubic_spring", "viscous")
+    """Physical backbone terms of the same least squares (:data:`debist.model.terms.TERMS`; the
+    ``physics_*`` terms need a ``[physics]`` section).
+    """
     input_map: Literal["v2", "v"] = "v2"
+    """h(v) = v^2 (DE actuators, default) or v (rigs whose force is linear in v)."""
     outside: Literal["clip", "zero"] = "clip"
+    """RBF evaluation outside the estimation range: held at the edge values or zero."""
     T_z: Annotated[Annotated[float, Field(ge=0)] | Literal["search"], Field(description=_T_Z)] = (
         "search"
     )
+    """Friction time constant [s]; "search" runs a bounded search, 0 fixes z = q_dot."""
     T_z_bounds: Annotated[
         tuple[PositiveFloat, PositiveFloat] | None,
         AsTuple,
         Field(description="[lo, hi] [s] with 0 < lo < hi"),
     ] = None
+    """Search interval of T_z [s]; default [dt, 100 dt] of the estimation data."""
     creep: Annotated[
         Literal[False] | PositiveFloat | Literal["search"], Field(description=_CREEP)
     ] = False
+    """Maxwell creep of the DEs (Eq. 26) as identified force terms: a relaxation rate [1/s],
+    "search", or false (Eq. 37 without creep).
+    """
     creep_bounds: Annotated[
         tuple[PositiveFloat, PositiveFloat] | None,
         AsTuple,
         Field(description="[lo, hi] [1/s] with 0 < lo < hi"),
     ] = None
+    """Search interval of the creep rate [1/s]; default [1 / longest record, 1 / (10 dt)]."""
     slip: Annotated[
         Literal[False] | Annotated[int, Field(ge=1, le=20)] | tuple[PositiveFloat, ...],
         AsTuple,
         Field(description=_SLIP),
     ] = False
+    """Generalised Maxwell-slip friction elements: a number N (placed on :data:`SLIP_GRID`) or
+    their break-away deflections [unit of q]; false: Eq. 37's friction only.
+    """
     inertia: Annotated[
         Annotated[int, Field(ge=0, le=4)] | tuple[Annotated[int, Field(ge=1, le=4)], ...],
         AsTuple,
         Field(description="a degree 0..4 of m(q) in q, or a list of powers 1..4"),
     ] = 0
+    """Position-dependent inertia m(q) = m_q + sum_a mu_a q^a: a degree or a list of powers; 0: the
+    constant m_q of Eq. 37.
+    """
     m_q: Annotated[PositiveFloat | Literal["identify"], Field(description=_M_Q)] = 1.0
+    """Generalised mass [kg]; 1 identifies per unit mass; "identify" needs ``input_gain``;
+    "physics" takes the analytical model's m_q at q = 0.
+    """
     input_gain: Annotated[tuple[FiniteFloat, ...] | None, AsTuple] = None
+    """Known gains g_0,i [N/V or N/V^2] when ``m_q = "identify"``."""
     coulomb_velocity: PositiveFloat = 1e-3
+    """v_c of the smoothed Coulomb term tanh(z/v_c) [unit of q / s]."""
     trim: NonNegativeInt = 0
+    """Samples dropped at each end of each estimation record (edge effects of the derivatives).
+    """
     lowpass: Annotated[PositiveFloat | None, Field(description="a frequency > 0 [Hz]")] = None
+    """Corner frequency [Hz] of a zero-phase low-pass on both sides of Eq. 40 (the filtered
+    equation error); none: no filter.
+    """
     weights_window: Annotated[PositiveFloat | None, Field(description="a duration > 0 [s]")] = None
+    """Window [s] of the local RMS that weights a second least squares; none: ordinary least
+    squares (the paper).
+    """
     effective_mass: bool = False
+    """Rescale the model so that its effective mass at the wells is m_q
+    (:mod:`debist.identify.mass`); false: the curves as fitted (the paper).
+    """
     q_range: Interval | None = None
+    """Operating range of Eq. 39 [unit of q]; default the estimation data range."""
     max_condition: Annotated[float, Field(gt=0, allow_inf_nan=True)] = 1e8
+    """Largest accepted condition number of the column-scaled regressor."""
     min_support: NonNegativeInt = 10
+    """Fewest samples within one width of every centre."""
     published: dict[str, FiniteFloat] | None = None
+    """Published parameter values to print next to the identified ones."""
     refine: Annotated[
         dict[str, Any] | bool | None,
         Field(description="a table of [identify.refine] settings, true or false"),
     ] = None
+    """The ``[identify.refine]`` table: refine by the windowed free-run error; absent or false: no
+    refinement.
+    """
     auto: Annotated[
         dict[str, Any] | None,
         Field(description="a table of candidate lists, e.g. M = [6, 8, 10], and folds"),
     ] = None
+    """The ``[identify.auto]`` table: candidate lists chosen by blocked cross-validation of the
+    free-run error; absent: the values given are used.
+    """
     smoothing: Annotated[
         Annotated[float, Field(ge=0, allow_inf_nan=False)] | Literal["gcv"],
         Field(description='a weight >= 0 or "gcv"'),
     ] = 0.0
+    """Weight of a second-difference penalty on each RBF curve's weights [-]; "gcv": generalised
+    cross-validation; 0: plain least squares (the paper).
+    """
     constraints: Annotated[tuple[str, ...], AsTuple] = ()
+    """Sign statements on the curves, e.g. "d >= 0", imposed by bounded least squares."""
     bootstrap: NonNegativeInt = 200
+    """Block-bootstrap replicates for the curves' 95 % bands; 0: no bands."""
     bootstrap_seed: NonNegativeInt = 0
+    """Seed of the bootstrap's random generator."""
     band_tolerance: PositiveFloat = 0.2
+    """Largest band width, a fraction of the curve's range, where a curve counts as identified."""
     model_error: bool = True
+    """Add the model error calibrated on the virtual rig to the bootstrap bands; false:
+    bootstrap-only bands.
+    """
     prior: Any = None
+    """The analytical model's curves for the ``physics_*`` terms, set by the identify stage."""
 
     @property
     def inertia_powers(self) -> tuple[int, ...]:
@@ -354,57 +299,43 @@ DEFAULT_WINDOW = 300
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
 class RefineConfig:
-    """The ``[identify.refine]`` section.
-
-    Parameters
-    ----------
-    windows : int
-        Number of windows spread evenly over the estimation records.
-    length : int
-        Samples per window.
-    max_nfev : int
-        Budget of cost evaluations of the optimiser.
-    substeps : int
-        RK4 steps per sample in the window simulations.
-    interpolation : {"bandlimited", "linear"}
-        Input interpolation (as in validation).
-    refine_T_z : bool
-        Also refine T_z (when the model has a friction lag, T_z > 0).
-    ftol : float
-        Relative cost decrease below which the optimiser stops.
-    holdout : int
-        Every ``holdout``-th block of each estimation record (blocks two windows long) is
-        held out: no fitted window touches it, and the refinement is kept only if its
-        windowed free-run error there falls (blocked cross-validation); 0: no held-out
-        blocks, judged on the whole estimation records only.
-    prior : float or tuple of float
-        Weight of a ridge term that pulls the scaled parameters towards the least-squares
-        estimate (Tikhonov regularisation of the output-error fit): residual rows
-        ``prior * r_0 * sqrt(N) * (x - x_LS)``, with ``r_0`` the windows' RMS error at
-        ``x_LS`` and ``N`` their sample count, so that moving the parameters by one
-        output-sized term (``|x - x_LS| = 1`` in the scaled variables) costs ``prior^2``
-        times the windows' initial cost. 0: no prior (the plain simulation-error fit).
-        Several weights (a TOML list, e.g. ``[0, 30]``): one refinement per weight, each
-        judged as a single one (``holdout``), and of the accepted ones the one with the
-        lowest free-run error over the whole estimation records is kept (estimation data
-        only).
+    """The ``[identify.refine]`` section: the simulation-error finish of the least squares.
 
     Raises
     ------
     pydantic.ValidationError
         If a value has the wrong type or is out of range (a ``ValueError``;
         :func:`refine_config` raises a ``WorkflowError`` naming the key instead).
+
+    Notes
+    -----
+    Each field is one key, documented under its declaration. The ridge term of ``prior`` adds
+    residual rows ``prior * r_0 * sqrt(N) * (x - x_LS)`` (``r_0`` the windows' RMS error at
+    ``x_LS``, ``N`` their sample count); what it does on the fleets: docs/results/fleets.md.
     """
 
     windows: PositiveInt = 40
+    """Number of windows spread evenly over the estimation records."""
     length: Annotated[int, Field(ge=10)] = 300
+    """Samples per window."""
     max_nfev: PositiveInt = 30
+    """Budget of cost evaluations of the optimiser."""
     substeps: PositiveInt = 2
+    """RK4 steps per sample in the window simulations."""
     interpolation: Literal["bandlimited", "linear"] = "bandlimited"
+    """Input interpolation (as in validation)."""
     refine_T_z: bool = True
+    """Also refine T_z (when the model has a friction lag, T_z > 0)."""
     ftol: PositiveFloat = 1e-6
+    """Relative cost decrease below which the optimiser stops."""
     holdout: Annotated[int, Field(ge=0)] = 4
+    """Every holdout-th block of each record is held out and judges the refinement (blocked
+    cross-validation); 0: judged on the whole estimation records.
+    """
     prior: float | Annotated[tuple[float, ...], AsTuple] = 0.0
+    """Weight of a ridge term pulling the scaled parameters to the least-squares estimate; 0: none;
+    a list: one refinement per weight, the best accepted one kept.
+    """
 
     def __post_init__(self) -> None:
         weights = self.priors

@@ -87,42 +87,29 @@ class ExcitationReport:
     Attributes
     ----------
     table : pandas.DataFrame
-        One row per RBF centre, columns ``centre`` [unit of q]; hard counts of the samples
-        with ``|q - xi_k| <= sigma``: ``n_total``, ``n_moving`` (``|q_dot|`` above
-        ``moving_fraction`` of its RMS), ``n_quasi_static`` (not in transit, see
-        ``transient_intervals``), ``n_inactive`` (every input inactive),
-        ``n_input1_active .. n_inputN_active``; the same weighted by the Gaussian of Eq. 38
-        (effective sample counts) ``neff_total``, ``neff_moving``, ``neff_inactive``,
-        ``neff_input1_active ..``; and the decisions ``supported_c``, ``supported_d``,
-        ``supported_g1 .. supported_gN`` (count at least ``min_samples``).
+        One row per RBF centre [unit of q]: hard counts ``n_total``, ``n_moving``,
+        ``n_quasi_static``, ``n_inactive``, ``n_input<i>_active``; Eq. 38-weighted counts
+        ``neff_*``; decisions ``supported_c``, ``supported_d``, ``supported_g<i>``.
     spectra : pandas.DataFrame
-        One row per record and channel (``q``, ``h1 .. hN`` = ``h(v_i)``): ``record``,
-        ``channel``, ``variance`` [unit^2], ``f_peak`` [Hz] (power-weighted centre of the
-        strongest cluster), ``n_lines`` (clusters of spectral bins carrying
-        ``power_fraction`` of the power), ``bandwidth`` [Hz] (their total width), ``df``
-        [Hz] (resolution), ``single_line`` (bool), ``fundamental`` [Hz] (centre of the
-        lowest cluster), ``harmonic`` (bool: every cluster a line, at most ``line_bins``
-        wide, at a whole multiple of it).
+        One row per record and channel (``q``, ``h1 .. hN``): ``variance``, ``f_peak`` [Hz],
+        ``n_lines``, ``bandwidth`` [Hz], ``df`` [Hz], ``single_line``, ``fundamental`` [Hz],
+        ``harmonic``.
     single_frequency : list of str
         Records whose response q is one spectral line.
     periodic : list of str
-        Records that are not single lines but whose inputs and response repeat one period:
-        q and every excited input carry their power in harmonics of one fundamental.
+        Records whose inputs and response repeat one period (harmonics of one fundamental).
     unsupported : dict of str to list of tuple of float
-        Per curve (``c``, ``d``, ``g1`` ..) the q intervals ``(a, b)`` [unit of q] of merged
-        runs of unsupported centres, ``(xi_a - sigma, xi_b + sigma)``.
+        Per curve the q intervals ``(a, b)`` [unit of q] of unsupported centres.
     transient_intervals : list of tuple of float
-        q intervals ``(a, b)`` [unit of q] visited only in transit (no quasi-static samples).
+        q intervals ``(a, b)`` [unit of q] visited only in transit.
     warnings : list of str
         Plain-language warnings, q in ``unit_name``.
     sigma : float
         RBF width [unit of q].
     settings : dict
         The thresholds used (for the manifest; ``bin_width`` in the display unit).
-    unit_scale : float
-        Display unit per unit of q.
-    unit_name : str
-        Display unit.
+    unit_scale, unit_name : float, str
+        Display unit per unit of q, and its name.
 
     References
     ----------
@@ -191,87 +178,30 @@ def check_excitation(
 ) -> ExcitationReport:
     """Check which curves of the RBF model the estimation records can identify.
 
-    Three checks, all deterministic:
-
-    1. *Coverage per centre.* Samples with ``|q - xi_k| <= sigma`` (as
-       :meth:`RBFBasis.support`) are counted in total, in motion (``|q_dot|`` above
-       ``moving_fraction`` of the pooled RMS of ``q_dot``), with input ``i`` active
-       (:func:`input_active` on the pooled inputs: ``v_i`` clearly off its own off level,
-       sub-threshold levels included) and with every input inactive; the effective
-       counts weight each sample by ``exp(-(q - xi_k)^2 / (2 sigma^2))`` (Eq. 38, without
-       clipping). Centre ``k`` supports ``c`` if
-       ``n_total >= min_samples``, ``d`` if ``n_moving >= min_samples`` and ``g_i`` if
-       ``n_input<i>_active >= min_samples``.
-    2. *Frequency content.* Per record, the Welch PSD (Hann window, ``nperseg`` samples,
-       half overlap, mean removed per segment, DC bin dropped) of q and of every ``h(v_i)``.
-       The fewest bins carrying ``power_fraction`` of the power are grouped into clusters
-       (bins at most two apart join); ``n_lines`` is the number of clusters and
-       ``bandwidth`` their total width. A channel is a *single line* if it has one cluster,
-       no wider than ``line_bins`` bins (the Hann main lobe is 4 bins) and resolved (its
-       band at most half its frequency, so a line needs about 16 periods in the record
-       at the default ``nperseg``). A record whose q is a single line is warned about: one
-       frequency cannot separate stiffness from mass and damping (Ljung 1999, Sec. 13.2).
-       A record is *periodic* if q and every excited input (variance above 1e-6 of the most
-       varied one's: an idle input's monitor noise does not count) have each cluster a line
-       (at most ``line_bins`` bins) centred within
-       1.5 bins of a whole multiple of the lowest one and share that fundamental: a single
-       tone through a nonlinearity (its harmonics), whose data show one periodic orbit and
-       excite no other frequency (the input is persistently exciting of a low order only,
-       Ljung 1999, Sec. 13.2); it is warned about the same way.
-    3. *Transient-only intervals.* A sample is in transit if ``|q_dot|`` exceeds
-       ``fast_factor`` times a robust speed scale of its record: 1.4826 times the median
-       of ``|q_dot|`` (the standard deviation of zero-mean normal velocities; the median is
-       set by the dwelling, not by the brief transits), at least 1 % of the record's
-       largest ``|q_dot|``. The pooled q range is cut into bins of ``bin_width``; the
-       window ``+-sigma`` around a bin (the reach of one RBF) is *transient-only* if it
-       holds samples in transit and fewer than ``min_samples`` quasi-static ones, or
-       quasi-static ones below ``quasi_static_fraction`` of its samples. Runs of such bins
-       are merged into the union of their windows, clipped to the data range (as the
-       coverage intervals ``[xi_a - sigma, xi_b + sigma]``). The window bridges unvisited
-       bins between sparse fast samples; the far end of an overshoot, slow only at its few
-       turning points, is flagged with the way to it.
+    Coverage, frequency content and transient-only intervals: docs/explanation/implementation.md.
 
     Parameters
     ----------
     records : sequence of Record
-        Estimation records: ``q`` (n,) [unit of q], ``q_dot`` (n,) [unit/s], ``v``
-        (n, n_inputs) [V], ``dt`` [s]. All with the same number of inputs.
+        Estimation records: ``q`` (n,) [unit of q], ``q_dot`` (n,), ``v`` (n, n_inputs) [V].
     basis : RBFBasis
         Centres ``xi`` (M,) and width ``sigma`` [unit of q].
     input_map_kind : {"v2", "v"}, optional
-        The input map h(v) of the model (``v^2`` for DE actuators).
+        The input map h(v) of the model.
     rbf : sequence of str, optional
-        The RBF curves of the model (subset of ``("c", "d", "g")``); warnings are issued for
-        these only. The table always has every column.
+        The RBF curves of the model; warnings are issued for these only.
     min_samples : int, optional
         Fewest samples within one width of a centre for a supported curve.
-    off_fraction : float, optional
-        Off band and activity floor of :func:`input_active`, a fraction of ``max |v_i|``
-        over all records, in (0, 1).
-    noise_factor : float, optional
-        Activity threshold of :func:`input_active` in robust standard deviations of the
-        input's off-level noise.
+    off_fraction, noise_factor : float, optional
+        Thresholds of :func:`input_active`.
     moving_fraction : float, optional
-        A sample is in motion where ``|q_dot|`` exceeds this fraction of the RMS of
-        ``q_dot`` over all records.
-    fast_factor : float, optional
-        Transit threshold in robust standard deviations of the record's ``q_dot``.
-    quasi_static_fraction : float, optional
-        A window is transient-only if fewer than this fraction of its samples (or fewer
-        than ``min_samples``) are quasi-static.
-    bin_width : float, optional
-        Bin width of the transient check [unit of q]; default ``sigma / 2``.
-    power_fraction : float, optional
-        Share of the spectral power that defines the lines and the bandwidth, in (0, 1).
-    line_bins : int, optional
-        Widest cluster [bins] that still counts as one spectral line.
-    nperseg : int, optional
-        Welch segment length [samples]; default half the record (three half-overlapping
-        segments; at least 256 samples, at most the record).
-    unit_scale : float, optional
-        Display unit per unit of q (e.g. 1e3 for q in m shown in mm); warnings and summary.
-    unit_name : str, optional
-        Display unit name.
+        In motion where ``|q_dot|`` exceeds this fraction of its RMS over all records.
+    fast_factor, quasi_static_fraction, bin_width : float, optional
+        Transient check: transit threshold [robust SDs of q_dot], quasi-static share, bin [q].
+    power_fraction, line_bins, nperseg : optional
+        Spectral power share of the lines, widest line [bins], Welch segment [samples].
+    unit_scale, unit_name : optional
+        Display unit per unit of q (e.g. 1e3 for mm) and its name, for the warnings.
 
     Returns
     -------
@@ -280,28 +210,11 @@ def check_excitation(
     Raises
     ------
     WorkflowError
-        If there are no records, the records disagree in their number of inputs, a
-        record's lengths differ or its ``dt`` is not positive, a setting is out of range
-        (``off_fraction``, ``noise_factor`` as :func:`input_active`) or ``input_map_kind``
-        is unknown.
+        If records are missing or disagree, ``dt <= 0``, or a setting is out of range.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37-40; L. Ljung, System Identification: Theory for the User,
-    2nd ed., 1999, Sec. 13.2 (persistence of excitation); P. D. Welch, IEEE Trans. Audio
-    Electroacoust. 15(2), 70-73, 1967 (PSD estimate, :func:`scipy.signal.welch`).
-
-    Examples
-    --------
-    >>> from debist.identify.fit import Record
-    >>> from debist.model.basis import RBFBasis
-    >>> t = np.arange(0, 20.0, 0.01)
-    >>> q = 0.01 * np.sin(2 * np.pi * 1.5 * t)
-    >>> v = np.full((t.size, 1), 100.0)
-    >>> rec = Record("sine", q, np.gradient(q, 0.01), np.zeros_like(q), v, 0.01)
-    >>> rep = check_excitation([rec], RBFBasis.equidistant(-0.01, 0.01, 5, 0.5), rbf=("c", "d"))
-    >>> rep.single_frequency
-    ['sine']
+    Masoud & Maas 2025, Eq. 37-40; Ljung 1999, Sec. 13.2; Welch 1967, IEEE Trans. AU-15(2).
     """
     _validate(
         records,
@@ -460,26 +373,11 @@ def input_active(
 ) -> np.ndarray:
     """Flag the samples at which each input excites the beam, sub-threshold levels included.
 
-    ``g_i`` of Eq. 37 multiplies ``h(v_i)``: a sample informs ``g_i(q)`` wherever
-    ``g_i(q) h(v_i)`` is not negligible against the noise of the regression (Eq. 40), not
-    only where the input switches the beam. A threshold relative to the largest ``h(v_i)``
-    (e.g. 10 %: 0.95 kV of a 3 kV pulse) discards exactly the sub-threshold excitation
-    (0.2-1 kV) a profile holds to identify ``g_i`` near the wells. So the input's activity is
-    decided against its own off level, from the data:
-
-    1. *Off level.* The samples with ``|v_i|`` at most ``off_fraction`` of its largest
-       magnitude are the candidates for "off"; their median ``v_off`` is the off level and
-       ``s = 1.4826 median |v_i - v_off|`` over them its noise (the normal-consistent median
-       absolute deviation; Rousseeuw & Croux 1993). Without such samples ``v_off = s = 0``.
-    2. *Active.* ``|v_i - v_off| > max(noise_factor s, off_fraction max|v_i|)``: clearly
-       above the channel's noise, and above a floor at the channel's own scale, which keeps
-       a driver's offset or leakage from counting (20 V of a 1.8 kV channel does not). At
-       the defaults and ``h = v^2`` the floor is 0.09 % of the largest ``h`` (90 V of a
-       3 kV maximum); 0.2 kV of a 3 kV maximum (0.44 % of the largest ``h``) counts.
-
-    The decision is made on ``v`` (the logged channel), so it holds for any input map: for
-    ``h = v^2`` and ``h = v`` alike the force ``g_i h(v_i)`` is non-zero exactly where
-    ``v_i`` leaves zero. An input that is zero throughout is never active.
+    The off level ``v_off`` is the median of the samples with ``|v_i|`` at most ``off_fraction``
+    of its largest magnitude, ``s`` their robust noise (1.4826 times the median absolute
+    deviation); a sample is active where
+    ``|v_i - v_off| > max(noise_factor s, off_fraction max|v_i|)``. Why not a share of the
+    largest value: docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -502,9 +400,8 @@ def input_active(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37-40 (``g_i(q) h(v_i)``), Fig. 11a (switching pulses and
-    sub-threshold excitation); P. J. Rousseeuw & C. Croux, J. Am. Stat. Assoc. 88,
-    1273-1283, 1993 (the MAD).
+    Masoud & Maas 2025, Eq. 37-40, Fig. 11a; Rousseeuw & Croux 1993, J. Am. Stat. Assoc. 88,
+    1273-1283 (the MAD).
 
     Examples
     --------

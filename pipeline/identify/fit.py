@@ -67,24 +67,18 @@ class FitDiagnostics:
         Regressor rows.
     columns : list of str
         Regressor column names.
-    rank : int
-        Numerical rank of the column-scaled regressor.
-    condition : float
-        Its 2-norm condition number.
+    rank, condition : int, float
+        Numerical rank and 2-norm condition number of the column-scaled regressor.
     singular_values : ndarray, shape (p,)
         Its singular values.
     residual_rms : float
-        RMS of the equation error [N, or unit/s^2 per unit mass] (weighted with
-        ``weights_window``).
+        RMS of the equation error [N, or unit/s^2 per unit mass] (weighted with ``weights_window``).
     fit_r2 : float
         Coefficient of determination of the regression output.
     support : ndarray of int, shape (M,)
         Samples within one width of each centre.
-    T_z_trace : ndarray, shape (k, 2)
-        (T_z [s], relative residual) of every outer-loop evaluation.
-    creep_trace : ndarray, shape (k, 2)
-        (lambda [1/s], relative residual) of every evaluation of the creep rate's search
-        (empty without ``creep = "search"``).
+    T_z_trace, creep_trace : ndarray, shape (k, 2)
+        (T_z [s] or lambda [1/s], relative residual) of every evaluation of the outer searches.
     theta : ndarray, shape (p,)
         The least-squares parameters, in the order of ``columns``.
     column_norms : ndarray, shape (p,)
@@ -96,13 +90,11 @@ class FitDiagnostics:
     gcv_trace : ndarray, shape (k, 3)
         ``(lambda, GCV, tr H)`` of the GCV search (empty without it).
     theta_boot : ndarray, shape (B, p) or None
-        Block-bootstrap replicates of ``theta`` (:func:`debist.identify.bands.block_bootstrap`);
-        None with ``bootstrap = 0``.
+        Block-bootstrap replicates of ``theta``; None with ``bootstrap = 0``.
     block : int
         The bootstrap's block length [samples] (0 without bootstrap).
     dissipation : str
-        Empty, or which signs were imposed and why (:func:`physical_signs`): what the
-        unconstrained fit had on the visited range, and where.
+        Empty, or which signs were imposed and why (:func:`physical_signs`).
     """
 
     n_samples: int
@@ -420,25 +412,10 @@ def fit_rbf_model(
 ) -> tuple[RBFModel, FitDiagnostics]:
     """Identify the RBF model of Eq. 37 by least squares, T_z by a bounded outer search.
 
-    For a given T_z the friction state z is computed from q_dot by the exact
-    discretisation of z' = (q_dot - z)/T_z; the weights then follow from the
-    linear regression of Eq. 40 (extended by the backbone terms), solved on the
-    column-scaled regressor by SVD. With ``cfg.lowpass`` every column and the output
-    are low-passed per record first (zero-phase Butterworth; the filtered equation error,
-    Ljung, System Identification, 2nd ed., Sec. 7.3 and 14.4). The outer loop minimises the relative
-    equation error over log T_z with a bounded scalar search (Brent) and also
-    evaluates the limit T_z = 0 (z = q_dot), keeping the better of the two.
-
-    With ``cfg.weights_window`` the whole fit (T_z and creep searches included) is run
-    twice: ordinary, then weighted by the inverse local RMS of that fit's equation error
-    (:func:`variance_weights`, two-stage feasible generalised least squares); the
-    diagnostics, residual and bootstrap are the weighted fit's.
-
-    With ``cfg.creep`` the force side also has the creep columns w_j (the filtered
-    phi_j(q) q_dot, :func:`debist.model.friction.creep_states`) at the relaxation rate
-    lambda; ``creep = "search"`` finds lambda by the same bounded search over log lambda
-    (variable projection of the creep columns), alternating twice with the T_z search when
-    that is searched too (T_z without creep, lambda, T_z with creep, lambda).
+    The weights solve the linear regression of Eq. 40 (with the backbone terms) on the
+    column-scaled regressor by SVD, for the friction state z of each T_z tried by a bounded
+    Brent search over log T_z (and T_z = 0). ``lowpass``, ``weights_window`` and ``creep``
+    extend it: docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -457,16 +434,17 @@ def fit_rbf_model(
     Raises
     ------
     IdentificationError
-        If a centre has no data near it, an input is never excited, the
-        regressor is rank deficient or worse conditioned than ``max_condition``, or
-        ``lowpass`` is not below a record's Nyquist frequency.
+        If a centre has no data near it, an input is never excited, the regressor is rank
+        deficient or worse conditioned than ``max_condition``, or ``lowpass`` is not below a
+        record's Nyquist frequency.
     ResourceError
         If the least squares would need more memory than the budget
         (:func:`debist.core.preflight.check_identify`), before anything is allocated.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 26 (creep), 37-40 and Sec. 4.2 (LS with T_z outer loop).
+    Masoud & Maas 2025, Eq. 26 (creep), 37-40 and Sec. 4.2 (LS with T_z outer loop); Ljung 1999,
+    System Identification, 2nd ed., Sec. 7.3 and 14.4 (filtered equation error).
     """
     records = _trimmed(records, cfg.trim)
     cfg = replace(cfg, trim=0)

@@ -15,9 +15,7 @@ is below m_q, and since only the ratios of mass, forces and gains shape the moti
 curve comes out scaled by about the same lambda. Multiplying the mass and every weight by
 1 / lambda (:meth:`debist.model.rbf.RBFModel.scaled`) leaves every free run unchanged (lambda is
 invariant under it) and puts the curves back on the physical scale: the effective mass at the
-wells' natural frequency is then m_q. On the virtual rig's full plant (seed-1 calibration fleet)
-lambda is 0.74-0.88 and the identified k* and g_i at the wells move from 0.64-0.90 of the truth to
-0.82-1.12 (0.88-1.19 on the independent seed-2 fleet); see docs/explanation/trust.md.
+wells' natural frequency is then m_q. What it does on the virtual rig: docs/explanation/trust.md.
 
 References
 ----------

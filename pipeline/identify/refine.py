@@ -230,14 +230,9 @@ def refine_model(
 ) -> RefineResult:
     """Refine an identified model by minimising its windowed free-run error.
 
-    With several ridge weights (``rcfg.prior`` a tuple), the refinement runs once per
-    weight; each run passes the guards of a single one (held-out windows better, free run
-    over the estimation records no worse, stable), and of the accepted runs the one whose
-    free run over the whole estimation records has the lowest error is kept (ties go to the
-    weight given first): estimation data only, as for ``T_z``. The held-out windows are
-    three seconds long and restart from measured states, so they cannot see a switch kept
-    by a thin margin; the free run over the whole records can. When no run is accepted the
-    least-squares model is kept.
+    With several ridge weights (``rcfg.prior`` a tuple) it runs once per weight, and of the runs
+    that pass the guards the one with the lowest free-run error over the whole estimation
+    records is kept; with none accepted, the least-squares model is kept.
 
     Parameters
     ----------
@@ -246,7 +241,7 @@ def refine_model(
     diag : FitDiagnostics
         Its diagnostics (parameter vector, column names and norms).
     records : sequence of Record
-        The estimation records (the same data; never test data).
+        The estimation records (never test data).
     cfg : IdentifyConfig
         The identification settings the model was fitted with.
     rcfg : RefineConfig
@@ -255,8 +250,7 @@ def refine_model(
     Returns
     -------
     RefineResult
-        The kept refinement (``prior`` its weight; ``candidates`` every weight's outcome
-        when there were several, ``seconds`` their total).
+        The kept refinement (``candidates`` every weight's outcome when there were several).
 
     Raises
     ------

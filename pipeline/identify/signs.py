@@ -33,18 +33,10 @@ def physical_signs(
 ) -> tuple[tuple[str, ...], str]:
     """Find the signs physics implies that a least-squares fit broke on the visited range.
 
-    A passive mechanism dissipates: the damping curve of Eq. 37 is not negative where the
-    data are (a negative d makes the free run gain energy). An actuator's force does not
-    change direction inside its range: for a DE (``input_map = "v2"``), ``g_i = (1/2)
-    dC_i/dq`` per unit mass (Eq. 35-37) keeps the sign of the capacitance's slope, which the
-    data show as the direction q moves when DE i is energised (the sign of the covariance of
-    ``v_i^2`` and q). Where the workflow states no sign for a curve (``[identify]
-    constraints``) and the fit breaks it on the visited range (d below zero; a gain reversed
-    by more than :data:`GAIN_REVERSAL` of its largest magnitude: an under-excited record
-    cannot separate damping from stiffness and mass, or a gain from the restoring force at
-    the edge of the range), the fit is redone with the bounds of the statements returned
-    (:func:`debist.identify.regularise.constraint_bounds`: the curve's RBF weights and
-    backbone gain take the sign, a sufficient condition).
+    Damping d is not negative where the data are, and a DE's gain ``g_i = (1/2) dC_i/dq`` keeps
+    the sign of the covariance of ``v_i^2`` and q. For each curve without a stated sign that the
+    fit breaks (d below zero; a gain reversed by more than :data:`GAIN_REVERSAL` of its largest
+    magnitude) a constraint is returned. Why: docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -55,8 +47,7 @@ def physical_signs(
     h : ndarray, shape (n, n_inputs)
         The inputs' h(v) at those samples [V^2 for ``"v2"``].
     cfg : IdentifyConfig
-        ``rbf`` (the curves fitted), ``input_map`` and ``constraints`` (the signs the
-        workflow states).
+        ``rbf``, ``input_map`` and ``constraints`` (the signs the workflow states).
     n_grid : int
         Points of the visited range checked.
 
@@ -65,8 +56,7 @@ def physical_signs(
     statements : tuple of str
         Constraints to add, e.g. ``("d >= 0", "g2 <= 0")``; empty if none.
     reason : str
-        What the fit had: each curve's value of the wrong sign farthest from zero, and where
-        [unit of q]; empty if none.
+        Each curve's value of the wrong sign farthest from zero, and where [unit of q]; or empty.
 
     References
     ----------

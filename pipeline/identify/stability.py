@@ -4,37 +4,15 @@ The identified model of Masoud & Maas 2025 (Eq. 37),
 
     m_q q'' + d(q) z + F_c tanh(z / v_c) + f(q) = sum_i g_i(q) h(v_i),   T_z z' = q' - z,
 
-with the restoring force ``f(q) = c(q) q + F_0`` (``c`` includes the backbone ``k_1 + k_3 q^2``
-and the scaled analytical curve, see :meth:`debist.model.rbf.RBFModel.curves`), is at
-rest where the static force
-
-    F(q; v) = f(q) - sum_i g_i(q) h(v_i)
-
-vanishes. For each constant input level this module finds those roots, their stiffness
-``k = dF/dq``, the small-signal natural frequency and damping ratio, and the energy barrier of
-each well; per input the static switching voltage (the saddle-node where the well the input
-pushes out of merges with its saddle); a verdict on whether the model is stable where the data
-are. The analytical model's numbers come from the same functions, applied to the analytical
-reduced model written in the form of Eq. 37 (:func:`debist.identify.design.analytical_as_eq37`).
-
-Small-signal model
-------------------
-Linearised about an equilibrium ``q*`` (``z = 0`` there, so the Coulomb term exerts no force),
-``m_q s^2 + d s / (1 + T_z s) + k = 0``, i.e. ``m_q T_z s^3 + m_q s^2 + (k T_z + d) s + k =
-0``. By the Routh-Hurwitz criterion this is asymptotically stable if and only if ``k > 0`` and
-``d > 0`` (for ``m_q, T_z > 0``; for ``T_z = 0`` it is the same second-order criterion), so the
-lag of the friction state does not change the ``stable`` flag. ``f_n = sqrt(k / m_q) / (2 pi)``
-and ``zeta = d / (2 sqrt(k m_q))`` are those of the limit ``z = q_dot`` (``T_z = 0``),
-accurate when ``2 pi f_n T_z << 1``. The Coulomb term is left out of ``d``: its slope
-``F_c / v_c`` at ``z = 0`` damps only velocities below ``v_c`` (it saturates beyond), so it
-does not make a well with ``d < 0`` stable beyond tiny amplitudes.
-
-Units
------
-``q`` in its own unit (m for the prototype), forces in N, so ``k`` [N/unit of q], ``d``
-[N s/unit of q] and the barrier ``int F dq`` [N * unit of q] = [J] when ``q`` is in m. When the
-curves are identified per unit mass (``m_q = 1``) forces are accelerations and the barrier is
-in [unit of q^2 / s^2] (energy per unit mass); ``f_n`` and ``zeta`` are unaffected.
+with the restoring force ``f(q) = c(q) q + F_0``, is at rest where the static force
+``F(q; v) = f(q) - sum_i g_i(q) h(v_i)`` vanishes. Per constant input level this module
+finds those roots, their stiffness ``k = dF/dq`` [N/unit of q], the small-signal natural
+frequency ``f_n`` [Hz] and damping ratio, and each well's energy barrier ``int F dq`` [J for
+q in m; per unit mass when ``m_q = 1``]; per input the static switching voltage [V] (a
+saddle-node); and a verdict on whether the model is stable where the data are. The
+analytical model's numbers come from the same functions
+(:func:`debist.identify.design.analytical_as_eq37`). A well is stable iff ``k > 0`` and
+``d > 0`` (Routh-Hurwitz, whatever ``T_z``): docs/explanation/implementation.md.
 
 References
 ----------
@@ -442,21 +420,10 @@ def model_is_stable(
 ) -> tuple[bool, str]:
     """Whether the identified model is stable where the data are (for refinement, validation).
 
-    The visited interval is ``[min, max]`` of ``q_visited``; the rest level (all inputs 0 V)
-    is analysed over that interval joined with the model's ``q_range``. A model without any
-    equilibrium at 0 V in the visited interval (no restoring force: a free mass, a linear
-    stage) is not judged here (its free run is checked by the divergence bound). Otherwise it
-    is unstable if :func:`verdict` says so (negative damping at a visited well, or only
-    unstable equilibria at 0 V inside the visited interval), or if ``d(q) < 0`` anywhere on
-    the visited part of a visited well's
-    basin (between its neighbouring unstable equilibria): the free run around that well gains
-    energy on every swing through it. Maxwell-slip elements (``[identify] slip``) do not enter
-    the rules: with their stiffnesses k_e >= 0 (bounded in the fit and the refinement) each
-    element is passive, storing at most k_e Delta_e^2 / 2 and dissipating while it slips
-    (Al-Bender, Lampaert & Swevers 2005), so it cannot feed energy into a well. With a
-    position-dependent inertia (``[identify] inertia``) the model is unstable where its mass
-    m(q) is not positive anywhere on the analysed interval (the kinetic energy
-    1/2 m(q) q_dot^2 would not be positive definite).
+    Unstable if :func:`verdict` says so at the rest level (over the visited interval joined
+    with ``q_range``), if the damping feeds energy into a visited well's basin, or if m(q) is
+    not positive; a model without an equilibrium at 0 V there is not judged. The rules:
+    docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -465,11 +432,8 @@ def model_is_stable(
     q_visited : array_like
         Positions the data visit [unit of q] (e.g. the measured ``q``); NaN ignored.
     q_dot : array_like, optional
-        The measured velocities at ``q_visited`` [unit of q / s]. Given, the basin rule asks
-        whether the identified damping dissipates energy along the measured motion,
-        ``sum d(q_s) q_dot_s^2 >= 0`` over the samples in the basin (a negative ``d`` where
-        the beam only passes at the range's edge is then tolerated); without, any
-        ``d(q) < 0`` in the visited basin fails.
+        The measured velocities at ``q_visited`` [unit of q / s]; given, the basin rule asks
+        ``sum d(q_s) q_dot_s^2 >= 0``, without, any ``d(q) < 0`` in the visited basin fails.
     n_grid : int
         Points of the bracketing grid (also where ``d(q)`` is checked).
 
@@ -624,28 +588,20 @@ def switching_voltages(
 ) -> pd.DataFrame:
     """Find the static switching voltage of each input of the identified model (others at 0 V).
 
-    An input ``i`` pushes towards the sign of ``g_i h(v_max)`` (its mean between the outer
-    equilibria at 0 V) and out of the outermost well on the other side, whose neighbouring
-    unstable equilibrium (saddle) lies on the push side. While ``I(v) = max push * F(q; v)``
-    over ``[well, saddle]`` (at 0 V) is positive the well and the saddle exist; at ``I = 0``
-    they merge (saddle-node) and the well disappears. ``I`` is scanned on ``n_scan`` steps of
-    ``[0, v_max]`` and the first sign change refined by Brent's method, so the smallest
-    switching voltage is found (to the scan's resolution when ``I`` is not monotone). The rule
-    assumes ``g_i`` of one sign between the well and the saddle (the input pushes one way).
+    The voltage at which the well input ``i`` pushes out of merges with its saddle
+    (saddle-node), by a scan of ``[0, v_max]`` refined by Brent's method; assumes ``g_i`` of
+    one sign between the well and the saddle. Details: docs/explanation/implementation.md.
 
     Parameters
     ----------
     model : RBFModel
         The identified model.
     v_max : float
-        Largest voltage searched [V] (e.g. the largest in the data: beyond it the model
-        extrapolates).
+        Largest voltage searched [V] (beyond the data the model extrapolates).
     q_range : tuple of float, optional
         Range searched [unit of q]; default ``model.q_range``.
-    n_grid : int
-        Points of the grid of ``q``.
-    n_scan : int
-        Steps of the voltage scan.
+    n_grid, n_scan : int
+        Points of the grid of ``q``; steps of the voltage scan.
     xtol : float
         Tolerance of the voltage [V].
 
@@ -653,8 +609,7 @@ def switching_voltages(
     -------
     pandas.DataFrame
         One row per input: ``input`` (1-based), ``v_switch`` [V] (NaN when not reached),
-        ``q_well``, ``q_saddle``, ``q_fold`` [unit of q], ``reached`` (bool) and ``reason``
-        (:class:`SwitchingVoltage`).
+        ``q_well``, ``q_saddle``, ``q_fold`` [unit of q], ``reached`` and ``reason``.
 
     Raises
     ------

@@ -87,43 +87,26 @@ def load_rig_log(
     Parameters
     ----------
     path : str or os.PathLike
-        The rig log: MAT v5/v7 or v7.3 (dSPACE ControlDesk recording or plain
-        variables), delimited text, Parquet, or MF4; the format is detected from the
-        content unless ``spec.format`` fixes it.
+        The rig log: MAT (dSPACE recording or plain variables), text, Parquet or MF4
+        (docs/reference/formats.md); detected from the content unless ``spec.format``.
     spec : IngestSpec
         From :meth:`IngestSpec.from_dict`.
     cache : RawLogCache, optional
-        Shares the reading of a file between calls (the ingest stage's data sets);
-        None reads the file.
+        Shares the reading of a file between calls; None reads the file.
 
     Returns
     -------
     list of pandas.DataFrame
-        Exactly one table when ``gaps = "error"``, else one per gap-free segment of at
-        least ``min_segment`` samples. Columns ``t`` [s], ``q``, ``v1 ... vN``, then the
-        extra channels sorted by name, all float64 in SI units (or the recorded unit's SI
-        counterpart, e.g. a voltage ``q`` in V); RangeIndex; ``t`` strictly increasing and
-        kept as recorded (not rebased). ``attrs``:
-
-        - ``units``: column -> SI unit string;
-        - ``source``: the path as a string;
-        - ``channels``: column -> source channel name (``"k * <Ts> s"`` for a synthetic time);
-        - ``segment``: 0-based number, ``n_segments``: tables returned;
-        - ``format``: ``"mat-v5"``, ``"mat-v7.3"``, ``"mat-v4"``, ``"csv"``, ``"parquet"``
-          or ``"mf4"``;
-        - ``first_index``: file sample index of the first (original) sample;
-        - ``dropped_segments``: segments dropped as shorter than ``min_segment``
-          (``first_index``, ``n_samples``, ``t_start``);
-        - ``resample``: None or ``{"sample_time": ..., "method": ...}``.
+        One per gap-free segment (one with ``gaps = "error"``): ``t`` [s], ``q``, ``v1 ...
+        vN``, extra channels, float64 in SI units; ``attrs`` the units, source channels,
+        format and segments (docs/reference/formats.md).
 
     Raises
     ------
     RigLogError
-        Naming the file and, where it applies, the channel and the offending value:
-        unreadable/truncated/corrupt file, missing or ambiguous channel, wrong or unknown
-        unit, non-numeric or non-finite value, time not strictly increasing, a gap under
-        ``gaps = "error"``, an empty selection, no time channel and no ``sample_time``,
-        channels on different rasters without ``resample``.
+        Naming the file (and channel, value): an unreadable file, a missing or ambiguous
+        channel, a wrong unit, a bad value or time, a gap under ``gaps = "error"``, an
+        empty selection, no time, channels on several rasters without ``resample``.
 
     Examples
     --------

@@ -5,38 +5,10 @@ for a v5 file, so :mod:`debist.ingest.mat` interprets both alike: a struct becom
 ``dict``, a struct array or a cell array a ``list``, a char array a ``str``, a numeric
 array a squeezed :class:`numpy.ndarray` in MATLAB's (column-major) orientation.
 
-Notes
------
-Layout written by MATLAB (``save -v7.3``) and read here:
-
-- a 512-byte HDF5 user block holding the 128-byte MAT header (version ``0x0200``);
-- one HDF5 object per variable at the root; every object carries the attribute
-  ``MATLAB_class`` (``"double"``, ``"char"``, ``"struct"``, ``"cell"``, ...);
-- dimensions are stored reversed (a MATLAB ``1 x n`` array is an HDF5 ``(n, 1)``
-  dataset), so arrays are transposed back;
-- ``char`` arrays are ``uint16`` UTF-16 code units (``MATLAB_int_decode = 2``);
-- an empty array is a dataset holding its dimensions, with ``MATLAB_empty = 1``;
-- a scalar struct is a group with one member per field (order in ``MATLAB_fields``);
-  a struct *array* is a group whose fields are datasets of object references (no
-  ``MATLAB_class``), one per element; a cell array is a dataset of object references
-  with ``MATLAB_class = "cell"``; the referenced objects live in the group ``#refs#``.
-
-Bounded reading
----------------
-Before any data is read, :func:`load_mat73` walks the objects the decoder will visit
-(following object references, each object surveyed once) and refuses the file when
-
-- a data set declares more bytes than can be stored for it: more than its allocated
-  storage (``H5Dget_storage_size``) or the file when uncompressed, or more than
-  :data:`~debist.core.preflight.DEFLATE_MAX_RATIO` times its stored bytes when filtered
-  (deflate cannot expand more), or its contiguous storage lies beyond the end of the
-  file: a forged or truncated file (``RigLogError``);
-- the decoder would visit more than :data:`MAX_OBJECTS` objects, counting every path
-  through the reference graph (a small file whose cells reference one another many
-  times over decodes into an exponentially large tree), or read more than that many
-  references, or a reference cycle (``RigLogError``);
-- the data it would read, counted per visit, exceeds the memory budget
-  (:func:`debist.core.preflight.check_memory`, ``ResourceError``).
+Before any data is read, :func:`load_mat73` surveys the objects the decoder will visit and
+refuses a forged or truncated file, a reference graph beyond :data:`MAX_OBJECTS` visits or
+a cycle (``RigLogError``), and data beyond the memory budget (``ResourceError``). The
+layout read and the bounds: docs/explanation/implementation.md.
 
 References
 ----------

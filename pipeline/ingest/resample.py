@@ -76,18 +76,15 @@ def resample_segment(
 
     Parameters
     ----------
-    t : ndarray, shape (n_samples,) [s]
-        Time, strictly increasing.
-    values : ndarray, shape (n_samples, n_channels)
-        The channels (any units; every column is resampled alike).
+    t, values : ndarray, shapes (n_samples,) [s] and (n_samples, n_channels)
+        Time, strictly increasing; the channels (any units, resampled alike).
     sample_time : float
         Target step [s].
     method : {"polyphase", "linear"}
-        See the module docstring.
+        Rational-rate polyphase filter or linear interpolation.
     resolution : float, optional
-        [s] rounding step of the recorded time
-        (:func:`~debist.ingest.checks.printed_resolution` times the unit factor); 0 for
-        a time base written in full or computed.
+        Rounding step of the recorded time [s] (:func:`~debist.ingest.checks.printed_resolution`);
+        0 for a time base written in full or computed.
 
     Returns
     -------
@@ -99,16 +96,13 @@ def resample_segment(
     Raises
     ------
     RigLogError
-        ``"polyphase"`` on a non-uniform time base, or with a ratio ``dt_out / dt_in``
-        that is not a fraction with denominator <= :data:`MAX_DOWN` (both within
-        :func:`~debist.ingest.checks.time_rtol`; the message suggests ``"linear"``); no
-        file name here, the caller adds it.
+        ``"polyphase"`` on a non-uniform time base, or with a ratio ``dt_out / dt_in`` that
+        is not a fraction with denominator <= :data:`MAX_DOWN` (the caller adds the file).
 
     References
     ----------
-    P. P. Vaidyanathan, "Multirate Systems and Filter Banks", Prentice Hall, 1993, ch. 4
-    (polyphase rational-rate conversion), as implemented by
-    :func:`scipy.signal.resample_poly`.
+    Vaidyanathan 1993, Multirate Systems and Filter Banks, ch. 4 (polyphase rational-rate
+    conversion, :func:`scipy.signal.resample_poly`).
 
     Examples
     --------

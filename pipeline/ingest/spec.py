@@ -5,42 +5,11 @@ parsed from TOML) into frozen pydantic dataclasses (:mod:`debist.core.config`) a
 anything it does not understand with a one-line :class:`~debist.core.errors.WorkflowError`
 naming the key and echoing the value (``[ingest] q.unit: expected ..., got 'bananas'``).
 
-Schema (every key optional unless marked required)::
-
-    format = "auto"            # auto | mat | csv | parquet | mf4
-    sample_time = 0.0016384    # [s] t = k * sample_time when no time channel is mapped
-    time = { name = "t", unit = "s" }         # the time channel
-    q  = { column = 1, unit = "V" }           # required: the displacement / output
-    v1 = { name = "vir", unit = "V" }         # required: first input
-    v2 = { regex = "Model Root/.*/v_DE2$", unit = "kV" }   # further inputs v2..vN, no holes
-    v1_ref = { regex = "...", unit = "kV" }   # any other key holding a table: an extra channel
-    slice = [40650, 105712]    # 0-based, end-exclusive sample slice of the file
-    time_window = [0.0, 30.0]  # [s] keep start <= t < stop
-    gap_tolerance = 1.5        # a step > gap_tolerance * median(dt) is a gap
-    gaps = "error"             # error | split
-    min_segment = 100          # [samples] shorter segments are dropped when splitting
-    resample = { sample_time = 0.01, method = "polyphase" }   # polyphase | linear
-    faults = "error"           # error | split: a sensor fault (channel `range`, `stuck`)
-    delimiter = "auto"         # text files: auto | whitespace | a single character
-    decimal = "auto"           # text files: auto | "." | "," (decimal separator)
-    header = "auto"            # text files: auto | true | false
-
-A channel table holds exactly one selector, ``name`` (exact channel name), ``regex``
-(:func:`re.search` on the channel name, must match exactly one channel), ``column`` (0-based
-column index, text and Parquet files) or ``var`` (a MAT file's numeric variable, with
-``column``: the 0-based column of an n x k matrix variable, rows being samples, e.g.
-``q = { var = "X3", column = 1 }`` for the values of an n x 2 ``[t, value]`` variable), plus
-``unit`` (any unit pint parses, e.g. ``"mm"``, ``"mm/s"``, ``"g0"``, ``"kV"``, ``"m/s^2"``,
-``"deg"``, ``"1"``; see :mod:`debist.core.units`), ``scale`` (extra factor) and ``si_unit``
-(the SI unit of the result when ``scale`` changes the quantity, e.g. a V -> m calibration).
-The quantity of the result must suit the column (:func:`debist.core.units.role_quantities`):
-the time a time, ``q`` a length, angle, dimensionless value or voltage, an input a voltage,
-acceleration, force, pressure, current, length or dimensionless value; ``q = { unit = "N" }`` or
-``time = { unit = "mm" }`` is refused naming ``[ingest] q.unit``. Further keys are
-the sensor validity checks of :mod:`debist.ingest.validity`: ``range = [lo, hi]`` (in
-the recorded unit; samples at or beyond a limit are faults) and ``stuck = k`` (``k`` or more
-identical consecutive samples are a fault; 0 turns the check off; default: 10 on ``q`` when
-it varies, none on other channels).
+A channel table (``time``, ``q``, ``v1`` ..., extra channels) holds one selector (``name``,
+``regex``, ``column`` or ``var``), a ``unit`` pint parses (:mod:`debist.core.units`), an
+optional calibration (``scale``, ``si_unit``) and the sensor checks of
+:mod:`debist.ingest.validity` (``range``, ``stuck``). The section at a glance, and the
+quantities each column may hold: docs/reference/formats.md.
 """
 
 from __future__ import annotations
@@ -197,44 +166,8 @@ _Unit = Annotated[str, BeforeValidator(_canonical), AfterValidator(_known_unit)]
 class ChannelSpec:
     """Where one canonical column comes from and in which unit it is recorded.
 
-    Parameters
-    ----------
-    role : str
-        The canonical column it fills: ``"t"``, ``"q"``, ``"v1"``, ..., or an extra name.
-    name : str, optional
-        Exact channel name (MAT variable, dSPACE ``Y(i).Name``, CSV header, Parquet column).
-    regex : str, optional
-        Pattern searched (:func:`re.search`) in the channel names; must match exactly one.
-    column : int, optional
-        0-based column index: of the file (text and Parquet files), or with ``var`` of
-        that variable (MAT files).
-    unit : str, optional
-        Unit of the recorded values, any unit pint parses with a factor to SI (``"mm/s"``,
-        ``"g0"``, ``"kV"``, ``"m/s^2"``, ``"deg"``, ``"1"``). When omitted the unit the file
-        declares (dSPACE ``Unit``, MF4 channel unit, Parquet field metadata) is used.
-    scale : float, optional
-        Extra factor applied after the unit conversion: ``x_si = x * factor(unit) * scale``.
-    si_unit : str, optional
-        Coherent SI unit of the result (stored as its SI symbol, e.g. ``"m/s^2"``), needed
-        only when ``scale`` changes the quantity (a sensor calibration, e.g. ``unit = "V",
-        scale = 2e-3, si_unit = "m"`` for 2 mm/V); another quantity than ``unit`` needs
-        ``scale``.
-    range : tuple of float, optional
-        ``(lo, hi)`` valid range of the sensor in the recorded unit (before ``scale``),
-        ``lo < hi``; a sample at or beyond a limit is a sensor fault (out-of-range value,
-        saturation). None: no range check.
-    stuck : int, optional
-        [samples] ``k``: ``k`` or more identical consecutive samples are a stuck sensor;
-        0: no check. None: the default rule of :func:`debist.ingest.validity.stuck_length`
-        (10 on ``q`` when its median absolute step is > 0, no check elsewhere).
-    var : str, optional
-        Name of a numeric variable of a MAT file: a vector, or with ``column`` an n x k
-        matrix (n samples in rows, MATLAB orientation in v5 and v7.3 files alike).
-
     At most one of ``name``, ``regex``, ``column``, ``var`` is set, except ``var`` with
-    ``column``; a channel table of a workflow gives exactly one (checked by
-    :meth:`from_dict`; only the default time channel of a dSPACE recording,
-    ``ChannelSpec("t")``, has none).
+    ``column``; a workflow's channel table gives exactly one (:meth:`from_dict`).
 
     Raises
     ------
@@ -244,23 +177,46 @@ class ChannelSpec:
         time channel in ``mm`` (a ``ValueError``; :meth:`from_dict` raises a
         ``WorkflowError`` naming the key, the value and the expected quantity).
 
+    Notes
+    -----
+    Each field is a key of a channel table, documented under its declaration.
+
     References
     ----------
     pint (https://pint.readthedocs.io) parses the units, see :mod:`debist.core.units`.
     """
 
     role: str
+    """The canonical column it fills: "t", "q", "v1", ..., or an extra name."""
     name: Annotated[str, Field(min_length=1)] | None = None
+    """Exact channel name (MAT variable, dSPACE Y(i).Name, CSV header, Parquet column)."""
     regex: Annotated[str, Field(min_length=1), AfterValidator(_regex)] | None = None
+    """Pattern searched (re.search) in the channel names; must match exactly one."""
     column: NonNegativeInt | None = None
+    """0-based column index of the file (text, Parquet), or with var of that variable (MAT)."""
     unit: Annotated[_Unit | None, Field(description=_UNIT_TEXT)] = None
+    """Unit of the recorded values, any unit pint parses with a factor to SI; default the unit the
+    file declares.
+    """
     scale: Annotated[FiniteFloat, AfterValidator(_nonzero)] | None = None
+    """Extra factor after the unit conversion: x_si = x * factor(unit) * scale."""
     si_unit: Annotated[
         str | None, BeforeValidator(_canonical), AfterValidator(lambda u: u and _si_unit(u))
     ] = None
+    """SI unit of the result when scale changes the quantity (a calibration, e.g. unit = "V", scale
+    = 2e-3, si_unit = "m").
+    """
     range: Interval | None = None
+    """[lo, hi] valid range of the sensor in the recorded unit; a sample at or beyond a limit is a
+    fault.
+    """
     stuck: Annotated[NonNegativeInt, AfterValidator(_stuck)] | None = None
+    """[samples] k or more identical consecutive samples are a stuck sensor; 0: no check; default
+    10 on q when it varies.
+    """
     var: Annotated[str, Field(min_length=1)] | None = None
+    """Name of a numeric MAT variable: a vector, or with column an n x k matrix (samples in rows).
+    """
 
     def __post_init__(self) -> None:
         given = [k for k in _SELECTORS if getattr(self, k) is not None]
@@ -446,80 +402,64 @@ _INGEST_CONFIG = pydantic.ConfigDict(**CONFIG, populate_by_name=True)
 class IngestSpec:
     """Frozen configuration of :func:`debist.ingest.load.load_rig_log`.
 
-    Parameters
-    ----------
-    channels : tuple of ChannelSpec
-        ``q``, ``v1``, ..., ``vN``, then the extra channels sorted by name.
-    format : {"auto", "mat", "csv", "parquet", "mf4"}
-        ``"auto"``: detect by magic bytes, then by extension; ``"mf4"``: ASAM MDF
-        (versions 3 and 4, read with asammdf, the ``mf4`` extra).
-    sample_time : float, optional
-        Sample time [s]; the time is ``k * sample_time`` (k the 0-based sample index of the
-        file) when no time channel is mapped. With a time channel it is checked against
-        the median step (1 % tolerance).
-    time : ChannelSpec, optional
-        The time channel (role ``"t"``). Not needed for dSPACE recordings, whose time base
-        ``X`` is used.
-    sample_slice : tuple of int, optional
-        ``(start, stop)``, 0-based end-exclusive sample slice applied after reading.
-    time_window : tuple of float, optional
-        ``(start, stop)`` [s]; keeps ``start <= t < stop``; applied after the slice.
-    gap_tolerance : float
-        A time step larger than ``gap_tolerance * median(dt)`` is a gap; > 1.
-    gaps : {"error", "split"}
-        What a gap does: raise, or split the log into gap-free segments.
-    min_segment : int
-        [samples] segments shorter than this are dropped when splitting; >= 3.
-    resample : ResampleSpec, optional
-        Resampling of each segment.
-    delimiter : str
-        Text files: ``"auto"``, ``"whitespace"`` or a single character.
-    decimal : {"auto", ".", ","}
-        Text files: the decimal separator; ``"auto"`` detects ``","`` from numbers with a
-        comma between digits when the delimiter is not a comma
-        (:func:`debist.ingest.text.detect_decimal`).
-    header : bool or None
-        Text files: whether the first line holds the channel names; None = detect.
-    faults : {"error", "split"}
-        What a sensor fault (a channel's ``range`` or ``stuck`` check) does, for every
-        channel of the data set: raise, or cut the faulty samples out of every column and
-        keep the segments in between (segments shorter than ``min_segment`` are dropped).
-
     Raises
     ------
     pydantic.ValidationError
         On a value of the wrong type or out of range, or a text or Parquet format
         without a time channel nor ``sample_time`` (a ``ValueError``; :meth:`from_dict`
         raises a ``WorkflowError`` naming the key).
+
+    Notes
+    -----
+    Each field is a key of the ``[ingest]`` section (``sample_slice`` is ``slice``), documented
+    under its declaration; the section at a glance: docs/reference/formats.md.
     """
 
     channels: tuple[ChannelSpec, ...]
+    """q, v1, ..., vN, then the extra channels sorted by name."""
     format: Literal["auto", "mat", "csv", "parquet", "mf4"] = "auto"
+    """"auto" detects by content, then extension; "mf4": ASAM MDF 3 and 4 (the mf4 extra)."""
     sample_time: PositiveFloat | None = None
+    """Sample time [s]: t = k * sample_time without a time channel; with one, checked against its
+    median step.
+    """
     time: ChannelSpec | None = None
+    """The time channel (not needed for dSPACE recordings, whose time base X is used)."""
     sample_slice: Annotated[
         Annotated[tuple[NonNegativeInt, NonNegativeInt], AsTuple, AfterValidator(_ordered)] | None,
         Field(alias="slice", description="[start, stop] [samples] with 0 <= start < stop"),
     ] = None
+    """[start, stop], 0-based end-exclusive sample slice applied after reading."""
     time_window: Annotated[
         Annotated[tuple[float, float], AsTuple, AfterValidator(_ordered)] | None,
         Field(description="[start, stop] [s] with start < stop"),
     ] = None
+    """[start, stop] [s]; keeps start <= t < stop, after the slice."""
     gap_tolerance: Annotated[float, Field(gt=1)] = 1.5
+    """A time step larger than gap_tolerance * median(dt) is a gap; > 1."""
     gaps: Literal["error", "split"] = "error"
+    """What a gap does: raise, or split the log into gap-free segments."""
     min_segment: Annotated[int, Field(ge=3)] = 100
+    """[samples] Segments shorter than this are dropped when splitting; >= 3."""
     resample: ResampleSpec | None = None
+    """Resampling of each segment."""
     delimiter: Annotated[
         str,
         BeforeValidator(_delimiter),
         AfterValidator(_check_delimiter),
         Field(description=_DELIMITER_TEXT),
     ] = "auto"
+    """Text files: "auto", "whitespace" or a single character."""
     decimal: Literal["auto", ".", ","] = "auto"
+    """Text files: the decimal separator; "auto" detects a decimal comma."""
     header: Annotated[
         bool | None, BeforeValidator(_header), Field(description='"auto", true or false')
     ] = None
+    """Text files: whether the first line holds the channel names; none: detect."""
     faults: Literal["error", "split"] = "error"
+    """What a sensor fault (range, stuck) does: raise, or cut the faulty samples out of every
+    column and keep the segments in between.
+    """
 
     def __post_init__(self) -> None:
         if self.time is None and self.sample_time is None and self.format in ("csv", "parquet"):

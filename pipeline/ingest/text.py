@@ -8,36 +8,8 @@ recognised; a decimal comma needs a delimiter other than ``,``. Blank lines are 
 Channels are named by the header, or ``"column <i>"`` in a headerless file (select those
 with ``column = i``).
 
-Truncated files
----------------
-A log cut while it was written or copied ends inside its last line. Before parsing,
-:func:`check_tail` compares the last non-blank line with up to :data:`TAIL_LINES` data
-lines before it (plain and gzip files alike) and raises a ``RigLogError`` naming the file
-and the line number when
-
-1. the last line has fewer fields than the line before it (whether or not the file ends
-   with a newline); or
-2. the file does not end with a newline and the last field of the last line looks cut
-   compared with the same column in the lines before, all of which are numbers. A
-   truncation can only cut that one field, and a writer formats a column the same way
-   on every line, so the field is taken as cut when
-
-   a. it is not a number (``"-"``, ``"1.6e"``, an empty field after the delimiter);
-   b. it ends with ``"."`` and no earlier value in the column does;
-   c. every earlier value has the same number d >= 1 of digits after the point (fixed-
-      point writers, ``%.6f``, ``%.4e``) and it has fewer;
-   d. every earlier value has an exponent with the same number of digits and it has
-      none or fewer; or
-   e. it has at least 2 significant digits fewer than every earlier value (writers of
-      the shortest or ``%g`` form, which drop trailing zeros, so that the count varies
-      by one or two from value to value).
-
-A complete last value is never taken as cut by rules a-d, whatever its magnitude. Rule e
-can: on the Silverbox record (``%g``-style, 5 significant digits, 131072 lines) it would
-flag 25 of the 130872 line ends that have 200 lines before them (0.02 %), while it catches
-every cut that leaves at most 3 of the 5 digits. A file that ends with a newline is
-never judged by rule 2: it was written to its end or cut exactly between lines, which
-no rule can tell apart.
+A file cut inside its last line is refused before parsing (:func:`check_tail`); the rules
+that tell a cut field from a complete one: docs/explanation/implementation.md.
 """
 
 from __future__ import annotations

@@ -286,11 +286,8 @@ def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:
 def creep_states(phi: np.ndarray, q_dot: np.ndarray, dt: float, rate: float) -> np.ndarray:
     """Filter ``phi_j(q) q_dot`` through w_j' = phi_j(q) q_dot - lambda w_j: the creep states.
 
-    The creep of the DEs (Masoud & Maas 2025, Eq. 26, q_eps' = k(q) q' - (Y_MW/eta_MW) q_eps)
-    with k(q) written in the RBF basis: ``w_j = z_j / lambda`` where z_j is ``phi_j q_dot``
-    through the friction filter of :func:`friction_state` with ``T_z = 1 / lambda`` (the same
-    exact first-order-hold discretisation, started at rest relative to its input, which is
-    w = 0 for a record that starts at rest).
+    The creep of the DEs (Eq. 26) with k(q) in the RBF basis: ``w_j = z_j / lambda`` with z_j
+    the friction filter of :func:`friction_state` (``T_z = 1 / lambda``) of ``phi_j q_dot``.
 
     Parameters
     ----------

@@ -25,70 +25,37 @@ _VECTORS = ("g_0", "g_h", "s_g", "s_gh", "s_k")
 class RBFModel:
     """m_q q'' + d(q) z + c(q) q + F_c tanh(z/v_c) + F_0 = sum_i g_i(q) h(v_i), z' = (q' - z)/T_z.
 
-    The fitted form of Eq. 37 with optional physical backbone: the curves are the RBF sums of
-    Eq. 38 plus backbone terms (``c = Phi theta_c + k_1 + k_3 q^2 + s_c c_phys``, ``d = Phi
-    theta_d + d_v + s_d d_phys``, ``g_i = Phi theta_g,i + g_0,i + s_g,i g_phys,i``; the input
-    force may have a second order in h(v_i), ``g_h,i(q) h(v_i)^2``, :meth:`quadratic_gain`).
-    With creep (``creep_rate > 0``) the force side has the DEs' creep of Eq. 26 too, ``+ sum_j
-    theta_creep,j w_j`` with the creep states ``w_j' = phi_j(q) q' - lambda w_j`` (lambda =
-    ``creep_rate``); the state is then ``[q, q_dot, z, w_1..w_M]``. With Maxwell-slip elements
-    (``slip_width``) the force side has ``+ sum_e theta_slip,e delta_e``, the stiffnesses of
-    elements whose deflections delta_e follow q until they reach their break-away deflections
-    Delta_e (Al-Bender, Lampaert & Swevers 2005; :func:`debist.model.friction.slip_state_rate`);
-    their states follow ``z`` and the creep states. With a position-dependent inertia
-    (``theta_inertia``) the mass is ``m(q) = m_q + sum_a theta_inertia[a-1] q^a`` and the force
-    side has the Lagrangian ``1/2 m'(q) q_dot^2`` (:meth:`mass`; the curves stay forces, or
-    forces per ``m_q`` when ``m_q = 1``).
+    The fitted form of Eq. 37: RBF curves (Eq. 38) plus backbone terms, and optionally creep,
+    Maxwell-slip and inertia terms (docs/explanation/terms.md). The stored g_i follow Eq. 33 and
+    40, g_i = 1/2 dC_i/dq (docs/interpretation.md item 8).
 
     Parameters
     ----------
     basis : RBFBasis
         Centres and width; evaluation outside the range per ``basis.outside``.
-    input_map : {"v2", "v"}
-        h(v) = v^2 or v.
-    n_inputs : int
-        Number of inputs v_1..v_N.
-    m_q : float
-        Generalised mass [kg]; 1 when the curves are identified per unit mass.
-    T_z : float
-        Friction time constant [s]; 0 means z = q_dot.
+    input_map, n_inputs : {"v2", "v"}, int
+        h(v) = v^2 or v; number of inputs v_1..v_N.
+    m_q, T_z : float
+        Generalised mass [kg] (1: curves per unit mass); friction time constant [s] (0: z = q').
     coulomb_velocity : float
         v_c of the smoothed Coulomb term [unit of q / s].
     theta_c, theta_d : ndarray, shape (M,)
         RBF weights of c(q) [N/m] and d(q) [N s/m] (zeros when inactive).
-    theta_g : ndarray, shape (n_inputs, M)
-        RBF weights of g_i(q) [N/V^2 or N/V] (zeros when inactive).
+    theta_g, theta_gh : ndarray, shape (n_inputs, M)
+        RBF weights of g_i(q) [N/V^2 or N/V] and of g_h,i(q) [N/V^4] (None: no ``gh``).
     backbone : dict of str to float or list
-        ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c`` [N], ``F_0`` [N],
-        ``g_0`` (list, one per input), ``g_h`` (list, one per input: the force
-        ``g_h,i h(v_i)^2`` of the backbone term ``input_quadratic`` [N/V^4]), and the
-        scales ``s_c``, ``s_d`` [-], ``s_g`` and ``s_gh`` (one per input) of the analytical
-        curves (``s_gh``: of the full model's second order ``g_h,phys,i(q)``, the backbone
-        term ``physics_quadratic``);
-        absent terms are 0.
+        ``k_1`` [N/m], ``k_3`` [N/m^3], ``d_v`` [N s/m], ``F_c``, ``F_0`` [N], ``g_0``, ``g_h``
+        (per input) and the scales ``s_c``, ``s_d``, ``s_g``, ``s_gh`` [-]; absent terms are 0.
     q_range : tuple of float
         Range of q in the estimation data [unit of q].
     prior : PhysicsPrior or None
         The analytical model's curves ``c_phys, d_phys, g_phys`` when the backbone uses them.
-    creep_rate : float
-        Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; 0: no creep.
-    theta_creep : ndarray, shape (M,) or None
-        Weights of the creep force sum_j theta_creep,j w_j [N per unit of q] (with creep).
-    slip_width : tuple of float
-        Break-away deflections Delta_e of the Maxwell-slip elements [unit of q]; empty: none.
-    theta_slip : ndarray, shape (E,) or None
-        Their stiffnesses k_e [N per unit of q] (with slip elements).
+    creep_rate, theta_creep : float, ndarray of shape (M,) or None
+        Relaxation rate lambda of the creep states [1/s] (0: none); their weights [N/unit of q].
+    slip_width, theta_slip : tuple of float, ndarray of shape (E,) or None
+        Break-away deflections Delta_e [unit of q] (empty: none); stiffnesses k_e [N/unit of q].
     theta_inertia : ndarray, shape (N,) or None
-        Coefficients mu_a of the inertia m(q) = m_q + sum_(a=1..N) mu_a q^a [kg per unit of
-        q^a] (None: the constant m_q of Eq. 37).
-    theta_gh : ndarray, shape (n_inputs, M) or None
-        RBF weights of the input force's second order in h(v_i), ``g_h,i(q) h(v_i)^2``
-        [N/V^4 with h = v^2] (the RBF term ``gh``; :meth:`quadratic_gain`); None: none.
-
-    Notes
-    -----
-    Eq. 37 carries 1/2 in front of g while Eq. 33 and 40 do not (docs/interpretation.md item 8):
-    the stored g_i follow Eq. 33 and Eq. 40, g_i = 1/2 dC_i/dq, so dC_i/dq = 2 g_i.
+        Coefficients mu_a of m(q) = m_q + sum_a mu_a q^a [kg/unit of q^a]; None: constant m_q.
 
     References
     ----------

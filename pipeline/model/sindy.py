@@ -47,55 +47,44 @@ OPTIMIZERS = ("STLSQ", "SR3")
 class SindyConfig(SectionConfig):
     """Hyper-parameters of the SINDy baseline (the workflow's ``[compare]`` section).
 
-    Parameters
-    ----------
-    degree : int
-        Largest total degree of the polynomials in (q, q_dot).
-    input_terms : bool
-        ``True``: library P_d(q, q_dot) x [1, h(v_1), ..., h(v_N)] (input gains that
-        depend on the state, g_i(q) h(v_i)); ``False``: P_d(q, q_dot) + [h(v_1), ...,
-        h(v_N)] (constant input gains).
-    optimizer : {"STLSQ", "SR3"}
-        Sequentially thresholded ridge regression, or SR3 with an L0 penalty whose hard
-        threshold equals ``threshold`` (``reg_weight_lam = threshold**2 / 2``, nu = 1).
-    threshold : float
-        Sparsity threshold. With ``normalize_columns=True`` it is *relative* and free of
-        units and sample count: a term xi_j theta_j(q, q_dot, v) is kept only if
-        ``|xi_j| ||theta_j||_2 >= threshold ||q_ddot||_2``, i.e. if the RMS of its
-        contribution is at least ``threshold`` times the RMS of q_ddot. With
-        ``normalize_columns=False`` it is passed to pysindy unchanged and compared with the
-        raw coefficients in their own (mixed) SI units. Default 1e-3: terms contributing
-        less than 0.1 % of the acceleration are dropped.
-    alpha : float
-        Ridge weight of STLSQ, applied to unit-norm library columns when
-        ``normalize_columns=True`` (the final coefficients are refitted without ridge on
-        the selected terms, pysindy's ``unbias``). Ignored by SR3.
-    input_map : {"v2", "v"}
-        h(v) = v^2 [V^2] (DE actuators) or v [V].
-    normalize_columns : bool
-        Scale each library column to unit 2-norm before the sparse regression; needed
-        in SI units, where the columns differ by many orders of magnitude.
-
     Raises
     ------
     pydantic.ValidationError
         If a value has the wrong type or is out of range (a ``ValueError``;
         :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
 
+    Notes
+    -----
+    Each field is one key, documented under its declaration; what the threshold means with and
+    without normalised columns: docs/explanation/implementation.md.
+
     References
     ----------
-    Brunton, Proctor & Kutz 2016, PNAS, Sec. "Sparse regression" (STLSQ).
+    Brunton, Proctor & Kutz 2016, PNAS, Sec. "Sparse regression" (STLSQ); Champion et al.
+    2020, IEEE Access 8 (SR3 for SINDy).
     """
 
     SECTION: ClassVar[str] = "[compare]"
 
     degree: PositiveInt = 3
+    """Largest total degree of the polynomials in (q, q_dot)."""
     input_terms: bool = True
+    """true: library P_d(q, q_dot) x [1, h(v_1), ..., h(v_N)] (state-dependent input gains); false:
+    P_d(q, q_dot) + [h(v_1), ..., h(v_N)] (constant gains).
+    """
     optimizer: Literal["STLSQ", "SR3"] = "STLSQ"
+    """Sequentially thresholded ridge regression, or SR3 with an L0 penalty at the same threshold.
+    """
     threshold: NonNegativeFloat = 1e-3
+    """Sparsity threshold; with normalize_columns a term is kept if the RMS of its contribution is
+    at least this fraction of the RMS of q_ddot.
+    """
     alpha: NonNegativeFloat = 1e-10
+    """Ridge weight of STLSQ on unit-norm columns (ignored by SR3)."""
     input_map: Literal["v2", "v"] = "v2"
+    """h(v) = v^2 [V^2] (DE actuators) or v [V]."""
     normalize_columns: bool = True
+    """Scale each library column to unit 2-norm before the sparse regression."""
 
 
 @dataclass(frozen=True)
@@ -386,9 +375,8 @@ def fit_sindy(
     Parameters
     ----------
     q, q_dot, q_ddot : ndarray, shape (n,), or list of them (one per record)
-        Position [m], velocity [m/s] and acceleration [m/s^2]: the same estimation
-        data and derivatives as the RBF model. Records are stacked row-wise, which
-        is exact because the derivatives are given (nothing is differentiated).
+        Position [m], velocity [m/s] and acceleration [m/s^2] (the RBF model's estimation
+        data and derivatives); records are stacked row-wise.
     v : ndarray, shape (n, n_inputs) or (n,), or list of them
         Inputs [V]; the control is u = h(v).
     dt : float
@@ -396,8 +384,7 @@ def fit_sindy(
     cfg : SindyConfig
         Library and optimizer settings.
     input_units : sequence of str, optional
-        Unit of each input (``"V"``, ``"1"`` for a dimensionless one), for the legend of
-        the equation text; default V.
+        Unit of each input (``"V"``, ``"1"``) for the equation's legend; default V.
 
     Returns
     -------
@@ -407,8 +394,7 @@ def fit_sindy(
     Raises
     ------
     IdentificationError
-        If the records disagree in number or length, contain non-finite values,
-        or have fewer samples than library terms.
+        If the records disagree, contain non-finite values, or are shorter than the library.
     WorkflowError
         If ``dt`` is not positive.
     ResourceError

@@ -334,10 +334,8 @@ def force_columns(
 
     Parameters
     ----------
-    q : ndarray, shape (n,)
-        Position [unit of q].
-    z : ndarray, shape (n,)
-        Friction state [unit of q / s].
+    q, z : ndarray, shape (n,)
+        Position [unit of q] and friction state [unit of q / s].
     basis : RBFBasis
         The RBF basis (Eq. 38).
     rbf, backbone : sequence of str
@@ -347,36 +345,28 @@ def force_columns(
     prior : PhysicsPrior, optional
         The analytical model's curves (needed by the ``physics_*`` terms).
     w : ndarray, shape (n, M), optional
-        The creep states along the record [unit of q]
-        (:func:`debist.model.friction.creep_states`); given: the creep columns
-        ``creep[i]`` = w_i follow the ``d[i]``.
+        The creep states [unit of q] (:func:`debist.model.friction.creep_states`): ``creep[i]``.
     slip : ndarray, shape (n, E), optional
-        The Maxwell-slip elements' deflections along the record [unit of q]
-        (:func:`debist.model.friction.slip_states`); given: the columns ``slip[e]`` =
-        delta_e follow the creep columns.
+        The Maxwell-slip deflections [unit of q] (:func:`debist.model.friction.slip_states`).
     inertia : sequence of int, optional
-        Powers a of the position-dependent inertia: the columns ``inertia[a]`` =
-        ``q^a q'' + 1/2 a q^(a-1) q_dot^2`` follow the slip columns.
+        Powers a of the inertia: columns ``q^a q'' + 1/2 a q^(a-1) q_dot^2``.
     q_dot, q_ddot : ndarray, shape (n,), optional
-        Velocity [unit of q / s] and acceleration [unit of q / s^2] (needed with
-        ``inertia``).
+        Velocity [unit of q / s] and acceleration [unit of q / s^2] (needed with ``inertia``).
     strain : ndarray, shape (n, n_inputs), optional
-        The creep strains q_eps,i of ``physics_creep`` along the record [-]
-        (:func:`debist.model.friction.creep_states` of the prior's k_i(q) at its rate).
+        The creep strains q_eps,i of ``physics_creep`` [-].
 
     Returns
     -------
     columns : ndarray, shape (n, p_F)
         ``[Phi q, Phi z, W, q, q^3, z, tanh(z/v_c), 1, c_phys q, d_phys z]`` restricted to
-        active terms (:func:`term_table`, the one definition of the terms).
+        active terms; slip and inertia columns follow the creep columns ``W``.
     names : list of str
         One name per column (:func:`column_names`).
 
     Raises
     ------
     WorkflowError
-        If a ``physics_*`` term is active without ``prior``, or ``physics_creep`` without
-        ``strain``.
+        If a ``physics_*`` term lacks ``prior``, or ``physics_creep`` lacks ``strain``.
     """
     q = np.asarray(q, dtype=float)
     n_slip = 0 if slip is None else slip.shape[1]
@@ -482,46 +472,27 @@ def term_table(
 ) -> TermTable:
     """Build the term library of Eq. 37: one term per regressor column name, as a term table.
 
-    The one definition of the model's terms: the regressor columns of Eq. 40
-    (:meth:`~debist.model.termtable.TermTable.columns`), the NumPy and the compiled right-hand
-    sides and the refinement's parameters all come from it.
+    The one definition of the model's terms (regressor columns, right-hand sides, refinement).
 
     Parameters
     ----------
     names : sequence of str
-        Column names as :func:`force_columns` and :func:`input_columns` give them:
-        ``c[i]`` (Phi_i q), ``d[i]`` (Phi_i z), ``g<j>[i]`` (Phi_i h(v_j)), ``gh<j>[i]``
-        (Phi_i h(v_j)^2: ``input_quadratic`` as a curve of q), the backbone
-        names (``linear_spring`` q, ``cubic_spring`` q^3, ``viscous`` z, ``coulomb``
-        tanh(z/v_c), ``offset`` 1), ``input_gain<j>`` (h(v_j)), ``input_quadratic<j>``
-        (h(v_j)^2: the input force's departure from the separable g_j(q) h(v_j) of Eq. 37,
-        the full model's DE pull bending the beam off the v = 0 path, Fig. 4), ``physics_spring``
-        (c_phys q), ``physics_damping`` (d_phys z), ``physics_gain<j>`` (g_phys,j h(v_j)),
-        ``physics_quadratic<j>`` (g_h,phys,j h(v_j)^2: the full model's large-signal DE force,
-        Fig. 4), ``creep[i]`` (the creep state w_i, w_i' = Phi_i q_dot - lambda w_i, Eq. 26),
-        ``physics_creep<j>`` (k_phys,j(q) q_eps,j with the creep strain q_eps,j' =
-        k_phys,j(q) q_dot - lambda q_eps,j of the prior, Eq. 26; one state per input, after
-        the ``creep[i]`` states),
-        ``slip[e]`` (a Maxwell-slip element's deflection), ``inertia[a]`` (q^a in the mass,
-        :meth:`~debist.model.termtable.TermTableBuilder.inertia`).
+        Column names as :func:`force_columns` and :func:`input_columns` give them (``c[i]``,
+        ``d[i]``, ``g<j>[i]``, backbone and ``physics_*`` names, ``creep[i]``, ``slip[e]``,
+        ``inertia[a]``; the table: docs/explanation/terms.md).
     basis : RBFBasis
         Centres and width (Eq. 38-39); ``outside = "clip"`` holds q at the range's edge.
-    n_inputs : int
-        Number of inputs.
-    input_map_kind : {"v2", "v"}
-        h(v).
+    n_inputs, input_map_kind : int, {"v2", "v"}
+        Number of inputs; h(v).
     coulomb_velocity : float
         v_c [unit of q / s].
     prior : PhysicsPrior, optional
         The analytical curves of the ``physics_*`` terms.
     creep_rate : float, optional
-        Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s]; with ``creep[i]``
-        names every centre gets its creep state (state i has basis Phi_i).
+        Relaxation rate lambda = Y_MW / eta_MW of the creep states [1/s].
     slip_width : sequence of float, optional
-        Break-away deflections Delta_e [unit of q] of the Maxwell-slip elements, one per
-        ``slip[e]`` name (``slip[e]`` delta_e, the element stiffness k_e its weight). None
-        (default): a table for regressor columns only, whose ``slip[e]`` terms read their
-        states by index (the deflections matter only to a simulation).
+        Break-away deflections Delta_e [unit of q], one per ``slip[e]``; None: a table for
+        regressor columns only (the ``slip[e]`` terms read their states by index).
 
     Returns
     -------

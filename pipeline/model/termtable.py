@@ -128,36 +128,28 @@ class TermTable:
     base_centre, base_width : ndarray, shape (K,)
         Centre xi [unit of q] and width sigma [unit of q] of a Gaussian basis.
     base_lo, base_hi : ndarray, shape (K,)
-        A Gaussian basis is evaluated at q clipped to ``[lo, hi]`` (``-inf, inf``: not
-        clipped).
+        A Gaussian basis is evaluated at q clipped to ``[lo, hi]`` (``-inf, inf``: not clipped).
     base_table : ndarray of int, shape (K,)
         Row of ``tables`` of a tabulated basis.
-    table_q : ndarray, shape (G,)
-        Ascending grid of the tables [unit of q] (length 1 when there are none).
-    tables : ndarray, shape (T, G)
-        Tabulated curves on ``table_q``, interpolated linearly and held outside the grid.
-    term_base : ndarray of int, shape (J,)
-        Basis of each term.
-    term_qpow : ndarray of int, shape (J,)
-        Power ``a_j >= 0`` of q.
+    table_q, tables : ndarray, shapes (G,) and (T, G)
+        Ascending grid [unit of q] and tabulated curves (linear, held outside the grid).
+    term_base, term_qpow : ndarray of int, shape (J,)
+        Basis of each term; its power ``a_j >= 0`` of q.
     term_skind, term_spow : ndarray of int, shape (J,)
         Velocity factor of each term (:data:`S_ONE`, :data:`S_POW` with power ``term_spow``,
         :data:`S_TANH`, :data:`S_CREEP` with state ``term_spow`` of ``[w, delta]``,
         :data:`S_ACC` for an inertia term: constant basis, ``a_j >= 1``, no inputs).
     term_hpow : ndarray of int, shape (J, n_inputs)
         Powers ``c_ji >= 0`` of the mapped inputs.
-    input_map : {"v2", "v"}
-        h(v) = v^2 [V^2] or v [V].
-    coulomb_velocity : float
-        v_c of the ``tanh`` factor [unit of q / s].
+    input_map, coulomb_velocity : {"v2", "v"}, float
+        h(v) = v^2 [V^2] or v [V]; v_c of the ``tanh`` factor [unit of q / s].
     creep_base : ndarray of int, shape (C,)
         Basis of each creep state, ``w_k' = b_(creep_base[k])(q) q_dot - lambda w_k``
         [unit of q] (empty: no creep states).
     creep_rate : float
         The creep states' relaxation rate lambda = Y_MW / eta_MW [1/s].
     slip_width : ndarray, shape (E,)
-        Break-away deflections Delta_e of the Maxwell-slip elements [unit of q] (empty: none);
-        their states follow the C creep states.
+        Break-away deflections Delta_e of the Maxwell-slip elements [unit of q] (empty: none).
 
     References
     ----------

@@ -388,9 +388,7 @@ def simulate(
         Times of input discontinuities [s].
     method : str
         A stiff :func:`solve_ivp` method: ``"BDF"`` (default) or ``"Radau"``, both with the
-        approximate Jacobian of :meth:`FullModel.jac`, or ``"LSODA"``. On the switching
-        profile of Fig. 7 BDF with ``rtol = 1e-6`` is within 0.1 um of an LSODA solution with
-        ``rtol = 1e-8`` at a third of the cost of Radau.
+        approximate Jacobian of :meth:`FullModel.jac`, or ``"LSODA"``.
     rtol, atol : float
         Tolerances; ``atol`` applies to the states scaled to metres (``q_m`` times
         ``[l^2, l^3, l^4, 1]``, the same for the velocities [m/s]) and to ``q_eps`` [-].

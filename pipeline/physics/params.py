@@ -39,75 +39,15 @@ V_MAX = 3.0e3
 class PrototypeParams(SectionConfig):
     """Geometry and material parameters of the bistable DE actuator, SI units.
 
-    Parameters
+    Each field is one key of the ``[physics]`` workflow section, documented under its
+    declaration; what an asymmetry ``dz_1``, ``dz_2`` does: docs/explanation/implementation.md.
+
+    Attributes
     ----------
-    epsilon_0 : float
-        Vacuum permittivity [F/m].
-    epsilon_r : float
-        Relative permittivity of the elastomer [-].
-    n : float
-        Number of DE layers per actuator [-].
-    d_0 : float
-        Thickness of one layer, undeformed [m].
-    l_0 : float
-        Length of a DE strip, undeformed [m].
-    A_0 : float
-        Area of one layer, undeformed [m^2].
-    Y : float
-        Neo-Hookean modulus of the DE (Eq. 11) [Pa].
-    Y_MW : float
-        Modulus of the Maxwell element (Eq. 12) [Pa].
-    eta_MW : float
-        Viscosity of the Maxwell element (Eq. 12) [Pa s].
-    eta_v : float
-        Kelvin-Voigt viscosity of the DE (Eq. 12) [Pa s].
-    beta : float
-        Electrode area / DE area (Eq. 11) [-]; 1 by default (docs/interpretation.md item 4).
-    V_DE : float or None
-        Volume of one DE actuator [m^3]; ``None`` means ``n * d_0 * A_0``
-        (docs/interpretation.md item 4).
-    l : float
-        Beam length [m].
-    A : float
-        Beam cross-section [m^2].
-    I : float
-        Second moment of area of the beam cross-section [m^4].
-    E : float
-        Young's modulus of the beam [Pa]; 2.1 GPa with the 1/2 on the bending term
-        (docs/interpretation.md items 2 and 3).
-    rho : float
-        Density of the beam [kg/m^3].
-    eta : float
-        Viscosity of the beam (Eq. 12) [Pa s].
-    a : float
-        Half width of the upper frame: horizontal offset of the DE upper ends from the beam
-        tip [m].
-    b : float
-        Pre-strain screw position (Eq. 4); the DE upper ends sit ``b - a_0`` below the tip [m].
-    b_max : float
-        Reference screw position of Eq. 17, ``z_b = b_max - b`` [m].
-    e_x : float
-        Height of the fixed DE ends above the beam clamp [m].
-    e_z : float
-        Horizontal offset of the fixed DE ends from the beam axis [m].
-    a_0 : float
-        Vertical offset of the frame joint in Eq. 5 [m].
-    m : float
-        Moving mass of the upper frame, lumped at the beam tip [kg].
-    g : float
-        Gravitational acceleration [m/s^2].
-    dz_1, dz_2 : float
-        Geometric asymmetry: horizontal offsets of the fixed (lower) ends of DE 1 (left) and
-        DE 2 (right) from their nominal positions ``-e_z`` and ``+e_z``, positive to the
-        right [m]; signed, 0 by default (the symmetric prototype of the paper). A bearing
-        (beam clamp) mounted ``delta`` to the right of its nominal position is equivalent to
-        ``dz_1 = dz_2 = -delta`` (only relative positions enter the energy; the tip
-        displacement ``q`` is then measured from the clamp). The mirror image of offsets
-        ``(dz_1, dz_2)`` is ``(-dz_2, -dz_1)``: the symmetric part ``dz_1 - dz_2`` only changes
-        the pre-stretch (the DE upper ends sit outside the anchors, ``a > e_z``, so anchors
-        moved inwards stretch both DEs more), the antisymmetric part ``dz_1 + dz_2 > 0``
-        favours the right well (its ``|q|`` grows, the left one's shrinks); at b = 23 mm a
-        bearing offset of about 0.4 mm already removes one well.
+    C_0 : float
+        Capacitance of an undeformed DE [F] (Eq. 11).
+    z_b : float
+        Displacement parameter ``b_max - b`` [m] (Eq. 17).
 
     Raises
     ------
@@ -133,33 +73,67 @@ class PrototypeParams(SectionConfig):
     SECTION: ClassVar[str] = "[physics]"
 
     epsilon_0: PositiveFloat = 8.854e-12
+    """Vacuum permittivity [F/m]."""
     epsilon_r: PositiveFloat = 2.8
+    """Relative permittivity of the elastomer [-]."""
     n: PositiveFloat = 8.0
+    """Number of DE layers per actuator [-]."""
     d_0: PositiveFloat = 50e-6
+    """Thickness of one layer, undeformed [m]."""
     l_0: PositiveFloat = 51e-3
+    """Length of a DE strip, undeformed [m]."""
     A_0: PositiveFloat = 1326e-6
+    """Area of one layer, undeformed [m^2]."""
     Y: PositiveFloat = 1.2e6
+    """Neo-Hookean modulus of the DE (Eq. 11) [Pa]."""
     Y_MW: NonNegativeFloat = 0.31e6
+    """Modulus of the Maxwell element (Eq. 12) [Pa]."""
     eta_MW: NonNegativeFloat = 83.5e3
+    """Viscosity of the Maxwell element (Eq. 12) [Pa s]."""
     eta_v: NonNegativeFloat = 0.3e3
+    """Kelvin-Voigt viscosity of the DE (Eq. 12) [Pa s]."""
     beta: PositiveFloat = 1.0
+    """Electrode area / DE area (Eq. 11) [-] (docs/interpretation.md item 4)."""
     V_DE: PositiveFloat | None = None
+    """Volume of one DE actuator [m^3]; None means n * d_0 * A_0 (docs/interpretation.md item 4).
+    """
     l: PositiveFloat = 90e-3  # noqa: E741
+    """Beam length [m]."""
     A: PositiveFloat = 11e-6
+    """Beam cross-section [m^2]."""
     I: PositiveFloat = 1.1e-12  # noqa: E741
+    """Second moment of area of the beam cross-section [m^4]."""
     E: PositiveFloat = 2.1e9
+    """Young's modulus of the beam [Pa], with the 1/2 on the bending term (docs/interpretation.md
+    items 2 and 3).
+    """
     rho: PositiveFloat = 1.2e3
+    """Density of the beam [kg/m^3]."""
     eta: NonNegativeFloat = 3.64e6
+    """Viscosity of the beam (Eq. 12) [Pa s]."""
     a: PositiveFloat = 32e-3
+    """Half width of the upper frame: horizontal offset of the DE upper ends from the beam tip [m].
+    """
     b: PositiveFloat = 23e-3
+    """Pre-strain screw position (Eq. 4); the DE upper ends sit b - a_0 below the tip [m]."""
     b_max: PositiveFloat = 30e-3
+    """Reference screw position of Eq. 17, z_b = b_max - b [m]."""
     e_x: NonNegativeFloat = 7e-3
+    """Height of the fixed DE ends above the beam clamp [m]."""
     e_z: NonNegativeFloat = 16e-3
+    """Horizontal offset of the fixed DE ends from the beam axis [m]."""
     a_0: NonNegativeFloat = 11e-3
+    """Vertical offset of the frame joint in Eq. 5 [m]."""
     m: NonNegativeFloat = 40e-3
+    """Moving mass of the upper frame, lumped at the beam tip [kg]."""
     g: NonNegativeFloat = 9.81
+    """Gravitational acceleration [m/s^2]."""
     dz_1: FiniteFloat = 0.0
+    """Horizontal offset of DE 1's fixed end from -e_z, positive to the right [m]; 0: the symmetric
+    prototype.
+    """
     dz_2: FiniteFloat = 0.0
+    """Horizontal offset of DE 2's fixed end from +e_z, positive to the right [m]."""
 
     def __post_init__(self) -> None:
         if self.V_DE is None:

@@ -158,17 +158,11 @@ def solve_segments(
     breakpoints : sequence of float
         Times of input discontinuities [s]; those outside ``t_span`` are ignored.
     **options
-        ``method`` (default ``"RK45"``): a :func:`scipy.integrate.solve_ivp` method, and the
-        other options are passed to ``solve_ivp`` (``rtol``, ``atol``, ``jac``, ``args``,
-        ...); or ``"odeint"`` (:data:`ODEINT`): :func:`scipy.integrate.odeint` (LSODA,
-        automatic switching between Adams and BDF) with ``rtol``, ``atol`` (scalar or per
-        state), ``jac`` (a callable ``jac(t, x, *args)`` returning ``d fun_i / d x_j``,
-        shape (n_states, n_states); without it LSODA differences), ``args``,
-        ``first_step``, ``max_step`` and ``odeint``'s own keywords (``mxstep``, default
-        :data:`ODEINT_MXSTEP` steps per output interval, ``mxords``, ...). Without
-        ``rtol``/``atol`` each integrator keeps its own defaults (``solve_ivp`` 1e-3/1e-6,
-        ``odeint`` 1.49e-8 for both). ``odeint`` never steps beyond a segment's end
-        (``tcrit``); ``solve_ivp`` methods never do either.
+        ``method`` (default ``"RK45"``): a :func:`scipy.integrate.solve_ivp` method, the
+        other options passed to it; or :data:`ODEINT`: :func:`scipy.integrate.odeint`
+        (LSODA) with ``rtol``, ``atol``, ``jac(t, x, *args)`` (shape (n_states, n_states)),
+        ``args``, ``first_step``, ``max_step`` and its own keywords (``mxstep``, default
+        :data:`ODEINT_MXSTEP`). No step crosses a segment's end.
 
     Returns
     -------

@@ -417,11 +417,9 @@ def equilibria(
 ) -> tuple[Equilibrium, ...]:
     """All physical equilibria of Eq. 15 for given pre-strain, voltages and load, sorted by ``q``.
 
-    Starting points are the sign changes of ``F_v(q) - F`` along the continuation path on
-    ``[-q_max, q_max]``, the straight beam, cantilever-like shapes at ``q = +-5 ... +-20 mm``
-    and the given ``starts``. Each is refined by Newton's method on Eq. 15; converged solutions
-    are deduplicated and those with a slack DE (``lambda_1 < 1``, docs/interpretation.md
-    item 5) are dropped.
+    Newton's method on Eq. 15 from the sign changes along the continuation path, the
+    straight beam, cantilever-like shapes and ``starts``; equilibria with a slack DE
+    (``lambda_1 < 1``, docs/interpretation.md item 5) are dropped.
 
     Parameters
     ----------
@@ -519,9 +517,8 @@ def switching_voltage(
     DE 1 (left) pushes the beam towards ``+q``: its threshold is the lowest ``v1`` (with
     ``v2 = 0``, no load) at which every stable equilibrium of Eq. 15 has ``q > 0``, so the
     left well is gone and the beam must snap to the right; DE 2 the same towards ``-q``.
-    Found by bisection on ``[0, v_max]`` (each step one :func:`equilibria` call); static and
-    without friction, so a slow ramp switches a real prototype at about this voltage, and
-    creep or a resonance lower (Sec. 3.3.4, Fig. 3).
+    Found by bisection on ``[0, v_max]``; static and without friction (creep or a resonance
+    switch lower).
 
     Parameters
     ----------
@@ -529,10 +526,8 @@ def switching_voltage(
         Prototype parameters (its anchor offsets ``dz_1``, ``dz_2`` included).
     de : {1, 2}
         The DE whose voltage rises.
-    v_max : float
-        Upper end of the search [V]; default the converters' 3 kV.
-    tol : float
-        Width of the final bracket [V].
+    v_max, tol : float
+        Upper end of the search [V] (default 3 kV); width of the final bracket [V].
     F : float
         Constant horizontal tip force [N] (as :func:`equilibria`); default no load.
 
@@ -549,8 +544,7 @@ def switching_voltage(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 15, Section 3.3.4 and Fig. 3 (the switching limit of the
-    operating range).
+    Masoud & Maas 2025, Eq. 15, Section 3.3.4 and Fig. 3 (the switching limit).
 
     Examples
     --------

@@ -249,7 +249,7 @@ def replicate_band(
     -----
     The band is the scatter of the estimate alone (no model error), so it is never
     labelled a prediction interval: the label gives the share of this record's measured q it
-    holds (on the virtual rig 28-71 %).
+    holds.
 
     References
     ----------

@@ -469,12 +469,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     str
         ``"unstable: ..."``, ``"diverged: ..."``, ``"not better than the mean ..."``,
         ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
-        ``"fragile: ..."`` (the 97.5th percentile of the NRMSE(q) of the model's bootstrap
-        replicates, :func:`debist.validate.freerun.replicate_spread`, is poor: more than 2.5 % of
-        them lose the motion), ``"worse than <model> (x %)"``,
-        or ``"ok"``; the last three may combine. A row whose ``under_excited`` names why the
-        estimation data cannot separate the model's terms (a single line, one period) starts
-        with ``"under-excited: <why>"``, which replaces ``"ok"``.
+        ``"fragile: ..."`` (more than 2.5 % of the bootstrap replicates lose the motion),
+        ``"worse than <model> (x %)"``, or ``"ok"``; the last three may combine. A row with
+        ``under_excited`` starts with ``"under-excited: <why>"``, which replaces ``"ok"``.
 
     Examples
     --------
@@ -493,7 +490,6 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
     ...          "under_excited": "one spectral line at 2 Hz in 'a'"})
     "under-excited: one spectral line at 2 Hz in 'a'"
-
     """
     words = _verdict(row, rows)
     thin = row.get("under_excited")

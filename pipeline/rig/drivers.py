@@ -62,43 +62,31 @@ def uniform_grid(t_ref: ArrayLike, name: str = "t_ref") -> tuple[NDArray[np.floa
 class DriverOutput:
     """Output voltage of one HV driver for a zero-order-hold reference.
 
-    The driver follows its reference ``r`` with a first-order lag and a slew-rate limit,
-
-        dv/dt = clip((r(t) - v) / tau, -slew, slew),
-
-    ``r`` clipped to ``[0, v_max]``, so ``v`` stays in ``[0, v_max]``. The solution is
-    piecewise analytic. Within a hold interval that starts with ``|r - v| <= slew tau`` the
-    limit is never reached and ``v`` relaxes exponentially towards ``r_k``: the exact ZOH
-    discretisation of the lag, ``v_{k+1} = a v_k + (1 - a) r_k`` with ``a = exp(-hold / tau)``
-    (run as a recursive filter, :func:`scipy.signal.lfilter`). An interval that starts with
-    ``|r_k - v_k| > slew tau`` begins with a ramp at ``+-slew`` that lasts
-    ``t_c = (|r_k - v_k| - slew tau) / slew`` (or the whole interval), after which the lag
-    continues from ``r_k -+ slew tau`` (the clip is continuous there, so this is the exact
-    solution).
+    The driver follows its reference with a first-order lag and a slew-rate limit,
+    ``dv/dt = clip((r(t) - v) / tau, -slew, slew)``, ``r`` clipped to ``[0, v_max]``; the
+    solution is piecewise analytic (exact ZOH lag, slew-limited ramps):
+    docs/explanation/implementation.md.
 
     Parameters
     ----------
     t_ref : array_like, shape (n,)
         Uniform sample times of the reference [s]; sample ``k`` holds on
-        ``[t_ref[k], t_ref[k] + hold)``, the last one until ``t_ref[-1] + hold``.
+        ``[t_ref[k], t_ref[k] + hold)``.
     r : array_like, shape (n,)
         Reference voltage [V].
-    tau : float
-        Lag time constant [s].
-    slew : float
-        Slew-rate limit [V/s].
+    tau, slew : float
+        Lag time constant [s]; slew-rate limit [V/s].
     v0 : float
         Output at ``t_ref[0]`` [V] (also returned before it).
     v_max : float
-        Largest output [V]; the reference is clipped to ``[0, v_max]``.
+        Largest output [V].
 
     Attributes
     ----------
     knots : ndarray, shape (n + 1,)
         Output at ``t_ref[0] + k hold``, ``k = 0..n`` [V].
     ramp : ndarray, shape (n,)
-        Duration ``t_c`` of the slew-limited ramp at the start of each hold interval [s]
-        (0 where the interval starts within ``slew tau`` of its reference).
+        Duration of the slew-limited ramp at the start of each hold interval [s].
     n_slew : int
         Number of slew-limited hold intervals.
 

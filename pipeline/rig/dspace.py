@@ -10,45 +10,20 @@ one struct variable (``Recording1`` by default) with the fields
     1 x k struct array of time bases ("rasters"): ``Name = "Time"``, ``Type = "Time"``,
     ``Raster`` (e.g. ``"Periodic Task 1"``), ``Data`` (1 x n) [s], ``Unit = "s"``.
 ``Y``
-    1 x m struct array of channels: ``Name`` (the full block path, e.g.
-    ``"Model Root/Sensors/Laser/q"``), ``Type = "Value"``, ``Raster`` (the name of its
-    time base), ``Data`` (1 x n), ``Unit``.
+    1 x m struct array of channels: ``Name`` (the full block path), ``Type = "Value"``,
+    ``Raster`` (the name of its time base), ``Data`` (1 x n), ``Unit``.
 
-Build the nested value with :func:`recording` from :class:`Channel` objects and write it
-with :func:`write_recording`; :func:`write_mat` writes any variables of the same kinds
-(nested dicts, lists of dicts, strings, numeric arrays).
-
-Notes
------
-MAT v5 is written by :func:`scipy.io.savemat` (zlib-compressed) into memory; the 116-byte
-header text is then replaced so that it carries ``created`` instead of the wall-clock time.
-MAT v7.3 is written with h5py in MATLAB's layout: a 512-byte user block holding the MAT
-header (version ``0x0200``), ``MATLAB_class`` attributes, char arrays as ``uint16``
-UTF-16 code units (``MATLAB_int_decode = 2``), empty strings as ``MATLAB_empty`` datasets
-of their dimensions, a struct as a group with ``MATLAB_fields``, a struct array as a group
-whose fields are (k, 1) datasets of object references into ``#refs#`` (named ``a``, ``b``,
-... as MATLAB does; ``#refs#/a`` is MATLAB's canonical empty), numeric arrays as
-``double`` with the dimensions reversed.
-
-Byte stability: the same input gives a byte-identical file for the same versions of
-scipy/zlib (v5) and of h5py/HDF5 (v7.3). Nothing time-dependent is stored: the header's
-"Created on" is the ``created`` argument, and HDF5 object timestamps are off
-(``track_times=False`` on every dataset and group). Other library versions may encode the
-same content with different bytes (zlib compression, HDF5 metadata layout); the decoded
-content is the same.
-
-Atomicity: the file is written to a temporary file ``.<name>.<random>.tmp`` in the target
-folder, flushed to disk (``fsync``), then moved over the target with :func:`os.replace`.
-A failure at any point removes the temporary file and leaves an existing target
-untouched; readers never see a partial file.
+Build the nested value with :func:`recording` and write it with :func:`write_recording`;
+the same input gives a byte-identical file for the same library versions, and a failed
+write leaves an existing target untouched. The layout written:
+docs/explanation/implementation.md.
 
 References
 ----------
-dSPACE GmbH, "ControlDesk Measurement and Recording": MAT-file export of recordings
-(struct with fields ``X``, ``Y``, ``Description``). The MathWorks, "MAT-File Format"
-(Level 5 MAT-file header, 128 bytes) and "MAT-File Versions" (version 7.3 files use HDF5,
-with the MAT header in a 512-byte user block). The HDF Group, "HDF5 File Format
-Specification", user block and object modification times.
+dSPACE GmbH, "ControlDesk Measurement and Recording": MAT-file export of recordings.
+The MathWorks, "MAT-File Format" (Level 5 header, 128 bytes) and "MAT-File Versions"
+(7.3 is HDF5 with the MAT header in a 512-byte user block). The HDF Group, "HDF5 File
+Format Specification" (user block, object modification times).
 """
 
 from __future__ import annotations
@@ -473,22 +448,19 @@ def write_recording(
         The value of :func:`recording` (``X`` and ``Y`` required, ``Description`` optional).
     version : {"5", "7.3"}
         MAT file version; :func:`debist.ingest.load.load_rig_log` reads both alike.
-    variable : str
-        Name of the struct variable, ControlDesk's default ``"Recording1"``.
-    created : str
-        Header timestamp, e.g. ``"Fri Nov 21 12:00:00 2025"`` (see :func:`write_mat`).
+    variable, created : str
+        Name of the struct variable (``"Recording1"``); header timestamp (:func:`write_mat`).
 
     Returns
     -------
     Path
-        ``path``.
 
     Raises
     ------
     ValueError
         ``recording`` without ``X`` or ``Y``, or see :func:`write_mat`.
     OSError
-        The file cannot be written (an existing target is then untouched).
+        The file cannot be written (an existing target is untouched).
 
     References
     ----------
@@ -496,7 +468,7 @@ def write_recording(
 
     Examples
     --------
-    >>> import numpy as np, tempfile, pathlib
+    >>> import tempfile, pathlib
     >>> t = np.arange(5) * 1e-3
     >>> rec = recording([Channel("Model Root/Laser/q", 2 * t, "mm", "Periodic Task 1")],
     ...                 {"Periodic Task 1": t})

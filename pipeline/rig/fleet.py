@@ -119,15 +119,10 @@ def make_fleet(
 ) -> list[RigParams]:
     """Draw ``n`` prototypes scattered around a nominal rig, all bistable and switchable.
 
-    Each member draws, in this order from ``numpy.random.default_rng(seed)``: the pre-strain
-    ``b`` and the anchor offsets ``dz_1``, ``dz_2`` (normal about the nominal values), then
-    the slip forces and stiffnesses of the friction elements (lognormal, median = nominal).
-    A draw that fails :func:`is_bistable_and_switchable` is rejected and redrawn, so the
-    fleet's distribution is the scatter truncated to working prototypes (with the default
-    spreads about one draw in five is rejected (7 of 40 for seed 0), all for an asymmetry
-    ``|dz_1 + dz_2|`` of 0.4-1 mm that removes a well or its margin; larger ``b``, less
-    pre-stretch, tolerates less). The same seed gives the same
-    fleet; the first ``m`` members do not depend on ``n``.
+    Each member draws from ``numpy.random.default_rng(seed)``: the pre-strain ``b`` and the
+    anchor offsets ``dz_1``, ``dz_2`` (normal), then the friction elements' slip forces and
+    stiffnesses (lognormal, median = nominal). A draw that fails
+    :func:`is_bistable_and_switchable` is redrawn. The first ``m`` members do not depend on ``n``.
 
     Parameters
     ----------
@@ -136,13 +131,11 @@ def make_fleet(
     seed : int
         Seed of the scatter.
     nominal : RigParams, optional
-        Centre of the scatter; default :class:`RigParams` with the paper's symmetric
-        prototype (``PrototypeParams.paper()``, b = 23 mm, ``dz_1 = dz_2 = 0``) and the
-        default friction, drivers and sensors.
+        Centre of the scatter; default the paper's symmetric prototype (b = 23 mm) on the
+        default rig.
     scatter : Mapping[str, float], optional
-        Spreads overriding :data:`DEFAULT_SCATTER` by name: ``"b"``, ``"dz_1"``, ``"dz_2"``
-        (standard deviations [m]), ``"friction_F"``, ``"friction_k"`` (log-standard
-        deviations [-]); 0 disables a scatter.
+        Spreads overriding :data:`DEFAULT_SCATTER`: ``"b"``, ``"dz_1"``, ``"dz_2"`` [m],
+        ``"friction_F"``, ``"friction_k"`` (log-standard deviations [-]); 0 disables one.
     max_draws : int
         Draws per member before giving up.
 
@@ -154,11 +147,9 @@ def make_fleet(
     Raises
     ------
     WorkflowError
-        If ``n`` is negative or not an integer, a scatter name is unknown or a spread
-        negative or not finite.
+        If ``n`` is negative or not an integer, a scatter name is unknown or a spread invalid.
     FleetError
-        If a member is not found within ``max_draws`` draws (the spreads are too large or
-        the nominal prototype does not work).
+        If a member is not found within ``max_draws`` draws.
 
     References
     ----------

@@ -34,80 +34,17 @@ def _default_prototype() -> PrototypeParams:
 class RigParams(SectionConfig):
     """The simulated prototype and the rig around it, SI units.
 
-    Parameters
-    ----------
-    prototype : PrototypeParams
-        The physics of the prototype (Table 1 read as docs/interpretation.md items 1-6) with its
-        asymmetry;
-        default the paper's prototype at b = 23 mm with ``dz_1 = 0.15 mm``,
-        ``dz_2 = 0.05 mm`` (assembly tolerance of a 3D-printed frame; wells at -9.50 and
-        +10.99 mm, still switchable by 3 kV on either DE).
-    model : {"full", "reduced"}
-        The mechanics of the plant: ``"full"`` (default) the full model of Sec. 3
-        (:class:`debist.rig.plant.RigPlant`, Eq. 19-23), whose DE force is not of the
-        separable form ``g_i(q) v_i^2`` of Eq. 37; ``"reduced"`` the reduced one-coordinate
-        model of Eq. 24-26 of the same prototype (:class:`debist.rig.reduced.ReducedPlant`),
-        whose true curves ``f(q)``, ``d(q)``, ``g_i(q)`` are exactly those of Eq. 37. Both
-        have the same friction, drivers and sensors.
-    friction_k : tuple of float
-        Stiffnesses ``k_i`` of the Maxwell-slip elements at the beam tip [N/m]; default
-        (40, 12, 4) N/m: pre-sliding distances ``F_i / k_i`` of 10, 50 and 250 um, a tangent
-        stiffness after a reversal of 56 N/m against the 13 N/m of the wells.
-    friction_F : tuple of float
-        Slip forces ``F_i`` of the elements [N]; default (0.4, 0.6, 1.0) mN, a breakaway
-        force of 2 mN: 2 % of the +-80 mN force span over +-15 mm of Fig. 4 and 6 % of the
-        36 mN barrier, so friction perturbs the model without changing its switching. The
-        paper does not quantify friction; these are plausible values for a rubbing frame.
-    friction_c : float
-        Viscous part of the tip friction [N s/m]; 0 by default (the model's own damping,
-        Eq. 12, is in the prototype).
-    friction_exponent : float
-        Sharpness ``p`` of the regularised stick-slip transition (>= 1; large = ideal
-        elasto-plastic elements, see :class:`RigPlant`).
-    driver_tau : float
-        Time constant of the first-order lag of each HV driver [s]; default 5 ms.
-    driver_slew : float
-        Slew-rate limit of each HV driver [V/s]; default 100 kV/s (30 ms for 0 -> 3 kV).
-    sensor_range : float
-        Measuring range of the laser sensor, ``+-sensor_range`` about q = 0 [m]; default
-        25 mm.
-    sensor_resolution : float
-        Quantisation step of the laser sensor [m]; default 0.3 um; 0 disables quantisation.
-    sensor_noise : float
-        RMS of the white noise of one internal laser sample [m]; default 1 um. The FIR of
-        the decimation removes the part above the log's Nyquist frequency, so the logged
-        noise is about ``sensor_noise / sqrt(oversample)``.
-    monitor_noise : float
-        RMS of the white noise of one internal sample of the voltage monitors [V]; default
-        2 V (0.07 % of 3 kV).
-    oversample : int
-        Internal samples per log sample (sensors and plant output on the grid
-        ``sample_time / oversample``); default 10.
-    gain_1, gain_2 : float
-        Electrostatic gain of DE 1 and DE 2 against the prototype's [-]: the DE force is
-        ``gain_i`` times the prototype's at the same voltage (a membrane whose permittivity or
-        electrode area differs by that factor); default 1.
-    force_offset : float
-        Constant horizontal force on the tip [N], positive towards +q (a tilted mount, a
-        cable); default 0.
-    sensor_offset : float
-        Zero offset of the laser [m]: it reads ``q + sensor_offset`` (the range is about its
-        own zero); default 0.
-    sensor_average : int
-        0 (default): the laser and the monitors are decimated by a zero-phase FIR (the rig's
-        anti-aliasing). ``N >= 1``: the logger stores the trailing mean of the laser's last
-        ``N`` internal samples (a moving-average FIR with a group delay of ``(N - 1) / 2``
-        internal samples) and the monitors' values at the log instants (point samples).
-    sensor_lag : float
-        Time constant of a first-order lag of the laser's output [s], applied on the internal
-        grid before the logger; default 0 (none).
-
     Raises
     ------
     pydantic.ValidationError
         If a value is of the wrong type, not finite or out of range, or the friction tuples
         differ in length (a ``ValueError``; :meth:`from_dict` and :meth:`replace` raise a
         ``WorkflowError`` naming the key).
+
+    Notes
+    -----
+    Each field is one key of the ``[rig]`` workflow section, documented under its declaration.
+    Where the defaults come from: docs/explanation/calibration.md.
 
     References
     ----------
@@ -126,24 +63,54 @@ class RigParams(SectionConfig):
     SECTION: ClassVar[str] = "[rig.plant]"
 
     prototype: PrototypeParams = field(default_factory=_default_prototype)
+    """The physics of the prototype (Table 1, docs/interpretation.md items 1-6) with its asymmetry;
+    default the paper's prototype with dz_1 = 0.15 mm, dz_2 = 0.05 mm.
+    """
     model: Literal["full", "reduced"] = "full"
+    """The plant's mechanics: "full", the model of Sec. 3 (Eq. 19-23), or "reduced", the
+    one-coordinate model of Eq. 24-26, exact in the form of Eq. 37.
+    """
     friction_k: Annotated[tuple[PositiveFloat, ...], AsTuple] = (40.0, 12.0, 4.0)
+    """Stiffnesses k_i of the Maxwell-slip elements at the beam tip [N/m]."""
     friction_F: Annotated[tuple[PositiveFloat, ...], AsTuple] = (0.4e-3, 0.6e-3, 1.0e-3)
+    """Slip forces F_i of the elements [N]."""
     friction_c: NonNegativeFloat = 0.0
+    """Viscous part of the tip friction [N s/m] (the model's own damping, Eq. 12, is in the
+    prototype).
+    """
     friction_exponent: Annotated[float, Field(ge=1)] = 4.0
+    """Sharpness p of the regularised stick-slip transition (>= 1; large: ideal elasto-plastic
+    elements).
+    """
     driver_tau: PositiveFloat = 5e-3
+    """Time constant of the first-order lag of each HV driver [s]."""
     driver_slew: PositiveFloat = 100e3
+    """Slew-rate limit of each HV driver [V/s]."""
     sensor_range: PositiveFloat = 25e-3
+    """Measuring range of the laser sensor, +-sensor_range about q = 0 [m]."""
     sensor_resolution: NonNegativeFloat = 0.3e-6
+    """Quantisation step of the laser sensor [m]; 0: none."""
     sensor_noise: NonNegativeFloat = 1e-6
+    """RMS of the white noise of one internal laser sample [m]."""
     monitor_noise: NonNegativeFloat = 2.0
+    """RMS of the white noise of one internal sample of the voltage monitors [V]."""
     oversample: PositiveInt = 10
+    """Internal samples per log sample (sensors and plant output)."""
     gain_1: Annotated[float, Field(gt=0, le=10)] = 1.0
+    """Electrostatic gain of DE 1 against the prototype's [-] (its force at the same voltage).
+    """
     gain_2: Annotated[float, Field(gt=0, le=10)] = 1.0
+    """Electrostatic gain of DE 2 against the prototype's [-]."""
     force_offset: FiniteFloat = 0.0
+    """Constant horizontal force on the tip [N], positive towards +q."""
     sensor_offset: FiniteFloat = 0.0
+    """Zero offset of the laser [m]: it reads q + sensor_offset."""
     sensor_average: Annotated[int, Field(ge=0, le=1000)] = 0
+    """0: anti-aliasing FIR and decimation; N >= 1: the trailing mean of the laser's last N
+    internal samples, the monitors point-sampled.
+    """
     sensor_lag: NonNegativeFloat = 0.0
+    """Time constant of a first-order lag of the laser's output [s]; 0: none."""
 
     def __post_init__(self) -> None:
         if self.sensor_average > 10 * self.oversample:

@@ -1,41 +1,11 @@
 """Excitation profiles of the virtual rig: reference voltages of DE 1 (left) and DE 2 (right).
 
-A profile is a pair of reference voltages ``r1``, ``r2`` sampled on the uniform grid of the
-rig's DAC (zero-order hold, interval ``hold``). Six profiles are defined, the first five built as a
-sequence of episodes "sub-threshold block -> switching pulse -> free ring-down", with
-the pulses alternating between DE 1 (the beam moves to the right well) and DE 2 (back to the
-left well); the beam starts in the left well (the paper's experiment starts at q = -10 mm):
-
-``identification``
-    The broad-band training profile of Fig. 11a: band-limited random voltages on both DEs
-    between the pulses, rectangular pulses of three lengths.
-``validation``
-    Unseen data for the cross-validation of Fig. 15: chirps, staircases, triangles and a
-    multisine between trapezoidal, rectangular and shorter pulses, at other times.
-``staircase``
-    A richer identification profile (75 s): both voltages held on a grid of levels in each
-    well until the beam settles (the DE pushing towards the barrier up to ``v_sub``, the
-    one pushing deeper up to 3 kV), and pulses of three heights, so that ``g_i(q) v_i^2``
-    is excited at several ``v_i^2`` over a few mm around each well.
-``steps``
-    Random sub-threshold voltage steps on both DEs between the pulses.
-``sweep``
-    Logarithmic sine sweeps on one DE at a time between the pulses.
-``sine``
-    One frequency only, as a base-excited or single-tone experiment: DE 1 driven by a raised
-    cosine below the switching threshold (the beam stays in its well), or, with
-    ``switching = true``, both DEs in antiphase up to ``v_max`` (the beam switches twice a
-    period). The data then hold one spectral line of q: the case in which stiffness, mass
-    and damping cannot be told apart.
-
-The sub-threshold blocks keep both voltages below ``v_sub`` (default 1 kV; in the staircase
-profile the DE that pushes the beam deeper into its well goes higher, as it cannot switch). The
-electrostatic force is ``g_i(q) v_i^2`` (Eq. 37), so every block has a non-zero offset:
-``v = v0 + u`` gives ``v^2 = v0^2 + 2 v0 u + u^2``, a force linear in the excitation ``u``
-around a shifted operating point. The static switching threshold of the Table 1 prototype
-(reduced model of Sec. 3.4) is about 1.45 kV on one DE (1.4 kV does not switch it from the
-left well, 1.5 kV does), so 1 kV leaves a margin for the dynamic overshoot of the resonance
-near 3 Hz (damping ratio about 0.5).
+A profile is a pair of reference voltages ``r1``, ``r2`` [V] on the uniform grid of the
+rig's DAC (zero-order hold, interval ``hold`` [s]): ``identification`` (Fig. 11a),
+``validation`` (Fig. 15), ``staircase``, ``steps``, ``sweep`` and ``sine``. The first five
+are episodes "sub-threshold block -> switching pulse -> free ring-down", the pulses
+alternating between DE 1 and DE 2, from the left well. Their timing and design:
+docs/reference/profiles.md.
 
 References
 ----------
@@ -341,33 +311,9 @@ def identification_profile(
 ) -> Excitation:
     """Broad-band identification profile of Fig. 11a: switching both ways plus random noise.
 
-    Timing with the defaults (37.5 s, 37 500 DAC samples of 1 ms): 0.5 s rest at 0 V,
-    then six cycles of
-
-    1. a 4 s noise block on both DEs (``"noise"``),
-    2. 0.2 s rest,
-    3. a rectangular ``v_max`` pulse on one DE, 0.6, 0.8 or 1.0 s long (cycled), DE 1
-       first (left -> right well), then DE 2 (right -> left), alternating
-       (``"pulse-DE1"`` / ``"pulse-DE2"``, onsets at 4.7, 10.5, 16.5, 22.7, 28.5, 34.5 s),
-    4. 1 s rest: the free ring-down in the new well,
-
-    and a last 1 s noise block in the left well. A longer ``duration`` repeats the cycle;
-    the time left after the last full cycle is noise (when at least 1 s) or rest.
-
-    With ``ramps`` (not the paper's) the pulses are trapezoids: ``v`` rises linearly from 0
-    to ``v_max`` in the ramp time, holds, and falls back in the same time, so that the beam
-    creeps towards its switching threshold quasi-statically before it snaps over. Each ramp
-    lengthens its cycle by twice the ramp time; the cycles that no longer fit are dropped.
-
-    A noise block is white Gaussian noise (``numpy.random.default_rng(seed)``, one
-    independent stream per DE, so that ``g1`` and ``g2`` are separable) filtered by a
-    4th-order Butterworth band-pass 0.5-20 Hz (zero-phase, :func:`scipy.signal.sosfiltfilt`),
-    mapped per block to ``[0, peak]``: offset ``peak / 2``, +-3 standard deviations to
-    ``+-peak / 2`` and the 0.3 % of samples beyond clipped (a crest factor of 3 instead of
-    the 4-4.5 of a 4 s Gaussian record: 40 % more RMS for the same peak).
-    The peaks of (DE 1, DE 2) cycle through (1, 0.5), (1, 0.5), (0.5, 1), (0.5, 1),
-    (0.8, 0.8), (0.8, 0.8) times ``v_sub``, so each well is excited with the beam pushed
-    towards the barrier, deeper into the well and balanced.
+    After 0.5 s rest, cycles of a 4 s band-limited noise block on both DEs (0.5-20 Hz, peaks
+    cycling through fractions of ``v_sub``), 0.2 s rest, a ``v_max`` pulse of 0.6, 0.8 or 1.0 s
+    on DE 1 and DE 2 in turn, and 1 s ring-down. Timing and design: docs/reference/profiles.md.
 
     Parameters
     ----------
@@ -378,20 +324,17 @@ def identification_profile(
     v_max : float
         Height of the switching pulses [V], at most 3000.
     v_sub : float
-        Peak of the sub-threshold noise [V], below ``v_max`` and, for the profile to mean
-        what it says, below the prototype's switching threshold (about 1.45 kV for Table 1).
+        Peak of the sub-threshold noise [V], below ``v_max`` and the switching threshold.
     seed : int
         Seed of :func:`numpy.random.default_rng`; the same seed gives identical arrays.
     ramps : sequence of float
-        Ramp times of the switching pulses [s], >= 0, cycled over the pulses (e.g.
-        ``(0, 0, 1, 1)``: the third and fourth pulse of every four ramped over 1 s); default
-        ``(0,)``, the rectangular pulses of Fig. 11a.
+        Ramp times of the switching pulses [s], >= 0, cycled over the pulses; default ``(0,)``,
+        the rectangular pulses of Fig. 11a.
 
     Returns
     -------
     Excitation
-        ``name = "identification"``; ``r1``, ``r2`` of shape ``(round(duration / hold),)``
-        [V].
+        ``name = "identification"``; ``r1``, ``r2`` of shape ``(round(duration / hold),)`` [V].
 
     Raises
     ------
@@ -461,28 +404,9 @@ def validation_profile(
 ) -> Excitation:
     """Build the validation profile: chirps, staircase, multisine, triangles, ramped pulses.
 
-    Timing with the defaults (37.5 s): 1 s rest, then five episodes "block, pulse, rest"
-    whose four pulses alternate DE 1, DE 2, DE 1, DE 2 (onsets 6.0, 13.2, 21.2, 28.2 s), so
-    the beam ends in the left well where it started:
-
-    ============  ============================================  ==========================
-    time [s]      sub-threshold block                           switching pulse
-    ============  ============================================  ==========================
-    1.0-6.0       DE 1 log chirp 0.5 -> 15 Hz in [0, 0.9 v_sub], trapezoid on DE 1:
-                  DE 2 triangle 0 -> 0.6 v_sub (period 2.5 s)   0.2 s ramps, 0.6 s flat
-    8.2-13.2      DE 2 staircase of 0.2 ... 1.0 v_sub, 1 s per  rectangle on DE 2, 0.5 s
-                  step in a seeded order; DE 1 at 0.2 v_sub
-    15.2-21.2     both DEs: random-phase multisine, 8 tones     rectangle on DE 1, 1.0 s
-                  0.3-12 Hz, in [0, 0.9 v_sub]
-    23.2-28.2     DE 2 log chirp 15 -> 0.5 Hz in [0, 0.9 v_sub], trapezoid on DE 2:
-                  DE 1 triangle 0 -> 0.6 v_sub (period 2.5 s)   0.1 s ramps, 0.7 s flat
-    30.1-35.1     DE 1 triangle 0 -> v_sub (period 2.5 s)       (none; rest to the end)
-    ============  ============================================  ==========================
-
-    with 1.2, 1.5, 1.0, 1.0 and 2.4 s rest after the episodes. The blocks differ from the
-    identification data in kind (deterministic sweeps, steps and ramps instead of band-limited
-    noise), amplitude and timing, and the pulses in length and shape. A longer ``duration``
-    repeats the five episodes; what does not fit entirely is left at 0 V.
+    After 1 s rest, five episodes "block, pulse, rest" whose four pulses alternate DE 1, DE 2,
+    DE 1, DE 2, so the beam ends in the left well; the blocks differ from the identification
+    data in kind, amplitude and timing. Timing: docs/reference/profiles.md.
 
     Parameters
     ----------
@@ -581,62 +505,29 @@ def staircase_profile(
 ) -> Excitation:
     """Staircase identification profile: held voltage levels in each well, then a switch.
 
-    The profile is a sequence of episodes "staircase block -> 0.2 s rest -> rectangular
-    pulse of 0.8 s on the DE pushing towards the barrier (``"pulse-DE1"`` /
-    ``"pulse-DE2"``: the switch to the other well, DE 1 first) -> 1 s rest". The pulse
-    heights cycle through ``(1, 0.8, 0.7) * v_max``, so each DE drives the transit at three
-    ``v_i^2`` and ``g_i`` can be told from ``f`` between the wells too (the lowest, 2.1 kV
-    with the defaults, must exceed the switching threshold: on the reduced plant of the
-    default rig prototype 1.5 kV switches from the left well, 1.7 kV from the right one). A block
-    (``"staircase"``) holds both reference voltages on levels of a 4 x 4 grid, each
-    level for ``step`` seconds, so that the beam settles and the DE creep relaxes: the DE
-    pushing the beam towards the barrier (DE 1 in the left well, DE 2 in the right one) on
-    ``(0, 0.577, 0.816, 1) * v_sub``, the DE pushing it deeper into the well on
-    ``(0, 0.577, 0.816, 1) * v_deep`` (``v^2`` in equal steps, so the force
-    ``g_i(q) v_i^2`` rises in equal steps). Neither can switch the beam: ``v_sub`` is
-    below the switching threshold and the other DE pushes away from the barrier. The grid
-    is walked as a serpentine, consecutive levels differing in one voltage only, so every
-    change is a clean step of one ``v_i^2`` taken at the equilibrium the other voltage
-    holds: ``g_i(q) v_i^2`` is excited at several ``v_i^2``, at several positions near each
-    well (the deepening DE moves the beam by a few mm) and approached from both sides
-    (friction). A block walks ``rows`` rows of the serpentine; the walk of each well goes on
-    where the previous visit to that well stopped, the DE pushing towards the barrier in
-    the inner loop in the first pass over the grid and the deepening DE in the next.
-
-    Timing with the defaults (75 s, 8 s blocks): 0.5 s rest in the left well, then seven
-    episodes of 10 s, the pulses alternating DE 1, DE 2, ... (onsets 8.7, 18.7, ..., 68.7
-    s), and a truncated block (4.5 s) in the right well. A last episode that does not
-    fit entirely is a truncated block (at least 1 s) or rest.
+    Blocks of both voltages held on a 4 x 4 serpentine of levels, each followed by a pulse
+    of ``(1, 0.8, 0.7) * v_max`` (cycled): docs/reference/profiles.md.
 
     Parameters
     ----------
     duration : float
-        Length [s]; a multiple of ``hold``, at least the lead and one episode
-        (``0.5 + 4 rows step + 2`` s).
+        Length [s]; a multiple of ``hold``, at least ``0.5 + 4 rows step + 2`` s.
     hold : float
         DAC interval [s], at most 0.01.
     v_max : float
         Height of the highest switching pulse [V], at most 3000.
     v_sub : float
-        Highest level of the DE pushing towards the barrier [V], below ``v_max`` and, for
-        the profile to mean what it says, below the prototype's switching threshold (about
-        1.45 kV for Table 1): the beam stays in its well during the blocks.
+        Highest level of the DE pushing towards the barrier [V], below the switching threshold.
     seed : int
-        Seed of :func:`numpy.random.default_rng` for the dither; the same seed gives
-        identical arrays.
+        Seed of :func:`numpy.random.default_rng` for the dither.
     v_deep : float or None
-        Highest level of the DE pushing the beam deeper into its well [V], at most
-        ``v_max``; default ``v_max``.
+        Highest level of the DE pushing the beam deeper [V], at most ``v_max``; default ``v_max``.
     step : float
-        Hold time of each level [s], a multiple of ``hold``; default 1 s, about four times
-        the creep time constant of the Table 1 DEs (``eta_MW / Y_MW = 0.27 s``) and three
-        times the settling time of the well resonance.
+        Hold time of each level [s], a multiple of ``hold``.
     rows : int
         Rows of the 4 x 4 serpentine per block, 1 to 4 (a block lasts ``4 rows step``).
     dither : float
-        Peak of a band-limited random dither (0.5-20 Hz, as the identification profile's
-        noise) added to each held non-zero level, as a fraction of that DE's highest level,
-        in ``[0, 0.5]``; 0 (default): pure steps. The sum is clipped to ``[0, peak]``.
+        Peak of a band-limited (0.5-20 Hz) dither on each non-zero level, a fraction in [0, 0.5].
 
     Returns
     -------
@@ -646,16 +537,11 @@ def staircase_profile(
     Raises
     ------
     ValueError
-        As :func:`identification_profile`; ``v_deep`` above ``v_max``, ``step`` not a
-        multiple of ``hold``, ``rows`` outside 1-4, ``dither`` outside ``[0, 0.5]``, or
-        ``duration`` shorter than the lead and one episode.
+        As :func:`identification_profile`, or another argument out of range.
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 37 (the input term ``g_i(q) v_i^2``), Sec. 5.1 (3 kV
-    converters, start in the left well); Ljung 1999, System Identification, 2nd ed.,
-    Sec. 13.2-13.3 (informative experiments; steps and staircases for static
-    nonlinearities).
+    Masoud & Maas 2025, Eq. 37, Sec. 5.1; Ljung 1999, System Identification, Sec. 13.2-13.3.
     """
     n = _grid(duration, hold, v_max, v_sub)
     v_deep = v_max if v_deep is None else _positive("v_deep", v_deep)
@@ -898,13 +784,9 @@ def sine_profile(
 ) -> Excitation:
     """Build a single-frequency profile: one tone, inside one well or switching.
 
-    After 0.5 s rest, ``switching = false``: DE 1 follows the raised cosine
-    ``v_sub (1 - cos(2 pi f t)) / 2`` (default ``f`` = 2 Hz) and DE 2 holds 0 V, so the beam
-    oscillates in the left well at ``f`` (``v_1^2`` adds the line ``2 f``).
-    ``switching = true``: DE 1 follows ``v_max (1 - cos(2 pi f t)) / 2`` and DE 2 the same
-    shifted by half a period (default ``f`` = 0.5 Hz), so each DE in turn pulls the beam over
-    the barrier: two switches a period. Nothing in it is random (``seed`` is accepted for a
-    common signature and ignored).
+    After 0.5 s rest, DE 1 follows ``v_sub (1 - cos(2 pi f t)) / 2`` (DE 2 at 0 V), or with
+    ``switching`` both DEs ``v_max (1 - cos(2 pi f t)) / 2`` in antiphase (two switches a
+    period). Nothing in it is random.
 
     Parameters
     ----------
@@ -912,28 +794,25 @@ def sine_profile(
         Length [s]; a multiple of ``hold``, at least 0.5 s rest plus two periods.
     hold : float
         DAC interval [s], at most 0.01.
-    v_max : float
-        Peak of the switching tone [V], at most 3000.
-    v_sub : float
-        Peak of the tone inside the well [V], below ``v_max``.
+    v_max, v_sub : float
+        Peak of the switching tone [V], at most 3000; peak of the tone inside the well [V].
     seed : int
-        Ignored.
+        Ignored (a common signature).
     frequency : float or None
-        Tone frequency ``f`` [Hz], above 0 and below a tenth of ``1 / hold``.
+        Tone frequency ``f`` [Hz], below a tenth of ``1 / hold``; default 2 Hz, switching 0.5 Hz.
     switching : bool
         Antiphase tones on both DEs up to ``v_max`` instead of DE 1 below ``v_sub``.
 
     Returns
     -------
     Excitation
-        ``name = "sine"``; one block labelled ``"sine"`` after the rest; the switch times
-        are the onsets of each half period in which a DE pulls (``switching``), else none.
+        ``name = "sine"``; one block ``"sine"``; switch times at the onsets of each half period
+        in which a DE pulls (``switching``), else none.
 
     Raises
     ------
     ValueError
-        As :func:`identification_profile`, or a frequency out of range, or a duration
-        shorter than 0.5 s plus two periods.
+        As :func:`identification_profile`, or a frequency or duration out of range.
 
     References
     ----------

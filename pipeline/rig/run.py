@@ -88,28 +88,20 @@ def make_plant(rig: RigParams, v1, v2, *, compiled: bool = True):
 class RigRun:
     """One rig experiment: the logged channels and the truth behind them.
 
-    Logged channels (what the rig's recorder holds), at the log instants:
-
     Attributes
     ----------
     t : ndarray, shape (n,)
         Log instants ``t_ref[0] + k sample_time`` [s].
     q : ndarray, shape (n,)
-        Laser reading of the tip displacement [m]: noise, quantisation, range clipping,
-        anti-aliasing FIR and decimation; saturates at ``+-sensor_range``.
+        Laser reading of the tip displacement [m]; saturates at ``+-sensor_range``.
     v1, v2 : ndarray, shape (n,)
-        Voltage monitors of DE 1 and DE 2 [V] (applied voltage plus noise, decimated).
+        Voltage monitors of DE 1 and DE 2 [V].
     r1, r2 : ndarray, shape (n,)
-        Reference voltages at the log instants [V] (the DAC sample holding there).
-    q_true : ndarray, shape (n,)
-        Noise-free tip displacement [m] (Eq. 16).
-    q_dot_true : ndarray, shape (n,)
-        Tip velocity [m/s].
-    phi_true : ndarray, shape (n,)
-        Pitch angle of the upper frame [rad] (Eq. 1).
+        Reference voltages at the log instants [V].
+    q_true, q_dot_true, phi_true : ndarray, shape (n,)
+        Noise-free tip displacement [m] (Eq. 16), velocity [m/s], frame pitch [rad] (Eq. 1).
     x_true : ndarray, shape (n, n_states)
-        Plant states: ``[q_m, q_m_dot, q_eps, z]`` (``10 + n_friction``) for the full plant,
-        ``[q, q_dot, q_eps, z]`` (``4 + n_friction``) for the reduced one.
+        Plant states: ``[q_m, q_m_dot, q_eps, z]`` (full), ``[q, q_dot, q_eps, z]`` (reduced).
     F_friction : ndarray, shape (n,)
         Friction force on the tip [N].
     v1_applied, v2_applied : ndarray, shape (n,)
@@ -120,10 +112,8 @@ class RigRun:
         Log interval [s].
     seed : int
         Seed of the sensor noise.
-    nfev : int
-        Right-hand-side evaluations of the plant integration.
-    njev : int
-        Jacobian evaluations.
+    nfev, njev : int
+        Right-hand-side and Jacobian evaluations of the plant integration.
     success : bool
         Whether every integration segment succeeded.
     message : str
@@ -194,98 +184,33 @@ def simulate_rig(
 ) -> RigRun:
     """Run one experiment on the virtual rig: drivers, plant, sensors and recorder.
 
-    1. The HV drivers turn the references (clipped to ``[0, 3000]`` V) into the applied
-       voltages (:class:`~debist.rig.drivers.DriverOutput`; they do not depend on the mechanics).
-    2. The plant (:func:`make_plant`: :class:`RigPlant`, or the reduced plant of
-       :mod:`debist.rig.reduced` for ``rig.model = "reduced"``) starts at rest in the well
-       ``side`` (equilibrium at v = 0, :func:`~debist.physics.dynamics.well_state`, or the
-       stable zero of the reduced ``f(q)``; relaxed creep, unloaded friction) and is
-       integrated with the plant's (approximate) Jacobian by LSODA
-       (:func:`scipy.integrate.odeint`, its step loop compiled in Fortran) or by
-       :func:`scipy.integrate.solve_ivp` (Radau, BDF), split at the reference steps larger
-       than ``step_threshold`` (:func:`~debist.physics.segments.solve_segments`), with
-       output on the internal grid ``sample_time / oversample``.
-    3. The laser reads ``q + sensor_offset`` through a first-order lag ``sensor_lag``, adds
-       seeded white noise (``numpy.random.default_rng(seed)``), quantises to
-       ``sensor_resolution`` and clips to ``+-sensor_range``; the voltage monitors add
-       noise. With ``sensor_average = 0`` every channel is decimated to ``sample_time`` by a
-       zero-phase FIR (:func:`scipy.signal.decimate`; the laser reading clipped again after
-       the filter); with ``N >= 1`` the log holds the trailing mean of the laser's last ``N``
-       internal samples and the monitors' values at the log instants. The record is
-       simulated ``11 sample_time`` beyond both ends (at rest before, reference held after)
-       so no filter sees an edge. When the true ``q`` leaves the range the logged value
-       saturates at ``+-sensor_range`` (flagged in ``saturated``).
-
     Parameters
     ----------
     rig : RigParams
         Prototype and rig.
-    t_ref : array_like, shape (n_ref,)
-        Uniform DAC sample times [s]; sample ``k`` holds until ``t_ref[k] + hold``.
-    r1, r2 : array_like, shape (n_ref,)
-        Reference voltages of DE 1 (left) and DE 2 (right) [V].
-    sample_time : float
-        Log interval [s]; the log covers ``[t_ref[0], t_ref[0] + n_ref hold)``.
-    seed : int
-        Seed of the sensor and monitor noise.
+    t_ref, r1, r2 : array_like, shape (n_ref,)
+        Uniform DAC times [s] (each held for ``hold``); references of DE 1 and DE 2 [V].
+    sample_time, seed : float, int
+        Log interval [s] (the log covers ``n_ref hold``); seed of the sensor and monitor noise.
     side : {-1, +1}
-        Initial well: -1 left (the paper's experiments start at q = -10 mm), +1 right.
+        Initial well: -1 left (the paper's start, q = -10 mm), +1 right.
     method : {"odeint", "Radau", "BDF"}
-        ``"odeint"`` (default): ODEPACK's LSODA through :func:`scipy.integrate.odeint`
-        (stiff BDF here, the step loop in Fortran, one Python call per right-hand side or
-        Jacobian); ``"Radau"``, ``"BDF"``: :func:`scipy.integrate.solve_ivp`, stepping in
-        Python. All use the plant's Jacobian.
-    rtol : float, optional
-        Relative tolerance; default per method (:data:`TOLERANCES`): 1e-8 for LSODA, 1e-4
-        for Radau and BDF.
-    atol : float
-        Absolute tolerance [m] of the bending coordinates scaled to metres (``q_m * [l^2,
-        l^3, l^4]``) and of the friction deflections (LSODA: ``0.3 atol``, see below); the
-        axial coordinate ``u_0`` gets ``100 atol``, the velocities ``1e4 atol`` per second
-        and the creep strains ``100 atol`` [-]. The looser axial and velocity tolerances
-        spare the integrator the nanometre ringing of the stiff axial mode (about 400 Hz,
-        undamped by the beam) that every 1 ms voltage kink excites; it does not show in
-        ``q``. For the reduced plant the positions are ``q`` and ``z``, and ``q_dot`` (per
-        second) and the creep strains get ``100 atol``.
-
-        The methods need different settings for the same accuracy. scipy's Radau (order 5)
-        controls the error with an embedded estimate of order 3 (Hairer & Wanner IV.8),
-        which overestimates it: at ``rtol = 1e-4`` the noise-free ``q`` stays within
-        0.2-0.4 um of a tight solution (LSODA at ``rtol = 1e-10, atol = 1e-14``: 2 nm from
-        ``1e-9, 1e-13``, 0.5 nm from Radau at ``1e-7, 1e-11`` on 5 s of switching) on
-        broad-band experiments with 3 kV switching (0.39 and 0.44 um on the 37.5 s
-        identification and validation profiles), about one step per DAC interval. LSODA's
-        estimate is that of the BDF formula it steps with, and the driver output has a
-        kink at every changed DAC sample (25000 in 37.5 s) that the multistep formulas
-        carry across: at ``rtol = 1e-4`` it is 50 um off. It holds Radau's agreement with
-        ``rtol = 1e-8`` and the positions at ``0.3 atol`` (3 nm): on six 15 s broad-band
-        experiments at most 0.24 um, 0.14 um at the 99th percentile, against 0.43 and
-        0.15 um for Radau at ``rtol = 1e-4``; the positions at ``atol`` give 0.87 um, all
-        tolerances at ``0.3 atol`` cost 40 % more. It takes about twice Radau's
-        right-hand-side evaluations at a fraction of its cost per step (about 4x faster,
-        ``benchmarks/bench_rig.py``). Near a barrier crossing errors grow (the motion is
-        unstable there), so no tolerance bounds them in general. The reduced plant with the
-        defaults: 0.37 um (LSODA) and 0.23 um (Radau) from the tight solution on the
-        identification profile.
+        LSODA by :func:`scipy.integrate.odeint` (default), or :func:`scipy.integrate.solve_ivp`.
+    rtol, atol : float, optional
+        Relative tolerance (default per method, :data:`TOLERANCES`); absolute one [m].
     step_threshold : float
         Reference jumps larger than this [V] become integration breakpoints.
     compiled : bool
-        Integrate the compiled plant (default) or the NumPy reference (``False``, several
-        times slower; the reduced plant always runs in NumPy). Their right-hand sides agree
-        to rounding, not bit for bit, so the integrator takes other steps: the two solutions
-        differ by the integration error.
+        Integrate the compiled plant (default) or the NumPy reference.
 
     Returns
     -------
     RigRun
-        The logged channels, the truth and the integration statistics.
 
     Raises
     ------
     ValueError
-        If ``t_ref`` is not uniform, the shapes differ, ``sample_time`` is not positive or
-        longer than the record, ``side`` is not -1 or +1 or ``method`` unknown; from
-        :func:`~debist.physics.dynamics.well_state` if that well does not exist.
+        If an argument is out of its domain or the well ``side`` does not exist.
 
     Warns
     -----
@@ -294,12 +219,8 @@ def simulate_rig(
 
     References
     ----------
-    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Al-Bender, Lampaert & Swevers 2005;
-    Hindmarsh, A. C. (1983), ODEPACK, a systematized collection of ODE solvers, IMACS Trans.
-    Sci. Comput. 1, 55-64; Petzold, L. (1983), Automatic selection of methods for solving
-    stiff and nonstiff systems of ordinary differential equations, SIAM J. Sci. Stat.
-    Comput. 4(1), 136-148; Hairer & Wanner, Solving ODEs II, Sec. IV.8 (Radau IIA error
-    estimate).
+    Masoud & Maas 2025, Eq. 1, 16, 19-26, Sec. 5.1; Hindmarsh 1983 (ODEPACK); Petzold 1983
+    (LSODA). Stages and accuracy of the integrators: docs/explanation/implementation.md.
     """
     start = time.perf_counter()
     t_ref, hold = uniform_grid(t_ref)
@@ -402,20 +323,11 @@ def simulate_rig(
 def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float64]]:
     """Return the prototype's true characteristic curves in the identified model's convention.
 
-    From the reduced model of the rig's prototype (:func:`debist.physics.reduced.
-    reduced_curves`, static path at v = 0 through the energy of Eq. 9-11, so the asymmetry
-    ``dz_1``, ``dz_2`` is included), and the actuation force at the switching voltage from
-    the full model's static force-displacement curves (Fig. 4). The rig's DE gains
-    ``gain_i`` scale ``g_i`` and its ``force_offset`` moves ``f``; friction, the drivers and
-    the sensors (``sensor_offset`` included: the curves are over the tip displacement, the
-    laser reads ``q + sensor_offset``) are not part of these curves.
-
-    The two gains differ because the DE force is not of the separable form
-    ``g_i(q) v_i^2`` of Eq. 26/37 for the full model: the DEs' pull bends the beam off the
-    v = 0 path, so at ``V_MAX`` = 3 kV the holding-force change is 72 % of
-    ``1/2 dC_i/dq V_MAX^2`` near q = 0 and 95-100 % in the wells (Table 1 prototype).
-    ``g1``, ``g2`` are the small-signal gains (sub-threshold excitation), ``g1_vmax``,
-    ``g2_vmax`` the secants the switching pulses see.
+    From the reduced model of the prototype (:func:`debist.physics.reduced.reduced_curves`,
+    static path at v = 0, asymmetry included) and the full model's static force-displacement
+    curves (Fig. 4). The rig's ``gain_i`` scale ``g_i`` and its ``force_offset`` moves ``f``;
+    friction, drivers and sensors are not part of these curves. Why two gains:
+    docs/explanation/implementation.md.
 
     Parameters
     ----------
@@ -427,20 +339,15 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     Returns
     -------
     dict[str, ndarray]
-        Each of shape (n,): ``"q"`` [m]; ``"f"`` restoring force at v = 0 [N] with
-        ``m_q q_ddot + d q_dot + f(q) = g_1 v_1^2 + g_2 v_2^2`` (Eq. 26, 37); ``"c"``
-        ``= f / q`` [N/m] (Eq. 33; for an asymmetric prototype ``f(0) != 0`` and ``c`` has a
-        pole at q = 0, use ``f``); ``"k"`` ``= df/dq`` [N/m]; ``"g1"``, ``"g2"``
-        ``= 1/2 dC_i/dq`` [N/V^2] (docs/interpretation.md item 8); ``"g1_vmax"``, ``"g2_vmax"``
-        ``= (F(q; 0) - F(q; v_i = V_MAX)) / V_MAX^2`` [N/V^2] with ``F`` the static holding
-        force of the full model (Fig. 4); ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch
-        angle along the static path [rad].
+        Each of shape (n,): ``"q"`` [m]; ``"f"`` restoring force at v = 0 [N]; ``"c" = f / q``
+        [N/m] (Eq. 33); ``"k" = df/dq`` [N/m]; ``"g1"``, ``"g2" = 1/2 dC_i/dq`` [N/V^2]
+        (small-signal); ``"g1_vmax"``, ``"g2_vmax"`` the secants at ``V_MAX`` [N/V^2];
+        ``"m_q"`` [kg]; ``"d"`` [N s/m]; ``"phi"`` pitch along the static path [rad].
 
     Notes
     -----
-    For ``rig.model = "reduced"`` the curves are the reduced plant's own, exact in the form
-    of Eq. 37 (:func:`debist.rig.reduced.reduced_true_curves`: the same keys, ``g1_vmax =
-    g1``, ``g2_vmax = g2``, plus ``dm_q``, ``k1``, ``k2``).
+    For ``rig.model = "reduced"`` the curves are the reduced plant's own, exact in the form of
+    Eq. 37 (:func:`debist.rig.reduced.reduced_true_curves`; plus ``dm_q``, ``k1``, ``k2``).
 
     References
     ----------

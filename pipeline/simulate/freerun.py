@@ -285,44 +285,34 @@ def simulate(
     model : FreeRunModel
         The model (e.g. :class:`debist.model.rbf.RBFModel`).
     inputs : sequence of ndarray, each shape (n_k, n_inputs), or FineInputs
-        Input records [V], all with sample time ``dt``, or the same already
-        interpolated by :func:`prepare_inputs` (for repeated simulations).
+        Input records [V] with sample time ``dt``, or already interpolated (:func:`prepare_inputs`).
     dt : float
         Sample time [s].
     q0, q_dot0 : ndarray, shape (B,)
         Initial position [unit of q] and velocity [unit/s] of each record.
     substeps : int, optional
-        RK4 steps per sample interval (raised automatically when the model's
-        ``max_step`` requires it).
-    interpolation : {"bandlimited", "linear"}, optional
-        Input interpolation between samples (see :func:`upsample_inputs`).
-    q_limit : float, optional
-        A trajectory with ``|q| > q_limit`` or a non-finite state counts as
-        diverged and is not integrated further.
+        RK4 steps per sample interval (raised when the model's ``max_step`` requires it).
+    interpolation, q_limit : {"bandlimited", "linear"}, float, optional
+        Input interpolation (:func:`upsample_inputs`); bound on ``|q|`` beyond which a run stops.
     engine : {"compiled", "numpy"}, optional
-        The compiled kernel (models with ``kernel_table`` or ``kernel_splines``; others run
-        on the NumPy engine), or the NumPy reference engine.
+        The compiled kernel (models with ``kernel_table`` or ``kernel_splines``) or the NumPy
+        reference engine.
     progress : callable, optional
-        Called as ``progress(done, total)`` [samples] while the compiled engine integrates
-        long records (between chunks of :data:`debist.simulate.kernel.CHUNK` samples); default:
-        report to the listener of :mod:`debist.core.progress` as task "free run", if any.
+        ``progress(done, total)`` [samples] from the compiled engine; default the listener.
     x0 : ndarray, shape (B, n_states), optional
-        Whole initial states (e.g. a friction state estimated from the record); default
-        ``model.initial_state(q0, q_dot0)``.
+        Whole initial states; default ``model.initial_state(q0, q_dot0)``.
 
     Returns
     -------
     list of SimulationResult
-        One per record, in order.
+        One per record.
 
     Raises
     ------
     WorkflowError
-        If ``dt`` or ``substeps`` is not positive, the batch is empty or the engine
-        unknown.
+        If ``dt`` or ``substeps`` is not positive, the batch is empty or the engine unknown.
     ResourceError
-        If the fine input grid and trajectories would exceed the memory budget
-        (:func:`check_free_run`, naming ``substeps``).
+        If the fine input grid and trajectories would exceed the memory budget.
 
     References
     ----------

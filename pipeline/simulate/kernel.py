@@ -1247,13 +1247,8 @@ def free_run_sensitivity(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Free runs of a term-table model and the sensitivities of q to its parameters.
 
-    The weights are ``w_j = term_sign[j] * p[term_param[j]]`` (a fixed weight where
-    ``term_param[j] < 0``), the mass is ``p[mass_param]`` (fixed if negative; with inertia
-    terms the constant part m of m(q)) and ``T_z = exp(p[tz_param])`` (fixed if negative).
-    The sensitivity equations are integrated
-    with the states by the same RK4 stages, so the result is the exact derivative of the
-    discrete free run (to rounding), which the simulation-error refinement uses as its
-    Jacobian.
+    Weights ``term_sign[j] * p[term_param[j]]``, mass ``p[mass_param]``, ``T_z =
+    exp(p[tz_param])``; the sensitivities are the exact derivative of the discrete RK4 run.
 
     Parameters
     ----------
@@ -1263,22 +1258,16 @@ def free_run_sensitivity(
         Inputs on the grid of half sub-steps [V].
     lengths : ndarray of int, shape (B,)
         Samples of each trajectory.
-    dt : float
-        Sample time [s].
-    substeps : int
-        RK4 steps per sample.
+    dt, substeps : float, int
+        Sample time [s]; RK4 steps per sample.
     x0 : ndarray, shape (B, n_states)
         Initial states (independent of the parameters).
     q_limit : float
         Divergence bound on ``|q|`` [unit of q].
-    term_param : ndarray of int, shape (J,)
-        Parameter of each term of the table (in the table's order), -1 for a fixed weight.
-    term_sign : ndarray, shape (J,)
-        Sign of each term's weight relative to its parameter.
-    mass_param, tz_param : int
-        Parameter index of the mass and of log T_z, -1 when fixed.
-    n_params : int
-        Number of parameters P.
+    term_param, term_sign : ndarray, shape (J,)
+        Parameter of each term (-1: fixed weight); sign of its weight relative to it.
+    mass_param, tz_param, n_params : int
+        Parameter index of the mass and of log T_z (-1 when fixed); number P of parameters.
 
     Returns
     -------
@@ -1294,8 +1283,7 @@ def free_run_sensitivity(
 
     References
     ----------
-    Hairer, Norsett & Wanner, Solving ODEs I, Sec. I.14 (variational equations); Ljung,
-    System Identification (1999), Sec. 10.3 (output-error gradients).
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. I.14; Ljung 1999, Sec. 10.3.
     """
     if arrays.kind != KIND_TABLE:
         raise ValueError("sensitivities are computed for term-table models only")

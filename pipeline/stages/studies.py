@@ -186,48 +186,36 @@ def rbf_grid_study(
 ) -> tuple[pd.DataFrame, Any]:
     """Identify the RBF model for every (M, sigma_n) of the grid and score it (Fig. 11b).
 
-    Every cell is fitted with the workflow's ``[identify]`` section with ``M`` and
-    ``sigma_n`` replaced. A fit that the identification rejects (a centre without
-    data, rank deficiency, a condition number above ``max_condition``) is a row
-    with that status, not an exception; its condition number and equation error
-    are still reported when the least squares could be solved.
+    Every cell is fitted with the ``[identify]`` section with ``M`` and ``sigma_n`` replaced;
+    a fit the identification rejects is a row with that status, not an exception.
 
     Parameters
     ----------
     tables : mapping of str to pandas.DataFrame
-        Canonical tables ``t [s], q [m], v1..vN [V]`` with ``attrs['role']``
-        ("estimation" or "validation").
+        Canonical tables ``t [s], q [m], v1..vN [V]`` with ``attrs['role']``.
     derivs : mapping of str to pandas.DataFrame
-        Their derivatives ``t, q, q_hat, q_dot [m/s], q_ddot [m/s^2]`` with
-        ``attrs['dt']`` [s] (the differentiation stage's output).
-    identify_section : mapping
-        The ``[identify]`` section (see :class:`~debist.identify.config.IdentifyConfig`).
-    validate_section : mapping
-        The ``[validate]`` section (see :class:`~debist.validate.config.ValidateConfig`).
+        Their derivatives ``t, q, q_hat, q_dot [m/s], q_ddot [m/s^2]`` with ``attrs['dt']`` [s].
+    identify_section, validate_section : mapping
+        The ``[identify]`` and ``[validate]`` sections.
     cfg : StudyConfig
         The grids, ``free_run`` and ``max_samples``.
 
     Returns
     -------
     table : pandas.DataFrame
-        One row per cell, M-major: ``M, sigma_n, condition, rank, n_columns,
-        eq_mse`` [(m/s^2)^2 per unit mass], ``nrmse_q_est, nrmse_q_val``
-        [dimensionless], ``status`` ("ok" or the shortened reason). ``attrs``
+        One row per cell, M-major: ``M, sigma_n, condition, rank, n_columns, eq_mse``
+        [(m/s^2)^2 per unit mass], ``nrmse_q_est, nrmse_q_val`` [-], ``status``; ``attrs``
         hold ``max_samples``, the samples used per record and a note.
     figure : matplotlib.figure.Figure
-        Two annotated heat maps over (sigma_n, M): the model error (free-run
-        NRMSE(q) [%] on the estimation data, or the equation-error MSE when
-        ``free_run`` is False) and log10 of the condition number; rejected cells
-        are hatched and labelled, the lowest error is boxed. Four axes (two
-        panels, two colour bars).
+        Heat maps over (sigma_n, M) of the model error (free-run NRMSE(q) [%], or the
+        equation-error MSE) and log10 of the condition number. Four axes.
 
     Raises
     ------
     WorkflowError
         For an invalid section or no estimation data set.
     ResourceError
-        If the largest ``M`` of the grid would make the least squares exceed the memory
-        budget (checked once, before the first fit).
+        If the largest ``M`` of the grid would exceed the memory budget (checked first).
 
     References
     ----------
@@ -281,59 +269,43 @@ def alpha_study(
 ) -> tuple[pd.DataFrame, Any]:
     """Differentiate, identify and score for every TVRegDiff ``alpha`` (Fig. 11c).
 
-    For each ``alpha`` every table is differentiated with the workflow's
-    ``[differentiate]`` section with ``alpha`` replaced (and ``alpha2``, when given,
-    scaled by the same factor), then the model is fitted with the ``[identify]``
-    section and scored as in :func:`rbf_grid_study`. The equation error is measured
-    against the derivatives of that ``alpha`` itself, so it keeps falling as
-    smoothing removes noise; the free-run NRMSE(q) against the measured position
-    is the score that penalises over-smoothing too.
+    Per ``alpha`` (``alpha2`` scaled alike) the tables are differentiated, fitted and scored as
+    in :func:`rbf_grid_study` (why both scores: docs/explanation/implementation.md).
 
     Parameters
     ----------
     tables : mapping of str to pandas.DataFrame
         Canonical tables ``t [s], q [m], v1..vN [V]`` with ``attrs['role']``.
-    identify_section : mapping
-        The ``[identify]`` section.
-    validate_section : mapping
-        The ``[validate]`` section.
+    identify_section, validate_section : mapping
+        The ``[identify]`` and ``[validate]`` sections.
     diff_section : mapping
-        The ``[differentiate]`` section; its ``method`` must be "tvregdiff" (the
-        default when absent).
+        The ``[differentiate]`` section; its ``method`` must be "tvregdiff" (the default).
     cfg : StudyConfig
         ``alpha`` values [unit of q * s], ``free_run``, ``max_samples``.
 
     Returns
     -------
     table : pandas.DataFrame
-        One row per ``alpha``, in the order given: ``alpha, eq_mse, nrmse_q_est,
-        nrmse_q_val, condition, status, roughness`` (RMS of the second difference
-        of q_dot over the studied samples of the estimation records [m/s]) and
-        ``converged`` (both TVRegDiff passes met their tolerance on every table).
-        ``attrs`` as in :func:`rbf_grid_study` plus ``workflow_alpha``. The
-        roughness falls with ``alpha`` while noise dominates, then levels off
-        and can rise again: TV regularisation makes q_dot piecewise constant
-        (staircasing) for large ``alpha``.
+        One row per ``alpha``: ``alpha, eq_mse, nrmse_q_est, nrmse_q_val, condition, status,
+        roughness`` (RMS of the second difference of q_dot [m/s]) and ``converged``;
+        ``attrs`` as in :func:`rbf_grid_study` plus ``workflow_alpha``.
     figure : matplotlib.figure.Figure
-        Left column: measured q, then q_dot and q_ddot for every ``alpha``
-        overlaid, over a window of :data:`WINDOW_SAMPLES` samples of the first
-        estimation record around its fastest motion within the studied
-        samples; right column: free-run NRMSE(q), equation-error MSE and
-        roughness versus ``alpha`` (log axes). Six axes.
+        Left: q, q_dot and q_ddot per ``alpha`` over :data:`WINDOW_SAMPLES` samples around
+        the fastest motion; right: NRMSE(q), equation-error MSE and roughness against
+        ``alpha``. Six axes.
 
     Raises
     ------
     WorkflowError
         For an invalid section, a method other than TVRegDiff or no estimation data.
     ResourceError
-        If the least squares would exceed the memory budget (before differentiating).
+        If the least squares would exceed the memory budget.
     RigLogError
         For non-uniform sampling.
 
     References
     ----------
-    Masoud & Maas 2025, Sec. 5.1 and Fig. 11c (alpha = 0.01 for q in mm, i.e. 1e-5 in m);
-    Chartrand 2011 (TVRegDiff).
+    Masoud & Maas 2025, Sec. 5.1 and Fig. 11c (alpha = 0.01 for q in mm); Chartrand 2011.
     """
     icfg = IdentifyConfig.from_dict(dict(identify_section))
     vcfg = ValidateConfig.from_dict(validate_section)

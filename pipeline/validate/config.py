@@ -44,51 +44,19 @@ class PublishedResult(TypedDict):
 class ValidateConfig(SectionConfig):
     """The ``[validate]`` workflow section.
 
-    Parameters
-    ----------
-    substeps : int
-        RK4 steps per sample interval, ``>= 1``.
-    input_interpolation : {"bandlimited", "linear"}
-        Input interpolation between samples.
-    init_samples : int
-        Samples of measured output a protocol allows for initialisation; the
-        initial state is estimated from them only and the metrics are computed
-        over the remaining samples. 0: start from the differentiated signals at
-        the first sample and score every sample.
-    report_unit : str or None
-        Unit for the RMS column (e.g. "mV", "mm"); default the unit of q.
-    q_limit : float or None
-        |q| beyond which a run counts as diverged [unit of q]; default twice the
-        largest |q| of the estimation range
-        (:func:`~debist.validate.freerun.default_q_limit`).
-    published : tuple of dict
-        Published results to print beside ours: ``{model = "...", rms = {dataset = value}}``
-        (:class:`PublishedResult`).
-    analytical : bool
-        Also free-run the analytical reduced model (Eq. 26) with the nominal parameters of
-        the workflow's ``[physics]`` section (the "analytical" row of Table 2); needs ``q``
-        in metres and the two DE voltages as inputs.
-    engine : {"compiled", "numpy"}
-        Free-run engine: the compiled kernel (:mod:`debist.simulate.kernel`, default) or the NumPy
-        reference; the same scheme and the same numbers to rounding.
-    predict_steps : int
-        Horizon k [samples] of the k-step-ahead NRMSE scored beside the free run (each
-        sample's prediction restarted from the measured state k samples earlier, as
-        MATLAB's ``predict``); 0: no prediction scores and no residual analysis.
-    resid_lags : int
-        Largest lag [samples] of the residual analysis of the one-step prediction errors
-        (autocorrelation and cross-correlation with each input, as MATLAB's ``resid``).
-    replicates : int
-        Bootstrap replicates of the identified model simulated in free run beside it (as
-        MATLAB's ``simsd``; :func:`debist.validate.freerun.replicate_spread`): the spread of
-        NRMSE(q) they give and the share that lose the motion; at most as many as the identify
-        stage drew (``[identify] bootstrap``); 0: none.
-
     Raises
     ------
     pydantic.ValidationError
         If a value has the wrong type or is out of range (a ``ValueError``;
         :meth:`from_dict` raises a ``WorkflowError`` naming the key instead).
+
+    Notes
+    -----
+    Each field is one key, documented under its declaration.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 41, Table 2; Ljung 1999, Sec. 16.6 (residual analysis).
 
     Examples
     --------
@@ -99,16 +67,38 @@ class ValidateConfig(SectionConfig):
     SECTION: ClassVar[str] = "[validate]"
 
     substeps: PositiveInt = 2
+    """RK4 steps per sample interval, >= 1."""
     input_interpolation: Literal["bandlimited", "linear"] = "bandlimited"
+    """Input interpolation between samples."""
     init_samples: NonNegativeInt = 0
+    """Samples of measured output used only to estimate the initial state, not scored; 0: start
+    from the differentiated signals and score every sample.
+    """
     report_unit: str | None = None
+    """Unit for the RMS column (e.g. "mV", "mm"); default the unit of q."""
     q_limit: PositiveFloat | None = None
+    """|q| beyond which a run counts as diverged [unit of q]; default twice the largest |q| of the
+    estimation range.
+    """
     published: Annotated[tuple[PublishedResult, ...], AsTuple] = ()
+    """Published results to print beside ours: {model = "...", rms = {dataset = value}}."""
     analytical: bool = False
+    """Also free-run the analytical reduced model (Eq. 26) of [physics] (Table 2's "analytical"
+    row); needs q in metres and the two DE voltages.
+    """
     engine: Literal["compiled", "numpy"] = "compiled"
+    """Free-run engine: the compiled kernel or the NumPy reference (the same numbers to rounding).
+    """
     predict_steps: NonNegativeInt = 10
+    """Horizon k [samples] of the k-step-ahead NRMSE beside the free run; 0: no prediction scores
+    and no residual analysis.
+    """
     resid_lags: PositiveInt = 25
+    """Largest lag [samples] of the residual analysis of the one-step prediction errors."""
     replicates: NonNegativeInt = 100
+    """Bootstrap replicates of the identified model run free beside it (as MATLAB's simsd), at most
+    [identify] bootstrap; 0: none.
+    """
 
     def __post_init__(self) -> None:
         if self.report_unit is not None and lookup_unit(self.report_unit) is None:

@@ -332,13 +332,8 @@ def replicate_spread(
 
     Each replicate is the model with its parameters moved by one block-bootstrap replicate's
     deviation from the least-squares estimate (:meth:`debist.model.rbf.RBFModel.
-    replicate_table`), simulated by the same kernel and scored by Eq. 41. The spread shows how
-    much of a free run the data pin down: a bistable beam near a switching threshold keeps or
-    loses a switch with small changes of its curves, and a low NRMSE(q) whose replicates lose
-    it is a fragile result. The spread covers the estimation uncertainty only (the bands of
-    the curves add the model error; these do not): on the virtual rig the replicates' 95 %
-    band held the measured q at 28-71 % of the samples, so it is reported as what it is,
-    never as a prediction interval.
+    replicate_table`), simulated by the same kernel and scored by Eq. 41. The spread covers
+    the estimation uncertainty only, never a prediction interval (docs/results/fleets.md).
 
     Parameters
     ----------
@@ -359,11 +354,9 @@ def replicate_spread(
     -------
     table : pandas.DataFrame
         One row per data set: ``dataset``, ``replicates`` (B), ``nrmse_q_lo``, ``nrmse_q_hi``
-        (the 2.5th and 97.5th order statistics of the replicates' NRMSE(q), a diverged
-        replicate counting as infinite), ``replicates_poor`` (the share whose NRMSE(q) is
-        above :data:`debist.core.metrics.POOR_SHARE` of the mean baseline's, or diverged).
-        ``replicates_hold_q``: the share of the scored samples whose measured q lies inside
-        the replicates' band (what the band held on this data set).
+        (2.5th and 97.5th order statistics of NRMSE(q), a diverged replicate infinite),
+        ``replicates_poor`` (share above :data:`debist.core.metrics.POOR_SHARE` of the mean
+        baseline's, or diverged), ``replicates_hold_q`` (share of measured q in the band).
     bands : dict of str to ndarray, shape (2, n)
         Per data set the pointwise 2.5 and 97.5 percentiles of the replicates' q [unit of
         q] (NaN where every replicate diverged), stored as :data:`REPLICATE_BAND`.

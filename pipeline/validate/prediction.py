@@ -80,36 +80,23 @@ def k_step_prediction(
 ) -> np.ndarray:
     """Predict q ``k`` samples ahead from the measured state at every sample.
 
-    Each window starts from the model's states along the record: its
-    ``measured_states(q, q_dot, dt)`` where it has one (the identified model's friction
-    state filtered from the measured velocity), else ``initial_state(q, q_dot)``.
-
     Parameters
     ----------
     model : FreeRunModel
-        The model (identified, SINDy, analytical).
-    q, q_dot : ndarray, shape (n,)
-        Measured position [unit of q] and its derivative [unit of q / s] (the
-        differentiate stage's), the state each window restarts from.
-    v : ndarray, shape (n, n_inputs)
-        Inputs [V] (or the input's unit).
-    dt : float
-        Sample time [s].
-    k : int
-        Prediction horizon [samples], ``>= 1``.
+        The model; each window starts from its ``measured_states`` (or ``initial_state``).
+    q, q_dot, v : ndarray, shapes (n,), (n,), (n, n_inputs)
+        Measured position [unit of q], velocity [unit of q / s] and inputs [V].
+    dt, k : float, int
+        Sample time [s]; prediction horizon [samples], ``>= 1``.
     substeps, interpolation, q_limit, engine
-        As :func:`debist.simulate.freerun.simulate` (the validate stage's settings).
+        As :func:`debist.simulate.freerun.simulate`.
     max_windows : int, optional
-        Most restarts per record; a longer record restarts at evenly spaced samples
-        (then ``k >= 2``; with ``k = 1`` every sample is kept so that the errors are
-        consecutive, as the residual analysis needs).
+        Most restarts per record, evenly spaced (``k >= 2``; ``k = 1`` keeps every sample).
 
     Returns
     -------
     ndarray, shape (n,)
-        ``q_hat(j | j - k)`` [unit of q]: the prediction of sample ``j`` made at sample
-        ``j - k``; NaN for ``j < k``, for samples that start no window and after a
-        window diverged.
+        ``q_hat(j | j - k)`` [unit of q]; NaN for ``j < k``, unstarted or diverged windows.
 
     Raises
     ------
@@ -118,23 +105,16 @@ def k_step_prediction(
 
     References
     ----------
-    Ljung 1999, Sec. 7.3 (k-step-ahead prediction); the scheme of
-    :func:`debist.simulate.freerun.simulate` (classical RK4 with sub-steps).
+    Ljung 1999, Sec. 7.3 (k-step-ahead prediction).
 
     Examples
     --------
-    A model that holds its velocity predicts a ramp exactly:
-
-    >>> class Ramp:
-    ...     n_states = 2
-    ...     def initial_state(self, q0, q_dot0):
-    ...         return np.stack([q0, q_dot0], axis=-1)
-    ...     def rhs(self, x, v):
-    ...         return np.stack([x[:, 1], 0 * x[:, 1]], axis=1), 0 * x[:, 1]
-    ...     def max_step(self):
-    ...         return np.inf
-    >>> t = np.arange(6) * 0.1
-    >>> q_hat = k_step_prediction(Ramp(), 2 * t, np.full(6, 2.0), np.zeros((6, 1)), 0.1, 2)
+    >>> from types import SimpleNamespace
+    >>> ramp = SimpleNamespace(n_states=2, max_step=lambda: np.inf,  # holds its velocity
+    ...     initial_state=lambda q0, q_dot0: np.stack([q0, q_dot0], axis=-1),
+    ...     rhs=lambda x, v: (np.stack([x[:, 1], 0 * x[:, 1]], axis=1), 0 * x[:, 1]))
+    >>> q_hat = k_step_prediction(
+    ...     ramp, 0.2 * np.arange(6), np.full(6, 2.0), np.zeros((6, 1)), 0.1, 2)
     >>> np.round(q_hat, 12).tolist()[2:]
     [0.4, 0.6, 0.8, 1.0]
     """
@@ -190,26 +170,17 @@ def restarted_runs(
 ) -> list[np.ndarray]:
     """Free runs over windows of measured records, each restarted from the measured state.
 
-    The multiple-shooting form of the free run (Bock & Plitt 1984): every window starts
-    from the model's states along its record, ``measured_states(q, q_dot, dt)`` where the
-    model has one (the identified model's friction state filtered from the measured
-    velocity), else ``initial_state(q, q_dot)``, and is driven by the record's inputs,
-    interpolated once over the whole record (so a window's inputs are those of the whole
-    record's free run). All windows run as one batch with the scheme of
-    :func:`debist.simulate.freerun.simulate`. A lost switch then costs one window, not the rest
-    of the record (Ribeiro et al. 2020).
+    Multiple shooting, in one batch: each window starts from the model's ``measured_states``
+    (else ``initial_state``); a lost switch costs one window, not the rest of the record.
 
     Parameters
     ----------
     model : FreeRunModel
         The model (identified, SINDy, analytical).
     records : sequence
-        Records with attributes ``q`` (n,) [unit of q], ``q_dot`` (n,) [unit of q / s] and
-        ``v`` (n, n_inputs) [V] (or the input's unit), all with sample time ``dt``.
-    windows : sequence of (int, int, int)
-        ``(record index, first sample, sample after the last)``, at least 2 samples each.
-    dt : float
-        Sample time [s].
+        Records with ``q`` (n,) [unit of q], ``q_dot`` (n,) [unit/s], ``v`` (n, n_inputs) [V].
+    windows, dt : sequence of (int, int, int), float
+        ``(record, first sample, sample after the last)``, >= 2 samples each; sample time [s].
     substeps, interpolation, q_limit, engine
         As :func:`debist.simulate.freerun.simulate`.
 
@@ -221,28 +192,20 @@ def restarted_runs(
     Raises
     ------
     WorkflowError
-        If there is no window or a window is shorter than 2 samples or outside its record.
+        If there is no window, or one is shorter than 2 samples or outside its record.
 
     References
     ----------
-    Bock & Plitt, "A multiple shooting algorithm for direct solution of optimal control
-    problems", IFAC 9th World Congress, 1984; Ribeiro, Tiels, Umenberger, Schon & Aguirre,
-    "On the smoothness of nonlinear system identification", Automatica 121, 2020.
+    Bock & Plitt 1984, IFAC 9th World Congress; Ribeiro et al. 2020, Automatica 121.
 
     Examples
     --------
-    A model that holds its velocity, restarted on a ramp, follows it in every window:
-
-    >>> class Ramp:
-    ...     n_states = 2
-    ...     def initial_state(self, q0, q_dot0):
-    ...         return np.stack([q0, q_dot0], axis=-1)
-    ...     def rhs(self, x, v):
-    ...         return np.stack([x[:, 1], 0 * x[:, 1]], axis=1), 0 * x[:, 1]
-    ...     def max_step(self):
-    ...         return np.inf
+    >>> from types import SimpleNamespace
+    >>> ramp = SimpleNamespace(n_states=2, max_step=lambda: np.inf,  # holds its velocity
+    ...     initial_state=lambda q0, q_dot0: np.stack([q0, q_dot0], axis=-1),
+    ...     rhs=lambda x, v: (np.stack([x[:, 1], 0 * x[:, 1]], axis=1), 0 * x[:, 1]))
     >>> rec = _Record(np.arange(8.0), np.ones(8), np.zeros((8, 1)))
-    >>> [r.tolist() for r in restarted_runs(Ramp(), [rec], [(0, 1, 4), (0, 5, 8)], 1.0)]
+    >>> [r.tolist() for r in restarted_runs(ramp, [rec], [(0, 1, 4), (0, 5, 8)], 1.0)]
     [[1.0, 2.0, 3.0], [5.0, 6.0, 7.0]]
     """
     idx = np.asarray(windows, dtype=np.int64).reshape(-1, 3)
@@ -382,11 +345,8 @@ def residual_analysis(errors: np.ndarray, v: np.ndarray, max_lag: int = 25) -> R
 
     References
     ----------
-    Ljung 1999, Sec. 16.6 (Eq. 16.61-16.63: the correlation estimates and their
-    confidence limits); Ljung & Box 1978 (the portmanteau statistic
-    ``Q = n (n + 2) sum_tau r(tau)^2 / (n - tau)``, chi-square with L degrees of freedom);
-    Bartlett's formula for the variance of a cross-correlation between independent series
-    (Box, Jenkins & Reinsel, Time Series Analysis, 4th ed. 2008, Sec. 11.1.3).
+    Ljung 1999, Sec. 16.6, Eq. 16.61-16.63 (correlations and their limits); Ljung & Box 1978
+    (portmanteau statistic); Box, Jenkins & Reinsel 2008, Sec. 11.1.3 (Bartlett's formula).
 
     Examples
     --------

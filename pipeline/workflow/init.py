@@ -272,11 +272,9 @@ def init_workflow(
     Parameters
     ----------
     data : sequence of path-like
-        Rig logs, at least one: the first is the estimation data set, the others
-        validation data sets.
+        Rig logs, at least one: the first the estimation data set, the others validation.
     out : path-like, optional
-        The workflow file to write; default :data:`DEFAULT_OUT` in the working folder.
-        Its folder is created if missing.
+        The workflow file to write (its folder created); default :data:`DEFAULT_OUT`.
     force : bool, optional
         Replace an existing ``out`` (never one of the rig logs).
     request : MappingRequest, optional
@@ -290,13 +288,11 @@ def init_workflow(
     Raises
     ------
     WorkflowError
-        No file given; ``out`` exists (without ``force``), is a folder or one of the rig
-        logs; a channel that cannot be guessed, or is ambiguous, or a given one the file
-        lacks (one line naming the file, listing its channels and the option to pass);
-        files with different numbers of inputs.
+        No file; ``out`` exists (without ``force``), is a folder or a rig log; a channel
+        that cannot be guessed or is missing (naming file, channels and option); files with
+        different numbers of inputs.
     RigLogError
-        A rig log that cannot be read, or does not ingest with the chosen mapping (a
-        time that is not increasing, a unit of the wrong quantity, ...).
+        A rig log that cannot be read, or does not ingest with the chosen mapping.
     OSError
         The workflow cannot be written (nothing is left then).
 

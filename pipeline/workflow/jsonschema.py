@@ -4,7 +4,8 @@
 file: every section, sub-table and key that :func:`debist.workflow.schema.check_workflow`
 accepts, with its type, range, default and description. The per-key parts come from
 pydantic (``TypeAdapter``-style generation over the stages' own config dataclasses), the
-descriptions from each class's numpydoc ``Parameters`` section, so the schema cannot drift
+descriptions from each class's numpydoc ``Parameters`` section or, for a class with many
+fields, from the docstring under each field's declaration, so the schema cannot drift
 from the checks. What the classes leave to code (the channel tables of ``[ingest]``, the
 ``method`` of ``[differentiate]``, the candidate lists of ``[identify.auto]``, the sub-tables
 of ``[rig]``) is added here by hand, following :mod:`debist.workflow.schema`.
@@ -23,8 +24,12 @@ numpydoc docstring guide (https://numpydoc.readthedocs.io/en/latest/format.html)
 
 from __future__ import annotations
 
+import ast
 import copy
+import inspect
+import itertools
 import re
+import textwrap
 from typing import Any
 
 import docstring_parser
@@ -67,11 +72,32 @@ def _plain(text: str | None) -> str:
     return _ROLE.sub(_role, " ".join((text or "").split())).replace("``", "`")
 
 
+def _field_docs(cls: type) -> dict[str, str]:
+    """Return the docstrings written under a class's field declarations (``x: int = 1``)."""
+    out: dict[str, str] = {}
+    for klass in reversed(cls.__mro__[:-1]):
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError, SyntaxError):  # no source: a builtin or a generated class
+            continue
+        body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        for field, doc in itertools.pairwise(body):
+            if (
+                isinstance(field, ast.AnnAssign)
+                and isinstance(field.target, ast.Name)
+                and isinstance(doc, ast.Expr)
+                and isinstance(doc.value, ast.Constant)
+                and isinstance(doc.value.value, str)
+            ):
+                out[field.target.id] = inspect.cleandoc(doc.value.value)
+    return out
+
+
 def _descriptions(cls: type) -> tuple[str, dict[str, str]]:
-    """Return a class's summary and its numpydoc parameter (or attribute) descriptions."""
+    """Return a class's summary and its field descriptions (numpydoc or under each field)."""
     doc = docstring_parser.parse(cls.__doc__ or "", docstring_parser.DocstringStyle.NUMPYDOC)
     summary = " ".join(x for x in (doc.short_description, doc.long_description) if x)
-    params = {}
+    params = {name: _plain(text) for name, text in _field_docs(cls).items()}
     for param in doc.params:
         for name in param.arg_name.split(","):  # "lo, hi : float" documents two fields
             params[name.strip()] = _plain(param.description)
