@@ -164,8 +164,8 @@ class Truth:
 
 
 def test_the_true_plant_predicts_its_own_record_to_integration_error(bistable_record):
-    from debist.validate.prediction import prediction_table
     from debist.validate.freerun import DataSet
+    from debist.validate.prediction import prediction_table
 
     rec = bistable_record
     n = 2000
@@ -236,8 +236,8 @@ def test_restarts_carry_the_friction_state_of_the_record_not_z_equal_q_dot():
 def test_restarted_windows_of_a_free_run_repeat_it_sample_for_sample(bistable_record):
     """Windows restarted from a free run's own states, with the inputs interpolated over the
     whole record, are that free run's stretches (the same arithmetic)."""
-    from debist.validate.prediction import restarted_runs
     from debist.validate.freerun import DataSet
+    from debist.validate.prediction import restarted_runs
 
     rec, n = bistable_record, 3000
     (run,) = simulate(
@@ -260,8 +260,8 @@ def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bis
     switch misses the record after its first lost switch in one free run, but only the
     windows that hold a switch when every window restarts from the measured state."""
     from debist.core.metrics import nrmse
-    from debist.validate.prediction import restarted_runs
     from debist.validate.freerun import DataSet
+    from debist.validate.prediction import restarted_runs
 
     class Weak(Truth):
         def rhs(self, x, v):

@@ -49,8 +49,8 @@ from debist.identify.config import (
 )
 from debist.identify.fit import Record, fit_rbf_model, supported_size
 from debist.model.terms import column_names
-from debist.validate.prediction import restarted_runs
 from debist.validate.freerun import default_q_limit
+from debist.validate.prediction import restarted_runs
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")

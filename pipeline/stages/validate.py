@@ -17,7 +17,6 @@ from debist.model.rbf import RBFModel
 from debist.report.plots import free_run_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
-from debist.validate.prediction import prediction_table
 from debist.stages import StageInputs, StageOutput
 from debist.validate.datasets import validation_datasets
 from debist.validate.freerun import (
@@ -28,6 +27,7 @@ from debist.validate.freerun import (
     replicate_spread,
     validate_model,
 )
+from debist.validate.prediction import prediction_table
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
