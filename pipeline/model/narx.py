@@ -12,23 +12,18 @@ its terms ordered by forward regression with orthogonal least squares (FROLS; Sy
 found (the window of sizes grows until the criterion rises, never capped) and bounds the sizes
 tried; among those, the simulation error of the free run over the estimation records picks
 the model (:func:`fit_narx`; Piroddi & Spinelli 2003: a one-step criterion alone keeps terms
-that fit the sensor's coloured noise and lose the free run). Validation data never enter the
-choice.
+that fit the sensor's coloured noise and lose the free run), after a screen on inputs the
+estimation records imply but do not contain (:func:`stress_inputs`): a candidate whose free
+run leaves the visited range under them is unstable where the data cannot vouch for it.
+Validation data never enter the choice.
 
-Data are scaled before the fit (``q`` about the midrange of the estimation records, divided by
-its standard deviation there; each ``h(v_i)`` by its largest magnitude there), so that the
-polynomial terms are of comparable size for the orthogonalisation; predictions are scaled
-back. A polynomial NARX is not invariant to the origin of ``q`` (a shifted monomial of degree
-d mixes all lower degrees, so a sparse selection changes). The origin used here is a function
-of the data that moves with them: shifting every record by a constant ``c`` shifts the
-midrange by ``c``, the fit sees identical numbers, and every free run is the old one plus
-``c``, so NRMSE(q) is unchanged to rounding. The model is therefore independent of the
-sensor's zero. Scaling is harmless: FROLS's error reduction ratio does not depend on a
-column's scale, and the criterion's minimum moves only with ``log`` of it by a constant.
-Each record's regressor rows are built on that record alone (no lag reaches into another
-record) and stacked; at most ``max_samples`` samples are fitted (the first of each record, in
-proportion to its length). Free runs use a compiled recursion (:mod:`debist.model.narx_kernel`)
-equal to SysIdentPy's ``predict``.
+Data are scaled before the fit (``q`` about an origin, divided by its standard deviation;
+each ``h(v_i)`` by its largest magnitude). A polynomial NARX is not invariant to the origin of
+``q``, so the origin is searched like the degree (:func:`q_origins`); every candidate origin
+moves with a shift of the data, so the model is independent of the sensor's zero. Each
+record's regressor rows are built on that record alone (no lag reaches into another record).
+Free runs use a compiled recursion (:mod:`debist.model.narx_kernel`) equal to SysIdentPy's
+``predict``. Why each step: the NARX section of the implementation notes in the docs.
 
 References
 ----------
@@ -61,8 +56,17 @@ from debist.model.termtable import input_map as apply_input_map
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
+linalg = lazy.load("scipy.linalg", suppress_warning=True)
 
-__all__ = ["NARX_MISSING", "NarxConfig", "NarxModel", "fit_narx", "narx_available"]
+__all__ = [
+    "NARX_MISSING",
+    "NarxConfig",
+    "NarxModel",
+    "fit_narx",
+    "narx_available",
+    "q_origins",
+    "stress_inputs",
+]
 
 #: The status of NARX rows when SysIdentPy is not installed.
 NARX_MISSING = "not available (pip install 'debist[narx]')"
@@ -161,14 +165,14 @@ class NarxModel:
     degree, lag : int
         Its polynomial degree and lags [samples].
     q_origin, q_std : float
-        Output origin (the midrange of the estimation records) and scale [unit of q].
+        Output origin (:func:`q_origins`) and scale [unit of q].
     h_scale : ndarray, shape (n_inputs,)
         Input scaling [unit of h].
     q_limit : float
         A free run beyond ``|q| > q_limit`` [unit of q] counts as diverged.
     candidates : pandas.DataFrame
-        The search: ``degree, lag, input_map, n_terms, criterion_terms, free_run_nrmse_q,
-        status`` per structure and model size.
+        The search: ``degree, lag, input_map, origin, n_terms, criterion_terms,
+        free_run_nrmse_q, stress_excursion, status`` per structure and model size.
     """
 
     estimator: Any
@@ -264,7 +268,7 @@ class NarxModel:
         }
 
 
-def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any) -> np.ndarray:
+def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any, *, qr: bool = False):
     """Information criterion of every nested least-squares model ``psi[:, :k]``, k = 1..n.
 
     One thin QR decomposition of ``psi`` gives each prefix's residual: with ``Q``'s columns
@@ -280,12 +284,15 @@ def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any) -> np.ndarra
         Target.
     criterion : callable
         ``criterion(n_theta, n_samples, e_var)``, e.g. SysIdentPy's ``aic``.
+    qr : bool, optional
+        Also return ``R`` and ``c = Q^T y``: the least-squares parameters of the first ``k``
+        columns are ``R[:k, :k]^-1 c[:k]``.
 
     Returns
     -------
     ndarray, shape (n,)
         The criterion for 1..n terms; ``inf`` from the first column that is numerically
-        dependent on the ones before it.
+        dependent on the ones before it. With ``qr``, the tuple ``(criterion, R, c)``.
 
     References
     ----------
@@ -304,7 +311,7 @@ def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any) -> np.ndarra
                     for k in range(n)])  # fmt: skip
     if dependent.any():
         out[int(np.argmax(dependent)) :] = np.inf
-    return out
+    return (out, R, c) if qr else out
 
 
 @functools.cache
@@ -347,28 +354,33 @@ def _frols_class():
             while True:
                 err, piv, _ = self.run_mss_algorithm(psi, padded, n)
                 piv = np.asarray(piv, dtype=np.intp)[:n]
-                ic = prefix_criteria(psi[:, piv], target, self.info_criteria_function)
+                ic, R, c = prefix_criteria(psi[:, piv], target, self.info_criteria_function,
+                                           qr=True)  # fmt: skip
                 k = int(np.argmin(ic)) + 1
                 if k < n or n == n_cand:
                     break
                 n = min(2 * n, n_cand)
             self.info_values, self.err, self.pivv = ic, err, piv
             self.n_terms_criterion = k
-            self._stack = (psi, target)
+            self._qr = (R, c)
             return self.truncate(k)
 
         def truncate(self, k: int):
-            """Keep the first ``k`` terms of FROLS's order, refitted by least squares."""
-            psi, target = self._stack
+            """Keep the first ``k`` terms of FROLS's order, refitted by least squares.
+
+            The least-squares solution of the first ``k`` ordered columns from the thin QR
+            decomposition of :func:`prefix_criteria`: ``R[:k, :k] theta = c[:k]``.
+            """
+            R, c = self._qr
             piv = self.pivv[:k]
             self.n_terms = k
             self.final_model = self.regressor_code[piv, :].copy()
-            self.theta = self.estimator.optimize(psi[:, piv], target[:, None])
+            self.theta = linalg.solve_triangular(R[:k, :k], c[:k])[:, None]
             return self
 
         def release(self):
-            """Drop the stacked regressor kept for :meth:`truncate`."""
-            self._stack = None
+            """Drop the decomposition kept for :meth:`truncate`."""
+            self._qr = None
             return self
 
     return RecordsFROLS
@@ -403,12 +415,16 @@ def _fit(pieces_q, pieces_x, degree, lag, cfg: NarxConfig):
     return est
 
 
-#: Relative margin of the held-out score within which fewer terms are preferred.
-SIMPLER_WITHIN = 0.1
+#: Relative margin of the free-run score within which fewer terms are preferred.
+SIMPLER_WITHIN = 0.25
+
+#: Largest excursion of a free run on the stress inputs, in half-spans of the estimation
+#: records' q about their midrange, that still counts as staying in the visited range.
+STRESS_LIMIT = 2.0
 
 
 def term_counts(k_criterion: int) -> list[int]:
-    """Model sizes the held-out free run compares: a geometric ladder up to the criterion's.
+    """Model sizes the free run compares: 4, 6, 12 and every multiple of 8 up to the criterion's.
 
     Parameters
     ----------
@@ -418,10 +434,67 @@ def term_counts(k_criterion: int) -> list[int]:
     Returns
     -------
     list of int
-        4, 6, 8, 12, 16, 24, ... below ``k_criterion``, and ``k_criterion``.
+        Ascending sizes below ``k_criterion``, and ``k_criterion``.
     """
-    ladder = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192]
-    return [k for k in ladder if k < k_criterion] + [k_criterion]
+    sizes = {4, 6, 12, *range(8, k_criterion, 8)}
+    return [*sorted(k for k in sizes if k < k_criterion), k_criterion]
+
+
+def q_origins(q: np.ndarray) -> dict[str, float]:
+    """Candidate origins of ``q`` for the polynomial: each moves with a shift of the data.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        The estimation records' positions, concatenated [unit of q].
+
+    Returns
+    -------
+    dict
+        ``"midrange"``: ``(max + min) / 2``; ``"halves"``: the mean of the medians of the
+        samples below and at or above the midrange (the two wells' midpoint on a record that
+        dwells in both).
+    """
+    mid = float(0.5 * (q.max() + q.min()))
+    low, high = q[q < mid], q[q >= mid]
+    halves = 0.5 * (np.median(low) + np.median(high)) if low.size and high.size else mid
+    return {"midrange": mid, "halves": float(halves)}
+
+
+def stress_inputs(v: Sequence[np.ndarray]) -> dict[str, np.ndarray]:
+    """Return inputs the estimation records imply but do not contain, for a stability screen.
+
+    From the records' inputs, concatenated (``n`` samples, amplitudes ``v_max`` per input):
+    the same sequence time-reversed (``"reversed"``) and at half speed (``"slow"``, the first
+    ``n`` samples); each input in turn ramped from 0 to its ``v_max`` and back, three times
+    (``"ramps"``); each input in turn stepped through 0, 1/4, ..., 1, ..., 0 of its
+    ``v_max`` (``"stairs"``). A model of a rig that stays in its visited range for every input
+    of that range must stay there under these too.
+
+    Parameters
+    ----------
+    v : sequence of ndarray, each shape (n_k, n_inputs)
+        The estimation records' inputs [V].
+
+    Returns
+    -------
+    dict of str to ndarray, each shape (n, n_inputs)
+    """
+    v = np.concatenate([np.asarray(r, dtype=float) for r in v])
+    n, k = v.shape
+    v_max = np.max(np.abs(v), axis=0)
+    t = np.arange(n) / n
+    triangle = 1.0 - np.abs(2.0 * ((3.0 * t) % 1.0) - 1.0)
+    turn = np.floor(3.0 * k * t).astype(int) % k
+    ramps = np.where(turn[:, None] == np.arange(k), triangle[:, None], 0.0) * v_max
+    levels = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 0.75, 0.5, 0.25, 0.0])
+    part = n // k
+    stairs = np.zeros_like(v)
+    for i in range(k):
+        stairs[i * part : (i + 1) * part, i] = levels[np.arange(part) * levels.size // part]
+    stairs *= v_max
+    return {"reversed": v[::-1].copy(), "slow": v[np.arange(n) // 2], "ramps": ramps,
+            "stairs": stairs}  # fmt: skip
 
 
 def _scaled_inputs(v, h_map: str) -> tuple[list[np.ndarray], np.ndarray]:
@@ -448,16 +521,32 @@ def _free_run_score(model: NarxModel, ys, xs, span: float) -> float:
     return float(np.sqrt(sse / count) / span)
 
 
+def _stress_excursion(model: NarxModel, y0: np.ndarray, stress, centre: float, half: float):
+    """Largest ``|y - centre| / half`` of the stress inputs' free runs (inf if one diverged)."""
+    worst = 0.0
+    for x in stress:
+        sim, at = model.simulate_scaled(y0, x)
+        if at >= 0:
+            return np.inf
+        worst = max(worst, float(np.max(np.abs(sim - centre))) / half)
+    return worst
+
+
 def _simplest_near_best(candidates: pd.DataFrame) -> dict | None:
     """Pick the fewest terms whose free-run score is within :data:`SIMPLER_WITHIN` of the best.
 
-    None if no candidate ran free to the end of the estimation records.
+    Among the candidates that ran free to the end of the estimation records and stayed within
+    :data:`STRESS_LIMIT` on the stress inputs; if none stayed, among all that ran free. None if
+    no candidate ran free to the end of the estimation records.
     """
     ok = candidates[np.isfinite(candidates.free_run_nrmse_q)] if len(candidates) else candidates
     if ok.empty:
         return None
+    steady = ok[ok.stress_excursion <= STRESS_LIMIT]
+    ok = steady if len(steady) else ok
     near = ok[ok.free_run_nrmse_q <= (1.0 + SIMPLER_WITHIN) * ok.free_run_nrmse_q.min()]
-    return near.sort_values(["n_terms", "degree", "lag", "free_run_nrmse_q"]).iloc[0].to_dict()
+    order = ["n_terms", "degree", "lag", "free_run_nrmse_q"]
+    return near.sort_values(order, kind="stable").iloc[0].to_dict()
 
 
 def fit_narx(
@@ -469,11 +558,13 @@ def fit_narx(
 ) -> NarxModel:
     """Choose and fit the polynomial NARX model on the estimation records.
 
-    Per candidate structure (input map, degree, lags), FROLS orders the terms on the stacked
-    records and the information criterion's minimum gives the largest model size; the sizes
-    of :func:`term_counts` up to it run free over the estimation records from each record's
-    first ``max_lag`` samples. The fewest terms within :data:`SIMPLER_WITHIN` of the best
-    free-run NRMSE(q) win, over every structure.
+    Per candidate structure (input map, degree, lags, origin of :func:`q_origins`), FROLS
+    orders the terms on the stacked records and the information criterion's minimum gives the
+    largest model size; the sizes of :func:`term_counts` up to it run free over the estimation
+    records from each record's first ``max_lag`` samples and over :func:`stress_inputs`. Of
+    the candidates that stay within :data:`STRESS_LIMIT` half-spans on the stress inputs (all,
+    if none does), the fewest terms within :data:`SIMPLER_WITHIN` of the best free-run
+    NRMSE(q) win, over every structure.
 
     Parameters
     ----------
@@ -507,27 +598,37 @@ def fit_narx(
     v = [np.asarray(r, dtype=float).reshape(r.shape[0], -1) for r in v]
     maps = cfg.input_maps or (input_map,)
     q_all = np.concatenate(q)
-    q_origin, q_std = float(0.5 * (q_all.max() + q_all.min())), float(np.std(q_all)) or 1.0
-    ys = [(r - q_origin) / q_std for r in q]
+    q_std = float(np.std(q_all)) or 1.0
     span = float(np.ptp(q_all)) / q_std or 1.0
+    mid = float(0.5 * (q_all.max() + q_all.min()))
+    stress = stress_inputs(v)
     rows, fits = [], {}
-    for h_map, degree, lag in itertools.product(maps, cfg.degree, cfg.lags):
+    for h_map, degree, lag, (origin, q_origin) in itertools.product(
+        maps, cfg.degree, cfg.lags, q_origins(q_all).items()
+    ):
+        ys = [(r - q_origin) / q_std for r in q]
         xs, scale = _scaled_inputs(v, h_map)
-        base = {"degree": degree, "lag": lag, "input_map": h_map}
+        stress_x = [apply_input_map(s, h_map) / scale for s in stress.values()]
+        base = {"degree": degree, "lag": lag, "input_map": h_map, "origin": origin}
         try:
             est = _fit(ys, xs, degree, lag, cfg)
         except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
-            rows.append({**base, "n_terms": 0, "criterion_terms": 0,
-                         "free_run_nrmse_q": np.inf, "status": f"fit failed: {exc}"})  # fmt: skip
+            rows.append({**base, "n_terms": 0, "criterion_terms": 0, "free_run_nrmse_q": np.inf,
+                         "stress_excursion": np.inf, "status": f"fit failed: {exc}"})  # fmt: skip
             continue
         for size in term_counts(est.n_terms_criterion):
             model = NarxModel(est.truncate(size), h_map, degree, lag, q_origin, q_std, scale,
                               q_limit)  # fmt: skip
             score = _free_run_score(model, ys, xs, span)
+            excursion = _stress_excursion(model, ys[0], stress_x, (mid - q_origin) / q_std,
+                                          0.5 * span)  # fmt: skip
+            status = "ok" if np.isfinite(score) else "diverged"
+            if status == "ok" and excursion > STRESS_LIMIT:
+                status = "left the visited range on the stress inputs"
             rows.append({**base, "n_terms": size, "criterion_terms": est.n_terms_criterion,
-                         "free_run_nrmse_q": score,
-                         "status": "ok" if np.isfinite(score) else "diverged"})  # fmt: skip
-        fits[h_map, degree, lag] = est, scale
+                         "free_run_nrmse_q": score, "stress_excursion": excursion,
+                         "status": status})  # fmt: skip
+        fits[h_map, degree, lag, origin] = est, scale, q_origin
     candidates = pd.DataFrame(rows)
     best = _simplest_near_best(candidates)
     if best is None:
@@ -535,9 +636,10 @@ def fit_narx(
             "NARX: every candidate structure failed to fit or diverged in its free run over "
             "the estimation records"
         )
-    est, scale = fits.pop((best["input_map"], best["degree"], best["lag"]))
+    est, scale, q_origin = fits.pop((best["input_map"], best["degree"], best["lag"],
+                                     best["origin"]))  # fmt: skip
     est.truncate(int(best["n_terms"])).release()
-    for other, _ in fits.values():
+    for other, *_ in fits.values():
         other.release()
     if len(est.final_model) == 0:
         warnings.warn("NARX: the chosen structure selected no term", DebistWarning, stacklevel=2)
