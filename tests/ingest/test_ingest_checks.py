@@ -49,11 +49,14 @@ def test_nan_names_file_channel_index_and_time(tmp_path):
     q[7] = np.nan
     q[9] = np.nan
     path = write_csv(tmp_path / "nan.csv", t, q, q)
-    with pytest.raises(
-        RigLogError,
-        match=r"nan.csv', channel 'q': `q` is nan at sample 7 \(t = 0.07 s\); 2 non-finite",
-    ):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.path.endswith("nan.csv")
+    assert err.value.channel == "q"
+    assert "`q`" in str(err.value)
+    assert err.value.sample == 7 and np.isnan(err.value.value)
+    assert "t = 0.07 s" in str(err.value)
+    assert "2 non-finite" in str(err.value)
     # outside the slice it does not matter
     (df,) = load(path, slice=[10, 20])
     assert len(df) == 10 and df.attrs["first_index"] == 10
@@ -64,77 +67,97 @@ def test_inf_is_reported_like_nan(tmp_path):
     u = np.zeros(20)
     u[3] = -np.inf
     path = write_csv(tmp_path / "inf.csv", t, np.zeros(20), u)
-    with pytest.raises(RigLogError, match=r"channel 'u': `v1` is -inf at sample 3 \(t = 0.03 s\)"):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.channel == "u"
+    assert "`v1`" in str(err.value)
+    assert err.value.sample == 3 and err.value.value == -np.inf
+    assert "t = 0.03 s" in str(err.value)
 
 
 def test_repeated_time(tmp_path):
     t = np.arange(20) * 0.01
     t[5] = t[4]
     path = write_csv(tmp_path / "rep.csv", t, np.zeros(20), np.zeros(20))
-    with pytest.raises(
-        RigLogError,
-        match=r"rep.csv', channel 't': time is not strictly increasing at sample 5: "
-        r"t\[4\] = 0.04 s, t\[5\] = 0.04 s \(repeated\); 1 such step",
-    ):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.path.endswith("rep.csv")
+    assert err.value.channel == "t"
+    assert err.value.sample == 5 and err.value.value == pytest.approx(0.04)
+    assert "t[4] = 0.04 s" in str(err.value)
+    assert "t[5] = 0.04 s" in str(err.value)
+    assert "(repeated);" in str(err.value)
 
 
 def test_time_going_back(tmp_path):
     t = np.arange(20) * 0.01
     t[10] = 0.02
     path = write_csv(tmp_path / "back.csv", t, np.zeros(20), np.zeros(20))
-    with pytest.raises(RigLogError, match=r"t\[10\] = 0.02 s \(goes back by 0.07 s\)"):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert "t[10] = 0.02 s" in str(err.value)
+    assert "0.07 s)" in str(err.value)
 
 
 def test_nan_time(tmp_path):
     t = np.arange(20) * 0.01
     t[6] = np.nan
     path = write_csv(tmp_path / "tnan.csv", t, np.zeros(20), np.zeros(20))
-    with pytest.raises(RigLogError, match=r"channel 't': time is nan at sample 6 \(previous t ="):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.channel == "t"
+    assert err.value.sample == 6 and np.isnan(err.value.value)
 
 
 def test_gap_error_and_split(tmp_path):
     t = np.r_[np.arange(10) * 0.01, 1.0 + np.arange(10) * 0.01]
     path = write_csv(tmp_path / "gap.csv", t, np.arange(20.0), np.zeros(20))
-    with pytest.raises(
-        RigLogError,
-        match=r"gap.csv', channel 't': 1 gap\(s\).*first starts at t = 0.09 s \(sample 9\) "
-        r"and lasts 0.91 s; set gaps = \"split\"",
-    ):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.path.endswith("gap.csv")
+    assert err.value.channel == "t"
+    assert "1 gap(s)" in str(err.value)
+    assert "t = 0.09 s" in str(err.value)
+    assert err.value.sample == 9 and err.value.value == pytest.approx(0.91)
+    assert "lasts 0.91 s" in str(err.value)
+    assert 'gaps = "split"' in str(err.value)
     a, b = load(path, gaps="split", min_segment=5)
     assert a["q"].tolist() == [i * 1e-3 for i in range(10)]
     assert b.attrs["first_index"] == 10 and b["t"].iloc[0] == 1.0
 
 
 @pytest.mark.parametrize(
-    ("changes", "match"),
+    ("changes", "selection", "kept"),
     [
-        ({"slice": [0, 2]}, r"empty selection: slice = \[0, 2\] keeps 2 of 20 samples"),
-        ({"slice": [30, 40]}, r"empty selection: slice = \[20, 20\] keeps 0 of 20 samples"),
-        ({"time_window": [5.0, 6.0]}, r"empty selection: time_window = \[5.0, 6.0\] s keeps 0"),
-        ({"time_window": [0.0, 0.015]}, r"empty selection: time_window = \[0.0, 0.015\] s keeps 2"),
+        ({"slice": [0, 2]}, "slice = [0, 2]", "keeps 2 of 20"),
+        ({"slice": [30, 40]}, "slice = [20, 20]", "keeps 0 of 20"),
+        ({"time_window": [5.0, 6.0]}, "time_window = [5.0, 6.0] s", "keeps 0"),
+        ({"time_window": [0.0, 0.015]}, "time_window = [0.0, 0.015] s", "keeps 2"),
     ],
 )
-def test_empty_selection(log, changes, match):
-    with pytest.raises(RigLogError, match=r"run.csv': " + match):
+def test_empty_selection(log, changes, selection, kept):
+    with pytest.raises(RigLogError) as err:
         load(log, **changes)
+    assert err.value.path.endswith("run.csv")
+    assert str(err.value).split(": ", 1)[1].startswith("empty selection")
+    assert f"{selection} {kept}" in str(err.value)
 
 
 def test_sample_time_missing_without_time_channel(log):
     section = {"q": {"name": "q", "unit": "mm"}, "v1": {"name": "u", "unit": "V"}}
-    with pytest.raises(RigLogError, match=r"run.csv': no time channel is mapped and `sample_ti"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(log, IngestSpec.from_dict(section))
+    assert err.value.path.endswith("run.csv")
+    assert "`sample_time`" in str(err.value)
 
 
 def test_sample_time_must_agree_with_time_channel(log):
     (df,) = load(log, sample_time=0.01)
     assert len(df) == 20
-    with pytest.raises(RigLogError, match=r"`sample_time` = 0.001 s but the median step .* 0.01 s"):
+    with pytest.raises(RigLogError) as err:
         load(log, sample_time=0.001)
+    assert "`sample_time` = 0.001 s" in str(err.value)
+    assert err.value.value == pytest.approx(0.01)
 
 
 def test_missing_channel_lists_names_truncated(tmp_path):
@@ -155,8 +178,13 @@ def test_channels_of_different_length_in_a_mat_file(tmp_path):
 
     path = tmp_path / "ragged.mat"
     scipy.io.savemat(path, {"t": np.arange(10.0), "q": np.zeros(10), "u": np.zeros(9)})
-    with pytest.raises(RigLogError, match=r"channel 'u': `v1` has 9 samples but `t` \('t'\) has"):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.channel == "u"
+    assert "`v1`" in str(err.value)
+    assert "has 9" in str(err.value)
+    assert "`t`" in str(err.value)
+    assert "'t'" in str(err.value)
 
 
 def test_output_contract(log):
@@ -175,22 +203,32 @@ def test_garbage_file(tmp_path):
     rng = np.random.default_rng(0)
     path = tmp_path / "garbage.mat"
     path.write_bytes(b"\x00\xff" + rng.integers(0, 256, 2000, dtype=np.uint8).tobytes())
-    with pytest.raises(RigLogError, match=r"garbage.mat': cannot read mat-v4 file"):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.path.endswith("garbage.mat")
+    assert "mat-v4" in str(err.value)
     path = path.rename(tmp_path / "garbage.bin")
-    with pytest.raises(RigLogError, match=r"garbage.bin': unrecognised format: binary"):
+    with pytest.raises(RigLogError) as err:
         load(path)
+    assert err.value.path.endswith("garbage.bin")
+    assert "unrecognised" in str(err.value) and "binary" in str(err.value)
 
 
 def test_empty_and_missing_file(tmp_path):
     (tmp_path / "empty.csv").write_bytes(b"")
-    with pytest.raises(RigLogError, match=r"empty.csv': empty file"):
+    with pytest.raises(RigLogError) as err:
         load(tmp_path / "empty.csv")
-    with pytest.raises(RigLogError, match=r"nope.csv': no such file"):
+    assert err.value.path.endswith("empty.csv")
+    assert "empty" in str(err.value)
+    with pytest.raises(RigLogError) as err:
         load(tmp_path / "nope.csv")
+    assert err.value.path.endswith("nope.csv")
+    assert "such" in str(err.value)
     (tmp_path / "blank.csv").write_text("\n\n  \n")
-    with pytest.raises(RigLogError, match=r"blank.csv': text file without any data line"):
+    with pytest.raises(RigLogError) as err:
         load(tmp_path / "blank.csv")
+    assert err.value.path.endswith("blank.csv")
+    assert "without" in str(err.value)
 
 
 def test_content_wins_over_extension(tmp_path, log):
@@ -202,10 +240,15 @@ def test_content_wins_over_extension(tmp_path, log):
 
 
 def test_declared_format_must_match_content(log):
-    with pytest.raises(RigLogError, match=r"run.csv': format = 'parquet' but the file holds 'csv'"):
+    with pytest.raises(RigLogError) as err:
         load(log, format="parquet")
-    with pytest.raises(RigLogError, match=r"format = 'mat' but the file holds 'csv' content"):
+    assert err.value.path.endswith("run.csv")
+    assert "format = 'parquet'" in str(err.value)
+    assert "'csv'" in str(err.value)
+    with pytest.raises(RigLogError) as err:
         load(log, format="mat")
+    assert "format = 'mat'" in str(err.value)
+    assert "'csv'" in str(err.value)
     assert load(log, format="csv")[0].attrs["format"] == "csv"
 
 
@@ -215,8 +258,9 @@ def test_sniff_format_magic_bytes():
     assert sniff_format(head + b"\x01\x00MI") == "mat-v5"  # big-endian writer
     v73 = (head + b"\x00\x02IM").ljust(512, b"\x00") + b"\x89HDF\r\n\x1a\n"
     assert sniff_format(v73) == "mat-v7.3"
-    with pytest.raises(RigLogError, match="unsupported MAT file version 0x0300"):
+    with pytest.raises(RigLogError) as err:
         sniff_format(head + b"\x00\x03IM")
+    assert "version 0x0300" in str(err.value)
     assert sniff_format(b"PAR1\x15\x04") == "parquet"
     assert sniff_format(b"t;q\n1,5;2\n") == "csv"
     assert sniff_format("µm\n1\n".encode()[:2]) == "csv"  # cut inside a character
@@ -272,9 +316,12 @@ def test_a_declared_unit_of_the_same_quantity_wins_over_the_workflow_and_is_said
         (in_v,) = load_rig_log(path, IngestSpec.from_dict(PARQUET))
     np.testing.assert_allclose(in_v["v1"], in_kv["v1"], rtol=1e-15)
     assert in_v.attrs["units"]["v1"] == "V"
-    with pytest.raises(RigLogError, match=r"channel 'v_DE1': wrong units.*another quantity"):
+    with pytest.raises(RigLogError) as err:
         pq.write_table(with_units(volts, {"v_DE1": "mm"}), path)
         load_rig_log(path, IngestSpec.from_dict(PARQUET))
+    assert err.value.channel == "v_DE1"
+    assert "wrong" in str(err.value)
+    assert "quantity" in str(err.value)
 
 
 def test_parquet_timestamp_time_column(tmp_path):
@@ -300,8 +347,10 @@ def test_truncated_parquet(tmp_path):
     pq.write_table(parquet_table(), path)
     cut = tmp_path / "cut.parquet"
     cut.write_bytes(path.read_bytes()[:-20])
-    with pytest.raises(RigLogError, match=r"cut.parquet': cannot read Parquet file"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(cut, IngestSpec.from_dict(PARQUET))
+    assert err.value.path.endswith("cut.parquet")
+    assert "Parquet" in str(err.value)
 
 
 # ------------------------------------------------------------------------ resampling
@@ -333,8 +382,9 @@ def test_polyphase_rational_ratio_and_identity():
     np.testing.assert_allclose(y[:, 0], 2.0, rtol=1e-3)
     _t3, y3 = resample_segment(t, x, 0.003, "polyphase")
     np.testing.assert_array_equal(y3, x)
-    with pytest.raises(RigLogError, match="not a simple fraction"):
+    with pytest.raises(RigLogError) as err:
         resample_segment(t, x, 0.003 * np.pi, "polyphase")
+    assert "fraction" in str(err.value)
 
 
 def test_linear_resampling_is_exact_on_lines():

@@ -36,7 +36,7 @@ def test_an_absurd_value_is_refused_at_ingest_naming_file_channel_and_value(proj
     code, out = invoke("run", project / "wf.toml", "--stages", "ingest")
     assert code == 1
     assert "rig.csv" in out and "channel 'laser'" in out and "1e+305 m" in out
-    assert "sample 700" in out and "beyond any plausible length" in out
+    assert "sample 700" in out and "plausible" in out and "length" in out
     assert not (project / "out" / "ingest").exists()
 
 
@@ -47,7 +47,7 @@ def test_a_unit_slip_inside_the_record_is_refused_with_its_time(project):
     edit_log(project, slip)
     code, out = invoke("run", project / "wf.toml", "--stages", "ingest")
     assert code == 1
-    assert "channel 'laser'" in out and "changes scale by 10^-3 at sample 3000" in out
+    assert "channel 'laser'" in out and "10^-3" in out and "sample 3000" in out
     assert "t = 6 s" in out
 
 
@@ -67,9 +67,13 @@ def test_plausibility_by_quantity():
                     channel="x", path="f")  # fmt: skip
     check_plausible(np.array([0, 1e30, 0]), t, idx, role="q", quantity="dimensionless",
                     unit="1", channel="x", path="f")  # fmt: skip
-    with pytest.raises(RigLogError, match=r"`v1` = 2e\+06 V at sample 1 .* voltage"):
+    with pytest.raises(RigLogError) as err:
         check_plausible(np.array([0, 2e6, 0]), t, idx, role="v1", quantity="voltage", unit="V",
                         channel="x", path="f")  # fmt: skip
+    assert "`v1`" in str(err.value)
+    assert err.value.value == 2e6 and "2e+06 V" in str(err.value)
+    assert err.value.sample == 1
+    assert "voltage" in str(err.value)
 
 
 def test_a_motionless_q_is_a_data_error_naming_file_and_channel(project):
@@ -77,8 +81,8 @@ def test_a_motionless_q_is_a_data_error_naming_file_and_channel(project):
     code, out = invoke("run", project / "wf.toml")
     assert code == 1, out
     assert "channel 'laser'" in out and "rig.csv" in out
-    assert "`q` is constant (0.001 m)" in out and "estimation data sets (estimation)" in out
-    assert "operating range" not in out
+    assert "constant (0.001 m)" in out and "(estimation)" in out
+    assert "operating" not in out
 
 
 def test_a_laser_error_code_beyond_the_ild2300_range_is_refused_without_a_range(project):
@@ -95,5 +99,5 @@ def test_a_laser_error_code_beyond_the_ild2300_range_is_refused_without_a_range(
     with pytest.warns(DebistWarning, match=r"ILD2300.*no `range`"):
         code, out = invoke("run", wf, "--stages", "ingest")
     assert code == 1
-    assert "channel 'ILD2300 distance'" in out and "range limit 25 mm" in out
+    assert "channel 'ILD2300 distance'" in out and "limit 25 mm" in out
     assert not (project / "out" / "ingest").exists()

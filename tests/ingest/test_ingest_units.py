@@ -78,21 +78,26 @@ def test_mm_per_s_g0_and_kv_channels_are_converted_to_si(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("key", "table", "match"),
+    ("key", "table", "expected", "got"),
     [
-        ("time", {"name": "t", "unit": "mm"}, r"\[ingest\] time.unit: expected a time \[s\]"),
-        ("q", {"name": "x", "unit": "mm/s"}, r"\[ingest\] q.unit: expected a length \[m\]"),
-        ("q", {"name": "x", "unit": "g0"}, r"q.unit: .*got 'g0' \(acceleration \[m/s\^2\]\)"),
-        ("v1", {"name": "u", "unit": "mm/s"}, r"\[ingest\] v1.unit: expected a voltage \[V\]"),
-        ("v1", {"name": "u", "unit": "s"}, r"v1.unit: .*got 's' \(time \[s\]\)"),
+        ("time", {"name": "t", "unit": "mm"}, "time [s]", "length [m]"),
+        ("q", {"name": "x", "unit": "mm/s"}, "length [m]", "velocity [m/s]"),
+        ("q", {"name": "x", "unit": "g0"}, "length [m]", "acceleration [m/s^2]"),
+        ("v1", {"name": "u", "unit": "mm/s"}, "voltage [V]", "velocity [m/s]"),
+        ("v1", {"name": "u", "unit": "s"}, "voltage [V]", "time [s]"),
     ],
 )
-def test_wrong_dimension_is_a_workflow_error_naming_key_value_and_dimension(key, table, match):
+def test_wrong_dimension_is_a_workflow_error_naming_key_value_and_dimension(
+    key, table, expected, got
+):
     section = {"time": {"name": "t", "unit": "s"}, "q": {"name": "x", "unit": "mm"}}
     section["v1"] = {"name": "u", "unit": "V"}
     section[key] = table
-    with pytest.raises(WorkflowError, match=match):
+    with pytest.raises(WorkflowError) as err:
         IngestSpec.from_dict(section)
+    assert err.value.key == f"ingest.{key}.unit" and err.value.value == table["unit"]
+    assert expected in str(err.value)
+    assert f"got {table['unit']!r} ({got})" in str(err.value)
 
 
 def test_calibration_changes_the_quantity_and_extras_take_any_unit(tmp_path):
@@ -128,10 +133,14 @@ def test_declared_unit_of_a_wrong_dimension_is_refused(tmp_path):
     path = tmp_path / "declared.parquet"
     pq.write_table(table, path)
     spec = IngestSpec.from_dict({"time": {"name": "t"}, "q": {"name": "x"}, "v1": {"name": "u"}})
-    with pytest.raises(RigLogError, match=r"channel 'x': the file declares unit 'N' \(force"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(path, spec)
-    with pytest.raises(WorkflowError, match=r"q.unit: .*got 'N'"):
+    assert err.value.channel == "x"
+    assert "'N'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         IngestSpec.from_dict({"q": {"name": "x", "unit": "N"}, "v1": {"name": "u"}})
+    assert "unit" in str(err.value)
+    assert "'N'" in str(err.value)
     # the same unit in two spellings is no conflict
     spec = IngestSpec.from_dict(
         {"time": {"name": "t", "unit": "second"}, "q": {"name": "u"}, "v1": {"name": "u"}}
@@ -177,12 +186,15 @@ def test_polyphase_tolerance_is_shared_by_uniformity_and_ratio():
     dt = 0.00048828125
     t = np.round(np.arange(4096) * dt, 8)  # 8 decimals: steps off by up to 1e-8 s
     x = np.ones((t.size, 1))
-    with pytest.raises(RigLogError, match="needs uniform sampling"):
+    with pytest.raises(RigLogError) as err:
         resample_segment(t, x, 4 * dt, "polyphase")  # as if written in full
+    assert "sampling" in str(err.value)
     t2, _ = resample_segment(t, x, 4 * dt, "polyphase", resolution=1e-8)
     assert t2.size == 1024
-    with pytest.raises(RigLogError, match=r"not a simple fraction .*tolerance"):
+    with pytest.raises(RigLogError) as err:
         resample_segment(t, x, 4 * dt * (1 + 1e-3), "polyphase", resolution=1e-8)
+    assert "fraction" in str(err.value)
+    assert "tolerance" in str(err.value)
 
 
 def test_sample_time_is_checked_against_the_files_time_column(tmp_path):
@@ -193,11 +205,19 @@ def test_sample_time_is_checked_against_the_files_time_column(tmp_path):
     section = {"q": {"name": "x", "unit": "mm"}, "v1": {"name": "u", "unit": "V"}}
     (df,) = load_rig_log(log, IngestSpec.from_dict({**section, "sample_time": dt}))
     assert df.attrs["channels"]["t"] == f"k * {dt:g} s"
-    with pytest.raises(RigLogError, match=r"log.csv', channel 'time': `sample_time` = 0.000488 s"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(log, IngestSpec.from_dict({**section, "sample_time": 0.000488}))
+    assert err.value.path.endswith("log.csv")
+    assert err.value.channel == "time"
+    assert "`sample_time`" in str(err.value)
+    assert "0.000488 s" in str(err.value)
     mapped = {**section, "time": {"name": "time", "unit": "s"}, "sample_time": 0.0005}
-    with pytest.raises(RigLogError, match=r"channel 'time': `sample_time` = 0.0005 s .*0.00048828"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(log, IngestSpec.from_dict(mapped))
+    assert err.value.channel == "time"
+    assert "`sample_time`" in str(err.value)
+    assert "0.0005 s" in str(err.value)
+    assert "0.00048828" in str(err.value)
 
 
 # ----------------------------------------------------------------- one read per file
@@ -281,14 +301,17 @@ def test_mf4_channels_on_two_groups_need_resample_and_convert_g0(tmp_path):
     path = tmp_path / "rig.mf4"
     truth = write_mf4(path)
     section = {"q": {"regex": "Laser/q$"}, "v1": {"regex": "acc$"}}
-    with pytest.raises(RigLogError, match="different time bases"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(path, IngestSpec.from_dict(section))
+    assert "different" in str(err.value)
     section["resample"] = {"sample_time": 2e-3, "method": "linear"}
     (df,) = load_rig_log(path, IngestSpec.from_dict(section))
     np.testing.assert_allclose(df["v1"], truth["acc"][: len(df)] * G0, rtol=1e-12)
     assert df.attrs["units"]["v1"] == "m/s^2"
-    with pytest.raises(RigLogError, match=r"wrong units for `v1`: the file declares 'g0'"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(path, IngestSpec.from_dict({**section, "v1": {"regex": "acc$", "unit": "V"}}))
+    assert "`v1`" in str(err.value)
+    assert "'g0'" in str(err.value)
 
 
 def test_mf4_without_asammdf_says_how_to_install(tmp_path, monkeypatch):
@@ -305,5 +328,7 @@ def test_mf4_without_asammdf_says_how_to_install(tmp_path, monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_asammdf)
     spec = IngestSpec.from_dict({"q": {"regex": "Laser/q$"}, "v1": {"regex": "v_mon$"}})
-    with pytest.raises(RigLogError, match=r"rig.mf4': .*pip install debist\[mf4\]"):
+    with pytest.raises(RigLogError) as err:
         load_rig_log(path, spec)
+    assert err.value.path.endswith("rig.mf4")
+    assert "debist[mf4]" in str(err.value)
