@@ -81,8 +81,9 @@ def test_one_standard_error_rule_agrees_with_the_reference_on_random_tables():
             for i in range(n)
         ]
         if not any(np.isfinite(r["mean"]) for r in rows):
-            with pytest.raises(IdentificationError, match="every hyper-parameter candidate"):
+            with pytest.raises(IdentificationError) as err:
                 one_standard_error(_frame(rows))
+            assert err.value.reason == "candidates"
             continue
         assert one_standard_error(_frame(rows)) == _reference_choice(rows)
 
@@ -115,10 +116,14 @@ def test_blocked_folds_partition_the_rows(lengths, folds):
 
 
 def test_blocked_folds_refuse_too_many_folds():
-    with pytest.raises(WorkflowError, match="folds >= 2"):
+    with pytest.raises(WorkflowError) as err:
         blocked_folds([100], 1)
-    with pytest.raises(WorkflowError, match="record 1 has 3 samples, fewer than folds = 4"):
+    assert ">= 2" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         blocked_folds([100, 3], 4)
+    assert "record 1" in str(err.value)
+    assert "has 3" in str(err.value)
+    assert "folds = 4" in str(err.value)
 
 
 # --- a synthetic actuator inside the model class ------------------------------------------
@@ -219,16 +224,19 @@ def test_a_failing_fit_is_scored_inf_with_its_status(in_class_record):
 
 def test_every_candidate_failing_is_an_identification_error(in_class_record):
     base = IdentifyConfig(**{**_BASE, "min_support": 10})
-    with pytest.raises(IdentificationError, match="every hyper-parameter candidate failed"):
+    with pytest.raises(IdentificationError) as err:
         select_hyperparameters([in_class_record], base, {"M": [40]}, folds=2)
+    assert err.value.reason == "candidates"
 
 
 def test_the_grid_is_checked_before_any_fit(in_class_record):
     base = IdentifyConfig(**_BASE)
-    with pytest.raises(WorkflowError, match="unknown key 'sigma'"):
+    with pytest.raises(WorkflowError) as err:
         select_hyperparameters([in_class_record], base, {"sigma": [0.5]})
-    with pytest.raises(WorkflowError, match=r"setting \{'M': 1\}"):
+    assert "'sigma'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         select_hyperparameters([in_class_record], base, {"M": [8, 1]})
+    assert "'M'" in str(err.value)
 
 
 def test_a_large_grid_is_swept_one_parameter_at_a_time(in_class_record, monkeypatch):

@@ -73,14 +73,15 @@ def test_the_rescale_leaves_the_free_run_and_scales_every_curve():
 def test_a_lag_heavier_than_the_mass_is_not_applied():
     model = double_well(d_v=50 * D)  # d T_z far above m_q: lambda < 0
     out, _, info = effective_mass(model, _diagnostics(3))
-    assert out is model and not info.applied and info.ratio < 0 and "not in (0, 1]" in info.reason
+    assert out is model and not info.applied and info.ratio < 0 and "(0, 1]" in info.reason
 
 
 def test_an_identified_mass_is_refused():
-    with pytest.raises(WorkflowError, match="effective_mass: needs a known mass"):
+    with pytest.raises(WorkflowError) as err:
         IdentifyConfig.from_dict(
             {"m_q": "identify", "input_gain": [1.0], "rbf": ["c", "d"], "effective_mass": True}
         )
+    assert "effective_mass" in str(err.value)
 
 
 def test_the_tables_say_the_mass_is_rigid_and_give_lambda():
@@ -94,4 +95,4 @@ def test_the_tables_say_the_mass_is_rigid_and_give_lambda():
     assert rows[1][1:3] == ("-", 0.8) and "lambda" in rows[1][0]
     skipped = {"ratio": 1.0, "applied": False, "reason": "no well at rest"}
     rows = mass_rows({"m_q": 0.0402, "effective_mass": skipped}, "kg")
-    assert rows[0][0] == "mass m_q" and "not applied: no well at rest" in rows[1][0]
+    assert rows[0][0] == "mass m_q" and rows[1][0].endswith(": no well at rest)")

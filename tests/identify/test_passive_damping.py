@@ -33,7 +33,7 @@ def test_negative_damping_from_least_squares_is_refitted_with_d_nonnegative(
     d = model.curves(grid)["d"]
     assert d.min() >= -1e-9
     assert diag.dissipation.startswith("imposed d >= 0")
-    assert "the least-squares fit had d = -" in diag.dissipation
+    assert "least-squares" in diag.dissipation and "d = -" in diag.dissipation
 
 
 def test_a_dissipative_fit_is_left_as_least_squares_made_it(bistable_record):
@@ -64,6 +64,6 @@ def test_a_gain_that_changes_sign_on_the_visited_range_keeps_the_data_s_sign(bis
     grid = np.linspace(rec.q.min(), rec.q.max(), 401)
     model, diag = fit_rbf_model([rec], IdentifyConfig.from_dict(CFG))
     assert diag.dissipation.startswith("imposed g1 >= 0")
-    assert "the least-squares fit had g1 = -" in diag.dissipation
+    assert "least-squares" in diag.dissipation and "g1 = -" in diag.dissipation
     g1 = np.asarray(model.curves(grid)["g"]).reshape(grid.size, -1)[:, 0]
     assert g1.min() >= -1e-12 and g1.max() > 1e-7

@@ -120,8 +120,9 @@ def test_the_prior_holds_the_refinement_near_the_least_squares_estimate(duffing)
     assert window[-1] <= plain.window_rms_ls
     assert runs[-1].full_rms_refined == pytest.approx(plain.full_rms_ls, rel=1e-3)
     assert plain.full_rms_refined < 0.2 * runs[-1].full_rms_refined
-    with pytest.raises(WorkflowError, match="prior"):
+    with pytest.raises(WorkflowError) as err:
         refine_config({"prior": -1.0})
+    assert "prior" in str(err.value)
 
 
 def test_several_priors_keep_the_accepted_run_with_the_lowest_estimation_free_run_error(duffing):
@@ -152,16 +153,19 @@ def test_several_priors_keep_the_accepted_run_with_the_lowest_estimation_free_ru
     assert np.isfinite(chosen.seconds) and chosen.seconds > 0  # (a sum of runs: not timed here)
     assert refine_config({"prior": [0, 30]}).priors == (0.0, 30.0)
     for bad in ([], [0, -1]):
-        with pytest.raises(WorkflowError, match="prior"):
+        with pytest.raises(WorkflowError) as err:
             refine_config({"prior": bad})
+        assert "prior" in str(err.value)
 
 
 def test_refine_config_parsing():
     assert refine_config(None) is None and refine_config(False) is None
     assert refine_config(True) == RefineConfig()
     assert refine_config({"windows": 5}).windows == 5
-    with pytest.raises(WorkflowError, match=r"\[identify.refine\] unknown key 'window'; did you"):
+    with pytest.raises(WorkflowError) as err:
         refine_config({"window": 5})
+    assert err.value.key == "identify.refine.window"
+    assert "unknown" in str(err.value)
 
 
 @pytest.mark.slow
@@ -182,7 +186,7 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     )
     assert not res.accepted and res.model is model
     assert res.full_rms_refined < res.full_rms_ls  # better in free run, but unstable
-    assert "unstable" in res.message and "negative damping" in res.message
+    assert "unstable" in res.message and "damping" in res.message
     assert len(calls) == 1 and calls[0][0] == calls[0][1] > 1000  # q and q_dot of the records
 
 

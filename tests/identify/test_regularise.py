@@ -50,12 +50,15 @@ def test_constraint_bounds_and_bad_statements():
     # the analytical curves' scales are non-negative whatever the sign: their curves carry it
     np.testing.assert_array_equal(lo, [-np.inf, 0, 0, 0, -np.inf, -np.inf, 0, 0])
     np.testing.assert_array_equal(hi, [np.inf, np.inf, np.inf, np.inf, 0, 0, np.inf, np.inf])
-    with pytest.raises(WorkflowError, match="'c >= 0' is not of the form"):
+    with pytest.raises(WorkflowError) as err:
         constraint_bounds(names, ["c >= 0"])
-    with pytest.raises(WorkflowError, match="has no curve 'g3'"):
+    assert "'c >= 0'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         constraint_bounds(names, ["g3 >= 0"])
-    with pytest.raises(WorkflowError, match=r"\[identify\] constraints"):
+    assert "'g3'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         IdentifyConfig.from_dict({"constraints": ["g1 > 0"]})
+    assert "constraints" in str(err.value)
 
 
 def _noisy(rec, level, seed):

