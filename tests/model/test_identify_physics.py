@@ -76,13 +76,17 @@ def test_model_with_prior_round_trips_through_hdf5(record, tmp_path):
 
 def test_physics_terms_need_physics(record):
     rec, _ = record
-    with pytest.raises(WorkflowError, match="need a \\[physics\\] section"):
+    with pytest.raises(WorkflowError) as err:
         physics_prior(None, [rec])
+    assert "need" in str(err.value) and "section" in str(err.value)
     cfg = IdentifyConfig.from_dict({"rbf": [], "backbone": PHYSICS, "T_z": 0})
-    with pytest.raises(WorkflowError, match="add a \\[physics\\] section"):
+    with pytest.raises(WorkflowError) as err:
         fit_rbf_model([rec], cfg)
-    with pytest.raises(WorkflowError, match=r"\[identify\] unknown key 'prior'"):
+    assert "add" in str(err.value) and "section" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         IdentifyConfig.from_dict({"prior": {}})
+    assert err.value.key == "identify.prior"
+    assert "unknown" in str(err.value)
 
 
 def test_m_q_physics_is_the_analytical_mass_at_zero():
@@ -91,5 +95,6 @@ def test_m_q_physics_is_the_analytical_mass_at_zero():
 
     assert physics_mass(P) == pytest.approx(float(reduced_curves(P, np.array([0.0])).m_q[0]))
     assert 0.040 < physics_mass(P) < 0.041  # tip mass 40 g plus the beam's share
-    with pytest.raises(WorkflowError, match="m_q = 'physics' needs a \\[physics\\]"):
+    with pytest.raises(WorkflowError) as err:
         physics_mass(None)
+    assert "m_q = 'physics'" in str(err.value)

@@ -88,8 +88,9 @@ def test_the_model_file_keeps_the_inertia_and_a_constant_mass_keeps_its_bytes():
 
 @pytest.mark.parametrize("bad", [-1, 5, 1.5, "yes"])
 def test_the_inertia_degree_is_checked(bad):
-    with pytest.raises(Exception, match="inertia"):
+    with pytest.raises(Exception) as err:
         IdentifyConfig.from_dict({"inertia": bad})
+    assert "inertia" in str(err.value)
 
 
 def test_a_list_of_powers_fits_only_those_and_a_symmetric_mass_comes_back():
@@ -117,7 +118,7 @@ def test_a_mass_that_is_not_positive_where_the_data_are_is_unstable():
     ok, _ = model_is_stable(_with_inertia(truth, mu=[0.0, 1e3]), q)
     bad, reason = model_is_stable(_with_inertia(truth, mu=[0.0, -1e4]), q)
     assert ok and not bad
-    assert "mass m(q)" in reason and "not positive" in reason
+    assert "m(q)" in reason and "mass" in reason and "positive" in reason
 
 
 def test_the_report_lists_the_mass_at_the_range_edges_and_at_zero():

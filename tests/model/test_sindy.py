@@ -122,16 +122,22 @@ def test_tree_round_trip(model):
 def test_config_rejects_unknown_and_bad_values():
     assert SindyConfig.from_dict(None) == SindyConfig()
     assert SindyConfig.from_dict({"degree": 2, "optimizer": "SR3"}).degree == 2
-    with pytest.raises(
-        WorkflowError, match=r"\[compare\] unknown key 'treshold'; did you mean 'threshold'"
-    ):
+    with pytest.raises(WorkflowError) as err:
         SindyConfig.from_dict({"treshold": 0.1})
-    with pytest.raises(
-        WorkflowError, match=r"\[compare\] optimizer: expected 'STLSQ' or 'SR3', got 'lasso'"
-    ):
+    assert err.value.key == "compare.treshold"
+    assert "unknown" in str(err.value)
+    assert "'threshold'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         SindyConfig.from_dict({"optimizer": "lasso"})
-    with pytest.raises(WorkflowError, match=r"\[compare\] degree: expected an integer >= 1, got 0"):
+    assert err.value.key == "compare.optimizer"
+    assert "'STLSQ'" in str(err.value)
+    assert "'SR3'" in str(err.value)
+    assert "'lasso'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         SindyConfig.from_dict({"degree": 0})
+    assert err.value.key == "compare.degree"
+    assert ">= 1" in str(err.value)
+    assert "got 0" in str(err.value)
 
 
 def test_sr3_recovers_the_same_terms(data):
@@ -155,9 +161,12 @@ def test_constant_input_gains_library(data):
 
 def test_rejects_inconsistent_records(data):
     q, q_dot, q_ddot, v = data[0]
-    with pytest.raises(IdentificationError, match="record 0"):
+    with pytest.raises(IdentificationError) as err:
         fit_sindy(q, q_dot[:-1], q_ddot, v, DT, SindyConfig())
-    with pytest.raises(IdentificationError, match="number"):
+    assert "record 0" in str(err.value)
+    with pytest.raises(IdentificationError) as err:
         fit_sindy([q, q], [q_dot], [q_ddot], [v], DT, SindyConfig())
-    with pytest.raises(WorkflowError, match="dt"):
+    assert "number" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         fit_sindy(q, q_dot, q_ddot, v, 0.0, SindyConfig())
+    assert "dt" in str(err.value)

@@ -55,8 +55,9 @@ def test_slip_states_are_the_stop_operator_of_the_integrated_velocity():
         assert np.max(np.abs(delta[:, e])) <= width
     assert np.max(np.abs(delta[:, 0])) == pytest.approx(1e-4)  # it slips
     np.testing.assert_allclose(delta[:, 2], q, atol=1e-15)  # never reaches 10 m
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError) as err:
         slip_states(q_dot, dt, np.array([0.0]))
+    assert "positive" in str(err.value)
 
 
 def test_an_element_sticks_until_break_away_then_slips_until_the_motion_reverses():
@@ -128,8 +129,10 @@ def test_slip_config_the_default_grid_and_the_model_file():
     """`slip` is false, a count or ascending deflections; a count spreads the deflections
     geometrically over 1.5e-4 .. 1e-2 of the range; model.h5 keeps the elements."""
     for bad in (True, 0.5, [2e-5, 1e-5], [-1e-6], 21):
-        with pytest.raises(WorkflowError, match=r"\[identify\] slip: expected"):
+        with pytest.raises(WorkflowError) as err:
             IdentifyConfig.from_dict({"slip": bad})
+        assert err.value.key == "identify.slip"
+        assert "expected" in str(err.value)
     assert IdentifyConfig.from_dict({}).slip is False
     from debist.core.preflight import identify_columns
 
