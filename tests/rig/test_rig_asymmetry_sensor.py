@@ -131,7 +131,9 @@ def test_block_average_lags_the_switching_motion_by_its_group_delay():
 
 
 def test_sensor_average_is_bounded_and_validated():
-    with pytest.raises(WorkflowError, match="sensor_average"):
+    with pytest.raises(WorkflowError) as err:
         RigParams.from_dict({"sensor_average": 200, "oversample": 10})
-    with pytest.raises(WorkflowError, match="gain_1"):
+    assert err.value.key.endswith(".sensor_average")
+    with pytest.raises(WorkflowError) as err:
         RigParams.from_dict({"gain_1": 0.0})
+    assert err.value.key.endswith(".gain_1")

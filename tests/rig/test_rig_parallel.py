@@ -62,5 +62,6 @@ def test_a_failing_worker_raises_the_experiments_error():
     section = {**SECTION, "experiments": {n: {"profile": "staircase", "duration": 1.0}
                                           for n in ("a", "b")}}  # fmt: skip
     cfg = RigConfig.from_dict(section, {"b": 23e-3})
-    with pytest.raises(WorkflowError, match=r"staircase.*1\.0 s is shorter"):
+    with pytest.raises(WorkflowError) as err:
         run_experiments(cfg)
+    assert "staircase" in str(err.value) and "shorter" in str(err.value)

@@ -28,8 +28,9 @@ def test_curve_score_interpolates_the_truth_and_ignores_points_off_its_grid():
     assert score.max_error < 1e-3
     none = curve_score(Q, est, est, est, np.zeros(Q.size, bool), q_true, true)
     assert none.marked == 0 and np.isnan(none.max_error) and np.isnan(none.coverage)
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(ValueError) as err:
         curve_score(Q, est[:-1], est, est, np.ones(Q.size, bool), q_true, true)
+    assert "shape" in str(err.value)
 
 
 def test_marked_near_needs_a_marked_point_near_every_well():
@@ -51,5 +52,6 @@ def test_lost_switch_counts_a_long_rest_in_the_wrong_well_only():
     diverged = late.copy()
     diverged[500:] = np.nan
     assert lost_switch(q, diverged, 0.0, dt)
-    with pytest.raises(ValueError, match="dt"):
+    with pytest.raises(ValueError) as err:
         lost_switch(q, late, 0.0, 0.0)
+    assert "dt" in str(err.value)

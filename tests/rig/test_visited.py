@@ -28,8 +28,9 @@ def test_rest_points_of_an_offset_cubic_interpolate_between_grid_points():
 
 def test_rest_points_reject_a_monostable_curve():
     q = np.linspace(-1.0, 1.0, 11)
-    with pytest.raises(ValueError, match="no unstable zero"):
+    with pytest.raises(ValueError) as err:
         rest_points(q, q)
+    assert "unstable" in str(err.value) and "zero" in str(err.value)
 
 
 def test_excitation_blocks_skip_pulses_and_rest():
@@ -79,5 +80,6 @@ def test_visited_intervals_need_min_samples_and_one_value_per_sample():
     block[:10] = True  # 10 dwell samples at -A only
     assert visited_intervals(q, h, block, q_dot, [-A, A], 0.0, min_samples=20) == []
     assert len(visited_intervals(q, h, block, q_dot, [-A, A], 0.0, min_samples=10)) == 1
-    with pytest.raises(ValueError, match="one value per sample"):
+    with pytest.raises(ValueError) as err:
         visited_intervals(q[:-1], h, block, q_dot, [-A, A], 0.0)
+    assert "value" in str(err.value) and "sample" in str(err.value)
