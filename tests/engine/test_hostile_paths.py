@@ -46,7 +46,7 @@ def test_a_data_set_name_that_is_not_a_file_name_is_refused_before_anything_is_w
     victim.write_bytes(b"the user's file")
     code, out = invoke("run", _workflow(project, name), "--stages", "ingest")
     assert code == 2, out
-    assert "[datasets] data set name" in out and repr(name) in out
+    assert "[datasets]" in out and "name" in out and repr(name) in out
     assert victim.read_bytes() == b"the user's file"
     assert not (project / "out").exists()
     assert not os.path.exists("/tmp/x/abs.parquet")
@@ -65,8 +65,9 @@ def test_a_rig_experiment_name_is_checked_too(tmp_path):
         '[rig.experiments."../escape"]\nprofile = "identification"\nduration = 5.0\n'
         '[datasets.a]\nrig = "../escape"\nrole = "estimation"\n'
     )
-    with pytest.raises(WorkflowError, match=r"\[rig.experiments\] experiment name '../escape'"):
+    with pytest.raises(WorkflowError) as err:
         load_workflow(wf)
+    assert "'../escape'" in str(err.value)
 
 
 def test_the_workflow_name_becomes_a_folder_only_when_it_is_a_file_name(project):
@@ -74,8 +75,9 @@ def test_the_workflow_name_becomes_a_folder_only_when_it_is_a_file_name(project)
         'name = "synthetic"\noutput_dir = "out"\n', 'name = "../../evil"\n'
     )
     (project / "wf.toml").write_text(text)
-    with pytest.raises(WorkflowError, match=r"\[workflow\] name \(no output_dir given\)"):
+    with pytest.raises(WorkflowError) as err:
         load_workflow(project / "wf.toml")
+    assert "output_dir" in str(err.value)
     # with an output_dir the name is free text (it never becomes a path)
     (project / "wf.toml").write_text(text.replace("[ingest]", 'output_dir = "out"\n[ingest]', 1))
     wf = load_workflow(project / "wf.toml")
@@ -96,16 +98,18 @@ def test_output_dir_and_out_expand_the_home_folder(project, monkeypatch, tmp_pat
 @pytest.mark.parametrize("rel", ["../x.parquet", "/tmp/abs.parquet", "a/../../x.parquet"])
 def test_write_stage_refuses_an_output_outside_its_folder(tmp_path, rel):
     stage = tmp_path / "out" / "ingest"
-    with pytest.raises(OutputDirError, match="outside its stage folder"):
+    with pytest.raises(OutputDirError) as err:
         write_stage(
             stage, stage="ingest", key="k", code="c", versions={}, config={}, inputs={},
             upstream={}, outputs={rel: pd.DataFrame({"a": [1.0]})},
         )  # fmt: skip
+    assert "outside" in str(err.value) and "folder" in str(err.value)
     assert not (tmp_path / "out" / "x.parquet").exists() and not (tmp_path / "x.parquet").exists()
     assert not stage.exists()
     assert [p.name for p in (tmp_path / "out").iterdir()] == []  # no temporary folder left
 
 
 def test_check_file_name_repr_shows_control_characters():
-    with pytest.raises(WorkflowError, match=r"'a\\nb'"):
+    with pytest.raises(WorkflowError) as err:
         check_file_name("a\nb", "[datasets]")
+    assert "'a\\nb'" in str(err.value)

@@ -67,7 +67,7 @@ def test_a_read_only_output_location_is_one_line(project, monkeypatch, tmp_path)
     rc, printed = invoke("run", project / "wf.toml", "--out", tmp_path / "ro-media" / "run")
     assert rc == 2 and "Traceback" not in printed
     (line,) = error_lines(printed)
-    assert "Read-only file system [EROFS]" in line and "ro-media" in line
+    assert "Read-only" in line and "[EROFS]" in line and "ro-media" in line
 
 
 def test_a_stage_folder_replaced_by_a_link_is_refused_and_left_alone(project, tmp_path):
@@ -80,7 +80,7 @@ def test_a_stage_folder_replaced_by_a_link_is_refused_and_left_alone(project, tm
     rc, printed = invoke("run", project / "wf.toml", "--force")
     assert rc == 2 and "Traceback" not in printed
     (line,) = error_lines(printed)
-    assert "is a symbolic link" in line and "validate" in line
+    assert "symbolic" in line and "link" in line and "validate" in line
     assert sorted(p.name for p in elsewhere.iterdir()) == before  # the target is untouched
     (out / "validate").unlink()
     rc, printed = invoke("run", project / "wf.toml")
@@ -109,9 +109,9 @@ def test_a_device_as_a_source_is_named_as_such(project):
     wf.write_text(wf.read_text().replace('source = "rig.csv"', 'source = "/dev/zero"', 1))
     rc, printed = invoke("run", wf)
     assert rc == 2
-    assert "'/dev/zero' is not a regular file" in printed and "does not exist" not in printed
+    assert "'/dev/zero'" in printed and "regular" in printed and "exist" not in printed
 
 
 def test_a_nul_byte_in_the_output_folder_is_refused(project):
     rc, printed = invoke("run", project / "wf.toml", "--out", "a\x00b")
-    assert rc == 2 and "null byte" in printed.lower() and "Traceback" not in printed
+    assert rc == 2 and "null" in printed.lower() and "Traceback" not in printed

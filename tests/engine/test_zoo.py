@@ -25,8 +25,9 @@ def test_a_member_depends_on_its_seed_and_index_only():
     assert a.rig == b.rig and a.name == "m003"
     assert draw_member(2, 3).rig != a.rig
     assert draw_member(1, 3, attempt=1).rig != a.rig
-    with pytest.raises(ValueError, match="seed"):
+    with pytest.raises(ValueError) as err:
         draw_member(-1, 0)
+    assert "seed" in str(err.value)
 
 
 def test_members_span_the_plants_frictions_asymmetries_sensors_and_profiles():
@@ -111,11 +112,13 @@ def test_write_zoo_writes_logs_workflow_and_truth_and_never_overwrites(zoo, tmp_
     # a rerun keeps the member; another seed or a foreign folder is refused
     again = write_zoo(folder, 1, 1)
     assert again.written == ()
-    with pytest.raises(OutputDirError, match="seed"):
+    with pytest.raises(OutputDirError) as err:
         write_zoo(folder, 1, 2)
+    assert "seed" in str(err.value)
     (tmp_path / "mine.txt").write_text("a user's file")
-    with pytest.raises(OutputDirError, match="not a zoo"):
+    with pytest.raises(OutputDirError) as err:
         write_zoo(tmp_path, 1, 1)
+    assert "zoo" in str(err.value)
     assert (tmp_path / "mine.txt").read_text() == "a user's file"
     assert expand_workflows([folder]) == [(member / "workflow.toml").resolve()]
 
@@ -145,7 +148,9 @@ def test_batch_over_a_zoo_writes_the_zoo_table(zoo):
 
 def test_a_damaged_zoo_index_is_refused_by_name(tmp_path):
     (tmp_path / "zoo.json").write_text('{"members": ["../../etc"]}')
-    with pytest.raises(ZooError, match=r"zoo\.json"):
+    with pytest.raises(ZooError) as err:
         read_zoo(tmp_path)
-    with pytest.raises(WorkflowError, match="zoo"):
+    assert "json" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         expand_workflows([tmp_path])
+    assert "zoo" in str(err.value)
