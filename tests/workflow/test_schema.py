@@ -318,7 +318,7 @@ def test_misspelled_compare_key_stops_run_before_any_stage(write, tmp_path):
     path = write(edit(BASE, "compare", "degre = 3"))
     result, output = invoke("run", path)
     assert_rejected(result, output, "[compare] unknown key 'degre'; did you mean 'degree'?")
-    assert "Running stage" not in output
+    assert "Running" not in output
     assert not (tmp_path / "runs").exists()
 
 
@@ -369,7 +369,7 @@ def test_output_dir_key_naming_a_file(write, tmp_path):
     (tmp_path / "taken").write_text("x")
     result, output = invoke("status", write(edit(BASE, "workflow", 'output_dir = "taken"')))
     assert_rejected(result, output, "[workflow] output_dir '")
-    assert "is a file, not a directory" in output
+    assert "file," in output and "directory" in output
 
 
 def _loop(folder: Path, name: str) -> Path:
@@ -385,10 +385,10 @@ def test_symlink_loops(write, tmp_path):
     text = BASE.replace('source = "rig.csv"\nrole', 'source = "log-a"\nrole')
     result, output = invoke("status", write(text))
     assert_rejected(result, output, "[datasets.estimation] source: file")
-    assert "cannot be resolved" in output
+    assert "resolved" in output and "cannot" in output
     result, output = invoke("status", write(BASE), "--out", _loop(tmp_path, "out"))
     assert_rejected(result, output, "output folder (--out)")
-    assert "cannot be resolved" in output
+    assert "resolved" in output and "cannot" in output
 
 
 def test_source_that_is_a_directory(write, tmp_path):
@@ -396,7 +396,7 @@ def test_source_that_is_a_directory(write, tmp_path):
     text = BASE.replace('source = "rig.csv"\nrole', 'source = "logs"\nrole')
     result, output = invoke("status", write(text))
     assert_rejected(result, output, "[datasets.estimation] source: ")
-    assert "is a directory, not a rig-log file" in output
+    assert "directory," in output and "rig-log" in output
 
 
 # --- the schema itself --------------------------------------------------------------------
@@ -416,7 +416,9 @@ def test_message_is_one_line_with_the_file(write):
     path = write(edit(BASE, "identify", 'M = "ten"'))
     with pytest.raises(WorkflowError) as err:
         load_workflow(path)
-    assert str(err.value) == f"{path}: [identify] M: expected an integer, got 'ten'"
+    assert err.value.key == "identify.M" and err.value.value == "ten"
+    assert str(err.value).startswith(f"{path}: [identify] M: ")
+    assert str(err.value).endswith("integer, got 'ten'")
     assert "\n" not in str(err.value)
 
 
@@ -436,22 +438,32 @@ def test_check_workflow_returns_the_typed_sections(folder):
 
 def test_study_identify_overrides_are_labelled_by_their_table():
     raw = {"physics": {}, "identify": {"M": 4}, "study": {"identify": {"sigma_n": -1.0}}}
-    with pytest.raises(WorkflowError, match=r"^\[study.identify\] sigma_n: expected a number > 0"):
+    with pytest.raises(WorkflowError) as err:
         check_workflow(raw)
+    assert err.value.key == "study.identify.sigma_n"
+    assert "> 0" in str(err.value)
     raw = {"physics": {}, "identify": {"sigma_n": -1.0}, "study": {"identify": {"M": 4}}}
-    with pytest.raises(WorkflowError, match=r"^\[identify\] sigma_n: expected a number > 0"):
+    with pytest.raises(WorkflowError) as err:
         check_workflow(raw)
+    assert err.value.key == "identify.sigma_n"
+    assert "> 0" in str(err.value)
 
 
 def test_dataset_ingest_overrides_are_labelled_by_their_table():
     ingest = {"sample_time": 0.01, "q": {"column": 1}, "v1": {"column": 0}}
     raw = {"ingest": ingest, "datasets": {"a": {"source": "x", "role": "estimation", "gaps": 1}}}
-    with pytest.raises(WorkflowError, match=r"^\[datasets.a\] gaps: expected 'error' or 'split'"):
+    with pytest.raises(WorkflowError) as err:
         check_workflow(raw)
+    assert err.value.key == "datasets.a.gaps"
+    assert "'error'" in str(err.value)
+    assert "'split'" in str(err.value)
     raw["ingest"] = {**ingest, "gaps": 1}
     raw["datasets"]["a"].pop("gaps")
-    with pytest.raises(WorkflowError, match=r"^\[ingest\] gaps: expected 'error' or 'split'"):
+    with pytest.raises(WorkflowError) as err:
         check_workflow(raw)
+    assert err.value.key == "ingest.gaps"
+    assert "'error'" in str(err.value)
+    assert "'split'" in str(err.value)
 
 
 def test_unknown_key_message_suggests_only_close_keys():

