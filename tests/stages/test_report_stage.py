@@ -83,10 +83,14 @@ def test_report_section_in_the_schema():
     assert check_workflow({"physics": {}}).report is None
     assert check_workflow({"physics": {}, "report": {}}).report.zoom_window == 2.0
     assert check_workflow({"physics": {}, "report": {"zoom_window": 0.5}}).report.zoom_window == 0.5
-    with pytest.raises(WorkflowError, match=r"\[report\] zoom_window: expected a number > 0"):
+    with pytest.raises(WorkflowError) as err:
         check_workflow({"physics": {}, "report": {"zoom_window": -1.0}})
-    with pytest.raises(WorkflowError, match=r"\[report\] unknown key 'zoom'"):
+    assert err.value.key == "report.zoom_window"
+    assert "> 0" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         check_workflow({"physics": {}, "report": {"zoom": 1.0}})
+    assert err.value.key == "report.zoom"
+    assert "unknown" in str(err.value)
 
 
 def test_dynamic_window_is_the_burst():
@@ -159,11 +163,12 @@ def test_run_report_draws_the_papers_figures(bistable_record):
     assert "Fig. 11a: estimation record 'est'" in text
     assert "Fig. 12, estimation data 'est'" in text
     assert "Fig. 15, cross-validation on unseen data 'check'" in text
-    assert "free run of rbf, sindy" in text and "the 2 s window" in text
+    assert "rbf, sindy" in text and "2 s" in text and "window" in text
     other = run_report(inputs, {"zoom_window": 0.5})
-    assert "the 0.5 s window" in other.html and other.html != res.html
-    with pytest.raises(WorkflowError, match="zoom_window"):
+    assert "0.5 s" in other.html and other.html != res.html
+    with pytest.raises(WorkflowError) as err:
         run_report(inputs, {"zoom_window": "wide"})
+    assert err.value.key.endswith(".zoom_window")
 
 
 # ------------------------------------------------------------------ one CLI run
@@ -214,7 +219,7 @@ def test_run_writes_a_hashed_report(synthetic_run):
         key = artifacts.read_manifest(out / stage).key
         assert [stage, key, artifacts.manifest_digest(out / stage)] in page.rows
     assert outdir.run_digest(out, SHOWN) in html
-    assert "debist verify wf.toml" in html
+    assert "verify" in html and "wf.toml" in html
     assert str(folder) not in html  # no absolute path: the same page in any clone
     code, text = invoke("verify", wf, "--digest", digest)
     assert code == 0, text
@@ -225,10 +230,10 @@ def test_report_reruns_only_when_its_inputs_change(synthetic_run):
     page = folder / "out" / "report" / "report.html"
     before = page.read_bytes()
     code, out = invoke("run", wf)
-    assert code == 0 and "Stage 'report' is up to date" in out and digest in out
-    assert f"report: {page}" in out and "no report written" not in out
+    assert code == 0 and "Stage 'report'" in out and "date" in out and digest in out
+    assert f"report: {page}" in out and "written" not in out
     code, out = invoke("report", wf)
-    assert code == 0 and "Stage 'report' is up to date" in out and str(page) in out
+    assert code == 0 and "Stage 'report'" in out and "date" in out and str(page) in out
     page.write_text("<html>edited</html>")
     code, out = invoke("verify", wf)
     assert code == 3 and "report.html (modified)" in out
@@ -268,7 +273,7 @@ def test_batch_writes_an_index_of_the_reports(synthetic_run):
     code, out = invoke("batch", wf, broken, "--scheduler", "synchronous")
     assert code == 1, out  # the broken prototype fails, the index is written all the same
     index = folder / "index.html"
-    assert f"index of the reports: {index}" in out.replace("\n", "")
+    assert f"reports: {index}" in out.replace("\n", "")
     html = index.read_text(encoding="utf-8")
     page = parse(html)
     assert page.urls == ["./out/report/report.html"]

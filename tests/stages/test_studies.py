@@ -164,25 +164,34 @@ def test_alpha2_is_scaled_with_alpha(bistable_record):
 def test_alpha_study_needs_tvregdiff(bistable_record):
     tables, _ = _tables(bistable_record)
     cfg = StudyConfig.from_dict({"alpha": [1e-6], "free_run": False})
-    with pytest.raises(WorkflowError, match="method = 'tvregdiff', got 'savgol'"):
+    with pytest.raises(WorkflowError) as err:
         alpha_study(tables, IDENTIFY, {}, {"method": "savgol"}, cfg)
+    assert "method = 'tvregdiff'" in str(err.value)
+    assert "'savgol'" in str(err.value)
 
 
 def test_config_is_checked():
     cfg = StudyConfig.from_dict({})
     assert cfg.M == (4, 6, 8, 10, 12, 16) and cfg.free_run is True
-    with pytest.raises(
-        WorkflowError, match=r"\[study\] unknown key 'sigma'; did you mean 'sigma_n'"
-    ):
+    with pytest.raises(WorkflowError) as err:
         StudyConfig.from_dict({"sigma": [0.5]})
-    with pytest.raises(WorkflowError, match=r"\[study\] M\[0\]: expected an integer >= 2, got 1"):
+    assert err.value.key == "study.sigma"
+    assert "unknown" in str(err.value)
+    assert "'sigma_n'" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         StudyConfig.from_dict({"M": [1, 4]})
-    with pytest.raises(
-        WorkflowError, match=r"\[study\] alpha\[0\]: expected a number > 0, got 0.0"
-    ):
+    assert err.value.key == "study.M"
+    assert ">= 2" in str(err.value)
+    assert "got 1" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         StudyConfig.from_dict({"alpha": [0.0]})
-    with pytest.raises(WorkflowError, match=r"\[study\] sigma_n: expected at least 1 value"):
+    assert err.value.key == "study.alpha"
+    assert "> 0" in str(err.value)
+    assert "got 0.0" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         StudyConfig.from_dict({"sigma_n": []})
+    assert err.value.key == "study.sigma_n"
+    assert "least 1" in str(err.value)
 
 
 def test_roughness_of_a_line_is_zero_and_of_noise_is_large():
