@@ -101,8 +101,9 @@ def test_well_state_sides():
     L = ritz_basis(P.l).L
     assert left[:4] @ L == pytest.approx(-(right[:4] @ L), rel=1e-9)
     assert left[:4] @ L < -10e-3
-    with pytest.raises(ValueError, match="no stable equilibrium"):
+    with pytest.raises(ValueError) as err:
         well_state(P, -1, b=29e-3)
+    assert "stable" in str(err.value) and "equilibrium" in str(err.value)
 
 
 def test_modes_exact_for_a_single_shape():

@@ -66,8 +66,11 @@ def test_validation_scores_the_analytical_model_and_phi(reference):
 
 def test_analytical_needs_physics_and_de_data():
     ds = DataSet("s", "estimation", T, T, T, T, np.zeros((T.size, 2)), "V")
-    with pytest.raises(WorkflowError, match="needs a \\[physics\\]"):
+    with pytest.raises(WorkflowError) as err:
         analytical_for(None, [ds], ValidateConfig(analytical=True))
+    assert "needs" in str(err.value) and "physics" in str(err.value)
     assert analytical_for(None, [ds], ValidateConfig()) is None
-    with pytest.raises(WorkflowError, match="data set 's' has q in 'V'"):
+    with pytest.raises(WorkflowError) as err:
         analytical_for(P, [ds], ValidateConfig(analytical=True))
+    assert "'s'" in str(err.value)
+    assert "'V'" in str(err.value)

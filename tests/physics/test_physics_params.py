@@ -35,10 +35,11 @@ def test_workflow_physics_section_loads_to_the_paper_prototype():
 
 
 def test_unknown_key_is_named():
-    with pytest.raises(
-        WorkflowError, match=r"\[physics\] unknown key 'Young' \(known keys: epsilon_0, "
-    ):
+    with pytest.raises(WorkflowError) as err:
         PrototypeParams.from_dict({"E": 2e9, "Young": 1.0})
+    assert err.value.key == "physics.Young"
+    assert "unknown" in str(err.value)
+    assert "epsilon_0" in str(err.value)
 
 
 @pytest.mark.parametrize(
@@ -66,10 +67,10 @@ def test_zero_damping_is_allowed_and_replace_rederives_volume():
 
 
 def test_not_a_table():
-    with pytest.raises(
-        WorkflowError, match=r"^\[physics\] expected a table, got \[\('E', 1.0\)\]$"
-    ):
+    with pytest.raises(WorkflowError) as err:
         PrototypeParams.from_dict([("E", 1.0)])
+    assert "'E'" in str(err.value)
+    assert "1.0" in str(err.value)
 
 
 @pytest.mark.parametrize("name", MODULES)

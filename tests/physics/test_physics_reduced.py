@@ -75,8 +75,9 @@ def test_nrmse_definition():
     assert nrmse(y, y, on_constant="nan") == 0.0
     assert nrmse(y, y + 0.1) == pytest.approx(0.1 / (y.max() - y.min()))
     assert np.isnan(nrmse(np.ones(3), np.zeros(3), on_constant="nan"))  # the full model at rest
-    with pytest.raises(ValueError, match="constant"):
+    with pytest.raises(ValueError) as err:
         nrmse(np.ones(3), np.zeros(3))
+    assert "constant" in str(err.value)
     v1, v2, bp = switching_profile()
     assert (v1(0.49), v1(0.5), v1(1.5), v2(2.5), v2(3.5)) == (0.0, V_MAX, 0.0, V_MAX, 0.0)
     assert bp == (0.5, 1.5, 2.5, 3.5)

@@ -133,15 +133,18 @@ def test_switching_limit():
 
 
 def test_bifurcation_search_errors():
-    with pytest.raises(StaticsError, match="b_bracket"):
+    with pytest.raises(StaticsError) as err:
         pitchfork_zb(P, b_bracket=(26e-3, 30e-3))
-    with pytest.raises(StaticsError, match="b_range"):
+    assert "b_bracket" in str(err.value)
+    with pytest.raises(StaticsError) as err:
         switching_limit_zb(P, b_range=(20e-3, 30e-3))
+    assert "b_range" in str(err.value)
 
 
 def test_force_displacement_checks_grid():
-    with pytest.raises(ValueError, match="strictly increasing"):
+    with pytest.raises(ValueError) as err:
         force_displacement(P, [0.0, -1e-3])
+    assert "strictly" in str(err.value) and "increasing" in str(err.value)
 
 
 def test_prestrain_sweep_fig3():
@@ -214,7 +217,11 @@ def test_switching_voltage_follows_the_asymmetry_and_the_mirror():
 
 def test_switching_voltage_limits_and_errors():
     assert switching_voltage(P, 1, v_max=1000.0) == np.inf  # 1 kV keeps the left well
-    with pytest.raises(ValueError, match="`de` must be 1 or 2"):
+    with pytest.raises(ValueError) as err:
         switching_voltage(P, 3)
-    with pytest.raises(ValueError, match="positive"):
+    assert "`de`" in str(err.value)
+    assert "be 1" in str(err.value)
+    assert "or 2" in str(err.value)
+    with pytest.raises(ValueError) as err:
         switching_voltage(P, 1, tol=0.0)
+    assert "positive" in str(err.value)
