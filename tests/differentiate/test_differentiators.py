@@ -236,8 +236,11 @@ def test_tvregdiff_unit_mm_takes_the_papers_values_as_printed():
     np.testing.assert_allclose(a.x_dot, b.x_dot, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(a.x_ddot, b.x_ddot, rtol=1e-6, atol=1e-10)
     assert a.info["unit"] == "mm"
-    with pytest.raises(WorkflowError, match=r"\[differentiate\] unit: .*unit.*, got 'bananas'"):
+    with pytest.raises(WorkflowError) as err:
         TVRegDiffConfig.from_dict({"unit": "bananas"})
+    assert err.value.key == "differentiate.unit"
+    assert "unit" in str(err.value)
+    assert "'bananas'" in str(err.value)
 
 
 # ---------------------------------------------------------------- registry and configs
@@ -251,19 +254,18 @@ def test_registry_and_configs_agree():
 
 @pytest.mark.parametrize("method", sorted(CONFIGS))
 def test_unknown_key_names_key_and_method(method):
-    with pytest.raises(
-        WorkflowError,
-        match=rf"^\[differentiate\] unknown key 'alpah'.*known keys of method '{method}'",
-    ):
+    with pytest.raises(WorkflowError) as err:
         differentiate(X, DT, method=method, params={"alpah": 1.0})
+    assert err.value.key == "differentiate.alpah"
+    assert "unknown" in str(err.value)
+    assert f"'{method}'" in str(err.value)
 
 
 def test_unknown_method_is_a_workflow_error():
-    with pytest.raises(
-        WorkflowError,
-        match=r"\[differentiate\] method: unknown method 'kalman'; known methods: tvr",
-    ):
+    with pytest.raises(WorkflowError) as err:
         differentiate(X, DT, method="kalman", params={})
+    assert err.value.key == "differentiate.method"
+    assert "'kalman'" in str(err.value)
 
 
 @pytest.mark.parametrize(
@@ -298,8 +300,9 @@ def test_params_default_to_config_defaults():
     assert d.info["window"] == SavGolConfig().window
     assert SpectralConfig.from_dict({}) == SpectralConfig()
     assert TVRegDiffConfig.from_dict({"alpha": 2e-5}) == TVRegDiffConfig(alpha=2e-5)
-    with pytest.raises(WorkflowError, match=r"^\[differentiate\] expected a table, got \[\("):
+    with pytest.raises(WorkflowError) as err:
         SavGolConfig.from_dict([("window", 5)])  # type: ignore[arg-type]
+    assert "differentiate" in str(err.value)
 
 
 @pytest.mark.parametrize("method", sorted(DIFFERENTIATORS))
@@ -319,8 +322,12 @@ def test_invalid_signal_raises(method, x, dt, match):
 
 
 def test_savgol_window_longer_than_record():
-    with pytest.raises(ValueError, match=r"`x` must have at least `window`=21 samples, got 10"):
+    with pytest.raises(ValueError) as err:
         savgol_derivatives(np.zeros(10), DT)
+    assert "`x`" in str(err.value)
+    assert "`window`" in str(err.value)
+    assert "21 samples" in str(err.value)
+    assert "got 10" in str(err.value)
 
 
 # ---------------------------------------------------------------- properties

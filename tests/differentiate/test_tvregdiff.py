@@ -300,5 +300,7 @@ def test_invalid_input_raises(kwargs, match):
 
 
 def test_tv_functional_checks_length():
-    with pytest.raises(ValueError, match=r"`u` must have shape \(4,\) for scale 'large'"):
+    with pytest.raises(ValueError) as err:
         tv_functional(np.zeros(5), np.zeros(4), 0.1, scale="large")
+    assert "`u`" in str(err.value)
+    assert "'large'" in str(err.value)
