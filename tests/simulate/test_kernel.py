@@ -244,8 +244,9 @@ def test_parallel_batch_equals_one_trajectory_at_a_time():
 
 
 def test_kernel_arrays_check_the_spline_shape():
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(ValueError) as err:
         kernel.spline_arrays(np.arange(3.0), np.zeros((4, 2, 7)), 1.0, 1.0)
+    assert "shape" in str(err.value)
     fine = prepare_inputs([inputs(10, 0)], 1, "linear")
     assert fine.values.shape == (1, 19, 2)
 
@@ -340,8 +341,9 @@ def test_the_kernel_groups_the_inertia_terms_last_and_checks_their_form():
         build = TermTableBuilder(1, "v")
         build.term("bad", build.one(), qpow=qpow, skind=S_ACC, hpow=hpow)
         bad = TableModel(build.build(), np.ones((1, 1)), np.ones(1), np.zeros(1))
-        with pytest.raises(ValueError, match="inertia term"):
+        with pytest.raises(ValueError) as err:
             kernel.table_arrays(bad)
+        assert "inertia" in str(err.value) and "term" in str(err.value)
 
 
 @pytest.mark.parametrize(
@@ -419,6 +421,7 @@ def test_a_changed_compiled_helper_is_refused_until_the_kernel_records_it(monkey
 
     kernel._check_compiled_from()  # the recorded value is the sources' own
     monkeypatch.setattr(rk4, "NODES", (0.0, 0.5, 0.5, 0.999))
-    with pytest.raises(ImportError, match="COMPILED_FROM_SHA256") as raised:
+    with pytest.raises(ImportError) as raised:
         kernel._check_compiled_from()
+    assert "COMPILED_FROM_SHA256" in str(raised.value)
     assert kernel._compiled_from_sha256() in str(raised.value)

@@ -137,10 +137,12 @@ def test_coloured_input_and_errors_widen_the_cross_limit_as_bartlett_says():
 
 
 def test_residual_analysis_refuses_too_few_errors_and_constant_errors():
-    with pytest.raises(WorkflowError, match="at least 100"):
+    with pytest.raises(WorkflowError) as err:
         residual_analysis(np.r_[np.ones(50), np.full(100, np.nan)], np.zeros((150, 1)))
-    with pytest.raises(WorkflowError, match="constant"):
+    assert "least 100" in str(err.value)
+    with pytest.raises(WorkflowError) as err:
         residual_analysis(np.ones(200), np.zeros((200, 1)))
+    assert "constant" in str(err.value)
 
 
 class Truth:
@@ -251,8 +253,10 @@ def test_restarted_windows_of_a_free_run_repeat_it_sample_for_sample(bistable_re
     assert [o.size for o in outs] == [300, 750, 10, 2]
     for (_, a, b), out in zip(windows, outs, strict=True):
         np.testing.assert_allclose(out, run.q[a:b], rtol=0, atol=1e-15)
-    with pytest.raises(WorkflowError, match=r"window \(0, 2999, 3001\) is not inside"):
+    with pytest.raises(WorkflowError) as err:
         restarted_runs(Truth(), [own], [(0, 2999, 3001)], rec["dt"])
+    assert "2999" in str(err.value)
+    assert "3001" in str(err.value)
 
 
 def test_a_lost_switch_costs_one_restarted_window_not_the_rest_of_the_record(bistable_record):

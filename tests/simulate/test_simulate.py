@@ -106,8 +106,9 @@ def test_nrmse_and_rms_properties():
     assert nrmse(y, y) == 0.0
     assert nrmse(3 * y, 3 * y + 3 * 0.1) == pytest.approx(nrmse(y, y + 0.1))
     assert rms(np.full(10, -2.0)) == 2.0
-    with pytest.raises(ValueError, match="constant"):
+    with pytest.raises(ValueError) as err:
         nrmse(np.ones(5), np.ones(5))
+    assert "constant" in str(err.value)
 
 
 def test_initial_state_from_first_samples_of_a_cubic():
