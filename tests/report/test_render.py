@@ -64,8 +64,9 @@ def test_a_workers_warning_is_issued_here(parallel):
 
 def test_a_workers_error_is_raised_here(parallel):
     jobs = [*_jobs(2), FigureJob(_fail, (7,))]  # the failing job is the worker's
-    with pytest.raises(ValueError, match="no figure for 7"):
+    with pytest.raises(ValueError) as err:
         render_pngs(jobs)
+    assert "for 7" in str(err.value)
 
 
 def test_a_daemonic_process_renders_serially(monkeypatch):
