@@ -70,16 +70,21 @@ def test_budget_from_the_environment_and_by_default(monkeypatch):
     assert 0 < default <= 0.5 * psutil.virtual_memory().total
     for bad in ("lots", "-1", "0", "nan"):
         monkeypatch.setenv(preflight.BUDGET_ENV, bad)
-        with pytest.raises(WorkflowError, match=rf"DEBIST_MEMORY_BUDGET_GB = '{bad}' must be"):
+        with pytest.raises(WorkflowError) as err:
             preflight.memory_budget()
+        assert f"DEBIST_MEMORY_BUDGET_GB = '{bad}'" in str(err.value)
 
 
 def test_check_memory_names_setting_estimate_and_budget(budget):
     preflight.check_memory(3.9e9, "[x] y = 1", "it")  # within the budget: nothing
-    with pytest.raises(ResourceError, match=r"^\[x\] y = 2: it needs about 4.1 GB \(peak\); the "):
+    with pytest.raises(ResourceError) as err:
         preflight.check_memory(4.1e9, "[x] y = 2", "it", "peak")
-    with pytest.raises(ResourceError, match=r"the memory budget is 4 GB \(set by DEBIST_MEMORY"):
+    assert "y = 2" in str(err.value)
+    assert "about 4.1 GB" in str(err.value)
+    with pytest.raises(ResourceError) as err:
         preflight.check_memory(4.1e9, "[x] y = 2", "it")
+    assert "is 4 GB" in str(err.value)
+    assert "DEBIST_MEMORY" in str(err.value)
 
 
 # ------------------------------------------------------------------------------ identify
@@ -106,7 +111,9 @@ def test_huge_M_is_refused_by_the_fit_before_allocating(budget):
     assert str(exc).startswith(
         "[identify] M = 100000: the regressor of 3750 samples x 300003 columns needs about "
     )
-    assert "(peak, with the SVD's copies); the memory budget is 4 GB" in str(exc)
+    assert (
+        "(peak, with the SVD's copies)" in str(exc) and "budget" in str(exc) and "4 GB" in str(exc)
+    )
     assert peak < SMALL  # the regressor alone would be 3750 x 300003 x 8 bytes = 9 GB
 
 
@@ -183,11 +190,12 @@ def test_free_run_estimate_agrees_with_the_measured_peak():
 @pytest.mark.parametrize("init_samples", [100_000_000, 997, 2])
 def test_init_samples_beyond_the_data_set_are_refused(init_samples):
     cfg = ValidateConfig.from_dict({"init_samples": init_samples})
-    with pytest.raises(
-        WorkflowError,
-        match=rf"^\[validate\] init_samples = {init_samples}: data set 'check' has 1000 samples",
-    ):
+    with pytest.raises(WorkflowError) as err:
         validate_model(_Oscillator(), "osc", _datasets(), cfg, 10.0)
+    assert err.value.key == "validate.init_samples" and err.value.value == init_samples
+    assert str(err.value).startswith(f"[validate] init_samples = {init_samples}: ")
+    assert "'check'" in str(err.value)
+    assert "has 1000" in str(err.value)
     table, _ = validate_model(
         _Oscillator(), "osc", _datasets(), ValidateConfig(init_samples=996), 10
     )
@@ -225,8 +233,10 @@ def test_grid_study_with_a_huge_M_is_refused_before_the_first_fit(budget):
     deriv = pd.DataFrame({"t": t, "q": r.q, "q_dot": r.q_dot, "q_ddot": r.q_ddot})
     deriv.attrs["dt"] = r.dt
     cfg = StudyConfig.from_dict({"M": [4, 100000], "sigma_n": [0.5], "free_run": False})
-    with pytest.raises(ResourceError, match=r"^\[study\] M = 100000: the regressor of 4000 samp"):
+    with pytest.raises(ResourceError) as err:
         rbf_grid_study({"e": table}, {"e": deriv}, {"M": 4}, {}, cfg)
+    assert "M = 100000" in str(err.value)
+    assert "of 4000" in str(err.value)
 
 
 # ------------------------------------------------------------------------------------ CLI
@@ -281,7 +291,7 @@ def test_cli_refuses_huge_M_with_exit_code_2_naming_the_key(tmp_path, monkeypatc
     result = runner.invoke(app, ["identify", str(wf)])
     assert result.exit_code == 2, result.output
     assert "[identify] M = 100000" in result.output
-    assert "the memory budget is 4 GB" in result.output
+    assert "budget" in result.output and "4 GB" in result.output
 
 
 def test_a_huge_bootstrap_is_refused_naming_bootstrap_not_M(budget):
@@ -289,9 +299,11 @@ def test_a_huge_bootstrap_is_refused_naming_bootstrap_not_M(budget):
     ``[identify] bootstrap``; with a modest bootstrap and a huge M it names M."""
     records = _records(600)
     cfg = IdentifyConfig.from_dict({"M": 4, "T_z": 0.0, "bootstrap": 1_000_000_000})
-    with pytest.raises(ResourceError, match=r"\[identify\] bootstrap = 1000000000") as info:
+    with pytest.raises(ResourceError) as info:
         fit_rbf_model(records, cfg)
+    assert "bootstrap = 1000000000" in str(info.value)
     assert "M = 4" not in str(info.value)
     big_m = IdentifyConfig.from_dict({"M": 200_000, "T_z": 0.0, "bootstrap": 10})
-    with pytest.raises(ResourceError, match=r"\[identify\] M = 200000"):
+    with pytest.raises(ResourceError) as err:
         preflight.check_identify(big_m, 1, 600)
+    assert "M = 200000" in str(err.value)
