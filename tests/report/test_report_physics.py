@@ -95,7 +95,7 @@ def test_an_acceleration_input_is_named_and_drawn_as_such():
     summary["design"] = dict(summary["design"])
     summary["design"]["switching"] = [{"model": "rbf", "input": 1, "v_switch": 4.2}]
     cells = _cells(design_table(summary))
-    assert "acceleration, input 1" in cells["inputs [m/s^2]"]
+    assert cells["inputs [m/s^2]"].count("switching acceleration, input 1") >= 1  # a cell of it
     assert "4.2 m/s^2" in cells["kind"]
     html = _design(summary)
     assert any(r[1] == "switching acceleration, input 1" and r[3] == "4.2 m/s^2"
