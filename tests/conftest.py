@@ -337,22 +337,6 @@ def inside_class_record(truth, t):
     return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
 
 
-def truth_and_record(build):
-    """``build(truth_model(seed 2))`` and its noise-free 13 s record (:func:`inside_class_record`)
-    as an estimation :class:`~debist.identify.fit.Record`."""
-    truth = build(truth_model(np.random.default_rng(2)))
-    rec = inside_class_record(truth, np.arange(0.0, 13.0, 0.002))
-    return truth, Record("sim", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
-
-
-def curve_error(model, truth, grid=None) -> float:
-    """Largest error of ``c(q) q`` and ``g_i`` of ``model`` against ``truth``, relative to the
-    truth's largest magnitude, on ``grid`` (default 50 points over +-12 mm)."""
-    grid = np.linspace(-0.012, 0.012, 50) if grid is None else grid
-    got, want = model.curves(grid), truth.curves(grid)
-    return max(np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "g"))
-
-
 #: [identify] settings whose model class holds truth_model.
 INSIDE_CLASS = {
     "M": 8,
@@ -396,3 +380,23 @@ def with_physics_quadratic(model, s_gh=(0.7, 1.3)):
     prior = replace(prior, gh=np.stack([-shape, shape], axis=1))
     backbone = {**model.backbone, "s_gh": np.asarray(s_gh, dtype=float)}
     return replace(model, prior=prior, backbone=backbone)
+
+
+#: Break-away deflections [m] of the three Maxwell-slip elements of :func:`with_slip`.
+SLIP_WIDTHS = (2e-4, 8e-4, 3.2e-3)
+
+
+def with_slip(model: RBFModel, stiffness=(400.0, 150.0, 40.0)) -> RBFModel:
+    """``model`` with three Maxwell-slip elements (widths :data:`SLIP_WIDTHS`, stiffnesses per
+    unit mass [N/m])."""
+    return replace(model, slip_width=SLIP_WIDTHS, theta_slip=np.array(stiffness))
+
+
+def slip_record(truth: RBFModel, n=6500, dt=0.002):
+    """Noise-free states of a model with slip elements (RK4, 4 sub-steps), exact q''."""
+    t = np.arange(n) * dt
+    v = excitation(t)
+    run = simulate(truth, [v], dt, np.array([-0.01]), np.array([0.0]), substeps=4)[0]
+    x = run.states
+    q_ddot = truth.accel(x[:, 0], x[:, 1], v, x[:, 3:])
+    return Record("sim", x[:, 0], x[:, 1], q_ddot, v, dt), x

@@ -3,7 +3,7 @@
 ``reference/workflow-keys.md`` holds the marker ``<!-- workflow-keys -->``; when the site is
 built, :func:`on_page_markdown` replaces it with one table per section and sub-table (key,
 type, default, description) rendered from :func:`debist.workflow_schema`, the schema that
-``debist schema`` prints. :func:`render` is importable on its own (``tests/test_docs.py``
+``debist schema`` prints. :func:`render` is importable on its own (``tests/cli/test_docs.py``
 checks that the page lists every key the schema has).
 
 References

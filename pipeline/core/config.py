@@ -39,6 +39,7 @@ __all__ = [
     "Interval",
     "SectionConfig",
     "config_from_section",
+    "dotted_key",
     "format_validation_error",
     "unknown_key_message",
 ]
@@ -401,12 +402,15 @@ def config_from_section(
     if not isinstance(section, Mapping):
         what = prefix.rstrip(".")
         head = f"{label(what)} {what}:" if what else label("")
-        raise WorkflowError(f"{head} expected a table, got {section!r}")
+        key = dotted_key(label(what), what)
+        raise WorkflowError(f"{head} expected a table, got {section!r}", key=key, value=section)
     for key in section:
         if key in internal:
             known = field_names(cls, internal)
             raise WorkflowError(
-                unknown_key_message(label(key), key, known, known_label=known_label, prefix=prefix)
+                unknown_key_message(label(key), key, known, known_label=known_label, prefix=prefix),
+                key=dotted_key(label(key), prefix + key),
+                value=section[key],
             )
     try:
         return cls(**section, **(extra or {}))
@@ -414,7 +418,55 @@ def config_from_section(
         message = format_validation_error(
             exc, cls, section, where, prefix=prefix, known_label=known_label, internal=internal
         )
-        raise WorkflowError(message) from None
+        raise WorkflowError(message, **_offending(exc, section, label, prefix)) from None
+
+
+def dotted_key(label: str, key: str) -> str | None:
+    """Return a workflow key as ``--set`` names it: ``"[identify]", "M"`` -> ``"identify.M"``.
+
+    Examples
+    --------
+    >>> dotted_key("[ingest]", "q.unit"), dotted_key("[compare]", "")
+    ('ingest.q.unit', 'compare')
+    """
+    section = label.strip().removeprefix("[").removesuffix("]")
+    return ".".join(part for part in (section, key) if part) or None
+
+
+def _offending(
+    exc: pydantic.ValidationError,
+    section: Mapping[str, Any],
+    label: Callable[[str], str],
+    prefix: str,
+) -> dict[str, Any]:
+    """Return the ``key`` and ``value`` of the error :func:`format_validation_error` reports.
+
+    An unknown key first, else the first error; a helper's own :class:`WorkflowError` keeps its.
+    """
+    errors = exc.errors(include_url=False)
+    unknown = [
+        e
+        for e in errors
+        if e["type"] in ("unexpected_keyword_argument", "extra_forbidden") and len(e["loc"]) == 1
+    ]
+    err = (unknown or errors)[0]
+    inner = (err.get("ctx") or {}).get("error")
+    if isinstance(inner, WorkflowError):
+        return {"key": inner.key, "value": inner.value}
+    loc = tuple(err["loc"])
+    name = str(loc[0]) if loc else ""
+    if isinstance(inner, ConfigValueError) and inner.key is not None:
+        name = inner.key
+    if isinstance(inner, ConfigValueError) and inner.got is not ConfigValueError._UNSET:
+        value = inner.got
+    elif err["type"] in ("missing", "missing_argument"):
+        value = None
+    elif not name:  # a rule on the whole table
+        value = dict(section)
+    else:
+        value = section.get(name, err.get("input"))
+    key = prefix + name if name else prefix.rstrip(".")
+    return {"key": dotted_key(label(name), key), "value": value}
 
 
 def field_names(cls: type, internal: Sequence[str] = ()) -> list[str]:

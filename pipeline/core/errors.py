@@ -14,11 +14,44 @@ from contextlib import contextmanager
 
 
 class DebistError(Exception):
-    """Base class of every error raised by debist."""
+    """Base class of every error raised by debist.
+
+    The keyword fields of a subclass (``path``, ``channel``, ``key``, ``value``, ...) are
+    attributes of the exception, so a caller can test what went wrong without parsing the
+    message; they survive pickling (a batch worker's error reaches the parent whole).
+    """
+
+    def __reduce__(self):
+        return _rebuild, (type(self), self.args, self.__dict__)
+
+
+def _rebuild(cls: type, args: tuple, fields: dict) -> BaseException:
+    """Unpickle a :class:`DebistError`: its message and its fields, without ``__init__``."""
+    exc = cls.__new__(cls)
+    exc.args = args
+    exc.__dict__.update(fields)
+    return exc
 
 
 class WorkflowError(DebistError, ValueError):
-    """A workflow file or one of its sections is invalid (unknown key, wrong type, bad value)."""
+    """A workflow file or one of its sections is invalid (unknown key, wrong type, bad value).
+
+    Parameters
+    ----------
+    message : str
+        What is wrong: ``[section] key: expected ..., got ...``.
+    key : str, optional
+        The workflow key at fault, dotted from its section (``"identify.M"``,
+        ``"ingest.q.unit"``, ``"compare.treshold"`` for an unknown key); ``None`` when the
+        error is not about one key.
+    value : object, optional
+        The offending value as given (``None`` when there is none to echo).
+    """
+
+    def __init__(self, message: str = "", *, key: str | None = None, value: object = None):
+        self.key = key
+        self.value = value
+        super().__init__(message)
 
 
 class ArgumentError(WorkflowError, TypeError):
@@ -51,11 +84,25 @@ class RigLogError(DebistError, ValueError):
         The file the problem was found in; prefixed to the message.
     channel : str, optional
         The channel the problem was found in; prefixed to the message.
+    value : object, optional
+        The offending value (a sample, a unit, a count), as the message echoes it.
+    sample : int, optional
+        The index of the first offending sample (or line, for a text file's line).
     """
 
-    def __init__(self, message: str, *, path: object = None, channel: str | None = None):
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: object = None,
+        channel: str | None = None,
+        value: object = None,
+        sample: int | None = None,
+    ):
         self.path = None if path is None else str(path)
         self.channel = channel
+        self.value = value
+        self.sample = sample
         where = []
         if self.path is not None:
             where.append(f"file '{self.path}'")
@@ -66,7 +113,21 @@ class RigLogError(DebistError, ValueError):
 
 
 class IdentificationError(DebistError, ValueError):
-    """The identification problem is ill-posed (rank deficient, ill-conditioned, under-excited)."""
+    """The identification problem is ill-posed (rank deficient, ill-conditioned, under-excited).
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, with the numbers.
+    reason : str, optional
+        A short machine-readable cause: ``"support"`` (a centre without samples),
+        ``"rank"``, ``"condition"``, ``"excitation"``, ``"inputs"``, ``"non-finite"``,
+        ``"candidates"`` (every candidate of a search failed), ...
+    """
+
+    def __init__(self, message: str = "", *, reason: str | None = None):
+        self.reason = reason
+        super().__init__(message)
 
 
 class ArtifactError(DebistError, RuntimeError):

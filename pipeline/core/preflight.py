@@ -18,7 +18,7 @@ search: 645 MB; with ``lowpass``: 656 MB), 200000 x 203 (1637 MB measured, 1634 
 estimated) and 3000 x 6003 (1158 MB measured, 1224 MB estimated): within 7 %.
 :mod:`tracemalloc` sees only the arrays numpy allocates through Python's allocator, not
 LAPACK's copies and work space (numpy's linalg allocates those with ``malloc``), so it
-reports about two thirds of the estimate (tests/test_preflight.py).
+reports about two thirds of the estimate (tests/core/test_preflight.py).
 """
 
 from __future__ import annotations

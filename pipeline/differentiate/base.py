@@ -85,7 +85,9 @@ def differentiate(
     if method not in DIFFERENTIATORS:
         raise WorkflowError(
             f"[differentiate] method: unknown method {method!r}; known methods: "
-            + ", ".join(DIFFERENTIATORS)
+            + ", ".join(DIFFERENTIATORS),
+            key="differentiate.method",
+            value=method,
         )
     config = CONFIGS[method].from_dict({} if params is None else params)
     return DIFFERENTIATORS[method](x, dt, config=config)

@@ -174,7 +174,9 @@ def one_standard_error(table: pd.DataFrame) -> Any:
     """
     finite = table[np.isfinite(table["mean"].to_numpy(dtype=float))]
     if finite.empty:
-        raise IdentificationError("every hyper-parameter candidate failed or diverged")
+        raise IdentificationError(
+            "every hyper-parameter candidate failed or diverged", reason="candidates"
+        )
     best = finite["mean"].astype(float).idxmin()
     se = float(finite.loc[best, "se"])
     limit = float(finite.loc[best, "mean"]) + (se if np.isfinite(se) else 0.0)

@@ -16,6 +16,7 @@ from debist.core.config import (
     Interval,
     SectionConfig,
     config_from_section,
+    dotted_key,
 )
 from debist.core.errors import WorkflowError
 from debist.identify.regularise import CONSTRAINT
@@ -285,7 +286,9 @@ class IdentifyConfig(SectionConfig):
             given = cls.SECTION if where is None else where
             label = given("prior") if callable(given) else given
             raise WorkflowError(
-                f"{label} unknown key 'prior' (the analytical backbone comes from [physics])"
+                f"{label} unknown key 'prior' (the analytical backbone comes from [physics])",
+                key=dotted_key(label, "prior"),
+                value=section["prior"],
             )
         return super().from_dict(section, where)
 

@@ -122,7 +122,8 @@ def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
     for r in records:
         if r.q.size <= 2 * trim + 10:
             raise IdentificationError(
-                f"data set '{r.name}': {r.q.size} samples are too few for trim = {trim}"
+                f"data set '{r.name}': {r.q.size} samples are too few for trim = {trim}",
+                reason="samples",
             )
         s = slice(trim, r.q.size - trim)
         weight = None if r.weight is None else r.weight[s]
@@ -145,7 +146,8 @@ def _prefilter(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
     if not cfg.lowpass < nyquist:
         raise IdentificationError(
             f"data set '{r.name}': [identify] lowpass = {cfg.lowpass:g} Hz is not below the "
-            f"Nyquist frequency {nyquist:g} Hz of its sample time {r.dt:g} s"
+            f"Nyquist frequency {nyquist:g} Hz of its sample time {r.dt:g} s",
+            reason="nyquist",
         )
     from scipy import signal
 
@@ -277,7 +279,8 @@ def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig
         if dead:
             raise IdentificationError(
                 f"regressor columns {dead[:6]} are identically zero: the experiment does not "
-                "excite them (an input never applied, or no motion)"
+                "excite them (an input never applied, or no motion)",
+                reason="excitation",
             )
     scale = np.where(scale == 0, 1.0, scale)
     U, S, Vt = np.linalg.svd(psi / scale, full_matrices=False)
@@ -289,13 +292,15 @@ def _solve(psi: np.ndarray, y: np.ndarray, names: list[str], cfg: IdentifyConfig
         culprits = [names[j] for j in np.argsort(null)[::-1][:4]]
         raise IdentificationError(
             f"regressor is rank deficient (rank {rank} of {psi.shape[1]} columns); the null "
-            f"direction involves {culprits}: remove a redundant term or excite the system more"
+            f"direction involves {culprits}: remove a redundant term or excite the system more",
+            reason="rank",
         )
     if check and cond > cfg.max_condition:
         raise IdentificationError(
             f"regressor condition number {cond:.3g} exceeds "
             f"max_condition = {cfg.max_condition:.3g}: "
-            f"reduce M (= {cfg.M}) or sigma_n (= {cfg.sigma_n}), or excite the range better"
+            f"reduce M (= {cfg.M}) or sigma_n (= {cfg.sigma_n}), or excite the range better",
+            reason="condition",
         )
     keep = tol < S
     uty = U[:, keep].T @ y
@@ -392,7 +397,8 @@ def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConf
         raise IdentificationError(
             f"centre xi_{i + 1} = {basis.xi[i]:.6g} has only {int(support[i])} samples within "
             f"sigma = {basis.sigma:.3g} (min_support = {cfg.min_support}): the experiment does not "
-            "excite that part of the range; reduce M, set q_range, or excite it"
+            "excite that part of the range; reduce M, set q_range, or excite it",
+            reason="support",
         )
     return support
 
@@ -403,7 +409,8 @@ def _check_inputs(records: Sequence[Record], cfg: IdentifyConfig) -> None:
         if np.ptp(v[:, j]) == 0:
             raise IdentificationError(
                 f"input v{j + 1} is constant ({v[0, j]:.6g} V) over all estimation data: "
-                "the experiment is under-excited and g(q) of that input cannot be identified"
+                "the experiment is under-excited and g(q) of that input cannot be identified",
+                reason="excitation",
             )
 
 
@@ -719,7 +726,8 @@ def assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, creep_rate=0.0)
         if not m_q > 0:
             raise IdentificationError(
                 f"identified mass m_q = {m_q:.6g} is not positive: the acceleration is not "
-                "excited or the input gain is wrong"
+                "excited or the input gain is wrong",
+                reason="mass",
             )
         g_0 = np.asarray(cfg.input_gain, dtype=float)
     else:

@@ -298,6 +298,8 @@ def to_float(channel: RawChannel, log: RawLog) -> np.ndarray:
             f"value {data[bad[0]]!r} at sample {bad[0]} is not a number",
             path=log.path,
             channel=channel.name,
+            value=data[bad[0]],
+            sample=int(bad[0]),
         )
     return numbers
 

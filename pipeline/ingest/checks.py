@@ -170,6 +170,8 @@ def check_finite(
             "sample(s) in the selection",
             path=path,
             channel=channel,
+            value=float(values[i]),
+            sample=int(index[i]),
         )
 
 
@@ -238,6 +240,8 @@ def check_plausible(
             "sample(s): a sensor error code, a unit slip or a corrupt file",
             path=path,
             channel=channel,
+            value=float(values[i]),
+            sample=int(index[i]),
         )
 
 
@@ -301,6 +305,8 @@ def check_scale_jump(
                         "(e.g. mm and m); fix the log or cut it with `slice`/`time_window`",
                         path=path,
                         channel=channel,
+                        value=float(x[k]),
+                        sample=int(index[k]),
                     )
 
 
@@ -334,6 +340,7 @@ def check_varies(
             f"{part}: a stuck or disconnected sensor; there is no motion to identify",
             path=path,
             channel=channel,
+            value=float(values[0]),
         )
 
 
@@ -362,7 +369,11 @@ def check_time(t: np.ndarray, index: np.ndarray, *, channel: str, path: Path) ->
         i = int(bad[0])
         before = f"previous t = {_t(t[i - 1])}" if i > 0 else "first sample"
         raise RigLogError(
-            f"time is {t[i]} at sample {index[i]} ({before})", path=path, channel=channel
+            f"time is {t[i]} at sample {index[i]} ({before})",
+            path=path,
+            channel=channel,
+            value=float(t[i]),
+            sample=int(index[i]),
         )
     steps = np.diff(t)
     bad = np.flatnonzero(steps <= 0.0)
@@ -374,6 +385,8 @@ def check_time(t: np.ndarray, index: np.ndarray, *, channel: str, path: Path) ->
             f"{_t(t[i])}, t[{index[i + 1]}] = {_t(t[i + 1])} ({kind}); {bad.size} such step(s)",
             path=path,
             channel=channel,
+            value=float(t[i + 1]),
+            sample=int(index[i + 1]),
         )
 
 
@@ -495,6 +508,7 @@ def check_sample_time(
             f"tolerance {rtol:.3g}); {hint}",
             path=path,
             channel=channel,
+            value=float(median),
         )
 
 
@@ -573,6 +587,8 @@ def gap_error(
         f"and lasts {_t(t[i + 1] - t[i])}; {hint}",
         path=path,
         channel=channel,
+        value=float(t[i + 1] - t[i]),
+        sample=int(index[i]),
     )
 
 

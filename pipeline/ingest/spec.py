@@ -35,6 +35,7 @@ from debist.core.config import (
     ConfigValueError,
     Interval,
     config_from_section,
+    dotted_key,
     unknown_key_message,
 )
 from debist.core.errors import WorkflowError
@@ -310,7 +311,11 @@ class ChannelSpec:
         key = "time" if role == "t" else role
         label = _label(where, key)
         if isinstance(table, Mapping) and not any(k in table for k in _SELECTORS):
-            raise WorkflowError(f"{label} {key}: {_SELECTOR_TEXT}, got {dict(table)!r}")
+            raise WorkflowError(
+                f"{label} {key}: {_SELECTOR_TEXT}, got {dict(table)!r}",
+                key=dotted_key(label, key),
+                value=dict(table),
+            )
         return config_from_section(
             cls, table, label, prefix=f"{key}.", internal=("role",), extra={"role": role}
         )
@@ -389,7 +394,7 @@ def _channel(key: str, table: object, where: Where, extra: bool) -> ChannelSpec:
             message = unknown_key_message(
                 _label(where, key), key, OPTION_KEYS, known_label="known options"
             )
-            raise WorkflowError(message) from None
+            raise WorkflowError(message, key=dotted_key(_label(where, key), key)) from None
         raise
 
 
@@ -524,40 +529,55 @@ class IngestSpec:
         debist.core.errors.WorkflowError: [ingest] unknown key 'smaple_time'; did you mean ...
         """
         if not isinstance(section, Mapping):
-            raise WorkflowError(f"{_label(where, '')} expected a table, got {section!r}")
+            raise WorkflowError(
+                f"{_label(where, '')} expected a table, got {section!r}",
+                key=dotted_key(_label(where, ""), ""),
+                value=section,
+            )
         for key, value in section.items():
             if key not in OPTION_KEYS and not isinstance(value, Mapping):
                 raise WorkflowError(
                     unknown_key_message(
                         _label(where, key), str(key), OPTION_KEYS, known_label="known options"
                     )
-                    + "; a channel is a table {name|regex|column = ..., unit = ...}"
+                    + "; a channel is a table {name|regex|column = ..., unit = ...}",
+                    key=dotted_key(_label(where, key), str(key)),
+                    value=value,
                 )
         channel_keys = [k for k in section if k not in OPTION_KEYS]
         for key in channel_keys:
             fail = f"{_label(where, key)} {key}:"
             if key == "t":
-                raise WorkflowError(f"{fail} map the time channel with `time = {{ ... }}`")
+                raise WorkflowError(
+                    f"{fail} map the time channel with `time = {{ ... }}`",
+                    key=dotted_key(_label(where, key), key),
+                )
             if not _IDENTIFIER.fullmatch(key):
-                raise WorkflowError(f"{fail} a channel key must be an identifier")
+                raise WorkflowError(
+                    f"{fail} a channel key must be an identifier",
+                    key=dotted_key(_label(where, key), key),
+                )
         inputs = sorted((int(m.group(1)), k) for k in channel_keys if (m := _INPUT.fullmatch(k)))
         for number, key in inputs:
             if key != f"v{number}" or number == 0:
                 raise WorkflowError(
-                    f"{_label(where, key)} {key}: inputs are named v1, v2, ... (no v0, no zeros)"
+                    f"{_label(where, key)} {key}: inputs are named v1, v2, ... (no v0, no zeros)",
+                    key=dotted_key(_label(where, key), key),
                 )
         for required in ("q", "v1"):
             if required not in section:
                 raise WorkflowError(
                     f"{_label(where, required)} {required}: missing required channel "
-                    f'(e.g. {required} = {{ name = "...", unit = "..." }})'
+                    f'(e.g. {required} = {{ name = "...", unit = "..." }})',
+                    key=dotted_key(_label(where, required), required),
                 )
         numbers = [n for n, _ in inputs]
         if numbers != list(range(1, len(numbers) + 1)):
             missing = min(set(range(1, max(numbers) + 1)) - set(numbers))
             raise WorkflowError(
                 f"{_label(where, f'v{max(numbers)}')} v{max(numbers)}: inputs must be "
-                f"contiguous v1 ... vN; `v{missing}` is missing"
+                f"contiguous v1 ... vN; `v{missing}` is missing",
+                key=dotted_key(_label(where, f"v{max(numbers)}"), f"v{max(numbers)}"),
             )
         extras = sorted(k for k in channel_keys if k != "q" and not _INPUT.fullmatch(k))
         order = ["q", *(k for _, k in inputs), *extras]

@@ -222,6 +222,7 @@ def _check_unique_header(line: str, sep: str, path: Path) -> None:
                 f"the header names channel {token!r} twice (columns {seen[token]} and {i}, "
                 "counted from 0): rename one, so that a channel means one column",
                 path=path,
+                value=token,
             )
         seen[token] = i
 
@@ -385,7 +386,7 @@ def check_tail(path: Path, delimiter: str, header: bool, decimal: str = ".") -> 
         newlines = _count_newlines(path)
     total = newlines + (0 if ends_with_newline else 1)
     number = total - (len(lines) - 1 - j_last)
-    raise RigLogError(f"line {number} {problem}", path=path)
+    raise RigLogError(f"line {number} {problem}", path=path, sample=number)
 
 
 def _check_decimal(frame: pd.DataFrame, names: list[str], decimal: str, path: Path) -> None:
@@ -405,6 +406,8 @@ def _check_decimal(frame: pd.DataFrame, names: list[str], decimal: str, path: Pa
                 f'`decimal = "{other}"` (or "auto")',
                 path=path,
                 channel=name,
+                value=hits.iloc[0],
+                sample=int(hits.index[0]),
             )
 
 

@@ -243,7 +243,9 @@ def validate_model(
             raise WorkflowError(
                 f"[validate] init_samples = {k}: data set '{ds.name}' has {ds.q.size} samples; "
                 f"the initial-state estimate needs at least {fit_min} of them and at least "
-                f"{fit_min} must remain to score the free run (0 starts from the first sample)"
+                f"{fit_min} must remain to score the free run (0 starts from the first sample)",
+                key="validate.init_samples",
+                value=k,
             )
     for dt, group in by_dt.items():
         check_free_run(

@@ -283,7 +283,7 @@ def load_workflow(
     try:
         checked = check_workflow(raw)
     except WorkflowError as exc:  # keep the class (a ResourceError stays one)
-        raise type(exc)(f"{path}: {exc}") from None
+        raise type(exc)(f"{path}: {exc}", key=exc.key, value=exc.value) from None
     head = checked.head
     name = head.name if head.name is not None else path.stem
     base = path.parent

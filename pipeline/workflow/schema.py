@@ -28,7 +28,7 @@ from typing import Annotated, Any, Literal
 import pydantic
 
 from debist.core import preflight
-from debist.core.config import CONFIG, config_from_section, unknown_key_message
+from debist.core.config import CONFIG, config_from_section, dotted_key, unknown_key_message
 from debist.core.errors import WorkflowError
 from debist.core.names import check_file_name
 from debist.core.units import UNITS
@@ -179,7 +179,7 @@ def _tables(raw: Mapping[str, Any]) -> None:
         )
     for name, value in raw.items():
         if not isinstance(value, Mapping):
-            raise WorkflowError(f"[{name}] expected a table, got {value!r}")
+            raise WorkflowError(f"[{name}] expected a table, got {value!r}", key=name, value=value)
 
 
 def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
@@ -192,7 +192,9 @@ def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
         try:
             make_profile(exp.profile, **exp.profile_kwargs())
         except WorkflowError as exc:
-            raise WorkflowError(f"[rig.experiments.{name}] {exc}") from None
+            raise WorkflowError(
+                f"[rig.experiments.{name}] {exc}", key=f"rig.experiments.{name}", value=exc.value
+            ) from None
     return cfg
 
 
@@ -217,7 +219,9 @@ def _datasets(
         if entry.rig is not None and entry.rig not in experiments:
             raise WorkflowError(
                 f"{where} rig: expected the name of a [rig.experiments.<name>] table "
-                f"({', '.join(experiments) or 'there is none'}), got {entry.rig!r}"
+                f"({', '.join(experiments) or 'there is none'}), got {entry.rig!r}",
+                key=dotted_key(where, "rig"),
+                value=entry.rig,
             )
         overrides = {k: v for k, v in table.items() if k not in DATASET_KEYS}
         for key, value in overrides.items():

@@ -69,7 +69,7 @@ def write_v73(path: Path, rec: dict | None = None) -> None:
 
 
 # The low-level v7.3 writer and header, for tests that write plain variables into an open
-# h5py file (tests/test_ingest_mat.py::test_plain_variables_v73_equal_v5).
+# h5py file (tests/ingest/test_ingest_mat.py::test_plain_variables_v73_equal_v5).
 _Writer = dspace._V73Writer
 
 

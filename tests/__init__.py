@@ -1,0 +1,1 @@
+"""debist's tests, one package per package of debist (tests/core for debist.core, ...)."""

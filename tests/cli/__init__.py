@@ -1,0 +1,1 @@
+"""Tests of the command line (debist.cli), the Python API (debist.api) and the package."""

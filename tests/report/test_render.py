@@ -1,0 +1,85 @@
+"""Figures rendered in forked processes: the same PNG bytes, in order, errors and warnings kept."""
+
+import threading
+import warnings
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from debist.core import forking
+from debist.core.forking import fork_workers
+from debist.report import render
+from debist.report.render import FigureJob, render_pngs
+
+
+def _draw(seed: int, warn: bool = False) -> Figure:
+    """A line plot of a seeded random walk (a figure that differs per seed)."""
+    rng = np.random.default_rng(seed)
+    fig = Figure(figsize=(3, 2))
+    ax = fig.subplots()
+    ax.plot(np.cumsum(rng.standard_normal(500)), lw=0.8)
+    ax.set_title(f"walk {seed}")
+    if warn:
+        warnings.warn(f"walk {seed} warns", UserWarning, stacklevel=1)
+    return fig
+
+
+def _fail(seed: int) -> Figure:
+    raise ValueError(f"no figure for {seed}")
+
+
+def _jobs(n: int, **kwargs) -> list[FigureJob]:
+    return [FigureJob(_draw, (seed,), kwargs, dpi=60) for seed in range(n)]
+
+
+@pytest.fixture
+def parallel(monkeypatch):
+    """Two processes even on a one-core machine, so that the forked path runs."""
+    monkeypatch.setattr(render, "fork_workers", lambda n: 1 if n < 2 else 2)
+
+
+def test_parallel_bytes_are_the_serial_bytes_in_order(parallel):
+    jobs = _jobs(5)
+    pngs = render_pngs(jobs)
+    assert pngs == [job.png() for job in jobs]
+    assert len(set(pngs)) == 5  # five different figures, not one repeated
+    assert all(p.startswith(b"\x89PNG\r\n\x1a\n") for p in pngs)
+
+
+def test_one_figure_and_no_figure_render_here():
+    assert fork_workers(1) == 1
+    assert render_pngs([]) == []
+    job = _jobs(1)[0]
+    assert render_pngs([job]) == [job.png()]
+
+
+def test_a_workers_warning_is_issued_here(parallel):
+    jobs = _jobs(3, warn=True)  # this process draws the first two, a worker the third
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        render_pngs(jobs)
+    assert sorted(str(w.message) for w in caught) == [f"walk {s} warns" for s in range(3)]
+
+
+def test_a_workers_error_is_raised_here(parallel):
+    jobs = [*_jobs(2), FigureJob(_fail, (7,))]  # the failing job is the worker's
+    with pytest.raises(ValueError) as err:
+        render_pngs(jobs)
+    assert "for 7" in str(err.value)
+
+
+def test_a_daemonic_process_renders_serially(monkeypatch):
+    class Daemon:
+        daemon = True
+
+    monkeypatch.setattr(forking.multiprocessing, "current_process", lambda: Daemon())
+    assert fork_workers(4) == 1
+
+
+def test_a_thread_other_than_the_main_one_renders_serially():
+    found = []
+    worker = threading.Thread(target=lambda: found.append(fork_workers(4)))
+    worker.start()
+    worker.join()
+    assert found == [1]

@@ -1,0 +1,241 @@
+"""Every printed table and plot shows units, derived from the data and the model form."""
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from debist.model.sindy import SindyConfig, fit_sindy
+from debist.report.tables import design_table, identify_table, summary_units
+from debist.stages.identify import run_identify
+from debist.stages.validate import run_validate
+from tests.conftest import DT_LOG as DT
+from tests.conftest import double_well, logged_tables
+
+SECTION = {
+    "T_z": 0,
+    "bootstrap": 0,
+    "backbone": ["linear_spring", "cubic_spring", "viscous", "offset"],
+}
+
+
+def _render(table) -> str:
+    console = Console(record=True, width=200)
+    console.print(table)
+    return console.export_text()
+
+
+@pytest.fixture(scope="module")
+def data():
+    truth = double_well()
+    tables, derivs = logged_tables(truth)
+    for d in derivs.values():
+        d.attrs["dt"] = DT
+    return truth, tables, derivs
+
+
+def test_identified_model_in_newtons_when_m_q_is_a_mass(data):
+    truth, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": truth.m_q}).summary
+    assert summary["units"] == {
+        "q": "m",
+        "v1": "V",
+        "v2": "V",
+        "input_map": "v2",
+        "per_unit_mass": False,
+    }
+    text = _render(identify_table(summary))
+    for row in (
+        "mass m_q [kg]",
+        "backbone coefficient k_1 (a basis term; the stiffness k* is in the equilibria) [N/m]",
+        "backbone coefficient k_3 (a basis term) [N/m^3]",
+        "backbone coefficient d_v (a basis term; the damping d(q*) is in the equilibria) [N s/m]",
+        "offset force F_0 [N]",
+        "T_z [s]",
+    ):
+        assert row in text
+    assert "per unit mass" not in text
+    design = _render(design_table(summary))
+    assert "q* [m]" in design and "inputs [V]" in design and "barrier [J]" in design
+    assert "d(q*) [N s/m]" in design and "k* [N/m]" in design
+
+
+def test_identified_model_per_unit_mass_in_accelerations(data):
+    _, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": 1.0}).summary
+    assert summary["units"]["per_unit_mass"] is True
+    text = _render(identify_table(summary))
+    for row in (
+        "mass m_q [1]",
+        "k_1 (a basis term; the stiffness k* is in the equilibria) [1/s^2]",
+        "k_3 (a basis term) [1/m^2/s^2]",
+        "d_v (a basis term; the damping d(q*) is in the equilibria) [1/s]",
+        "offset force F_0 [m/s^2]",
+        "forces in m/s^2",
+    ):
+        assert row in text
+    assert "[N" not in text
+
+
+@pytest.mark.parametrize(
+    ("per_unit_mass", "expected"),
+    [
+        (True, {"k_1": "1/s^2", "d_v": "1/s", "F_0": "V/s^2", "g_0": ["V/s^2"], "force": "V/s^2"}),
+        (False, {"k_1": "N/V", "k_3": "N/V^3", "d_v": "N s/V", "F_c": "N", "g_0": ["N"]}),
+    ],
+)
+def test_units_follow_q_in_volts_and_a_dimensionless_linear_input(per_unit_mass, expected):
+    summary = {
+        "m_q": 1.0 if per_unit_mass else 2.0,
+        "backbone": {"k_1": 1.0, "g_0": [0.0]},
+        "units": {"q": "V", "v1": "1", "input_map": "v", "per_unit_mass": per_unit_mass},
+    }
+    units = summary_units(summary)
+    assert {k: units[k] for k in expected} == expected
+    assert units["inputs"] == ["1"]
+
+
+def test_input_gain_rows_in_force_per_mapped_input():
+    summary = {
+        "T_z": 0.0,
+        "m_q": 95.0,
+        "condition": 1.0,
+        "rank": 3,
+        "n_columns": 3,
+        "n_params": 3,
+        "fit_r2": 1.0,
+        "backbone": {"k_1": 1.0, "g_0": [35.15]},
+        "units": {"q": "m", "v1": "V", "input_map": "v", "per_unit_mass": False},
+    }
+    assert "(a basis term; g_i(q) in Fig. 14) g_0,1 [N/V]" in _render(identify_table(summary))
+
+
+def test_validation_plot_shows_q_in_the_report_unit(data):
+    truth, tables, derivs = data
+    res = run_validate(truth, tables, derivs, {"substeps": 1, "report_unit": "mm"})
+    fig = res.figures["val"]
+    whole, zoom, error = fig.axes[:3]
+    assert whole.get_ylabel() == "q [mm]" and zoom.get_ylabel() == "q [mm]"
+    assert error.get_ylabel() == "error [mm]"
+    measured = whole.get_lines()[0].get_ydata()
+    np.testing.assert_allclose(measured, 1e3 * tables["val"]["q"].to_numpy(), rtol=1e-12)
+    simulated = res.simulated["val"]
+    np.testing.assert_allclose(
+        error.get_lines()[0].get_ydata(),
+        1e3 * (simulated["q"] - simulated["q_sim"]).to_numpy(),
+        rtol=1e-9,
+        atol=1e-12,  # [mm]: the difference of two scaled values rounds differently
+    )
+    plain = run_validate(truth, tables, derivs, {"substeps": 1}).figures["val"]
+    assert plain.axes[0].get_ylabel() == "q [m]"
+    np.testing.assert_allclose(plain.axes[0].get_lines()[0].get_ydata(), tables["val"]["q"])
+
+
+def test_sindy_legend_names_the_inputs_actual_unit(data):
+    _, tables, derivs = data
+    frame, d = tables["est"], derivs["est"]
+    args = (frame["q"].to_numpy(), d["q_dot"].to_numpy(), d["q_ddot"].to_numpy())
+    v = frame[["v1", "v2"]].to_numpy()
+    cfg = SindyConfig.from_dict({})
+    volts = fit_sindy(*args, v, DT, cfg).equations
+    assert "h_i = v_i^2 [V^2], i = 1..2" in volts
+    plain = fit_sindy(*args, v, DT, cfg, input_units=["1", "1"]).equations
+    assert "h_i = v_i^2, i = 1..2" in plain and "[V" not in plain
+
+
+def test_the_refinement_row_names_why_it_was_rejected_and_shows_the_held_out_windows(data):
+    """A rejected refinement prints its own reason (held-out windows here, not "the full
+    records"), with the held-out windows' RMS; without held-out blocks those rows are absent."""
+    truth, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": truth.m_q}).summary
+    refine = {
+        "accepted": False, "nfev": 12, "window_rms_equation_error": 3e-4,
+        "window_rms_simulation_error": 5e-5, "holdout_rms_equation_error": 1.5e-4,
+        "holdout_rms_simulation_error": 4.4e-3, "full_rms_equation_error": 3e-4,
+        "full_rms_simulation_error": 2.9e-4,
+        "message": "rejected: the windows of the held-out estimation blocks got worse "
+                   "(0.00015 -> 0.0044 RMS)",
+    }  # fmt: skip
+    text = _render(identify_table({**summary, "refine": refine}))
+    assert "rejected: the windows of the held-out estimation blocks got worse (0.00015 -> " in text
+    assert "free-run RMS, held-out windows: simulation error [m]" in text
+    kept = {**refine, "accepted": True, "message": "`ftol` termination condition is satisfied.",
+            "holdout_rms_equation_error": float("nan"),
+            "holdout_rms_simulation_error": float("nan")}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": kept}))
+    assert "accepted, 12 evaluations" in text and "held-out" not in text
+    # several ridge weights: the kept one and each weight's free-run error, rejections named
+    several = {**refine, "accepted": True, "prior": 30.0, "holdout_windows": 3,
+               "holdout_rms_simulation_error": 1.2e-4,
+               "candidates": [{"prior": 0.0, "accepted": False, "message": "rejected",
+                               "full_rms_simulation_error": 4.4e-3},
+                              {"prior": 30.0, "accepted": True, "message": "ftol",
+                               "full_rms_simulation_error": 1.2e-4}]}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": several}))
+    assert "refinement ridge prior: kept 30, estimation free-run RMS [m] per weight" in text
+    assert "0: 0.0044 (rejected); 30: 0.00012" in text
+    # a weight never run (records shorter than one window) is not called diverged
+    unrun = {"prior": 0.0, "accepted": False, "message": "records shorter than one window",
+             "full_rms_simulation_error": float("nan"), "nfev": 0}  # fmt: skip
+    text = _render(identify_table({**summary, "refine": {**several, "candidates": [
+        unrun, {**unrun, "prior": 30.0}]}}))  # fmt: skip
+    assert "0: - (rejected); 30: - (rejected)" in text and "diverged" not in text
+
+
+def test_a_curve_identified_nowhere_says_why_with_the_calibrated_numbers():
+    from debist.report.tables import identified_text
+
+    bands = {
+        "bands": {"model_error": {"d": 0.652, "g": 0.576, "restoring": 0.04}, "tolerance": 0.2}
+    }
+    assert identified_text("d", [], bands) == (
+        "nowhere: its calibrated model error alone (65 % of its scale each side) is wider than "
+        "the band tolerance (20 %)"
+    )
+    # a gain's band is narrow enough only where |g| <= 0.2 / (2 * 0.576) = 17 % of its scale
+    assert "17 %" in identified_text("g2", [], bands)
+    assert "excitation" in identified_text("restoring", [], bands)
+    assert identified_text("restoring", [[-0.2031, 0.20557]], bands) == "[-0.2031, 0.2056]"
+    assert identified_text("d", [], {}) == "nowhere"  # a summary from before the tolerance
+
+
+def test_a_thinned_trace_keeps_every_columns_extremes_and_a_short_one_is_unchanged():
+    from debist.report.figures import thin, thin_band
+
+    rng = np.random.default_rng(5)
+    t = np.arange(100_000) * 1e-3
+    y = np.cumsum(rng.normal(size=t.size))
+    y[50_000:50_010] = np.nan  # a gap stays a gap only where a whole column is missing
+    tt, yy = thin(t, y, bins=1000)
+    assert tt.size == yy.size == 2000
+    assert np.nanmax(yy) == np.nanmax(y) and np.nanmin(yy) == np.nanmin(y)
+    column = slice(100 * 137, 100 * 138)  # column 137 of 1000: samples 13700..13799
+    assert yy[2 * 137] == y[column].min() and yy[2 * 137 + 1] == y[column].max()
+    assert tt[2 * 137] == t[column].mean()
+    short = np.arange(10.0)
+    assert np.array_equal(thin(short, short, bins=1000)[1], short)
+    tb, lo, hi = thin_band(t, y - 1.0, y + 1.0, bins=1000)
+    assert tb.size == 1000 and np.all(lo <= hi)
+    assert hi[137] == y[column].max() + 1.0 and lo[137] == y[column].min() - 1.0
+
+
+def test_the_design_table_reads_as_lines_in_a_narrow_terminal():
+    from debist.report.tables import design_lines
+
+    well = {"model": "rbf", "level": 0, "static_stable": True, "stable": True, "identified": True,
+            "q": -0.0095, "v1": 0.0, "v2": 0.0, "d": 0.33, "k": 10.6, "k_lo": 8.4, "k_hi": 12.9,
+            "f_n": 2.3, "zeta": 0.22, "barrier": 1.5e-4, "d_identified": False}  # fmt: skip
+    summary = {
+        "units": {"q": "m", "v1": "V", "v2": "V", "per_unit_mass": False},
+        "design": {"verdict": "stable", "reason": "1 visited well(s)", "equilibria": [well],
+                   "switching": [{"model": "rbf", "input": 1, "v_switch": 1282.0,
+                                  "identified": True}]},
+    }  # fmt: skip
+    lines = design_lines(summary)
+    assert lines[0].startswith("Equilibria and switching")
+    assert lines[1] == (
+        "  rbf well at q* = -0.0095 m (inputs 0, 0): d(q*) 0.33 N s/m (not identified), "
+        "k* 10.6 N/m (8.4-12.9), f_n 2.3 Hz, zeta 0.22 (not identified), barrier 0.00015 J"
+    )
+    assert lines[2] == "  rbf switching voltage, input 1: 1282 V"
+    assert lines[-1].startswith("identified model: stable")
+    assert design_lines({}) == []
