@@ -21,6 +21,7 @@ from debist.core import preflight
 from debist.core import progress as _progress
 from debist.core.errors import WorkflowError
 from debist.simulate import rk4
+from debist.simulate.batch import BatchRun, mask_batch
 
 INTERPOLATIONS = ("bandlimited", "linear")
 #: Free-run engines: the compiled kernel and the NumPy reference.
@@ -264,7 +265,7 @@ def check_free_run(
     return ns
 
 
-def simulate(
+def simulate_batch(
     model: FreeRunModel,
     inputs: Sequence[np.ndarray] | FineInputs,
     dt: float,
@@ -277,8 +278,8 @@ def simulate(
     engine: str = "compiled",
     progress: Callable[[int, int], None] | None = None,
     x0: np.ndarray | None = None,
-) -> list[SimulationResult]:
-    """Simulate a model in free run, driven by measured inputs, from measured initial states.
+) -> BatchRun:
+    """Simulate a batch of free runs driven by measured inputs, as arrays (:class:`BatchRun`).
 
     Parameters
     ----------
@@ -304,8 +305,8 @@ def simulate(
 
     Returns
     -------
-    list of SimulationResult
-        One per record.
+    BatchRun
+        The trajectories on one grid, masked after a divergence and beyond each length.
 
     Raises
     ------
@@ -350,24 +351,58 @@ def simulate(
         return _integrate(model, prepared, dt, x0, q_limit)
 
 
-def _results(states, acc, diverged_at, lengths, ns) -> list[SimulationResult]:
+def simulate(
+    model: FreeRunModel,
+    inputs: Sequence[np.ndarray] | FineInputs,
+    dt: float,
+    q0: np.ndarray,
+    q_dot0: np.ndarray,
+    *,
+    substeps: int = 2,
+    interpolation: str = "bandlimited",
+    q_limit: float = np.inf,
+    engine: str = "compiled",
+    progress: Callable[[int, int], None] | None = None,
+    x0: np.ndarray | None = None,
+) -> list[SimulationResult]:
+    """Simulate a model in free run, driven by measured inputs, from measured initial states.
+
+    Parameters
+    ----------
+    model, inputs, dt, q0, q_dot0, substeps, interpolation, q_limit, engine, progress, x0
+        As :func:`simulate_batch`.
+
+    Returns
+    -------
+    list of SimulationResult
+        One per record, each owning its arrays (length of its record).
+
+    Raises
+    ------
+    WorkflowError, ResourceError
+        As :func:`simulate_batch`.
+
+    References
+    ----------
+    Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (classical RK4).
+    """
+    run = simulate_batch(
+        model, inputs, dt, q0, q_dot0, substeps=substeps, interpolation=interpolation,
+        q_limit=q_limit, engine=engine, progress=progress, x0=x0,
+    )  # fmt: skip
     out = []
-    for b, length in enumerate(lengths):
-        st = states[b, :length]
-        qdd = acc[b, :length]
-        d = int(diverged_at[b])
-        if 0 <= d < length:  # a padded record may diverge after its end: not its divergence
-            st[d:] = np.nan
-            qdd[max(d - 1, 0) :] = np.nan
+    for b, length in enumerate(run.lengths.tolist()):
+        st = run.states[b, :length]
+        d = int(run.diverged_at[b])
         out.append(
             SimulationResult(
                 q=st[:, 0].copy(),
                 q_dot=st[:, 1].copy(),
-                q_ddot=qdd.copy(),
+                q_ddot=run.acc[b, :length].copy(),
                 states=st.copy(),
-                diverged=bool(0 <= d < length),
-                diverged_at=d if 0 <= d < length else -1,
-                substeps=ns,
+                diverged=d >= 0,
+                diverged_at=d,
+                substeps=run.substeps,
             )
         )
     return out
@@ -383,10 +418,10 @@ def _integrate_compiled(model, prepared, dt, x0, q_limit, progress):
         kernel_arrays(model), prepared.values, lengths, dt, prepared.substeps,
         x0, q_limit, progress,
     )  # fmt: skip
-    return _results(states, acc, dead, prepared.lengths, prepared.substeps)
+    return BatchRun(states, acc, dead, lengths, prepared.substeps)
 
 
-def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationResult]:
+def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> BatchRun:
     """Integrate with NumPy over the prepared input grid (see :func:`simulate`)."""
     ns = prepared.substeps
     h = dt / ns
@@ -421,4 +456,4 @@ def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> list[SimulationR
         states[alive, k + 1] = x[alive]
     _, a_last = model.rhs(np.nan_to_num(states[:, -1]), fine[:, -1])
     acc[:, -1] = np.where(alive, a_last, np.nan)
-    return _results(states, acc, diverged_at, lengths, ns)
+    return mask_batch(states, acc, diverged_at, lengths, ns)

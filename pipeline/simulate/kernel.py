@@ -42,6 +42,7 @@ import numpy as np
 
 from debist.model import basis, friction
 from debist.simulate import rk4
+from debist.simulate.batch import mask_batch
 
 __all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run", "free_run_sensitivity"]
 
@@ -1389,14 +1390,5 @@ def free_run(
         integrate(k0, k1)
         if progress is not None:
             progress(k1, n)
-    for b in range(B):
-        L = int(lengths[b])
-        d = int(dead[b])
-        if 0 <= d < L:
-            states[b, d:] = np.nan
-            acc[b, max(d - 1, 0) :] = np.nan
-        else:
-            dead[b] = -1
-        states[b, L:] = np.nan
-        acc[b, L:] = np.nan
-    return states, acc, dead
+    run = mask_batch(states, acc, dead, lengths, substeps)
+    return run.states, run.acc, run.diverged_at

@@ -18,6 +18,7 @@ from debist.simulate.freerun import (
     check_free_run,
     prepare_inputs,
     simulate,
+    simulate_batch,
     substeps_needed,
 )
 from debist.validate.config import ValidateConfig
@@ -313,12 +314,12 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
     for a in range(0, B, REPLICATE_CHUNK):
         dev = deviations[a : a + REPLICATE_CHUNK]
         n = dev.shape[0]
-        sims = simulate(
+        run = simulate_batch(
             model.replicate_table(list(columns), dev), fine.tile(n), dt, np.full(n, q0),
             np.full(n, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
         )  # fmt: skip
-        for j, r in enumerate(sims):
-            q_runs[a + j], diverged[a + j] = r.q, r.diverged
+        q_runs[a : a + n] = run.q[:, : ds.q.size]
+        diverged[a : a + n] = run.diverged_at >= 0
     return q_runs, diverged
 
 

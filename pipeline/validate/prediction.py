@@ -36,11 +36,12 @@ import numpy as np
 
 from debist.core.errors import WorkflowError
 from debist.core.metrics import nrmse
+from debist.simulate.batch import BatchRun
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
     prepare_inputs,
-    simulate,
+    simulate_batch,
     substeps_needed,
 )
 from debist.validate.freerun import DataSet
@@ -132,19 +133,13 @@ def k_step_prediction(
     starts = np.arange(n - k)
     if k > 1 and starts.size > max_windows:
         starts = np.unique(np.linspace(0, n - k - 1, max_windows).astype(np.int64))
-    record = _Record(q, q_dot, v)
-    runs = restarted_runs(
-        model,
-        [record],
-        [(0, int(s), int(s) + k + 1) for s in starts],
-        dt,
-        substeps=substeps,
-        interpolation=interpolation,
-        q_limit=q_limit,
-        engine=engine,
-    )
+    windows = np.column_stack([np.zeros_like(starts), starts, starts + k + 1])
+    run = _restarted_batch(
+        model, [_Record(q, q_dot, v)], windows, dt, substeps=substeps,
+        interpolation=interpolation, q_limit=q_limit, engine=engine,
+    )  # fmt: skip
     out = np.full(n, np.nan)
-    out[starts + k] = [run[-1] for run in runs]
+    out[starts + k] = run.last_q()
     return out
 
 
@@ -208,6 +203,25 @@ def restarted_runs(
     >>> [r.tolist() for r in restarted_runs(ramp, [rec], [(0, 1, 4), (0, 5, 8)], 1.0)]
     [[1.0, 2.0, 3.0], [5.0, 6.0, 7.0]]
     """
+    run = _restarted_batch(
+        model, records, windows, dt, substeps=substeps, interpolation=interpolation,
+        q_limit=q_limit, engine=engine,
+    )  # fmt: skip
+    return [run.q[b, :length] for b, length in enumerate(run.lengths.tolist())]
+
+
+def _restarted_batch(
+    model: FreeRunModel,
+    records: Sequence,
+    windows: Sequence[tuple[int, int, int]],
+    dt: float,
+    *,
+    substeps: int = 2,
+    interpolation: str = "bandlimited",
+    q_limit: float = np.inf,
+    engine: str = "compiled",
+) -> BatchRun:
+    """Run :func:`restarted_runs` and return the batch as arrays."""
     idx = np.asarray(windows, dtype=np.int64).reshape(-1, 3)
     if not idx.size:
         raise WorkflowError("no window to simulate")
@@ -234,7 +248,7 @@ def restarted_runs(
         else:
             x0[rows] = model.initial_state(np.asarray(r.q), np.asarray(r.q_dot))[idx[rows, 1]]
     batch = FineInputs(values, (idx[:, 2] - idx[:, 1]).tolist(), ns)
-    runs = simulate(
+    return simulate_batch(
         model,
         batch,
         dt,
@@ -246,7 +260,6 @@ def restarted_runs(
         progress=lambda done, total: None,
         x0=x0,
     )
-    return [run.q for run in runs]
 
 
 @dataclass(frozen=True)
