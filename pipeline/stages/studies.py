@@ -124,8 +124,9 @@ def _fit_and_score(
         "status": "ok",
     }
     # The condition limit is applied here, after the fit, so that a rejected cell
-    # still reports its condition number and equation error.
-    unchecked = dataclasses.replace(identify, max_condition=math.inf)
+    # still reports its condition number and equation error; a study reads no band, so
+    # no bootstrap (the point estimate does not depend on it).
+    unchecked = dataclasses.replace(identify, max_condition=math.inf, bootstrap=0)
     try:
         model, diag = fit_rbf_model(records, unchecked)
     except IdentificationError as exc:
