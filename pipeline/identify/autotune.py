@@ -10,9 +10,14 @@ estimated on the estimation records alone:
   (multiple shooting);
 * a fit that raises :class:`~debist.core.errors.IdentificationError` or a free run that
   diverges scores ``+inf``;
-* the chosen setting is the most parsimonious one whose mean score is within one standard
-  error of the best (the one-standard-error rule), in the order of :data:`PARSIMONY`:
-  fewer regressor columns, wider RBFs, stronger smoothing, lower ``lowpass`` corner.
+* the chosen setting is the most parsimonious one whose score is within one standard error
+  of the best (the one-standard-error rule), in the order of :data:`PARSIMONY`: fewer
+  regressor columns, wider RBFs, stronger smoothing, lower ``lowpass`` corner. Every
+  candidate is scored on the same folds, so the error compared is the paired one: the mean
+  over the folds of ``log(score / best's score)`` against its standard error
+  (:func:`paired_gaps`). One held-out block that holds a switch can score ten times the
+  others for every candidate; unpaired, that spread between the blocks would admit every
+  candidate, paired it cancels.
 
 Grids of more than :data:`MAX_PRODUCT` settings are swept one coordinate at a time.
 Rationale: docs/explanation/implementation.md.
@@ -22,6 +27,7 @@ References
 Masoud & Maas 2025, Eq. 37-41 and Fig. 11b, 11c (error against M and sigma_n); Hastie,
 Tibshirani & Friedman 2009, Sec. 7.10 (K-fold cross-validation, one-standard-error rule);
 Bergmeir & Benitez 2012, Inf. Sci. 191, 192-213 (blocked cross-validation of time series);
+Dietterich 1998, Neural Comput. 10(7), 1895-1923 (paired comparisons on shared folds);
 Bock & Plitt 1984, IFAC 9th World Congress (multiple shooting); Ribeiro, Tiels, Umenberger,
 Schon & Aguirre 2020, Automatica 121 (smoothness of simulation-error costs).
 """
@@ -65,6 +71,7 @@ __all__ = [
     "blocked_folds",
     "drop_inert_slip",
     "one_standard_error",
+    "paired_gaps",
     "scored_folds",
     "select_hyperparameters",
     "undecided",
@@ -151,16 +158,18 @@ def one_standard_error(table: pd.DataFrame) -> Any:
     ----------
     table : pandas.DataFrame
         One row per candidate with ``mean`` and ``se`` (the cross-validation score's mean
-        and standard error over the folds; ``inf`` for a failed candidate) and any of the
-        parsimony columns of :data:`PARSIMONY` (``n_params``, ``sigma_n``, ``lambda``,
-        ``lowpass``; NaN ``lowpass`` means no filter, ranked as the highest corner).
+        and standard error over the folds; ``inf`` for a failed candidate), optionally
+        ``gap`` and ``gap_se`` (:func:`paired_gaps`), and any of the parsimony columns of
+        :data:`PARSIMONY` (``n_params``, ``sigma_n``, ``lambda``, ``lowpass``; NaN
+        ``lowpass`` means no filter, ranked as the highest corner).
 
     Returns
     -------
     object
-        Index label of the chosen row: among the rows with ``mean <= mean_best + se_best``
-        (``best`` the row of least finite mean), the first in the parsimony order, ties
-        broken by the lower mean.
+        Index label of the chosen row: among the rows near the best, the first in the
+        parsimony order, ties broken by the lower mean. Near: ``gap <= gap_se`` where the
+        table has the paired columns, else ``mean <= mean_best + se_best`` (``best`` the
+        row of least finite mean).
 
     Raises
     ------
@@ -177,10 +186,7 @@ def one_standard_error(table: pd.DataFrame) -> Any:
         raise IdentificationError(
             "every hyper-parameter candidate failed or diverged", reason="candidates"
         )
-    best = finite["mean"].astype(float).idxmin()
-    se = float(finite.loc[best, "se"])
-    limit = float(finite.loc[best, "mean"]) + (se if np.isfinite(se) else 0.0)
-    near = finite[finite["mean"].astype(float) <= limit]
+    near = finite[_near(finite)]
     keys = []
     for column, up in PARSIMONY:
         if column in near:
@@ -193,6 +199,60 @@ def one_standard_error(table: pd.DataFrame) -> Any:
     keys.append(near["mean"].astype(float))
     order = pd.DataFrame({f"k{i}": k for i, k in enumerate(keys)}, index=near.index)
     return order.sort_values(list(order.columns), kind="stable").index[0]
+
+
+def _near(finite: pd.DataFrame) -> np.ndarray:
+    """Rows within one standard error of the best: paired when the gaps are there."""
+    if {"gap", "gap_se"} <= set(finite.columns):
+        gap = finite["gap"].to_numpy(dtype=float)
+        return gap <= np.nan_to_num(finite["gap_se"].to_numpy(dtype=float), nan=0.0)
+    best = finite["mean"].astype(float).idxmin()
+    se = float(finite.loc[best, "se"])
+    limit = float(finite.loc[best, "mean"]) + (se if np.isfinite(se) else 0.0)
+    return (finite["mean"].astype(float) <= limit).to_numpy()
+
+
+def paired_gaps(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each candidate's paired log-ratio to the best over shared folds, with its standard error.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (n_candidates, n_folds)
+        Fold scores (NRMSE(q) of each held-out block) [-], over the folds that rank the
+        candidates (:func:`scored_folds`); a row with a non-finite score has no gap.
+
+    Returns
+    -------
+    gap : ndarray, shape (n_candidates,)
+        Mean over the folds of ``log(score / score of the best)``, the best being the row
+        of least mean score: 0 for the best, ``inf`` for a row with a non-finite score.
+    gap_se : ndarray, shape (n_candidates,)
+        Standard error of that mean (sample standard deviation over sqrt(folds); 0 for the
+        best, ``inf`` with fewer than two folds or no finite score).
+
+    References
+    ----------
+    Dietterich 1998, Neural Comput. 10(7), 1895-1923 (paired differences on shared folds);
+    Hastie, Tibshirani & Friedman 2009, Sec. 7.10 (the one-standard-error rule).
+
+    Examples
+    --------
+    >>> gap, se = paired_gaps(np.array([[0.10, 0.01], [0.20, 0.02], [0.12, 0.03]]))
+    >>> np.round(gap, 4).tolist(), np.round(se, 4).tolist()
+    ([0.0, 0.6931, 0.6405], [0.0, 0.0, 0.4581])
+    """
+    scores = np.asarray(scores, dtype=float)
+    n, k = scores.shape
+    gap, gap_se = np.full(n, np.inf), np.full(n, np.inf)
+    finite = np.isfinite(scores).all(axis=1) & (scores > 0).all(axis=1)
+    if not finite.any():
+        return gap, gap_se
+    mean = np.where(finite, scores.mean(axis=1), np.inf)
+    logs = np.log(np.where(finite[:, None], scores, 1.0))
+    diff = logs[finite] - logs[int(np.argmin(mean))]
+    gap[finite] = diff.mean(axis=1)
+    gap_se[finite] = diff.std(axis=1, ddof=1) / np.sqrt(k) if k > 1 else np.inf
+    return gap, gap_se
 
 
 @dataclass(frozen=True)
@@ -211,8 +271,9 @@ class AutoResult:
         penalty weight used, mean over the folds), ``mean`` and ``se`` of the fold scores,
         ``fold_1 .. fold_K`` (NRMSE(q) of each held-out block [-]; ``inf`` for a fold whose
         fit failed or whose free run diverged, NaN for folds not evaluated after a failed fit),
-        ``status`` (``"ok"``, ``"fit failed"``, ``"diverged"``), ``message``,
-        ``within_1se`` and ``chosen``.
+        ``gap`` and ``gap_se`` (:func:`paired_gaps`), ``status`` (``"ok"``, ``"fit
+        failed"``, ``"diverged"``), ``message``, ``within_1se`` (within one paired standard
+        error of the best) and ``chosen``.
     settings : list of dict
         The grid values of each row of ``table``, as given.
     folds : int
@@ -222,7 +283,8 @@ class AutoResult:
     best : int
         Row of the least mean score.
     threshold : float
-        ``mean_best + se_best``: the one-standard-error bound.
+        ``mean_best + se_best``: the best's score plus its standard error over the folds
+        (what the figure draws; the choice compares paired gaps, ``within_1se``).
     seconds : float
         Wall time [s] of the search.
     """
@@ -534,7 +596,7 @@ def select_hyperparameters(
         chosen = same[0] if same else 0
     best = int(table["mean"].astype(float).idxmin())
     threshold = float(table.loc[best, "mean"] + np.nan_to_num(table.loc[best, "se"]))
-    table["within_1se"] = table["mean"] <= threshold
+    table["within_1se"] = _near(table) & np.isfinite(table["mean"].to_numpy(dtype=float))
     table["chosen"] = table.index == chosen
     return AutoResult(
         chosen=dict(order[chosen]),
@@ -591,6 +653,7 @@ def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
     data["lambda"] = [r["lambda"] for r in rows]
     data["mean"] = mean
     data["se"] = se
+    data["gap"], data["gap_se"] = paired_gaps(kept)
     for j in range(k):
         data[f"fold_{j + 1}"] = scores[:, j]
     data["status"] = [r["status"] for r in rows]
@@ -667,8 +730,8 @@ def undecided(search: AutoResult) -> bool:
     bool
         True when the best candidate's standard error of the fold scores exceeds
         :data:`UNDECIDED_SE` of their mean (or the mean is not finite): the folds disagree,
-        e.g. one held-out block of a bistable record lost a switch, and the
-        one-standard-error rule then admits every candidate.
+        e.g. one held-out block of a bistable record lost a switch, so the score itself is
+        uncertain (the choice compares paired gaps, which that spread does not enter).
 
     References
     ----------

@@ -14,6 +14,7 @@ from debist.identify.autotune import (
     auto_settings,
     blocked_folds,
     one_standard_error,
+    paired_gaps,
     select_hyperparameters,
 )
 from debist.identify.config import IdentifyConfig
@@ -62,6 +63,46 @@ def test_one_standard_error_rule_on_a_hand_made_table():
     # equal parameters and width: the stronger penalty wins over the lower corner
     rows[2].update(n_params=28, sigma_n=0.5, **{"lambda": 1e-4})
     assert one_standard_error(_frame(rows)) == _reference_choice(rows) == 2
+
+
+def test_paired_gaps_are_the_mean_log_ratio_to_the_best_and_its_standard_error():
+    rng = np.random.default_rng(7)
+    scores = rng.uniform(0.01, 0.2, size=(5, 4))
+    scores[3, 2] = np.inf  # a diverged fold: no gap
+    gap, se = paired_gaps(scores)
+    best = int(np.argmin([np.mean(r) if np.all(np.isfinite(r)) else np.inf for r in scores]))
+    for i, row in enumerate(scores):
+        if i == 3:
+            assert gap[i] == se[i] == np.inf
+            continue
+        d = [np.log(a / b) for a, b in zip(row, scores[best], strict=True)]
+        m = sum(d) / 4
+        assert gap[i] == pytest.approx(m, rel=1e-12, abs=1e-15)
+        sd = (sum((x - m) ** 2 for x in d) / 3) ** 0.5
+        assert se[i] == pytest.approx(sd / 2, rel=1e-12, abs=1e-15)
+    assert gap[best] == se[best] == 0.0
+
+
+def test_the_paired_rule_sees_a_candidate_worse_on_every_fold_through_the_folds_spread():
+    """Fold 1 holds a switch and scores ten times the others for every candidate: unpaired,
+    its spread admits the simpler candidate that is 40 % worse on every fold; paired, not."""
+    folds = np.array([[0.10, 0.010, 0.012, 0.011], [0.14, 0.014, 0.0168, 0.0154]])
+    gap, se = paired_gaps(folds)
+    rows = [
+        {"id": i, "mean": float(folds[i].mean()), "n_params": n, "sigma_n": 0.5,
+         "lambda": 0.0, "lowpass": None,
+         "se": float(folds[i].std(ddof=1) / 2)}
+        for i, n in ((0, 32), (1, 28))
+    ]  # fmt: skip
+    assert _reference_choice(rows) == 1  # unpaired: the simpler one
+    frame = _frame(rows).assign(gap=gap, gap_se=se)
+    assert gap[1] == pytest.approx(np.log(1.4)) and se[1] < 1e-12
+    assert one_standard_error(frame) == 0  # paired: the one better on every fold
+    # within the noise of the pairing, the simpler one again
+    folds[1] = folds[0] * np.array([1.3, 0.8, 1.2, 0.85])
+    gap, se = paired_gaps(folds)
+    assert 0.0 < gap[1] <= se[1]
+    assert one_standard_error(_frame(rows).assign(gap=gap, gap_se=se)) == 1
 
 
 def test_one_standard_error_rule_agrees_with_the_reference_on_random_tables():
