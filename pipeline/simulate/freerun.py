@@ -357,20 +357,17 @@ def simulate(
     dt: float,
     q0: np.ndarray,
     q_dot0: np.ndarray,
-    *,
-    substeps: int = 2,
-    interpolation: str = "bandlimited",
-    q_limit: float = np.inf,
-    engine: str = "compiled",
-    progress: Callable[[int, int], None] | None = None,
-    x0: np.ndarray | None = None,
+    **options,
 ) -> list[SimulationResult]:
     """Simulate a model in free run, driven by measured inputs, from measured initial states.
 
     Parameters
     ----------
-    model, inputs, dt, q0, q_dot0, substeps, interpolation, q_limit, engine, progress, x0
+    model, inputs, dt, q0, q_dot0
         As :func:`simulate_batch`.
+    **options
+        The keyword options of :func:`simulate_batch`: ``substeps``, ``interpolation``,
+        ``q_limit``, ``engine``, ``progress``, ``x0``.
 
     Returns
     -------
@@ -386,10 +383,7 @@ def simulate(
     ----------
     Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (classical RK4).
     """
-    run = simulate_batch(
-        model, inputs, dt, q0, q_dot0, substeps=substeps, interpolation=interpolation,
-        q_limit=q_limit, engine=engine, progress=progress, x0=x0,
-    )  # fmt: skip
+    run = simulate_batch(model, inputs, dt, q0, q_dot0, **options)
     out = []
     for b, length in enumerate(run.lengths.tolist()):
         st = run.states[b, :length]

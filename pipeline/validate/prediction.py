@@ -36,7 +36,6 @@ import numpy as np
 
 from debist.core.errors import WorkflowError
 from debist.core.metrics import nrmse
-from debist.simulate.batch import BatchRun
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
@@ -135,8 +134,7 @@ def k_step_prediction(
         starts = np.unique(np.linspace(0, n - k - 1, max_windows).astype(np.int64))
     windows = np.column_stack([np.zeros_like(starts), starts, starts + k + 1])
     run = _restarted_batch(
-        model, [_Record(q, q_dot, v)], windows, dt, substeps=substeps,
-        interpolation=interpolation, q_limit=q_limit, engine=engine,
+        model, [_Record(q, q_dot, v)], windows, dt, substeps, interpolation, q_limit, engine
     )  # fmt: skip
     out = np.full(n, np.nan)
     out[starts + k] = run.last_q()
@@ -204,24 +202,13 @@ def restarted_runs(
     [[1.0, 2.0, 3.0], [5.0, 6.0, 7.0]]
     """
     run = _restarted_batch(
-        model, records, windows, dt, substeps=substeps, interpolation=interpolation,
-        q_limit=q_limit, engine=engine,
+        model, records, windows, dt, substeps, interpolation, q_limit, engine
     )  # fmt: skip
     return [run.q[b, :length] for b, length in enumerate(run.lengths.tolist())]
 
 
-def _restarted_batch(
-    model: FreeRunModel,
-    records: Sequence,
-    windows: Sequence[tuple[int, int, int]],
-    dt: float,
-    *,
-    substeps: int = 2,
-    interpolation: str = "bandlimited",
-    q_limit: float = np.inf,
-    engine: str = "compiled",
-) -> BatchRun:
-    """Run :func:`restarted_runs` and return the batch as arrays."""
+def _restarted_batch(model, records, windows, dt, substeps, interpolation, q_limit, engine):
+    """Run :func:`restarted_runs`; return the batch as arrays (a ``BatchRun``)."""
     idx = np.asarray(windows, dtype=np.int64).reshape(-1, 3)
     if not idx.size:
         raise WorkflowError("no window to simulate")
