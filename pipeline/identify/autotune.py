@@ -205,7 +205,7 @@ def _near(finite: pd.DataFrame) -> np.ndarray:
     """Rows within one standard error of the best: paired when the gaps are there."""
     if {"gap", "gap_se"} <= set(finite.columns):
         gap = finite["gap"].to_numpy(dtype=float)
-        return gap <= np.nan_to_num(finite["gap_se"].to_numpy(dtype=float), nan=0.0)
+        return np.isfinite(gap) & (gap <= finite["gap_se"].to_numpy(dtype=float))
     best = finite["mean"].astype(float).idxmin()
     se = float(finite.loc[best, "se"])
     limit = float(finite.loc[best, "mean"]) + (se if np.isfinite(se) else 0.0)
@@ -244,11 +244,12 @@ def paired_gaps(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     scores = np.asarray(scores, dtype=float)
     n, k = scores.shape
     gap, gap_se = np.full(n, np.inf), np.full(n, np.inf)
-    finite = np.isfinite(scores).all(axis=1) & (scores > 0).all(axis=1)
+    finite = np.isfinite(scores).all(axis=1)
     if not finite.any():
         return gap, gap_se
     mean = np.where(finite, scores.mean(axis=1), np.inf)
-    logs = np.log(np.where(finite[:, None], scores, 1.0))
+    # a perfect fold (score 0) counts as the smallest positive score
+    logs = np.log(np.where(finite[:, None], np.maximum(scores, np.finfo(float).tiny), 1.0))
     diff = logs[finite] - logs[int(np.argmin(mean))]
     gap[finite] = diff.mean(axis=1)
     gap_se[finite] = diff.std(axis=1, ddof=1) / np.sqrt(k) if k > 1 else np.inf
@@ -596,7 +597,7 @@ def select_hyperparameters(
         chosen = same[0] if same else 0
     best = int(table["mean"].astype(float).idxmin())
     threshold = float(table.loc[best, "mean"] + np.nan_to_num(table.loc[best, "se"]))
-    table["within_1se"] = _near(table) & np.isfinite(table["mean"].to_numpy(dtype=float))
+    table["within_1se"] = _near(table)
     table["chosen"] = table.index == chosen
     return AutoResult(
         chosen=dict(order[chosen]),
