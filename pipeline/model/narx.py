@@ -14,8 +14,9 @@ tried; among those, the simulation error of the free run over the estimation rec
 the model (:func:`fit_narx`; Piroddi & Spinelli 2003: a one-step criterion alone keeps terms
 that fit the sensor's coloured noise and lose the free run), after a screen on inputs the
 estimation records imply but do not contain (:func:`stress_inputs`): a candidate whose free
-run leaves the visited range under them is unstable where the data cannot vouch for it.
-Validation data never enter the choice.
+run leaves the visited range under them is unstable where the data cannot vouch for it, and
+is passed over unless it is the only kind that reproduces the estimation records (a free run
+that loses a switch on its own data is no alternative). Validation data never enter the choice.
 
 Data are scaled before the fit (``q`` about an origin, divided by its standard deviation;
 each ``h(v_i)`` by its largest magnitude). A polynomial NARX is not invariant to the origin of
@@ -51,6 +52,7 @@ from pydantic import Field, PositiveInt
 
 from debist.core.config import CONFIG, AsTuple, SectionConfig
 from debist.core.errors import DebistWarning, IdentificationError
+from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse
 from debist.model.narx_kernel import factor_tables, narx_free_run
 from debist.model.termtable import input_map as apply_input_map
 
@@ -532,16 +534,34 @@ def _stress_excursion(model: NarxModel, y0: np.ndarray, stress, centre: float, h
     return worst
 
 
-def _simplest_near_best(candidates: pd.DataFrame) -> dict | None:
+def _simplest_near_best(candidates: pd.DataFrame, poor: float = np.inf) -> dict | None:
     """Pick the fewest terms whose free-run score is within :data:`SIMPLER_WITHIN` of the best.
 
-    Among the candidates that ran free to the end of the estimation records and stayed within
-    :data:`STRESS_LIMIT` on the stress inputs; if none stayed, among all that ran free. None if
-    no candidate ran free to the end of the estimation records.
+    Among the candidates that reproduce the estimation records (free-run NRMSE(q) at most
+    ``poor``; all that ran free if none does), those that stayed within :data:`STRESS_LIMIT`
+    on the stress inputs; if none stayed, all of them. None if no candidate ran free to the
+    end of the estimation records.
+
+    Parameters
+    ----------
+    candidates : pandas.DataFrame
+        The search table of :func:`fit_narx` (``n_terms, degree, lag, free_run_nrmse_q,
+        stress_excursion``).
+    poor : float, optional
+        The estimation free run's NRMSE(q) above which a candidate does not reproduce its own
+        data (a lost switch: :data:`~debist.core.metrics.POOR_SHARE` of the mean baseline's);
+        default: no bound.
+
+    Returns
+    -------
+    dict or None
+        The chosen row.
     """
     ok = candidates[np.isfinite(candidates.free_run_nrmse_q)] if len(candidates) else candidates
     if ok.empty:
         return None
+    good = ok[ok.free_run_nrmse_q <= poor]
+    ok = good if len(good) else ok
     steady = ok[ok.stress_excursion <= STRESS_LIMIT]
     ok = steady if len(steady) else ok
     near = ok[ok.free_run_nrmse_q <= (1.0 + SIMPLER_WITHIN) * ok.free_run_nrmse_q.min()]
@@ -562,9 +582,12 @@ def fit_narx(
     orders the terms on the stacked records and the information criterion's minimum gives the
     largest model size; the sizes of :func:`term_counts` up to it run free over the estimation
     records from each record's first ``max_lag`` samples and over :func:`stress_inputs`. Of
-    the candidates that stay within :data:`STRESS_LIMIT` half-spans on the stress inputs (all,
-    if none does), the fewest terms within :data:`SIMPLER_WITHIN` of the best free-run
-    NRMSE(q) win, over every structure.
+    the candidates that reproduce the estimation records (their free run not "poor": at most
+    :data:`~debist.core.metrics.POOR_SHARE` of the mean baseline's NRMSE(q)), those that stay
+    within :data:`STRESS_LIMIT` half-spans on the stress inputs (all, if none does), the
+    fewest terms within :data:`SIMPLER_WITHIN` of the best free-run NRMSE(q) win, over every
+    structure (:func:`_simplest_near_best`). A stable candidate that loses a switch on its own
+    data does not displace one that reproduces them.
 
     Parameters
     ----------
@@ -602,6 +625,7 @@ def fit_narx(
     span = float(np.ptp(q_all)) / q_std or 1.0
     mid = float(0.5 * (q_all.max() + q_all.min()))
     stress = stress_inputs(v)
+    poor = POOR_SHARE * mean_baseline_nrmse(q_all)
     rows, fits = [], {}
     for h_map, degree, lag, (origin, q_origin) in itertools.product(
         maps, cfg.degree, cfg.lags, q_origins(q_all).items()
@@ -623,14 +647,16 @@ def fit_narx(
             excursion = _stress_excursion(model, ys[0], stress_x, (mid - q_origin) / q_std,
                                           0.5 * span)  # fmt: skip
             status = "ok" if np.isfinite(score) else "diverged"
-            if status == "ok" and excursion > STRESS_LIMIT:
+            if status == "ok" and score > poor:
+                status = "poor on the estimation records"
+            elif status == "ok" and excursion > STRESS_LIMIT:
                 status = "left the visited range on the stress inputs"
             rows.append({**base, "n_terms": size, "criterion_terms": est.n_terms_criterion,
                          "free_run_nrmse_q": score, "stress_excursion": excursion,
                          "status": status})  # fmt: skip
         fits[h_map, degree, lag, origin] = est, scale, q_origin
     candidates = pd.DataFrame(rows)
-    best = _simplest_near_best(candidates)
+    best = _simplest_near_best(candidates, poor)
     if best is None:
         raise IdentificationError(
             "NARX: every candidate structure failed to fit or diverged in its free run over "

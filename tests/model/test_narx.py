@@ -155,6 +155,22 @@ def test_a_candidate_that_leaves_the_range_on_the_stress_inputs_is_not_chosen():
     assert _simplest_near_best(table) is None
 
 
+def test_a_stable_candidate_that_loses_its_own_data_does_not_displace_one_that_fits_them():
+    """Candidates above the poor bound on the estimation records (a lost switch there) count
+    only when no candidate reproduces the records; the stress screen then ranks the rest."""
+    from debist.model.narx import STRESS_LIMIT, _simplest_near_best
+
+    table = pd.DataFrame({"degree": 3, "lag": 3, "input_map": "v2", "origin": "midrange",
+                          "n_terms": [12, 16, 64, 72],
+                          "free_run_nrmse_q": [0.165, 0.166, 0.0029, 0.0026],
+                          "stress_excursion": [1.0, 1.0, np.inf, np.inf]})  # fmt: skip
+    assert _simplest_near_best(table)["n_terms"] == 12  # no bound: the screen decides
+    assert _simplest_near_best(table, poor=0.15)["n_terms"] == 64
+    assert _simplest_near_best(table, poor=0.001)["n_terms"] == 12  # none fits: as before
+    table.loc[table.n_terms == 72, "stress_excursion"] = STRESS_LIMIT - 0.1
+    assert _simplest_near_best(table, poor=0.15)["n_terms"] == 72  # stable and fits
+
+
 def test_the_window_of_model_sizes_grows_until_the_criterion_rises():
     """With a window of 3 sizes the criterion still falls at its end: it grows, and the term
     count is the minimum over every size scored."""
