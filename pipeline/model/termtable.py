@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -113,6 +114,26 @@ def _int(a, shape=None) -> np.ndarray:
 
 def _float(a) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Index groups of a :class:`TermTable` (see :attr:`TermTable._plan`)."""
+
+    gauss: np.ndarray
+    table: np.ndarray
+    qpow: tuple[tuple[int, np.ndarray], ...]
+    spow: tuple[tuple[int, np.ndarray], ...]
+    tanh: np.ndarray
+    creep: np.ndarray
+    hpow: tuple[tuple[tuple[int, np.ndarray], ...], ...]
+    inertia: np.ndarray
+
+
+def _groups(power: np.ndarray, among: np.ndarray) -> tuple[tuple[int, np.ndarray], ...]:
+    """``(p, indices)`` for each distinct power ``p != 0`` of the terms ``among``, ascending."""
+    return tuple((int(p), np.flatnonzero(among & (power == p)))
+                 for p in np.unique(power[among]) if p)  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,7 +216,30 @@ class TermTable:
     @property
     def has_inertia(self) -> bool:
         """Whether some terms are inertia terms (a position-dependent mass)."""
-        return bool(np.any(self.term_skind == S_ACC))
+        return self._plan.inertia.size > 0
+
+    @cached_property
+    def _plan(self) -> _Plan:
+        """The groups of terms and bases that :meth:`columns` and :meth:`bases` work on.
+
+        Computed once per table (its arrays are not changed after construction): the
+        same groups, in the same order, as finding them on every call.
+        """
+        kind = self.base_kind
+        spow = self.term_skind == S_POW
+        return _Plan(
+            gauss=np.flatnonzero(kind == BASE_GAUSS),
+            table=np.flatnonzero(kind == BASE_TABLE),
+            qpow=_groups(self.term_qpow, np.ones(self.n_terms, dtype=bool)),
+            spow=_groups(self.term_spow, spow),
+            tanh=np.flatnonzero(self.term_skind == S_TANH),
+            creep=np.flatnonzero(self.term_skind == S_CREEP),
+            hpow=tuple(
+                _groups(self.term_hpow[:, i], np.ones(self.n_terms, dtype=bool))
+                for i in range(self.n_inputs)
+            ),
+            inertia=np.flatnonzero(self.term_skind == S_ACC),
+        )
 
     def inertia_parts(self, q: np.ndarray, q_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return the inertia terms' part of the mass and their velocity-squared force.
@@ -258,15 +302,14 @@ class TermTable:
         -------
         ndarray, shape (n, K)
         """
-        q = np.asarray(q, dtype=float)
+        q = np.asarray(q, dtype=float).reshape(-1)
         out = np.ones((q.size, self.base_kind.size))
-        for k, kind in enumerate(self.base_kind):
-            if kind == BASE_GAUSS:
-                qc = np.minimum(np.maximum(q, self.base_lo[k]), self.base_hi[k])
-                diff = qc - self.base_centre[k]
-                out[:, k] = gaussian(diff, self.base_width[k])
-            elif kind == BASE_TABLE:
-                out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
+        g = self._plan.gauss
+        if g.size:  # every Gaussian at once: the same operations, element by element
+            qc = np.minimum(np.maximum(q[:, None], self.base_lo[g]), self.base_hi[g])
+            out[:, g] = gaussian(qc - self.base_centre[g], self.base_width[g])
+        for k in self._plan.table:
+            out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
 
     def columns(
@@ -304,38 +347,33 @@ class TermTable:
         q = np.asarray(q, dtype=float)
         s = np.asarray(s, dtype=float)
         hv = np.asarray(hv, dtype=float).reshape(q.size, self.n_inputs)
+        plan = self._plan
         b = self.bases(q)
         out = b[:, self.term_base].copy()
-        for a in np.unique(self.term_qpow):
-            if a:
-                out[:, self.term_qpow == a] *= (q**a)[:, None]
+        for a, idx in plan.qpow:
+            out[:, idx] *= (q**a)[:, None]
         # the factors by groups of terms (one array operation per distinct power), in the
         # order q power, velocity factor, inputs: the same products as term by term
-        for p in np.unique(self.term_spow[self.term_skind == S_POW]):
-            if p:
-                out[:, (self.term_skind == S_POW) & (self.term_spow == p)] *= (s**p)[:, None]
-        tanh = self.term_skind == S_TANH
-        if tanh.any():
-            out[:, tanh] *= np.tanh(s / self.coulomb_velocity)[:, None]
-        creep = np.flatnonzero(self.term_skind == S_CREEP)
-        if creep.size:
-            states = self.term_spow[creep]
+        for p, idx in plan.spow:
+            out[:, idx] *= (s**p)[:, None]
+        if plan.tanh.size:
+            out[:, plan.tanh] *= np.tanh(s / self.coulomb_velocity)[:, None]
+        if plan.creep.size:
+            states = self.term_spow[plan.creep]
             if w is None:
-                out[:, creep] = 0.0
+                out[:, plan.creep] = 0.0
             else:
-                out[:, creep] *= np.asarray(w, dtype=float).reshape(q.size, -1)[:, states]
-        for i in range(self.n_inputs):
-            for p in np.unique(self.term_hpow[:, i]):
-                if p:
-                    out[:, self.term_hpow[:, i] == p] *= (hv[:, i] ** p)[:, None]
-        inertia = self.term_skind == S_ACC
-        if inertia.any():
+                out[:, plan.creep] *= np.asarray(w, dtype=float).reshape(q.size, -1)[:, states]
+        for i, groups in enumerate(plan.hpow):
+            for p, idx in groups:
+                out[:, idx] *= (hv[:, i] ** p)[:, None]
+        if plan.inertia.size:
             if q_ddot is None:
-                out[:, inertia] = 0.0
+                out[:, plan.inertia] = 0.0
             else:
                 mass, force = self.inertia_parts(q, q_dot)
                 qdd = np.asarray(q_ddot, dtype=float).reshape(-1, 1)
-                out[:, inertia] = (mass * qdd + force)[:, inertia]
+                out[:, plan.inertia] = (mass * qdd + force)[:, plan.inertia]
         return out
 
     def select(self, keep: Sequence[int]) -> TermTable:
