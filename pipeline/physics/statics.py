@@ -238,6 +238,7 @@ def force_displacement(
     v1: float = 0.0,
     v2: float = 0.0,
     b: float | None = None,
+    guess: ArrayLike | None = None,
 ) -> ForceCurve:
     """Force-displacement curve ``F(q)`` by continuation in ``q`` (Fig. 4) with ``C_i(q)`` (Fig. 5).
 
@@ -252,6 +253,11 @@ def force_displacement(
         Voltages of DE 1 (left) and DE 2 (right) [V].
     b : float, optional
         Pre-strain screw position [m]; ``params.b`` if omitted.
+    guess : array_like, shape (n, 4), optional
+        The path ``q_m(q)`` on the same ``q`` at nearby settings (voltages, ``b``) [1/m,
+        1/m^2, 1/m^3, m]: every point is solved from it in one batched Newton solve (natural
+        continuation in the settings), and the continuation in ``q`` runs only if one of
+        them does not converge.
 
     Returns
     -------
@@ -277,7 +283,13 @@ def force_displacement(
         raise ValueError("`q` must be a strictly increasing 1-D array of at least 2 values [m]")
     b = params.b if b is None else float(b)
     bb, vv1, vv2 = _as_batch(b, v1, v2)
-    qm, ok = _path(params, q, bb, vv1, vv2)
+    ok = np.zeros((1, q.size), dtype=bool)
+    if guess is not None:
+        y0 = np.asarray(guess, dtype=float).reshape(q.size, 4)[:, 1:]
+        path, _, ok = _solve_at_q(params, q, y0, bb[0], vv1[0], vv2[0], 1e-3)
+        qm, ok = path[None], ok[None]
+    if not np.all(ok):
+        qm, ok = _path(params, q, bb, vv1, vv2)
     if not np.all(ok):
         warnings.warn(
             f"force_displacement: {np.count_nonzero(~ok)} of {ok.size} path points did not "
@@ -454,9 +466,18 @@ def equilibria(
     >>> [(round(e.q * 1e3, 1) + 0.0, e.stable) for e in eqs]
     [(-10.2, True), (0.0, False), (10.2, True)]
     """
+    return _equilibria(params, b, v1, v2, F, q_max, n_grid, starts)[0]
+
+
+def _equilibria(params, b, v1, v2, F, q_max, n_grid, starts, guess=None):
+    """:func:`equilibria`, and the continuation path ``q_m(q)`` (n_grid, 4) it started from.
+
+    ``guess``: such a path at nearby voltages, from which the new one is solved at once
+    (:func:`force_displacement`).
+    """
     b = params.b if b is None else float(b)
     q = np.linspace(-q_max, q_max, n_grid)
-    curve = force_displacement(params, q, v1=v1, v2=v2, b=b)
+    curve = force_displacement(params, q, v1=v1, v2=v2, b=b, guess=guess)
     L = ritz_basis(params.l).L
     x0 = list(_bracket_starts(q, curve.qm, curve.F, F))
     x0.append(np.zeros(4))
@@ -478,7 +499,7 @@ def equilibria(
         for k in range(len(X0))
         if res.converged[k] and np.all(lam[k] >= 1.0)
     ]
-    return _dedup(eqs, ritz_basis(params.l).scale)
+    return _dedup(eqs, ritz_basis(params.l).scale), curve.qm
 
 
 def switches(params: PrototypeParams, de: int, v: float, *, F: float = 0.0) -> bool:
@@ -505,8 +526,15 @@ def switches(params: PrototypeParams, de: int, v: float, *, F: float = 0.0) -> b
     ----------
     Masoud & Maas 2025, Eq. 15, Section 3.3.4.
     """
-    stable = [e for e in equilibria(params, F=F, **{f"v{de}": v}) if e.stable]
-    return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable)
+    return _switches(params, de, v, F)[0]
+
+
+def _switches(params, de, v, F, guess=None):
+    """:func:`switches`, and the path of its equilibria (:func:`_equilibria`)."""
+    v1, v2 = (v, 0.0) if de == 1 else (0.0, v)
+    eqs, path = _equilibria(params, None, v1, v2, F, 25e-3, 201, (), guess)
+    stable = [e for e in eqs if e.stable]
+    return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable), path
 
 
 def switching_voltage(
@@ -556,12 +584,18 @@ def switching_voltage(
         raise ValueError(f"`de` must be 1 or 2, got {de!r}")
     if not (v_max > 0 and tol > 0):
         raise ValueError(f"`v_max` and `tol` must be positive, got {v_max!r} and {tol!r}")
-    if switches(params, de, 0.0, F=F):
+    at_lo, path_lo = _switches(params, de, 0.0, F)
+    if at_lo:
         return 0.0
-    if not switches(params, de, v_max, F=F):
+    at_hi, path_hi = _switches(params, de, float(v_max), F)
+    if not at_hi:
         return float("inf")
     lo, hi = 0.0, float(v_max)
-    while hi - lo > tol:
+    while hi - lo > tol:  # each path solved at once from the last one's (natural continuation)
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if switches(params, de, mid, F=F) else (mid, hi)
+        at_mid, path = _switches(params, de, mid, F, path_hi if hi - mid < mid - lo else path_lo)
+        if at_mid:
+            hi, path_hi = mid, path
+        else:
+            lo, path_lo = mid, path
     return hi

@@ -147,6 +147,20 @@ def test_force_displacement_checks_grid():
     assert "strictly" in str(err.value) and "increasing" in str(err.value)
 
 
+def test_a_path_solved_from_a_nearby_path_is_the_continuations(curves):
+    """Natural continuation in the voltage: every point of the 1.5 kV path solved at once from
+    the 0 V path gives the continuation's path (to Newton's tolerance) and its forces; a
+    guess it cannot solve from falls back to the continuation, the same numbers."""
+    ref = force_displacement(P, STROKE, v1=1500.0)
+    fast = force_displacement(P, STROKE, v1=1500.0, guess=curves[(0.0, 0.0)].qm)
+    assert fast.converged.all()
+    scale = ritz_basis(P.l).scale
+    assert np.max(np.abs((fast.qm - ref.qm) * scale)) < 1e-9  # [m]
+    np.testing.assert_allclose(fast.F, ref.F, rtol=0, atol=1e-9 * np.ptp(ref.F))
+    bad = force_displacement(P, STROKE, v1=1500.0, guess=np.full((STROKE.size, 4), 1e9))
+    np.testing.assert_array_equal(bad.qm, ref.qm)
+
+
 def test_prestrain_sweep_fig3():
     sweep = prestrain_sweep(P, b=np.linspace(18e-3, 30e-3, 25), n_q=120)
     assert sweep.z_b_min == pytest.approx(4.837e-3, abs=5e-6)
