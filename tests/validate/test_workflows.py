@@ -120,6 +120,7 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
     assert np.max(np.abs(f_id - f_true)) <= 0.10 * np.ptp(f_true)
 
 
+@pytest.mark.slow  # the paper experiment end to end, shared with the Table 2 test
 @pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
