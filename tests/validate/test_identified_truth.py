@@ -37,6 +37,9 @@ HALF_WIDTH = 1.5e-3  # [m] around each well centre, for the restoring force
 ACTIVE = 0.1  # v_i^2 above this fraction of its block maximum: v_i applied
 VISITED = (1.0, 99.0)  # [%] percentiles of the dwell positions: the interval visited
 
+# every test here reads one run of the staircase workflow (its module fixtures): the slow set
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def staircase_out(tmp_path_factory):
@@ -111,7 +114,6 @@ def _curves_and_truth(out: Path):
 
 @pytest.mark.parametrize("bands", ["shipped", "bootstrap"])
 @pytest.mark.parametrize("name", list(CURVES))
-@pytest.mark.slow
 def test_identified_curves_match_the_truth_where_marked(staircase, staircase_boot, name, bands):
     """Within 10 % of the truth's range wherever marked, with either band (the model-error
     term only takes marks away: this workflow's band_tolerance = 0.1 is below twice every
