@@ -791,10 +791,15 @@ def _trajectory(
 def _integrate_serial(
     kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
 ):  # pragma: no cover - compiled
-    """Integrate the trajectories in turn (one trajectory: no thread start-up)."""
+    """Integrate the trajectories in turn (one trajectory: no thread start-up).
+
+    Each trajectory is one call of :func:`_trajectory_call`, which the parallel integrator
+    calls too: the integrator is compiled once for both (a call per trajectory costs nothing
+    against its steps, whose right-hand sides stay inlined).
+    """
     for b in range(states.shape[0]):
-        _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
-                    acc, dead, b)  # fmt: skip
+        _trajectory_call(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1,
+                         states, acc, dead, np.int64(b))  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
