@@ -265,7 +265,7 @@ class TermTable:
         q_dot = np.asarray(q_dot, dtype=float).reshape(-1)
         mass = np.zeros((q.size, self.n_terms))
         force = np.zeros((q.size, self.n_terms))
-        for j in np.flatnonzero(self.term_skind == S_ACC):
+        for j in self._plan.inertia:
             a = int(self.term_qpow[j])
             mass[:, j] = q**a
             force[:, j] = 0.5 * a * q ** (a - 1) * q_dot**2

@@ -466,10 +466,12 @@ def equilibria(
     >>> [(round(e.q * 1e3, 1) + 0.0, e.stable) for e in eqs]
     [(-10.2, True), (0.0, False), (10.2, True)]
     """
-    return _equilibria(params, b, v1, v2, F, q_max, n_grid, starts)[0]
+    return _equilibria(params, b=b, v1=v1, v2=v2, F=F, q_max=q_max, n_grid=n_grid, starts=starts)[0]
 
 
-def _equilibria(params, b, v1, v2, F, q_max, n_grid, starts, guess=None):
+def _equilibria(
+    params, *, b=None, v1=0.0, v2=0.0, F=0.0, q_max=25e-3, n_grid=201, starts=(), guess=None
+):
     """:func:`equilibria`, and the continuation path ``q_m(q)`` (n_grid, 4) it started from.
 
     ``guess``: such a path at nearby voltages, from which the new one is solved at once
@@ -531,8 +533,7 @@ def switches(params: PrototypeParams, de: int, v: float, *, F: float = 0.0) -> b
 
 def _switches(params, de, v, F, guess=None):
     """:func:`switches`, and the path of its equilibria (:func:`_equilibria`)."""
-    v1, v2 = (v, 0.0) if de == 1 else (0.0, v)
-    eqs, path = _equilibria(params, None, v1, v2, F, 25e-3, 201, (), guess)
+    eqs, path = _equilibria(params, F=F, guess=guess, **{f"v{de}": v})
     stable = [e for e in eqs if e.stable]
     return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable), path
 
