@@ -18,8 +18,14 @@ from __future__ import annotations
 import multiprocessing
 import os
 import threading
+import warnings
+from collections.abc import Callable
+from typing import Any
 
-__all__ = ["fork_context", "fork_workers"]
+__all__ = ["Caught", "call_recording_warnings", "fork_context", "fork_workers", "replay_warnings"]
+
+#: Warnings recorded in a worker process: (message, category, filename, lineno) each.
+Caught = list[tuple[str, type[Warning], str, int]]
 
 
 def fork_workers(n: int) -> int:
@@ -59,3 +65,40 @@ def fork_context():
     multiprocessing.context.ForkContext
     """
     return multiprocessing.get_context("fork")
+
+
+def call_recording_warnings(fn: Callable[[], Any]) -> tuple[Any, Caught]:
+    """Call ``fn()`` in a worker process and record the warnings it issues.
+
+    A worker's warnings would reach the terminal from another process, past the parent's
+    progress display and its warning format; they travel back with the result instead and
+    :func:`replay_warnings` issues them in the parent, as a serial call would have.
+
+    Parameters
+    ----------
+    fn : callable
+        Called without arguments.
+
+    Returns
+    -------
+    result : object
+        What ``fn`` returned.
+    caught : list of tuple
+        The warnings, in order (every one, not filtered by the "once" rules).
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = fn()
+    return result, [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
+
+
+def replay_warnings(caught: Caught) -> None:
+    """Issue warnings recorded by :func:`call_recording_warnings` in this process.
+
+    Parameters
+    ----------
+    caught : list of tuple
+        (message, category, filename, lineno) of each warning.
+    """
+    for message, category, filename, lineno in caught:
+        warnings.warn_explicit(message, category, filename, lineno)

@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,9 @@ from debist.core.errors import (
 )
 from debist.core.faults import fault_point
 from debist.core.fileformats import write_output
+from debist.core.forking import fork_workers
 from debist.engine import outdir
+from debist.engine.beside import BesideRun
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
 from debist.stages import registry
@@ -652,70 +655,139 @@ class Runner:
         damaged: Mapping[str, str] | None = None,
     ) -> dict[str, artifacts.Manifest]:
         damaged = damaged or {}
-        manifests = {}
-        for stage in STAGES:
-            if stage not in selected:
-                continue
-            found = self._key(stage)
-            if found is None:
-                missing = [
-                    u
-                    for u in self._upstream(stage)
-                    if artifacts.read_manifest(self.wf.stage_dir(u)) is None
-                ]
-                raise ArtifactError(
-                    f"stage '{stage}' needs the artifacts of {missing}: run those first"
-                )
-            key, inputs, upstream = found
-            sdir = self.wf.stage_dir(stage)
-            manifest = artifacts.read_manifest(sdir)
-            if (
-                not force
-                and manifest is not None
-                and manifest.key == key
-                and not artifacts.changed_outputs(sdir, manifest)
-            ):
-                on_event(stage, "skip", f"key {key[:12]} matches its manifest, outputs unchanged")
-                summary = artifacts.read_summary(sdir, manifest)
-                manifests[stage] = replace(manifest, summary=summary)
-                continue
-            if stage in damaged:
-                why = damaged[stage]
-            elif manifest is None:
-                why = "never run"
-            elif force:
-                why = "forced"
-            else:
-                why = "; ".join(r.detail for r in self._stale_reasons(stage, manifest))
-            on_event(stage, "start", why)
-            fault_point(f"stage:{stage}:start", self.wf.name)
-            t0 = time.perf_counter()
-            module = importlib.import_module(registry.stage(stage).module)
-            with one_blas_thread():
-                t_run = time.perf_counter()
-                result = module.execute(self)
-                ran = time.perf_counter() - t_run
-            seconds = time.perf_counter() - t0
-            # the stage's own parts, what they leave out, and the import of its code (its
-            # libraries on first use); write_stage adds the writing as "write"
-            parts = {"import": t_run - t0, **result.timings}
-            parts["other"] = max(0.0, ran - sum(result.timings.values()))
-            code, versions = self._code(stage)
-            manifests[stage] = artifacts.write_stage(
-                sdir,
-                stage=stage,
-                key=key,
-                code=code,
-                versions=versions,
-                config=stage_config(self.wf, stage),
-                inputs=inputs,
-                upstream=upstream,
-                outputs=result.outputs,
-                summary=result.summary,
-                timings={"stage": seconds, **parts},
+        manifests: dict[str, artifacts.Manifest] = {}
+        pending = [s for s in STAGES if s in selected]
+        beside: dict[str, BesideRun] = {}
+        try:
+            while pending:
+                ready = [s for s in pending if self._may_run_beside(s, pending)]
+                stage = next((s for s in ready if s not in manifests), pending[0])
+                pending.remove(stage)
+                for up in self._upstream(stage):
+                    if up in beside:
+                        manifests[up] = self._join(up, beside.pop(up), on_event)
+                found = self._start(stage, force, on_event, damaged, manifests)
+                if found is None:
+                    continue
+                if stage in ready:
+                    beside[stage] = BesideRun(
+                        partial(self._execute, stage, *found), f"stage '{stage}'"
+                    )
+                    continue
+                manifests[stage], seconds = self._execute(stage, *found)
+                on_event(stage, "done", f"{seconds:.2f} s")
+            for stage in list(beside):
+                manifests[stage] = self._join(stage, beside.pop(stage), on_event)
+        finally:
+            for run in beside.values():
+                run.stop()
+        return {s: manifests[s] for s in STAGES if s in manifests}
+
+    def _may_run_beside(self, stage: str, pending: Sequence[str]) -> bool:
+        """Whether ``stage`` can start now in a forked process beside the pending stages.
+
+        It is marked ``beside`` in the registry, its upstream stages are not pending, some
+        pending stage does not read it (there is work to overlap with), and this process
+        may fork (:func:`debist.core.forking.fork_workers`).
+        """
+        if not registry.stage(stage).beside or fork_workers(2) < 2:
+            return False
+        if any(up in pending for up in self._upstream(stage)):
+            return False
+        return any(s != stage and stage not in self._upstream(s) for s in pending)
+
+    def _start(
+        self,
+        stage: str,
+        force: bool,
+        on_event: Event,
+        damaged: Mapping[str, str],
+        manifests: dict[str, artifacts.Manifest],
+    ) -> tuple[str, dict, dict] | None:
+        """Skip an up-to-date stage (its manifest into ``manifests``: None), or announce it.
+
+        Returns
+        -------
+        tuple or None
+            The stage's key, input hashes and upstream manifest hashes when it is to run.
+
+        Raises
+        ------
+        ArtifactError
+            If an upstream stage has no artifacts.
+        """
+        found = self._key(stage)
+        if found is None:
+            missing = [
+                u
+                for u in self._upstream(stage)
+                if artifacts.read_manifest(self.wf.stage_dir(u)) is None
+            ]
+            raise ArtifactError(
+                f"stage '{stage}' needs the artifacts of {missing}: run those first"
             )
-            on_event(stage, "done", f"{time.perf_counter() - t0:.2f} s")
-        return manifests
+        key = found[0]
+        sdir = self.wf.stage_dir(stage)
+        manifest = artifacts.read_manifest(sdir)
+        if (
+            not force
+            and manifest is not None
+            and manifest.key == key
+            and not artifacts.changed_outputs(sdir, manifest)
+        ):
+            on_event(stage, "skip", f"key {key[:12]} matches its manifest, outputs unchanged")
+            summary = artifacts.read_summary(sdir, manifest)
+            manifests[stage] = replace(manifest, summary=summary)
+            return None
+        if stage in damaged:
+            why = damaged[stage]
+        elif manifest is None:
+            why = "never run"
+        elif force:
+            why = "forced"
+        else:
+            why = "; ".join(r.detail for r in self._stale_reasons(stage, manifest))
+        on_event(stage, "start", why)
+        fault_point(f"stage:{stage}:start", self.wf.name)
+        return found
+
+    def _execute(
+        self, stage: str, key: str, inputs: dict[str, str], upstream: dict[str, str]
+    ) -> tuple[artifacts.Manifest, float]:
+        """Run one stage's ``execute`` and write its folder; return its manifest and time [s]."""
+        t0 = time.perf_counter()
+        module = importlib.import_module(registry.stage(stage).module)
+        with one_blas_thread():
+            t_run = time.perf_counter()
+            result = module.execute(self)
+            ran = time.perf_counter() - t_run
+        seconds = time.perf_counter() - t0
+        # the stage's own parts, what they leave out, and the import of its code (its
+        # libraries on first use); write_stage adds the writing as "write"
+        parts = {"import": t_run - t0, **result.timings}
+        parts["other"] = max(0.0, ran - sum(result.timings.values()))
+        code, versions = self._code(stage)
+        manifest = artifacts.write_stage(
+            self.wf.stage_dir(stage),
+            stage=stage,
+            key=key,
+            code=code,
+            versions=versions,
+            config=stage_config(self.wf, stage),
+            inputs=inputs,
+            upstream=upstream,
+            outputs=result.outputs,
+            summary=result.summary,
+            timings={"stage": seconds, **parts},
+        )
+        return manifest, time.perf_counter() - t0
+
+    @staticmethod
+    def _join(stage: str, run: BesideRun, on_event: Event) -> artifacts.Manifest:
+        """Wait for a stage that ran beside the others; announce it done."""
+        manifest, seconds = run.result()
+        on_event(stage, "done", f"{seconds:.2f} s, in its own process beside the others")
+        return manifest
 
     # ---------------------------------------------------------------- verify
     def digest(self) -> str | None:

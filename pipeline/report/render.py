@@ -17,14 +17,19 @@ application server" (``matplotlib.figure.Figure`` without pyplot).
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 from debist.core.fileformats import png_bytes
-from debist.core.forking import fork_context, fork_workers
+from debist.core.forking import (
+    Caught,
+    call_recording_warnings,
+    fork_context,
+    fork_workers,
+    replay_warnings,
+)
 
 __all__ = ["FigureJob", "render_pngs"]
 
@@ -71,19 +76,15 @@ class FigureJob:
         return png_bytes(self.figure(), self.dpi)
 
 
-def _render(job: FigureJob) -> tuple[bytes, list[tuple[str, type[Warning], str, int]]]:
+def _render(job: FigureJob) -> tuple[bytes, Caught]:
     """Render a job in a worker; its warnings travel back with the bytes (see _replay)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        png = job.png()
-    return png, [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
+    return call_recording_warnings(job.png)
 
 
-def _replay(result: tuple[bytes, list[tuple[str, type[Warning], str, int]]]) -> bytes:
+def _replay(result: tuple[bytes, Caught]) -> bytes:
     """Issue a worker's warnings here, as a serial rendering would have, and return its bytes."""
     png, caught = result
-    for message, category, filename, lineno in caught:
-        warnings.warn_explicit(message, category, filename, lineno)
+    replay_warnings(caught)
     return png
 
 

@@ -39,6 +39,9 @@ class StageDef:
         One line for the CLI.
     optional : bool
         The stage runs only when the workflow has a section of its name.
+    beside : bool
+        The stage may run in a forked process beside the stages after it that do not read
+        it (:class:`debist.engine.beside.BesideRun`): it reads little and much follows it.
     """
 
     name: str
@@ -47,6 +50,7 @@ class StageDef:
     libraries: tuple[str, ...]
     help: str
     optional: bool = False
+    beside: bool = False
 
 
 #: The stages in execution order.
@@ -101,6 +105,7 @@ STAGES: tuple[StageDef, ...] = (
         (*_BASE, "matplotlib"),
         "Sensitivity studies: RBF grid (Fig. 11b) and TVRegDiff alpha (Fig. 11c).",
         optional=True,
+        beside=True,
     ),
     StageDef(
         "analyze",
@@ -109,6 +114,7 @@ STAGES: tuple[StageDef, ...] = (
         ("numpy", "scipy", "h5py", "matplotlib"),
         "Design analysis of Section 3: statics.h5 and Fig. 3-7.",
         optional=True,
+        beside=True,
     ),
     StageDef(
         "report",

@@ -154,3 +154,12 @@ def test_study_stage_runs_only_when_configured(project):
         assert g.sort_values("sigma_n").condition.is_monotonic_increasing
     assert len(pd.read_parquet(project / "out/study/alpha.parquet")) == 2
     assert (project / "out/study/rbf_grid.png").stat().st_size > 10_000
+    # it ran in its own process beside identify..compare, and wrote what a serial run writes
+    assert out.index("Running stage 'study'") < out.index("Running stage 'identify'")
+    assert "in its own process beside the others" in out
+    beside = stage_hashes(project / "out/study")
+    code, out = invoke("run", wf, "--stages", "study", "--force")
+    assert code == 0 and "in its own process" not in out, out
+    serial = stage_hashes(project / "out/study")
+    del beside["timings.json"], serial["timings.json"]
+    assert serial == beside

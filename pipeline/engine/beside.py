@@ -1,0 +1,126 @@
+"""A stage run in a forked process beside the stages after it that do not read it.
+
+The sensitivity studies (``study``) and the design analysis (``analyze``) read the ingested
+data and derivatives, or nothing, and only the report reads them; the identification,
+validation and comparison that follow them in the stage order spend most of their time on
+one core. :class:`BesideRun` runs such a stage's ``execute`` and ``write_stage`` in a copy
+of this process (POSIX ``fork``: the runner and the data read so far are inherited, nothing
+is pickled on the way in) while this process goes on with the next stages, and returns its
+manifest when the runner reaches a stage that reads it, or the end. The child's warnings
+are issued here when it is joined (:func:`debist.core.forking.call_recording_warnings`); its
+progress reports are not drawn (two processes cannot share one terminal display). The
+stage's files and manifest are the same as in a serial run: the same code on the same
+inputs, written by the same atomic swap.
+
+References
+----------
+Python documentation, :mod:`multiprocessing` ("Contexts and start methods",
+``Process``, ``Pipe``).
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Callable
+from typing import Any
+
+from debist.core.errors import ArtifactError
+from debist.core.forking import call_recording_warnings, fork_context, replay_warnings
+from debist.core.progress import listening
+
+__all__ = ["BesideRun"]
+
+#: Seconds a stopped child gets to end on SIGTERM before it is killed.
+STOP_GRACE = 5.0
+
+
+def _child(fn: Callable[[], Any], send) -> None:
+    """Call ``fn`` in the forked process without progress display; send (ok, value, warnings)."""
+    try:
+        with listening(None):
+            value, caught = call_recording_warnings(fn)
+        message = (True, value, caught)
+    except BaseException as exc:
+        message = (False, exc, [])
+    try:
+        send.send(message)
+    except (pickle.PicklingError, TypeError, AttributeError) as exc:
+        send.send((False, ArtifactError(f"the result could not be sent back: {exc}"), []))
+    finally:
+        send.close()
+
+
+class BesideRun:
+    """Call a function in a forked process now; collect its result later.
+
+    Parameters
+    ----------
+    fn : callable
+        Called without arguments in the child; its result must be picklable.
+    label : str
+        What runs (for messages), e.g. ``"stage 'study'"``.
+
+    Raises
+    ------
+    ValueError
+        Where the ``fork`` start method does not exist (check
+        :func:`debist.core.forking.fork_workers` first).
+    """
+
+    def __init__(self, fn: Callable[[], Any], label: str):
+        ctx = fork_context()
+        self.label = label
+        self._recv, send = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_child, args=(fn, send), name=label)
+        self._proc.start()
+        send.close()
+
+    def result(self) -> Any:
+        """Wait for the child; return its result or raise what it raised.
+
+        Its recorded warnings are issued here first.
+
+        Returns
+        -------
+        object
+            What ``fn`` returned.
+
+        Raises
+        ------
+        ArtifactError
+            If the child ended without a result (killed, or it crashed).
+        BaseException
+            What ``fn`` raised in the child.
+        """
+        try:
+            ok, value, caught = self._recv.recv()
+        except EOFError:
+            self._proc.join()
+            raise ArtifactError(
+                f"{self.label} ran in its own process, which ended without a result "
+                f"(exit code {self._proc.exitcode}); its previous artifacts stay"
+            ) from None
+        except Exception as exc:  # a result or exception that does not unpickle
+            self._proc.join()
+            raise ArtifactError(f"{self.label}: its result could not be read: {exc}") from exc
+        finally:
+            self._recv.close()
+        self._proc.join()
+        replay_warnings(caught)
+        if not ok:
+            raise value
+        return value
+
+    def stop(self) -> None:
+        """End the child if it still runs (SIGTERM, then SIGKILL after :data:`STOP_GRACE`).
+
+        A stage's swap of its folder is crash-safe, so a stage stopped halfway leaves its
+        previous artifacts or leftovers the next run resolves.
+        """
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(STOP_GRACE)
+            if self._proc.is_alive():
+                self._proc.kill()
+        self._proc.join()
+        self._recv.close()

@@ -1,0 +1,63 @@
+"""A stage's work in a forked process beside the others: result, errors, warnings, stop."""
+
+import os
+import signal
+import time
+import warnings
+
+import pytest
+
+from debist.core.errors import ArtifactError, IdentificationError
+from debist.core.forking import fork_workers
+from debist.core.progress import listening, report
+from debist.engine.beside import BesideRun
+
+pytestmark = pytest.mark.skipif(
+    fork_workers(2) < 2, reason="needs POSIX fork, the main thread and two cores"
+)
+
+
+def test_the_result_comes_from_another_process():
+    run = BesideRun(lambda: (os.getpid(), sum(range(1000))), "sum")
+    pid, total = run.result()
+    assert pid != os.getpid() and total == 499500
+
+
+def test_what_the_child_raises_is_raised_here_with_its_type_and_fields():
+    def fail():
+        raise IdentificationError("too few samples in well 2", reason="under-excited")
+
+    with pytest.raises(IdentificationError, match="too few samples in well 2") as info:
+        BesideRun(fail, "stage 'study'").result()
+    assert info.value.reason == "under-excited"
+
+
+def test_a_child_killed_halfway_is_an_artifact_error_naming_it():
+    def die():
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    with pytest.raises(ArtifactError, match=r"stage 'study' .*exit code -9"):
+        BesideRun(die, "stage 'study'").result()
+
+
+def test_the_childs_warnings_are_issued_here_and_its_progress_is_not_drawn():
+    seen = []
+
+    def work():
+        report("study: grid", 1, 2)  # a listener inherited from the parent must not hear it
+        warnings.warn("sigma_n = 3 overlaps every centre", RuntimeWarning, stacklevel=1)
+        return 7
+
+    with listening(lambda *a: seen.append(a)):
+        run = BesideRun(work, "study")
+        with pytest.warns(RuntimeWarning, match="overlaps every centre"):
+            assert run.result() == 7
+    assert seen == []
+
+
+def test_stop_ends_a_child_that_still_runs():
+    run = BesideRun(lambda: time.sleep(60), "sleeper")
+    t0 = time.perf_counter()
+    run.stop()
+    assert time.perf_counter() - t0 < 10
+    assert run._proc.exitcode is not None and run._proc.exitcode != 0
