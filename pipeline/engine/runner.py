@@ -192,6 +192,26 @@ def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]
     return out
 
 
+#: Stages that free-run models with the compiled kernels (:mod:`debist.simulate.warmup`).
+FREE_RUN_STAGES = ("identify", "validate", "compare")
+
+
+def _compile_ahead() -> list[BesideRun]:
+    """Start compiling the free-run kernels in a forked process, unless numba has them cached.
+
+    Returns
+    -------
+    list of BesideRun
+        The process (to be stopped at the end of the run: it only fills numba's cache), or
+        nothing when the kernels are cached or this process may not fork.
+    """
+    from debist.simulate import warmup  # the compiled kernels load only when a stage needs them
+
+    if fork_workers(2) < 2 or warmup.kernels_cached():
+        return []
+    return [BesideRun(warmup.compile_kernels, "compiling the free-run kernels ahead")]
+
+
 @contextmanager
 def one_blas_thread() -> Iterator[None]:
     """Run the block with one BLAS thread in every BLAS library a stage may call.
@@ -658,6 +678,7 @@ class Runner:
         manifests: dict[str, artifacts.Manifest] = {}
         pending = [s for s in STAGES if s in selected]
         beside: dict[str, BesideRun] = {}
+        ahead: list[BesideRun] = []
         try:
             while pending:
                 ready = [s for s in pending if self._may_run_beside(s, pending)]
@@ -669,6 +690,8 @@ class Runner:
                 found = self._start(stage, force, on_event, damaged, manifests)
                 if found is None:
                     continue
+                if not ahead and stage in FREE_RUN_STAGES:
+                    ahead = _compile_ahead()
                 if stage in ready:
                     beside[stage] = BesideRun(
                         partial(self._execute, stage, *found), f"stage '{stage}'"
@@ -679,7 +702,7 @@ class Runner:
             for stage in list(beside):
                 manifests[stage] = self._join(stage, beside.pop(stage), on_event)
         finally:
-            for run in beside.values():
+            for run in (*beside.values(), *ahead):
                 run.stop()
         return {s: manifests[s] for s in STAGES if s in manifests}
 

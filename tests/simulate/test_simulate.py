@@ -2,29 +2,14 @@ import numpy as np
 import pytest
 
 from debist.core.metrics import nrmse, rms
-from debist.model.basis import RBFBasis
-from debist.model.rbf import RBFModel
+from debist.simulate import warmup
 from debist.simulate.freerun import simulate, upsample_inputs
 from debist.validate.freerun import initial_state
 
 
 def oscillator(k1=(2 * np.pi * 3.0) ** 2, dv=2.0, T_z=0.0):
     """q'' + dv z + k1 q = v: a linear oscillator as an RBFModel with backbone only."""
-    basis = RBFBasis.equidistant(-1.0, 1.0, 3, 0.5)
-    zeros = np.zeros(3)
-    return RBFModel(
-        basis=basis,
-        input_map="v",
-        n_inputs=1,
-        m_q=1.0,
-        T_z=T_z,
-        coulomb_velocity=1e-3,
-        theta_c=zeros,
-        theta_d=zeros,
-        theta_g=np.zeros((1, 3)),
-        backbone={"k_1": k1, "d_v": dv, "g_0": np.array([1.0])},
-        q_range=(-1.0, 1.0),
-    )
+    return warmup.oscillator(k1, dv, T_z)
 
 
 def analytic_forced(t, k1, dv, omega):
