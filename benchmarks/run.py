@@ -14,7 +14,7 @@ peak memory per sample.
 
 Run from the repository root::
 
-    python benchmarks/run.py                      # main job, paper experiment, fleet of 10
+    python benchmarks/run.py                      # main job, paper experiment, fleet of 20
     python benchmarks/run.py --against 0a89952 --runs 3
     python benchmarks/run.py --jobs paper --scaling              # 10^4, 10^5, 10^6 samples
     python benchmarks/run.py --jobs paper --scaling 10000,100000
@@ -78,11 +78,17 @@ def _job(name: str, debist: str, work: Path, root: Path) -> tuple[float, float, 
         wf = root / "workflows" / "paper-experiment.toml"
         wall, peak = _timed([debist, "-q", "run", str(wf), "--out", str(out), "--force"], work)
         return wall, peak, _stage_times(out)
-    template = root / "workflows" / "paper-experiment.toml"
-    w1, p1 = _timed([debist, "fleet", str(template), "--size", "10", "--seed", "1",
-                     "--dir", str(out)], work)  # fmt: skip
-    w2, p2 = _timed([debist, "-q", "batch", str(out), "--workers", "2"], work)
-    return w1 + w2, max(p1, p2), {"fleet": w1, "batch": w2}
+    # the fleet of 20: 10 full and 10 reduced prototypes of seed 1, one batch over both
+    walls, peaks = [], []
+    for kind, template in (("full", "paper-experiment"), ("reduced", "paper-experiment-reduced")):
+        wf = root / "workflows" / f"{template}.toml"
+        w, p = _timed([debist, "fleet", str(wf), "--size", "10", "--seed", "1",
+                       "--dir", str(out / kind)], work)  # fmt: skip
+        walls.append(w)
+        peaks.append(p)
+    w2, p2 = _timed([debist, "-q", "batch", str(out / "full"), str(out / "reduced"),
+                     "--workers", "2"], work)  # fmt: skip
+    return sum(walls) + w2, max(*peaks, p2), {"fleet": sum(walls), "batch": w2}
 
 
 def _install(rev: str, work: Path) -> tuple[str, Path]:
