@@ -36,7 +36,7 @@ from debist.core.errors import (
 )
 from debist.core.faults import fault_point
 from debist.core.fileformats import write_output
-from debist.core.forking import fork_workers
+from debist.core.forking import fork_workers, numba_fork_safe
 from debist.engine import outdir
 from debist.engine.beside import BesideRun
 from debist.engine.fingerprint import code_fingerprint
@@ -196,18 +196,28 @@ def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]
 FREE_RUN_STAGES = ("identify", "validate", "compare")
 
 
+def _may_fork_kernels() -> bool:
+    """Whether this process may fork a child that runs numba's parallel kernels.
+
+    One process per core is allowed (:func:`debist.core.forking.fork_workers`) and numba's
+    threading layer survives the fork (:func:`debist.core.forking.numba_fork_safe`).
+    """
+    return fork_workers(2) >= 2 and numba_fork_safe()
+
+
 def _compile_ahead() -> list[BesideRun]:
-    """Start compiling the free-run kernels in a forked process, unless numba has them cached.
+    """Start compiling the free-run kernels in a forked process, unless they are cached.
 
     Returns
     -------
     list of BesideRun
         The process (to be stopped at the end of the run: it only fills numba's cache), or
-        nothing when the kernels are cached or this process may not fork.
+        nothing when the kernels are cached or a child could not run them
+        (:func:`_may_fork_kernels`).
     """
     from debist.simulate import warmup  # the compiled kernels load only when a stage needs them
 
-    if fork_workers(2) < 2 or warmup.kernels_cached():
+    if not _may_fork_kernels() or warmup.kernels_cached():
         return []
     return [BesideRun(warmup.compile_kernels, "compiling the free-run kernels ahead")]
 
@@ -682,7 +692,7 @@ class Runner:
         try:
             while pending:
                 ready = [s for s in pending if self._may_run_beside(s, pending)]
-                stage = next((s for s in ready if s not in manifests), pending[0])
+                stage = ready[0] if ready else pending[0]
                 pending.remove(stage)
                 for up in self._upstream(stage):
                     if up in beside:
@@ -710,10 +720,10 @@ class Runner:
         """Whether ``stage`` can start now in a forked process beside the pending stages.
 
         It is marked ``beside`` in the registry, its upstream stages are not pending, some
-        pending stage does not read it (there is work to overlap with), and this process
-        may fork (:func:`debist.core.forking.fork_workers`).
+        pending stage does not read it (there is work to overlap with), and a child forked
+        now may run the compiled kernels (:func:`_may_fork_kernels`).
         """
-        if not registry.stage(stage).beside or fork_workers(2) < 2:
+        if not registry.stage(stage).beside or not _may_fork_kernels():
             return False
         if any(up in pending for up in self._upstream(stage)):
             return False
