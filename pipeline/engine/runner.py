@@ -688,7 +688,7 @@ class Runner:
         manifests: dict[str, artifacts.Manifest] = {}
         pending = [s for s in STAGES if s in selected]
         beside: dict[str, BesideRun] = {}
-        ahead: list[BesideRun] = []
+        ahead: list[BesideRun] | None = None  # tried once, at the first free-running stage
         try:
             while pending:
                 ready = [s for s in pending if self._may_run_beside(s, pending)]
@@ -700,7 +700,7 @@ class Runner:
                 found = self._start(stage, force, on_event, damaged, manifests)
                 if found is None:
                     continue
-                if not ahead and stage in FREE_RUN_STAGES:
+                if ahead is None and stage in FREE_RUN_STAGES:
                     ahead = _compile_ahead()
                 if stage in ready:
                     beside[stage] = BesideRun(
@@ -712,7 +712,7 @@ class Runner:
             for stage in list(beside):
                 manifests[stage] = self._join(stage, beside.pop(stage), on_event)
         finally:
-            for run in (*beside.values(), *ahead):
+            for run in (*beside.values(), *(ahead or ())):
                 run.stop()
         return {s: manifests[s] for s in STAGES if s in manifests}
 
