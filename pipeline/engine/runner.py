@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -31,13 +30,11 @@ from debist.core.errors import (
     ArtifactError,
     DebistError,
     OutputDirError,
-    RunLockedError,
     WorkflowError,
 )
 from debist.core.faults import fault_point
-from debist.core.fileformats import write_output
 from debist.core.forking import fork_workers, numba_fork_safe
-from debist.engine import outdir
+from debist.engine import outdir, verification
 from debist.engine.beside import BesideRun
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
@@ -180,16 +177,6 @@ def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
     if stage in ("identify", "validate") and physics:
         return {**wf.section(stage), **physics}
     return wf.section(stage)
-
-
-def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
-    """Keys whose values differ between a stage config and a manifest's, with the values."""
-    canon = artifacts.canonical_json
-    out = []
-    for k in sorted(set(config) | set(recorded)):
-        if canon(config.get(k)) != canon(recorded.get(k)):
-            out.append(f"{k} ({canon(recorded.get(k))} -> {canon(config.get(k))})")
-    return out
 
 
 #: Stages that free-run models with the compiled kernels (:mod:`debist.simulate.warmup`).
@@ -830,6 +817,8 @@ class Runner:
     def verify(self, digest: str | None = None) -> list[str]:
         """Check every artifact, every manifest and the chain (and a quoted digest).
 
+        See :func:`debist.engine.verification.verify_run`.
+
         Parameters
         ----------
         digest : str, optional
@@ -838,175 +827,23 @@ class Runner:
         Returns
         -------
         list of str
-            Problems, each naming the file: a missing output folder, missing or extra
-            stage folders and manifests, modified, missing or unlisted outputs, manifests
-            whose key does not match their own fields, a broken chain (recorded inputs or
-            upstream manifests that differ from the current ones, changed source files),
-            leftovers of an interrupted run, and a digest that differs. Empty when all is
-            intact.
+            Problems, each naming the file; empty when all is intact.
 
         Raises
         ------
         RunLockedError
             While another process writes to the output folder.
         """
-        out = self.wf.output_dir
-        if not out.is_dir():
-            return [f"output folder '{out}' does not exist (the workflow was never run there)"]
-        if outdir.is_locked(out):
-            raise RunLockedError(
-                f"output folder '{out}' is being written by {outdir.lock_holder(out)}: "
-                "verify when it is done"
-            )
-        problems = [outdir.describe_leftover(p) for p in outdir.leftovers(out)]
-        mine = self.stages()
-        for entry in sorted(out.iterdir()):
-            if (
-                entry.is_dir()
-                and entry.name not in mine
-                and not artifacts.SET_ASIDE.fullmatch(entry.name)
-                and (entry.name in STAGES or (entry / artifacts.MANIFEST).exists())
-            ):
-                problems.append(f"'{entry}': extra stage folder (not a stage of this workflow)")
-        for stage in mine:
-            problems += self._verify_stage(stage)
-        if not problems:
-            problems += self._verify_ingest()
-        if digest is not None and not problems:
-            quoted = digest.strip().lower()
-            actual = self.digest()
-            if actual != quoted:
-                problems.append(self._explain_digest(quoted, actual))
-        return problems
+        return verification.verify_run(self, digest)
 
     def version_notes(self) -> list[str]:
         """Libraries installed now in other versions than those that made the run's stages.
 
-        Not a failure (the artifacts verify by their hashes), but a rerun may give other
-        bytes, so ``verify`` says it.
+        See :func:`debist.engine.verification.version_notes`.
 
         Returns
         -------
         list of str
-            One line per stage and library, e.g. ``"identify: numpy 2.3.5 made it, 2.4.6
-            installed"``.
+            One line per stage and library.
         """
-        notes = []
-        for stage in self.stages():
-            try:
-                manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
-            except ArtifactError:
-                continue
-            if manifest is None:
-                continue
-            _, now = self._code(stage)
-            for lib, made in sorted(manifest.versions.items()):
-                if now.get(lib, made) != made:
-                    notes.append(f"{stage}: {lib} {made} made it, {now[lib]} installed now")
-        return notes
-
-    def _explain_digest(self, quoted: str, actual: str | None) -> str:
-        """Say where a run departs from a quoted digest, by rerunning its workflow elsewhere.
-
-        The digest hashes the stage manifests in order, so it implies every manifest only
-        through a run that produces it: the workflow is rerun from its sources into a
-        temporary folder (stages are deterministic), and when that rerun gives the quoted
-        digest, the first stage whose manifest differs from the rerun's is the one changed.
-        """
-        with tempfile.TemporaryDirectory(prefix="debist-verify-") as tmp:
-            fresh = Runner(replace(self.wf, output_dir=Path(tmp) / "run"))
-            fresh.run()
-            again = fresh.digest()
-            first = next(
-                (
-                    s
-                    for s in self.stages()
-                    if artifacts.manifest_digest(self.wf.stage_dir(s))
-                    != artifacts.manifest_digest(fresh.wf.stage_dir(s))
-                ),
-                None,
-            )
-        out = self.wf.output_dir
-        if again == quoted and first is not None:
-            return (
-                f"'{self.wf.stage_dir(first) / artifacts.MANIFEST}': stage '{first}' differs from "
-                f"the run the quoted digest {quoted} names (a rerun of this workflow from its "
-                f"sources gives that digest; this run's is {actual})"
-            )
-        if again == actual:
-            return (
-                f"'{out}': the quoted digest {quoted} is not this run's: the run is intact and "
-                f"a rerun from its sources gives its digest {actual}; the quoted one names "
-                "another run (other sources, workflow or library versions)"
-            )
-        return (
-            f"'{out}': the quoted digest {quoted} matches neither this run ({actual}) nor a "
-            f"rerun of this workflow from its sources ({again}); the first stage that differs "
-            f"from the rerun is '{first}'"
-        )
-
-    def _verify_ingest(self) -> list[str]:
-        """Re-read the sources and compare with the ingest artifacts (they must be identical).
-
-        Ingest is where measured data enter; its outputs are a pure function of the
-        sources and the workflow, cheap to recompute. A table edited and re-signed with
-        consistent hashes and keys is found here, without a digest.
-        """
-        sdir = self.wf.stage_dir("ingest")
-        manifest = artifacts.read_manifest(sdir)
-        if manifest is None or "ingest" not in self.stages():
-            return []
-        module = importlib.import_module(registry.stage("ingest").module)
-        result = module.execute(self)
-        with tempfile.TemporaryDirectory(prefix="debist-verify-") as tmp:
-            fresh = {}
-            for rel, value in result.outputs.items():
-                target = Path(tmp) / rel
-                write_output(value, target)
-                fresh[rel] = artifacts.sha256_file(target)
-        differ = sorted(
-            rel for rel in set(fresh) | set(manifest.outputs) - {artifacts.SUMMARY}
-            if fresh.get(rel) != manifest.outputs.get(rel)
-        )  # fmt: skip
-        return [
-            f"'{sdir / rel}': differs from what the sources give now (re-read from the data "
-            "sources of the workflow)"
-            for rel in differ
-        ]
-
-    def _verify_stage(self, stage: str) -> list[str]:
-        sdir = self.wf.stage_dir(stage)
-        try:
-            manifest = artifacts.read_manifest(sdir)
-        except ArtifactError as exc:
-            return [str(exc)]
-        if manifest is None:
-            return [f"'{sdir / artifacts.MANIFEST}': missing (stage '{stage}' never ran)"]
-        path = sdir / artifacts.MANIFEST
-        problems = [f"'{sdir / c}'" for c in artifacts.changed_outputs(sdir, manifest)]
-        if manifest.stage != stage or manifest.expected_key() != manifest.key:
-            problems.append(f"'{path}': edited (its key does not match its own fields)")
-        changed = _changed_keys(stage_config(self.wf, stage), manifest.config)
-        if changed:
-            problems.append(
-                f"'{path}': the workflow changed since this run: [{stage}] {', '.join(changed)}"
-            )
-        for up in self._upstream(stage):
-            recorded = manifest.upstream.get(up)
-            actual = artifacts.manifest_digest(self.wf.stage_dir(up))
-            if recorded != actual:
-                problems.append(
-                    f"'{path}': broken chain, upstream manifest '{up}/{artifacts.MANIFEST}' "
-                    "is not the one this stage was made from"
-                )
-        found = self._inputs(stage)
-        if found is not None and found[0] != manifest.inputs:
-            names = sorted(
-                k
-                for k in set(found[0]) | set(manifest.inputs)
-                if found[0].get(k) != manifest.inputs.get(k)
-            )
-            problems.append(
-                f"'{path}': made from other inputs than the current ones ({', '.join(names[:3])})"
-            )
-        return problems
+        return verification.version_notes(self)
