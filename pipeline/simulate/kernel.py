@@ -16,10 +16,13 @@ block, so the table's structure is read once per block and the products vectoris
 trajectory's arithmetic in the order of the one-trajectory integrator (the same numbers).
 
 Every model reaches the kernel as three flat arrays: floats ``fp``, integers ``ip`` and a
-layout ``lay`` of sizes and offsets (:class:`KernelArrays`); the right-hand sides are inlined
-into the one-trajectory integrator (a lockstep block calls its own once per stage for the
-whole block). Both keep numba's reference counting out of the inner loop (every array
-argument of a call that is not inlined costs two atomic updates).
+layout ``lay`` of sizes and offsets (:class:`KernelArrays`). The table model's right-hand
+side and its gradient (:func:`_rhs_table`, :func:`_grad_table`) are compiled once as
+functions of their own, called by the one-trajectory integrator and the sensitivity
+integrator: inlined into both, they made the first compile after an install about 13 s
+longer, for a few per cent of run time (every array argument of a call that is not inlined
+costs two atomic reference-count updates). The other helpers are inlined; a lockstep block
+calls its own right-hand side once per stage for the whole block.
 
 References
 ----------
@@ -473,7 +476,7 @@ def _table_interval(q, fp, lay):  # pragma: no cover - compiled
     return lo_i
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - compiled
     # Offsets are read into locals once: stores into W could alias lay for the compiler.
     K, U, H, NI, QMAX, G = lay[_K], lay[_U], lay[_H], lay[_NI], lay[_QMAX], lay[_NG]
@@ -596,7 +599,7 @@ def _project_table(x, lay, fp):  # pragma: no cover - compiled
         x[c1 + e] = _slip_clip(x[c1 + e], fp[o_sw + e])
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _grad_table(x, b, fp, ip, lay, W, V, tv, ae, acc):  # pragma: no cover - compiled
     """Differentiate the table model's acceleration ``acc``, after :func:`_rhs_table` filled W.
 
@@ -795,7 +798,7 @@ def _integrate_serial(
 
     Each trajectory is one call of :func:`_trajectory_call`, which the parallel integrator
     calls too: the integrator is compiled once for both (a call per trajectory costs nothing
-    against its steps, whose right-hand sides stay inlined).
+    against its steps).
     """
     for b in range(states.shape[0]):
         _trajectory_call(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1,
