@@ -9,9 +9,16 @@ logged. Prints per member
 the unseen NRMSE(q) [%] (mean over the unseen records; ``inf`` for a diverged run) of both and
 their ratio, and the largest ratio.
 
+A polynomial NARX fitted on raw ``q`` depends on where the sensor's zero lies; debist's row
+does not (its origins move with the data). ``--shifts`` refits the direct model with the
+sensor's zero moved by each given amount [m] and prints the direct fit's lowest, median and
+highest unseen NRMSE(q) over them, and debist's ratio to that median: how far the yardstick
+itself moves with a choice no rig makes on purpose.
+
 Run from the repository root::
 
     python benchmarks/narx_peer.py /path/to/zoo [--set info_criteria=bic ...]
+    python benchmarks/narx_peer.py /path/to/zoo --shifts=-5e-4,-1e-4,1e-4,5e-4
 """
 
 from __future__ import annotations
@@ -73,12 +80,14 @@ def main() -> None:
     parser.add_argument("zoo", type=Path)
     parser.add_argument("--set", action="append", default=[], help="NarxConfig KEY=VALUE")
     parser.add_argument("--shift", type=float, default=0.0, help="add this to every q [m]")
+    parser.add_argument("--shifts", default="", help="comma-separated sensor-zero moves [m]")
     args = parser.parse_args()
     settings = {}
     for item in args.set:
         key, value = item.split("=", 1)
         settings[key] = json.loads(value) if value[:1] in "[{0123456789-" else value
     cfg = NarxConfig.from_dict(settings)
+    shifts = [float(x) for x in args.shifts.split(",") if x.strip()]
     index = json.loads((args.zoo / "zoo.json").read_text())
     rows = []
     for name in index["members"]:
@@ -95,14 +104,30 @@ def main() -> None:
         ours, model = debist_narx(frames["estimation"], unseen, cfg)
         direct = direct_sysidentpy(frames["estimation"], unseen)
         a, b = float(np.mean(ours)), float(np.mean(direct))
-        rows.append({"member": name, "debist": a, "direct": b, "ratio": a / b,
-                     "terms": model.n_params, "lag": model.lag})  # fmt: skip
+        row = {"member": name, "debist": a, "direct": b, "ratio": a / b,
+               "terms": model.n_params, "lag": model.lag}  # fmt: skip
+        if shifts:
+            moved = [b]
+            for dq in shifts:
+                frames_dq = [f.assign(q=f.q + dq) for f in (frames["estimation"], *unseen)]
+                moved.append(float(np.mean(direct_sysidentpy(frames_dq[0], frames_dq[1:]))))
+            low, mid, high = np.min(moved), np.median(moved), np.max(moved)
+            with np.errstate(invalid="ignore"):  # both diverged: NaN, counted as within
+                row |= {"direct_min": low, "direct_median": mid, "direct_max": high,
+                        "ratio_to_median": a / mid}  # fmt: skip
+        rows.append(row)
     table = pd.DataFrame(rows)
     print(table.round(3).to_string(index=False))
     finite = table.replace([np.inf], np.nan)
     diverged = {k: int(np.isinf(table[k]).sum()) for k in ("debist", "direct")}
     print(f"median debist {finite.debist.median():.2f} %, direct {finite.direct.median():.2f} %; "
           f"worst ratio {table.ratio.max():.2f}; diverged {diverged}")  # fmt: skip
+    if shifts:
+        low, high = table.direct_min, table.direct_max
+        moved = int(((high > 1.5 * low) & ~(np.isinf(low) & np.isinf(high))).sum())
+        print(f"the direct fit moves by more than 1.5x with the sensor zero on {moved} of "
+              f"{len(table)} members; debist above 1.5x the direct median on "
+              f"{int((table.ratio_to_median > 1.5).sum())}")  # fmt: skip
 
 
 if __name__ == "__main__":
