@@ -10,7 +10,13 @@ import numpy as np
 
 from debist.core import progress
 from debist.core.errors import WorkflowError
-from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse, nan_percentiles, nrmse, rms
+from debist.core.metrics import (
+    POOR_SHARE,
+    TailPercentiles,
+    mean_baseline_nrmse,
+    nrmse,
+    rms,
+)
 from debist.core.units import lookup_unit
 from debist.simulate.freerun import (
     FreeRunModel,
@@ -306,11 +312,17 @@ REPLICATE_CHUNK = 20
 
 
 def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limit):
-    """Free-run the replicates on one data set in chunks; return q (B, n) and diverged (B,)."""
+    """Free-run the replicates on one data set in chunks; return the band and the scores.
+
+    Only each chunk's q is held; the band keeps the extreme ranks (:class:`TailPercentiles`).
+    Returns the 2.5 and 97.5 percentiles, shape (2, n), and each replicate's NRMSE(q) after
+    ``cfg.init_samples`` (inf where it diverged), shape (B,).
+    """
     B = deviations.shape[0]
     fine = prepare_inputs([ds.v], ns, cfg.input_interpolation)
-    q_runs = np.empty((B, ds.q.size))
-    diverged = np.zeros(B, dtype=bool)
+    band = TailPercentiles(ds.q.size, rows=B, percentiles=(2.5, 97.5))
+    scores = np.empty(B)
+    s = slice(cfg.init_samples, None)
     for a in range(0, B, REPLICATE_CHUNK):
         dev = deviations[a : a + REPLICATE_CHUNK]
         n = dev.shape[0]
@@ -318,9 +330,11 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
             model.replicate_table(list(columns), dev), fine.tile(n), dt, np.full(n, q0),
             np.full(n, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
         )  # fmt: skip
-        q_runs[a : a + n] = run.q[:, : ds.q.size]
-        diverged[a : a + n] = run.diverged_at >= 0
-    return q_runs, diverged
+        q_runs = run.q[:, : ds.q.size]
+        band.add(q_runs)
+        for i, (q, at) in enumerate(zip(q_runs, run.diverged_at, strict=True)):
+            scores[a + i] = np.inf if at >= 0 else nrmse(ds.q[s], q[s])
+    return band.result(), scores
 
 
 def replicate_spread(
@@ -379,17 +393,11 @@ def replicate_spread(
         ns = substeps_needed(model.replicate_table(list(columns), deviations), dt, cfg.substeps)
         q0, qd0 = _initial_states(group, dt, cfg.init_samples)
         for k, ds in enumerate(group):
-            q_runs, diverged = _replicate_runs(
+            band, scores = _replicate_runs(
                 model, columns, deviations, ds, dt, ns, q0[k], qd0[k], cfg, q_limit
             )
-            scores = np.array(
-                [
-                    np.inf if bad else nrmse(ds.q[s], q[s])
-                    for q, bad in zip(q_runs, diverged, strict=True)
-                ]
-            )
             # all-NaN samples (every replicate diverged): NaN
-            lo, hi = bands[ds.name] = nan_percentiles(q_runs, (2.5, 97.5))
+            lo, hi = bands[ds.name] = band
             inside = (lo[s] <= ds.q[s]) & (ds.q[s] <= hi[s])  # NaN edges hold nothing
             base = mean_baseline_nrmse(ds.q[s])
             rows.append(

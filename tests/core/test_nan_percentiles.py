@@ -36,3 +36,42 @@ def test_the_lagged_correlation_equals_the_full_one_at_the_lags_asked_for():
     assert got.shape == (2 * lags + 1,)
     assert np.allclose(got, expected, rtol=0.0, atol=1e-14)
     assert np.argmax(got) == lags - 4  # b(t) follows a(t - 4): r_ab peaks at tau = -4
+
+
+@pytest.mark.parametrize("rows", [1, 2, 7, 200])
+@pytest.mark.parametrize("chunk", [1, 3, 20])
+def test_the_tail_percentiles_of_chunks_equal_numpys_over_all_rows(rows, chunk):
+    """Only the extreme ranks are kept, yet every percentile asked equals numpy's over the
+    whole array, bit for bit, for any chunking; columns with 0, 1 or few finite values too."""
+    from debist.core.metrics import TailPercentiles
+
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(rows, 500))
+    x[rng.random(x.shape) < 0.3] = np.nan
+    x[:, :2] = np.nan  # no finite value
+    x[1:, 2] = np.nan  # one finite value
+    x[:, 3] = 1.0  # ties
+    percentiles = (2.5, 97.5, 0.0, 100.0)
+    tail = TailPercentiles(x.shape[1], rows=rows, percentiles=percentiles)
+    for a in range(0, rows, chunk):
+        tail.add(x[a : a + chunk])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        expected = np.nanpercentile(x, percentiles, axis=0)
+    assert np.array_equal(tail.result(), expected, equal_nan=True)
+    assert tail.low.shape[0] <= (6 if rows == 200 else rows)  # B = 200: 6 ranks per tail
+
+
+def test_the_tail_percentiles_refuse_what_they_cannot_answer():
+    from debist.core.metrics import TailPercentiles
+
+    tail = TailPercentiles(4, rows=2, percentiles=(2.5,))
+    with pytest.raises(ValueError, match="no rows"):
+        tail.result()
+    with pytest.raises(ValueError, match="shape"):
+        tail.add(np.zeros((1, 5)))
+    tail.add(np.zeros((2, 4)))
+    with pytest.raises(ValueError, match="more than the 2 rows"):
+        tail.add(np.zeros((1, 4)))
+    with pytest.raises(ValueError, match="percentiles"):
+        TailPercentiles(4, rows=2, percentiles=(101.0,))
