@@ -310,6 +310,34 @@ def _initial_states(group: Sequence[DataSet], dt: float, init_samples: int):
 #: otherwise), while the compiled kernel still runs a chunk in lock step.
 REPLICATE_CHUNK = 20
 
+#: Memory a chunk of replicates may hold [bytes] (their inputs on the RK4 grid, states and
+#: acceleration at the samples): a long record runs fewer replicates at once, at least
+#: :data:`REPLICATE_MIN_CHUNK`, so that the memory per sample stays flat with the length.
+REPLICATE_BUDGET = 128 * 2**20
+
+#: Fewest replicates in a chunk (the lock-step kernel's blocks, one per thread).
+REPLICATE_MIN_CHUNK = 2
+
+
+def replicate_chunk(n_fine: int, n_inputs: int, n: int, n_states: int) -> int:
+    """Replicates simulated at once for a record, within :data:`REPLICATE_BUDGET`.
+
+    Parameters
+    ----------
+    n_fine, n_inputs : int
+        Points of the RK4 input grid and inputs of one replicate.
+    n, n_states : int
+        Samples of the record and states of the model.
+
+    Returns
+    -------
+    int
+        Between :data:`REPLICATE_MIN_CHUNK` and :data:`REPLICATE_CHUNK`.
+    """
+    per_replicate = 8 * (n_fine * n_inputs + n * (n_states + 1))
+    fits = REPLICATE_BUDGET // max(per_replicate, 1)
+    return int(min(REPLICATE_CHUNK, max(REPLICATE_MIN_CHUNK, fits)))
+
 
 def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limit):
     """Free-run the replicates on one data set in chunks; return the band and the scores.
@@ -323,8 +351,10 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
     band = TailPercentiles(ds.q.size, rows=B, percentiles=(2.5, 97.5))
     scores = np.empty(B)
     s = slice(cfg.init_samples, None)
-    for a in range(0, B, REPLICATE_CHUNK):
-        dev = deviations[a : a + REPLICATE_CHUNK]
+    _, n_fine, n_inputs = fine.values.shape
+    chunk = replicate_chunk(n_fine, n_inputs, ds.q.size, model.n_states)
+    for a in range(0, B, chunk):
+        dev = deviations[a : a + chunk]
         n = dev.shape[0]
         run = simulate_batch(
             model.replicate_table(list(columns), dev), fine.tile(n), dt, np.full(n, q0),
