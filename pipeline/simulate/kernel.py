@@ -19,10 +19,9 @@ Every model reaches the kernel as three flat arrays: floats ``fp``, integers ``i
 layout ``lay`` of sizes and offsets (:class:`KernelArrays`). The table model's right-hand
 side and its gradient (:func:`_rhs_table`, :func:`_grad_table`) are compiled once as
 functions of their own, called by the one-trajectory integrator and the sensitivity
-integrator: inlined into both, they made the first compile after an install about 13 s
-longer, for a few per cent of run time (every array argument of a call that is not inlined
-costs two atomic reference-count updates). The other helpers are inlined; a lockstep block
-calls its own right-hand side once per stage for the whole block.
+integrator, which keeps the first compile short at the price of the reference counting of
+their array arguments. The other helpers are inlined; a lockstep block calls its own
+right-hand side once per stage for the whole block.
 
 References
 ----------
