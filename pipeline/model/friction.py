@@ -216,13 +216,9 @@ def slip_states(q_dot: np.ndarray, dt: float, widths: np.ndarray) -> np.ndarray:
     if not np.all(widths > 0):
         raise ValueError(f"slip widths must be positive, got {widths.tolist()}")
     q_dot = np.asarray(q_dot, dtype=float)
-    step = 0.5 * dt * (q_dot[1:] + q_dot[:-1])
-    out = np.zeros((q_dot.size, widths.size))
-    delta = np.zeros(widths.size)
-    for k, dq in enumerate(step):
-        delta = slip_clip(delta + dq, widths)
-        out[k + 1] = delta
-    return out
+    from debist.model.slip_kernel import stop_operator  # numba: loaded when slip is used
+
+    return stop_operator(0.5 * dt * (q_dot[1:] + q_dot[:-1]), widths)
 
 
 def friction_state(q_dot: np.ndarray, dt: float, T_z: float) -> np.ndarray:

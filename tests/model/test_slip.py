@@ -61,6 +61,27 @@ def test_slip_states_are_the_stop_operator_of_the_integrated_velocity():
     assert "positive" in str(err.value)
 
 
+def test_the_compiled_stop_operator_is_the_numpy_recursion_with_slip_clip_bit_for_bit():
+    """slip_states runs the compiled loop (debist.model.slip_kernel); the same recursion in
+    NumPy with friction.slip_clip, written here, gives the same bits, a NaN included."""
+    rng = np.random.default_rng(11)
+    dt = 1e-3
+    q_dot = np.cumsum(rng.standard_normal(5000)) * 1e-3
+    q_dot[4000] = np.nan  # a NaN propagates as np.maximum propagates it
+    widths = np.array([3e-7, 2e-6, 5e-5, 1.0])
+    step = 0.5 * dt * (q_dot[1:] + q_dot[:-1])
+    expected = np.zeros((q_dot.size, widths.size))
+    delta = np.zeros(widths.size)
+    for k, dq in enumerate(step):
+        delta = slip_clip(delta + dq, widths)
+        expected[k + 1] = delta
+    got = slip_states(q_dot, dt, widths)
+    assert got.shape == (5000, 4)
+    np.testing.assert_array_equal(got, expected)
+    assert np.isnan(got[4000:]).all() and np.isfinite(got[:4000]).all()
+    assert np.abs(got[:4000, 0]).max() == 3e-7  # the narrow element slips
+
+
 def test_an_element_sticks_until_break_away_then_slips_until_the_motion_reverses():
     width = 1e-3
     assert slip_state_rate(0.2, 0.5e-3, width) == 0.2  # inside: it deflects with q
