@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from debist.core import preflight
+from debist.core import allocator, preflight
 from debist.core.errors import DebistError, WorkflowError
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
@@ -53,6 +53,9 @@ _WORKER_ENVIRON = {
     "MKL_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
     "NUMBA_NUM_THREADS": "1",  # the free-run kernel's threads: one per worker process too
+    # freed arrays stay in the worker's heap (debist.core.allocator), instead of dask's default
+    # MALLOC_TRIM_THRESHOLD_ of 64 KiB, which returns them to the kernel
+    **allocator.ENVIRON,
 }
 #: Type of the arguments of one batch item: (workflow file, stages, force).
 _Args = tuple[str, tuple[str, ...] | None, bool]

@@ -277,18 +277,24 @@ def test_expand_workflows_files_directories_and_patterns(tmp_path):
 
 def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry(monkeypatch):
     blas = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+    heap = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
     monkeypatch.setenv("OMP_NUM_THREADS", "3")  # the user's own setting is kept
-    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
-    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    for name in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", *heap):
+        monkeypatch.delenv(name, raising=False)
     before = dict(os.environ)
     with local_cluster(2) as client:
         seen = client.run(lambda: {name: os.environ.get(name) for name in blas})
+        heaps = client.run(lambda: {name: os.environ.get(name) for name in heap})
         pids = client.run(os.getpid)
         retries = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures)
         threads = client.nthreads()
     assert (
         list(seen.values())
         == [{"OMP_NUM_THREADS": "3", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}] * 2
+    )
+    # glibc keeps freed arrays in the worker's heap (not dask's 64 KiB trim threshold)
+    assert (
+        list(heaps.values()) == [{h: str(1 << 30 if "MMAP" in h else 2**31 - 1) for h in heap}] * 2
     )
     assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()
     assert sorted(threads.values()) == [1, 1] and retries == 1

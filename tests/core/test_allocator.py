@@ -1,0 +1,79 @@
+"""glibc's malloc thresholds for the process (debist.core.allocator).
+
+Checked: mallopt takes both thresholds on glibc, a threshold the user set in the environment
+is left alone, and a freed array of a record's size is reused from the heap afterwards (the
+address of a second array of the same size is the first one's).
+"""
+
+import ctypes
+import os
+import platform
+import subprocess
+import sys
+
+import pytest
+
+from debist.core import allocator
+
+GLIBC = platform.libc_ver()[0] == "glibc"
+
+
+@pytest.mark.skipif(not GLIBC, reason="mallopt's thresholds are glibc's")
+def test_thresholds_are_set_on_glibc_unless_the_user_set_one(monkeypatch):
+    for name in allocator.ENVIRON:
+        monkeypatch.delenv(name, raising=False)
+    assert allocator.keep_freed_memory() is True
+    assert allocator.keep_freed_memory() is True  # idempotent
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    assert allocator.keep_freed_memory() is False
+    assert allocator.ENVIRON == {
+        "MALLOC_MMAP_THRESHOLD_": "1073741824",
+        "MALLOC_TRIM_THRESHOLD_": "2147483647",
+    }
+
+
+_PROBE = """
+import ctypes, sys
+if sys.argv[1] == "keep":
+    from debist.core.allocator import keep_freed_memory
+    assert keep_freed_memory()
+
+class Mallinfo2(ctypes.Structure):  # glibc >= 2.33, malloc.h
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+        "fordblks", "keepcost")]
+
+libc = ctypes.CDLL(None)
+libc.malloc.restype = ctypes.c_void_p
+libc.malloc.argtypes = [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+libc.mallinfo2.restype = Mallinfo2
+before = libc.mallinfo2().hblks
+block = libc.malloc(64 << 20)  # 64 MiB: above glibc's largest dynamic mmap threshold
+mapped = libc.mallinfo2().hblks - before
+libc.free(block)
+print(mapped, libc.mallinfo2().arena >> 20)
+"""
+
+
+@pytest.mark.skipif(
+    not GLIBC or not hasattr(ctypes.CDLL(None), "mallinfo2"), reason="glibc >= 2.33's mallinfo2"
+)
+def test_a_64_mib_block_comes_from_the_heap_and_stays_there_only_with_the_thresholds():
+    """glibc's own statistics (mallinfo2): by default a 64 MiB block is a mapping of its own
+    (one more in hblks) and the heap stays small; with the thresholds it is carved from the heap
+    (hblks unchanged) and after free the heap keeps it (arena >= 64 MiB)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+
+    def probe(mode: str) -> tuple[int, int]:
+        out = subprocess.run(
+            [sys.executable, "-c", _PROBE, mode], capture_output=True, text=True, env=env,
+            check=True,
+        ).stdout  # fmt: skip
+        mapped, arena_mib = (int(x) for x in out.split())
+        return mapped, arena_mib
+
+    mapped, arena_mib = probe("default")
+    assert mapped == 1 and arena_mib < 64
+    mapped, arena_mib = probe("keep")
+    assert mapped == 0 and arena_mib >= 64
