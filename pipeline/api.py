@@ -753,7 +753,8 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     """Write one workflow per prototype of a seeded fleet around a template's rig.
 
     Each prototype's rig experiments are run once and its logs checked by the template's
-    own ingest; a draw whose logs fail is skipped (and named), the next draw taken.
+    own ingest; a draw whose logs fail is skipped (and named), the next draw taken. A kept
+    member's rig and ingest stages stay in its output folder (up to date for the batch).
 
     Parameters
     ----------
@@ -778,7 +779,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     """
     import tomllib
 
-    from debist.engine.fleetrun import viable_fleet
+    from debist.engine.fleetrun import remove_runs, viable_fleet
     from debist.workflow import tomltext
 
     template, folder = check_path(template, "template"), check_path(folder, "folder")
@@ -793,8 +794,12 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
             f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
             "folder (debist never overwrites them)"
         )
-    files, rejected = viable_fleet(raw, template.resolve().parent, folder, size, seed)
-    paths = artifacts.write_text_files(folder, files)
+    files, rejected, runs = viable_fleet(raw, template.resolve().parent, folder, size, seed)
+    try:
+        paths = artifacts.write_text_files(folder, files)
+    except BaseException:
+        remove_runs(runs)  # the checks' output folders without their workflows
+        raise
     return FleetResult(tuple(paths), dict(rejected))
 
 

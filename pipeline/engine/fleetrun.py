@@ -4,16 +4,22 @@
 their statics; whether a prototype's *recording* is usable is a property of the rig run: a
 member that overshoots past the laser's range, for instance, logs samples at the range limit,
 which the template's ingest refuses as sensor faults. :func:`viable_fleet` therefore runs the
-rig and ingest stages of each candidate (into a temporary folder) and keeps the first ``size``
-draws that pass, in draw order; the rejected draws and their reasons are returned to be
-reported. Member names keep their draw index, so a member is the same prototype whatever
-the fleet size.
+rig and ingest stages of each candidate and keeps the first ``size`` draws that pass, in draw
+order; the rejected draws and their reasons are returned to be reported. Member names keep
+their draw index, so a member is the same prototype whatever the fleet size.
+
+A candidate is checked in its own output folder, under its own workflow file's name (the
+folder records that file as its owner): a kept member's rig logs and ingested tables stay
+there, and the batch that runs the fleet finds those two stages up to date instead of
+recording the same logs again. A rejected candidate's folder is removed, and so are the kept
+ones' when the fleet cannot be completed.
 """
 
 from __future__ import annotations
 
+import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from debist.core.errors import DebistError
@@ -22,26 +28,41 @@ from debist.rig.fleet import FleetError
 from debist.rig.fleet_workflows import fleet_workflows
 from debist.workflow.loader import load_workflow
 
-__all__ = ["viable_fleet"]
+__all__ = ["remove_runs", "viable_fleet"]
 
 #: Extra draws allowed per requested member before giving up.
 EXTRA_DRAWS = 2
 
 
-def _ingest_problem(text: str, folder: Path, label: str) -> str | None:
-    """Run a candidate's rig and ingest stages in a scratch folder; the error, or None."""
-    check = folder / f".{label}.check.toml"
+def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Path | None]:
+    """Run a candidate's rig and ingest stages; the error (or None) and the run folder kept.
+
+    The candidate's workflow is written as ``folder/name`` for the run and removed after it
+    (the caller writes the kept ones, all or none). The run goes to the workflow's own output
+    folder, kept when the logs pass; a folder that exists already is not touched (the check
+    then runs in a scratch folder, as a failing one's is removed).
+    """
+    path = folder / name
     with tempfile.TemporaryDirectory(prefix="debist-fleet-") as tmp:
+        run_dir = None
         try:
-            check.write_text(text, encoding="utf-8")
-            wf = load_workflow(check, Path(tmp) / "run")
+            path.write_text(text, encoding="utf-8")
+            wf = load_workflow(path)
+            if Path(wf.output_dir).exists():
+                wf = load_workflow(path, Path(tmp) / "run")
+            else:
+                run_dir = Path(wf.output_dir)
             stages = [s for s in ("rig", "ingest") if s in Runner(wf).stages()]
             Runner(wf).run(stages)
-        except DebistError as exc:
-            return str(exc)
+        except BaseException as exc:
+            if run_dir is not None:
+                shutil.rmtree(run_dir, ignore_errors=True)
+            if isinstance(exc, DebistError):
+                return str(exc), None
+            raise
         finally:
-            check.unlink(missing_ok=True)
-    return None
+            path.unlink(missing_ok=True)
+    return None, run_dir
 
 
 def viable_fleet(
@@ -51,7 +72,7 @@ def viable_fleet(
     size: int,
     seed: int,
     scatter: Mapping[str, float] | None = None,
-) -> tuple[dict[str, str], dict[str, str]]:
+) -> tuple[dict[str, str], dict[str, str], list[Path]]:
     """Render ``size`` member workflows whose rig logs pass the template's ingest.
 
     Parameters
@@ -61,8 +82,8 @@ def viable_fleet(
     template_dir : pathlib.Path
         Folder of the template.
     folder : pathlib.Path
-        Folder the member workflows go to (created; the checks write a scratch workflow
-        there and remove it).
+        Folder the member workflows go to (created; each check writes its workflow there and
+        removes it, and keeps a passing member's output folder).
     size : int
         Members wanted.
     seed : int
@@ -76,6 +97,9 @@ def viable_fleet(
         ``<name>-<draw>.toml`` -> TOML text of the kept members, in draw order.
     rejected : dict of str to str
         Member name -> why its log failed the template's ingest (one line).
+    runs : list of pathlib.Path
+        The output folders that hold the kept members' rig and ingest stages (for
+        :func:`remove_runs` if their workflows cannot be written).
 
     Raises
     ------
@@ -93,18 +117,35 @@ def viable_fleet(
     draws = fleet_workflows(template, template_dir, folder, n_draws, seed=seed, scatter=scatter)
     kept: dict[str, str] = {}
     rejected: dict[str, str] = {}
-    for name, text in draws if size > 0 else ():
-        label = name.removesuffix(".toml")
-        problem = _ingest_problem(text, folder, label)
-        if problem is None:
-            kept[name] = text
-        else:
-            rejected[label] = problem
-        if len(kept) == size:
-            break
-    if len(kept) < size:
-        raise FleetError(
-            f"only {len(kept)} of {n_draws} drawn prototypes give logs that the template's "
-            f"ingest accepts (wanted {size}); first refusal: {next(iter(rejected.values()))}"
-        )
-    return kept, rejected
+    runs: list[Path] = []
+    try:
+        for name, text in draws if size > 0 else ():
+            problem, run_dir = _ingest_problem(text, folder, name)
+            runs += [run_dir] if run_dir is not None else []
+            if problem is None:
+                kept[name] = text
+            else:
+                rejected[name.removesuffix(".toml")] = problem
+            if len(kept) == size:
+                break
+        if len(kept) < size:
+            raise FleetError(
+                f"only {len(kept)} of {n_draws} drawn prototypes give logs that the template's "
+                f"ingest accepts (wanted {size}); first refusal: {next(iter(rejected.values()))}"
+            )
+    except BaseException:
+        remove_runs(runs)
+        raise
+    return kept, rejected, runs
+
+
+def remove_runs(runs: Sequence[Path]) -> None:
+    """Remove the output folders the candidates' checks kept (a fleet that is not written).
+
+    Parameters
+    ----------
+    runs : sequence of pathlib.Path
+        The folders :func:`viable_fleet` returned.
+    """
+    for run_dir in runs:
+        shutil.rmtree(run_dir, ignore_errors=True)

@@ -66,12 +66,13 @@ def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_pat
     raw = tomllib.loads(TEMPLATE.read_text())
     calls = []
 
-    def problem(text, folder, label):
+    def problem(text, folder, name):
+        label = name.removesuffix(".toml")
         calls.append(label)
-        return "laser at its range limit" if label.endswith("-001") else None
+        return ("laser at its range limit" if label.endswith("-001") else None), None
 
     monkeypatch.setattr(fleetrun, "_ingest_problem", problem)
-    files, rejected = fleetrun.viable_fleet(raw, TEMPLATE.parent, tmp_path, 3, seed=4)
+    files, rejected, _ = fleetrun.viable_fleet(raw, TEMPLATE.parent, tmp_path, 3, seed=4)
     name = raw["workflow"]["name"]
     assert list(files) == [f"{name}-000.toml", f"{name}-002.toml", f"{name}-003.toml"]
     assert rejected == {f"{name}-001": "laser at its range limit"}
@@ -95,6 +96,29 @@ def test_a_fleet_whose_logs_all_fail_ingest_is_refused_with_the_reason(tmp_path)
     assert "of 3" in str(err.value)
     assert "range" in str(err.value)
     assert not list(tmp_path.glob("*.toml"))  # the scratch workflows are gone
+    assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").iterdir())
+
+
+def test_a_kept_members_rig_and_ingest_stay_up_to_date_for_the_batch(tmp_path):
+    """The check's run is the member's own: the batch does not record the logs again, and a
+    draw that fails leaves no folder."""
+    import tomli_w
+
+    from debist import api
+
+    raw = tomllib.loads(TEMPLATE.read_text())
+    for exp in raw["rig"]["experiments"].values():
+        exp["duration"] = 8.0
+    template = tmp_path / "short.toml"
+    template.write_text(tomli_w.dumps(raw))
+    made = api.fleet(template, 1, seed=1, folder=tmp_path / "fleet")
+    (member,) = made.paths
+    states = {s.stage: s.state for s in api.status(member)}
+    assert states["rig"] == states["ingest"] == "up to date"
+    assert states["differentiate"] == "missing"
+    runs = sorted(p.name for p in (tmp_path / "fleet" / "runs").iterdir())
+    assert runs == [member.stem]  # rejected draws' folders, if any, are gone
+    assert sorted(p.name for p in (tmp_path / "fleet").glob("*.toml")) == [member.name]
 
 
 def test_a_member_switching_below_the_template_gets_its_sub_threshold_levels_scaled(tmp_path):
