@@ -15,8 +15,9 @@ pre-strain).
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 
@@ -25,7 +26,13 @@ from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import equilibria, switches
 from debist.rig.params import RigParams
 
-__all__ = ["DEFAULT_SCATTER", "FleetError", "is_bistable_and_switchable", "make_fleet"]
+__all__ = [
+    "DEFAULT_SCATTER",
+    "FleetError",
+    "fleet_members",
+    "is_bistable_and_switchable",
+    "make_fleet",
+]
 
 DEFAULT_SCATTER: Mapping[str, float] = {
     "b": 0.5e-3,
@@ -157,6 +164,45 @@ def make_fleet(
     """
     if isinstance(n, bool) or not isinstance(n, int) or n < 0:
         raise WorkflowError(f"`n` must be a non-negative integer, got {n!r}")
+    members = fleet_members(seed=seed, nominal=nominal, scatter=scatter, max_draws=max_draws)
+    return list(itertools.islice(members, n))
+
+
+def fleet_members(
+    *,
+    seed: int,
+    nominal: RigParams | None = None,
+    scatter: Mapping[str, float] | None = None,
+    max_draws: int = 200,
+) -> Iterator[RigParams]:
+    """Draw the prototypes of :func:`make_fleet` one at a time, each when it is asked for.
+
+    The scatter is checked at the call; each member is drawn (and redrawn until it passes
+    :func:`is_bistable_and_switchable`) only when the iterator reaches it, so a caller that
+    needs fewer members than it might pays only for those. Member ``i`` is
+    ``make_fleet(n, ...)[i]`` for every ``n > i``.
+
+    Parameters
+    ----------
+    seed, nominal, scatter, max_draws
+        As :func:`make_fleet`.
+
+    Returns
+    -------
+    iterator of RigParams
+        The fleet's members in order, without end.
+
+    Raises
+    ------
+    WorkflowError
+        At the call, for an unknown scatter name or an invalid spread.
+    FleetError
+        When the iterator reaches a member not found within ``max_draws`` draws.
+
+    References
+    ----------
+    Masoud & Maas 2025, Table 1, Eq. 15, 17, Fig. 3.
+    """
     spread = dict(DEFAULT_SCATTER)
     for key, value in (scatter or {}).items():
         if key not in DEFAULT_SCATTER:
@@ -170,17 +216,19 @@ def make_fleet(
         spread[key] = float(value)
     if nominal is None:
         nominal = RigParams(prototype=PrototypeParams.paper())
-    rng = np.random.default_rng(seed)
-    fleet: list[RigParams] = []
-    for i in range(n):
+    return _members(np.random.default_rng(seed), nominal, spread, seed, max_draws)
+
+
+def _members(rng, nominal, spread, seed, max_draws) -> Iterator[RigParams]:
+    """Yield the screened draws of :func:`fleet_members`."""
+    for i in itertools.count():
         for _ in range(max_draws):
             candidate = _draw(rng, nominal, spread)
             if is_bistable_and_switchable(candidate):
-                fleet.append(candidate)
+                yield candidate
                 break
         else:
             raise FleetError(
                 f"make_fleet: no bistable, switchable prototype in {max_draws} draws for "
                 f"member {i} (seed {seed}, scatter {spread})"
             )
-    return fleet

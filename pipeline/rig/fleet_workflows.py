@@ -2,7 +2,7 @@
 
 A lab's batch run is N prototypes through the same pipeline. :func:`fleet_workflows` takes a
 workflow with a ``[rig]`` section as the template, draws N prototypes around its rig with
-:func:`debist.rig.fleet.make_fleet` and returns one workflow per prototype: the template
+:func:`debist.rig.fleet.fleet_members` and returns one workflow per prototype: the template
 with the member's prototype in ``[rig.prototype]``, its friction in ``[rig.plant]``, its own
 name and output folder. ``[physics]`` stays the nominal design, so each member's analytical
 row shows what the nominal model misses on that copy. ``debist batch`` then runs them on Dask.
@@ -24,6 +24,7 @@ Masoud & Maas 2025, Table 1 (nominal prototype).
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import os
 from collections.abc import Iterator, Mapping
@@ -36,7 +37,7 @@ from debist.core.errors import WorkflowError
 from debist.core.names import check_file_name
 from debist.physics.params import V_MAX, PrototypeParams
 from debist.physics.statics import switching_voltage
-from debist.rig.fleet import make_fleet
+from debist.rig.fleet import fleet_members
 from debist.rig.params import RigParams
 from debist.rig.profiles import V_SUB
 
@@ -105,9 +106,10 @@ def fleet_workflows(
 ) -> Iterator[tuple[str, str]]:
     """Render one workflow per fleet member from a template workflow, member by member.
 
-    The template is checked and the prototypes drawn at the call; each member's threshold
-    and text only when the iterator reaches it, so a caller that stops early pays for what
-    it took (``dict(fleet_workflows(...))`` renders them all).
+    The template and the scatter are checked at the call; each member is drawn, screened
+    (:func:`debist.rig.fleet.fleet_members`) and rendered only when the iterator reaches it,
+    so a caller that stops early pays for what it took (``dict(fleet_workflows(...))``
+    renders them all).
 
     Parameters
     ----------
@@ -137,7 +139,8 @@ def fleet_workflows(
         are invalid, or its name is not a plain file name
         (:func:`debist.core.names.check_file_name`).
     FleetError
-        If the scatter leaves too few working prototypes.
+        When the iterator reaches a member the scatter does not give (too few working
+        prototypes).
 
     References
     ----------
@@ -149,16 +152,18 @@ def fleet_workflows(
     physics = template.get("physics", {})
     prototype = PrototypeParams.from_dict({**physics, **rig.get("prototype", {})})
     nominal = RigParams.from_dict({**rig.get("plant", {}), "prototype": prototype})
-    members = make_fleet(n, seed=seed, nominal=nominal, scatter=scatter)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise WorkflowError(f"`n` must be a non-negative integer, got {n!r}")
+    members = itertools.islice(fleet_members(seed=seed, nominal=nominal, scatter=scatter), n)
     name = template.get("workflow", {}).get("name", "fleet")
     check_file_name(name, "[workflow] name of the fleet template")  # <name>-<k>.toml
     v_template = lower_threshold(prototype)
-    return _render(template, template_dir, out_dir, members, v_template, name, seed)
+    return _render(template, template_dir, out_dir, members, n, v_template, name, seed)
 
 
-def _render(template, template_dir, out_dir, members, v_template, name, seed):
+def _render(template, template_dir, out_dir, members, n, v_template, name, seed):
     """Yield each member's file name and TOML text (:func:`fleet_workflows`)."""
-    width = max(3, len(str(len(members) - 1)))
+    width = max(3, len(str(n - 1)))
     for k, member in enumerate(members):
         scale, v_member = sub_threshold_scale(member.prototype, v_template)
         wf = copy.deepcopy(dict(template))

@@ -24,6 +24,27 @@ def test_same_seed_same_fleet_and_prefix_property(fleet):
     assert other[0] != fleet[0]
 
 
+def test_members_are_drawn_only_when_asked_for_and_are_make_fleets(fleet, monkeypatch):
+    """fleet_members screens a draw only when its iterator reaches the member, and yields
+    make_fleet's members in order; a bad scatter is refused at the call."""
+    from debist.rig import fleet as fleet_module
+
+    screened = []
+    real = fleet_module.is_bistable_and_switchable
+    monkeypatch.setattr(
+        fleet_module, "is_bistable_and_switchable", lambda p: screened.append(p) or real(p)
+    )
+    members = fleet_module.fleet_members(seed=7)
+    assert screened == []
+    first = [next(members), next(members)]
+    assert first == fleet[:2]
+    assert len(screened) >= 2 and screened[-1] == fleet[1]
+    n_screened = len(screened)
+    assert next(members) == fleet[2] and len(screened) > n_screened
+    with pytest.raises(WorkflowError, match="unknown scatter 'mass'"):
+        fleet_module.fleet_members(seed=7, scatter={"mass": 0.1})
+
+
 def test_members_scatter_around_the_paper(fleet):
     paper = PrototypeParams.paper()
     b = np.array([m.prototype.b for m in fleet])
