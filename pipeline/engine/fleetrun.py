@@ -55,8 +55,7 @@ def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Pat
             stages = [s for s in ("rig", "ingest") if s in Runner(wf).stages()]
             Runner(wf).run(stages)
         except BaseException as exc:
-            if run_dir is not None:
-                shutil.rmtree(run_dir, ignore_errors=True)
+            remove_runs([run_dir] if run_dir is not None else [])
             if isinstance(exc, DebistError):
                 return str(exc), None
             raise

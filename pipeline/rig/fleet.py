@@ -162,13 +162,11 @@ def make_fleet(
     ----------
     Masoud & Maas 2025, Table 1, Eq. 15, 17, Fig. 3.
     """
-    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-        raise WorkflowError(f"`n` must be a non-negative integer, got {n!r}")
-    members = fleet_members(seed=seed, nominal=nominal, scatter=scatter, max_draws=max_draws)
-    return list(itertools.islice(members, n))
+    return list(fleet_members(n, seed=seed, nominal=nominal, scatter=scatter, max_draws=max_draws))
 
 
 def fleet_members(
+    n: int | None = None,
     *,
     seed: int,
     nominal: RigParams | None = None,
@@ -184,18 +182,21 @@ def fleet_members(
 
     Parameters
     ----------
+    n : int, optional
+        Number of members (>= 0); without it the iterator has no end.
     seed, nominal, scatter, max_draws
         As :func:`make_fleet`.
 
     Returns
     -------
     iterator of RigParams
-        The fleet's members in order, without end.
+        The fleet's members in order.
 
     Raises
     ------
     WorkflowError
-        At the call, for an unknown scatter name or an invalid spread.
+        At the call, if ``n`` is negative or not an integer, for an unknown scatter name or
+        an invalid spread.
     FleetError
         When the iterator reaches a member not found within ``max_draws`` draws.
 
@@ -203,6 +204,8 @@ def fleet_members(
     ----------
     Masoud & Maas 2025, Table 1, Eq. 15, 17, Fig. 3.
     """
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 0):
+        raise WorkflowError(f"`n` must be a non-negative integer, got {n!r}")
     spread = dict(DEFAULT_SCATTER)
     for key, value in (scatter or {}).items():
         if key not in DEFAULT_SCATTER:
@@ -216,7 +219,8 @@ def fleet_members(
         spread[key] = float(value)
     if nominal is None:
         nominal = RigParams(prototype=PrototypeParams.paper())
-    return _members(np.random.default_rng(seed), nominal, spread, seed, max_draws)
+    members = _members(np.random.default_rng(seed), nominal, spread, seed, max_draws)
+    return members if n is None else itertools.islice(members, n)
 
 
 def _members(rng, nominal, spread, seed, max_draws) -> Iterator[RigParams]:

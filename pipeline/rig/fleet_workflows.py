@@ -24,7 +24,6 @@ Masoud & Maas 2025, Table 1 (nominal prototype).
 from __future__ import annotations
 
 import copy
-import itertools
 import math
 import os
 from collections.abc import Iterator, Mapping
@@ -152,9 +151,7 @@ def fleet_workflows(
     physics = template.get("physics", {})
     prototype = PrototypeParams.from_dict({**physics, **rig.get("prototype", {})})
     nominal = RigParams.from_dict({**rig.get("plant", {}), "prototype": prototype})
-    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-        raise WorkflowError(f"`n` must be a non-negative integer, got {n!r}")
-    members = itertools.islice(fleet_members(seed=seed, nominal=nominal, scatter=scatter), n)
+    members = fleet_members(n, seed=seed, nominal=nominal, scatter=scatter)
     name = template.get("workflow", {}).get("name", "fleet")
     check_file_name(name, "[workflow] name of the fleet template")  # <name>-<k>.toml
     v_template = lower_threshold(prototype)
