@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 import threading
 import warnings
 from collections.abc import Callable
@@ -28,7 +27,6 @@ __all__ = [
     "call_recording_warnings",
     "fork_context",
     "fork_workers",
-    "numba_fork_safe",
     "replay_warnings",
 ]
 
@@ -63,35 +61,6 @@ def fork_workers(n: int) -> int:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return max(1, min(n, cores or 1))
-
-
-def numba_fork_safe() -> bool:
-    """Whether a child forked now may call numba's parallel kernels.
-
-    numba's OpenMP threading layer (GNU libgomp) cannot start in a child forked from a
-    process that has already started it: numba ends the child with SIGTERM on its first
-    parallel call ("fork() called from a process already using GNU OpenMP, this is
-    unsafe"). Before any parallel kernel ran here, or with another layer (TBB, numba's
-    workqueue), a forked child is free to run them. An Intel OpenMP layer would be safe
-    too; it is not told apart, so the answer is False there as well.
-
-    Returns
-    -------
-    bool
-        False when numba's threading layer has started here and is ``"omp"``.
-
-    References
-    ----------
-    numba documentation, "The Threading Layers" (the fork-safety of each layer;
-    ``numba.threading_layer()`` raises ValueError before a layer has started).
-    """
-    numba = sys.modules.get("numba")
-    if numba is None:
-        return True
-    try:
-        return numba.threading_layer() != "omp"
-    except ValueError:  # no parallel kernel has run in this process
-        return True
 
 
 def fork_context():

@@ -33,7 +33,7 @@ from debist.core.errors import (
     WorkflowError,
 )
 from debist.core.faults import fault_point
-from debist.core.forking import fork_workers, numba_fork_safe
+from debist.core.forking import fork_workers
 from debist.engine import outdir, verification
 from debist.engine.beside import BesideRun
 from debist.engine.fingerprint import code_fingerprint
@@ -183,15 +183,6 @@ def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
 FREE_RUN_STAGES = ("identify", "validate", "compare")
 
 
-def _may_fork_kernels() -> bool:
-    """Whether this process may fork a child that runs numba's parallel kernels.
-
-    One process per core is allowed (:func:`debist.core.forking.fork_workers`) and numba's
-    threading layer survives the fork (:func:`debist.core.forking.numba_fork_safe`).
-    """
-    return fork_workers(2) >= 2 and numba_fork_safe()
-
-
 def _compile_ahead() -> list[BesideRun]:
     """Start compiling the free-run kernels in a forked process, unless they are cached.
 
@@ -200,11 +191,11 @@ def _compile_ahead() -> list[BesideRun]:
     list of BesideRun
         The process (to be stopped at the end of the run: it only fills numba's cache), or
         nothing when the kernels are cached or a child could not run them
-        (:func:`_may_fork_kernels`).
+        (:func:`debist.core.forking.fork_workers`).
     """
     from debist.simulate import warmup  # the compiled kernels load only when a stage needs them
 
-    if not _may_fork_kernels() or warmup.kernels_cached():
+    if fork_workers(2) < 2 or warmup.kernels_cached():
         return []
     return [BesideRun(warmup.compile_kernels, "compiling the free-run kernels ahead")]
 
@@ -707,10 +698,11 @@ class Runner:
         """Whether ``stage`` can start now in a forked process beside the pending stages.
 
         It is marked ``beside`` in the registry, its upstream stages are not pending, some
-        pending stage does not read it (there is work to overlap with), and a child forked
-        now may run the compiled kernels (:func:`_may_fork_kernels`).
+        pending stage does not read it (there is work to overlap with), and a second process
+        may run (:func:`debist.core.forking.fork_workers`; the compiled kernels run on Python
+        threads, never on numba's threading layer, so a forked child may call them).
         """
-        if not registry.stage(stage).beside or not _may_fork_kernels():
+        if not registry.stage(stage).beside or fork_workers(2) < 2:
             return False
         if any(up in pending for up in self._upstream(stage)):
             return False

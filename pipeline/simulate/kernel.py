@@ -3,7 +3,8 @@
 The scheme is exactly that of :func:`debist.simulate.freerun.simulate` (classical RK4 with
 sub-steps, the inputs interpolated once onto the grid of half sub-steps, divergence when a
 state is not finite or ``|q|`` exceeds the limit), compiled with numba (nopython, cached on
-disk) and parallel over the trajectories of a batch (records, windows, parameter vectors).
+disk) and run on threads over the trajectories of a batch (records, windows, parameter
+vectors; :func:`on_threads`).
 Models hand it plain arrays: a term table with weights per trajectory
 (:class:`debist.model.termtable.TableModel`: the RBF model of Eq. 37 with its backbone and
 physics prior, the SINDy polynomials) or the tabulated curves of the analytical reduced model
@@ -27,7 +28,7 @@ References
 ----------
 Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I, Sec. II.1 (classical
 RK4); Lam, Pitrou & Seibert 2015, "Numba: a LLVM-based Python JIT compiler" (numba
-documentation: ``njit``, ``cache=True``, ``prange``).
+documentation: ``njit``, ``cache=True``, ``nogil=True``).
 """
 
 from __future__ import annotations
@@ -35,8 +36,10 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
+import os
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba as nb
@@ -46,7 +49,16 @@ from debist.model import basis, friction
 from debist.simulate import rk4
 from debist.simulate.batch import mask_batch
 
-__all__ = ["CHUNK", "KIND_SPLINE", "KIND_TABLE", "KernelArrays", "free_run", "free_run_sensitivity"]
+__all__ = [
+    "CHUNK",
+    "KIND_SPLINE",
+    "KIND_TABLE",
+    "KernelArrays",
+    "free_run",
+    "free_run_sensitivity",
+    "kernel_threads",
+    "on_threads",
+]
 
 #: Model kinds of the kernel.
 KIND_TABLE, KIND_SPLINE = 0, 1
@@ -789,44 +801,14 @@ def _trajectory(
             states[b, k + 1, i] = x[i]
 
 
-@nb.njit(cache=True)
-def _integrate_serial(
-    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
+@nb.njit(cache=True, nogil=True)
+def _integrate(
+    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, bidx
 ):  # pragma: no cover - compiled
-    """Integrate the trajectories in turn (one trajectory: no thread start-up).
-
-    Each trajectory is one call of :func:`_trajectory_call`, which the parallel integrator
-    calls too: the integrator is compiled once for both (a call per trajectory costs nothing
-    against its steps).
-    """
-    for b in range(states.shape[0]):
-        _trajectory_call(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1,
-                         states, acc, dead, np.int64(b))  # fmt: skip
-
-
-@nb.njit(cache=True, parallel=True)
-def _integrate_parallel(
-    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead
-):  # pragma: no cover - compiled
-    """Integrate the trajectories on numba's threads (independent: the same numbers).
-
-    The loop body is a call, not inlined code: numba's parfor pass hoists loop-invariant
-    array reads out of a prange body, also from branches that do not run (the table model's
-    offsets read from a spline model's short layout, out of bounds: a segmentation fault).
-    """
-    for bp in nb.prange(states.shape[0]):
-        b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
-        _trajectory_call(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1,
-                         states, acc, dead, b)  # fmt: skip
-
-
-@nb.njit(cache=True)
-def _trajectory_call(
-    kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, b
-):  # pragma: no cover - compiled
-    """:func:`_trajectory` behind a call boundary (see :func:`_integrate_parallel`)."""
-    _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
-                acc, dead, b)  # fmt: skip
+    """Integrate the trajectories ``bidx`` in turn, without the GIL (one call per thread)."""
+    for c in range(bidx.size):
+        _trajectory(kind, fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, k0, k1, states,
+                    acc, dead, bidx[c])  # fmt: skip
 
 
 # ------------------------------------------------------------- lockstep batches of one table model
@@ -1010,7 +992,7 @@ def _rhs_table_lock(
             D[row, c1 + e, c] = XT[1, c] * _slip_sticks(XT[1, c], XT[c1 + e, c], fp[o_sw + e])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _lockstep(
     fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, bidx
 ):  # pragma: no cover - compiled
@@ -1089,17 +1071,6 @@ def _lockstep(
                 dead[b] = k + 1
             for i in range(S):  # diverged or ended: held at the origin from now on
                 X[i, c] = 0.0
-
-
-@nb.njit(cache=True, parallel=True)
-def _lockstep_parallel(
-    fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead, bidx, bounds
-):  # pragma: no cover - compiled
-    """:func:`_lockstep` on numba's threads, one block ``bidx[bounds[i]:bounds[i + 1]]`` each."""
-    for ip_ in nb.prange(bounds.size - 1):
-        i = np.int64(ip_)
-        _lockstep(fp, ip, lay, fine, lengths, h, ns, q_limit, k0, k1, states, acc, dead,
-                  bidx[bounds[i] : bounds[i + 1]])  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -1216,27 +1187,60 @@ def _trajectory_sens(
             states[b, k + 1, i] = x[i]
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, nogil=True)
 def _sensitivities(
-    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap
+    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap, bidx
 ):  # pragma: no cover - compiled
-    """Integrate every trajectory with its sensitivities on numba's threads.
+    """Integrate the trajectories ``bidx`` with their sensitivities, without the GIL."""
+    for c in range(bidx.size):
+        _trajectory_sens(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead,
+                         sens, pmap, bidx[c])  # fmt: skip
 
-    The body is a call, as in :func:`_integrate_parallel` (no reads hoisted out of branches).
+
+def kernel_threads() -> int:
+    """Threads a batch of free runs may use: numba's thread count, at most the usable cores.
+
+    ``NUMBA_NUM_THREADS`` (numba's setting, read without starting numba's thread pool) bounds
+    it, so a batch's worker processes, which set it to 1, integrate on their own thread.
+
+    Returns
+    -------
+    int
+        At least 1.
     """
-    for bp in nb.prange(states.shape[0]):
-        b = np.int64(bp)  # the parallel index may be unsigned; indices below mix with 0
-        _trajectory_sens_call(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc,
-                              dead, sens, pmap, b)  # fmt: skip
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(int(nb.config.NUMBA_NUM_THREADS), cores or 1))
 
 
-@nb.njit(cache=True)
-def _trajectory_sens_call(
-    fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead, sens, pmap, b
-):  # pragma: no cover - compiled
-    """:func:`_trajectory_sens` behind a call boundary (see :func:`_sensitivities`)."""
-    _trajectory_sens(fp, ip, lay, n_work, fine, lengths, h, ns, q_limit, states, acc, dead,
-                     sens, pmap, b)  # fmt: skip
+def on_threads(call: Callable[[np.ndarray], None], blocks: Sequence[np.ndarray]) -> None:
+    """Call ``call(block)`` for every block, each on a thread of its own.
+
+    The compiled integrators release the GIL (``nogil=True``) and write disjoint rows of
+    shared arrays, so the blocks run in parallel and the numbers do not depend on how the
+    trajectories were split. Python threads instead of numba's ``prange``: a ``parallel=True``
+    kernel costs seconds more to compile on the first run and starts numba's threading layer,
+    which a forked process may not inherit. The threads end before the call returns.
+
+    Parameters
+    ----------
+    call : callable
+        Takes one block of trajectory indices (ndarray of int64).
+    blocks : sequence of ndarray
+        The blocks; empty ones are skipped.
+
+    Raises
+    ------
+    Exception
+        The first exception a call raised, after every thread has ended.
+    """
+    blocks = [b for b in blocks if b.size]
+    if len(blocks) <= 1:
+        for b in blocks:
+            call(b)
+        return
+    with ThreadPoolExecutor(max_workers=len(blocks), thread_name_prefix="debist-rk4") as pool:
+        for future in [pool.submit(call, b) for b in blocks]:
+            future.result()
 
 
 def free_run_sensitivity(
@@ -1308,10 +1312,16 @@ def free_run_sensitivity(
     dead = np.full(B, -1, dtype=np.int64)
     sens = np.full((B, n, int(n_params)), np.nan)
     states[:, 0] = x0
-    _sensitivities(arrays.fp, arrays.ip, arrays.lay, arrays.n_work,
-                   np.ascontiguousarray(fine, np.float64), np.ascontiguousarray(lengths, np.int64),
-                   float(dt) / int(substeps), int(substeps), float(q_limit), states, acc, dead,
-                   sens, pmap)  # fmt: skip
+    lengths = np.ascontiguousarray(lengths, np.int64)
+    fine = np.ascontiguousarray(fine, np.float64)
+    threads = min(B, kernel_threads())
+    by_length = np.argsort(-lengths, kind="stable").astype(np.int64)  # longest first, dealt out
+    on_threads(
+        lambda bidx: _sensitivities(arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine,
+                                    lengths, float(dt) / int(substeps), int(substeps),
+                                    float(q_limit), states, acc, dead, sens, pmap, bidx),
+        [np.ascontiguousarray(by_length[i::threads]) for i in range(threads)],
+    )  # fmt: skip
     q = states[:, :, 0]
     for b in range(B):
         if dead[b] >= 0:
@@ -1376,25 +1386,27 @@ def free_run(
     fine = np.ascontiguousarray(fine, dtype=np.float64)
     h = float(dt) / int(substeps)
     step = n if progress is None else CHUNK
-    threads = nb.get_num_threads()
+    threads = kernel_threads()
     if arrays.kind == KIND_TABLE and threads < B:
         # blocks of similar length, one per thread, each integrated in lockstep
-        bidx = np.argsort(-lengths, kind="stable").astype(np.int64)
+        by_length = np.argsort(-lengths, kind="stable").astype(np.int64)
         bounds = np.linspace(0, B, threads + 1).round().astype(np.int64)
+        blocks = [by_length[bounds[i] : bounds[i + 1]] for i in range(threads)]
 
-        def integrate(k0: int, k1: int) -> None:
-            _lockstep_parallel(arrays.fp, arrays.ip, arrays.lay, fine, lengths, h, int(substeps),
-                               float(q_limit), k0, k1, states, acc, dead, bidx, bounds)  # fmt: skip
+        def block(k0: int, k1: int, bidx: np.ndarray) -> None:
+            _lockstep(arrays.fp, arrays.ip, arrays.lay, fine, lengths, h, int(substeps),
+                      float(q_limit), k0, k1, states, acc, dead, bidx)  # fmt: skip
     else:
-        run = _integrate_parallel if B > 1 and threads > 1 else _integrate_serial
+        blocks = np.array_split(np.arange(B, dtype=np.int64), min(B, threads))
 
-        def integrate(k0: int, k1: int) -> None:
-            run(arrays.kind, arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine, lengths, h,
-                int(substeps), float(q_limit), k0, k1, states, acc, dead)  # fmt: skip
+        def block(k0: int, k1: int, bidx: np.ndarray) -> None:
+            _integrate(arrays.kind, arrays.fp, arrays.ip, arrays.lay, arrays.n_work, fine,
+                       lengths, h, int(substeps), float(q_limit), k0, k1, states, acc, dead,
+                       bidx)  # fmt: skip
 
     for k0 in range(0, n, step):
         k1 = min(k0 + step, n)
-        integrate(k0, k1)
+        on_threads(lambda bidx, k0=k0, k1=k1: block(k0, k1, bidx), blocks)
         if progress is not None:
             progress(k1, n)
     run = mask_batch(states, acc, dead, lengths, substeps)

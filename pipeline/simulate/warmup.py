@@ -35,7 +35,7 @@ from debist.simulate.freerun import simulate
 __all__ = ["compile_kernels", "kernels_cached", "oscillator"]
 
 #: The kernels :func:`compile_kernels` reaches, in the order a run first calls them.
-KERNELS = (kernel._integrate_serial, kernel._lockstep_parallel, narx_free_run)
+KERNELS = (kernel._integrate, kernel._lockstep, narx_free_run)
 
 
 def oscillator(k1: float = 100.0, dv: float = 2.0, T_z: float = 0.0) -> RBFModel:

@@ -140,14 +140,10 @@ def test_a_diverging_model_diverges_at_the_same_sample_in_both_engines():
 
 
 @pytest.fixture
-def two_threads():
-    """Numba's threads set to 2 (at most), so that a batch of more runs in lockstep blocks."""
-    import numba
-
-    before = numba.get_num_threads()
-    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-    yield numba.get_num_threads()
-    numba.set_num_threads(before)
+def two_threads(monkeypatch):
+    """The kernel's threads set to 2, so that a batch of more runs in lockstep blocks."""
+    monkeypatch.setattr(kernel, "kernel_threads", lambda: 2)
+    return 2
 
 
 def test_a_lockstep_batch_of_uneven_diverging_runs_equals_both_references(two_threads, monkeypatch):
@@ -241,6 +237,57 @@ def test_parallel_batch_equals_one_trajectory_at_a_time():
     for i, rec in enumerate(records):
         one = simulate(model, [rec], DT, q0[i : i + 1], np.zeros(1), substeps=2)
         np.testing.assert_array_equal(batch[i].states, one[0].states)
+
+
+def test_sensitivities_do_not_depend_on_the_threads(monkeypatch):
+    """Five trajectories of uneven length dealt out to 1, 2 and 3 threads: the same bits."""
+    from debist.model.terms import term_sign, term_table
+    from debist.model.termtable import TableModel
+
+    model = rbf_model(T_z=0.02)
+    names, theta = model.parameters()
+    table = term_table(names, model.basis, 2, "v2", 1e-3, model.prior)
+    signs = np.array([term_sign(n) for n in names])
+    n = len(names)
+    arrays = kernel.kernel_arrays(
+        TableModel(table, signs * theta, np.array([1.0]), np.array([0.02]))
+    )
+    lengths = np.array([300, 120, 260, 300, 90])
+    fine = prepare_inputs([inputs(300, s) for s in range(5)], 2, "bandlimited").values
+    x0 = np.zeros((5, arrays.n_states))
+    x0[:, 0] = np.linspace(-0.01, 0.01, 5)
+    runs = []
+    for threads in (1, 2, 3):
+        monkeypatch.setattr(kernel, "kernel_threads", lambda t=threads: t)
+        runs.append(kernel.free_run_sensitivity(arrays, fine, lengths, DT, 2, x0, np.inf,
+                                                np.arange(n), signs, n, n + 1, n + 2))  # fmt: skip
+    assert np.isfinite(runs[0][1][4, :90]).all() and np.isnan(runs[0][1][4, 90:]).all()
+    for q, dq in runs[1:]:
+        np.testing.assert_array_equal(q, runs[0][0])
+        np.testing.assert_array_equal(dq, runs[0][1])
+
+
+def test_on_threads_runs_every_block_and_raises_the_first_error():
+    import threading
+
+    seen, names = [], set()
+    together = threading.Barrier(3, timeout=30)  # passes only when three blocks run at once
+
+    def call(block):
+        together.wait()
+        names.add(threading.current_thread().name)
+        seen.extend(block.tolist())
+        if 7 in block:
+            raise ValueError("block with 7")
+
+    blocks = [np.arange(0, 4), np.arange(4, 6), np.array([], dtype=np.int64), np.arange(6, 9)]
+    with pytest.raises(ValueError, match="block with 7"):
+        kernel.on_threads(call, blocks)
+    assert sorted(seen) == list(range(9))  # every block ran, the failing one included
+    assert len(names) == 3 and all(n.startswith("debist-rk4") for n in names)
+    seen.clear()
+    kernel.on_threads(lambda b: seen.extend(b.tolist()), [np.arange(3)])  # one block: no thread
+    assert seen == [0, 1, 2]
 
 
 def test_kernel_arrays_check_the_spline_shape():
