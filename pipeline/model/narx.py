@@ -325,7 +325,8 @@ def _frols_class():
     and scores every model size with the information criterion (:func:`prefix_criteria`). The
     window of sizes starts at ``n_info_values`` and doubles while the criterion's minimum lies
     at its end, up to the number of candidate terms: the term count is the criterion's
-    minimum, never a cap.
+    minimum, never a cap. FROLS orders all candidates once; each window takes the first of
+    them (greedy forward selection: the first ``n`` do not depend on how many are ordered).
     """
     FROLS = _sysidentpy()[0]
     from sysidentpy.utils.information_matrix import build_lagged_matrix
@@ -353,16 +354,19 @@ def _frols_class():
             self.n_inputs = xs[0].shape[1]
             self.regressor_code = self.regressor_space(self.n_inputs)
             n_cand, n = psi.shape[1], min(self.n_info_values, psi.shape[1])
+            # FROLS's order is greedy: its first n terms do not depend on how many follow, so
+            # one run over every candidate serves each window (its last steps are cheap)
+            err, order, _ = self.run_mss_algorithm(psi, padded, n_cand)
+            order = np.asarray(order, dtype=np.intp)
             while True:
-                err, piv, _ = self.run_mss_algorithm(psi, padded, n)
-                piv = np.asarray(piv, dtype=np.intp)[:n]
+                piv = order[:n]
                 ic, R, c = prefix_criteria(psi[:, piv], target, self.info_criteria_function,
                                            qr=True)  # fmt: skip
                 k = int(np.argmin(ic)) + 1
                 if k < n or n == n_cand:
                     break
                 n = min(2 * n, n_cand)
-            self.info_values, self.err, self.pivv = ic, err, piv
+            self.info_values, self.err, self.pivv = ic, err[:n], piv
             self.n_terms_criterion = k
             self._qr = (R, c)
             return self.truncate(k)

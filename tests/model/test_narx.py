@@ -183,6 +183,28 @@ def test_the_window_of_model_sizes_grows_until_the_criterion_rises():
     assert est.n_terms == int(np.argmin(est.info_values)) + 1 < len(est.info_values)
 
 
+def test_frols_puts_the_same_terms_first_however_many_it_orders():
+    """fit_records orders every candidate once and takes each window's first terms: that is
+    SysIdentPy's own run to the window's size, term for term and ERR for ERR."""
+    from sysidentpy.utils.information_matrix import build_lagged_matrix
+
+    from debist.model.narx import _estimator
+
+    x, y = _cubic_record(1500, 8)
+    est = _estimator(3, 2, 2, NarxConfig(n_info_values=3)).fit_records([x], [y])
+    n = len(est.info_values)  # the window where the criterion's minimum lay inside
+    assert 3 < n < 84  # grown, and short of the 84 candidates (one run ordered them all)
+    ref = _estimator(3, 2, 2, NarxConfig())
+    ref.max_lag = ref._get_max_lag()
+    lagged = build_lagged_matrix(x, y, ref.xlag, ref.ylag, ref.model_type)
+    psi = ref.basis_function.fit(lagged, ref.max_lag, ref.ylag, ref.xlag, ref.model_type,
+                                 predefined_regressors=None)  # fmt: skip
+    assert psi.shape[1] == 84
+    err, piv, _ = ref.run_mss_algorithm(psi, y, n)
+    np.testing.assert_array_equal(est.pivv, np.asarray(piv)[:n])
+    np.testing.assert_array_equal(est.err, np.asarray(err)[:n])
+
+
 def test_no_regressor_row_reaches_across_a_record_boundary():
     """Records stacked row-wise, each with its own lags, give a fit that does not depend on
     the records' order; joined end to end (a lag reaching into the other record, whose offset
