@@ -12,17 +12,24 @@ A candidate is checked in its own output folder, under its own workflow file's n
 folder records that file as its owner): a kept member's rig logs and ingested tables stay
 there, and the batch that runs the fleet finds those two stages up to date instead of
 recording the same logs again. A rejected candidate's folder is removed, and so are the kept
-ones' when the fleet cannot be completed.
+ones' when the fleet cannot be completed. With two cores the next candidate is drawn and
+checked in a forked process while the current one is (the results are taken in draw order,
+so the fleet is the serial loop's); a candidate checked beyond the fleet's size is removed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import tempfile
-from collections.abc import Mapping, Sequence
+from collections import deque
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from debist.core import progress
 from debist.core.errors import DebistError
+from debist.core.forking import call_recording_warnings, fork_context, fork_workers, replay_warnings
 from debist.engine.runner import Runner
 from debist.rig.fleet import FleetError
 from debist.rig.fleet_workflows import fleet_workflows
@@ -62,6 +69,64 @@ def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Pat
         finally:
             path.unlink(missing_ok=True)
     return None, run_dir
+
+
+def _check_quietly(text: str, folder: Path, name: str):
+    """:func:`_ingest_problem` in a worker process: no progress reports, warnings recorded."""
+    with progress.listening(None):
+        return call_recording_warnings(lambda: _ingest_problem(text, folder, name))
+
+
+def _checks(
+    draws: Iterable[tuple[str, str]], folder: Path
+) -> Iterator[tuple[str, str, str | None, Path | None]]:
+    """Check the draws in order: name, text, the problem (or None) and the run folder kept.
+
+    With two cores the next draw is rendered and checked in a forked process while this one
+    waits for the current check, so the results arrive in draw order as from a serial loop.
+    A draw checked ahead of need is undone when the caller stops (the generator is closed):
+    its kept run folder is removed. An error of the draws themselves (a member the scatter
+    does not give) is raised only when the caller asks for that draw.
+    """
+    workers = fork_workers(2)
+    if workers == 1:
+        for name, text in draws:
+            yield name, text, *_ingest_problem(text, folder, name)
+        return
+    draws = iter(draws)
+    ahead: deque = deque()
+    error: list[BaseException] = []
+    with ProcessPoolExecutor(workers, mp_context=fork_context()) as pool:
+
+        def draw_ahead() -> None:
+            while not error and len(ahead) < workers:
+                try:
+                    name, text = next(draws)
+                except StopIteration:
+                    return
+                except Exception as exc:  # raised when its turn comes
+                    error.append(exc)
+                    return
+                ahead.append((name, text, pool.submit(_check_quietly, text, folder, name)))
+
+        try:
+            draw_ahead()
+            while ahead:
+                name, text, future = ahead[0]
+                (problem, run_dir), caught = future.result()
+                ahead.popleft()
+                replay_warnings(caught)
+                yield name, text, problem, run_dir
+                draw_ahead()
+            if error:
+                raise error[0]
+        finally:
+            for _, _, future in ahead:  # checked ahead of need, or after a failure
+                if future.cancel():
+                    continue
+                with contextlib.suppress(BaseException):
+                    (_, run_dir), _ = future.result()
+                    remove_runs([run_dir] if run_dir is not None else [])
 
 
 def viable_fleet(
@@ -118,15 +183,15 @@ def viable_fleet(
     rejected: dict[str, str] = {}
     runs: list[Path] = []
     try:
-        for name, text in draws if size > 0 else ():
-            problem, run_dir = _ingest_problem(text, folder, name)
-            runs += [run_dir] if run_dir is not None else []
-            if problem is None:
-                kept[name] = text
-            else:
-                rejected[name.removesuffix(".toml")] = problem
-            if len(kept) == size:
-                break
+        with contextlib.closing(_checks(draws if size > 0 else (), folder)) as checks:
+            for name, text, problem, run_dir in checks:
+                runs += [run_dir] if run_dir is not None else []
+                if problem is None:
+                    kept[name] = text
+                else:
+                    rejected[name.removesuffix(".toml")] = problem
+                if len(kept) == size:
+                    break
         if len(kept) < size:
             raise FleetError(
                 f"only {len(kept)} of {n_draws} drawn prototypes give logs that the template's "

@@ -60,23 +60,35 @@ def test_template_without_rig_is_refused(tmp_path):
 
 
 @pytest.mark.slow
-def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(tmp_path, monkeypatch):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_draws_whose_logs_fail_the_template_ingest_are_skipped_and_named(
+    tmp_path, monkeypatch, workers
+):
+    """Serially, and with the next draw checked in a forked process ahead of need: the same
+    fleet, and a draw checked beyond it leaves no folder."""
     from debist.engine import fleetrun
 
     raw = tomllib.loads(TEMPLATE.read_text())
-    calls = []
+    runs = tmp_path / "runs"
 
-    def problem(text, folder, name):
+    def problem(text, folder, name):  # may run in a forked process: it leaves a folder
         label = name.removesuffix(".toml")
-        calls.append(label)
-        return ("laser at its range limit" if label.endswith("-001") else None), None
+        (runs / label).mkdir(parents=True)
+        (tmp_path / f"checked-{label}").touch()
+        return ("laser at its range limit" if label.endswith("-001") else None), runs / label
 
     monkeypatch.setattr(fleetrun, "_ingest_problem", problem)
-    files, rejected, _ = fleetrun.viable_fleet(raw, TEMPLATE.parent, tmp_path, 3, seed=4)
+    monkeypatch.setattr(fleetrun, "fork_workers", lambda n: min(n, workers))
+    files, rejected, kept_runs = fleetrun.viable_fleet(raw, TEMPLATE.parent, tmp_path, 3, seed=4)
     name = raw["workflow"]["name"]
     assert list(files) == [f"{name}-000.toml", f"{name}-002.toml", f"{name}-003.toml"]
     assert rejected == {f"{name}-001": "laser at its range limit"}
-    assert calls == [f"{name}-00{k}" for k in range(4)]  # stops once the fleet is full
+    assert kept_runs == [runs / f"{name}-00{k}" for k in range(4)]
+    # stops once the fleet is full: a draw checked ahead (-004) is removed again
+    assert sorted(p.name for p in runs.iterdir()) == [f"{name}-00{k}" for k in range(4)]
+    checked = sorted(p.name.removeprefix("checked-") for p in tmp_path.glob("checked-*"))
+    assert checked[:4] == [f"{name}-00{k}" for k in range(4)]
+    assert checked[4:] in ([], [f"{name}-004"] if workers == 2 else [])  # at most one ahead
     # a kept member is the same prototype as in the unchecked fleet
     assert files[f"{name}-002.toml"] == render(tmp_path / "x", n=9, seed=4)[f"{name}-002.toml"]
 
