@@ -90,8 +90,8 @@ def compile_kernels() -> int:
     -----
     The free runs are 20 samples of a linear oscillator; their results are discarded. The
     batch of three records takes the lock-step path wherever fewer than three threads run
-    (:func:`debist.simulate.kernel.free_run`); with more threads it takes the parallel
-    serial path, which a real batch of that size would take as well.
+    (:func:`debist.simulate.kernel.free_run`); with more threads it takes the
+    one-trajectory-per-thread path, which a real batch of that size would take as well.
     """
     model = oscillator()
     v = np.sin(np.linspace(0.0, 2.0, 20))[:, None]
