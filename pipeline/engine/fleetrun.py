@@ -59,8 +59,8 @@ def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Pat
                 wf = load_workflow(path, Path(tmp) / "run")
             else:
                 run_dir = Path(wf.output_dir)
-            stages = [s for s in ("rig", "ingest") if s in Runner(wf).stages()]
-            Runner(wf).run(stages)
+            runner = Runner(wf)
+            runner.run([s for s in ("rig", "ingest") if s in runner.stages()])
         except BaseException as exc:
             remove_runs([run_dir] if run_dir is not None else [])
             if isinstance(exc, DebistError):
@@ -124,7 +124,7 @@ def _checks(
             for _, _, future in ahead:  # checked ahead of need, or after a failure
                 if future.cancel():
                     continue
-                with contextlib.suppress(BaseException):
+                with contextlib.suppress(Exception):  # a failed check removed its own folder
                     (_, run_dir), _ = future.result()
                     remove_runs([run_dir] if run_dir is not None else [])
 
