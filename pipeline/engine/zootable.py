@@ -126,7 +126,8 @@ def _curves(run: Path, member: Path, truth: dict, row: dict) -> None:
     """Each curve's error and band coverage where marked, and g_i near the wells."""
     curves = _parquet(run, "identify", "curves.parquet")
     folder, manifest = _stage(run, "identify")
-    m_q = float(read_summary(folder, manifest).get("m_q", 1.0))
+    summary = read_summary(folder, manifest)
+    m_q = float(summary.get("m_q_curves", summary.get("m_q", 1.0)))  # the curves' mass
     true = read_parquet(member / "truth.parquet")
     q = curves.q.to_numpy()
     for name in CURVES:

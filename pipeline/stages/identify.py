@@ -155,7 +155,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         excitation = replace(excitation, warnings=[note, *excitation.warnings])
     t_fit = time.perf_counter()
     model, diag = fit_rbf_model(records, cfg)
-    mass = None
+    mass, physical = None, model.m_q  # physical: the mass the curves are forces of [kg]
     if cfg.effective_mass:  # the curves on the physical mass's scale; the free run unchanged
         model, diag, mass = effective_mass(model, diag)
         cfg = replace(cfg, m_q=model.m_q)  # the rigid mass, for the refinement
@@ -187,7 +187,6 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance,
         model_error=model_error,
     )  # fmt: skip
-    physical = model.m_q * mass.ratio if mass is not None and mass.applied else None
     design = design_numbers(model, records, physics, physical)
     design["static"], static = static_frame(
         model, diag, records, held_levels(records), min_support=cfg.min_support,
@@ -202,6 +201,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     summary = {
         "T_z": model.T_z,
         "m_q": model.m_q,
+        "m_q_curves": physical,  # the curves' mass: m_q, or m_q lambda with the scale
         "q_range": list(model.q_range),  # Eq. 39's range; narrower than the data's where
         "q_data_range": [float(q_data.min()), float(q_data.max())],  # the ends lack support
         "condition": diag.condition,
@@ -243,7 +243,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "static": static,
         },
         "constraints": list(cfg.constraints),
-        "units": _units(tables, cfg),
+        "units": _units(tables, cfg.input_map, physical),
     }
     if search is not None:
         summary["auto"] = search.to_summary()
@@ -295,14 +295,14 @@ def _excitation(records, cfg: IdentifyConfig, tables):
     )  # fmt: skip
 
 
-def _units(tables, cfg: IdentifyConfig) -> dict[str, Any]:
-    """Units of q and the inputs (SI), the input map and whether ``m_q = 1`` (per unit mass)."""
+def _units(tables, input_map: str, m_q_curves: float) -> dict[str, Any]:
+    """Units of q and the inputs (SI), the input map and whether the curves are per unit mass."""
     attrs = next(iter(tables.values())).attrs.get("units", {})
     units = {k: v for k, v in attrs.items() if k == "q" or (k[:1] == "v" and k[1:].isdigit())}
     return {
         **{"q": "m", **units},
-        "input_map": cfg.input_map,
-        "per_unit_mass": cfg.m_q == 1.0,
+        "input_map": input_map,
+        "per_unit_mass": m_q_curves == 1.0,
     }
 
 
@@ -362,7 +362,11 @@ def execute(ctx: StageInputs) -> StageOutput:
     if res.equation_error_model is not None and res.equation_error_model is not res.model:
         tree["equation_error"] = res.equation_error_model.to_tree()["model"]
     physics = ctx.physics()
-    analytical = analytical_curves(physics, res.model) if physics is not None else None
+    analytical = (
+        analytical_curves(physics, res.model, res.summary["m_q_curves"])
+        if physics is not None
+        else None
+    )
     unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
     figure = Figure(
         curves_figure(res.curves, analytical, unit, summary_units(res.summary)), REPORT_DPI
@@ -375,7 +379,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     return StageOutput(outputs, res.summary, res.timings)
 
 
-def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
+def analytical_curves(physics, model: RBFModel, mass: float | None = None) -> pd.DataFrame:
     """Tabulate the analytical model's curves in the identified model's units, for Fig. 14.
 
     Parameters
@@ -384,13 +388,16 @@ def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
         The ``[physics]`` prototype.
     model : RBFModel
         The identified model (its ``q_range`` and ``m_q``).
+    mass : float, optional
+        The mass the identified curves are forces of [kg] (the summary's ``m_q_curves``:
+        ``m_q lambda`` under the effective-mass scale); default ``model.m_q``.
 
     Returns
     -------
     pandas.DataFrame
         ``q`` [m], ``restoring`` (``f(q)`` at ``v = 0``), ``d``, ``g1``, ``g2``, times
-        ``m_q / m_q,phys(0)``: the identified curves are per the model's ``m_q``
-        (``m_q = 1`` identifies them per unit mass), the analytical ones per its mass.
+        ``mass / m_q,phys(0)``: the identified curves are per that mass (``m_q = 1``
+        identifies them per unit mass), the analytical ones per the prototype's.
 
     References
     ----------
@@ -398,6 +405,6 @@ def analytical_curves(physics, model: RBFModel) -> pd.DataFrame:
     """
     grid = np.linspace(model.q_range[0], model.q_range[1], 201)
     cur = reduced_curves(physics, grid)
-    scale = model.m_q / float(np.interp(0.0, grid, cur.m_q))
+    scale = (model.m_q if mass is None else mass) / float(np.interp(0.0, grid, cur.m_q))
     frame = {"q": grid, "restoring": cur.f, "d": cur.d, "g1": cur.g1, "g2": cur.g2}
     return pd.DataFrame({k: (v if k == "q" else scale * v) for k, v in frame.items()})

@@ -166,3 +166,18 @@ def test_the_analytical_rows_keep_the_physical_scale_under_the_effective_mass_sc
     inflated = analytical(design_numbers(rigid, [rec], P))  # without it: forces x 1.25
     wells = ~np.isnan(base[:, 2])
     np.testing.assert_allclose(inflated[wells, 1], 1.25 * base[wells, 1], rtol=1e-9)
+
+
+def test_the_figure_curves_keep_the_physical_scale_under_the_effective_mass_scale():
+    """Fig. 14's analytical curves are per the mass the identified curves refer to (the
+    summary's ``m_q_curves``), not per the rescaled model's rigid mass."""
+    from debist.stages.identify import analytical_curves
+
+    P = PrototypeParams.paper()
+    model = dataclasses.replace(double_well(), m_q=0.0402)
+    rigid = model.scaled(1.25)
+    base = analytical_curves(P, model)
+    kept = analytical_curves(P, rigid, mass=rigid.m_q / 1.25)
+    np.testing.assert_allclose(kept.to_numpy(), base.to_numpy(), rtol=1e-12)
+    inflated = analytical_curves(P, rigid)
+    np.testing.assert_allclose(inflated.g1, 1.25 * base.g1, rtol=1e-12)
