@@ -133,9 +133,10 @@ class IdentifyConfig(SectionConfig):
     """Window [s] of the local RMS that weights a second least squares; none: ordinary least
     squares (the paper).
     """
-    effective_mass: bool = False
+    effective_mass: bool | None = None
     """Rescale the model so that its effective mass at the wells is m_q
-    (:mod:`debist.identify.mass`); false: the curves as fitted (the paper).
+    (:mod:`debist.identify.mass`); false: the curves as fitted (the paper); unset: true unless
+    ``m_q = "identify"``.
     """
     q_range: Interval | None = None
     """Operating range of Eq. 39 [unit of q]; default the estimation data range."""
@@ -208,6 +209,8 @@ class IdentifyConfig(SectionConfig):
         if bounds is not None and not bounds[0] < bounds[1]:
             raise ConfigValueError("creep_bounds", "[lo, hi] [1/s] with 0 < lo < hi", list(bounds))
         gains = {"input_gain", "physics_gain"} & set(self.backbone)
+        if self.effective_mass is None:  # the default: the curves on the physical mass's scale
+            object.__setattr__(self, "effective_mass", self.m_q != "identify")
         if self.m_q == "identify" and self.effective_mass:
             raise ConfigValueError(
                 "effective_mass",

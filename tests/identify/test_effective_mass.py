@@ -6,6 +6,7 @@ k* = -2 k1 and omega_n^2 = k*/m_q, lambda = 1 - d_v T_z / ((1 + (omega_n T_z)^2)
 """
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from debist.core.errors import WorkflowError
@@ -13,7 +14,8 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import FitDiagnostics
 from debist.identify.mass import effective_mass, effective_mass_ratio
 from debist.simulate.freerun import simulate
-from tests.conftest import K1, M_Q, D, double_well
+from debist.stages.identify import run_identify
+from tests.conftest import K1, M_Q, D, bistable_truth, double_well
 
 
 def _diagnostics(p: int) -> FitDiagnostics:
@@ -74,6 +76,45 @@ def test_a_lag_heavier_than_the_mass_is_not_applied():
     model = double_well(d_v=50 * D)  # d T_z far above m_q: lambda < 0
     out, _, info = effective_mass(model, _diagnostics(3))
     assert out is model and not info.applied and info.ratio < 0 and "(0, 1]" in info.reason
+
+
+def test_the_scale_is_the_default_unless_the_mass_is_identified():
+    assert IdentifyConfig.from_dict({}).effective_mass is True
+    assert IdentifyConfig.from_dict({"effective_mass": False}).effective_mass is False
+    identified = {"m_q": "identify", "input_gain": [1.0], "rbf": ["c", "d"]}
+    assert IdentifyConfig.from_dict(identified).effective_mass is False
+
+
+def test_by_default_the_stage_gives_the_curves_of_the_physical_mass(bistable_record):
+    """A lag the plant lacks (T_z = 0.02 s on data with z = q_dot, m_q = 1) lowers the fitted
+    curves by lambda: with the default scale they are per the configured m_q (the summary's
+    ``m_q_curves``, still per unit mass) and nearer the truth than as fitted."""
+    r = bistable_record
+    frame = pd.DataFrame({"t": r["t"], "q": r["q"], "v1": r["v"][:, 0], "v2": r["v"][:, 1]})
+    frame.attrs.update(role="estimation", units={"q": "m", "t": "s", "v1": "V", "v2": "V"})
+    deriv = pd.DataFrame({"q_dot": r["q_dot"], "q_ddot": r["q_ddot"]})
+    deriv.attrs["dt"] = r["dt"]
+    section = {"M": 6, "T_z": 0.02, "slip": False, "bootstrap": 0, "max_condition": 1e10}
+    scaled = run_identify({"sim": frame}, {"sim": deriv}, section)
+    plain = run_identify({"sim": frame}, {"sim": deriv}, {**section, "effective_mass": False})
+    info = scaled.summary["effective_mass"]
+    assert info["applied"] and 0.9 < info["ratio"] < 0.97
+    assert scaled.summary["m_q_curves"] == 1.0 and plain.summary["m_q_curves"] == 1.0
+    assert scaled.summary["m_q"] == pytest.approx(1.0 / info["ratio"], rel=1e-12)
+    assert scaled.summary["units"]["per_unit_mass"] and "effective_mass" not in plain.summary
+    q = scaled.curves.q.to_numpy()
+    truth = bistable_truth(q)
+    for name, true in (("restoring", truth["c"] * q), ("g2", truth["g2"])):
+        np.testing.assert_allclose(
+            scaled.curves[name], plain.curves[name] / info["ratio"], rtol=1e-9, atol=0
+        )
+        error = [
+            np.max(np.abs(c[name] - true)) / np.ptp(true) for c in (scaled.curves, plain.curves)
+        ]
+        assert error[0] < 0.7 * error[1], (name, error)
+    restoring = [np.max(np.abs(c.restoring - truth["c"] * q)) / np.ptp(truth["c"] * q)
+                 for c in (scaled.curves, plain.curves)]  # fmt: skip
+    assert restoring[0] < 0.02 < 0.03 < restoring[1]
 
 
 def test_an_identified_mass_is_refused():
