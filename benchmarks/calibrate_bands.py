@@ -32,6 +32,11 @@ Run from the repository root (about 2-4 minutes per fleet of 10 on 2 cores)::
 
     python benchmarks/calibrate_bands.py --size 10 --seed 1 --workers 2 --dir /tmp/cal
 
+``--plants zoo`` scores a plant zoo instead (``debist zoo``: members of other plants,
+friction laws, sensors and excitations, each with its minimal workflow) against the truth it
+wrote per unit mass (``truth.parquet``: the restoring force and g_i; the zoo has no d), the
+identified curves divided by the mass they refer to (the identify summary's ``m_q_curves``).
+
 It prints a Markdown table per plant and writes ``<dir>/calibration.json``. ``--add-backbone``
 adds terms to every member's backbone and ``--set KEY=VALUE`` sets any other ``[identify]`` key
 (e.g. ``--set weights_window=0.5``), so a setting's model error is calibrated on the fleets it
@@ -91,6 +96,47 @@ def _rig_config(wf: Path):
 
     raw = tomllib.loads(wf.read_text())
     return RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
+
+
+def _zoo_rows(member: Path) -> list[dict]:
+    """A zoo member's restoring force and g_i against its truth per unit mass."""
+    run = member / "run"
+    curves = pd.read_parquet(run / "identify" / "curves.parquet")
+    summary = json.loads((run / "identify" / "summary.json").read_text())
+    mass = float(summary.get("m_q_curves", summary["m_q"]))
+    truth = pd.read_parquet(member / "truth.parquet")
+    q = curves.q.to_numpy()
+    inside = (q >= truth.q.iloc[0]) & (q <= truth.q.iloc[-1])
+    rows = []
+    for name in ("restoring", "g1", "g2"):
+        true = np.interp(q, truth.q, truth[name])
+        est, lo, hi = (curves[c].to_numpy() / mass for c in (name, f"{name}_lo", f"{name}_hi"))
+        marked = curves[f"{name}_identified"].to_numpy() & inside
+        rows.append(_score(name, true, est, lo, hi, marked))
+    return rows
+
+
+def calibrate_zoo(
+    size: int, seed: int, workers: int, folder: Path, model_error: bool = True,
+    settings: dict | None = None,
+) -> dict:  # fmt: skip
+    """Run a plant zoo (``debist zoo``, then ``debist batch``) and score it like a fleet."""
+    zoo = folder / f"zoo-{seed}"
+    if not (zoo / "zoo.json").exists():
+        _debist("zoo", "--size", str(size), "--seed", str(seed), "--dir", str(zoo))
+    members = [(wf, wf.parent / "run") for wf in sorted(zoo.glob("m*/workflow.toml"))]
+    _set_members(members, model_error, (), settings)
+    _debist("-q", "batch", str(zoo), "--workers", str(workers))
+    rows, nrmse = [], []
+    for wf, run in members:
+        if not (run / "identify" / "curves.parquet").exists():
+            nrmse.append({"member": wf.parent.name, "model": "rbf", "nrmse_q": np.nan})
+            continue
+        rows += [{"member": wf.parent.name, **r} for r in _zoo_rows(wf.parent)]
+        table = pd.read_parquet(run / "compare" / "nrmse.parquet")
+        for _, r in table[table.role == "validation"].iterrows():
+            nrmse.append({"member": wf.parent.name, "model": r.model, "nrmse_q": r.nrmse_q})
+    return _summarise("zoo", size, seed, rows, nrmse, [], [])
 
 
 def _curve_rows(config, run: Path, plant: str, curves: pd.DataFrame, rig: dict) -> list[dict]:
@@ -298,12 +344,17 @@ def _set_members(
     ``rig.experiments.identification.ramps``)."""
     import tomli_w
 
+    from debist.identify.config import IdentifyConfig
+
+    default = list(IdentifyConfig.from_dict({}).backbone)
     for wf, _ in members:
         text = wf.read_text()
         before, raw = tomllib.loads(text), tomllib.loads(text)
         section = raw.setdefault("identify", {})
-        terms = list(section.get("backbone", []))
-        section.update(model_error=on, backbone=terms + [t for t in backbone if t not in terms])
+        section["model_error"] = on
+        if backbone:  # a workflow without the key has the default backbone
+            terms = list(section.get("backbone", default))
+            section["backbone"] = terms + [t for t in backbone if t not in terms]
         for key, value in (settings or {}).items():
             *path, last = key.split(".") if "." in key else ("identify", key)
             table = raw
@@ -354,6 +405,11 @@ def calibrate(
         table = pd.read_parquet(run / "compare" / "nrmse.parquet")
         for _, r in table[table.role == "validation"].iterrows():
             nrmse.append({"member": wf.stem, "model": r.model, "nrmse_q": r.nrmse_q, **_spread(r)})
+    return _summarise(plant, size, seed, rows, nrmse, visited, held)
+
+
+def _summarise(plant, size, seed, rows, nrmse, visited, held) -> dict:
+    """The per-curve summary, the pooled lacking half-widths and the rows of one calibration."""
     scores = pd.DataFrame(rows)
     lacking = scores.pop("lacking")
     summary = (
@@ -503,7 +559,7 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--dir", type=Path, required=True)
-    p.add_argument("--plants", default="full,reduced")
+    p.add_argument("--plants", default="full,reduced", help="full, reduced and/or zoo")
     p.add_argument(
         "--add-backbone", default="",
         help="comma-separated backbone terms added to every member (e.g. physics_creep)",
@@ -526,7 +582,9 @@ def main() -> None:
     on = args.model_error == "on"
     extra = tuple(t for t in args.add_backbone.split(",") if t)
     results = [
-        calibrate(plant, args.size, args.seed, args.workers, args.dir, on, extra, settings)
+        calibrate_zoo(args.size, args.seed, args.workers, args.dir, on, settings)
+        if plant == "zoo"
+        else calibrate(plant, args.size, args.seed, args.workers, args.dir, on, extra, settings)
         for plant in args.plants.split(",")
     ]
     for r in results:
