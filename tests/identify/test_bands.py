@@ -356,7 +356,7 @@ def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
     """Backbone ``physics_creep`` and ``effective_mass`` each have their own calibration (fleets
     of both plants run with them) and label. The effective-mass scale takes the lagged damping's
     apparent mass out of the curves: every curve's model error is at most the as-fitted one,
-    and g_i's (of its local magnitude) falls from 0.55-0.58 to 0.21-0.32."""
+    and g_i's (of its local magnitude) falls from 0.55-0.58 to 0.32-0.44."""
     from debist.identify.bands import (
         MEASURED_COVERAGE_AS_FITTED,
         MEASURED_COVERAGE_CREEP,
@@ -379,7 +379,7 @@ def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
                            (MODEL_ERROR_CREEP, MODEL_ERROR_CREEP_AS_FITTED)):  # fmt: skip
         assert set(scaled) == set(fitted) == {"restoring", "d", "g", "F"}
         assert all(scaled[k] <= fitted[k] for k in fitted)
-        assert scaled["g"] <= 0.32 < 0.55 <= fitted["g"]
+        assert scaled["g"] <= 0.44 < 0.55 <= fitted["g"]
     assert STIFFNESS_ERROR < 0.5 * STIFFNESS_ERROR_AS_FITTED
     assert f"at {MEASURED_COVERAGE_CREEP} there" in band_label(True, creep=True)
     assert f"at {MEASURED_COVERAGE_AS_FITTED} there" in band_label(True, effective_mass=False)
