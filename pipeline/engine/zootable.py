@@ -7,7 +7,8 @@ each member's truth and its run's checked artifacts and gives one row per member
   the mean over the unseen records and the worst one (``inf`` where a free run diverged or
   the model is unstable; ``*_status`` says which),
   whether a free run rests in the wrong well for 0.5 s or more on an unseen record
-  (``*_lost_switch``), the NARX structure (terms, lags, degree);
+  (``*_lost_switch``), whether an unseen record applies an input where the estimation
+  record never did (``unseen_extrapolated``), the NARX structure (terms, lags, degree);
 - the measurement floor [%]: the logged q against the true q (noise, quantisation, block
   averaging, sensor lag), on the estimation and the unseen records;
 - per curve (``restoring``, ``g1``, ``g2``, per unit mass) the largest error where marked
@@ -36,6 +37,7 @@ from debist.core.artifacts import checked_output, read_manifest, read_summary
 from debist.core.errors import ArtifactError
 from debist.core.fileformats import read_parquet, write_output
 from debist.engine.zooindex import ZooError, read_zoo
+from debist.report.zoo import FLAGS
 from debist.rig.truthscore import curve_score, lost_switch, marked_near
 
 __all__ = [
@@ -88,6 +90,10 @@ def _free_runs(run: Path, truth: dict, row: dict) -> None:
     for model, stage, column in (("rbf", "validate", "q_sim"), ("narx", "compare", "q_sim_narx"),
                                  ("sindy", "compare", "q_sim")):  # fmt: skip
         row[f"{model}_lost_switch"] = _lost(run, stage, column, unseen, truth)
+    beyond = table.loc[(table.model == "rbf") & table.dataset.isin(unseen)]
+    row["unseen_extrapolated"] = bool(
+        "extrapolated" in beyond and (beyond.extrapolated.fillna("").astype(str) != "").any()
+    )
     narx = summary.get("narx") or {}
     row["narx_terms"] = narx.get("n_params", np.nan)
     row["narx_lag"] = narx.get("lag", np.nan)
@@ -219,7 +225,7 @@ def zoo_summary(table: Any) -> Any:
     out = {}
     for column in table.columns:
         values = table[column]
-        if values.dtype == bool or column.endswith(("_lost_switch", "_near_wells")):
+        if values.dtype == bool or column.endswith(FLAGS):
             flags = values.dropna().astype(bool)
             out[column] = {"median": np.nan, "worst": float(flags.sum()), "count": len(flags)}
         elif pd.api.types.is_numeric_dtype(values.dtype):

@@ -459,7 +459,8 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ----------
     row : dict
         A row of ``nrmse.parquet`` (``nrmse_q``, ``nrmse_q_baseline``, ``status``,
-        ``reason``, ``diverged``, ``model``, ``dataset``, ``under_excited``).
+        ``reason``, ``diverged``, ``model``, ``dataset``, ``under_excited``,
+        ``extrapolated``).
     rows : list of dict, optional
         The whole table: a row is also called worse than another model whose free run of
         the same data set has a lower NRMSE(q).
@@ -471,7 +472,10 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
         ``"fragile: ..."`` (more than 2.5 % of the bootstrap replicates lose the motion),
         ``"worse than <model> (x %)"``, or ``"ok"``; the last three may combine. A row with
-        ``under_excited`` starts with ``"under-excited: <why>"``, which replaces ``"ok"``.
+        ``under_excited`` starts with ``"under-excited: <why>"``, one with ``extrapolated``
+        (an input applied where the estimation never applied it,
+        :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``;
+        either replaces ``"ok"``.
 
     Examples
     --------
@@ -490,12 +494,22 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
     ...          "under_excited": "one spectral line at 2 Hz in 'a'"})
     "under-excited: one spectral line at 2 Hz in 'a'"
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
+    ...          "extrapolated": "v2 applied at q = 3 to 9 mm (40 samples), where ..."})
+    'extrapolated: v2 applied at q = 3 to 9 mm (40 samples), where ...'
     """
     words = _verdict(row, rows)
-    thin = row.get("under_excited")
-    if not isinstance(thin, str) or not thin:
+    caveats = [
+        f"{label}: {text}"
+        for label, text in (
+            ("under-excited", row.get("under_excited")),
+            ("extrapolated", row.get("extrapolated")),
+        )
+        if isinstance(text, str) and text
+    ]
+    if not caveats:
         return words
-    return f"under-excited: {thin}" + ("" if words == "ok" else f"; {words}")
+    return "; ".join(caveats) + ("" if words == "ok" else f"; {words}")
 
 
 def _verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None) -> str:

@@ -22,6 +22,8 @@ import jinja2
 
 __all__ = ["COLUMNS", "render_zoo"]
 
+#: Endings of the zoo table's yes/no columns (counted, not averaged, in the summary).
+FLAGS = ("_lost_switch", "_near_wells", "_extrapolated")
 #: Columns shown on the page: (column, heading); the table holds more.
 COLUMNS = (
     ("member", "member"),
@@ -33,6 +35,7 @@ COLUMNS = (
     ("rbf_unseen", "RBF %"),
     ("rbf_unseen_max", "RBF worst %"),
     ("rbf_lost_switch", "RBF lost switch"),
+    ("unseen_extrapolated", "unseen input beyond estimation's"),
     ("narx_unseen", "NARX %"),
     ("narx_terms", "NARX terms"),
     ("narx_lag", "NARX lags"),
@@ -93,7 +96,7 @@ _TEXT = {"member", "plant", "friction", "estimation_profile", "status"}
 
 def _cell(column: str, value: Any) -> str:
     """Format one cell: percent numbers to two decimals, inf as diverged, NaN as not marked."""
-    if isinstance(value, bool) or column.endswith(("_lost_switch", "_near_wells")):
+    if isinstance(value, bool) or column.endswith(FLAGS):
         return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) \
             else ("yes" if value else "no")  # fmt: skip
     if isinstance(value, float):
@@ -132,14 +135,14 @@ def render_zoo(table: Any, summary: Any, attrs: Mapping[str, Any]) -> str:
         cells = []
         for c, _ in summary_cols:
             value = summary.loc[label, c]
-            if c.endswith(("_lost_switch", "_near_wells")):
+            if c.endswith(FLAGS):
                 count = int(summary.loc["count", c])
                 cells.append(f"{int(value)} of {count}" if label == "worst" else "")
             else:
                 cells.append(_cell(c, float(value)))
         summary_rows.append((label, cells))
     summary_rows.append(("no free run", [
-        "" if c.endswith(("_lost_switch", "_near_wells"))
+        "" if c.endswith(FLAGS)
         else f"{int(summary.loc['no_free_run', c])} of {int(summary.loc['count', c])}"
         for c, _ in summary_cols]))  # fmt: skip
     seed = attrs.get("zoo", {}).get("seed", "?")

@@ -237,7 +237,14 @@ def execute(ctx: StageInputs) -> StageOutput:
         if "under_excited" in validated and len(validated)
         else ""
     )
-    table = with_verdicts(res.table.assign(under_excited=thin))
+    # and which data sets ask for an input where the estimation never applied it
+    beyond = (
+        dict(zip(validated.dataset, validated.extrapolated, strict=True))
+        if "extrapolated" in validated
+        else {}
+    )
+    table = res.table.assign(under_excited=thin, extrapolated=res.table.dataset.map(beyond))
+    table = with_verdicts(table.assign(extrapolated=table.extrapolated.fillna("")))
     outputs: dict[str, Any] = {
         "sindy.h5": H5Tree(res.model.to_tree()),
         "nrmse.parquet": table,

@@ -10,6 +10,8 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.progress import Stopwatch
+from debist.core.tables import input_columns
+from debist.identify.driven import beyond_driven, driven_ranges
 from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
@@ -25,6 +27,7 @@ from debist.validate.freerun import (
     default_q_limit,
     mark_unstable,
     replicate_spread,
+    report_factor,
     validate_model,
 )
 from debist.validate.prediction import prediction_table
@@ -223,6 +226,43 @@ def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
     return q, q_dot
 
 
+def extrapolation(tables, margin: float) -> dict[str, str]:
+    """Per data set, where it applies an input beyond the estimation's driven range, or ``""``.
+
+    Parameters
+    ----------
+    tables : mapping of str to pandas.DataFrame
+        Canonical tables (``q``, ``v1..vN``; ``attrs['role']``, ``attrs['units']``).
+    margin : float
+        One RBF width: positions this close to the driven range count as informed [unit of q].
+
+    Returns
+    -------
+    dict of str to str
+        :func:`debist.identify.driven.beyond_driven` of every data set (q in mm when q is in
+        m); ``""`` for the estimation data sets and when there are none.
+    """
+    est = [t for t in tables.values() if t.attrs.get("role") == "estimation"]
+    if not est:
+        return {name: "" for name in tables}
+    ranges = driven_ranges(
+        np.concatenate([t["q"].to_numpy() for t in est]),
+        np.vstack([t[input_columns(t)].to_numpy() for t in est]),
+    )
+    out = {}
+    for name, t in tables.items():
+        unit = t.attrs.get("units", {}).get("q", "m")
+        factor, shown = report_factor(unit, "mm" if unit == "m" else None)
+        out[name] = (
+            ""
+            if t.attrs.get("role") == "estimation"
+            else beyond_driven(
+                ranges, t["q"].to_numpy(), t[input_columns(t)].to_numpy(), margin, factor, shown
+            )
+        )
+    return out
+
+
 def execute(ctx: StageInputs) -> StageOutput:
     """Run the validate stage: the identified model (and its equation-error fit) in free run.
 
@@ -259,7 +299,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     watch.lap("read inputs")
     res = run_validate(model, tables, derivs, section, baseline, ctx.physics(), replicates)
     watch.restart()  # its own parts are in res.timings
-    table = with_verdicts(res.table.assign(under_excited=thin))
+    beyond = extrapolation(tables, model.basis.sigma)
+    table = res.table.assign(under_excited=thin, extrapolated=res.table.dataset.map(beyond))
+    table = with_verdicts(table)
     outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:
         outputs["residuals.parquet"] = res.residuals

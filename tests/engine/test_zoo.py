@@ -141,6 +141,8 @@ def test_batch_over_a_zoo_writes_the_zoo_table(zoo):
         if row[f"{curve}_marked"]:
             assert 0 <= row[f"{curve}_coverage"] <= 100 and row[f"{curve}_max_error"] >= 0
     assert summary.loc["median", "floor_unseen"] == pytest.approx(row.floor_unseen)
+    assert isinstance(row.unseen_extrapolated, bool | np.bool_)  # counted, not averaged:
+    assert summary.loc["worst", "unseen_extrapolated"] == float(row.unseen_extrapolated)
     html = page.read_text()
     assert "Content-Security-Policy" in html and "<script" not in html
     assert pd.read_parquet(table_path).member.tolist() == ["m000"]

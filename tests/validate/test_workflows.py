@@ -44,6 +44,14 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
     assert again.count("up to date, skipping") == out.count("done") == 7  # report included
     both = pd.read_parquet(tmp_path / "compare/nrmse.parquet")
     assert set(both.model) == {"narx", "rbf", "rbf-ls", "sindy"}
+    # the protocol's own split: the arrow's full record leaves the amplitude range of the
+    # estimation input (its first 32000 samples do not): said on every model's row
+    beyond = both.groupby("dataset").extrapolated.agg(lambda x: set(x))
+    assert beyond["test_arrow_no_extrapolation"] == beyond["test_multisine"] == {""}
+    (words,) = beyond["test_arrow_full"]
+    assert words.startswith("v1 applied at q = -0.3 to -0.25 V (7 samples) and 0.25 to 0.28 V")
+    assert words.endswith("where the estimation applied it only at -0.21 to 0.22 V")
+    assert (both[both.dataset == "test_arrow_full"].verdict.str.startswith("extrapolated:")).all()
 
 
 @pytest.mark.slow

@@ -1,0 +1,139 @@
+"""Where the estimation data applied each input, and a record that applies it elsewhere.
+
+A gain ``g_i(q)`` of Eq. 37 is informed only by samples at which ``v_i`` drives the beam
+(:func:`debist.identify.excitation.input_active`), within about one RBF width of them: a
+record that applies ``v_i`` at positions the estimation never did asks every model for a
+force it was never shown, and its free run there is an extrapolation, however good or bad
+it turns out. :func:`driven_ranges` gives the estimation's range per input and
+:func:`beyond_driven` words what a record does outside it, for the ``extrapolated`` column of
+the NRMSE tables (:func:`debist.report.tables.verdict`).
+
+References
+----------
+Masoud & Maas 2025, Eq. 37-40; L. Ljung, System Identification: Theory for the User, 2nd ed.,
+Prentice Hall 1999, Sec. 16.6 (a model is validated only for the conditions of the data it
+was estimated on).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from debist.identify.excitation import input_active
+
+__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges"]
+
+#: Fewest samples outside the driven range that make a record an extrapolation (as the
+#: default ``min_support`` of the RBF centres).
+MIN_SAMPLES = 10
+
+
+def driven_ranges(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Find the range of q over which the estimation data apply each input.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Estimation positions, records concatenated [unit of q].
+    v : ndarray, shape (n, n_inputs)
+        Their inputs [V].
+
+    Returns
+    -------
+    ndarray, shape (n_inputs, 2)
+        Smallest and largest q at which input i is active; NaN for an input never applied.
+
+    Raises
+    ------
+    ValueError
+        If ``q`` and ``v`` differ in length.
+
+    Examples
+    --------
+    >>> q = np.array([-0.01, -0.009, 0.0, 0.009, 0.01])
+    >>> v = np.array([[0.0, 900.0], [0.0, 3000.0], [0.0, 0.0], [3000.0, 0.0], [900.0, 0.0]])
+    >>> driven_ranges(q, v).tolist()
+    [[0.009, 0.01], [-0.01, -0.009]]
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    if v.shape[0] != q.size:
+        raise ValueError(f"q has {q.size} samples, v {v.shape[0]}")
+    v = v if v.ndim == 2 else v.reshape(q.size, 1)
+    active = input_active(v) if q.size else np.zeros(v.shape, dtype=bool)
+    out = np.full((v.shape[1], 2), np.nan)
+    for j in range(v.shape[1]):
+        if active[:, j].any():
+            out[j] = q[active[:, j]].min(), q[active[:, j]].max()
+    return out
+
+
+def beyond_driven(
+    ranges: np.ndarray,
+    q: np.ndarray,
+    v: np.ndarray,
+    margin: float,
+    scale: float = 1.0,
+    unit: str = "m",
+    min_samples: int = MIN_SAMPLES,
+) -> str:
+    """Say where a record applies an input outside the estimation's driven range, or ``""``.
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (n_inputs, 2)
+        :func:`driven_ranges` of the estimation data [unit of q].
+    q : ndarray, shape (n,)
+        The record's positions [unit of q].
+    v : ndarray, shape (n, n_inputs)
+        The record's inputs [V].
+    margin : float
+        Distance beyond the range still taken as informed (one RBF width) [unit of q].
+    scale, unit : float, str
+        Display factor and unit of q in the words (e.g. ``1e3, "mm"``).
+    min_samples : int
+        Fewest active samples outside the range that count.
+
+    Returns
+    -------
+    str
+        Per input, e.g. ``"v2 applied at q = -23 to -16 mm (40 samples) and 1.2 to 8.9 mm
+        (1199 samples), where the estimation applied it only at -14 to -8.1 mm"`` (each side
+        of the range apart, inputs joined by ``"; "``); ``""`` when fewer than
+        ``min_samples`` active samples of every input lie outside its range.
+
+    Examples
+    --------
+    >>> ranges = np.array([[0.0, 0.01], [-0.01, 0.0]])
+    >>> q = np.linspace(-0.01, 0.01, 41)
+    >>> v = np.column_stack([np.where(q < 0, 3000.0, 0.0), np.zeros(41)])
+    >>> words = beyond_driven(ranges, q, v, margin=0.002, scale=1e3, unit="mm")
+    >>> for part in words.split(", "):
+    ...     print(part)
+    v1 applied at q = -10 to -2.5 mm (16 samples)
+    where the estimation applied it only at 0 to 10 mm
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float).reshape(q.size, -1)
+    if q.size == 0:
+        return ""
+    active = input_active(v)
+    words = []
+    for j in range(v.shape[1]):
+        lo, hi = ranges[j]
+        on = q[active[:, j]]
+        sides = [on] if np.isnan(lo) else [on[on < lo - margin], on[on > hi + margin]]
+        if sum(side.size for side in sides) < min_samples:
+            continue
+        spans = " and ".join(
+            f"{scale * side.min():.2g} to {scale * side.max():.2g} {unit} ({side.size} samples)"
+            for side in sides
+            if side.size
+        )
+        where = (
+            "the estimation never applied it"
+            if np.isnan(lo)
+            else f"the estimation applied it only at {scale * lo:.2g} to {scale * hi:.2g} {unit}"
+        )
+        words.append(f"v{j + 1} applied at q = {spans}, where {where}")
+    return "; ".join(words)

@@ -1,0 +1,86 @@
+"""Where the estimation applied each input, and records that apply one elsewhere."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from debist.identify.driven import beyond_driven, driven_ranges
+from debist.report.tables import verdict
+from debist.stages.validate import extrapolation
+
+
+def _levels(n, on, rng):
+    """Input levels [V]: 3 kV where ``on``, the driver's noise (2 V RMS) elsewhere."""
+    return np.where(on, 3000.0, 0.0) + 2.0 * rng.standard_normal(n)
+
+
+def test_the_driven_range_is_where_the_input_is_active_and_nan_where_never():
+    rng = np.random.default_rng(5)
+    q = np.linspace(-0.012, 0.012, 241)
+    v = np.column_stack([_levels(241, q > 0.004, rng), np.zeros(241)])  # v2 never applied
+    ranges = driven_ranges(q, v)
+    np.testing.assert_allclose(ranges[0], [q[q > 0.004].min(), 0.012])
+    assert np.isnan(ranges[1]).all()
+    with pytest.raises(ValueError, match="241 samples, v 240"):
+        driven_ranges(q, v[:-1])
+
+
+def test_a_record_beyond_the_range_is_worded_per_side_and_counted():
+    """Driven at [-10, -8] mm, margin 1 mm: a record with v2 on over [-12, 9] mm on a 0.1 mm
+    grid has 10 samples below -11 mm and 160 above -7 mm, each side worded apart."""
+    rng = np.random.default_rng(6)
+    ranges = np.array([[-0.012, 0.012], [-0.010, -0.008]])
+    q = np.round(np.arange(-0.012, 0.0090001, 1e-4), 10)
+    v = np.column_stack([_levels(q.size, q < 0, rng), _levels(q.size, np.ones(q.size, bool), rng)])
+    words = beyond_driven(ranges, q, v, margin=0.001, scale=1e3, unit="mm")
+    below = int(np.sum(q < -0.011))
+    above = int(np.sum(q > -0.007))
+    assert words == (
+        f"v2 applied at q = -12 to -11 mm ({below} samples) and -6.9 to 9 mm ({above} samples), "
+        "where the estimation applied it only at -10 to -8 mm"
+    )
+    assert below == 10 and above == 160  # (-12.0..-11.1 mm) and (-6.9..9.0 mm)
+
+
+def test_within_the_margin_or_below_the_count_nothing_is_said_and_never_applied_is():
+    rng = np.random.default_rng(7)
+    ranges = np.array([[-0.01, 0.0], [np.nan, np.nan]])
+    q = np.linspace(-0.0105, 0.0005, 100)  # at most 0.5 mm beyond: inside a 1 mm margin
+    v = np.column_stack([_levels(100, np.ones(100, bool), rng), np.zeros(100)])
+    assert beyond_driven(ranges, q, v, margin=0.001) == ""
+    q9 = np.linspace(0.002, 0.003, 9)  # nine samples beyond: fewer than MIN_SAMPLES
+    v9 = np.column_stack([np.full(9, 3000.0), np.zeros(9)])
+    v9 = np.vstack([v9, np.zeros((20, 2))])
+    q9 = np.concatenate([q9, np.zeros(20)])
+    assert beyond_driven(ranges, q9, v9, margin=0.001) == ""
+    v2 = np.column_stack([np.zeros(100), _levels(100, q > -0.005, rng)])
+    assert beyond_driven(ranges, q, v2, margin=0.001, scale=1e3, unit="mm").endswith(
+        "where the estimation never applied it"
+    )
+
+
+def _table(role, q, v):
+    frame = pd.DataFrame({"t": np.arange(q.size) * 1e-3, "q": q, "v1": v[:, 0], "v2": v[:, 1]})
+    frame.attrs.update(role=role, units={"t": "s", "q": "m", "v1": "V", "v2": "V"})
+    return frame
+
+
+def test_the_stage_flags_the_unseen_record_and_the_verdict_says_so_first():
+    rng = np.random.default_rng(8)
+    q = np.linspace(-0.01, 0.01, 400)
+    est = np.column_stack([_levels(400, q < -0.004, rng), _levels(400, q > 0.004, rng)])
+    same = est[::-1].copy()
+    other = np.column_stack([_levels(400, q > 0.004, rng), _levels(400, q < -0.004, rng)])
+    tables = {
+        "est": _table("estimation", q, est),
+        "same": _table("validation", q[::-1].copy(), same),
+        "other": _table("validation", q, other),
+    }
+    out = extrapolation(tables, margin=0.001)
+    assert out["est"] == "" and out["same"] == ""
+    assert out["other"].startswith("v1 applied at q = 4 to 10 mm (120 samples), where the ")
+    assert "; v2 applied at q = -10 to -4 mm (120 samples)" in out["other"]
+    row = {"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "extrapolated": out["other"]}
+    assert verdict(row) == f"extrapolated: {out['other']}"
+    poor = {**row, "nrmse_q": 0.19}
+    assert verdict(poor).startswith(f"extrapolated: {out['other']}; poor: 95 %")
