@@ -36,6 +36,9 @@ from debist.validate.freerun import default_q_limit, score_free_runs, validate_m
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
+#: Columns of validate's NRMSE table that the compare stage carries over per data set.
+CAVEATS = ("under_excited", "extrapolated")
+
 __all__ = ["CompareResult", "execute", "run_compare"]
 
 
@@ -231,20 +234,14 @@ def execute(ctx: StageInputs) -> StageOutput:
         ctx.stage_config("compare"),
         ctx.physics(),
     )
-    # every model is fitted on the same estimation data: what they lack, each row says
-    thin = (
-        validated["under_excited"].iloc[0]
-        if "under_excited" in validated and len(validated)
-        else ""
-    )
-    # and which data sets ask for an input where the estimation never applied it
-    beyond = (
-        dict(zip(validated.dataset, validated.extrapolated, strict=True))
-        if "extrapolated" in validated
-        else {}
-    )
-    table = res.table.assign(under_excited=thin, extrapolated=res.table.dataset.map(beyond))
-    table = with_verdicts(table.assign(extrapolated=table.extrapolated.fillna("")))
+    # every model is fitted on the same estimation data and run on the same records: what
+    # the data lack (under-excited) and ask for (extrapolated), each row says as validate's
+    per_dataset = validated.drop_duplicates("dataset").set_index("dataset")
+    table = res.table.assign(**{
+        c: res.table.dataset.map(per_dataset[c]).fillna("") if c in per_dataset else ""
+        for c in CAVEATS
+    })  # fmt: skip
+    table = with_verdicts(table)
     outputs: dict[str, Any] = {
         "sindy.h5": H5Tree(res.model.to_tree()),
         "nrmse.parquet": table,

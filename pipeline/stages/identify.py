@@ -43,7 +43,7 @@ from debist.report.plots import curves_figure
 from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
-from debist.validate.freerun import report_factor
+from debist.validate.freerun import words_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -288,7 +288,7 @@ def _excitation(records, cfg: IdentifyConfig, tables):
     lo, hi = cfg.q_range or supported_range(q, cfg)
     basis = RBFBasis.equidistant(lo, hi, cfg.M, cfg.sigma_n, cfg.outside)
     unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
-    factor, name = report_factor(unit, "mm" if unit == "m" else None)
+    factor, name = words_factor(unit)
     return check_excitation(
         records, basis, cfg.input_map, rbf=cfg.rbf, min_samples=cfg.min_support,
         unit_scale=factor, unit_name=name,

@@ -27,8 +27,8 @@ from debist.validate.freerun import (
     default_q_limit,
     mark_unstable,
     replicate_spread,
-    report_factor,
     validate_model,
+    words_factor,
 )
 from debist.validate.prediction import prediction_table
 
@@ -252,7 +252,7 @@ def extrapolation(tables, margin: float) -> dict[str, str]:
     out = {}
     for name, t in tables.items():
         unit = t.attrs.get("units", {}).get("q", "m")
-        factor, shown = report_factor(unit, "mm" if unit == "m" else None)
+        factor, shown = words_factor(unit)
         out[name] = (
             ""
             if t.attrs.get("role") == "estimation"

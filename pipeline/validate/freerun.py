@@ -141,6 +141,29 @@ def report_factor(q_unit: str, report_unit: str | None) -> tuple[float, str]:
     return 1.0 / unit.factor, report_unit
 
 
+def words_factor(q_unit: str) -> tuple[float, str]:
+    """Factor and unit for positions in warnings and verdicts: mm when q is in m.
+
+    Parameters
+    ----------
+    q_unit : str
+        SI unit of q.
+
+    Returns
+    -------
+    factor, unit : float, str
+        As :func:`report_factor` with ``"mm"`` for q in m, else q's own unit.
+
+    Examples
+    --------
+    >>> words_factor("m")
+    (1000.0, 'mm')
+    >>> words_factor("V")
+    (1.0, 'V')
+    """
+    return report_factor(q_unit, "mm" if q_unit == "m" else None)
+
+
 def default_q_limit(q_range: tuple[float, float]) -> float:
     """Divergence bound of a free run: twice the largest ``|q|`` of the estimation range.
 
