@@ -212,7 +212,7 @@ def _restarted_batch(model, records, windows, dt, substeps, interpolation, q_lim
     idx = np.asarray(windows, dtype=np.int64).reshape(-1, 3)
     if not idx.size:
         raise WorkflowError("no window to simulate")
-    sizes = np.array([np.size(records[i].q) for i in idx[:, 0]])
+    sizes = np.array([np.size(r.q) for r in records], dtype=np.int64)[idx[:, 0]]
     bad = ~((idx[:, 1] >= 0) & (idx[:, 1] < idx[:, 2] - 1) & (idx[:, 2] <= sizes))
     if bad.any():
         i, a, b = idx[np.argmax(bad)].tolist()
