@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
+from threadpoolctl import threadpool_limits
 
 from debist.identify.fit import Record
 from debist.model.basis import RBFBasis
@@ -23,6 +24,25 @@ from debist.simulate.freerun import simulate
 # test session, never the user's own; the CLI runs in subprocesses inherit it.
 os.environ["DEBIST_CACHE_DIR"] = tempfile.mkdtemp(prefix="debist-cache-")
 atexit.register(shutil.rmtree, os.environ["DEBIST_CACHE_DIR"], ignore_errors=True)
+
+
+def _blas_threads() -> int:
+    """BLAS threads per pytest-xdist worker: the usable cores shared among the workers."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    return max(1, (cores or 1) // max(workers, 1))
+
+
+# n workers x n BLAS threads would oversubscribe the cores, and OpenBLAS's waiting threads then
+# cost more than they give (SysIdentPy's FROLS on a zoo member: 16.5 s with one thread per
+# process, 36 s with two, two processes at once). As for debist's own batch workers
+# (debist.engine.batch): in each xdist worker the BLAS libraries loaded so far are limited
+# here, those loaded later and the CLI's subprocesses read the variables; a variable the user
+# set keeps its value.
+if "PYTEST_XDIST_WORKER" in os.environ:
+    for _name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(_name, str(_blas_threads()))
+    threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
