@@ -26,6 +26,7 @@ from typing import Any
 from threadpoolctl import threadpool_limits
 
 from debist.core import artifacts
+from debist.core.beside import BesideRun
 from debist.core.errors import (
     ArtifactError,
     DebistError,
@@ -35,7 +36,6 @@ from debist.core.errors import (
 from debist.core.faults import fault_point
 from debist.core.forking import fork_workers
 from debist.engine import outdir, verification
-from debist.engine.beside import BesideRun
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
 from debist.stages import registry

@@ -4,7 +4,7 @@ numba compiles a kernel on its first call and keeps it in its on-disk cache (``c
 so only the first run after an install pays. That run meets the kernels one after the other
 on one core: the sensitivities of the identification's refinement, then the serial free run,
 the lock-step batch of the validation's replicates, and the NARX peer's free run. Called in
-a forked process when a run starts (:class:`debist.engine.beside.BesideRun`),
+a forked process when a run starts (:class:`debist.core.beside.BesideRun`),
 :func:`compile_kernels` compiles those the run needs after its first one, in that order, on
 the other core, and writes them to the cache; the run then loads each from the cache when it
 reaches it. With a warm cache the call only loads them (well under a second).

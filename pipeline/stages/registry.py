@@ -41,7 +41,7 @@ class StageDef:
         The stage runs only when the workflow has a section of its name.
     beside : bool
         The stage may run in a forked process beside the stages after it that do not read
-        it (:class:`debist.engine.beside.BesideRun`): it reads little and much follows it.
+        it (:class:`debist.core.beside.BesideRun`): it reads little and much follows it.
     """
 
     name: str

@@ -1,16 +1,16 @@
-"""A stage run in a forked process beside the stages after it that do not read it.
+"""A function called in a forked process now, its result collected later.
 
-The sensitivity studies (``study``) and the design analysis (``analyze``) read the ingested
-data and derivatives, or nothing, and only the report reads them; the identification,
-validation and comparison that follow them in the stage order spend most of their time on
-one core. :class:`BesideRun` runs such a stage's ``execute`` and ``write_stage`` in a copy
-of this process (POSIX ``fork``: the runner and the data read so far are inherited, nothing
-is pickled on the way in) while this process goes on with the next stages, and returns its
-manifest when the runner reaches a stage that reads it, or the end. The child's warnings
-are issued here when it is joined (:func:`debist.core.forking.call_recording_warnings`); its
-progress reports are not drawn (two processes cannot share one terminal display). The
-stage's files and manifest are the same as in a serial run: the same code on the same
-inputs, written by the same atomic swap.
+Two kinds of work use it. The runner starts a stage that only the report reads (``study``,
+``analyze``) beside the stages after it, and the compiled kernels' first compilation ahead
+of the first free run (:mod:`debist.engine.runner`); the compare stage fits its NARX peer
+beside the SINDy search (:mod:`debist.stages.compare`). Each is independent CPU-bound work
+while this process goes on, on one core each. :class:`BesideRun` calls the function in a
+copy of this process (POSIX ``fork``: the data read so far are inherited, nothing is pickled
+on the way in) and returns its result, or raises what it raised, when asked. The child's
+warnings are issued here when it is joined (:func:`debist.core.forking.
+call_recording_warnings`); its progress reports are not drawn (two processes cannot share one
+terminal display). The results are those of a serial call: the same code on the same inputs,
+with the BLAS thread limits of this process, which the fork inherits.
 
 References
 ----------

@@ -7,10 +7,10 @@ import warnings
 
 import pytest
 
+from debist.core.beside import BesideRun
 from debist.core.errors import ArtifactError, IdentificationError
 from debist.core.forking import fork_workers
 from debist.core.progress import listening, report
-from debist.engine.beside import BesideRun
 
 pytestmark = pytest.mark.skipif(
     fork_workers(2) < 2, reason="needs POSIX fork, the main thread and two cores"
