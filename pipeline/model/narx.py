@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import pickle
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -317,6 +318,7 @@ def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any, *, qr: bool 
 
 
 @functools.cache
+@functools.cache
 def _frols_class():
     """SysIdentPy's FROLS fitted on several records, with the criterion's minimum found.
 
@@ -389,7 +391,22 @@ def _frols_class():
             self._qr = None
             return self
 
+        def __reduce__(self):
+            # a class made in a function pickles by its state: the model travels back from
+            # the forked process the compare stage fits it in (debist.core.beside); the
+            # state is pickled apart, so that its SysIdentPy classes load only after
+            # _sysidentpy() has imported the package with matplotlib's settings kept
+            return _frols_from_state, (pickle.dumps(self.__dict__),)
+
     return RecordsFROLS
+
+
+def _frols_from_state(state: bytes):
+    """Rebuild a fitted ``RecordsFROLS`` from its pickled attributes."""
+    cls = _frols_class()
+    est = cls.__new__(cls)
+    est.__dict__.update(pickle.loads(state))
+    return est
 
 
 def _estimator(degree: int, lag: int, n_inputs: int, cfg: NarxConfig):

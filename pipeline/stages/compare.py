@@ -13,6 +13,7 @@ import time
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import lazy_loader as lazy
@@ -20,7 +21,9 @@ import numpy as np
 
 from debist.core import progress
 from debist.core.artifacts import H5Tree
+from debist.core.beside import BesideRun
 from debist.core.errors import DebistWarning, IdentificationError
+from debist.core.forking import fork_workers
 from debist.identify.physics_prior import analytical_for
 from debist.identify.records import estimation_records
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
@@ -58,8 +61,9 @@ class CompareResult:
     summary : dict
         The equations and the number of terms.
     timings : dict of str to float
-        Wall times [s] of the fit and of the free runs (not reproducible, hence kept out
-        of the hashed artifacts).
+        Wall times [s] of the SINDy fit and free runs and (``narx``) the time spent on the
+        NARX peer or waiting for it (not reproducible, hence kept out of the hashed
+        artifacts).
     narx : NarxModel or None
         The NARX peer (None when disabled or not installed).
     """
@@ -108,6 +112,15 @@ def run_compare(
     cfg = SindyConfig.from_dict(sindy_section)
     vcfg = ValidateConfig.from_dict(section["validate"])
     records = estimation_records(tables, derivs)
+    datasets = validation_datasets(tables, derivs)
+    analytical = analytical_for(physics, datasets, replace(vcfg, analytical=False))
+    phi = analytical.phi if analytical else None
+    # one divergence bound for both peers: from the estimation records' q, as fit_sindy's
+    # q_range (SindyModel.q_range) and default_q_limit define it
+    q_est = np.concatenate([r.q for r in records])
+    q_range = (float(q_est.min()), float(q_est.max()))
+    q_limit = vcfg.q_limit if vcfg.q_limit is not None else default_q_limit(q_range)
+    narx_job = _start_narx(records, datasets, cfg.input_map, ncfg, vcfg, q_limit, phi)
     progress.report("compare: SINDy fit", 0, 1)
     q_unit = next(iter(tables.values())).attrs.get("units", {}).get("q", "m")
     cfg, search = choose_sindy(records, cfg, sindy_section, vcfg, q_unit,
@@ -122,13 +135,8 @@ def run_compare(
         input_units=_input_units(tables, records[0].v),
     )
     progress.report("compare: SINDy fit", 1, 1)
-    q_limit = vcfg.q_limit if vcfg.q_limit is not None else default_q_limit(model.q_range)
-    datasets = validation_datasets(tables, derivs)
-    analytical = analytical_for(physics, datasets, replace(vcfg, analytical=False))
     t0 = time.perf_counter()
-    table, simulated = validate_model(
-        model, "sindy", datasets, vcfg, q_limit, analytical.phi if analytical else None
-    )
+    table, simulated = validate_model(model, "sindy", datasets, vcfg, q_limit, phi)
     sim_time = time.perf_counter() - t0
     table["n_params"] = model.n_params
     summary = {"equations": model.equations, "n_params": model.n_params,
@@ -137,12 +145,11 @@ def run_compare(
                           for r in search]}  # fmt: skip
     timings = {"fit": model.fit_time, "simulate": sim_time}
     narx, parts = None, [rbf_table, table]
-    if ncfg.enabled:
+    if narx_job is not None:
         t0 = time.perf_counter()
-        phi = analytical.phi if analytical else None
-        narx, narx_table = _narx_rows(
-            records, datasets, cfg.input_map, ncfg, vcfg, q_limit, phi, simulated
-        )
+        narx, narx_table, runs = narx_job()
+        for name, q_sim in runs.items():
+            simulated[name] = simulated[name].assign(q_sim_narx=q_sim)
         parts.append(narx_table)
         timings["narx"] = time.perf_counter() - t0
         summary["narx"] = _narx_summary(narx)
@@ -150,11 +157,28 @@ def run_compare(
     return CompareResult(model, combined, simulated, summary, timings, narx)
 
 
-def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated):
-    """Fit the NARX peer and score its free runs; its runs join ``simulated`` as ``q_sim_narx``.
+def _start_narx(records, datasets, input_map, ncfg, vcfg, q_limit, phi):
+    """Start the NARX peer (:func:`_narx_rows`); return a call that gives its result, or None.
 
-    Without SysIdentPy, or when no candidate structure survives, the rows say so (status)
-    with NaN numbers: the peer is never silently missing.
+    It does not depend on the SINDy search, so with a second core it runs in a forked process
+    beside it (:class:`debist.core.beside.BesideRun`: the same code on the same inputs, so the
+    same numbers); otherwise the call runs it here. None when the peer is off.
+    """
+    if not ncfg.enabled:
+        return None
+    job = partial(_narx_rows, records, datasets, input_map, ncfg, vcfg, q_limit, phi)
+    if fork_workers(2) < 2:
+        return job
+    return BesideRun(job, "the NARX peer").result
+
+
+def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi):
+    """Fit the NARX peer and score its free runs.
+
+    Returns the model (None without one), its rows of the NRMSE table and its free runs' q
+    per data set (the simulated tables' ``q_sim_narx``). Without SysIdentPy, or when no
+    candidate structure survives, the rows say so (status) with NaN numbers: the peer is
+    never silently missing.
     """
     status, narx = None, None
     if not narx_available():
@@ -173,16 +197,15 @@ def _narx_rows(records, datasets, input_map, ncfg, vcfg, q_limit, phi, simulated
         rows = [{"dataset": ds.name, "role": ds.role, "model": "narx", "n_samples": ds.q.size,
                  "nrmse_q": nan, "nrmse_q_dot": nan, "nrmse_q_ddot": nan, "rms_q": nan,
                  "diverged": False, "status": status} for ds in datasets]  # fmt: skip
-        return None, pd.DataFrame(rows).assign(n_params=0)
+        return None, pd.DataFrame(rows).assign(n_params=0), {}
     results = {}
     for ds in datasets:
         q_sim, at = narx.simulate(ds.q, ds.v)
         nan = np.full(ds.q.size, np.nan)  # a NARX model predicts q only
         results[ds.name] = SimulationResult(q_sim, nan, nan, q_sim[:, None], at >= 0, at, 0)
     table, runs = score_free_runs("narx", datasets, results, vcfg, phi)
-    for name, run in runs.items():
-        simulated[name] = simulated[name].assign(q_sim_narx=run["q_sim"].to_numpy())
-    return narx, table.assign(n_params=narx.n_params)
+    q_sims = {name: run["q_sim"].to_numpy() for name, run in runs.items()}
+    return narx, table.assign(n_params=narx.n_params), q_sims
 
 
 def _narx_summary(narx) -> dict[str, Any]:

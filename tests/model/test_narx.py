@@ -1,5 +1,8 @@
 """The polynomial NARX peer of the compare stage (Billings 2013, Ch. 3; SysIdentPy's FROLS)."""
 
+import pickle
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -237,6 +240,39 @@ def test_fitting_a_narx_model_leaves_matplotlib_s_settings_alone():
     assert {k: after[k] for k in before if str(before[k]) != str(after[k])} == {}
 
 
+_UNPICKLE = """
+import pickle, sys
+import matplotlib
+import numpy as np
+before = dict(matplotlib.rcParams)
+with open(sys.argv[1], "rb") as f:
+    model = pickle.load(f)
+changed = sorted(k for k in before if str(before[k]) != str(matplotlib.rcParams[k]))
+sim, at = model.simulate(np.load(sys.argv[2]), np.load(sys.argv[3]))
+np.save(sys.argv[4], sim)
+print(len(changed), at, model.n_params)
+"""
+
+
+def test_a_fitted_model_unpickles_in_a_new_process_whole_and_keeps_matplotlib_s_settings(
+    tmp_path,
+):
+    """The compare stage fits the NARX peer in a forked process and unpickles it in the run's:
+    the model comes back whole (the same free run to the bit), and loading its SysIdentPy
+    classes leaves matplotlib's settings as they were (the report's figures' bytes)."""
+    y, u = _narx_record(300, 6)
+    model = fit_narx([y], [u], "v", NarxConfig(degree=(2,), lags=(1,)), q_limit=100.0)
+    sim, at = model.simulate(y, u)
+    files = [tmp_path / n for n in ("model.pkl", "y.npy", "u.npy", "sim.npy")]
+    files[0].write_bytes(pickle.dumps(model))
+    np.save(files[1], y)
+    np.save(files[2], u)
+    run = subprocess.run([sys.executable, "-c", _UNPICKLE, *map(str, files)],
+                         capture_output=True, text=True, check=True)  # fmt: skip
+    assert run.stdout.split() == ["0", str(at), str(model.n_params)]
+    np.testing.assert_array_equal(np.load(files[3]), sim)
+
+
 def test_a_diverging_free_run_is_cut_at_the_limit():
     y, u = _narx_record(600, 5)
     model = fit_narx([y], [u], "v", NarxConfig(degree=(2,), lags=(2,)), q_limit=100.0)
@@ -281,11 +317,10 @@ def test_without_sysidentpy_the_rows_say_so(monkeypatch, bistable_record):
     ds = DataSet("unseen", "validation", rec["t"], rec["q"], rec["q_dot"], rec["q_ddot"],
                  rec["v"], "m")  # fmt: skip
     record = Record("est", rec["q"], rec["q_dot"], rec["q_ddot"], rec["v"], rec["dt"])
-    simulated = {"unseen": pd.DataFrame({"t": rec["t"], "q": rec["q"]})}
     with pytest.warns(UserWarning, match="NARX peer is not available"):
-        model, table = _narx_rows([record], [ds], "v2", NarxConfig(), ValidateConfig(), 1.0,
-                                  None, simulated)  # fmt: skip
-    assert model is None
+        model, table, runs = _narx_rows([record], [ds], "v2", NarxConfig(), ValidateConfig(),
+                                        1.0, None)  # fmt: skip
+    assert model is None and runs == {}
     assert table.status.tolist() == [NARX_MISSING] and np.isnan(table.nrmse_q).all()
 
 
