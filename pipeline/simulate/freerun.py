@@ -131,11 +131,11 @@ class FineInputs:
 
     Attributes
     ----------
-    values : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
+    values : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs), or one row
         Inputs at every RK4 stage instant [V]; shorter records padded with their
-        last value.
+        last value. One row (shape (1, ...)) drives all B trajectories.
     lengths : list of int
-        Samples of each record.
+        Samples of each record (B of them).
     substeps : int
         RK4 steps per sample interval the grid was made for.
     """
@@ -145,8 +145,12 @@ class FineInputs:
     substeps: int
 
     def tile(self, reps: int) -> FineInputs:
-        """Repeat the batch ``reps`` times (record order: the whole batch, then again)."""
-        return FineInputs(np.tile(self.values, (reps, 1, 1)), self.lengths * reps, self.substeps)
+        """Repeat the batch ``reps`` times (record order: the whole batch, then again).
+
+        A batch of one record keeps its one row, shared by the repeats (no copy).
+        """
+        values = self.values if self.values.shape[0] == 1 else np.tile(self.values, (reps, 1, 1))
+        return FineInputs(values, self.lengths * reps, self.substeps)
 
 
 def prepare_inputs(inputs: Sequence[np.ndarray], substeps: int, interpolation: str) -> FineInputs:
@@ -420,7 +424,8 @@ def _integrate(model, prepared: FineInputs, dt, x0, q_limit) -> BatchRun:
     ns = prepared.substeps
     h = dt / ns
     fine, lengths = prepared.values, prepared.lengths
-    B, n = fine.shape[0], max(lengths)
+    B, n = len(lengths), max(lengths)
+    fine = np.broadcast_to(fine, (B, *fine.shape[1:]))  # one row may drive every trajectory
     x = x0
     states = np.full((B, n, model.n_states), np.nan)
     acc = np.full((B, n), np.nan)

@@ -556,8 +556,9 @@ def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - com
                     val *= s
             W[w_sf + u] = val
     square = lay[_SQUARE] == 1
+    fb = b if fine.shape[0] > 1 else 0  # one input row may drive every trajectory
     for i in range(NI):
-        vi = fine[b, j, i]
+        vi = fine[fb, j, i]
         W[w_hv + i] = vi * vi if square else vi
     for u in range(H):
         val = 1.0
@@ -742,8 +743,9 @@ def _rhs_spline(x, fine, b, j, d, row, fp, lay, W):  # pragma: no cover - compil
     relax = fp[lay[_S_P_RELAX]]
     kbar = fp[lay[_S_P_KBAR]]
     qd = x[1]
-    v1 = fine[b, j, 0]
-    v2 = fine[b, j, 1]
+    fb = b if fine.shape[0] > 1 else 0  # one input row may drive every trajectory
+    v1 = fine[fb, j, 0]
+    v2 = fine[fb, j, 1]
     force = W[4] * v1**2 + W[5] * v2**2
     force -= 0.5 * W[1] * qd * qd + W[2] * qd + W[3] + kbar * (W[6] * x[2] + W[7] * x[3])
     acc = force / W[0]
@@ -881,9 +883,11 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
 
 @nb.njit(cache=True)
 def _rhs_table_lock(
-    XT, fine, bidx, nb_, js, D, row, fp, ip, lay, work, Ti, wts, mass, tz
+    XT, fine, frow, nb_, js, D, row, fp, ip, lay, work, Ti, wts, mass, tz
 ):  # pragma: no cover - compiled
     """:func:`_rhs_table` for a block of trajectories at once (rows of ``work`` over the block).
+
+    ``frow[c]`` is the row of ``fine`` that drives trajectory ``c`` of the block.
 
     Every loop over the block runs one term, basis or factor for all trajectories, so the
     table's structure is read once per block and the products vectorise; the arithmetic of
@@ -929,7 +933,7 @@ def _rhs_table_lock(
     square = lay[_SQUARE] == 1
     for i in range(NI):
         for c in range(nb_):
-            vi = fine[bidx[c], js, i]
+            vi = fine[frow[c], js, i]
             work[w_hv + i, c] = vi * vi if square else vi
     o_hun = lay[_I_HUNIQ]
     for u in range(H):
@@ -1014,9 +1018,11 @@ def _lockstep(
     mass = np.empty(nb_)
     tz = np.empty(nb_)
     L = np.empty(nb_, dtype=np.int64)
+    frow = np.empty(nb_, dtype=np.int64)  # input row: one row may be shared by every trajectory
     n_max = 0
     for c in range(nb_):
         b = bidx[c]
+        frow[c] = b if fine.shape[0] > 1 else 0
         w0 = lay[_P_W] + (b if lay[_BW] > 1 else 0) * J
         for m in range(J):
             wts[m, c] = fp[w0 + m]
@@ -1042,7 +1048,7 @@ def _lockstep(
                             if stage == 0
                             else _stage_state(X[i, c], h, stage, D[stage - 1, i, c])
                         )
-                _rhs_table_lock(XT, fine, bidx, nb_, js, D, stage, fp, ip, lay, work, Ti, wts,
+                _rhs_table_lock(XT, fine, frow, nb_, js, D, stage, fp, ip, lay, work, Ti, wts,
                                 mass, tz)  # fmt: skip
                 if stage == 0 and s == 0:
                     for c in range(nb_):
@@ -1348,8 +1354,9 @@ def free_run(
     ----------
     arrays : KernelArrays
         The model.
-    fine : ndarray, shape (B, (n - 1) * 2 * substeps + 1, n_inputs)
-        Inputs on the grid of half sub-steps [V] (:func:`debist.simulate.freerun.prepare_inputs`).
+    fine : ndarray, shape (B or 1, (n - 1) * 2 * substeps + 1, n_inputs)
+        Inputs on the grid of half sub-steps [V] (:func:`debist.simulate.freerun.prepare_inputs`);
+        one row drives every trajectory.
     lengths : ndarray of int, shape (B,)
         Samples of each trajectory (``<= n``).
     dt : float
@@ -1373,11 +1380,18 @@ def free_run(
     diverged_at : ndarray of int, shape (B,)
         First diverged sample, -1 if none.
 
+    Raises
+    ------
+    ValueError
+        If ``fine`` has neither B rows nor one.
+
     References
     ----------
     Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1 (classical RK4).
     """
-    B, n = fine.shape[0], int(np.max(lengths))
+    B, n = np.size(lengths), int(np.max(lengths))
+    if fine.shape[0] not in (1, B):
+        raise ValueError(f"inputs for {fine.shape[0]} trajectories, not {B} or one shared")
     states = np.full((B, n, arrays.n_states), np.nan)
     acc = np.full((B, n), np.nan)
     dead = np.full(B, -1, dtype=np.int64)

@@ -328,14 +328,16 @@ def _initial_states(group: Sequence[DataSet], dt: float, init_samples: int):
     return np.array(q0), np.array(qd0)
 
 
-#: Bootstrap replicates simulated at once: their inputs and trajectories are held together,
-#: so a chunk bounds the memory of the replicate spread (B x samples x states at once
-#: otherwise), while the compiled kernel still runs a chunk in lock step.
-REPLICATE_CHUNK = 20
+#: Bootstrap replicates simulated at once: their trajectories are held together, so a chunk
+#: bounds the memory of the replicate spread (B x samples x states at once otherwise), while
+#: the compiled kernel runs a chunk in lock step (a block of 25 per thread costs less per
+#: trajectory than one of 10).
+REPLICATE_CHUNK = 50
 
-#: Memory a chunk of replicates may hold [bytes] (their inputs on the RK4 grid, states and
-#: acceleration at the samples): a long record runs fewer replicates at once, at least
-#: :data:`REPLICATE_MIN_CHUNK`, so that the memory per sample stays flat with the length.
+#: Memory a chunk of replicates may hold [bytes] (their one shared input on the RK4 grid,
+#: their states and acceleration at the samples): a long record runs fewer replicates at
+#: once, at least :data:`REPLICATE_MIN_CHUNK`, so that the memory per sample stays flat with
+#: the length.
 REPLICATE_BUDGET = 128 * 2**20
 
 #: Fewest replicates in a chunk (the lock-step kernel's blocks, one per thread).
@@ -348,7 +350,7 @@ def replicate_chunk(n_fine: int, n_inputs: int, n: int, n_states: int) -> int:
     Parameters
     ----------
     n_fine, n_inputs : int
-        Points of the RK4 input grid and inputs of one replicate.
+        Points of the RK4 input grid and inputs of the record (one copy, shared).
     n, n_states : int
         Samples of the record and states of the model.
 
@@ -357,8 +359,10 @@ def replicate_chunk(n_fine: int, n_inputs: int, n: int, n_states: int) -> int:
     int
         Between :data:`REPLICATE_MIN_CHUNK` and :data:`REPLICATE_CHUNK`.
     """
-    per_replicate = 8 * (n_fine * n_inputs + n * (n_states + 1))
-    fits = REPLICATE_BUDGET // max(per_replicate, 1)
+    # its states and acceleration, and four rows' worth of the band's merge (TailPercentiles:
+    # the chunk negated, concatenated and sorted); the input is one row shared by all (tile)
+    per_replicate = 8 * n * (n_states + 1 + 4)
+    fits = (REPLICATE_BUDGET - 8 * n_fine * n_inputs) // max(per_replicate, 1)
     return int(min(REPLICATE_CHUNK, max(REPLICATE_MIN_CHUNK, fits)))
 
 

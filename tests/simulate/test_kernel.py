@@ -476,3 +476,28 @@ def test_a_changed_compiled_helper_is_refused_until_the_kernel_records_it(monkey
         kernel._check_compiled_from()
     assert "COMPILED_FROM_SHA256" in str(raised.value)
     assert kernel._compiled_from_sha256() in str(raised.value)
+
+
+@pytest.mark.parametrize("B", [2, 5])  # two: a thread per trajectory; five: lockstep blocks
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_one_shared_input_row_drives_a_batch_as_its_own_copies_do(engine, B):
+    """Bootstrap replicates share their record's input: a batch given that one row (what
+    ``FineInputs.tile`` of one record makes) runs every trajectory bit for bit as a batch
+    given B copies of it, from B initial states, each with its own replicate's weights."""
+    from debist.simulate.freerun import FineInputs, simulate_batch
+    from tests.conftest import G, double_well
+
+    dev = np.random.default_rng(4).normal(0.0, 0.2 * G, size=(B, 2))
+    model = double_well().replicate_table(["input_gain1", "input_gain2"], dev)
+    one = prepare_inputs([inputs(400, 3)], 2, "bandlimited")
+    shared = one.tile(B)
+    copies = FineInputs(np.tile(one.values, (B, 1, 1)), one.lengths * B, one.substeps)
+    assert shared.values.shape[0] == 1 and copies.values.shape[0] == B
+    q0, qd0 = np.linspace(-0.011, 0.011, B), np.linspace(-0.05, 0.05, B)
+    runs = [simulate_batch(model, f, DT, q0, qd0, engine=engine) for f in (shared, copies)]
+    assert np.isfinite(runs[0].states).all() and np.ptp(runs[0].q[:, -1]) > 0  # B runs apart
+    for field in ("states", "acc", "diverged_at", "lengths"):
+        assert np.array_equal(getattr(runs[0], field), getattr(runs[1], field), equal_nan=True)
+    with pytest.raises(ValueError, match="inputs for 2 trajectories"):
+        kernel.free_run(kernel.kernel_arrays(model), copies.values[:2], np.full(3, 400), DT, 2,
+                        np.zeros((3, model.n_states)), 1.0)  # fmt: skip
