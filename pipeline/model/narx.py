@@ -318,7 +318,6 @@ def prefix_criteria(psi: np.ndarray, y: np.ndarray, criterion: Any, *, qr: bool 
 
 
 @functools.cache
-@functools.cache
 def _frols_class():
     """SysIdentPy's FROLS fitted on several records, with the criterion's minimum found.
 
