@@ -15,6 +15,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
+from debist.core.forking import usable_cores
 from debist.identify.fit import Record
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
@@ -28,9 +29,8 @@ atexit.register(shutil.rmtree, os.environ["DEBIST_CACHE_DIR"], ignore_errors=Tru
 
 def _blas_threads() -> int:
     """BLAS threads per pytest-xdist worker: the usable cores shared among the workers."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-    return max(1, (cores or 1) // max(workers, 1))
+    return max(1, usable_cores() // max(workers, 1))
 
 
 # n workers x n BLAS threads would oversubscribe the cores, and OpenBLAS's waiting threads then

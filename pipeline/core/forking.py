@@ -28,10 +28,23 @@ __all__ = [
     "fork_context",
     "fork_workers",
     "replay_warnings",
+    "usable_cores",
 ]
 
 #: Warnings recorded in a worker process: (message, category, filename, lineno) each.
 Caught = list[tuple[str, type[Warning], str, int]]
+
+
+def usable_cores() -> int:
+    """Count the cores this process may run on (its CPU affinity where the OS has one).
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, cores or 1)
 
 
 def fork_workers(n: int) -> int:
@@ -59,8 +72,7 @@ def fork_workers(n: int) -> int:
         return 1
     if "fork" not in multiprocessing.get_all_start_methods():
         return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(n, cores or 1))
+    return min(n, usable_cores())
 
 
 def fork_context():

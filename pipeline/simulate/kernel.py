@@ -36,7 +36,6 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
-import os
 import weakref
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -45,6 +44,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from debist.core.forking import usable_cores
 from debist.model import basis, friction
 from debist.simulate import rk4
 from debist.simulate.batch import mask_batch
@@ -1214,8 +1214,7 @@ def kernel_threads() -> int:
     int
         At least 1.
     """
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(int(nb.config.NUMBA_NUM_THREADS), cores or 1))
+    return max(1, min(int(nb.config.NUMBA_NUM_THREADS), usable_cores()))
 
 
 def on_threads(call: Callable[[np.ndarray], None], blocks: Sequence[np.ndarray]) -> None:
