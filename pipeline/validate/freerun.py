@@ -19,6 +19,7 @@ from debist.core.metrics import (
 )
 from debist.core.units import lookup_unit
 from debist.simulate.freerun import (
+    FineInputs,
     FreeRunModel,
     SimulationResult,
     check_free_run,
@@ -328,24 +329,23 @@ def _initial_states(group: Sequence[DataSet], dt: float, init_samples: int):
     return np.array(q0), np.array(qd0)
 
 
-#: Bootstrap replicates simulated at once: their trajectories are held together, so a chunk
-#: bounds the memory of the replicate spread (B x samples x states at once otherwise), while
-#: the compiled kernel runs a chunk in lock step (a block of 25 per thread costs less per
-#: trajectory than one of 10).
+#: Bootstrap replicates simulated at once: the compiled kernel runs a chunk in lock step, one
+#: block per thread (a block of 25 per thread costs less per trajectory than one of 10).
 REPLICATE_CHUNK = 50
 
-#: Memory a chunk of replicates may hold [bytes] (their one shared input on the RK4 grid,
-#: their states and acceleration at the samples): a long record runs fewer replicates at
-#: once, at least :data:`REPLICATE_MIN_CHUNK`, so that the memory per sample stays flat with
-#: the length.
+#: Memory a chunk of replicates may hold [bytes]: their one shared input on the RK4 grid, and
+#: their states and acceleration over one segment of the record. A long record runs in
+#: shorter segments, each chunk going on from its states at the previous segment's last
+#: sample, so that the memory per sample stays flat with the length while the chunk (and
+#: with it the lock step) keeps its size.
 REPLICATE_BUDGET = 128 * 2**20
 
-#: Fewest replicates in a chunk (the lock-step kernel's blocks, one per thread).
-REPLICATE_MIN_CHUNK = 2
+#: Fewest samples in a segment of a chunk's free run (a record shorter runs whole).
+REPLICATE_MIN_SEGMENT = 1000
 
 
-def replicate_chunk(n_fine: int, n_inputs: int, n: int, n_states: int) -> int:
-    """Replicates simulated at once for a record, within :data:`REPLICATE_BUDGET`.
+def replicate_blocks(n_fine: int, n_inputs: int, n: int, n_states: int, B: int) -> tuple[int, int]:
+    """Replicates simulated at once, and samples per segment, for a record within the budget.
 
     Parameters
     ----------
@@ -353,45 +353,83 @@ def replicate_chunk(n_fine: int, n_inputs: int, n: int, n_states: int) -> int:
         Points of the RK4 input grid and inputs of the record (one copy, shared).
     n, n_states : int
         Samples of the record and states of the model.
+    B : int
+        Replicates in all.
 
     Returns
     -------
-    int
-        Between :data:`REPLICATE_MIN_CHUNK` and :data:`REPLICATE_CHUNK`.
+    chunk : int
+        Replicates at once: ``min(B, REPLICATE_CHUNK)``, at least 1.
+    segment : int
+        Samples of a segment (its last sample is the next segment's first): the most that
+        :data:`REPLICATE_BUDGET` admits for the chunk, at least
+        :data:`REPLICATE_MIN_SEGMENT` and at most ``n``.
     """
-    # its states and acceleration, and four rows' worth of the band's merge (TailPercentiles:
-    # the chunk negated, concatenated and sorted); the input is one row shared by all (tile)
-    per_replicate = 8 * n * (n_states + 1 + 4)
-    fits = (REPLICATE_BUDGET - 8 * n_fine * n_inputs) // max(per_replicate, 1)
-    return int(min(REPLICATE_CHUNK, max(REPLICATE_MIN_CHUNK, fits)))
+    chunk = max(1, min(B, REPLICATE_CHUNK))
+    # a replicate's sample: its states and acceleration, and four rows' worth of the band's
+    # merge (TailPercentiles: the chunk negated, concatenated and sorted); the input is one
+    # row shared by all (tile)
+    per_sample = 8 * chunk * (n_states + 1 + 4)
+    fits = (REPLICATE_BUDGET - 8 * n_fine * n_inputs) // per_sample
+    return chunk, int(min(n, max(REPLICATE_MIN_SEGMENT, fits)))
 
 
 def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limit):
-    """Free-run the replicates on one data set in chunks; return the band and the scores.
+    """Free-run the replicates on one data set in chunks and segments; return band and scores.
 
-    Only each chunk's q is held; the band keeps the extreme ranks (:class:`TailPercentiles`).
-    Returns the 2.5 and 97.5 percentiles, shape (2, n), and each replicate's NRMSE(q) after
-    ``cfg.init_samples`` (inf where it diverged), shape (B,).
+    A chunk runs one segment of the record at a time, from its states at the last sample of
+    the one before (RK4 is a one-step scheme: every state is the one of a single run); only
+    a segment's q is held, the band keeps the extreme ranks (:class:`TailPercentiles`) and
+    each score its sum of squares. Returns the 2.5 and 97.5 percentiles, shape (2, n), and
+    each replicate's NRMSE(q) after ``cfg.init_samples`` (inf where it diverged), shape (B,).
     """
-    B = deviations.shape[0]
+    B, n = deviations.shape[0], ds.q.size
     fine = prepare_inputs([ds.v], ns, cfg.input_interpolation)
-    band = TailPercentiles(ds.q.size, rows=B, percentiles=(2.5, 97.5))
-    scores = np.empty(B)
-    s = slice(cfg.init_samples, None)
     _, n_fine, n_inputs = fine.values.shape
-    chunk = replicate_chunk(n_fine, n_inputs, ds.q.size, model.n_states)
-    for a in range(0, B, chunk):
-        dev = deviations[a : a + chunk]
-        n = dev.shape[0]
-        run = simulate_batch(
-            model.replicate_table(list(columns), dev), fine.tile(n), dt, np.full(n, q0),
-            np.full(n, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
-        )  # fmt: skip
-        q_runs = run.q[:, : ds.q.size]
-        band.add(q_runs)
-        for i, (q, at) in enumerate(zip(q_runs, run.diverged_at, strict=True)):
-            scores[a + i] = np.inf if at >= 0 else nrmse(ds.q[s], q[s])
-    return band.result(), scores
+    chunk, segment = replicate_blocks(n_fine, n_inputs, n, model.n_states, B)
+    x = None  # each replicate's states at the segment's first sample, shape (B, n_states)
+    dead = np.zeros(B, dtype=bool)
+    sq = np.zeros(B)  # sum of squared errors over the scored samples
+    band = np.full((2, n), np.nan)
+    a = 0
+    while True:
+        e = min(a + segment - 1, n - 1)  # the segment's last sample
+        c = n if e == n - 1 else e  # columns [a, c) are this segment's
+        seg = FineInputs(fine.values[:, a * 2 * ns : e * 2 * ns + 1], [e - a + 1], ns)
+        tail = TailPercentiles(c - a, rows=B, percentiles=(2.5, 97.5))
+        lo = max(a, cfg.init_samples)  # scored samples of the segment: [lo, c)
+        for b0 in range(0, B, chunk):
+            idx = np.flatnonzero(~dead[b0 : b0 + chunk]) + b0
+            rows = min(chunk, B - b0)
+            if idx.size:
+                run = simulate_batch(
+                    model.replicate_table(list(columns), deviations[idx]), seg.tile(idx.size),
+                    dt, np.full(idx.size, q0), np.full(idx.size, qd0), substeps=ns,
+                    q_limit=q_limit, engine=cfg.engine, x0=x[idx] if a else None,
+                )  # fmt: skip
+                if x is None:
+                    x = np.full((B, run.states.shape[2]), np.nan)
+                x[idx] = run.states[:, -1]
+                dead[idx[run.diverged_at >= 0]] = True
+            if idx.size == rows:
+                q_runs = run.q[:, : c - a]  # a view of the states
+            else:  # NaN for those that diverged in an earlier segment
+                q_runs = np.full((rows, c - a), np.nan)
+                if idx.size:
+                    q_runs[idx - b0] = run.q[:, : c - a]
+            tail.add(q_runs)
+            for i, q in zip(range(b0, b0 + q_runs.shape[0]), q_runs, strict=True):
+                if lo < c and not dead[i]:
+                    sq[i] += np.sum((ds.q[lo:c] - q[lo - a :]) ** 2)
+        band[:, a:c] = tail.result()
+        if c == n:
+            break
+        a = e
+    s = ds.q[cfg.init_samples :]
+    span = float(np.max(s) - np.min(s))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scores = np.where(dead, np.inf, np.sqrt(sq / s.size) / span)
+    return band, scores
 
 
 def replicate_spread(
