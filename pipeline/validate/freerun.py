@@ -372,7 +372,7 @@ def replicate_blocks(n_fine: int, n_inputs: int, n: int, n_states: int, B: int) 
     # row shared by all (tile)
     per_sample = 8 * chunk * (n_states + 1 + 4)
     fits = (REPLICATE_BUDGET - 8 * n_fine * n_inputs) // per_sample
-    return chunk, int(min(n, max(REPLICATE_MIN_SEGMENT, fits)))
+    return chunk, int(min(n, max(2, REPLICATE_MIN_SEGMENT, fits)))  # 2: a segment advances
 
 
 def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limit):
@@ -390,6 +390,7 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
     chunk, segment = replicate_blocks(n_fine, n_inputs, n, model.n_states, B)
     x = None  # each replicate's states at the segment's first sample, shape (B, n_states)
     dead = np.zeros(B, dtype=bool)
+    tables = {}  # chunk start -> (replicates alive, their model): rebuilt only when one diverges
     sq = np.zeros(B)  # sum of squared errors over the scored samples
     band = np.full((2, n), np.nan)
     a = 0
@@ -403,10 +404,12 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
             idx = np.flatnonzero(~dead[b0 : b0 + chunk]) + b0
             rows = min(chunk, B - b0)
             if idx.size:
+                if tables.get(b0, (0,))[0] != idx.size:
+                    tables[b0] = (idx.size, model.replicate_table(list(columns), deviations[idx]))
                 run = simulate_batch(
-                    model.replicate_table(list(columns), deviations[idx]), seg.tile(idx.size),
-                    dt, np.full(idx.size, q0), np.full(idx.size, qd0), substeps=ns,
-                    q_limit=q_limit, engine=cfg.engine, x0=x[idx] if a else None,
+                    tables[b0][1], seg.tile(idx.size), dt, np.full(idx.size, q0),
+                    np.full(idx.size, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
+                    x0=x[idx] if a else None,
                 )  # fmt: skip
                 if x is None:
                     x = np.full((B, run.states.shape[2]), np.nan)
