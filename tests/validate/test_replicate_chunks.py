@@ -32,7 +32,7 @@ def test_the_band_and_the_scores_are_those_of_one_run_whatever_the_chunks_and_se
     monkeypatch, engine
 ):
     """Seven replicates with scattered gains (one far enough off to diverge), once all in
-    one chunk over the whole record, once two at a time in segments of 700 samples (the
+    one chunk over the whole record, once four at a time in segments of 700 samples (the
     budget forced to nothing): every band sample the same, bit for bit, each score to
     rounding, the diverged one infinite both times."""
     truth = double_well()
@@ -44,9 +44,9 @@ def test_the_band_and_the_scores_are_those_of_one_run_whatever_the_chunks_and_se
     cfg = {"substeps": 1, "engine": engine, "q_limit": 0.02}
     one = run_validate(truth, tables, derivs, cfg, replicates=reps)
     monkeypatch.setattr(freerun, "REPLICATE_BUDGET", 0)
-    monkeypatch.setattr(freerun, "REPLICATE_CHUNK", 2)
+    monkeypatch.setattr(freerun, "REPLICATE_CHUNK", 4)
     monkeypatch.setattr(freerun, "REPLICATE_MIN_SEGMENT", 700)
-    assert replicate_blocks(10**3, 2, 3000, 2, 7) == (2, 700)
+    assert replicate_blocks(10**3, 2, 3000, 2, 7) == (4, 700)
     pieces = run_validate(truth, tables, derivs, cfg, replicates=reps)
     exact = ["replicates", "replicates_poor", "replicates_hold_q"]
     assert one.table[exact].equals(pieces.table[exact])
