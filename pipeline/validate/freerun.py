@@ -388,7 +388,7 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
     fine = prepare_inputs([ds.v], ns, cfg.input_interpolation)
     _, n_fine, n_inputs = fine.values.shape
     chunk, segment = replicate_blocks(n_fine, n_inputs, n, model.n_states, B)
-    x = None  # each replicate's states at the segment's first sample, shape (B, n_states)
+    x = np.full((B, model.n_states), np.nan)  # each replicate's states at a segment's start
     dead = np.zeros(B, dtype=bool)
     tables = {}  # chunk start -> (replicates alive, their model): rebuilt only when one diverges
     sq = np.zeros(B)  # sum of squared errors over the scored samples
@@ -411,8 +411,6 @@ def _replicate_runs(model, columns, deviations, ds, dt, ns, q0, qd0, cfg, q_limi
                     np.full(idx.size, qd0), substeps=ns, q_limit=q_limit, engine=cfg.engine,
                     x0=x[idx] if a else None,
                 )  # fmt: skip
-                if x is None:
-                    x = np.full((B, run.states.shape[2]), np.nan)
                 x[idx] = run.states[:, -1]
                 dead[idx[run.diverged_at >= 0]] = True
             if idx.size == rows:
