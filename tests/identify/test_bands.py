@@ -380,6 +380,12 @@ def test_each_model_reads_the_calibration_of_its_own_terms_and_scale():
         assert set(scaled) == set(fitted) == {"restoring", "d", "g", "F"}
         assert all(scaled[k] <= fitted[k] for k in fitted)
         assert scaled["g"] <= 0.44 < 0.55 <= fitted["g"]
+    # a band is at least twice its model-error term wide: a restoring term of half the default
+    # tolerance or more would mark the restoring force nowhere on any rig
+    tolerance = IdentifyConfig().band_tolerance
+    for table in (MODEL_ERROR, MODEL_ERROR_CREEP, MODEL_ERROR_AS_FITTED,
+                  MODEL_ERROR_CREEP_AS_FITTED):  # fmt: skip
+        assert 2 * table["restoring"] < tolerance
     assert STIFFNESS_ERROR < 0.5 * STIFFNESS_ERROR_AS_FITTED
     assert f"at {MEASURED_COVERAGE_CREEP} there" in band_label(True, creep=True)
     assert f"at {MEASURED_COVERAGE_AS_FITTED} there" in band_label(True, effective_mass=False)
