@@ -29,6 +29,7 @@ import numpy as np
 from debist.core.errors import ArtifactError
 
 __all__ = [
+    "MAX_PNG_WIDTH",
     "REPORT_DPI",
     "Figure",
     "FileWriter",
@@ -225,8 +226,12 @@ class H5Tree:
 
 
 #: Resolution of the figures the HTML report shows [dots per inch]: a 9-inch-wide figure is
-#: 1944 px, twice the 60rem (960 CSS px) column it fills, sharp on a 2x (HiDPI) screen.
+#: 1944 px (1920 with :data:`MAX_PNG_WIDTH`), twice the 60rem (960 CSS px) column it fills,
+#: sharp on a 2x (HiDPI) screen.
 REPORT_DPI = 216
+#: Widest PNG written [px]: twice the report's 960 CSS px column, what a 2x (HiDPI) screen
+#: shows of a figure that fills it; a wider figure gets a lower resolution (same layout).
+MAX_PNG_WIDTH = 1920
 
 
 @dataclass(frozen=True)
@@ -253,7 +258,8 @@ def png_bytes(figure: Any, dpi: int = 110) -> bytes:
     figure : matplotlib.figure.Figure
         The figure.
     dpi : int, optional
-        Resolution [dots per inch].
+        Resolution [dots per inch]; lowered so that the PNG is at most
+        :data:`MAX_PNG_WIDTH` pixels wide (pixels nobody is shown cost rendering time).
 
     Returns
     -------
@@ -265,6 +271,7 @@ def png_bytes(figure: Any, dpi: int = 110) -> bytes:
     matplotlib ``Figure.savefig``: ``metadata={"Software": None}`` leaves out the only
     field that would differ between matplotlib builds of one version.
     """
+    dpi = min(float(dpi), MAX_PNG_WIDTH / float(figure.get_figwidth()))
     buf = io.BytesIO()
     figure.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
     return buf.getvalue()

@@ -83,3 +83,27 @@ def test_a_thread_other_than_the_main_one_renders_serially():
     worker.start()
     worker.join()
     assert found == [1]
+
+
+def _png_size(data: bytes) -> tuple[int, int]:
+    """Width and height of a PNG from its IHDR chunk [px]."""
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+@pytest.mark.parametrize(
+    ("size_in", "dpi", "expected"),
+    [
+        ((12.0, 8.0), 216, (1920, 1280)),  # 2592 px asked: capped at twice the report's column
+        ((10.5, 7.5), 216, (1920, 1371)),  # 182.86 dpi: 7.5 in are 1371.4 px
+        ((8.0, 7.5), 216, (1728, 1620)),  # narrower than the cap: as asked
+        ((4.0, 3.0), 60, (240, 180)),
+    ],
+)
+def test_a_png_is_never_wider_than_the_report_shows(size_in, dpi, expected):
+    from debist.core.fileformats import MAX_PNG_WIDTH, png_bytes
+
+    fig = Figure(figsize=size_in)
+    fig.subplots().plot([0, 1], [1, 0])
+    size = _png_size(png_bytes(fig, dpi))
+    assert size == expected
+    assert size[0] <= MAX_PNG_WIDTH == 1920
