@@ -209,7 +209,7 @@ class DriverOutput:
         s = (t - self.t0) / self.hold
         k = np.clip(np.floor(s).astype(int), 0, self._r.size - 1)
         rk, vk, tc = self._r[k], self.knots[k], self.ramp[k]
-        e = (s - k) * self.hold
+        e = np.maximum(s - k, 0.0) * self.hold  # before t0 (s < 0) the first knot holds
         sg = np.where(rk > vk, 1.0, -1.0)
         lag = rk + (vk - rk) * np.exp(-e / self.tau)
         after = rk - sg * self.slew * self.tau * np.exp(-np.maximum(e - tc, 0.0) / self.tau)

@@ -99,6 +99,18 @@ def test_driver_small_step_is_an_exact_first_order_lag():
     assert [d(x) for x in tt] == pytest.approx(expected, abs=1e-9)
 
 
+def test_driver_before_its_start_holds_the_first_knot_without_overflow():
+    # a fast driver (tau = 10 us) asked for times well before t0: exp(-e / tau) of a negative
+    # e would overflow, and 0 * inf is NaN, where the output is the first knot
+    t = np.arange(50) * 1e-3
+    r = np.where(t >= 0.01, 400.0, 0.0)
+    d = DriverOutput(t, r, tau=1e-5, slew=1e8)
+    tt = np.array([-0.05, -1e-3, 0.0, 0.0105, 0.02])
+    with np.errstate(all="raise"):
+        v = d.values(tt)
+    assert v == pytest.approx([0.0, 0.0, 0.0, 400.0, 400.0], abs=1e-9)
+
+
 def test_driver_large_step_is_slew_limited_then_exponential():
     t = np.arange(100) * 1e-3
     r = np.full(t.size, 3000.0)
