@@ -30,12 +30,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
-from debist.core import progress
 from debist.engine import zoo
-from debist.rig.config import RigConfig
-from debist.rig.run import true_curves
 from debist.rig.zoo import draw_member
 
 
@@ -60,18 +55,12 @@ def main() -> None:
     rig = copy.deepcopy(member.rig)
     for setting in args.set:
         _override(rig, setting)
-    member = replace(member, rig=rig)
-    member = zoo._with_sub_threshold(member, zoo.sub_threshold(member.rig_params()))
-    cfg = RigConfig.from_dict(member.rig, {})
-    wide = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 801))
-    wells, barrier = zoo.rest_points(wide["q"], wide["f"])
-    with progress.listening(None):
-        runs, _ = zoo.run_experiments(cfg)
-    problem = zoo._record_problem(member, runs, barrier)
-    if problem is not None:
-        raise SystemExit(f"{member.name}: {problem}")
+    try:
+        member, cfg, runs, statics = zoo.simulate_member(replace(member, rig=rig))
+    except zoo.ZooError as exc:
+        raise SystemExit(f"{member.name}: {exc}") from None
     args.dir.mkdir(parents=True, exist_ok=True)
-    zoo._write_member(args.dir, member, cfg, runs, {"wells": wells, "barrier": barrier})
+    zoo.write_member(args.dir, member, cfg, runs, statics)
     print(args.dir / member.name)
 
 

@@ -45,7 +45,7 @@ from debist.rig.run import RigRun, true_curves
 from debist.rig.visited import rest_points
 from debist.rig.zoo import ZOO_VERSION, ZooMember, draw_member, member_ok, sub_threshold
 
-__all__ = ["ZooResult", "member_workflow", "write_zoo"]
+__all__ = ["ZooResult", "member_workflow", "simulate_member", "write_member", "write_zoo"]
 
 #: Draws tried per member before the zoo gives up.
 MAX_ATTEMPTS = 12
@@ -131,29 +131,61 @@ def _record_problem(member: ZooMember, runs: dict[str, RigRun], barrier: float) 
     return None
 
 
+def simulate_member(member: ZooMember) -> tuple[ZooMember, RigConfig, dict[str, RigRun], dict]:
+    """Simulate a drawn member's records, its sub-threshold level set from its statics.
+
+    Parameters
+    ----------
+    member : ZooMember
+        A draw (:func:`debist.rig.zoo.draw_member`), possibly with its ``rig`` table changed.
+
+    Returns
+    -------
+    member : ZooMember
+        The member with its sub-threshold level ``v_sub`` [V] in every experiment.
+    cfg : RigConfig
+        Its rig.
+    runs : dict of str to RigRun
+        Its simulated records, by experiment name.
+    statics : dict
+        ``wells`` and ``barrier`` of the restoring force at v = 0 [m].
+
+    Raises
+    ------
+    ZooError
+        If the restoring force has no barrier or a record is unusable (the reason named).
+
+    References
+    ----------
+    Masoud & Maas 2025, Sec. 3, 5.1.
+    """
+    member = _with_sub_threshold(member, sub_threshold(member.rig_params()))
+    cfg = RigConfig.from_dict(member.rig, {})
+    wide = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 801))
+    try:
+        wells, barrier = rest_points(wide["q"], wide["f"])
+    except ValueError:
+        raise ZooError("the restoring force has no barrier") from None
+    with progress.listening(None):
+        runs, _ = run_experiments(cfg)
+    problem = _record_problem(member, runs, barrier)
+    if problem is not None:
+        raise ZooError(problem)
+    return member, cfg, runs, {"wells": wells, "barrier": barrier}
+
+
 def _simulate(seed: int, index: int) -> tuple[ZooMember, RigConfig, dict, dict, list[str]]:
     """Draw member ``index`` until its statics and its records are usable; simulate it."""
     rejected: list[str] = []
     for attempt in range(MAX_ATTEMPTS):
         member = draw_member(seed, index, attempt)
-        rig = member.rig_params()
-        if not member_ok(rig):
+        if not member_ok(member.rig_params()):
             rejected.append(f"draw {attempt}: not bistable and switchable at 3 kV")
             continue
-        member = _with_sub_threshold(member, sub_threshold(rig))
-        cfg = RigConfig.from_dict(member.rig, {})
-        wide = true_curves(cfg.rig, np.linspace(-20e-3, 20e-3, 801))
         try:
-            wells, barrier = rest_points(wide["q"], wide["f"])
-        except ValueError:
-            rejected.append(f"draw {attempt}: the restoring force has no barrier")
-            continue
-        with progress.listening(None):
-            runs, _ = run_experiments(cfg)
-        problem = _record_problem(member, runs, barrier)
-        if problem is None:
-            return member, cfg, runs, {"wells": wells, "barrier": barrier}, rejected
-        rejected.append(f"draw {attempt}: {problem}")
+            return (*simulate_member(member), rejected)
+        except ZooError as exc:
+            rejected.append(f"draw {attempt}: {exc}")
     raise ZooError(
         f"zoo seed {seed}: member {index} has no viable draw in {MAX_ATTEMPTS} "
         f"({'; '.join(rejected[-3:])})"
@@ -220,8 +252,22 @@ def _truth_json(member: ZooMember, cfg: RigConfig, runs: dict[str, RigRun], stat
     return json.dumps(json.loads(canonical_json(truth)), indent=1, sort_keys=True) + "\n"
 
 
-def _write_member(folder: Path, member: ZooMember, cfg, runs, statics) -> None:
-    """Write a member into a scratch folder beside its place, then move it there whole."""
+def write_member(folder: Path, member: ZooMember, cfg, runs, statics) -> None:
+    """Write a member into a scratch folder beside its place, then move it there whole.
+
+    Parameters
+    ----------
+    folder : Path
+        The zoo folder; the member goes to ``folder / member.name``.
+    member, cfg, runs, statics
+        As :func:`simulate_member` returns them.
+
+    Raises
+    ------
+    OSError
+        If the member's folder exists and is not empty, or cannot be written (the scratch folder is
+        removed; nothing is left behind).
+    """
     final = folder / member.name
     tmp = folder / f".{member.name}.{secrets.token_hex(4)}.tmp"
     tmp.mkdir()
@@ -304,7 +350,7 @@ def write_zoo(folder: str | os.PathLike, size: int, seed: int) -> ZooResult:
         if (folder / name).exists():
             raise OutputDirError(f"'{folder / name}' exists but is not a complete zoo member")
         member, cfg, runs, statics, why = _simulate(seed, i)
-        _write_member(folder, member, cfg, runs, statics)
+        write_member(folder, member, cfg, runs, statics)
         written.append(name)
         if why:
             rejected[name] = why
