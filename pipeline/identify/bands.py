@@ -494,16 +494,40 @@ def block_bootstrap(
                        for _ in range(n_boot)]).astype(float)  # fmt: skip
     H = (counts @ gram).reshape(n_boot, p, p)
     r = counts @ qty
-    from scipy.linalg import cholesky, solve_triangular
+    from scipy.linalg import solve_triangular
 
-    if estimator is None or estimator.plain:
+    floor = np.sqrt(np.finfo(float).eps)  # H ~ I for the whole data: Q is orthonormal
+    eig = np.linalg.eigvalsh(H)  # ascending, per replicate
+    full = eig[:, 0] > floor * eig[:, -1]
+    plain = estimator is None or estimator.plain
+    if plain and full.all():
         phi = np.linalg.solve(H, r[:, :, None])[:, :, 0]
         return solve_triangular(R, phi.T).T / scale, int(block)
     out = np.empty((n_boot, p))
-    for b in range(n_boot):  # A^T W A = (L^T R)^T (L^T R) with H = L L^T
-        L = cholesky(H[b], lower=True)
-        out[b] = estimator.solve(L.T @ R, solve_triangular(L, r[b], lower=True)) / scale
+    for b in range(n_boot):
+        C, d = _replicate_system(H[b], r[b], R, floor)
+        out[b] = (np.linalg.lstsq(C, d, rcond=None)[0] if plain else estimator.solve(C, d)) / scale
     return out, int(block)
+
+
+def _replicate_system(H: np.ndarray, r: np.ndarray, R: np.ndarray, floor: float):
+    """Return ``C, d`` of one replicate: ``C^T C = R^T H R`` and ``C^T d = R^T r``.
+
+    ``H = L L^T`` (Cholesky) gives ``C = L^T R``. A replicate whose blocks miss the rows of
+    some column has a singular ``H`` (eigenvalues at most ``floor`` times the largest): its
+    eigen-decomposition restricted to the larger eigenvalues gives the same normal equations,
+    and the least squares then returns the minimum-norm weights (zero along what that
+    replicate does not inform) instead of failing or returning noise.
+    """
+    from scipy.linalg import eigh, solve_triangular
+
+    e, V = eigh(H)
+    if e[0] > floor * e[-1]:
+        L = np.linalg.cholesky(H)
+        return L.T @ R, solve_triangular(L, r, lower=True)
+    keep = e > floor * e[-1]
+    root = np.sqrt(e[keep])
+    return root[:, None] * (V[:, keep].T @ R), (V[:, keep].T @ r) / root
 
 
 def support_weights(

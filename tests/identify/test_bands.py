@@ -428,3 +428,34 @@ def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bist
     none = stiffness_bands(eq, model, diag, True)  # no replicates: no band
     assert none[["k_lo", "k_hi"]].isna().all().all()
     assert flat.attrs == eq.attrs
+
+
+@pytest.mark.parametrize("penalised", [False, True])
+def test_a_replicate_that_misses_a_column_s_rows_gets_its_minimum_norm_fit(penalised):
+    """Column 2 is nonzero in the first block only: a replicate without that block has a
+    singular Gram and must give the fit of its own rows (plain: the minimum-norm one, zero
+    there; penalised: the penalty ties the column to its neighbours)."""
+    from debist.identify.regularise import Estimator, smoothness_operator
+
+    rng = np.random.default_rng(11)
+    X = rng.standard_normal((120, 4))
+    X[30:, 2] = 0.0
+    y = X @ np.array([1.0, -2.0, 0.5, 3.0]) + 0.1 * rng.standard_normal(120)
+    P = smoothness_operator([f"c[{k}]" for k in range(4)], 4)
+    est = Estimator(P, 0.3, np.full(4, -np.inf), np.full(4, np.inf))
+    boot, _ = block_bootstrap(
+        X, y, [120], 12, seed=2, block=30, estimator=est if penalised else None
+    )
+    scale = np.linalg.norm(X, axis=0)
+    draw = np.random.default_rng(2)
+    missed = 0
+    for b in range(12):
+        pick = draw.integers(0, 4, 4)
+        rows = np.concatenate([np.arange(30 * i, 30 * i + 30) for i in pick])
+        A = X[rows] / scale
+        ref = (est.solve(A, y[rows]) if penalised else np.linalg.lstsq(A, y[rows])[0]) / scale
+        np.testing.assert_allclose(boot[b], ref, rtol=1e-7, atol=1e-9)
+        if not penalised and 0 not in pick:
+            assert boot[b, 2] == pytest.approx(0.0, abs=1e-12)
+        missed += 0 not in pick
+    assert missed >= 1  # the draw does contain a replicate without the first block
