@@ -167,6 +167,10 @@ class IdentifyConfig(SectionConfig):
     """Weight of a second-difference penalty on each RBF curve's weights [-]; "gcv": generalised
     cross-validation; 0: plain least squares (the paper).
     """
+    tie_undriven: bool = False
+    """Continue each gain g_i over the centres beyond the range its input drives (less than
+    ``min_support`` samples' worth of data with v_i applied) linearly from the driven ones,
+    instead of leaving their weights free; the identify summary's ``undriven`` names them."""
     constraints: Annotated[tuple[str, ...], AsTuple] = ()
     """Sign statements on the curves, e.g. "d >= 0", imposed by bounded least squares."""
     bootstrap: NonNegativeInt = 200

@@ -20,8 +20,9 @@ from __future__ import annotations
 import numpy as np
 
 from debist.identify.excitation import input_active
+from debist.model.basis import RBFBasis
 
-__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges"]
+__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges", "undriven_centres"]
 
 #: Fewest samples outside the driven range that make a record an extrapolation (as the
 #: default ``min_support`` of the RBF centres).
@@ -66,6 +67,73 @@ def driven_ranges(q: np.ndarray, v: np.ndarray) -> np.ndarray:
         if active[:, j].any():
             out[j] = q[active[:, j]].min(), q[active[:, j]].max()
     return out
+
+
+def undriven_centres(
+    q: np.ndarray, v: np.ndarray, basis: RBFBasis, min_samples: int = MIN_SAMPLES
+) -> np.ndarray:
+    """Flag the RBF centres of each gain g_i beyond the range its input drives.
+
+    A weight of ``g_i`` multiplies ``phi_k(q) h(v_i)`` in Eq. 40: it is informed by the
+    samples at which ``v_i`` is active (:func:`debist.identify.excitation.input_active`),
+    each in proportion to ``phi_k(q)^2``, not by the samples at which the input is off. A DE
+    is typically driven from the well it pulls the beam out of, so that well lies at the edge
+    of its input's driven range, and the centres beyond it see only the Gaussian tails of a
+    few samples. A centre is flagged when it and every centre between it and the nearer end
+    of the basis hold less than ``min_samples`` samples' worth of that information: each
+    active sample within one width counts 1 (as :meth:`RBFBasis.support` counts), one
+    farther out ``phi_k(q)^2 / phi_k(xi_k + sigma)^2`` (0.14 two widths away). A thin centre
+    between informed ones (the barrier, crossed quickly with the input on) is not flagged.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n,)
+        Estimation positions, records concatenated [unit of q].
+    v : ndarray, shape (n, n_inputs)
+        Their inputs [V].
+    basis : RBFBasis
+        The basis of the fit (Eq. 38-39).
+    min_samples : int, optional
+        Information, in samples at the centre, that informs a centre (as ``min_support``).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_inputs, M)
+        True where centre k of g_i lies beyond the informed centres.
+
+    Raises
+    ------
+    ValueError
+        If ``q`` and ``v`` differ in length.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-40 and Sec. 5.2 (excite every centre's part of the range).
+
+    Examples
+    --------
+    >>> from debist.model.basis import RBFBasis
+    >>> q = np.linspace(-0.01, 0.01, 201)
+    >>> v = np.column_stack([np.where(q > 0, 3000.0, 0.0), np.where(abs(q) > 0.006, 3e3, 0)])
+    >>> basis = RBFBasis.equidistant(-0.01, 0.01, 5, 0.4, "clip")
+    >>> undriven_centres(q, v, basis).astype(int).tolist()
+    [[1, 1, 0, 0, 0], [0, 0, 0, 0, 0]]
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    if v.shape[0] != q.size:
+        raise ValueError(f"q has {q.size} samples, v {v.shape[0]}")
+    v = v if v.ndim == 2 else v.reshape(q.size, 1)
+    active = input_active(v) if q.size else np.zeros(v.shape, dtype=bool)
+    # within one width a sample counts 1 (as RBFBasis.support), beyond it phi^2 / phi(sigma)^2
+    weight = [np.minimum(1.0, np.e * basis(q[active[:, j]]) ** 2) for j in range(v.shape[1])]
+    information = np.stack([w.sum(axis=0) for w in weight])
+    thin = information < min_samples
+    # only the runs of thin centres at either end: a thin centre between informed ones lies
+    # where the beam crosses the barrier with the input on, which the data do inform
+    inner = np.cumsum(~thin, axis=1) > 0
+    inner &= np.cumsum(~thin[:, ::-1], axis=1)[:, ::-1] > 0
+    return thin & ~inner
 
 
 def beyond_driven(

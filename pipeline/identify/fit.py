@@ -12,11 +12,13 @@ from debist.core.errors import IdentificationError
 from debist.core.metrics import rms
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
+from debist.identify.driven import undriven_centres
 from debist.identify.regularise import (
     Estimator,
     constraint_bounds,
     gcv_lambda,
     smoothness_operator,
+    tie_rows,
     weight_penalty,
 )
 from debist.identify.signs import physical_signs
@@ -95,6 +97,9 @@ class FitDiagnostics:
         The bootstrap's block length [samples] (0 without bootstrap).
     dissipation : str
         Empty, or which signs were imposed and why (:func:`physical_signs`).
+    undriven : str
+        Empty, or the gains' weights tied to their driven neighbours and why
+        (:func:`undriven_weights`).
     """
 
     n_samples: int
@@ -115,6 +120,7 @@ class FitDiagnostics:
     gcv_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
     creep_trace: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     dissipation: str = ""
+    undriven: str = ""
 
 
 def _trimmed(records: Sequence[Record], trim: int) -> list[Record]:
@@ -403,6 +409,54 @@ def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConf
     return support
 
 
+def undriven_weights(
+    records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig
+) -> tuple[list[str], str]:
+    """Name the weights of the gains g_i whose centres the estimation does not drive.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The estimation records (``q``, ``v``).
+    basis : RBFBasis
+        The basis of the fit.
+    cfg : IdentifyConfig
+        ``tie_undriven`` (False: none), ``rbf`` (only ``"g"`` curves have such weights) and
+        ``min_support``.
+
+    Returns
+    -------
+    names : list of str
+        ``"g<j>[k]"`` for centre k of g_j beyond the centres that ``min_support`` samples
+        with v_j active inform (:func:`debist.identify.driven.undriven_centres`); the fit
+        ties them to their neighbours (:func:`debist.identify.regularise.tie_rows`).
+    text : str
+        Empty, or e.g. ``"g2 continued from its neighbours at centre(s) 9, 10 of 10: less
+        than 10 samples' worth of data with v2 applied there"``, one clause per input joined
+        by ``"; "``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-40.
+    """
+    if not cfg.tie_undriven or "g" not in cfg.rbf or cfg.m_q == "identify":
+        return [], ""
+    q = np.concatenate([r.q for r in records])
+    thin = undriven_centres(q, np.vstack([r.v for r in records]), basis, cfg.min_support)
+    names, words = [], []
+    for j, row in enumerate(thin):
+        k = np.flatnonzero(row)
+        if k.size == 0:
+            continue
+        names += [f"g{j + 1}[{i}]" for i in k]
+        at = ", ".join(str(i + 1) for i in k)
+        words.append(
+            f"g{j + 1} continued from its neighbours at centre(s) {at} of {basis.M}: less "
+            f"than {cfg.min_support} samples' worth of data with v{j + 1} applied there"
+        )
+    return names, "; ".join(words)
+
+
 def _check_inputs(records: Sequence[Record], cfg: IdentifyConfig) -> None:
     v = np.vstack([r.v for r in records])
     for j in range(v.shape[1]):
@@ -473,6 +527,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     if cfg.slip is not False:
         cfg = replace(cfg, slip=slip_widths(cfg.slip, q_range))
     support = _check_support(records, basis, cfg)
+    undriven, undriven_text = undriven_weights(records, basis, cfg)
     if cfg.m_q != "identify":
         _check_inputs(records, cfg)
 
@@ -501,7 +556,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     w_all = _creep_columns(records, basis, rate) if rate > 0 else None
     psi, y, names = _system(records, z_all, basis, cfg, w_all)
     theta, resid, rank, cond, S, compressed = _solve(psi, y, names, cfg, check=True)
-    estimator, gcv_trace = _estimator(psi, y, names, cfg)
+    estimator, gcv_trace = _estimator(psi, y, names, cfg, undriven)
     if not estimator.plain:
         scale = np.linalg.norm(psi, axis=0)
         Q, R = np.linalg.qr(psi / scale)
@@ -512,7 +567,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     signs, dissipation = physical_signs(model, q_all, h_all, cfg)
     if signs:
         estimator, gcv_trace = _estimator(psi, y, names, replace(
-            cfg, constraints=(*cfg.constraints, *signs)))  # fmt: skip
+            cfg, constraints=(*cfg.constraints, *signs)), undriven)  # fmt: skip
         scale = np.linalg.norm(psi, axis=0)
         theta = estimator.solve(*compressed) / np.where(scale == 0, 1.0, scale)
         resid = y - psi @ theta
@@ -542,6 +597,7 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         gcv_trace=gcv_trace,
         creep_trace=creep_trace,
         dissipation=dissipation,
+        undriven=undriven_text,
     )
     return model, diag, resid
 
@@ -653,8 +709,8 @@ def _search_creep(records, basis, cfg, bounds, T_z):
     return rate, np.array(trace, dtype=float)
 
 
-def _estimator(psi, y, names, cfg: IdentifyConfig):
-    """Build the workflow's estimator: plain, smoothed (fixed or GCV lambda), constrained."""
+def _estimator(psi, y, names, cfg: IdentifyConfig, undriven: Sequence[str] = ()):
+    """Build the fit's estimator: plain, smoothed (fixed or GCV lambda), constrained, tied."""
     lower, upper = constraint_bounds(names, cfg.constraints)
     # an element stiffness is a spring's (Al-Bender, Lampaert & Swevers 2005): k_e >= 0
     lower[[j for j, n in enumerate(names) if n.startswith("slip[")]] = 0.0
@@ -669,7 +725,8 @@ def _estimator(psi, y, names, cfg: IdentifyConfig):
         lam, trace = gcv_lambda(R, qty, float(y @ y - qty @ qty), y.size, penalty)
     else:
         lam = 0.0 if cfg.smoothing == "gcv" else float(cfg.smoothing)
-    return Estimator(penalty, lam, lower, upper), trace
+    tie = tie_rows(names, cfg.M, np.where(scale == 0, 1.0, scale), undriven)
+    return Estimator(penalty, lam, lower, upper, tie), trace
 
 
 def _search_T_z(records, basis, cfg, bounds, w_all=None):

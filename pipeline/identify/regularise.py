@@ -1,6 +1,6 @@
 """Regularised and sign-constrained least squares for the RBF model (Eq. 40 with a penalty).
 
-The paper solves Eq. 40 by plain least squares. Two optional additions make the curves more
+The paper solves Eq. 40 by plain least squares. Three additions make the curves more
 trustworthy where the data are thin:
 
 * a smoothness penalty ``lambda sum_curves ||D_2 theta_curve||^2`` on the second differences
@@ -10,7 +10,10 @@ trustworthy where the data are thin:
 * sign constraints from physics (``d >= 0``: passive damping; ``g1 >= 0``, ``g2 <= 0``:
   the two DEs pull in opposite directions with ``h = v^2``), imposed on the curve's RBF
   weights and its backbone scale (a sum of non-negative Gaussians with non-negative weights
-  is non-negative: a sufficient condition), solved with :func:`scipy.optimize.lsq_linear`.
+  is non-negative: a sufficient condition), solved with :func:`scipy.optimize.lsq_linear`;
+* ties of the weights the data do not reach (a gain's centres beyond where its input was
+  applied) to the driven ones (:func:`tie_rows`), always on: without them those weights
+  are free and bend the curve at the edge of the data, where a DE's own well lies.
 
 Everything works on the column-scaled regressor ``A = Psi / s`` through its QR factors
 ``A = Q R``: a (weighted) least-squares problem becomes the small system ``C x ~ d`` with
@@ -45,6 +48,9 @@ from debist.core.errors import WorkflowError
 
 #: Accepted constraint statements: "d >= 0", "g1 >= 0", "g2 <= 0".
 CONSTRAINT = re.compile(r"^\s*(d|g\d+)\s*(>=|<=)\s*0\s*$")
+#: Weight of the rows of :func:`tie_rows` on the unit-norm columns of the scaled
+#: regressor: stiff against the thin data of an undriven centre.
+TIE_WEIGHT = 1.0e4
 #: Logarithmic grid of lambda searched by GCV.
 LAMBDA_GRID = np.logspace(-8, 2, 41)
 
@@ -62,21 +68,25 @@ class Estimator:
         Penalty weight lambda (dimensionless).
     lower, upper : ndarray, shape (p,)
         Bounds of the scaled weights (``-inf`` / ``+inf``: free).
+    tie : ndarray, shape (t, p) or None
+        Rows always appended with weight one, whatever lambda (:func:`tie_rows`); None: none.
     """
 
     penalty: np.ndarray
     lam: float
     lower: np.ndarray
     upper: np.ndarray
+    tie: np.ndarray | None = None
 
     @property
     def plain(self) -> bool:
-        """True for the paper's plain least squares (no penalty, no bounds)."""
+        """True for the paper's plain least squares (no penalty, no ties, no bounds)."""
         free = np.all(np.isneginf(self.lower)) and np.all(np.isposinf(self.upper))
-        return (self.lam == 0.0 or self.penalty.shape[0] == 0) and bool(free)
+        untied = self.tie is None or self.tie.shape[0] == 0
+        return (self.lam == 0.0 or self.penalty.shape[0] == 0) and bool(free) and untied
 
     def solve(self, C: np.ndarray, d: np.ndarray) -> np.ndarray:
-        """Minimise ``||C x - d||^2 + lam ||P x||^2`` within the bounds.
+        """Minimise ``||C x - d||^2 + lam ||P x||^2 + ||T x||^2`` within the bounds.
 
         Parameters
         ----------
@@ -93,6 +103,9 @@ class Estimator:
         if self.lam > 0.0 and self.penalty.shape[0]:
             C = np.vstack([C, np.sqrt(self.lam) * self.penalty])
             d = np.concatenate([d, np.zeros(self.penalty.shape[0])])
+        if self.tie is not None and self.tie.shape[0]:
+            C = np.vstack([C, self.tie])
+            d = np.concatenate([d, np.zeros(self.tie.shape[0])])
         if np.all(np.isneginf(self.lower)) and np.all(np.isposinf(self.upper)):
             return np.linalg.lstsq(C, d, rcond=None)[0]
         from scipy.optimize import lsq_linear
@@ -174,6 +187,53 @@ def weight_penalty(penalty: np.ndarray, scale: np.ndarray, names: Sequence[str])
         if touched.size:
             out[i] = row / s * gmean[prefix[touched[0]]]
     return out
+
+
+def tie_rows(
+    names: Sequence[str], M: int, scale: np.ndarray, undriven: Sequence[str]
+) -> np.ndarray:
+    """Second-difference rows that continue a curve over the centres its data do not reach.
+
+    A weight whose column the data barely inform (a centre of ``g_i`` beyond where ``v_i``
+    was applied: :func:`debist.identify.driven.undriven_centres`) is otherwise free to take
+    any value at almost no cost, and through the overlap of the Gaussians it bends the curve
+    inside the data too. Every second difference ``theta[k-1] - 2 theta[k] + theta[k+1]`` of
+    a curve that involves such a weight is held at zero, stiffly: each row is written on the
+    scaled weights ``x = s theta``, normalised to unit length and weighted by
+    :data:`TIE_WEIGHT` against the unit-norm columns (a row's scale does not change what it
+    holds, and unit rows keep the stacked system's singular values near the data's). The
+    weights continue linearly from the driven centres, and where a curve's data reach fewer
+    than three centres it is a straight line in its weights.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Regression column names (``g<j>[k]`` style for the curves).
+    M : int
+        Number of centres.
+    scale : ndarray, shape (p,)
+        Column norms ``s`` of the regressor (> 0).
+    undriven : sequence of str
+        Names of the weights the data do not reach, e.g. ``"g2[9]"``.
+
+    Returns
+    -------
+    ndarray, shape (t, p)
+        Rows on the scaled weights ``x = s theta`` (``t = 0`` when nothing is tied).
+
+    References
+    ----------
+    Eilers & Marx 1996, Sec. 2 and 8 (a difference penalty extrapolates a curve linearly
+    beyond its data; a large weight makes the continuation exact).
+    """
+    names = list(names)
+    rows = smoothness_operator(names, M)
+    tied = [names.index(n) for n in undriven if n in names]
+    if not tied or rows.shape[0] == 0:
+        return np.zeros((0, len(names)))
+    touched = np.abs(rows[:, tied]).sum(axis=1) > 0
+    on_x = rows[touched] / np.asarray(scale, dtype=float)  # theta = x / s
+    return TIE_WEIGHT * on_x / np.linalg.norm(on_x, axis=1, keepdims=True)
 
 
 def constraint_bounds(names: Sequence[str], constraints: Sequence[str]) -> tuple:

@@ -230,6 +230,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         "smoothing": diag.smoothing,
         "basis": {"M_asked": asked, "M": cfg.M},
         **({"dissipation": diag.dissipation} if diag.dissipation else {}),
+        **({"undriven": diag.undriven} if diag.undriven else {}),
         "excitation": excitation.to_summary(),
         **({"creep_rate": model.creep_rate} if model.has_creep else {}),
         **({"slip": _slip_summary(model)} if model.has_slip else {}),

@@ -84,3 +84,29 @@ def test_the_stage_flags_the_unseen_record_and_the_verdict_says_so_first():
     assert verdict(row) == f"extrapolated: {out['other']}"
     poor = {**row, "nrmse_q": 0.19}
     assert verdict(poor).startswith(f"extrapolated: {out['other']}; poor: 95 %")
+
+
+def test_undriven_centres_are_the_end_runs_below_ten_samples_worth_of_information():
+    """Information of centre k for input i: over the active samples, 1 within one width and
+    phi_k^2 / phi_k(sigma)^2 = exp(1 - (q - xi_k)^2 / sigma^2) beyond (Eq. 38). v1 on at
+    q > 2 mm; v2 on at |q| > 7 mm only: its middle centres are thin but lie between informed
+    ones (a barrier crossed quickly), so only end runs are flagged."""
+    from debist.identify.driven import undriven_centres
+    from debist.model.basis import RBFBasis
+
+    rng = np.random.default_rng(8)
+    q = np.sort(rng.uniform(-0.012, 0.012, 2400))
+    v = np.column_stack([_levels(2400, q > 0.002, rng), _levels(2400, np.abs(q) > 0.007, rng)])
+    basis = RBFBasis.equidistant(-0.012, 0.012, 9, 0.5, "clip")
+    flags = undriven_centres(q, v, basis)
+    on = [q > 0.002, np.abs(q) > 0.007]
+    for j in range(2):
+        info = np.minimum(1.0, np.exp(1 - (q[on[j], None] - basis.xi) ** 2 / basis.sigma**2))
+        info = info.sum(axis=0)
+        thin = info < 10
+        first, last = np.flatnonzero(~thin)[[0, -1]]
+        want = thin & ((np.arange(9) < first) | (np.arange(9) > last))
+        np.testing.assert_array_equal(flags[j], want)
+    assert flags[0, :3].all() and not flags[0, 5:].any()  # below ~ -3 mm: v1 never on
+    assert not flags[1].any()  # v2's thin middle centres lie between informed ones
+    assert np.minimum(1, np.exp(1 - (q[on[1]] - basis.xi[4]) ** 2 / basis.sigma**2)).sum() < 10

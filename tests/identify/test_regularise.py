@@ -1,5 +1,7 @@
 """Regularised and sign-constrained least squares (debist.identify.regularise)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
@@ -10,10 +12,12 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.regularise import (
     LAMBDA_GRID,
+    TIE_WEIGHT,
     Estimator,
     constraint_bounds,
     gcv_lambda,
     smoothness_operator,
+    tie_rows,
     weight_penalty,
 )
 from tests.conftest import bistable_truth
@@ -171,3 +175,63 @@ def test_the_penalty_acts_on_the_curve_weights_not_on_the_scaled_ones():
     want = [2.0 * (theta2[0] - 2 * theta2[1] + theta2[2]),  # (1 * 4 * 2)^(1/3) = 2
             1e-2 * (theta2[4] - 2 * theta2[5] + theta2[6])]  # fmt: skip
     np.testing.assert_allclose(rows, want, rtol=1e-12)
+
+
+def _one_sided_record(rng, n=6000):
+    """Eq. 37 rows of the truth with each DE driven on one side only: v1 where q > -5 mm,
+    v2 where q < 5 mm (as a DE is driven from the well it pulls the beam out of)."""
+    q = np.clip(0.015 * np.sin(7.0 * np.cumsum(rng.uniform(0, 0.01, n)))
+                + 5e-4 * rng.standard_normal(n), -0.015, 0.015)  # fmt: skip
+    q_dot = 0.1 * rng.standard_normal(n)
+    v = np.column_stack([np.where(q > -0.005, 2000.0 * rng.random(n), 0.0),
+                         np.where(q < 0.005, 2000.0 * rng.random(n), 0.0)])  # fmt: skip
+    t = bistable_truth(q)
+    q_ddot = t["g1"] * v[:, 0] ** 2 + t["g2"] * v[:, 1] ** 2 - t["c"] * q - t["d"] * q_dot
+    q_ddot = q_ddot + 0.05 * np.std(q_ddot) * rng.standard_normal(n)
+    return Record("one-sided", q, q_dot, q_ddot, v, 0.001)
+
+
+def test_a_gain_is_continued_over_the_centres_its_input_never_drives():
+    """Without ties the weights beyond an input's driven range are free (their columns see
+    only Gaussian tails) and the gain runs off there; tied, it is right at the edge of the
+    driven range and continues linearly, as the truth (linear in q) does."""
+    rec = _one_sided_record(np.random.default_rng(3))
+    cfg = IdentifyConfig.from_dict({"M": 10, "T_z": 0, "bootstrap": 0, "rbf": ["c", "d", "g"],
+                                    "backbone": [], "tie_undriven": True})  # fmt: skip
+    model, diag = fit_rbf_model([rec], cfg)
+    assert diag.undriven == (
+        "g1 continued from its neighbours at centre(s) 1, 2, 3 of 10: less than 10 samples' "
+        "worth of data with v1 applied there; g2 continued from its neighbours at centre(s) 8, "
+        "9, 10 of 10: less than 10 samples' worth of data with v2 applied there"
+    )
+    edge = np.array([-0.006, -0.005, 0.0, 0.005, 0.006])
+    t = bistable_truth(edge)
+    g = model.curves(edge)["g"]
+    np.testing.assert_allclose(g[1:, 0], t["g1"][1:], rtol=0.03)  # v1 driven above -5 mm
+    np.testing.assert_allclose(g[:-1, 1], t["g2"][:-1], rtol=0.03)  # v2 below 5 mm
+    names = diag.columns
+    D2 = smoothness_operator(names, 10)
+    tied = [names.index(f"g1[{k}]") for k in range(3)] + [
+        names.index(f"g2[{k}]") for k in (7, 8, 9)
+    ]
+    rows = np.abs(D2[:, tied]).sum(axis=1) > 0
+    g_scale = np.max(np.abs(diag.theta[tied]))
+    assert np.max(np.abs(D2[rows] @ diag.theta)) < 0.02 * g_scale
+    # the same fit without the ties (the default) runs off past 5 mm
+    _, free = fit_rbf_model([rec], replace(cfg, tie_undriven=False))
+    assert free.undriven == ""
+    assert np.max(np.abs(D2[rows] @ free.theta)) > 10.0 * g_scale
+
+
+def test_tie_rows_hold_the_second_differences_that_touch_a_tied_weight():
+    names = ["c[0]", "c[1]", "c[2]", "c[3]", "g1[0]", "g1[1]", "g1[2]", "g1[3]"]
+    scale = np.array([1.0, 2.0, 4.0, 8.0, 1.0, 1.0, 1e-3, 1e-4])
+    rows = tie_rows(names, 4, scale, ["g1[3]"])
+    assert rows.shape == (1, 8)  # only g1's second difference (1, 2, 3)
+    theta = np.array([0.0, 0.0, 0.0, 0.0, 5.0, 1.0, 2.0, 3.0])  # linear over centres 1-3
+    np.testing.assert_allclose(rows @ (scale * theta), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(rows, axis=1), TIE_WEIGHT)  # unit rows, weighted
+    theta[7] = 4.0  # off the line by 1: the row is D2 theta / s written on x = s theta
+    a = np.array([1.0 / 1.0, -2.0 / 1e-3, 1.0 / 1e-4])
+    assert (rows @ (scale * theta))[0] == pytest.approx(TIE_WEIGHT / np.linalg.norm(a))
+    assert tie_rows(names, 4, scale, []).shape == (0, 8)
