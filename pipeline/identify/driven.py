@@ -29,6 +29,16 @@ __all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges", "undriven_centres"]
 MIN_SAMPLES = 10
 
 
+def _active(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return q (n,), v (n, n_inputs) and where each input is active; ValueError on lengths."""
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    if v.shape[0] != q.size:
+        raise ValueError(f"q has {q.size} samples, v {v.shape[0]}")
+    v = v if v.ndim == 2 else v.reshape(q.size, 1)
+    return q, v, input_active(v) if q.size else np.zeros(v.shape, dtype=bool)
+
+
 def driven_ranges(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Find the range of q over which the estimation data apply each input.
 
@@ -56,12 +66,7 @@ def driven_ranges(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     >>> driven_ranges(q, v).tolist()
     [[0.009, 0.01], [-0.01, -0.009]]
     """
-    q = np.asarray(q, dtype=float)
-    v = np.asarray(v, dtype=float)
-    if v.shape[0] != q.size:
-        raise ValueError(f"q has {q.size} samples, v {v.shape[0]}")
-    v = v if v.ndim == 2 else v.reshape(q.size, 1)
-    active = input_active(v) if q.size else np.zeros(v.shape, dtype=bool)
+    q, v, active = _active(q, v)
     out = np.full((v.shape[1], 2), np.nan)
     for j in range(v.shape[1]):
         if active[:, j].any():
@@ -87,10 +92,8 @@ def undriven_centres(
 
     Parameters
     ----------
-    q : ndarray, shape (n,)
-        Estimation positions, records concatenated [unit of q].
-    v : ndarray, shape (n, n_inputs)
-        Their inputs [V].
+    q, v : ndarray, shapes (n,) and (n, n_inputs)
+        Positions [unit of q] and inputs [V] of the estimation records, concatenated.
     basis : RBFBasis
         The basis of the fit (Eq. 38-39).
     min_samples : int, optional
@@ -119,12 +122,7 @@ def undriven_centres(
     >>> undriven_centres(q, v, basis).astype(int).tolist()
     [[1, 1, 0, 0, 0], [0, 0, 0, 0, 0]]
     """
-    q = np.asarray(q, dtype=float)
-    v = np.asarray(v, dtype=float)
-    if v.shape[0] != q.size:
-        raise ValueError(f"q has {q.size} samples, v {v.shape[0]}")
-    v = v if v.ndim == 2 else v.reshape(q.size, 1)
-    active = input_active(v) if q.size else np.zeros(v.shape, dtype=bool)
+    q, v, active = _active(q, v)
     # within one width a sample counts 1 (as RBFBasis.support), beyond it phi^2 / phi(sigma)^2
     weight = [np.minimum(1.0, np.e * basis(q[active[:, j]]) ** 2) for j in range(v.shape[1])]
     information = np.stack([w.sum(axis=0) for w in weight])
