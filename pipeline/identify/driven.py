@@ -6,7 +6,9 @@ record that applies ``v_i`` at positions the estimation never did asks every mod
 force it was never shown, and its free run there is an extrapolation, however good or bad
 it turns out. :func:`driven_ranges` gives the estimation's range per input and
 :func:`beyond_driven` words what a record does outside it, for the ``extrapolated`` column of
-the NRMSE tables (:func:`debist.report.tables.verdict`).
+the NRMSE tables (:func:`debist.report.tables.verdict`); :func:`undriven_centres` and
+:func:`undriven_weights` name the gains' weights beyond that range, which the fit can tie to
+the driven ones (``[identify] tie_undriven``).
 
 References
 ----------
@@ -17,12 +19,19 @@ was estimated on).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from debist.identify.excitation import input_active
 from debist.model.basis import RBFBasis
 
-__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges", "undriven_centres"]
+if TYPE_CHECKING:
+    from debist.identify.config import IdentifyConfig
+    from debist.identify.fit import Record
+
+__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges", "undriven_centres", "undriven_weights"]
 
 #: Fewest samples outside the driven range that make a record an extrapolation (as the
 #: default ``min_support`` of the RBF centres).
@@ -203,3 +212,51 @@ def beyond_driven(
         )
         words.append(f"v{j + 1} applied at q = {spans}, where {where}")
     return "; ".join(words)
+
+
+def undriven_weights(
+    records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig
+) -> tuple[list[str], str]:
+    """Name the weights of the gains g_i whose centres the estimation does not drive.
+
+    Parameters
+    ----------
+    records : sequence of debist.identify.fit.Record
+        The estimation records (``q``, ``v``).
+    basis : RBFBasis
+        The basis of the fit.
+    cfg : IdentifyConfig
+        ``tie_undriven`` (False: none), ``rbf`` (only ``"g"`` curves have such weights) and
+        ``min_support``.
+
+    Returns
+    -------
+    names : list of str
+        ``"g<j>[k]"`` for centre k of g_j beyond the centres that ``min_support`` samples
+        with v_j active inform (:func:`undriven_centres`); the fit
+        ties them to their neighbours (:func:`debist.identify.regularise.tie_rows`).
+    text : str
+        Empty, or e.g. ``"g2 continued from its neighbours at centre(s) 9, 10 of 10: less
+        than 10 samples' worth of data with v2 applied there"``, one clause per input joined
+        by ``"; "``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-40.
+    """
+    if not cfg.tie_undriven or "g" not in cfg.rbf or cfg.m_q == "identify":
+        return [], ""
+    q = np.concatenate([r.q for r in records])
+    thin = undriven_centres(q, np.vstack([r.v for r in records]), basis, cfg.min_support)
+    names, words = [], []
+    for j, row in enumerate(thin):
+        k = np.flatnonzero(row)
+        if k.size == 0:
+            continue
+        names += [f"g{j + 1}[{i}]" for i in k]
+        at = ", ".join(str(i + 1) for i in k)
+        words.append(
+            f"g{j + 1} continued from its neighbours at centre(s) {at} of {basis.M}: less "
+            f"than {cfg.min_support} samples' worth of data with v{j + 1} applied there"
+        )
+    return names, "; ".join(words)

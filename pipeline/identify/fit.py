@@ -12,7 +12,7 @@ from debist.core.errors import IdentificationError
 from debist.core.metrics import rms
 from debist.identify.bands import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
-from debist.identify.driven import undriven_centres
+from debist.identify.driven import undriven_weights
 from debist.identify.regularise import (
     Estimator,
     constraint_bounds,
@@ -99,7 +99,7 @@ class FitDiagnostics:
         Empty, or which signs were imposed and why (:func:`physical_signs`).
     undriven : str
         Empty, or the gains' weights tied to their driven neighbours and why
-        (:func:`undriven_weights`).
+        (:func:`debist.identify.driven.undriven_weights`).
     """
 
     n_samples: int
@@ -407,54 +407,6 @@ def _check_support(records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConf
             reason="support",
         )
     return support
-
-
-def undriven_weights(
-    records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig
-) -> tuple[list[str], str]:
-    """Name the weights of the gains g_i whose centres the estimation does not drive.
-
-    Parameters
-    ----------
-    records : sequence of Record
-        The estimation records (``q``, ``v``).
-    basis : RBFBasis
-        The basis of the fit.
-    cfg : IdentifyConfig
-        ``tie_undriven`` (False: none), ``rbf`` (only ``"g"`` curves have such weights) and
-        ``min_support``.
-
-    Returns
-    -------
-    names : list of str
-        ``"g<j>[k]"`` for centre k of g_j beyond the centres that ``min_support`` samples
-        with v_j active inform (:func:`debist.identify.driven.undriven_centres`); the fit
-        ties them to their neighbours (:func:`debist.identify.regularise.tie_rows`).
-    text : str
-        Empty, or e.g. ``"g2 continued from its neighbours at centre(s) 9, 10 of 10: less
-        than 10 samples' worth of data with v2 applied there"``, one clause per input joined
-        by ``"; "``.
-
-    References
-    ----------
-    Masoud & Maas 2025, Eq. 38-40.
-    """
-    if not cfg.tie_undriven or "g" not in cfg.rbf or cfg.m_q == "identify":
-        return [], ""
-    q = np.concatenate([r.q for r in records])
-    thin = undriven_centres(q, np.vstack([r.v for r in records]), basis, cfg.min_support)
-    names, words = [], []
-    for j, row in enumerate(thin):
-        k = np.flatnonzero(row)
-        if k.size == 0:
-            continue
-        names += [f"g{j + 1}[{i}]" for i in k]
-        at = ", ".join(str(i + 1) for i in k)
-        words.append(
-            f"g{j + 1} continued from its neighbours at centre(s) {at} of {basis.M}: less "
-            f"than {cfg.min_support} samples' worth of data with v{j + 1} applied there"
-        )
-    return names, "; ".join(words)
 
 
 def _check_inputs(records: Sequence[Record], cfg: IdentifyConfig) -> None:
