@@ -505,26 +505,26 @@ def block_bootstrap(
         return solve_triangular(R, phi.T).T / scale, int(block)
     out = np.empty((n_boot, p))
     for b in range(n_boot):
-        C, d = _replicate_system(H[b], r[b], R, floor)
+        C, d = _replicate_system(H[b], r[b], R, floor, bool(full[b]))
         out[b] = (np.linalg.lstsq(C, d, rcond=None)[0] if plain else estimator.solve(C, d)) / scale
     return out, int(block)
 
 
-def _replicate_system(H: np.ndarray, r: np.ndarray, R: np.ndarray, floor: float):
+def _replicate_system(H: np.ndarray, r: np.ndarray, R: np.ndarray, floor: float, full: bool):
     """Return ``C, d`` of one replicate: ``C^T C = R^T H R`` and ``C^T d = R^T r``.
 
-    ``H = L L^T`` (Cholesky) gives ``C = L^T R``. A replicate whose blocks miss the rows of
-    some column has a singular ``H`` (eigenvalues at most ``floor`` times the largest): its
-    eigen-decomposition restricted to the larger eigenvalues gives the same normal equations,
-    and the least squares then returns the minimum-norm weights (zero along what that
-    replicate does not inform) instead of failing or returning noise.
+    ``H = L L^T`` (Cholesky) gives ``C = L^T R`` when ``full``. A replicate whose blocks miss
+    the rows of some column has a singular ``H`` (eigenvalues at most ``floor`` times the
+    largest): its eigen-decomposition restricted to the larger eigenvalues gives the same
+    normal equations, and the least squares then returns the minimum-norm weights (zero
+    along what that replicate does not inform) instead of failing or returning noise.
     """
     from scipy.linalg import eigh, solve_triangular
 
-    e, V = eigh(H)
-    if e[0] > floor * e[-1]:
+    if full:
         L = np.linalg.cholesky(H)
         return L.T @ R, solve_triangular(L, r, lower=True)
+    e, V = eigh(H)
     keep = e > floor * e[-1]
     root = np.sqrt(e[keep])
     return root[:, None] * (V[:, keep].T @ R), (V[:, keep].T @ r) / root
