@@ -516,14 +516,21 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
         resid = y - psi @ theta
     model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
     h_all = np.vstack([input_map(r.v, cfg.input_map) for r in records])
-    signs, dissipation = physical_signs(model, q_all, h_all, cfg)
-    if signs:
-        estimator, gcv_trace = _estimator(psi, y, names, replace(
-            cfg, constraints=(*cfg.constraints, *signs)), undriven)  # fmt: skip
+    # A refit under some signs can break another (a gain held to its sign moves d below zero):
+    # check again until the fit keeps every sign; each round adds a curve, so it ends.
+    signed, reasons = cfg, []
+    signs, reason = physical_signs(model, q_all, h_all, signed)
+    while signs:
+        reasons.append(reason)
+        signed = replace(signed, constraints=(*signed.constraints, *signs))
+        estimator, gcv_trace = _estimator(psi, y, names, signed, undriven)
         scale = np.linalg.norm(psi, axis=0)
         theta = estimator.solve(*compressed) / np.where(scale == 0, 1.0, scale)
         resid = y - psi @ theta
         model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)
+        imposed = signed.constraints[len(cfg.constraints) :]
+        signs, reason = physical_signs(model, q_all, h_all, signed, after=imposed)
+    dissipation = "; then ".join(reasons)
     theta_boot, block = None, 0
     if cfg.bootstrap > 0:
         theta_boot, block = block_bootstrap(

@@ -13,6 +13,7 @@ Masoud & Maas 2025, Eq. 35-37; Khalil, Nonlinear Systems, 3rd ed., Sec. 4.1.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,7 +30,12 @@ GAIN_REVERSAL = 0.1
 
 
 def physical_signs(
-    model: RBFModel, q: np.ndarray, h: np.ndarray, cfg: IdentifyConfig, n_grid: int = 801
+    model: RBFModel,
+    q: np.ndarray,
+    h: np.ndarray,
+    cfg: IdentifyConfig,
+    n_grid: int = 801,
+    after: Sequence[str] = (),
 ) -> tuple[tuple[str, ...], str]:
     """Find the signs physics implies that a least-squares fit broke on the visited range.
 
@@ -41,7 +47,7 @@ def physical_signs(
     Parameters
     ----------
     model : RBFModel
-        The unconstrained fit.
+        The fit checked: least squares, or a refit under the signs in ``after``.
     q : ndarray, shape (n,)
         Estimation positions [unit of q].
     h : ndarray, shape (n, n_inputs)
@@ -50,6 +56,9 @@ def physical_signs(
         ``rbf``, ``input_map`` and ``constraints`` (the signs the workflow states).
     n_grid : int
         Points of the visited range checked.
+    after : sequence of str
+        Signs the fit was already refitted under (named in ``reason``; their curves are
+        skipped when ``cfg.constraints`` holds them); empty for the least-squares fit.
 
     Returns
     -------
@@ -87,7 +96,7 @@ def physical_signs(
             words.append(f"{name} = {g[k]:.4g} at q = {grid[k]:.4g}")
     if not statements:
         return (), ""
+    fit = f"the fit under {', '.join(after)}" if after else "the least-squares fit"
     return tuple(statements), (
-        f"imposed {', '.join(statements)}: the least-squares fit had {'; '.join(words)} on "
-        "the visited range"
+        f"imposed {', '.join(statements)}: {fit} had {'; '.join(words)} on the visited range"
     )

@@ -67,3 +67,36 @@ def test_a_gain_that_changes_sign_on_the_visited_range_keeps_the_data_s_sign(bis
     assert "least-squares" in diag.dissipation and "g1 = -" in diag.dissipation
     g1 = np.asarray(model.curves(grid)["g"]).reshape(grid.size, -1)[:, 0]
     assert g1.min() >= -1e-12 and g1.max() > 1e-7
+
+
+def test_a_sign_broken_by_the_refit_under_another_is_imposed_too(bistable_record, monkeypatch):
+    """The first check is made to see only the broken gain (as when least squares keeps d >= 0
+    and the gain's refit moves d below zero): the refit under g1 >= 0 still has the data's
+    d about -3 1/s, so a second round imposes d >= 0 and the result keeps both signs."""
+    import debist.identify.fit as fit
+    from debist.identify.signs import physical_signs
+
+    rec = _record(bistable_record, 6.0)
+    extra = 2.4e-5 * rec.q * rec.v[:, 0] ** 2
+    rec = Record("bistable", rec.q, rec.q_dot, rec.q_ddot + extra, rec.v, rec.dt)
+    calls = []
+
+    def first_without_d(model, q, h, cfg, **kw):
+        signs, reason = physical_signs(model, q, h, cfg, **kw)
+        calls.append(signs)
+        if len(calls) == 1:
+            assert "d >= 0" in signs and "g1 >= 0" in signs
+            kept = tuple(s for s in signs if s != "d >= 0")
+            return kept, f"imposed {', '.join(kept)}: (the first check, d left out)"
+        return signs, reason
+
+    monkeypatch.setattr(fit, "physical_signs", first_without_d)
+    model, diag = fit_rbf_model([rec], IdentifyConfig.from_dict(CFG))
+    assert len(calls) == 3 and "d >= 0" in calls[1] and calls[2] == ()
+    grid = np.linspace(rec.q.min(), rec.q.max(), 401)
+    curves = model.curves(grid)
+    assert curves["d"].min() >= -1e-9
+    assert np.asarray(curves["g"]).reshape(grid.size, -1)[:, 0].min() >= -1e-12
+    first, then = diag.dissipation.split("; then ")
+    assert first.startswith("imposed g1 >= 0") and "d >= 0" not in first
+    assert then.startswith("imposed d >= 0") and "had d = -" in then
