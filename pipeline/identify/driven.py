@@ -31,11 +31,23 @@ if TYPE_CHECKING:
     from debist.identify.config import IdentifyConfig
     from debist.identify.fit import Record
 
-__all__ = ["MIN_SAMPLES", "beyond_driven", "driven_ranges", "undriven_centres", "undriven_weights"]
+__all__ = [
+    "MIN_SAMPLES",
+    "TIE_RIPPLE",
+    "basis_ripple",
+    "beyond_driven",
+    "driven_ranges",
+    "undriven_centres",
+    "undriven_weights",
+]
 
 #: Fewest samples outside the driven range that make a record an extrapolation (as the
 #: default ``min_support`` of the RBF centres).
 MIN_SAMPLES = 10
+#: Largest :func:`basis_ripple` at which the gains' undriven weights are tied: a linear
+#: continuation of the weights then continues the curve (3 % at ``sigma_n = 0.5``; 73 % at
+#: 0.25, where the curve dips between the centres and the weights do not describe it).
+TIE_RIPPLE = 0.1
 
 
 def _active(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -214,6 +226,45 @@ def beyond_driven(
     return "; ".join(words)
 
 
+def basis_ripple(basis: RBFBasis, n_grid: int = 201) -> float:
+    """Ripple of the basis's sum of equal weights between its two middle centres.
+
+    ``1 - min S / max S`` for ``S(q) = sum_k phi_k(q)`` on ``[xi_a, xi_b]``, the two centres
+    nearest the middle of the basis: how far a curve whose weights are all equal is from flat.
+    Small where neighbouring Gaussians overlap (``sigma`` about half the spacing or wider);
+    there the weights sample the curve, and a rule on the weights (a tie, a difference
+    penalty) acts on the curve.
+
+    Parameters
+    ----------
+    basis : RBFBasis
+        The basis (Eq. 38-39), at least 2 centres.
+    n_grid : int, optional
+        Points of the interval evaluated.
+
+    Returns
+    -------
+    float
+        The ripple [-], in [0, 1).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-39; Buhmann, Radial Basis Functions, Cambridge University Press
+    2003, Sec. 2 (quasi-interpolation: a sum of shifted Gaussians approximates a constant
+    within a ripple that falls with the width).
+
+    Examples
+    --------
+    >>> from debist.model.basis import RBFBasis
+    >>> round(basis_ripple(RBFBasis.equidistant(-1.0, 1.0, 9, 0.5)), 3)
+    0.028
+    """
+    a = (basis.M - 1) // 2
+    grid = np.linspace(basis.xi[a], basis.xi[a + 1], int(n_grid))
+    total = basis(grid).sum(axis=1)
+    return float(1.0 - total.min() / total.max())
+
+
 def undriven_weights(
     records: Sequence[Record], basis: RBFBasis, cfg: IdentifyConfig
 ) -> tuple[list[str], str]:
@@ -238,7 +289,8 @@ def undriven_weights(
     text : str
         Empty, or e.g. ``"g2 continued from its neighbours at centre(s) 9, 10 of 10: less
         than 10 samples' worth of data with v2 applied there"``, one clause per input joined
-        by ``"; "``.
+        by ``"; "``. On a basis whose :func:`basis_ripple` exceeds :data:`TIE_RIPPLE` nothing
+        is tied and the text says so (``"... left free: ..."``).
 
     References
     ----------
@@ -248,15 +300,23 @@ def undriven_weights(
         return [], ""
     q = np.concatenate([r.q for r in records])
     thin = undriven_centres(q, np.vstack([r.v for r in records]), basis, cfg.min_support)
+    ripple, sigma_n = basis_ripple(basis), basis.sigma / (basis.xi[1] - basis.xi[0])
     names, words = [], []
     for j, row in enumerate(thin):
         k = np.flatnonzero(row)
         if k.size == 0:
             continue
-        names += [f"g{j + 1}[{i}]" for i in k]
         at = ", ".join(str(i + 1) for i in k)
+        why = f"less than {cfg.min_support} samples' worth of data with v{j + 1} applied there"
+        if ripple > TIE_RIPPLE:
+            words.append(
+                f"g{j + 1} left free at centre(s) {at} of {basis.M} ({why}): the Gaussians "
+                f"(sigma_n = {sigma_n:.3g}) leave a {100 * ripple:.0f} % ripple between centres, "
+                "so continuing the weights would not continue the curve"
+            )
+            continue
+        names += [f"g{j + 1}[{i}]" for i in k]
         words.append(
-            f"g{j + 1} continued from its neighbours at centre(s) {at} of {basis.M}: less "
-            f"than {cfg.min_support} samples' worth of data with v{j + 1} applied there"
+            f"g{j + 1} continued from its neighbours at centre(s) {at} of {basis.M}: " + why
         )
     return names, "; ".join(words)

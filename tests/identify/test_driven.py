@@ -110,3 +110,44 @@ def test_undriven_centres_are_the_end_runs_below_ten_samples_worth_of_informatio
     assert flags[0, :3].all() and not flags[0, 5:].any()  # below ~ -3 mm: v1 never on
     assert not flags[1].any()  # v2's thin middle centres lie between informed ones
     assert np.minimum(1, np.exp(1 - (q[on[1]] - basis.xi[4]) ** 2 / basis.sigma**2)).sum() < 10
+
+
+@pytest.mark.parametrize(("sigma_n", "expected"), [(0.25, 0.73), (0.5, 0.028), (1.0, 0.0)])
+def test_the_basis_ripple_is_that_of_a_lattice_of_gaussians(sigma_n, expected):
+    """Against the sum over an infinite lattice of unit spacing (101 terms), between two
+    centres: 1 - S(1/2) / S(0) for the narrow bases, flat to 1e-6 at sigma_n = 1."""
+    from debist.identify.driven import basis_ripple
+    from debist.model.basis import RBFBasis
+
+    k = np.arange(-50, 51)
+    x = np.linspace(0.0, 1.0, 201)
+    lattice = np.exp(-((x[:, None] - k) ** 2) / (2 * sigma_n**2)).sum(axis=1)
+    independent = 1.0 - lattice.min() / lattice.max()
+    ripple = basis_ripple(RBFBasis.equidistant(-1.0, 1.0, 21, sigma_n))
+    assert ripple == pytest.approx(independent, abs=1e-6)
+    assert ripple == pytest.approx(expected, abs=0.005)
+
+
+def test_a_narrow_basis_leaves_the_undriven_weights_free_and_says_why():
+    """v1 applied only at q > 4 mm, v2 only at q < 0: g1's first and g2's last centres are
+    undriven on both bases; with sigma_n = 0.5 they are tied, with sigma_n = 0.25 (73 %
+    ripple) left free, in words."""
+    from debist.identify.config import IdentifyConfig
+    from debist.identify.driven import undriven_weights
+    from debist.identify.fit import Record
+    from debist.model.basis import RBFBasis
+
+    rng = np.random.default_rng(7)
+    q = np.linspace(-0.012, 0.012, 2401)
+    v = np.column_stack([_levels(q.size, q > 0.004, rng), _levels(q.size, q < 0.0, rng)])
+    zeros = np.zeros_like(q)
+    records = [Record("est", q, zeros, zeros, v, 1e-3)]
+    cfg = IdentifyConfig.from_dict({"input_map": "v2"})
+    tied, text = undriven_weights(records, RBFBasis.equidistant(-0.012, 0.012, 7, 0.5), cfg)
+    assert tied[0] == "g1[0]" and tied[-1] == "g2[6]"
+    assert text.startswith("g1 continued from its neighbours at centre(s) 1")
+    assert "; g2 continued from its neighbours at centre(s) " in text
+    free, text = undriven_weights(records, RBFBasis.equidistant(-0.012, 0.012, 7, 0.25), cfg)
+    assert free == []
+    assert text.startswith("g1 left free at centre(s) 1") and "73 % ripple" in text
+    assert "; g2 left free at centre(s) " in text
