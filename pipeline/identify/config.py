@@ -167,10 +167,11 @@ class IdentifyConfig(SectionConfig):
     """Weight of a second-difference penalty on each RBF curve's weights [-]; "gcv": generalised
     cross-validation; 0: plain least squares (the paper).
     """
-    tie_undriven: bool = False
+    tie_undriven: bool = True
     """Continue each gain g_i over the centres beyond the range its input drives (less than
-    ``min_support`` samples' worth of data with v_i applied) linearly from the driven ones,
-    instead of leaving their weights free; the identify summary's ``undriven`` names them."""
+    ``min_support`` samples' worth of data with v_i applied) linearly from the driven ones;
+    False: their weights are free (the paper's plain least squares). The identify summary's
+    ``undriven`` names them."""
     constraints: Annotated[tuple[str, ...], AsTuple] = ()
     """Sign statements on the curves, e.g. "d >= 0", imposed by bounded least squares."""
     bootstrap: NonNegativeInt = 200

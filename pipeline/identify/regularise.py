@@ -1,7 +1,8 @@
 """Regularised and sign-constrained least squares for the RBF model (Eq. 40 with a penalty).
 
-The paper solves Eq. 40 by plain least squares. Three optional additions make the curves
-more trustworthy where the data are thin:
+The paper solves Eq. 40 by plain least squares. Three additions make the curves more
+trustworthy where the data are thin (the penalty is optional; the signs and the ties are
+defaults that a workflow can turn off):
 
 * a smoothness penalty ``lambda sum_curves ||D_2 theta_curve||^2`` on the second differences
   of each curve's RBF weights (``c``, ``d``, ``g_i``; neighbouring centres should carry
@@ -11,7 +12,7 @@ more trustworthy where the data are thin:
   the two DEs pull in opposite directions with ``h = v^2``), imposed on the curve's RBF
   weights and its backbone scale (a sum of non-negative Gaussians with non-negative weights
   is non-negative: a sufficient condition), solved with :func:`scipy.optimize.lsq_linear`;
-* with ``tie_undriven``, ties of the weights the data do not reach (a gain's centres beyond
+* with ``tie_undriven`` (the default), ties of the weights the data do not reach (a gain's centres beyond
   where its input was applied) to the driven ones (:func:`tie_rows`): without them those
   weights are free and bend the curve at the edge of the data, where a DE's own well lies.
 

@@ -240,9 +240,10 @@ def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistabl
         assert (frame[f"{name}_lo"] <= frame[f"{name}_hi"]).all()
 
 
-def _fit_with_input_only_where(bistable_record, j, keep, seed):
+def _fit_with_input_only_where(bistable_record, j, keep, seed, **settings):
     """Fit the bistable truth's record with input ``j`` zeroed outside ``keep`` (the
-    accelerations recomputed from the truth, 2 % noise): (model, diag, records, rec)."""
+    accelerations recomputed from the truth, 2 % noise), ``settings`` added to the identify
+    configuration: (model, diag, records, rec)."""
     rec = dict(bistable_record)
     v = rec["v"].copy()
     v[:, j] = np.where(keep, v[:, j], 0.0)
@@ -251,7 +252,7 @@ def _fit_with_input_only_where(bistable_record, j, keep, seed):
     rec["q_ddot"] = (cur["g1"] * v[:, 0] ** 2 + cur["g2"] * v[:, 1] ** 2 - cur["c"] * rec["q"]
                      - cur["d"] * rec["q_dot"])  # fmt: skip
     records = _records(rec, noise=0.02 * np.std(rec["q_ddot"]), seed=seed)
-    cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100)
+    cfg = _cfg(backbone=["linear_spring", "cubic_spring", "viscous"], bootstrap=100, **settings)
     model, diag = fit_rbf_model(records, cfg)
     return model, diag, records, rec
 
@@ -268,15 +269,18 @@ def test_an_input_never_applied_is_not_identified_there(bistable_record):
 
 
 def test_a_gain_is_judged_against_its_magnitude_where_the_data_surround_it(bistable_record):
-    """v_1 applied only at q < -4 mm: one RBF width past that edge g_1 is extrapolated (here
-    thousands of times its size), so its band is judged against g_1's magnitude over the
-    supported points only. Where marked the band is narrow against that magnitude and g_1 is
-    within 5 % of the true curve's range; judged against the extrapolated magnitude every
-    supported point would pass, dozens of them with bands wider than a quarter of the gain."""
+    """v_1 applied only at q < -4 mm, the weights beyond left free (``tie_undriven = false``):
+    one RBF width past that edge g_1 is extrapolated (here thousands of times its size), so its
+    band is judged against g_1's magnitude over the supported points only. Where marked the
+    band is narrow against that magnitude and g_1 is within 5 % of the true curve's range;
+    judged against the extrapolated magnitude every supported point would pass, dozens of them
+    with bands wider than a quarter of the gain."""
     from debist.identify.excitation import input_active, quasi_static
 
     keep = bistable_record["q"] < -0.004
-    model, diag, records, rec = _fit_with_input_only_where(bistable_record, 0, keep, seed=4)
+    model, diag, records, rec = _fit_with_input_only_where(
+        bistable_record, 0, keep, seed=4, tie_undriven=False
+    )
     frame, _ = curves_frame(model, diag, records, min_support=10, band_tolerance=0.25)
     q, g1 = frame.q.to_numpy(), frame.g1.to_numpy()
     # independent: the samples that inform g_1 and the points they surround / reach
