@@ -520,11 +520,11 @@ def _fit(records: Sequence[Record], cfg: IdentifyConfig):
     # check again until the fit keeps every sign; each round adds a curve, so it ends.
     signed, reasons = cfg, []
     signs, reason = physical_signs(model, q_all, h_all, signed)
+    scale = np.linalg.norm(psi, axis=0)
     while signs:
         reasons.append(reason)
         signed = replace(signed, constraints=(*signed.constraints, *signs))
         estimator, gcv_trace = _estimator(psi, y, names, signed, undriven)
-        scale = np.linalg.norm(psi, axis=0)
         theta = estimator.solve(*compressed) / np.where(scale == 0, 1.0, scale)
         resid = y - psi @ theta
         model = assemble_model(theta, names, basis, cfg, n_in, T_z, q_range, rate)

@@ -12,9 +12,10 @@ defaults that a workflow can turn off):
   the two DEs pull in opposite directions with ``h = v^2``), imposed on the curve's RBF
   weights and its backbone scale (a sum of non-negative Gaussians with non-negative weights
   is non-negative: a sufficient condition), solved with :func:`scipy.optimize.lsq_linear`;
-* with ``tie_undriven`` (the default), ties of the weights the data do not reach (a gain's centres beyond
-  where its input was applied) to the driven ones (:func:`tie_rows`): without them those
-  weights are free and bend the curve at the edge of the data, where a DE's own well lies.
+* with ``tie_undriven`` (the default), ties of the weights the data do not reach (a gain's
+  centres beyond where its input was applied) to the driven ones (:func:`tie_rows`): without
+  them those weights are free and bend the curve at the edge of the data, where a DE's own
+  well lies.
 
 Everything works on the column-scaled regressor ``A = Psi / s`` through its QR factors
 ``A = Q R``: a (weighted) least-squares problem becomes the small system ``C x ~ d`` with
