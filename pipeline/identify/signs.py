@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from debist.identify.config import IdentifyConfig
     from debist.model.rbf import RBFModel
 
-__all__ = ["GAIN_REVERSAL", "physical_signs"]
+__all__ = ["GAIN_REVERSAL", "broken_signs", "physical_signs"]
 
 #: A gain reversed by less than this share of its largest magnitude on the visited range is
 #: taken as the fit's noise at the edge of the range, not as a broken sign.
@@ -100,3 +100,56 @@ def physical_signs(
     return tuple(statements), (
         f"imposed {', '.join(statements)}: {fit} had {'; '.join(words)} on the visited range"
     )
+
+
+def broken_signs(reference: RBFModel, model: RBFModel, q: np.ndarray, n_grid: int = 801) -> str:
+    """Say which sign of d and g_i that ``reference`` keeps on the visited range ``model`` breaks.
+
+    A later stage (the simulation-error finish) must not undo the physics the fit kept: d not
+    negative where ``reference`` has it non-negative, and each gain that keeps one sign in
+    ``reference`` not reversed in ``model`` by more than :data:`GAIN_REVERSAL` of its largest
+    magnitude (in both: the tolerance :func:`physical_signs` grants a fit).
+
+    Parameters
+    ----------
+    reference : RBFModel
+        The model whose signs count (the least-squares fit, signs imposed).
+    model : RBFModel
+        The model checked, on the same curves.
+    q : ndarray, shape (n,)
+        Estimation positions [unit of q]; their range is checked.
+    n_grid : int
+        Points of the visited range checked.
+
+    Returns
+    -------
+    str
+        Empty, or e.g. ``"d >= 0 (d = -0.8 1/s at q = 0.0011)"``, clauses joined by ``"; "``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 35-37; Khalil, Nonlinear Systems, 3rd ed., Sec. 4.1.
+    """
+    grid = np.linspace(float(np.nanmin(q)), float(np.nanmax(q)), n_grid)
+    ref, new = reference.curves(grid), model.curves(grid)
+    words = []
+    if "d" in ref and "d" in new and np.min(ref["d"]) >= 0 and np.min(new["d"]) < 0:
+        k = int(np.argmin(new["d"]))
+        words.append(f"d >= 0 (d = {new['d'][k]:.4g} 1/s at q = {grid[k]:.4g})")
+    if "g" in ref and "g" in new:
+        g_ref = np.asarray(ref["g"]).reshape(grid.size, -1)
+        g_new = np.asarray(new["g"]).reshape(grid.size, -1)
+        for j in range(g_ref.shape[1]):
+            sign = float(np.sign(g_ref[np.argmax(np.abs(g_ref[:, j])), j]))
+            largest = np.max(np.abs(g_ref[:, j]))
+            if sign == 0 or np.any(g_ref[:, j] * sign < -GAIN_REVERSAL * largest):
+                continue  # the reference does not keep one sign either
+            g = g_new[:, j] * sign
+            if not np.any(g < -GAIN_REVERSAL * np.max(np.abs(g))):
+                continue
+            k = int(np.argmin(g))
+            words.append(
+                f"g{j + 1} {'>=' if sign > 0 else '<='} 0 (g{j + 1} = {g_new[k, j]:.4g} at "
+                f"q = {grid[k]:.4g})"
+            )
+    return "; ".join(words)

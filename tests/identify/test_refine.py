@@ -190,6 +190,30 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
     assert len(calls) == 1 and calls[0][0] == calls[0][1] > 1000  # q and q_dot of the records
 
 
+@pytest.mark.slow
+def test_refinement_never_undoes_a_sign_the_fit_kept(monkeypatch):
+    """The same accepted refinement, said to break d >= 0 that the least squares kept, is
+    rejected with that reason and the least squares kept; the check gets the least-squares
+    model as its reference and the refined one to judge."""
+    from debist.identify import refine
+
+    calls = []
+
+    def broken(reference, model, q):
+        calls.append((reference, model, q.size))
+        return "d >= 0 (d = -1 1/s at q = 0)"
+
+    monkeypatch.setattr(refine, "broken_signs", broken)  # the name refine calls
+    model, _, res = _refined(
+        _duffing_record(), 0.1, backbone=["linear_spring", "cubic_spring", "viscous", "input_gain"]
+    )
+    assert not res.accepted and res.model is model
+    assert res.full_rms_refined < res.full_rms_ls
+    assert res.message == "rejected: the refined model breaks d >= 0 (d = -1 1/s at q = 0), " + (
+        "which the fit kept")  # fmt: skip
+    assert len(calls) == 1 and calls[0][0] is model and calls[0][1] is not model
+
+
 def test_fitted_windows_never_touch_the_held_out_blocks_that_judge_them():
     from debist.identify.refine import _held_out, _windows
 
