@@ -40,7 +40,7 @@ from debist.core import preflight, progress
 from debist.core.metrics import rms
 from debist.identify.config import IdentifyConfig, RefineConfig, refine_config
 from debist.identify.fit import FitDiagnostics, Record, assemble_model
-from debist.identify.signs import broken_signs
+from debist.identify.signs import lost_dissipation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
 from debist.model.terms import term_sign, term_table
@@ -423,14 +423,12 @@ def _refine_once(model: RBFModel, diag: FitDiagnostics, records: Sequence[Record
     if accepted:
         qd_all = np.concatenate([r.q_dot for r in records])
         stable, reason = model_is_stable(refined, q_all, q_dot=qd_all)
-        broken = broken_signs(model, refined, q_all)
+        negative = lost_dissipation(model, refined, q_all)
         if not stable:
             accepted, message = False, f"rejected: the refined model is unstable ({reason})"
-        elif broken:
-            accepted, message = (
-                False,
-                f"rejected: the refined model breaks {broken}, which the fit kept",
-            )
+        elif negative:
+            accepted = False
+            message = f"rejected: the refined model has negative damping ({negative}), the fit none"
     return RefineResult(
         model=refined if accepted else model,
         accepted=accepted,

@@ -191,26 +191,27 @@ def test_refinement_never_accepts_an_unstable_model(monkeypatch):
 
 
 @pytest.mark.slow
-def test_refinement_never_undoes_a_sign_the_fit_kept(monkeypatch):
-    """The same accepted refinement, said to break d >= 0 that the least squares kept, is
+def test_refinement_never_brings_negative_damping_the_fit_did_not_have(monkeypatch):
+    """The same accepted refinement, said to have d < 0 where the least squares had none, is
     rejected with that reason and the least squares kept; the check gets the least-squares
     model as its reference and the refined one to judge."""
     from debist.identify import refine
 
     calls = []
 
-    def broken(reference, model, q):
+    def negative(reference, model, q):
         calls.append((reference, model, q.size))
-        return "d >= 0 (d = -1 1/s at q = 0)"
+        return "d = -1 1/s at q = 0"
 
-    monkeypatch.setattr(refine, "broken_signs", broken)  # the name refine calls
+    monkeypatch.setattr(refine, "lost_dissipation", negative)  # the name refine calls
     model, _, res = _refined(
         _duffing_record(), 0.1, backbone=["linear_spring", "cubic_spring", "viscous", "input_gain"]
     )
     assert not res.accepted and res.model is model
     assert res.full_rms_refined < res.full_rms_ls
-    assert res.message == "rejected: the refined model breaks d >= 0 (d = -1 1/s at q = 0), " + (
-        "which the fit kept")  # fmt: skip
+    assert res.message == (
+        "rejected: the refined model has negative damping (d = -1 1/s at q = 0), the fit none"
+    )
     assert len(calls) == 1 and calls[0][0] is model and calls[0][1] is not model
 
 
