@@ -423,10 +423,9 @@ def _refine_once(model: RBFModel, diag: FitDiagnostics, records: Sequence[Record
     if accepted:
         qd_all = np.concatenate([r.q_dot for r in records])
         stable, reason = model_is_stable(refined, q_all, q_dot=qd_all)
-        negative = lost_dissipation(model, refined, q_all)
         if not stable:
             accepted, message = False, f"rejected: the refined model is unstable ({reason})"
-        elif negative:
+        elif negative := lost_dissipation(model, refined, q_all):
             accepted = False
             message = f"rejected: the refined model has negative damping ({negative}), the fit none"
     return RefineResult(

@@ -37,12 +37,6 @@ def _on_visited(model: RBFModel, q: np.ndarray, n_grid: int):
     return grid, curves.get("d"), gains
 
 
-def _reversed_at(g: np.ndarray, sign: float) -> int | None:
-    """Where g is farthest against ``sign``, if by more than GAIN_REVERSAL of its magnitude."""
-    k = int(np.argmin(g * sign))
-    return k if g[k] * sign < -GAIN_REVERSAL * float(np.max(np.abs(g))) else None
-
-
 def physical_signs(
     model: RBFModel,
     q: np.ndarray,
@@ -98,13 +92,14 @@ def physical_signs(
     if "g" in cfg.rbf and gains is not None and cfg.input_map == "v2":
         h = np.asarray(h, dtype=float).reshape(q.size, -1)
         for j in range(gains.shape[1]):
-            name = f"g{j + 1}"
+            name, g = f"g{j + 1}", gains[:, j]
             sign = np.sign(np.cov(h[:, j], q)[0, 1])
-            k = None if name in stated or sign == 0 else _reversed_at(gains[:, j], sign)
-            if k is None:
+            largest = float(np.max(np.abs(g)))
+            if name in stated or sign == 0 or np.all(g * sign >= -GAIN_REVERSAL * largest):
                 continue
+            k = int(np.argmin(g * sign))
             statements.append(f"{name} {'>=' if sign > 0 else '<='} 0")
-            words.append(f"{name} = {gains[k, j]:.4g} at q = {grid[k]:.4g}")
+            words.append(f"{name} = {g[k]:.4g} at q = {grid[k]:.4g}")
     if not statements:
         return (), ""
     fit = f"the fit under {', '.join(after)}" if after else "the least-squares fit"
