@@ -34,8 +34,13 @@ __all__ = ["BesideRun"]
 STOP_GRACE = 5.0
 
 
-def _child(fn: Callable[[], Any], send) -> None:
-    """Call ``fn`` in the forked process without progress display; send (ok, value, warnings)."""
+def _child(fn: Callable[[], Any], send, recv) -> None:
+    """Call ``fn`` in the forked process without progress display; send (ok, value, warnings).
+
+    The copy of the parent's receiving end that the fork made is closed first: if the parent
+    is gone (stopped), the send then fails instead of waiting forever for a reader.
+    """
+    recv.close()
     try:
         with listening(None):
             value, caught = call_recording_warnings(fn)
@@ -46,6 +51,8 @@ def _child(fn: Callable[[], Any], send) -> None:
         send.send(message)
     except (pickle.PicklingError, TypeError, AttributeError) as exc:
         send.send((False, ArtifactError(f"the result could not be sent back: {exc}"), []))
+    except OSError:  # the parent is gone: nobody to tell
+        pass
     finally:
         send.close()
 
@@ -71,7 +78,7 @@ class BesideRun:
         ctx = fork_context()
         self.label = label
         self._recv, send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_child, args=(fn, send), name=label)
+        self._proc = ctx.Process(target=_child, args=(fn, send, self._recv), name=label)
         self._proc.start()
         send.close()
 

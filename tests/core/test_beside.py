@@ -61,3 +61,41 @@ def test_stop_ends_a_child_that_still_runs():
     run.stop()
     assert time.perf_counter() - t0 < 10
     assert run._proc.exitcode is not None and run._proc.exitcode != 0
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads process states in /proc")
+def test_a_grandchild_whose_parent_was_stopped_ends_instead_of_waiting_for_a_reader(tmp_path):
+    """A child that started its own BesideRun is stopped: the grandchild's result (larger
+    than a pipe holds) finds no reader, and the grandchild ends rather than block forever."""
+    marker = tmp_path / "grandchild.pid"
+
+    def parent():
+        def grandchild():
+            marker.write_text(str(os.getpid()))
+            time.sleep(0.5)  # the parent is stopped meanwhile
+            return b"x" * 1_000_000
+
+        BesideRun(grandchild, "grandchild").result()
+
+    run = BesideRun(parent, "parent")
+    while not marker.exists():
+        time.sleep(0.05)
+    run.stop()
+    pid = int(marker.read_text())
+    deadline = time.perf_counter() + 20
+    while time.perf_counter() < deadline and _alive(pid):
+        time.sleep(0.1)
+    ended = not _alive(pid)
+    if not ended:
+        os.kill(pid, signal.SIGKILL)  # it holds this process's output open
+    assert ended
+
+
+def _alive(pid):
+    """Whether a process runs (a zombie, ended but not reaped by init yet, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
