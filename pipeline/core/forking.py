@@ -19,7 +19,8 @@ import multiprocessing
 import os
 import threading
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "call_recording_warnings",
     "fork_context",
     "fork_workers",
+    "one_core",
     "replay_warnings",
     "usable_cores",
 ]
@@ -47,14 +49,38 @@ def usable_cores() -> int:
     return max(1, cores or 1)
 
 
+#: Depth of :func:`one_core` blocks in this process (a forked child starts with its parent's).
+_ONE_CORE = 0
+
+
+@contextmanager
+def one_core() -> Iterator[None]:
+    """Run the block on this process's core alone: :func:`fork_workers` returns 1 inside.
+
+    For work that already runs in a process beside others (a stage's first part started
+    ahead): a child it forked could outlive it when it is stopped, and would only compete
+    for the cores the others use.
+
+    Yields
+    ------
+    None
+    """
+    global _ONE_CORE
+    _ONE_CORE += 1
+    try:
+        yield
+    finally:
+        _ONE_CORE -= 1
+
+
 def fork_workers(n: int) -> int:
     """Count the processes for ``n`` independent jobs: one per core, 1 where forking is unsafe.
 
     A daemonic process (a Dask or multiprocessing worker, which already runs in parallel
-    with its peers) may not start children; only POSIX ``fork`` starts a child without
-    importing the library again (``spawn`` costs more than a short job saves); outside the
-    main thread (``debist batch`` with threads) another thread may hold a lock that a forked
-    child could never take.
+    with its peers) may not start children, nor may a :func:`one_core` block; only POSIX
+    ``fork`` starts a child without importing the library again (``spawn`` costs more than a
+    short job saves); outside the main thread (``debist batch`` with threads) another thread
+    may hold a lock that a forked child could never take.
 
     Parameters
     ----------
@@ -66,7 +92,7 @@ def fork_workers(n: int) -> int:
     int
         Processes to use, the calling one included: ``min(n, cores)``, or 1.
     """
-    if n < 2 or multiprocessing.current_process().daemon:
+    if n < 2 or _ONE_CORE or multiprocessing.current_process().daemon:
         return 1
     if threading.current_thread() is not threading.main_thread():
         return 1

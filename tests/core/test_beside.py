@@ -99,3 +99,13 @@ def _alive(pid):
     except FileNotFoundError:
         return False
 
+
+def test_one_core_keeps_the_block_from_forking():
+    from debist.core.forking import one_core
+
+    with one_core():
+        assert fork_workers(2) == 1
+        with one_core():
+            assert fork_workers(4) == 1
+        assert fork_workers(2) == 1
+    assert fork_workers(2) == 2
