@@ -34,7 +34,7 @@ from debist.core.errors import (
     WorkflowError,
 )
 from debist.core.faults import fault_point
-from debist.core.forking import fork_workers
+from debist.core.forking import fork_workers, one_core
 from debist.engine import outdir, verification
 from debist.engine.fingerprint import code_fingerprint
 from debist.physics.params import PrototypeParams
@@ -666,6 +666,7 @@ class Runner:
         manifests: dict[str, artifacts.Manifest] = {}
         pending = [s for s in STAGES if s in selected]
         beside: dict[str, BesideRun] = {}
+        early: dict[str, BesideRun] = {}  # first parts started ahead (registry ``early``)
         ahead: list[BesideRun] | None = None  # tried once, at the first free-running stage
         try:
             while pending:
@@ -675,8 +676,11 @@ class Runner:
                 for up in self._upstream(stage):
                     if up in beside:
                         manifests[up] = self._join(up, beside.pop(up), on_event)
+                first = early.pop(stage, None)
                 found = self._start(stage, force, on_event, damaged, manifests)
                 if found is None:
+                    if first is not None:  # its inputs came out as they were: not needed
+                        first.stop()
                     continue
                 if ahead is None and stage in FREE_RUN_STAGES:
                     ahead = _compile_ahead()
@@ -685,14 +689,61 @@ class Runner:
                         partial(self._execute, stage, *found), f"stage '{stage}'"
                     )
                     continue
-                manifests[stage], seconds = self._execute(stage, *found)
+                early.update(self._start_early(stage, pending, early, len(beside)))
+                prepared = None if first is None else first.result()
+                manifests[stage], seconds = self._execute(stage, *found, prepared=prepared)
                 on_event(stage, "done", f"{seconds:.2f} s")
             for stage in list(beside):
                 manifests[stage] = self._join(stage, beside.pop(stage), on_event)
         finally:
-            for run in (*beside.values(), *(ahead or ())):
+            for run in (*beside.values(), *early.values(), *(ahead or ())):
                 run.stop()
         return {s: manifests[s] for s in STAGES if s in manifests}
+
+    def _start_early(
+        self, running: str, pending: Sequence[str], started: Mapping[str, BesideRun], busy: int
+    ) -> dict[str, BesideRun]:
+        """Start the first parts of the pending stages that ``running`` leads to, if they can.
+
+        A stage's first part (its module's ``prepare``, registry ``early``) starts in a
+        forked process when the stages it reads are done, a stage it depends on is about to
+        run here (so it will most likely run too) and a core is free beside this process and
+        the ``busy`` stages already running beside it
+        (:func:`debist.core.forking.fork_workers`). If the stage turns out up to date, the
+        part is stopped unused.
+        """
+        out: dict[str, BesideRun] = {}
+        for stage in pending:
+            reads = registry.stage(stage).early
+            if (
+                not reads
+                or stage in started
+                or any(u in pending or u == running for u in reads)
+                or running not in self._depends_on(stage)
+                or fork_workers(busy + 2) < busy + 2
+            ):
+                continue
+            module = importlib.import_module(registry.stage(stage).module)
+            out[stage] = BesideRun(
+                partial(self._first_part, module.prepare), f"stage '{stage}' (first part)"
+            )
+        return out
+
+    def _depends_on(self, stage: str) -> set[str]:
+        """Every stage whose artifacts ``stage`` reads, directly or through others."""
+        seen: set[str] = set()
+        todo = list(self._upstream(stage))
+        while todo:
+            up = todo.pop()
+            if up not in seen:
+                seen.add(up)
+                todo.extend(self._upstream(up))
+        return seen
+
+    def _first_part(self, prepare: Callable[[Any], Any]) -> Any:
+        """Call a stage's ``prepare(self)`` as its ``execute``, on this process's core alone."""
+        with one_blas_thread(), one_core():
+            return prepare(self)
 
     def _may_run_beside(self, stage: str, pending: Sequence[str]) -> bool:
         """Whether ``stage`` can start now in a forked process beside the pending stages.
@@ -764,14 +815,23 @@ class Runner:
         return found
 
     def _execute(
-        self, stage: str, key: str, inputs: dict[str, str], upstream: dict[str, str]
+        self,
+        stage: str,
+        key: str,
+        inputs: dict[str, str],
+        upstream: dict[str, str],
+        prepared: Any = None,
     ) -> tuple[artifacts.Manifest, float]:
-        """Run one stage's ``execute`` and write its folder; return its manifest and time [s]."""
+        """Run one stage's ``execute`` and write its folder; return its manifest and time [s].
+
+        ``prepared``: the result of the stage's first part, when it ran ahead
+        (:meth:`_start_early`).
+        """
         t0 = time.perf_counter()
         module = importlib.import_module(registry.stage(stage).module)
         with one_blas_thread():
             t_run = time.perf_counter()
-            result = module.execute(self)
+            result = module.execute(self) if prepared is None else module.execute(self, prepared)
             ran = time.perf_counter() - t_run
         seconds = time.perf_counter() - t0
         # the stage's own parts, what they leave out, and the import of its code (its

@@ -42,7 +42,7 @@ pd = lazy.load("pandas")
 #: Columns of validate's NRMSE table that the compare stage carries over per data set.
 CAVEATS = ("under_excited", "extrapolated")
 
-__all__ = ["CompareResult", "execute", "run_compare"]
+__all__ = ["CompareResult", "execute", "prepare", "run_compare", "run_peers", "with_rbf_rows"]
 
 
 @dataclass(frozen=True)
@@ -54,8 +54,9 @@ class CompareResult:
     model : SindyModel
         The identified SINDy model.
     table : pandas.DataFrame
-        The RBF rows of the validation stage and the SINDy rows, per data set:
-        NRMSE of q, q_dot, q_ddot, RMS, divergence and ``n_params``.
+        The SINDy and NARX rows (:func:`run_peers`), with the RBF rows of the validation
+        stage before them (:func:`run_compare`), per data set: NRMSE of q, q_dot, q_ddot,
+        RMS, divergence and ``n_params``.
     simulated : dict of str to pandas.DataFrame
         SINDy free runs per data set.
     summary : dict
@@ -79,7 +80,7 @@ class CompareResult:
 def run_compare(
     tables, derivs, rbf_table: pd.DataFrame, section: Mapping[str, Any], physics=None
 ) -> CompareResult:
-    """Fit SINDy on the RBF model's data and derivatives; free-run it with the same simulator.
+    """Fit the peers (:func:`run_peers`) and put the RBF model's rows before theirs.
 
     Parameters
     ----------
@@ -88,6 +89,53 @@ def run_compare(
     rbf_table : pandas.DataFrame
         The validation stage's NRMSE table of the RBF model (with ``n_params``).
     section : mapping
+        As :func:`run_peers`.
+    physics : PrototypeParams, optional
+        As :func:`run_peers`.
+
+    Returns
+    -------
+    CompareResult
+        :func:`run_peers`'s, its table the RBF rows, then SINDy's, then the NARX peer's.
+
+    Raises
+    ------
+    WorkflowError, IdentificationError
+        As :func:`run_peers`.
+    """
+    return with_rbf_rows(run_peers(tables, derivs, section, physics), rbf_table)
+
+
+def with_rbf_rows(peers: CompareResult, rbf_table: pd.DataFrame) -> CompareResult:
+    """Return the peers' result with the RBF model's rows before theirs.
+
+    Parameters
+    ----------
+    peers : CompareResult
+        :func:`run_peers`'s result.
+    rbf_table : pandas.DataFrame
+        The validation stage's NRMSE table of the RBF model.
+
+    Returns
+    -------
+    CompareResult
+        The same, its table ``rbf_table``'s rows followed by the peers' (a new index).
+    """
+    return replace(peers, table=pd.concat([rbf_table, peers.table], ignore_index=True))
+
+
+def run_peers(tables, derivs, section: Mapping[str, Any], physics=None) -> CompareResult:
+    """Fit SINDy and the NARX peer on the estimation data; free-run them as the RBF model.
+
+    SINDy is fitted on the same data and derivatives and run free with the same simulator.
+    Nothing here reads the identified model: the peers can be fitted while it is identified
+    and validated (the stage's first part, :func:`prepare`).
+
+    Parameters
+    ----------
+    tables, derivs : mapping of str to pandas.DataFrame
+        Measured data and derivatives of every data set (the stages' outputs).
+    section : mapping
         ``{"sindy": [compare] section, "validate": [validate] section}``.
     physics : PrototypeParams, optional
         The ``[physics]`` prototype; its ``phi(q)`` map gives the SINDy rows ``nrmse_phi``.
@@ -95,6 +143,7 @@ def run_compare(
     Returns
     -------
     CompareResult
+        Its table the SINDy rows, then the NARX peer's.
 
     Raises
     ------
@@ -144,7 +193,7 @@ def run_compare(
                "search": [{k: (None if v == np.inf else v) for k, v in r.items()}
                           for r in search]}  # fmt: skip
     timings = {"fit": model.fit_time, "simulate": sim_time}
-    narx, parts = None, [rbf_table, table]
+    narx, parts = None, [table]
     if narx_job is not None:
         t0 = time.perf_counter()
         narx, narx_table, runs = narx_job()
@@ -229,13 +278,42 @@ def _input_units(tables, v) -> list[str]:
     return [units.get(f"v{i + 1}", "V") for i in range(n)]
 
 
-def execute(ctx: StageInputs) -> StageOutput:
-    """Run the compare stage: SINDy beside the validated RBF model.
+def prepare(ctx: StageInputs) -> CompareResult:
+    """Run the stage's first part: the peers (:func:`run_peers`), from ingest and differentiate.
+
+    The runner may call it in a forked process while identify and validate run (the
+    registry's ``early``) and hand its result to :func:`execute`.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The ``[compare]`` and ``[validate]`` sections and the data.
+
+    Returns
+    -------
+    CompareResult
+        The SINDy and NARX rows, models and free runs.
+
+    Raises
+    ------
+    WorkflowError, IdentificationError
+        As :func:`run_peers`.
+    """
+    return run_peers(
+        ctx.tables("ingest"), ctx.tables("differentiate"), ctx.stage_config("compare"),
+        ctx.physics(),
+    )  # fmt: skip
+
+
+def execute(ctx: StageInputs, prepared: CompareResult | None = None) -> StageOutput:
+    """Run the compare stage: SINDy and the NARX peer beside the validated RBF model.
 
     Parameters
     ----------
     ctx : StageInputs
         The ``[compare]`` and ``[validate]`` sections, the data and the validation table.
+    prepared : CompareResult, optional
+        :func:`prepare`'s result for this ``ctx``, if it ran already; else it runs here.
 
     Returns
     -------
@@ -247,16 +325,10 @@ def execute(ctx: StageInputs) -> StageOutput:
     Raises
     ------
     WorkflowError, IdentificationError
-        As :func:`run_compare`.
+        As :func:`run_peers`.
     """
     validated = ctx.read_parquet("validate", "nrmse.parquet")
-    res = run_compare(
-        ctx.tables("ingest"),
-        ctx.tables("differentiate"),
-        validated,
-        ctx.stage_config("compare"),
-        ctx.physics(),
-    )
+    res = with_rbf_rows(prepare(ctx) if prepared is None else prepared, validated)
     # every model is fitted on the same estimation data and run on the same records: what
     # the data lack (under-excited) and ask for (extrapolated), each row says as validate's
     per_dataset = validated.drop_duplicates("dataset").set_index("dataset")

@@ -42,6 +42,11 @@ class StageDef:
     beside : bool
         The stage may run in a forked process beside the stages after it that do not read
         it (:class:`debist.core.beside.BesideRun`): it reads little and much follows it.
+    early : tuple of str
+        Upstream stages that the first part of the stage reads, its module's
+        ``prepare(ctx)``: once they are done, the runner may call it in a forked process
+        beside the stages between and hands its result to ``execute(ctx, prepared)`` (the
+        same result as ``prepare`` called there; empty: no first part).
     """
 
     name: str
@@ -51,6 +56,7 @@ class StageDef:
     help: str
     optional: bool = False
     beside: bool = False
+    early: tuple[str, ...] = ()
 
 
 #: The stages in execution order.
@@ -97,6 +103,7 @@ STAGES: tuple[StageDef, ...] = (
         ("ingest", "differentiate", "validate"),
         (*_BASE, "h5py", "pysindy", "scikit-learn"),
         "SINDy on the same data, derivatives and simulator.",
+        early=("ingest", "differentiate"),  # the peers' fits and free runs
     ),
     StageDef(
         "study",
