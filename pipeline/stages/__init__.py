@@ -1,7 +1,8 @@
 """The pipeline's stages, one module each: pure functions from arrays and settings to results.
 
 Each stage module holds the stage's pure ``run_<stage>`` function (arrays and configuration
-in, a result out; no file IO, no printing) and an ``execute(ctx)`` adapter that takes the
+in, a result out; no file IO, no printing; compare has two, ``run_peers`` and
+``with_rbf_rows``, whose first can run ahead) and an ``execute(ctx)`` adapter that takes the
 stage's inputs from a :class:`StageInputs` (the runner, which reads them through
 :mod:`debist.core.artifacts`) and returns a :class:`StageOutput` for the runner to write. Only
 ingest reads files itself, because reading rig logs is what it is for.

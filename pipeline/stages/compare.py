@@ -42,7 +42,7 @@ pd = lazy.load("pandas")
 #: Columns of validate's NRMSE table that the compare stage carries over per data set.
 CAVEATS = ("under_excited", "extrapolated")
 
-__all__ = ["CompareResult", "execute", "prepare", "run_compare", "run_peers", "with_rbf_rows"]
+__all__ = ["CompareResult", "execute", "prepare", "run_peers", "with_rbf_rows"]
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class CompareResult:
         The identified SINDy model.
     table : pandas.DataFrame
         The SINDy and NARX rows (:func:`run_peers`), with the RBF rows of the validation
-        stage before them (:func:`run_compare`), per data set: NRMSE of q, q_dot, q_ddot,
+        stage before them (:func:`with_rbf_rows`), per data set: NRMSE of q, q_dot, q_ddot,
         RMS, divergence and ``n_params``.
     simulated : dict of str to pandas.DataFrame
         SINDy free runs per data set.
@@ -75,35 +75,6 @@ class CompareResult:
     summary: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     narx: Any = None
-
-
-def run_compare(
-    tables, derivs, rbf_table: pd.DataFrame, section: Mapping[str, Any], physics=None
-) -> CompareResult:
-    """Fit the peers (:func:`run_peers`) and put the RBF model's rows before theirs.
-
-    Parameters
-    ----------
-    tables, derivs : mapping of str to pandas.DataFrame
-        Measured data and derivatives of every data set (the stages' outputs).
-    rbf_table : pandas.DataFrame
-        The validation stage's NRMSE table of the RBF model (with ``n_params``).
-    section : mapping
-        As :func:`run_peers`.
-    physics : PrototypeParams, optional
-        As :func:`run_peers`.
-
-    Returns
-    -------
-    CompareResult
-        :func:`run_peers`'s, its table the RBF rows, then SINDy's, then the NARX peer's.
-
-    Raises
-    ------
-    WorkflowError, IdentificationError
-        As :func:`run_peers`.
-    """
-    return with_rbf_rows(run_peers(tables, derivs, section, physics), rbf_table)
 
 
 def with_rbf_rows(peers: CompareResult, rbf_table: pd.DataFrame) -> CompareResult:
