@@ -1103,11 +1103,12 @@ def main() -> None:
     """Entry point of the ``debist`` console script (SIGTERM stops as cleanly as Ctrl-C)."""
     import warnings
 
-    from debist.core.allocator import keep_freed_memory
+    from debist.core.allocator import arrow_system_pool, keep_freed_memory
 
     warnings.formatwarning = _warning_line
     signal.signal(signal.SIGTERM, _on_sigterm)
     keep_freed_memory()
+    arrow_system_pool()
     app()
 
 

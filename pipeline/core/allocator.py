@@ -1,4 +1,4 @@
-"""Keep freed large arrays in the process's heap for reuse (glibc's malloc, Linux).
+"""The process's allocators: freed arrays reused within a stage, returned between stages.
 
 The identification and the free runs allocate and free many temporaries of one or a few
 columns of a record (regressor columns, filtered copies, projections): 8 MB each at 10^6
@@ -12,13 +12,22 @@ fragmentation leaves; benchmarks/README.md has the measurements. The ``debist`` 
 it at start; a batch's Dask workers get the same thresholds through glibc's environment
 variables (:data:`ENVIRON`).
 
+Between stages the opposite is right: a stage's temporaries are gone, and what the heap kept
+of them would only raise the next stages' peak (and that of every process forked later, which
+inherits the pages). The runner calls :func:`release_freed_memory` (glibc's ``malloc_trim``)
+after each stage. pyarrow's default pool (mimalloc) likewise keeps segments of its own after
+the Parquet reads and writes; :func:`arrow_system_pool` has pyarrow allocate with the C
+library's ``malloc`` instead, whose freed memory the same trim returns. (The figures are drawn
+outside the stage's process for the same reason: :mod:`debist.report.render`.)
+
 A user's own ``MALLOC_MMAP_THRESHOLD_`` or ``MALLOC_TRIM_THRESHOLD_`` (glibc's environment
 variables) is kept; other C libraries (musl, macOS, Windows) are left alone.
 
 References
 ----------
 The GNU C Library manual, "Malloc Tunable Parameters" (``mallopt``, ``M_MMAP_THRESHOLD``,
-``M_TRIM_THRESHOLD``); mallopt(3), Linux man-pages.
+``M_TRIM_THRESHOLD``); mallopt(3) and malloc_trim(3), Linux man-pages; Apache Arrow
+documentation, "Memory Management" (``ARROW_DEFAULT_MEMORY_POOL``).
 """
 
 from __future__ import annotations
@@ -28,7 +37,15 @@ import ctypes.util
 import os
 import platform
 
-__all__ = ["ENVIRON", "MMAP_THRESHOLD", "TRIM_THRESHOLD", "keep_freed_memory"]
+__all__ = [
+    "ARROW_ENVIRON",
+    "ENVIRON",
+    "MMAP_THRESHOLD",
+    "TRIM_THRESHOLD",
+    "arrow_system_pool",
+    "keep_freed_memory",
+    "release_freed_memory",
+]
 
 #: Requests at least this large still get their own mapping [bytes] (1 GiB).
 MMAP_THRESHOLD = 1 << 30
@@ -41,6 +58,18 @@ ENVIRON = {
     "MALLOC_MMAP_THRESHOLD_": str(MMAP_THRESHOLD),
     "MALLOC_TRIM_THRESHOLD_": str(TRIM_THRESHOLD),
 }
+#: pyarrow's allocator, chosen by its environment variable before pyarrow allocates.
+ARROW_ENVIRON = {"ARROW_DEFAULT_MEMORY_POOL": "system"}
+
+
+def _glibc() -> ctypes.CDLL | None:
+    """Load the C library if it is glibc (None elsewhere or if it cannot be loaded)."""
+    if platform.libc_ver()[0] != "glibc":
+        return None
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    except OSError:
+        return None
 
 
 def keep_freed_memory() -> bool:
@@ -61,11 +90,60 @@ def keep_freed_memory() -> bool:
     >>> isinstance(keep_freed_memory(), bool)
     True
     """
-    if platform.libc_ver()[0] != "glibc" or any(name in os.environ for name in ENVIRON):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-    except OSError:
+    libc = _glibc()
+    if libc is None or any(name in os.environ for name in ENVIRON):
         return False
     ok = libc.mallopt(_M_MMAP_THRESHOLD, ctypes.c_int(MMAP_THRESHOLD))
     return bool(ok and libc.mallopt(_M_TRIM_THRESHOLD, ctypes.c_int(TRIM_THRESHOLD)))
+
+
+def release_freed_memory() -> bool:
+    """Return the free pages of the C library's heap to the kernel (glibc's ``malloc_trim``).
+
+    Memory still in use is untouched; only what :func:`keep_freed_memory` kept for reuse goes.
+
+    Returns
+    -------
+    bool
+        True if glibc released memory; False if there was none to release or the C library
+        is not glibc.
+
+    References
+    ----------
+    malloc_trim(3), Linux man-pages.
+
+    Examples
+    --------
+    >>> isinstance(release_freed_memory(), bool)
+    True
+    """
+    libc = _glibc()
+    return bool(libc is not None and libc.malloc_trim(ctypes.c_size_t(0)))
+
+
+def arrow_system_pool() -> bool:
+    """Have pyarrow allocate with the C library's ``malloc`` (its ``system`` memory pool).
+
+    Sets :data:`ARROW_ENVIRON` in this process's environment, which pyarrow reads when it
+    first allocates and which processes started from this one inherit; call it before pyarrow
+    is imported. A pool the user chose in the environment is kept.
+
+    Returns
+    -------
+    bool
+        True if the variable was set here; False if the user had set it.
+
+    References
+    ----------
+    Apache Arrow documentation, "Memory Management", ``ARROW_DEFAULT_MEMORY_POOL``.
+
+    Examples
+    --------
+    >>> ARROW_ENVIRON
+    {'ARROW_DEFAULT_MEMORY_POOL': 'system'}
+    """
+    ((name, value),) = ARROW_ENVIRON.items()
+    if name in os.environ:
+        return False
+    os.environ[name] = value
+    return True

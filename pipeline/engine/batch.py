@@ -56,6 +56,7 @@ _WORKER_ENVIRON = {
     # freed arrays stay in the worker's heap (debist.core.allocator), instead of dask's default
     # MALLOC_TRIM_THRESHOLD_ of 64 KiB, which returns them to the kernel
     **allocator.ENVIRON,
+    **allocator.ARROW_ENVIRON,  # pyarrow's allocator: the C library's, as in the command
 }
 #: Type of the arguments of one batch item: (workflow file, stages, force).
 _Args = tuple[str, tuple[str, ...] | None, bool]

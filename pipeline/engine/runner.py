@@ -26,6 +26,7 @@ from typing import Any
 from threadpoolctl import threadpool_limits
 
 from debist.core import artifacts
+from debist.core.allocator import release_freed_memory
 from debist.core.beside import BesideRun
 from debist.core.errors import (
     ArtifactError,
@@ -692,6 +693,7 @@ class Runner:
                 early.update(self._start_early(stage, pending, early, len(beside)))
                 prepared = None if first is None else first.result()
                 manifests[stage], seconds = self._execute(stage, *found, prepared=prepared)
+                release_freed_memory()  # its temporaries: not kept for the stages after it
                 on_event(stage, "done", f"{seconds:.2f} s")
             for stage in list(beside):
                 manifests[stage] = self._join(stage, beside.pop(stage), on_event)

@@ -1,12 +1,14 @@
 """Figures drawn and rendered to PNG bytes, several at a time in forked processes.
 
-A stage that writes several figures (the validate stage's free runs, the report's Fig. 11a,
-12, 13 and 15) spends most of its time in matplotlib's layout and Agg rendering, on one
-core. :func:`render_pngs` draws the figures of a list in worker processes, one per core:
+A stage that writes figures (identify's curves, the validate stage's free runs, the report's
+Fig. 11a, 12, 13 and 15) spends most of its time in matplotlib's layout and Agg rendering, on
+one core. :func:`render_pngs` draws the figures of a list in worker processes, one per core:
 each figure is drawn and rendered by the same code in a copy of the same process (POSIX
 ``fork``), so its bytes are those of a serial rendering (:func:`debist.core.fileformats.
-png_bytes`). Where forking is unsafe or pointless the figures are rendered here, one after
-the other (:func:`debist.core.forking.fork_workers`).
+png_bytes`). No figure is drawn in the calling process, a single one neither: matplotlib's
+caches and drawing buffers then never stay in the stage's process, whose resident memory is
+inherited by every later stage and every process forked after it. Where forking is unsafe
+(:func:`debist.core.forking.fork_workers`) the figures are rendered here, one after the other.
 
 References
 ----------
@@ -91,8 +93,8 @@ def _replay(result: tuple[bytes, Caught]) -> bytes:
 def render_pngs(jobs: Sequence[FigureJob]) -> list[bytes]:
     """Draw and render figures to PNG bytes, in forked worker processes where that is safe.
 
-    This process renders the first ``ceil(n / workers)`` figures while ``workers - 1``
-    forked processes render the rest (one process per core).
+    ``min(n, cores)`` forked processes render the figures; this process only waits (one core
+    or where forking is unsafe: it renders them itself, one after the other).
 
     Parameters
     ----------
@@ -115,12 +117,12 @@ def render_pngs(jobs: Sequence[FigureJob]) -> list[bytes]:
     Python documentation, :class:`concurrent.futures.ProcessPoolExecutor`.
     """
     jobs = list(jobs)
-    workers = fork_workers(len(jobs))
+    if not jobs:
+        return []
+    workers = fork_workers(max(len(jobs), 2))  # two for one figure: one to draw it, this one
     if workers == 1:
         return [job.png() for job in jobs]
     import matplotlib.figure  # noqa: F401  (imported once here, inherited by the workers)
 
-    mine = -(-len(jobs) // workers)
-    with ProcessPoolExecutor(workers - 1, mp_context=fork_context()) as pool:
-        theirs = pool.map(_render, jobs[mine:])
-        return [job.png() for job in jobs[:mine]] + [_replay(r) for r in theirs]
+    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=fork_context()) as pool:
+        return [_replay(result) for result in pool.map(_render, jobs)]

@@ -11,7 +11,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.core.artifacts import Figure, H5Tree
+from debist.core.artifacts import H5Tree
 from debist.core.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, drop_inert_slip, select_hyperparameters
 from debist.identify.bands import (
@@ -40,6 +40,7 @@ from debist.model.rbf import RBFModel
 from debist.model.terms import PHYSICS_TERMS
 from debist.physics.reduced import reduced_curves
 from debist.report.plots import curves_figure
+from debist.report.render import FigureJob, render_pngs
 from debist.report.study_plots import autotune_figure
 from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
@@ -369,14 +370,14 @@ def execute(ctx: StageInputs) -> StageOutput:
         else None
     )
     unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
-    figure = Figure(
-        curves_figure(res.curves, analytical, unit, summary_units(res.summary)), REPORT_DPI
-    )
-    outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves, "plots/curves.png": figure}
+    args = (res.curves, analytical, unit, summary_units(res.summary))
+    figures = {"plots/curves.png": FigureJob(curves_figure, args, dpi=REPORT_DPI)}
+    outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})
     if res.search is not None:
         outputs["autotune.parquet"] = res.search.table
-        outputs["plots/autotune.png"] = Figure(autotune_figure(res.search), REPORT_DPI)
+        figures["plots/autotune.png"] = FigureJob(autotune_figure, (res.search,), dpi=REPORT_DPI)
+    outputs.update(zip(figures, render_pngs(list(figures.values())), strict=True))
     return StageOutput(outputs, res.summary, res.timings)
 
 

@@ -77,3 +77,65 @@ def test_a_64_mib_block_comes_from_the_heap_and_stays_there_only_with_the_thresh
     assert mapped == 1 and arena_mib < 64
     mapped, arena_mib = probe("keep")
     assert mapped == 0 and arena_mib >= 64
+
+
+_TRIM_PROBE = """
+import ctypes
+from debist.core.allocator import keep_freed_memory, release_freed_memory
+assert keep_freed_memory()
+
+def rss_mib():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / 2**20
+
+libc = ctypes.CDLL(None)
+libc.malloc.restype = ctypes.c_void_p
+libc.malloc.argtypes = [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+block = libc.malloc(64 << 20)
+ctypes.memset(block, 1, 64 << 20)  # touched: resident
+libc.free(block)
+kept = rss_mib()
+released = release_freed_memory()
+print(kept - rss_mib(), released)
+"""
+
+
+@pytest.mark.skipif(
+    not GLIBC or not os.path.exists("/proc/self/statm"), reason="glibc's malloc_trim, Linux's /proc"
+)
+def test_a_freed_block_the_heap_kept_goes_back_to_the_kernel_when_released():
+    """With the thresholds a freed 64 MiB block stays resident in the heap (the previous test);
+    release_freed_memory gives at least 60 MiB of it back."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    out = subprocess.run(
+        [sys.executable, "-c", _TRIM_PROBE], capture_output=True, text=True, env=env, check=True
+    ).stdout
+    dropped, released = out.split()
+    assert float(dropped) >= 60.0 and released == "True"
+
+
+_POOL_PROBE = """
+from debist.core.allocator import arrow_system_pool
+print(arrow_system_pool())
+import pyarrow as pa
+print(pa.default_memory_pool().backend_name)
+"""
+
+
+@pytest.mark.parametrize(("user", "expected"), [(None, ["True", "system"]), ("jemalloc", None)])
+def test_pyarrow_allocates_with_malloc_unless_the_user_chose_a_pool(user, expected):
+    import pyarrow as pa
+
+    env = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+    if user is not None:
+        try:
+            getattr(pa, f"{user}_memory_pool")()
+        except (NotImplementedError, AttributeError):
+            pytest.skip(f"this pyarrow has no {user} pool")
+        env["ARROW_DEFAULT_MEMORY_POOL"] = user
+        expected = ["False", user]
+    out = subprocess.run(
+        [sys.executable, "-c", _POOL_PROBE], capture_output=True, text=True, env=env, check=True
+    ).stdout
+    assert out.split() == expected

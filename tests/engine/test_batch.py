@@ -279,12 +279,13 @@ def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry
     blas = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
     heap = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
     monkeypatch.setenv("OMP_NUM_THREADS", "3")  # the user's own setting is kept
-    for name in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", *heap):
+    for name in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", *heap, "ARROW_DEFAULT_MEMORY_POOL"):
         monkeypatch.delenv(name, raising=False)
     before = dict(os.environ)
     with local_cluster(2) as client:
         seen = client.run(lambda: {name: os.environ.get(name) for name in blas})
         heaps = client.run(lambda: {name: os.environ.get(name) for name in heap})
+        pools = client.run(lambda: os.environ.get("ARROW_DEFAULT_MEMORY_POOL"))
         pids = client.run(os.getpid)
         retries = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures)
         threads = client.nthreads()
@@ -296,6 +297,7 @@ def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry
     assert (
         list(heaps.values()) == [{h: str(1 << 30 if "MMAP" in h else 2**31 - 1) for h in heap}] * 2
     )
+    assert list(pools.values()) == ["system"] * 2  # pyarrow allocates with malloc there too
     assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()
     assert sorted(threads.values()) == [1, 1] and retries == 1
     assert dict(os.environ) == before  # what the nannies set in this process is undone

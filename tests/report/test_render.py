@@ -1,5 +1,6 @@
 """Figures rendered in forked processes: the same PNG bytes, in order, errors and warnings kept."""
 
+import os
 import threading
 import warnings
 
@@ -47,15 +48,38 @@ def test_parallel_bytes_are_the_serial_bytes_in_order(parallel):
     assert all(p.startswith(b"\x89PNG\r\n\x1a\n") for p in pngs)
 
 
-def test_one_figure_and_no_figure_render_here():
-    assert fork_workers(1) == 1
+#: Processes that drew a figure with _draw_counted (this process's list; a worker's own copy
+#: of it is not seen here).
+_drawn: list[int] = []
+
+
+def _draw_counted(seed: int) -> Figure:
+    _drawn.append(os.getpid())
+    return _draw(seed)
+
+
+def test_no_figure_is_drawn_here_where_forking_is_safe(parallel):
+    """One figure and three: the bytes are those drawn here, yet this process drew none."""
+    for n in (1, 3):
+        jobs = [FigureJob(_draw_counted, (seed,), dpi=60) for seed in range(n)]
+        _drawn.clear()
+        pngs = render_pngs(jobs)
+        assert _drawn == []
+        assert pngs == [job.png() for job in jobs]
+        assert _drawn == [os.getpid()] * n  # the reference bytes, drawn here by job.png()
+
+
+def test_without_forking_the_figures_render_here(monkeypatch):
+    monkeypatch.setattr(render, "fork_workers", lambda n: 1)
     assert render_pngs([]) == []
-    job = _jobs(1)[0]
-    assert render_pngs([job]) == [job.png()]
+    jobs = [FigureJob(_draw_counted, (seed,), dpi=60) for seed in range(2)]
+    _drawn.clear()
+    assert render_pngs(jobs) == [job.png() for job in jobs]
+    assert _drawn == [os.getpid()] * 4
 
 
 def test_a_workers_warning_is_issued_here(parallel):
-    jobs = _jobs(3, warn=True)  # this process draws the first two, a worker the third
+    jobs = _jobs(3, warn=True)  # two worker processes draw them
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         render_pngs(jobs)
@@ -63,7 +87,7 @@ def test_a_workers_warning_is_issued_here(parallel):
 
 
 def test_a_workers_error_is_raised_here(parallel):
-    jobs = [*_jobs(2), FigureJob(_fail, (7,))]  # the failing job is the worker's
+    jobs = [*_jobs(2), FigureJob(_fail, (7,))]  # a worker's job fails
     with pytest.raises(ValueError) as err:
         render_pngs(jobs)
     assert "for 7" in str(err.value)
