@@ -536,8 +536,10 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
     }
     with contextlib.ExitStack() as stack:
         # The nannies live in this process and set their pre-spawn variables here too
-        # (and PYTHONHASHSEED): undo that when the cluster is gone.
-        stack.enter_context(_environ_restored([*pre_spawn, "PYTHONHASHSEED"]))
+        # (and PYTHONHASHSEED; distributed's proctitle sets __DASK_PARENT_PID): undo that
+        # when the cluster is gone.
+        restored = [*pre_spawn, "PYTHONHASHSEED", "__DASK_PARENT_PID"]
+        stack.enter_context(_environ_restored(restored))
         with dask.config.set(config):  # read when the scheduler and nannies are created
             cluster = LocalCluster(
                 host="127.0.0.1",
