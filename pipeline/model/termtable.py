@@ -122,18 +122,45 @@ class _Plan:
 
     gauss: np.ndarray
     table: np.ndarray
-    qpow: tuple[tuple[int, np.ndarray], ...]
-    spow: tuple[tuple[int, np.ndarray], ...]
+    # the Gaussians' clipping range, centres and widths, gathered once
+    gauss_lo: np.ndarray
+    gauss_hi: np.ndarray
+    gauss_centre: np.ndarray
+    gauss_width: np.ndarray
+    # each term's factor as a column of the factor matrices :meth:`TermTable.columns` builds:
+    # 0 is the factor 1 (x 1.0 is exact), k > 0 the k-th distinct power (or kind)
+    qpow: tuple[int, ...]
+    q_index: np.ndarray
+    spow: tuple[int, ...]
+    s_index: np.ndarray
     tanh: np.ndarray
     creep: np.ndarray
-    hpow: tuple[tuple[tuple[int, np.ndarray], ...], ...]
+    creep_states: np.ndarray
+    hpow: tuple[tuple[int, ...], ...]
+    h_index: tuple[np.ndarray, ...]
     inertia: np.ndarray
 
 
-def _groups(power: np.ndarray, among: np.ndarray) -> tuple[tuple[int, np.ndarray], ...]:
-    """``(p, indices)`` for each distinct power ``p != 0`` of the terms ``among``, ascending."""
-    return tuple((int(p), np.flatnonzero(among & (power == p)))
-                 for p in np.unique(power[among]) if p)  # fmt: skip
+def _powers(power: np.ndarray, among: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
+    """Return the distinct powers ``p != 0`` of the terms ``among`` (ascending), each term's index.
+
+    The index of a term is ``k + 1`` for the k-th of those powers, 0 for the others (their
+    factor is 1).
+    """
+    distinct = tuple(int(p) for p in np.unique(power[among]) if p)
+    index = np.zeros(power.size, dtype=np.int64)
+    for k, p in enumerate(distinct, start=1):
+        index[among & (power == p)] = k
+    return distinct, index
+
+
+def _factors(x: np.ndarray, powers: Sequence[int]) -> np.ndarray:
+    """``[1, x^p_1, x^p_2, ...]`` as columns, shape (n, 1 + len(powers))."""
+    out = np.empty((x.size, 1 + len(powers)))
+    out[:, 0] = 1.0
+    for k, p in enumerate(powers, start=1):
+        out[:, k] = x**p
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -198,17 +225,17 @@ class TermTable:
     creep_rate: float = 0.0
     slip_width: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
-    @property
+    @cached_property
     def n_creep(self) -> int:
         """Number of creep states C."""
         return int(self.creep_base.size)
 
-    @property
+    @cached_property
     def n_slip(self) -> int:
         """Number of Maxwell-slip elements E."""
         return int(self.slip_width.size)
 
-    @property
+    @cached_property
     def n_extra(self) -> int:
         """Number of states after ``[q, q_dot, z]``: the creep and the slip states, C + E."""
         return self.n_creep + self.n_slip
@@ -220,24 +247,41 @@ class TermTable:
 
     @cached_property
     def _plan(self) -> _Plan:
-        """The groups of terms and bases that :meth:`columns` and :meth:`bases` work on.
+        """The bases and the index of each term's factors that :meth:`columns` gathers.
 
-        Computed once per table (its arrays are not changed after construction): the
-        same groups, in the same order, as finding them on every call.
+        Computed once per table (its arrays are not changed after construction). The
+        NumPy engine calls :meth:`columns` for one state at a time, where the number of
+        array operations, not their size, is the cost: each factor (q power, velocity
+        factor, input power) is one gather from its distinct values, multiplied in the
+        order of term by term, so the products are the same to the bit.
         """
         kind = self.base_kind
-        spow = self.term_skind == S_POW
+        every = np.ones(self.n_terms, dtype=bool)
+        gauss = np.flatnonzero(kind == BASE_GAUSS)
+        qpow, q_index = _powers(self.term_qpow, every)
+        spow, s_index = _powers(self.term_spow, self.term_skind == S_POW)
+        tanh = np.flatnonzero(self.term_skind == S_TANH)
+        creep = np.flatnonzero(self.term_skind == S_CREEP)
+        # the velocity factors' columns: [1, s^p.., tanh(s / v_c), the states of the creep terms]
+        s_index[tanh] = 1 + len(spow)
+        s_index[creep] = 1 + len(spow) + (tanh.size > 0) + np.arange(creep.size)
+        hpow = [_powers(self.term_hpow[:, i], every) for i in range(self.n_inputs)]
         return _Plan(
-            gauss=np.flatnonzero(kind == BASE_GAUSS),
+            gauss=gauss,
             table=np.flatnonzero(kind == BASE_TABLE),
-            qpow=_groups(self.term_qpow, np.ones(self.n_terms, dtype=bool)),
-            spow=_groups(self.term_spow, spow),
-            tanh=np.flatnonzero(self.term_skind == S_TANH),
-            creep=np.flatnonzero(self.term_skind == S_CREEP),
-            hpow=tuple(
-                _groups(self.term_hpow[:, i], np.ones(self.n_terms, dtype=bool))
-                for i in range(self.n_inputs)
-            ),
+            gauss_lo=self.base_lo[gauss],
+            gauss_hi=self.base_hi[gauss],
+            gauss_centre=self.base_centre[gauss],
+            gauss_width=self.base_width[gauss],
+            qpow=qpow,
+            q_index=q_index,
+            spow=spow,
+            s_index=s_index,
+            tanh=tanh,
+            creep=creep,
+            creep_states=self.term_spow[creep],
+            hpow=tuple(h[0] for h in hpow),
+            h_index=tuple(h[1] for h in hpow),
             inertia=np.flatnonzero(self.term_skind == S_ACC),
         )
 
@@ -303,12 +347,13 @@ class TermTable:
         ndarray, shape (n, K)
         """
         q = np.asarray(q, dtype=float).reshape(-1)
-        out = np.ones((q.size, self.base_kind.size))
-        g = self._plan.gauss
-        if g.size:  # every Gaussian at once: the same operations, element by element
-            qc = np.minimum(np.maximum(q[:, None], self.base_lo[g]), self.base_hi[g])
-            out[:, g] = gaussian(qc - self.base_centre[g], self.base_width[g])
-        for k in self._plan.table:
+        out = np.empty((q.size, self.base_kind.size))
+        out.fill(1.0)
+        plan = self._plan
+        if plan.gauss.size:  # every Gaussian at once: the same operations, element by element
+            qc = np.minimum(np.maximum(q[:, None], plan.gauss_lo), plan.gauss_hi)
+            out[:, plan.gauss] = gaussian(qc - plan.gauss_centre, plan.gauss_width)
+        for k in plan.table:
             out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
 
@@ -348,25 +393,26 @@ class TermTable:
         s = np.asarray(s, dtype=float)
         hv = np.asarray(hv, dtype=float).reshape(q.size, self.n_inputs)
         plan = self._plan
-        b = self.bases(q)
-        out = b[:, self.term_base].copy()
-        for a, idx in plan.qpow:
-            out[:, idx] *= (q**a)[:, None]
-        # the factors by groups of terms (one array operation per distinct power), in the
-        # order q power, velocity factor, inputs: the same products as term by term
-        for p, idx in plan.spow:
-            out[:, idx] *= (s**p)[:, None]
-        if plan.tanh.size:
-            out[:, plan.tanh] *= np.tanh(s / self.coulomb_velocity)[:, None]
-        if plan.creep.size:
-            states = self.term_spow[plan.creep]
-            if w is None:
+        out = self.bases(q)[:, self.term_base].copy()  # C order: the weighted sums' order
+        # every term's factors in the order q power, velocity factor, inputs: the products of
+        # term by term, each factor gathered from the distinct values (a missing one is 1)
+        if plan.qpow:
+            out *= _factors(q, plan.qpow)[:, plan.q_index]
+        if plan.spow or plan.tanh.size or plan.creep.size:
+            S = _factors(s, plan.spow)
+            if plan.tanh.size:
+                S = np.column_stack([S, np.tanh(s / self.coulomb_velocity)])
+            if plan.creep.size and w is not None:
+                W = np.asarray(w, dtype=float).reshape(q.size, -1)[:, plan.creep_states]
+                S = np.column_stack([S, W])
+            elif plan.creep.size:  # no states given: the creep terms are 0 (set, as at rest)
+                S = np.column_stack([S, np.ones((q.size, plan.creep.size))])
+            out *= S[:, plan.s_index]
+            if plan.creep.size and w is None:
                 out[:, plan.creep] = 0.0
-            else:
-                out[:, plan.creep] *= np.asarray(w, dtype=float).reshape(q.size, -1)[:, states]
-        for i, groups in enumerate(plan.hpow):
-            for p, idx in groups:
-                out[:, idx] *= (hv[:, i] ** p)[:, None]
+        for i, powers in enumerate(plan.hpow):
+            if powers:
+                out *= _factors(hv[:, i], powers)[:, plan.h_index[i]]
         if plan.inertia.size:
             if q_ddot is None:
                 out[:, plan.inertia] = 0.0
@@ -633,40 +679,45 @@ class TableModel:
         if self.table.n_extra and w is None:
             w = np.zeros((np.shape(q)[0], self.table.n_extra))
         cols = self.table.columns(q, s, self.table.map_inputs(v), w)
-        weights = np.broadcast_to(self.weights, cols.shape)
+        # one row of weights (or masses) broadcasts over the trajectories: the same sums
+        weights = self.weights
         acc = np.einsum("bj,bj->b", cols, weights)
         if not self.table.has_inertia:
-            return acc / np.broadcast_to(self.mass, np.shape(q))
+            return acc / self.mass
         if q_dot is None:
             raise ValueError("a table with inertia terms needs q_dot for its acceleration")
         part, force = self.table.inertia_parts(q, q_dot)
         acc = acc + np.einsum("bj,bj->b", force, weights)
-        mass = np.broadcast_to(self.mass, np.shape(q)) - np.einsum("bj,bj->b", part, weights)
+        mass = self.mass - np.einsum("bj,bj->b", part, weights)
         return acc / mass
 
     def rhs(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """State derivative (B, n_states) and acceleration (B,), evaluated with NumPy."""
         q, q_dot = x[:, 0], x[:, 1]
-        if self.lag:
-            tz = np.broadcast_to(self.T_z, q.shape)
-            lagged = tz > 0
+        if self.lag:  # one T_z (a row) or one per trajectory
+            lagged = self.T_z > 0
             s = np.where(lagged, x[:, 2], q_dot)
-            z_dot = np.where(lagged, friction_state_rate(q_dot, s, np.where(lagged, tz, 1.0)), 0.0)
+            z_dot = np.where(
+                lagged, friction_state_rate(q_dot, s, np.where(lagged, self.T_z, 1.0)), 0.0
+            )
         else:
             s = q_dot
         c0 = 3 if self.lag else 2
         C = self.table.n_creep
         w = x[:, c0:] if self.table.n_extra else None
         acc = self.accel(q, s, v, w, q_dot)
-        derivs = [q_dot, acc, z_dot] if self.lag else [q_dot, acc]
+        out = np.empty((q.size, c0 + self.table.n_extra))
+        out[:, 0], out[:, 1] = q_dot, acc
+        if self.lag:
+            out[:, 2] = z_dot
         if C:
             b = self.table.bases(q)[:, self.table.creep_base]
-            derivs.append(creep_state_rate(b, q_dot[:, None], self.table.creep_rate, w[:, :C]))
+            out[:, c0 : c0 + C] = creep_state_rate(
+                b, q_dot[:, None], self.table.creep_rate, w[:, :C]
+            )
         if self.table.n_slip:
-            derivs.append(slip_state_rate(q_dot[:, None], w[:, C:], self.table.slip_width))
-        if self.table.n_extra:
-            return np.column_stack(derivs), acc
-        return np.stack(derivs, axis=1), acc
+            out[:, c0 + C :] = slip_state_rate(q_dot[:, None], w[:, C:], self.table.slip_width)
+        return out, acc
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """Hold the slip states to their break-away range after a step (:func:`slip_clip`).
