@@ -95,10 +95,11 @@ def held_levels(
         change = np.flatnonzero(np.any(np.diff(key, axis=0) != 0, axis=1)) + 1
         starts = np.concatenate([[0], change])
         ends = np.concatenate([change, [key.shape[0]]])
-        for s, e in zip(starts, ends, strict=True):
-            if (e - s) * r.dt >= hold and np.any(key[s]):
-                level = tuple(float(x) for x in key[s] * step)
-                held[level] = held.get(level, 0.0) + (e - s) * r.dt
+        # only the runs long enough enter the loop (a noise input changes level every sample)
+        long = ((ends - starts) * r.dt >= hold) & np.any(key[starts] != 0, axis=1)
+        for s, e in zip(starts[long], ends[long], strict=True):
+            level = tuple(float(x) for x in key[s] * step)
+            held[level] = held.get(level, 0.0) + (e - s) * r.dt
     ordered = sorted(held, key=lambda k: -held[k])
     return ordered[:max_levels]
 
