@@ -20,6 +20,8 @@ Python documentation, :mod:`multiprocessing` ("Contexts and start methods",
 
 from __future__ import annotations
 
+import contextlib
+import os
 import pickle
 from collections.abc import Callable
 from typing import Any
@@ -34,13 +36,17 @@ __all__ = ["BesideRun"]
 STOP_GRACE = 5.0
 
 
-def _child(fn: Callable[[], Any], send, recv) -> None:
+def _child(fn: Callable[[], Any], send, recv, niceness: int) -> None:
     """Call ``fn`` in the forked process without progress display; send (ok, value, warnings).
 
     The copy of the parent's receiving end that the fork made is closed first: if the parent
-    is gone (stopped), the send then fails instead of waiting forever for a reader.
+    is gone (stopped), the send then fails instead of waiting forever for a reader. The
+    child's scheduling priority is lowered by ``niceness`` first (where it can be).
     """
     recv.close()
+    if niceness:
+        with contextlib.suppress(OSError):
+            os.nice(niceness)
     try:
         with listening(None):
             value, caught = call_recording_warnings(fn)
@@ -66,6 +72,10 @@ class BesideRun:
         Called without arguments in the child; its result must be picklable.
     label : str
         What runs (for messages), e.g. ``"stage 'study'"``.
+    niceness : int, optional
+        Added to the child's nice value (POSIX ``nice``): work that nothing waits for
+        until the end of a run yields the cores to the work that is waited for when both
+        want them. Default 0, this process's priority.
 
     Raises
     ------
@@ -74,11 +84,13 @@ class BesideRun:
         :func:`debist.core.forking.fork_workers` first).
     """
 
-    def __init__(self, fn: Callable[[], Any], label: str):
+    def __init__(self, fn: Callable[[], Any], label: str, *, niceness: int = 0):
         ctx = fork_context()
         self.label = label
         self._recv, send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_child, args=(fn, send, self._recv), name=label)
+        self._proc = ctx.Process(
+            target=_child, args=(fn, send, self._recv, int(niceness)), name=label
+        )
         self._proc.start()
         send.close()
 

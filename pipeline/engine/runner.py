@@ -182,6 +182,9 @@ def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
 
 #: Stages that free-run models with the compiled kernels (:mod:`debist.simulate.warmup`).
 FREE_RUN_STAGES = ("identify", "validate", "compare")
+#: Nice value added to a stage run beside the others (only the report reads it): on a
+#: machine with fewer free cores than work, the stages the run waits for come first.
+BESIDE_NICENESS = 10
 
 
 def _compile_ahead() -> list[BesideRun]:
@@ -687,8 +690,9 @@ class Runner:
                     ahead = _compile_ahead()
                 if stage in ready:
                     beside[stage] = BesideRun(
-                        partial(self._execute, stage, *found), f"stage '{stage}'"
-                    )
+                        partial(self._execute, stage, *found), f"stage '{stage}'",
+                        niceness=BESIDE_NICENESS,
+                    )  # fmt: skip
                     continue
                 early.update(self._start_early(stage, pending, early, len(beside)))
                 prepared = None if first is None else first.result()

@@ -23,6 +23,15 @@ def test_the_result_comes_from_another_process():
     assert pid != os.getpid() and total == 499500
 
 
+def test_a_niceness_lowers_the_childs_priority_and_leaves_this_process_alone():
+    """POSIX nice values: the child's is this process's plus the niceness (at most 19);
+    without one it is this process's."""
+    mine = os.nice(0)
+    assert BesideRun(lambda: os.nice(0), "study", niceness=5).result() == min(mine + 5, 19)
+    assert BesideRun(lambda: os.nice(0), "the NARX peer").result() == mine
+    assert os.nice(0) == mine
+
+
 def test_what_the_child_raises_is_raised_here_with_its_type_and_fields():
     def fail():
         raise IdentificationError("too few samples in well 2", reason="under-excited")
