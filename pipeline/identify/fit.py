@@ -25,7 +25,7 @@ from debist.identify.signs import physical_signs
 from debist.model.basis import RBFBasis
 from debist.model.friction import creep_states, friction_state, slip_states
 from debist.model.rbf import RBFModel
-from debist.model.terms import PHYSICS_TERMS, force_columns, input_columns
+from debist.model.terms import PHYSICS_TERMS, force_columns, force_table, input_columns
 from debist.model.termtable import input_map
 
 
@@ -702,15 +702,15 @@ def _search_T_z(records, basis, cfg, bounds, w_all=None):
     a_fixed, y, _ = _system(records, zero, basis, fixed_cfg, w_all)
     z_rbf = ("d",) if "d" in cfg.rbf else ()
     z_backbone = tuple(b for b in cfg.backbone if b in _Z_TERMS)
+    # force_columns of the z terms, their factors of q computed once: only z moves with T_z
+    table, _ = force_table(basis, z_rbf, z_backbone, cfg.coulomb_velocity, cfg.prior)
+    fixed = [(table.position_part(r.q), np.zeros((r.q.size, 1))) for r in records]
 
     def columns(T_z: float) -> np.ndarray:
         cols = []
-        for r in records:
+        for r, (position, idle) in zip(records, fixed, strict=True):
             z = friction_state(r.q_dot, r.dt, T_z)
-            F, _ = force_columns(
-                r.q, z, basis, z_rbf, z_backbone, cfg.coulomb_velocity, prior=cfg.prior
-            )
-            cols.append(_rows(F, r, cfg))
+            cols.append(_rows(table.columns(r.q, z, idle, position=position), r, cfg))
         return np.vstack(cols)
 
     T_z, value, cost, trace = _projected_search(a_fixed, y, columns, bounds, 1e-2)

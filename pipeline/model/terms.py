@@ -315,6 +315,61 @@ def column_names(
     return force, inputs
 
 
+def force_table(
+    basis: RBFBasis,
+    rbf: Sequence[str],
+    backbone: Sequence[str],
+    coulomb_velocity: float,
+    prior: PhysicsPrior | None = None,
+    *,
+    n_strain: int = 1,
+    creep: bool = False,
+    n_slip: int = 0,
+    inertia: Sequence[int] = (),
+) -> tuple[TermTable, list[str]]:
+    """Build the term table of the force terms F(q, z) with its column names (Eq. 37).
+
+    Parameters
+    ----------
+    basis : RBFBasis
+        The RBF basis (Eq. 38).
+    rbf, backbone : sequence of str
+        Active terms.
+    coulomb_velocity : float
+        v_c of the smoothed Coulomb term [unit of q / s].
+    prior : PhysicsPrior, optional
+        The analytical model's curves (needed by the ``physics_*`` terms).
+    n_strain : int, optional
+        Number of creep strains of ``physics_creep``.
+    creep : bool, optional
+        Whether the RBF creep columns ``creep[i]`` are included.
+    n_slip : int, optional
+        Number of Maxwell-slip elements.
+    inertia : sequence of int, optional
+        Powers of the inertia columns.
+
+    Returns
+    -------
+    table : TermTable
+        One term per column, in the order of ``names`` (inputs: one, idle).
+    names : list of str
+        The column names (:func:`column_names`).
+
+    Raises
+    ------
+    WorkflowError
+        If a ``physics_*`` term lacks ``prior``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37-40.
+    """
+    names, _ = column_names(
+        rbf, backbone, basis.M, n_strain, creep=creep, n_slip=n_slip, inertia=inertia
+    )
+    return term_table(names, basis, 1, "v", coulomb_velocity, prior), names
+
+
 def force_columns(
     q: np.ndarray,
     z: np.ndarray,
@@ -373,12 +428,12 @@ def force_columns(
     if "physics_creep" in backbone and strain is None:
         raise WorkflowError("the physics_creep columns need the creep strains along the record")
     n_strain = 1 if strain is None else strain.shape[1]
-    names, _ = column_names(
-        rbf, backbone, basis.M, n_strain, creep=w is not None, n_slip=n_slip, inertia=inertia
-    )
     if inertia and (q_dot is None or q_ddot is None):
         raise WorkflowError("the inertia columns need the velocity and the acceleration")
-    table = term_table(names, basis, 1, "v", coulomb_velocity, prior)
+    table, names = force_table(
+        basis, rbf, backbone, coulomb_velocity, prior,
+        n_strain=n_strain, creep=w is not None, n_slip=n_slip, inertia=inertia,
+    )  # fmt: skip
     # the states in the table's order: RBF creep, the physics creep strains, the slip elements
     states = [a for a in (w, strain, slip) if a is not None]
     extra = np.hstack(states) if states else None

@@ -357,6 +357,26 @@ class TermTable:
             out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
 
+    def position_part(self, q: np.ndarray) -> np.ndarray:
+        """Evaluate every term's factors of q alone: its basis times its power of q.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Positions [unit of q].
+
+        Returns
+        -------
+        ndarray, shape (n, J), C order
+            ``b_j(q) q^a_j``: what :meth:`columns` multiplies by the other factors, given to
+            it as ``position`` when only those change (a search over T_z, which moves z).
+        """
+        q = np.asarray(q, dtype=float)
+        out = self.bases(q)[:, self.term_base].copy()  # C order: the weighted sums' order
+        if self._plan.qpow:
+            out *= _factors(q, self._plan.qpow)[:, self._plan.q_index]
+        return out
+
     def columns(
         self,
         q: np.ndarray,
@@ -365,6 +385,7 @@ class TermTable:
         w: np.ndarray | None = None,
         q_dot: np.ndarray | None = None,
         q_ddot: np.ndarray | None = None,
+        position: np.ndarray | None = None,
     ) -> np.ndarray:
         """Evaluate every term: the regressor columns (without weights and mass).
 
@@ -384,6 +405,9 @@ class TermTable:
             Velocity [unit of q / s] and acceleration [unit of q / s^2] of the inertia terms'
             columns ``q^a q'' + 1/2 a q^(a-1) q_dot^2`` (:meth:`inertia_parts`); without
             ``q_ddot`` those columns are 0 (the acceleration is what a simulation solves for).
+        position : ndarray, shape (n, J), optional
+            :meth:`position_part` of ``q``, computed once where only the other factors
+            change (not modified); default: computed here.
 
         Returns
         -------
@@ -393,11 +417,9 @@ class TermTable:
         s = np.asarray(s, dtype=float)
         hv = np.asarray(hv, dtype=float).reshape(q.size, self.n_inputs)
         plan = self._plan
-        out = self.bases(q)[:, self.term_base].copy()  # C order: the weighted sums' order
         # every term's factors in the order q power, velocity factor, inputs: the products of
         # term by term, each factor gathered from the distinct values (a missing one is 1)
-        if plan.qpow:
-            out *= _factors(q, plan.qpow)[:, plan.q_index]
+        out = self.position_part(q) if position is None else position.copy()
         if plan.spow or plan.tanh.size or plan.creep.size:
             S = _factors(s, plan.spow)
             if plan.tanh.size:

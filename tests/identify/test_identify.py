@@ -9,7 +9,7 @@ from debist.identify.fit import Record, fit_rbf_model
 from debist.model.basis import RBFBasis
 from debist.model.friction import friction_state
 from debist.model.rbf import RBFModel
-from debist.model.terms import force_columns, input_columns
+from debist.model.terms import force_columns, force_table, input_columns
 from debist.model.termtable import input_map
 from tests.conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
 
@@ -164,6 +164,25 @@ def test_model_accel_equals_regressor_row(bistable_record):
     )
     theta_G = np.concatenate([model.theta_g.ravel(), bb["g_0"]])
     assert np.allclose(model.accel(q, z, v), G @ theta_G - F @ theta_F, rtol=1e-10, atol=1e-12)
+
+
+def test_the_position_part_given_once_gives_the_same_columns_for_every_z(bistable_record):
+    """The T_z search computes the z terms' factors of q once (``position_part``) and moves
+    only z: the columns are those of force_columns, bit for bit, for each z, and the part
+    given is not modified."""
+    model, _ = _fit(bistable_record)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-0.015, 0.015, 200)
+    rbf, backbone = ("d",), ("viscous", "coulomb")
+    table, names = force_table(model.basis, rbf, backbone, 1e-3)
+    position = table.position_part(q)
+    kept = position.copy()
+    for scale in (0.01, 0.05, 0.2):
+        z = rng.standard_normal(q.size) * scale
+        F, want = force_columns(q, z, model.basis, rbf, backbone, 1e-3)
+        got = table.columns(q, z, np.zeros((q.size, 1)), position=position)
+        assert names == want and got.tobytes() == F.tobytes() and got.strides == F.strides
+    assert position.tobytes() == kept.tobytes()
 
 
 def test_model_roundtrips_through_its_tree(bistable_record):
