@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from debist.core.errors import WorkflowError
+from debist.identify.config import IdentifyConfig
 from debist.identify.excitation import input_active
 from debist.workflow.overrides import override_folder
 
@@ -132,7 +133,8 @@ def test_g_stays_unmarked_where_its_input_was_never_on(paper_until_identify):
     section = {**wf["identify"], "model_error": False, "band_tolerance": 1.0}
     res = run_identify(tables, derivs, section, PrototypeParams(**wf["physics"]))
     lo, hi = wf["identify"]["q_range"]
-    sigma = RBFBasis.equidistant(lo, hi, wf["identify"]["M"], wf["identify"]["sigma_n"]).sigma
+    sigma_n = wf["identify"].get("sigma_n", IdentifyConfig().sigma_n)  # the default if unstated
+    sigma = RBFBasis.equidistant(lo, hi, wf["identify"]["M"], sigma_n).sigma
     q = res.curves.q.to_numpy()
     g1 = res.curves.g1_identified.to_numpy()
     assert not g1[q > sigma].any(), q[g1 & (q > sigma)]
