@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -157,8 +158,19 @@ def _prefilter(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
         )
     from scipy import signal
 
-    sos = signal.butter(4, cfg.lowpass, fs=1.0 / r.dt, output="sos")
-    return signal.sosfiltfilt(sos, a, axis=0)
+    return signal.sosfiltfilt(_lowpass_sos(cfg.lowpass, 1.0 / r.dt).copy(), a, axis=0)
+
+
+@functools.lru_cache(maxsize=8)
+def _lowpass_sos(corner: float, fs: float) -> np.ndarray:
+    """4th-order Butterworth low-pass sections for a corner and sampling rate [Hz], cached.
+
+    Every fit of the T_z search and of the held-out folds filters its columns with the same
+    filter. The array is shared: callers pass scipy a copy.
+    """
+    from scipy import signal
+
+    return signal.butter(4, corner, fs=fs, output="sos")
 
 
 def _rows(a: np.ndarray, r: Record, cfg: IdentifyConfig) -> np.ndarray:
