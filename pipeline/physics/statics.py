@@ -16,6 +16,7 @@ Masoud & Maas 2025, Eq. 14-18, Fig. 3-5; docs/interpretation.md items 1-6.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -538,6 +539,7 @@ def _switches(params, de, v, F, guess=None):
     return bool(stable) and all((e.q > 0) if de == 1 else (e.q < 0) for e in stable), path
 
 
+@functools.lru_cache(maxsize=64)
 def switching_voltage(
     params: PrototypeParams, de: int, *, v_max: float = V_MAX, tol: float = 1.0, F: float = 0.0
 ) -> float:
@@ -547,7 +549,8 @@ def switching_voltage(
     ``v2 = 0``, no load) at which every stable equilibrium of Eq. 15 has ``q > 0``, so the
     left well is gone and the beam must snap to the right; DE 2 the same towards ``-q``.
     Found by bisection on ``[0, v_max]``; static and without friction (creep or a resonance
-    switch lower).
+    switch lower). Cached per argument set: the threshold is a pure function of its
+    (hashable) arguments, and each costs 10-14 static solves.
 
     Parameters
     ----------
