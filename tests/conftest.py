@@ -66,11 +66,19 @@ def bistable_truth(q: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
+def _multisine(seed: int = 7) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies [Hz] and phases [rad] of :func:`excitation`'s multisine, shape (2, 6) each."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.3, 6.0, size=(2, 6)), rng.uniform(0, 2 * np.pi, size=(2, 6))
+
+
+#: Drawn once: the ODE solvers of the truth records call :func:`excitation` per step.
+_F, _PH = _multisine()
+
+
 def excitation(t: np.ndarray) -> np.ndarray:
     """Two smooth voltage profiles [V]: switching pulses plus sub-threshold multisine."""
-    rng = np.random.default_rng(7)
-    f = rng.uniform(0.3, 6.0, size=(2, 6))
-    ph = rng.uniform(0, 2 * np.pi, size=(2, 6))
+    f, ph = _F, _PH
     base = np.stack(
         [np.sum(np.sin(2 * np.pi * f[i] * t[:, None] + ph[i]), axis=1) for i in range(2)], axis=1
     )
