@@ -23,6 +23,14 @@ def render(out: Path, n: int = 3, seed: int = 1) -> dict[str, str]:
     return dict(fleet_workflows(raw, TEMPLATE.parent, out, n, seed=seed))
 
 
+@pytest.fixture(scope="module")
+def fleet_1(tmp_path_factory) -> dict[str, str]:
+    """The template's seed-1 fleet of three (each member's switching voltages take seconds);
+    member k of a fleet is the same for every fleet size, so tests of fewer members read the
+    first ones. Read only."""
+    return render(tmp_path_factory.mktemp("fleet-1"), n=3, seed=1)
+
+
 @pytest.mark.slow
 def test_members_are_seeded_distinct_and_loadable(tmp_path):
     files = render(tmp_path)
@@ -39,8 +47,8 @@ def test_members_are_seeded_distinct_and_loadable(tmp_path):
         assert Runner(wf).stages()[:2] == ["rig", "ingest"]
 
 
-def test_existing_files_are_never_overwritten(tmp_path):
-    files = render(tmp_path, n=2)
+def test_existing_files_are_never_overwritten(tmp_path, fleet_1):
+    files = dict(list(fleet_1.items())[:2])
     (tmp_path / "paper-experiment-001.toml").write_text("mine", encoding="utf-8")
     with pytest.raises(OutputDirError) as err:
         write_text_files(tmp_path, files)
@@ -133,15 +141,16 @@ def test_a_kept_members_rig_and_ingest_stay_up_to_date_for_the_batch(tmp_path):
     assert sorted(p.name for p in (tmp_path / "fleet").glob("*.toml")) == [member.name]
 
 
-def test_a_member_switching_below_the_template_gets_its_sub_threshold_levels_scaled(tmp_path):
+def test_a_member_switching_below_the_template_gets_its_sub_threshold_levels_scaled(
+    tmp_path, fleet_1
+):
     """Seed 1, member 0 switches at 682 V (its left well is shallow); the template's prototype
     at 1244 V with the profiles' 1 kV: the member's levels become 1 kV x 682 / 1244."""
     from debist.physics.params import PrototypeParams
     from debist.physics.statics import switching_voltage
 
     raw = tomllib.loads(TEMPLATE.read_text(encoding="utf-8"))
-    files = dict(fleet_workflows(raw, TEMPLATE.parent, tmp_path, 3, seed=1))
-    member = [tomllib.loads(text) for text in files.values()]
+    member = [tomllib.loads(text) for text in fleet_1.values()]
     template = PrototypeParams.from_dict({**raw["physics"], **raw["rig"]["prototype"]})
     v_template = min(switching_voltage(template, de) for de in (1, 2))
     v_member = switching_voltage(PrototypeParams.from_dict(member[0]["rig"]["prototype"]), 1)
@@ -160,7 +169,7 @@ def test_a_member_switching_below_the_template_gets_its_sub_threshold_levels_sca
     assert scaled == pytest.approx(0.8 * levels[0], abs=0.1)
 
 
-def test_the_scaled_levels_keep_the_validation_blocks_below_the_switch(tmp_path):
+def test_the_scaled_levels_keep_the_validation_blocks_below_the_switch(fleet_1):
     """The validation profile's last block (DE 1 triangle to v_sub, 30.1-35.1 s, beam in the
     left well) snaps seed-1 member 0 over at the template's 1 kV; at its scaled level the
     beam stays in the left well, as the profile intends."""
@@ -168,8 +177,7 @@ def test_the_scaled_levels_keep_the_validation_blocks_below_the_switch(tmp_path)
     from debist.rig.experiment import run_experiment
 
     raw = tomllib.loads(TEMPLATE.read_text(encoding="utf-8"))
-    _, text = next(fleet_workflows(raw, TEMPLATE.parent, tmp_path, 1, seed=1))
-    rig = tomllib.loads(text)["rig"]
+    rig = tomllib.loads(next(iter(fleet_1.values())))["rig"]
     crossings = {}
     for v_sub in (1000.0, rig["experiments"]["validation"]["v_sub"]):
         rig["experiments"] = {"validation": {"profile": "validation", "seed": 2, "v_sub": v_sub}}
