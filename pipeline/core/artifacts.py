@@ -40,13 +40,13 @@ import threading
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from debist import __version__
-from debist.core.errors import ArtifactError, OutputDirError
+from debist.core.errors import ArtifactError, DebistError, OutputDirError
 from debist.core.faults import fault_point
 from debist.core.fileformats import (
     Figure,
@@ -71,6 +71,7 @@ __all__ = [
     "FileWriter",
     "H5Tree",
     "Manifest",
+    "adopt_stage",
     "canonical_json",
     "changed_outputs",
     "checked_output",
@@ -596,6 +597,67 @@ def write_stage(
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return Manifest(**{**asdict(manifest), "summary": json.loads(summary_json)})
+
+
+def adopt_stage(
+    source_dir: str | os.PathLike, stage_dir: str | os.PathLike, *, stage: str, key: str
+) -> Manifest | None:
+    """Copy another run's stage folder that made this stage's exact computation, if it did.
+
+    The copy is taken when ``source_dir`` holds a manifest with the same key (the same code,
+    library versions, configuration, input and upstream hashes) and its outputs match their
+    hashes, before and after the copy; it is written beside ``stage_dir`` and swapped into
+    place as :func:`write_stage` does. Only the files the manifest lists (and the timings)
+    are copied, each a regular file inside ``source_dir``.
+
+    Parameters
+    ----------
+    source_dir : path-like
+        The stage folder of the other run (only read).
+    stage_dir : path-like
+        This run's stage folder; nothing is adopted when it exists.
+    stage, key : str
+        The stage's name and its key in this run.
+
+    Returns
+    -------
+    Manifest or None
+        The copy's manifest, with its checked summary; None when nothing was adopted.
+    """
+    source, final = Path(source_dir), Path(stage_dir)
+    if source.is_symlink() or not source.is_dir() or os.path.lexists(final):
+        return None
+    try:
+        manifest = read_manifest(source)
+    except ArtifactError:
+        return None
+    if manifest is None or manifest.key != key:
+        return None
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = final.parent / f".{final.name}.tmp-{secrets.token_hex(6)}"
+    os.mkdir(tmp)
+    try:
+        for rel in [*sorted(manifest.outputs), TIMINGS, MANIFEST]:
+            path = inside(source, rel)
+            if path.is_symlink() or not path.is_file():
+                if rel == TIMINGS:
+                    continue
+                raise OutputDirError(f"'{path}' is not a regular file")
+            target = inside(tmp, rel)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, target)
+        copied = read_manifest(tmp)
+        if copied is None or copied.key != key or changed_outputs(tmp, copied):
+            raise OutputDirError(f"'{source}' changed while it was copied")
+        summary = read_summary(tmp, copied)
+        _swap_into_place(tmp, final, stage)
+    except (OSError, DebistError):
+        shutil.rmtree(tmp, ignore_errors=True)
+        return None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return replace(copied, summary=summary)
 
 
 def inside(folder: Path, rel: str) -> Path:

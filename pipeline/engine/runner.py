@@ -808,6 +808,13 @@ class Runner:
             summary = artifacts.read_summary(sdir, manifest)
             manifests[stage] = replace(manifest, summary=summary)
             return None
+        own = self.wf.own_output_dir
+        if manifest is None and not force and stage not in damaged and own is not None:
+            adopted = artifacts.adopt_stage(own / stage, sdir, stage=stage, key=key)
+            if adopted is not None:  # the settings leave it as the workflow's own run has it
+                on_event(stage, "skip", f"key {key[:12]} matches the workflow's own run: copied")
+                manifests[stage] = adopted
+                return None
         if stage in damaged:
             why = damaged[stage]
         elif manifest is None:

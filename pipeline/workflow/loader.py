@@ -99,6 +99,10 @@ class Workflow:
         The settings overridden for this run, as nested tables (``{"identify": {"M": 8}}``;
         empty for the file as it is). With overrides, ``output_dir`` is the folder of
         :func:`debist.workflow.overrides.override_folder` beside the workflow's own.
+    own_output_dir : pathlib.Path or None
+        With overrides, the workflow's own output folder, whose stages the settings leave
+        as they are may be copied instead of recomputed (:meth:`debist.engine.runner.
+        Runner.run`); None without overrides.
     """
 
     path: Path
@@ -107,6 +111,7 @@ class Workflow:
     datasets: tuple[DatasetSpec, ...]
     sections: dict[str, dict[str, Any]] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
+    own_output_dir: Path | None = None
 
     def section(self, name: str) -> dict[str, Any]:
         """Return a stage section (empty if absent)."""
@@ -294,7 +299,7 @@ def load_workflow(
     else:  # the name becomes a folder name: runs/<name>
         check_file_name(name, f"{path}: [workflow] name (no output_dir given)")
         out = _output_dir(base / "runs" / name, "[workflow] output_dir")
-    out = override_folder(out, changed)
+    own, out = out, override_folder(out, changed)
     datasets = []
     for ds_name, (entry, _) in checked.datasets.items():
         table = raw["datasets"][ds_name]
@@ -316,4 +321,4 @@ def load_workflow(
         ingest = {**raw.get("ingest", {}), **overrides}
         datasets.append(DatasetSpec(ds_name, source, entry.role, ingest, entry.rig))
     sections = {k: v for k, v in raw.items() if k not in ("workflow", "ingest", "datasets")}
-    return Workflow(path, name, out, tuple(datasets), sections, changed)
+    return Workflow(path, name, out, tuple(datasets), sections, changed, own if changed else None)

@@ -222,3 +222,31 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
     code, out = invoke("diff", root / "out", tmp_path / "nowhere")
     assert code == 2 and "output" in out and "folder" in out
     assert file_hashes(root / "out") == before
+
+
+@pytest.mark.slow
+def test_run_set_copies_the_stages_the_settings_leave_as_they_are(base, tmp_path):
+    """`--set validate.substeps=3` leaves ingest, differentiate and identify the computation
+    the workflow's own run made (the same key): their folders are copied byte for byte and
+    the experiment verifies; a stage whose artifact was changed in the own run is computed
+    again, and the own run is left as it is."""
+    shutil.copytree(base, tmp_path / "p")
+    root, wf = tmp_path / "p", tmp_path / "p" / "wf.toml"
+    code, text = invoke_cli("run", wf, "-S", "validate.substeps=3", "-v")
+    assert code == 0, text
+    text = " ".join(text.split())
+    folder = root / f"out.set-{override_digest({'validate': {'substeps': 3}})}"
+    for stage in ("ingest", "differentiate", "identify"):
+        assert f"Stage '{stage}' is up to date" in text and "own run: copied" in text
+        assert file_hashes(folder / stage) == file_hashes(root / "out" / stage), stage
+    assert "Running stage 'validate'" in text
+    assert invoke("verify", wf, "-S", "validate.substeps=3")[0] == 0
+    # the own run's identify changed after it ran: not copied, computed again
+    summary = root / "out" / "identify" / "summary.json"
+    summary.write_text(summary.read_text() + " ", encoding="utf-8")
+    changed = file_hashes(root / "out")
+    code, text = invoke_cli("run", wf, "-S", "validate.substeps=4", "-v")
+    assert code == 0, text
+    text = " ".join(text.split())
+    assert "Stage 'differentiate' is up to date" in text and "Running stage 'identify'" in text
+    assert file_hashes(root / "out") == changed
