@@ -562,9 +562,7 @@ def write_stage(
     if SUMMARY in outputs or MANIFEST in outputs or TIMINGS in outputs:
         raise TypeError(f"output names {SUMMARY}, {MANIFEST}, {TIMINGS} are reserved")
     started = time.perf_counter()
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.parent / f".{final.name}.tmp-{secrets.token_hex(6)}"
-    os.mkdir(tmp)  # mode 0o777 less the umask, unlike tempfile.mkdtemp's 0o700
+    tmp = _new_swap_folder(final)
     try:
         hashes = {}
         summary_json = json.dumps(
@@ -605,8 +603,8 @@ def adopt_stage(
     """Copy another run's stage folder that made this stage's exact computation, if it did.
 
     The copy is taken when ``source_dir`` holds a manifest with the same key (the same code,
-    library versions, configuration, input and upstream hashes) and its outputs match their
-    hashes, before and after the copy; it is written beside ``stage_dir`` and swapped into
+    library versions, configuration, input and upstream hashes) and the copied outputs match
+    the hashes of the copied manifest; it is written beside ``stage_dir`` and swapped into
     place as :func:`write_stage` does. Only the files the manifest lists (and the timings)
     are copied, each a regular file inside ``source_dir``.
 
@@ -633,9 +631,7 @@ def adopt_stage(
         return None
     if manifest is None or manifest.key != key:
         return None
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.parent / f".{final.name}.tmp-{secrets.token_hex(6)}"
-    os.mkdir(tmp)
+    tmp = _new_swap_folder(final)
     try:
         for rel in [*sorted(manifest.outputs), TIMINGS, MANIFEST]:
             path = inside(source, rel)
@@ -736,6 +732,14 @@ def remove_tree(path: str | os.PathLike) -> None:
         path.unlink(missing_ok=True)
     else:
         shutil.rmtree(path)
+
+
+def _new_swap_folder(final: Path) -> Path:
+    """Create the temporary folder a stage folder is written in, beside it (SWAP_FOLDER)."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = final.parent / f".{final.name}.tmp-{secrets.token_hex(6)}"
+    os.mkdir(tmp)  # mode 0o777 less the umask, unlike tempfile.mkdtemp's 0o700
+    return tmp
 
 
 def _swap_into_place(tmp: Path, final: Path, stage: str) -> None:
