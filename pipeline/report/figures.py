@@ -21,7 +21,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.validate.freerun import REPLICATE_BAND
+from debist.validate.freerun import REPLICATE_BAND, report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -273,6 +273,8 @@ def free_run_figure(
     unit: str,
     nrmse: Mapping[str, float] | None = None,
     rows: Mapping[str, Mapping[str, Any]] | None = None,
+    report_unit: str | None = None,
+    init_samples: int = 0,
 ) -> Any:
     """Measured position against the free run of every model, a zoom and the errors.
 
@@ -295,6 +297,11 @@ def free_run_figure(
     rows : mapping of str to mapping, optional
         NRMSE row per model (``replicates``, ``replicates_hold_q``): the label of a run's
         replicate band, which is drawn only for a model that has a row.
+    report_unit : str, optional
+        Unit the axes show q in (``[validate] report_unit``, e.g. ``"mV"``); the data are
+        converted for display only. None: :func:`q_scale`.
+    init_samples : int, optional
+        Samples used for the initial state, not scored (``[validate] init_samples``; shaded).
 
     Returns
     -------
@@ -302,13 +309,18 @@ def free_run_figure(
         Three axes: the whole record (Fig. 12 / 15), the zoom (Fig. 13, shaded in the
         first axes) and the error ``q - q_sim`` of each model.
 
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q (:func:`debist.validate.freerun.report_factor`).
+
     References
     ----------
     Masoud & Maas 2025, Fig. 12, 13, 15.
     """
     from matplotlib.figure import Figure
 
-    factor, label = q_scale(unit)
+    factor, label = q_scale(unit) if report_unit is None else report_factor(unit, report_unit)
     nrmse = nrmse or {}
     t = measured["t"].to_numpy()
     q = factor * measured["q"].to_numpy()
@@ -338,6 +350,9 @@ def free_run_figure(
             f"t = {t[a]:.3g} ... {t[b - 1]:.3g} s",
             fontsize=9,
         )
+    if init_samples:
+        for ax in (full, err):
+            ax.axvspan(t[0], t[min(init_samples, t.size - 1)], color="0.8", zorder=0)
     full.set_title(f"{name}: measured and free-run q", fontsize=10)
     # under the axes, across the figure: beside them a long label took 40 % of their width
     handles, labels = full.get_legend_handles_labels()

@@ -1,4 +1,4 @@
-"""Figures of the validation stage (matplotlib ``Figure`` objects: no backend, no pyplot state)."""
+"""Figures of the identify stage (matplotlib ``Figure`` objects: no backend, no pyplot state)."""
 
 from __future__ import annotations
 
@@ -7,94 +7,10 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.report.figures import dynamic_window, replicate_band, thin, thin_band
 from debist.report.tables import de_inputs
-from debist.validate.freerun import REPLICATE_BAND, report_factor
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
-
-
-def free_run_figure(
-    sim: pd.DataFrame,
-    name: str,
-    row: Any,
-    init_samples: int = 0,
-    unit: str = "m",
-    report_unit: str | None = None,
-    q_ddot: np.ndarray | None = None,
-) -> Any:
-    """Measured vs simulated position, a zoom and the error, as in Fig. 12, 13 and 15 of the paper.
-
-    Parameters
-    ----------
-    sim : pandas.DataFrame
-        Columns ``t [s], q, q_sim`` (q in ``unit``), optionally ``q_sim_lo, q_sim_hi``: the
-        2.5 and 97.5 percentiles of the bootstrap replicates' free runs (shaded, labelled
-        as what they are: :func:`debist.validate.freerun.replicate_spread`).
-    name : str
-        Data set name (title).
-    row : pandas.Series
-        Its NRMSE table row (``nrmse_q``, ``rms_q``, ``rms_unit``, ``model``, ``diverged``).
-    init_samples : int, optional
-        Samples used for initialisation (shaded).
-    unit : str, optional
-        SI unit of q, the unit of ``sim``.
-    report_unit : str, optional
-        Unit the axes show q in (``[validate] report_unit``, e.g. ``"mm"``); the data are
-        converted for display only. None: ``unit``.
-    q_ddot : ndarray, shape (n,), optional
-        The measured acceleration [unit/s^2]: the zoom is the 200-sample window where its
-        RMS is largest (:func:`debist.report.figures.dynamic_window`, as in the report);
-        default the second difference of the measured q.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        Three axes: the whole record, a zoom of 200 samples on its most dynamic part, the
-        error; q and the error in ``report_unit``.
-
-    Raises
-    ------
-    WorkflowError
-        If ``report_unit`` cannot express q (:func:`debist.validate.freerun.report_factor`).
-    """
-    from matplotlib.figure import Figure
-
-    factor, unit = report_factor(unit, report_unit)
-    q, q_sim = factor * sim["q"].to_numpy(), factor * sim["q_sim"].to_numpy()
-    fig = Figure(figsize=(10.5, 7), layout="constrained")
-    ax1, ax_zoom, ax2 = fig.subplots(3, 1, height_ratios=(2, 2, 1))
-    t = sim["t"].to_numpy()
-    accel = np.gradient(np.gradient(q)) if q_ddot is None else np.asarray(q_ddot, float)
-    dt = float(t[1] - t[0]) if t.size > 1 else 1.0
-    mid = slice(*dynamic_window(t, accel, 200 * dt))
-    for ax, s in ((ax1, slice(None)), (ax_zoom, mid)):
-        ax.plot(*thin(t[s], q[s]), color="0.2", lw=0.8, label="measured")
-        ax.plot(
-            *thin(t[s], q_sim[s]), color="tab:red", lw=0.8, ls="--",
-            label=f"{row['model']} free run",
-        )  # fmt: skip
-        if set(REPLICATE_BAND) <= set(sim):
-            lo, hi = (factor * sim[c].to_numpy() for c in REPLICATE_BAND)
-            replicate_band(ax, *thin_band(t[s], lo[s], hi[s]), row, "tab:red")
-        ax.set_ylabel(f"q [{unit}]")
-    handles, labels = ax1.get_legend_handles_labels()  # under the axes: full width for them
-    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8, frameon=False)
-    ax1.axvspan(t[mid][0], t[mid][-1], color="0.9", zorder=0)
-    ax_zoom.set_title(f"zoom: t = {t[mid][0]:.3g} ... {t[mid][-1]:.3g} s", fontsize=9)
-    ax1.set_title(
-        f"{name}: NRMSE(q) = {100 * row['nrmse_q']:.2f} %, "
-        f"RMS = {row['rms_q']:.4g} {row['rms_unit']}" + ("  (diverged)" if row["diverged"] else ""),
-        fontsize=10,
-    )
-    ax2.plot(*thin(t, q - q_sim), color="tab:blue", lw=0.6)
-    ax2.set_ylabel(f"error [{unit}]")
-    ax2.set_xlabel("t [s]")
-    if init_samples:
-        for ax in (ax1, ax2):
-            ax.axvspan(t[0], t[min(init_samples, t.size - 1)], color="0.85", zorder=0)
-    return fig
 
 
 def curves_figure(

@@ -1,6 +1,6 @@
 """Figures drawn and rendered to PNG bytes, several at a time in forked processes.
 
-A stage that writes figures (identify's curves, the validate stage's free runs, the report's
+A stage that writes figures (identify's curves and search, the report's
 Fig. 11a, 12, 13 and 15) spends most of its time in matplotlib's layout and Agg rendering, on
 one core. :func:`render_pngs` draws the figures of a list in worker processes, one per core:
 each figure is drawn and rendered by the same code in a copy of the same process (POSIX

@@ -182,6 +182,8 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
     order = [d["name"] for d in inputs.datasets if d["name"] in inputs.tables]
     order += sorted(set(inputs.tables) - set(order))
     jobs: dict[str, list[tuple[str, FigureJob]]] = {"excitation": [], "free_run": []}
+    validate = inputs.summaries.get("validate") or {}
+    report_unit, init_samples = validate.get("report_unit"), int(validate.get("init_samples", 0))
     for name in order:
         if roles.get(name) == "estimation" and name in inputs.derivs:
             table = inputs.tables[name]
@@ -199,7 +201,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
         scores = {model: r.get("nrmse_q") for model, r in rows.items()}
         unit = _unit(inputs.tables[name]) if name in inputs.tables else "m"
         runs = {m: run[[c for c in _RUN_COLUMNS if c in run]] for m, run in runs.items()}
-        args = (measured, runs, window, name, unit, scores, rows)
+        args = (measured, runs, window, name, unit, scores, rows, report_unit, init_samples)
         job = FigureJob(free_run_figure, args, dpi=REPORT_DPI)
         what = (
             "Fig. 12, estimation data"
@@ -210,6 +212,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
             f"{what} '{name}': measured q and the free run of "
             f"{', '.join(runs)}; middle: Fig. 13, the {cfg.zoom_window:g} s window with the "
             "largest q_ddot RMS; bottom: the errors"
+            + (f"; shaded: the first {init_samples} samples, not scored" if init_samples else "")
         )
         jobs["free_run"].append((caption, job))
     # the figures are drawn in parallel processes: the same PNG bytes as one after the other

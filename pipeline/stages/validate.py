@@ -16,8 +16,6 @@ from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
 from debist.identify.stability import model_is_stable
 from debist.model.rbf import RBFModel
-from debist.report.plots import free_run_figure
-from debist.report.render import FigureJob, render_pngs
 from debist.report.tables import with_verdicts
 from debist.stages import StageInputs, StageOutput
 from debist.validate.datasets import validation_datasets
@@ -52,8 +50,6 @@ class ValidateResult:
         NRMSE and RMS per data set and model.
     simulated : dict of str to pandas.DataFrame
         Measured and simulated trajectories per data set.
-    plots : dict of str to debist.report.render.FigureJob
-        Measured vs simulated q per data set, to draw (:func:`debist.report.plots.free_run_figure`).
     timings : dict of str to float
         Wall times of the parts [s], adding up to the call's: ``prepare``, ``simulate`` (the
         model's free runs), ``replicates`` (the bootstrap replicates' free runs), ``other
@@ -65,7 +61,6 @@ class ValidateResult:
 
     table: pd.DataFrame
     simulated: dict[str, pd.DataFrame]
-    plots: dict[str, FigureJob]
     timings: dict[str, float] = field(default_factory=dict)
     residuals: pd.DataFrame | None = None
 
@@ -73,17 +68,6 @@ class ValidateResult:
     def sim_time(self) -> float:
         """Wall time of the model's free runs [s] (``timings["simulate"]``)."""
         return self.timings.get("simulate", 0.0)
-
-    @property
-    def figures(self) -> dict[str, Any]:
-        """The figures of :attr:`plots`, drawn on each access.
-
-        Returns
-        -------
-        dict of str to matplotlib.figure.Figure
-            Per data set.
-        """
-        return {name: job.figure() for name, job in self.plots.items()}
 
 
 def run_validate(
@@ -183,24 +167,8 @@ def run_validate(
         stable, reason = model_is_stable(other, q_est, q_dot=qd_est)
         if not stable:
             table = mark_unstable(table, name, reason)
-    units = {ds.name: ds.q_unit for ds in datasets}
-    plots = {
-        name: FigureJob(
-            free_run_figure,
-            (
-                sim[[c for c in ("t", "q", "q_sim", *REPLICATE_BAND) if c in sim]],
-                name,
-                table[(table.dataset == name) & (table.model == "rbf")].iloc[0],
-                cfg.init_samples,
-                units[name],
-                cfg.report_unit,
-                derivs[name]["q_ddot"].to_numpy(),
-            ),
-        )
-        for name, sim in simulated.items()
-    }
     watch.lap("stability")
-    return ValidateResult(table, simulated, plots, watch.times, residuals)
+    return ValidateResult(table, simulated, watch.times, residuals)
 
 
 def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
@@ -274,9 +242,10 @@ def execute(ctx: StageInputs) -> StageOutput:
     Returns
     -------
     StageOutput
-        ``nrmse.parquet``, ``simulated/<table>.parquet`` and ``plots/<table>.png``;
-        summary: the NRMSE rows, the published results to print beside them and the
-        data-set order.
+        ``nrmse.parquet``, ``residuals.parquet`` and ``simulated/<table>.parquet`` (the
+        report draws them); summary: the NRMSE rows, the published results to print beside
+        them, the data-set order and what the report's figures need (``init_samples``, the
+        ``report_unit`` or None).
 
     Raises
     ------
@@ -289,6 +258,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     ls = tree.get("equation_error")
     baseline = RBFModel.from_tree({"model": ls}) if ls is not None else None
     section = ctx.section("validate")
+    cfg = ValidateConfig.from_dict(section)
     diag = tree.get("diagnostics", {})
     replicates = None
     if "theta_boot" in diag and "theta" in diag:
@@ -306,18 +276,12 @@ def execute(ctx: StageInputs) -> StageOutput:
     if res.residuals is not None:
         outputs["residuals.parquet"] = res.residuals
     outputs.update({f"simulated/{n}.parquet": s for n, s in res.simulated.items()})
-    # drawn in parallel processes: the same PNG bytes as one after the other
-    pngs = render_pngs(list(res.plots.values()))
-    outputs.update({f"plots/{n}.png": png for n, png in zip(res.plots, pngs, strict=True)})
-    watch.lap("plots")
     summary = {
         "table": table.to_dict(orient="records"),
         "published": list(section.get("published", [])),
         "order": [d.name for d in ctx.wf.datasets],
+        "init_samples": cfg.init_samples,
+        "report_unit": cfg.report_unit,
     }
-    timings = {
-        "read inputs": watch.times["read inputs"],
-        **res.timings,
-        "plots": watch.times["plots"],
-    }
+    timings = {"read inputs": watch.times["read inputs"], **res.timings}
     return StageOutput(outputs, summary, timings)

@@ -104,7 +104,7 @@ def test_verbose_timings_account_for_the_stage_wall_time(synthetic_run, tmp_path
     total = float(re.search(r"Stage 'validate' done \((\d+\.\d+) s\)", out).group(1))
     line = re.search(r"timings: (.*?) \(stage (\d+\.\d+) s\)", out)
     parts = dict(re.findall(r"([a-z][a-z -]*?) (\d+\.\d+) s(?:, |$)", line.group(1)))
-    for name in ("read inputs", "simulate", "replicates", "plots", "import", "other", "write"):
+    for name in ("read inputs", "simulate", "replicates", "import", "other", "write"):
         assert name in parts, parts
     shown = sum(float(v) for v in parts.values())
     slack = 0.005 * len(parts) + 0.01  # each part and the total rounded to 0.01 s

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
+from debist.core.errors import WorkflowError
 from debist.model.sindy import SindyConfig, fit_sindy
 from debist.report.tables import design_table, identify_table, summary_units
 from debist.stages.identify import run_identify
@@ -109,25 +110,37 @@ def test_input_gain_rows_in_force_per_mapped_input():
     assert "(a basis term; g_i(q) in Fig. 14) g_0,1 [N/V]" in _render(identify_table(summary))
 
 
-def test_validation_plot_shows_q_in_the_report_unit(data):
+def test_free_run_figure_shows_q_in_the_report_unit(data):
+    from debist.report.figures import free_run_figure
+    from debist.stages.report import _split_runs
+
     truth, tables, derivs = data
     res = run_validate(truth, tables, derivs, {"substeps": 1, "report_unit": "mm"})
-    fig = res.figures["val"]
+    simulated = res.simulated["val"]
+    runs = _split_runs(simulated, "rbf")
+    measured = simulated[["t", "q"]]
+    fig = free_run_figure(measured, runs, (0, 0), "val", "m", None, None, "mm", 5)
     whole, zoom, error = fig.axes[:3]
     assert whole.get_ylabel() == "q [mm]" and zoom.get_ylabel() == "q [mm]"
     assert error.get_ylabel() == "error [mm]"
-    measured = whole.get_lines()[0].get_ydata()
-    np.testing.assert_allclose(measured, 1e3 * tables["val"]["q"].to_numpy(), rtol=1e-12)
-    simulated = res.simulated["val"]
+    t, measured_mm = whole.get_lines()[0].get_data()
+    np.testing.assert_allclose(measured_mm, 1e3 * tables["val"]["q"].to_numpy(), rtol=1e-12)
     np.testing.assert_allclose(
         error.get_lines()[0].get_ydata(),
         1e3 * (simulated["q"] - simulated["q_sim"]).to_numpy(),
         rtol=1e-9,
         atol=1e-12,  # [mm]: the difference of two scaled values rounds differently
     )
-    plain = run_validate(truth, tables, derivs, {"substeps": 1}).figures["val"]
-    assert plain.axes[0].get_ylabel() == "q [m]"
-    np.testing.assert_allclose(plain.axes[0].get_lines()[0].get_ydata(), tables["val"]["q"])
+    # the samples of the initial state are shaded on the whole record and the errors
+    spans = [p.get_x() for p in whole.patches] + [p.get_x() for p in error.patches]
+    assert spans.count(t[0]) == 2
+    volts = free_run_figure(measured, runs, (0, 0), "val", "V", None, None, "mV")
+    assert volts.axes[0].get_ylabel() == "q [mV]"
+    np.testing.assert_allclose(
+        volts.axes[0].get_lines()[0].get_ydata(), 1e3 * tables["val"]["q"].to_numpy()
+    )
+    with pytest.raises(WorkflowError, match="cannot express q"):
+        free_run_figure(measured, runs, (0, 0), "val", "m", None, None, "mV")
 
 
 def test_sindy_legend_names_the_inputs_actual_unit(data):
