@@ -22,6 +22,13 @@ def project(tmp_path, bistable_record):
     return tmp_path
 
 
+@pytest.fixture
+def ran(synthetic_run, tmp_path):
+    """A copy of the session's complete run of the same workflow (``out/`` beside it)."""
+    shutil.copytree(synthetic_run[0], tmp_path / "p")
+    return tmp_path / "p"
+
+
 def invoke(*args):
     result = CliRunner().invoke(app, [str(a) for a in args])
     return result.exit_code, result.output
@@ -77,11 +84,10 @@ def test_run_skip_status_and_downstream_only_rerun(project):
 
 
 @pytest.mark.slow
-def test_verify_names_the_modified_file(project):
-    wf = project / "wf.toml"
-    assert invoke("run", wf)[0] == 0
+def test_verify_names_the_modified_file(ran):
+    wf = ran / "wf.toml"
     assert invoke("verify", wf)[0] == 0
-    target = project / "out/differentiate/check.parquet"
+    target = ran / "out/differentiate/check.parquet"
     target.write_bytes(target.read_bytes() + b"\0")
     code, out = invoke("verify", wf)
     assert code == 3
@@ -89,31 +95,29 @@ def test_verify_names_the_modified_file(project):
 
 
 @pytest.mark.slow
-def test_outputs_are_byte_identical_across_runs(project):
-    wf = project / "wf.toml"
+def test_outputs_are_byte_identical_across_runs(ran):
+    wf = ran / "wf.toml"
+    first = stage_hashes(ran / "out")  # the session's run, in another folder
+    shutil.rmtree(ran / "out")
     assert invoke("run", wf)[0] == 0
-    first = stage_hashes(project / "out")
-    shutil.rmtree(project / "out")
-    assert invoke("run", wf)[0] == 0
-    second = stage_hashes(project / "out")
+    second = stage_hashes(ran / "out")
     data = [k for k in first if k.endswith((".parquet", ".h5"))]
     assert len(data) >= 12 and "compare/sindy.h5" in data
     assert {k: first[k] for k in data} == {k: second[k] for k in data}
 
 
 @pytest.mark.slow
-def test_corrupt_input_fails_naming_file_and_keeps_previous_artifacts(project):
-    wf = project / "wf.toml"
-    assert invoke("run", wf)[0] == 0
-    before = stage_hashes(project / "out")
-    text = (project / "rig.csv").read_text().splitlines()
+def test_corrupt_input_fails_naming_file_and_keeps_previous_artifacts(ran):
+    wf = ran / "wf.toml"
+    before = stage_hashes(ran / "out")
+    text = (ran / "rig.csv").read_text().splitlines()
     text[100] = text[100].replace(text[100].split(",")[1], "nan", 1)
-    (project / "rig.csv").write_text("\n".join(text) + "\n")
+    (ran / "rig.csv").write_text("\n".join(text) + "\n")
     code, out = invoke("run", wf)
     assert code == 1
     assert "rig.csv" in out and "laser" in out
-    assert stage_hashes(project / "out") == before
-    assert not [p for p in (project / "out").iterdir() if ".tmp-" in p.name or ".old-" in p.name]
+    assert stage_hashes(ran / "out") == before
+    assert not [p for p in (ran / "out").iterdir() if ".tmp-" in p.name or ".old-" in p.name]
 
 
 def test_missing_channel_fails_and_writes_nothing(project):

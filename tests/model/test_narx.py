@@ -1,5 +1,6 @@
 """The polynomial NARX peer of the compare stage (Billings 2013, Ch. 3; SysIdentPy's FROLS)."""
 
+import functools
 import pickle
 import subprocess
 import sys
@@ -347,12 +348,23 @@ def test_the_compiled_free_run_is_sysidentpy_s_predict():
     assert "codes" in str(err.value)
 
 
+@functools.cache
 def _rig_member(index):
-    """Zoo seed 1's member ``index``: its logged estimation record and its unseen ones."""
+    """Zoo seed 1's member ``index``: its logged estimation record and its unseen ones.
+
+    Drawn once per test process (the tests of one member share an xdist group).
+    """
     from debist.engine.zoo import _simulate
 
     _, _, runs, _, _ = _simulate(1, index)
-    return [(r.q, np.column_stack([r.v1, r.v2])) for r in runs.values()]
+    return tuple((r.q, np.column_stack([r.v1, r.v2])) for r in runs.values())
+
+
+@functools.cache
+def _member_fit(index, shift=0.0):
+    """debist's NARX row fitted on member ``index``'s estimation record, q moved by ``shift``."""
+    q, v = _rig_member(index)[0]
+    return fit_narx([q + shift], [v], "v2", NarxConfig(), q_limit=0.05)
 
 
 def _unseen_nrmse(model, records, shift=0.0):
@@ -365,6 +377,7 @@ def _unseen_nrmse(model, records, shift=0.0):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("zoo_seed_1_member_0")
 def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged():
     """The candidate origins move with the data: a laser zero 5 mm away gives the same unseen
     NRMSE(q) on a zoo member (the bound is 0.05 points, the proof says rounding)."""
@@ -373,7 +386,7 @@ def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged():
     est, *unseen = _rig_member(0)
     scores, origins = [], []
     for shift in (0.0, 5e-3):
-        model = fit_narx([est[0] + shift], [est[1]], "v2", NarxConfig(), q_limit=0.05)
+        model = _member_fit(0, shift)
         scores.append(_unseen_nrmse(model, unseen, shift))
         origins.append(model.q_origin - shift)
         assert model.q_origin in q_origins(est[0] + shift).values()
@@ -384,7 +397,9 @@ def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("index", [0, 3])
+@pytest.mark.parametrize(
+    "index", [pytest.param(0, marks=pytest.mark.xdist_group("zoo_seed_1_member_0")), 3]
+)
 def test_the_narx_row_is_within_1_5x_of_sysidentpy_fitted_directly(index):
     """SysIdentPy's FROLS as a user calls it (degree 3, lags 3, inputs v1^2 and v2^2, AIC over
     40 terms, on q [mm] and v^2 [kV^2] as logged) free-runs the unseen records of a zoo
@@ -392,8 +407,7 @@ def test_the_narx_row_is_within_1_5x_of_sysidentpy_fitted_directly(index):
     from debist.model.narx import _sysidentpy
 
     est, *unseen = _rig_member(index)
-    model = fit_narx([est[0]], [est[1]], "v2", NarxConfig(), q_limit=0.05)
-    ours = _unseen_nrmse(model, unseen)
+    ours = _unseen_nrmse(_member_fit(index), unseen)
     FROLS, Polynomial, LeastSquares = _sysidentpy()
     ref = FROLS(order_selection=True, n_info_values=40, info_criteria="aic", ylag=3,
                 xlag=[[1, 2, 3], [1, 2, 3]], basis_function=Polynomial(degree=3),
