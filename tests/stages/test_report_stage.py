@@ -28,7 +28,7 @@ from debist.report.html import FIGURE_GROUPS, PNG_SIGNATURE, SECTIONS
 from debist.stages.report import ReportInputs, run_report
 from debist.workflow.loader import load_workflow
 from debist.workflow.schema import check_workflow
-from tests.conftest import SYNTHETIC_WORKFLOW, write_rig_csv
+from tests.conftest import SYNTHETIC_WORKFLOW
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 SHOWN = ["ingest", "differentiate", "identify", "validate", "compare"]
@@ -180,14 +180,18 @@ def invoke(*args):
 
 
 @pytest.fixture(scope="module")
-def synthetic_run(tmp_path_factory, bistable_record):
-    """`debist run` of the synthetic workflow with [report]; the folder and the run digest."""
-    folder = tmp_path_factory.mktemp("report-run")
-    write_rig_csv(folder, bistable_record)
+def synthetic_run(tmp_path_factory, synthetic_run):
+    """`debist run` of the synthetic workflow with [report]; the folder and the run digest.
+
+    The session's run of the same workflow without [report] is copied: only the report runs.
+    """
+    folder = tmp_path_factory.mktemp("report-run") / "run"
+    shutil.copytree(synthetic_run[0], folder)
     wf = folder / "wf.toml"
     wf.write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6) + "\n[report]\nzoom_window = 1.5\n")
     code, out = invoke("run", wf)
     assert code == 0, out
+    assert out.count("up to date, skipping") == len(SHOWN) and "Stage 'report' done" in out
     digest = re.search(r"run digest: ([0-9a-f]{64})", out).group(1)
     return folder, wf, digest
 
