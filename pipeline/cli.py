@@ -588,7 +588,7 @@ _stage_command(
 )
 _stage_command(
     "validate",
-    "Free-run the identified model on every data set as [validate] says; NRMSE table and plots.",
+    "Free-run the identified model on every data set as [validate] says; NRMSE table and runs.",
 )
 _stage_command(
     "compare",

@@ -94,8 +94,8 @@ STAGES: tuple[StageDef, ...] = (
         "validate",
         "debist.stages.validate",
         ("ingest", "differentiate", "identify"),
-        (*_BASE, "h5py", "matplotlib"),
-        "Free runs on every data set: NRMSE table and plots.",
+        (*_BASE, "h5py"),
+        "Free runs on every data set: NRMSE table and the simulated runs.",
     ),
     StageDef(
         "compare",
