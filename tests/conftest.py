@@ -248,6 +248,14 @@ def synthetic_run(tmp_path_factory, bistable_record):
     return root, out.split("run digest: ")[1].split()[0]
 
 
+@pytest.fixture
+def synthetic_copy(synthetic_run, tmp_path):
+    """A private copy of the session's complete synthetic run: its folder and the run digest."""
+    root, digest = synthetic_run
+    shutil.copytree(root, tmp_path / "p")
+    return tmp_path / "p", digest
+
+
 # --- a backbone-only double well with known curves (stability, design, trust, report tests) ---
 # f(q) = k1 q + k3 q^3 with k1 < 0: wells at +-sqrt(-k1/k3), local maximum F_MAX.
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 
@@ -13,14 +12,6 @@ import pytest
 import debist
 from debist.core import artifacts
 from debist.core.errors import ArtifactError, OutputDirError, WorkflowError
-
-
-@pytest.fixture
-def run_copy(synthetic_run, tmp_path):
-    """A private copy of the synthetic workflow's complete run (the CLI's), and its digest."""
-    root, digest = synthetic_run
-    shutil.copytree(root, tmp_path / "p")
-    return tmp_path / "p", digest
 
 
 def test_import_debist_is_light_and_lists_its_api():
@@ -34,8 +25,8 @@ def test_import_debist_is_light_and_lists_its_api():
     assert "'nonsense'" in str(err.value)
 
 
-def test_run_skips_what_is_up_to_date_prints_nothing_and_reports_progress(run_copy, capfd):
-    root, digest = run_copy
+def test_run_skips_what_is_up_to_date_prints_nothing_and_reports_progress(synthetic_copy, capfd):
+    root, digest = synthetic_copy
     events = []
     result = debist.run(root / "wf.toml", on_progress=events.append)
     captured = capfd.readouterr()
@@ -70,8 +61,8 @@ def test_nrmse_is_the_table_the_cli_prints_in_percent(synthetic_run):
 
 
 @pytest.mark.slow
-def test_overrides_change_the_run_and_are_recorded(run_copy):
-    root, digest = run_copy
+def test_overrides_change_the_run_and_are_recorded(synthetic_copy):
+    root, digest = synthetic_copy
     events = []
     result = debist.run(root / "wf.toml", overrides={"identify.M": 6}, on_progress=events.append)
     assert result.digest != digest
@@ -125,8 +116,8 @@ def test_model_curves_and_equilibria_are_the_identify_stages(synthetic_run):
     assert list(rest.sort_values("q")["static_stable"]) == [True, False, True]
 
 
-def test_a_changed_artifact_is_never_read(run_copy):
-    root, _ = run_copy
+def test_a_changed_artifact_is_never_read(synthetic_copy):
+    root, _ = synthetic_copy
     model_file = root / "out/identify/model.h5"
     model_file.write_bytes(model_file.read_bytes() + b"\0")
     with pytest.raises(ArtifactError) as err:
@@ -168,8 +159,8 @@ def test_printing_the_nrmse_table_shows_every_row_and_column(synthetic_run):
     assert type(table[["model"]]) is pd.DataFrame  # a selection is a plain DataFrame
 
 
-def test_the_cli_commands_are_the_apis_calls(run_copy, tmp_path):
-    root, digest = run_copy
+def test_the_cli_commands_are_the_apis_calls(synthetic_copy, tmp_path):
+    root, digest = synthetic_copy
     wf = root / "wf.toml"
     stages = debist.workflow_stages(wf)
     assert stages[0] == "ingest" and "identify" in stages and "report" not in stages
@@ -196,8 +187,8 @@ def test_the_cli_commands_are_the_apis_calls(run_copy, tmp_path):
     assert found == {"runs": [str(root / "out")] * 2, "config": [], "nrmse": []}
 
 
-def test_batch_helpers_find_tabulate_and_index(run_copy):
-    root, _ = run_copy
+def test_batch_helpers_find_tabulate_and_index(synthetic_copy):
+    root, _ = synthetic_copy
     assert debist.find_workflows([root / "wf.toml"]) == [root / "wf.toml"]
     with pytest.raises(WorkflowError):
         debist.find_workflows([root / "nothing-*.toml"])
@@ -210,13 +201,13 @@ def test_batch_helpers_find_tabulate_and_index(run_copy):
 
 
 @pytest.mark.parametrize("damage", [b"", b"[1, 2]", b"[" * 100_000])
-def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(run_copy, damage):
+def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(synthetic_copy, damage):
     """An empty, non-object or 100,000-deep manifest: status says stale and why, verify
     fails on it (exit 3 in the CLI), and run sets the folder aside untouched, recomputes the
     stage, and leaves a run that verifies to the original digest."""
     from tests.conftest import invoke_cli
 
-    root, digest = run_copy
+    root, digest = synthetic_copy
     manifest = root / "out/compare/manifest.json"
     manifest.write_bytes(damage)
     from debist.engine.runner import Runner
@@ -236,10 +227,10 @@ def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(run_copy, damag
     assert runner.verify() == [] and runner.digest() == digest
 
 
-def test_a_string_for_overrides_or_stages_is_refused_not_split_into_characters(run_copy):
+def test_a_string_for_overrides_or_stages_is_refused_not_split_into_characters(synthetic_copy):
     """``overrides="identify.M=8"`` and ``stages="identify"`` were read character by
     character; each is refused in one line that says what to pass instead."""
-    root, _ = run_copy
+    root, _ = synthetic_copy
     with pytest.raises(WorkflowError) as err:
         debist.run(root / "wf.toml", overrides="identify.M=8")
     assert "overrides" in str(err.value) and "identify" in str(err.value)

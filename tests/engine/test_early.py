@@ -1,7 +1,5 @@
 """A stage's first part run ahead (registry ``early``): the same artifacts, or stopped unused."""
 
-import shutil
-
 import pytest
 
 import debist
@@ -10,13 +8,6 @@ from debist.engine import runner as runner_module
 from debist.stages import registry
 
 pytestmark = pytest.mark.skipif(fork_workers(2) < 2, reason="needs two cores and POSIX fork")
-
-
-@pytest.fixture
-def run_copy(synthetic_run, tmp_path):
-    root, digest = synthetic_run
-    shutil.copytree(root, tmp_path / "p")
-    return tmp_path / "p", digest
 
 
 @pytest.fixture
@@ -44,11 +35,11 @@ def test_compare_reads_only_ingest_and_differentiate_in_its_first_part():
     assert set(compare.early) < set(compare.upstream)  # validate comes in the second part
 
 
-def test_the_first_part_run_ahead_gives_the_artifacts_of_a_run_in_turn(run_copy, children):
+def test_the_first_part_run_ahead_gives_the_artifacts_of_a_run_in_turn(synthetic_copy, children):
     """validate and compare recomputed (damaged manifests): compare's peers start beside
     validate, and the run verifies to the digest of the original run, whose compare the
     damaged-manifest test recomputes in turn (tests/cli/test_api.py)."""
-    root, digest = run_copy
+    root, digest = synthetic_copy
     for stage in ("validate", "compare"):
         (root / "out" / stage / "manifest.json").write_bytes(b"")
     result = debist.run(root / "wf.toml")
@@ -58,10 +49,10 @@ def test_the_first_part_run_ahead_gives_the_artifacts_of_a_run_in_turn(run_copy,
     assert debist.verify(root / "wf.toml", digest).ok
 
 
-def test_a_first_part_whose_stage_stays_up_to_date_is_stopped_unused(run_copy, children):
+def test_a_first_part_whose_stage_stays_up_to_date_is_stopped_unused(synthetic_copy, children):
     """validate recomputed to the same bytes: compare stays up to date, its peers' fit that
     started beside validate is stopped, and nothing of the run changes."""
-    root, digest = run_copy
+    root, digest = synthetic_copy
     before = (root / "out/compare/manifest.json").read_bytes()
     (root / "out/validate/manifest.json").write_bytes(b"")
     result = debist.run(root / "wf.toml")

@@ -19,9 +19,8 @@ def error_lines(out):
 
 
 @pytest.fixture
-def project(synthetic_run, tmp_path):
-    shutil.copytree(synthetic_run[0], tmp_path / "p")
-    return tmp_path / "p"
+def project(synthetic_copy):
+    return synthetic_copy[0]
 
 
 def manifests(out):

@@ -23,10 +23,9 @@ def project(tmp_path, bistable_record):
 
 
 @pytest.fixture
-def ran(synthetic_run, tmp_path):
+def ran(synthetic_copy):
     """A copy of the session's complete run of the same workflow (``out/`` beside it)."""
-    shutil.copytree(synthetic_run[0], tmp_path / "p")
-    return tmp_path / "p"
+    return synthetic_copy[0]
 
 
 def invoke(*args):

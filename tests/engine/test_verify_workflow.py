@@ -18,13 +18,6 @@ def invoke(*args):
     return code, " ".join(out.split())
 
 
-@pytest.fixture
-def project(synthetic_run, tmp_path):
-    root, digest = synthetic_run
-    shutil.copytree(root, tmp_path / "p")
-    return tmp_path / "p", digest
-
-
 def resign(out, stage):
     """Re-sign a stage's manifest after its outputs were edited, and the chain after it."""
     later = STAGES[STAGES.index(stage) :]
@@ -43,8 +36,8 @@ def resign(out, stage):
         (sdir / artifacts.MANIFEST).write_text(m.to_json())
 
 
-def test_a_changed_workflow_fails_verify_and_names_the_key(project):
-    root, _ = project
+def test_a_changed_workflow_fails_verify_and_names_the_key(synthetic_copy):
+    root, _ = synthetic_copy
     wf = root / "wf.toml"
     wf.write_text(wf.read_text().replace("M = 8", "M = 6"))
     code, out = invoke("verify", wf)
@@ -54,9 +47,9 @@ def test_a_changed_workflow_fails_verify_and_names_the_key(project):
 
 @pytest.mark.slow
 def test_stage_folders_copied_from_a_run_with_another_setting_fail_without_a_digest(
-    project, tmp_path
+    synthetic_copy, tmp_path
 ):
-    root, _ = project
+    root, _ = synthetic_copy
     wf = root / "wf.toml"
     wf.write_text(wf.read_text() + "\n[report]\n")  # the report stage is copied too
     code, out = invoke("run", wf)
@@ -74,8 +67,8 @@ def test_stage_folders_copied_from_a_run_with_another_setting_fail_without_a_dig
     assert code == 3 and "[identify] M (6 -> 8)" in out, out
 
 
-def test_edited_and_resigned_ingest_tables_fail_without_a_digest(project):
-    root, _ = project
+def test_edited_and_resigned_ingest_tables_fail_without_a_digest(synthetic_copy):
+    root, _ = synthetic_copy
     path = root / "out" / "ingest" / "estimation.parquet"
     table = pd.read_parquet(path)
     table["q"] *= 1.01
@@ -88,8 +81,8 @@ def test_edited_and_resigned_ingest_tables_fail_without_a_digest(project):
 
 
 @pytest.mark.slow
-def test_a_digest_names_the_first_stage_that_departs_from_it(project):
-    root, digest = project
+def test_a_digest_names_the_first_stage_that_departs_from_it(synthetic_copy):
+    root, digest = synthetic_copy
     path = root / "out" / "validate" / "nrmse.parquet"
     table = pd.read_parquet(path)
     table["nrmse_q"] *= 0.5  # a better-looking result, re-signed with a consistent chain
@@ -104,8 +97,8 @@ def test_a_digest_names_the_first_stage_that_departs_from_it(project):
 
 
 @pytest.mark.slow
-def test_a_wrong_digest_on_an_intact_run_is_not_called_a_changed_manifest(project):
-    root, digest = project
+def test_a_wrong_digest_on_an_intact_run_is_not_called_a_changed_manifest(synthetic_copy):
+    root, digest = synthetic_copy
     wrong = "0" * 64
     code, out = invoke("verify", root / "wf.toml", "--digest", wrong)
     assert code == 3
@@ -114,10 +107,10 @@ def test_a_wrong_digest_on_an_intact_run_is_not_called_a_changed_manifest(projec
     assert code == 0, out
 
 
-def test_verify_works_on_a_run_whose_lock_file_cannot_be_opened(project, monkeypatch):
+def test_verify_works_on_a_run_whose_lock_file_cannot_be_opened(synthetic_copy, monkeypatch):
     import filelock
 
-    root, _ = project
+    root, _ = synthetic_copy
 
     def refuse(self, *a, **k):
         raise PermissionError(30, "Read-only file system")
@@ -129,8 +122,8 @@ def test_verify_works_on_a_run_whose_lock_file_cannot_be_opened(project, monkeyp
     assert json.loads((root / "out" / ".debist-output.json").read_text())["workflow_file"]
 
 
-def test_verify_notes_library_versions_that_differ_from_the_run(project):
-    root, _ = project
+def test_verify_notes_library_versions_that_differ_from_the_run(synthetic_copy):
+    root, _ = synthetic_copy
     path = root / "out" / "identify" / artifacts.MANIFEST
     m = artifacts.read_manifest(root / "out" / "identify")
     m = dataclasses.replace(m, versions={**m.versions, "numpy": "0.0.1"})
