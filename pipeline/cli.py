@@ -1103,13 +1103,20 @@ def main() -> None:
     """Entry point of the ``debist`` console script (SIGTERM stops as cleanly as Ctrl-C)."""
     import warnings
 
-    from debist.core.allocator import arrow_system_pool, keep_freed_memory
+    from debist.core.allocator import (
+        arrow_system_pool,
+        keep_freed_memory,
+        skip_final_collection,
+    )
 
     warnings.formatwarning = _warning_line
     signal.signal(signal.SIGTERM, _on_sigterm)
     keep_freed_memory()
     arrow_system_pool()
-    app()
+    try:
+        app()
+    finally:
+        skip_final_collection()
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ from typing import Any
 from threadpoolctl import threadpool_limits
 
 from debist.core import artifacts
-from debist.core.allocator import release_freed_memory
+from debist.core.allocator import collector_frozen, release_freed_memory
 from debist.core.beside import BesideRun
 from debist.core.errors import (
     ArtifactError,
@@ -842,7 +842,7 @@ class Runner:
         """
         t0 = time.perf_counter()
         module = importlib.import_module(registry.stage(stage).module)
-        with one_blas_thread():
+        with one_blas_thread(), collector_frozen():  # its code and inputs: not traversed
             t_run = time.perf_counter()
             result = module.execute(self) if prepared is None else module.execute(self, prepared)
             ran = time.perf_counter() - t_run
