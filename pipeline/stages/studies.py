@@ -5,7 +5,8 @@ their derivatives in, a result table and a matplotlib figure out. They call the
 pipeline's own differentiator, identification and free-run validation, so a study
 scores exactly what a workflow run with those settings would produce, except that at
 most ``max_samples`` samples of each record are fitted and simulated (for speed; the
-table's ``attrs`` say so).
+table's ``attrs`` say so). The alpha study differentiates those samples only, as a workflow
+on records of that length would.
 
 References
 ----------
@@ -270,8 +271,9 @@ def alpha_study(
 ) -> tuple[pd.DataFrame, Any]:
     """Differentiate, identify and score for every TVRegDiff ``alpha`` (Fig. 11c).
 
-    Per ``alpha`` (``alpha2`` scaled alike) the tables are differentiated, fitted and scored as
-    in :func:`rbf_grid_study` (why both scores: docs/explanation/implementation.md).
+    Per ``alpha`` (``alpha2`` scaled alike) the first ``max_samples`` samples of each table are
+    differentiated, fitted and scored as in :func:`rbf_grid_study` (why both scores:
+    docs/explanation/implementation.md).
 
     Parameters
     ----------
@@ -315,9 +317,10 @@ def alpha_study(
     if est:  # without estimation data the first fit says so
         preflight.check_identify(icfg, len(input_columns(est[0])), sum(sizes), max(sizes))
     rows, curves = [], []
+    heads = {name: frame.iloc[: cfg.max_samples] for name, frame in tables.items()}
     for alpha in cfg.alpha:
         params = _scaled_section(diff_section, float(alpha))
-        derivs = differentiate_tables(tables, {"method": "tvregdiff", **params})
+        derivs = differentiate_tables(heads, {"method": "tvregdiff", **params})
         converged = all(d.attrs["converged"] for d in derivs.values())
         records, datasets = _study_data(tables, derivs, cfg.max_samples)
         score = _fit_and_score(records, datasets, icfg, vcfg, cfg.free_run)
