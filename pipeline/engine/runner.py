@@ -689,6 +689,8 @@ class Runner:
                 if ahead is None and stage in FREE_RUN_STAGES:
                     ahead = _compile_ahead()
                 if stage in ready:
+                    # its code imported here: the child inherits it, the stages here reuse it
+                    importlib.import_module(registry.stage(stage).module)
                     beside[stage] = BesideRun(
                         partial(self._execute, stage, *found), f"stage '{stage}'",
                         niceness=BESIDE_NICENESS,
