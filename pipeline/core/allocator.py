@@ -201,8 +201,10 @@ def skip_final_collection() -> None:
     """Spare the collection Python runs at interpreter exit (call it when the work is done).
 
     Freezes every tracked object (``gc.freeze``), so the exit's collection traverses none of
-    them; their memory goes back with the process. Files and handlers are closed as before
-    (``atexit`` and the modules' teardown do not depend on it).
+    them; their memory goes back with the process. ``atexit`` handlers and the modules'
+    teardown run as before, but an object that is garbage only as part of a reference cycle is
+    not finalized: what must reach a file is closed before (every write of a run is, by
+    ``with`` blocks and atomic renames).
 
     References
     ----------
