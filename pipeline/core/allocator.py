@@ -48,6 +48,7 @@ import ctypes.util
 import gc
 import os
 import platform
+import threading
 from collections.abc import Iterator
 
 __all__ = [
@@ -172,7 +173,10 @@ def collector_frozen() -> Iterator[None]:
     (``gc.freeze``): the collections inside the block traverse only what the block creates.
     On exit they return to the oldest generation (``gc.unfreeze``), so garbage among them is
     collected as before; nothing is kept alive longer than without the block. Not reentrant:
-    the inner block's exit hands back the outer block's objects too.
+    the inner block's exit hands back the outer block's objects too. Outside the main thread
+    it does nothing: there the process and its one collector belong to other threads too (a
+    batch's Dask worker), and freezing them raised a worker's peak memory over four workflows
+    from 621 to 757 MiB (617 MiB without).
 
     Yields
     ------
@@ -190,6 +194,9 @@ def collector_frozen() -> Iterator[None]:
     >>> gc.get_freeze_count()
     0
     """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     gc.freeze()
     try:
         yield

@@ -1,4 +1,4 @@
-"""glibc's malloc thresholds for the process (debist.core.allocator).
+"""glibc's malloc thresholds and Python's collector for the process (debist.core.allocator).
 
 Checked: mallopt takes both thresholds on glibc, a threshold the user set in the environment
 is left alone, and a freed array of a record's size is reused from the heap afterwards (the
@@ -139,3 +139,28 @@ def test_pyarrow_allocates_with_malloc_unless_the_user_chose_a_pool(user, expect
         [sys.executable, "-c", _POOL_PROBE], capture_output=True, text=True, env=env, check=True
     ).stdout
     assert out.split() == expected
+
+
+def test_a_stage_freezes_the_collector_only_from_the_main_thread():
+    """In the main thread the objects alive on entry leave the collections and come back on
+    exit; in another thread (a batch's Dask worker) the process's collector is left alone."""
+    import gc
+    import threading
+
+    from debist.core.allocator import collector_frozen
+
+    assert gc.get_freeze_count() == 0
+    with collector_frozen():
+        frozen_here = gc.get_freeze_count()
+    seen = []
+
+    def worker():
+        with collector_frozen():
+            seen.append(gc.get_freeze_count())
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert frozen_here > 1000  # the imported modules, classes and functions at least
+    assert seen == [0]
+    assert gc.get_freeze_count() == 0
