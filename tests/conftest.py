@@ -44,6 +44,23 @@ if "PYTEST_XDIST_WORKER" in os.environ:
         os.environ.setdefault(_name, str(_blas_threads()))
     threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
+
+def pytest_configure(config):
+    """Compile the numba kernels once before pytest-xdist starts its workers (tests/ahead.py).
+
+    Only in the controlling process of an xdist run, and only when numba's cache lacks a
+    kernel (a fresh install): with a warm cache the workers load them as before.
+    """
+    if "PYTEST_XDIST_WORKER" in os.environ or not getattr(config.option, "numprocesses", 0):
+        return
+    from debist.simulate.warmup import kernels_cached
+    from tests.ahead import compile_ahead
+
+    if not kernels_cached() and (failed := compile_ahead(str(config.rootpath))):
+        warning = pytest.PytestWarning(f"compiling the kernels ahead failed:\n{failed}")
+        config.issue_config_time_warning(warning, stacklevel=2)
+
+
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
