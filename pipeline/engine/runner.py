@@ -717,8 +717,9 @@ class Runner:
         forked process when the stages it reads are done, a stage it depends on is about to
         run here (so it will most likely run too) and a core is free beside this process and
         the ``busy`` stages already running beside it
-        (:func:`debist.core.forking.fork_workers`). If the stage turns out up to date, the
-        part is stopped unused.
+        (:func:`debist.core.forking.fork_workers`). The module's ``preload(ctx)``, if it has
+        one, runs here first: what it loads the child inherits. If the stage turns out up to
+        date, the part is stopped unused.
         """
         out: dict[str, BesideRun] = {}
         for stage in pending:
@@ -732,6 +733,8 @@ class Runner:
             ):
                 continue
             module = importlib.import_module(registry.stage(stage).module)
+            if hasattr(module, "preload"):  # what both processes load: loaded once, here
+                module.preload(self)
             out[stage] = BesideRun(
                 partial(self._first_part, module.prepare), f"stage '{stage}' (first part)"
             )

@@ -9,6 +9,7 @@ model beats them.
 
 from __future__ import annotations
 
+import contextlib
 import time
 import warnings
 from collections.abc import Mapping
@@ -22,12 +23,13 @@ import numpy as np
 from debist.core import progress
 from debist.core.artifacts import H5Tree
 from debist.core.beside import BesideRun
-from debist.core.errors import DebistWarning, IdentificationError
+from debist.core.errors import DebistError, DebistWarning, IdentificationError
 from debist.core.forking import fork_workers
 from debist.identify.physics_prior import analytical_for
 from debist.identify.records import estimation_records
 from debist.model.narx import NARX_MISSING, NarxConfig, fit_narx, narx_available
 from debist.model.sindy import SindyConfig, fit_sindy
+from debist.physics.freerun import analytical_model
 from debist.report.tables import with_verdicts
 from debist.simulate.freerun import SimulationResult
 from debist.stages import StageInputs, StageOutput
@@ -42,7 +44,7 @@ pd = lazy.load("pandas")
 #: Columns of validate's NRMSE table that the compare stage carries over per data set.
 CAVEATS = ("under_excited", "extrapolated")
 
-__all__ = ["CompareResult", "execute", "prepare", "run_peers", "with_rbf_rows"]
+__all__ = ["CompareResult", "execute", "preload", "prepare", "run_peers", "with_rbf_rows"]
 
 
 @dataclass(frozen=True)
@@ -247,6 +249,39 @@ def _input_units(tables, v) -> list[str]:
     units = next(iter(tables.values())).attrs.get("units", {})
     n = 1 if np.ndim(v) == 1 else np.shape(v)[1]
     return [units.get(f"v{i + 1}", "V") for i in range(n)]
+
+
+def preload(ctx: StageInputs) -> None:
+    """Load what :func:`prepare` and the stages run while it runs beside them both load.
+
+    The runner calls it here just before it forks :func:`prepare` (the registry's
+    ``early``): the forked process inherits what it loads instead of loading it a second
+    time, on the core the stages here need. With ``[physics]``, the prototype's analytical
+    model (cached per prototype: the forked SINDy rows' ``phi(q)``, identify's curves and
+    ``m_q``, validate's analytical row); with the NARX peer on, SysIdentPy and matplotlib
+    (SysIdentPy imports pyplot; the NARX model comes back pickled, so this process imports
+    SysIdentPy anyway, and matplotlib before it forks the workers that draw the figures of
+    identify and report). Loads nothing else, decides nothing: a prototype whose model
+    cannot be built is left to the stage that needs it to report.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        The ``[physics]`` section and the ``[compare.narx]`` table.
+
+    References
+    ----------
+    Python documentation, :mod:`multiprocessing` (the ``fork`` start method: the child
+    starts as a copy of the parent's memory).
+    """
+    # an error here (a prototype without a static path, an invalid [compare.narx]) is left
+    # to the stage that meets it to raise, in its own context
+    with contextlib.suppress(DebistError):
+        physics = ctx.physics()
+        if physics is not None:
+            analytical_model(physics)
+        if NarxConfig.from_dict(dict(ctx.stage_config("compare")["sindy"]).get("narx")).enabled:
+            narx_available()
 
 
 def prepare(ctx: StageInputs) -> CompareResult:

@@ -46,7 +46,9 @@ class StageDef:
         Upstream stages that the first part of the stage reads, its module's
         ``prepare(ctx)``: once they are done, the runner may call it in a forked process
         beside the stages between and hands its result to ``execute(ctx, prepared)`` (the
-        same result as ``prepare`` called there; empty: no first part).
+        same result as ``prepare`` called there; empty: no first part). An optional
+        ``preload(ctx)`` of the module runs in the runner's process just before the fork and
+        loads what both processes would load (the child inherits it).
     """
 
     name: str

@@ -1,13 +1,23 @@
 """A stage's first part run ahead (registry ``early``): the same artifacts, or stopped unused."""
 
+import dataclasses
+import os
+import sys
+
 import pytest
 
 import debist
 from debist.core.forking import fork_workers
 from debist.engine import runner as runner_module
-from debist.stages import registry
+from debist.identify.physics_prior import analytical_for, physics_mass
+from debist.physics.freerun import analytical_model
+from debist.physics.params import PrototypeParams
+from debist.physics.reduced import fit_reduced
+from debist.physics.statics import StaticsError
+from debist.stages import compare, registry
+from debist.validate.config import ValidateConfig
 
-pytestmark = pytest.mark.skipif(fork_workers(2) < 2, reason="needs two cores and POSIX fork")
+needs_fork = pytest.mark.skipif(fork_workers(2) < 2, reason="needs two cores and POSIX fork")
 
 
 @pytest.fixture
@@ -35,20 +45,31 @@ def test_compare_reads_only_ingest_and_differentiate_in_its_first_part():
     assert set(compare.early) < set(compare.upstream)  # validate comes in the second part
 
 
-def test_the_first_part_run_ahead_gives_the_artifacts_of_a_run_in_turn(synthetic_copy, children):
+@needs_fork
+def test_the_first_part_run_ahead_gives_the_artifacts_of_a_run_in_turn(
+    synthetic_copy, children, monkeypatch
+):
     """validate and compare recomputed (damaged manifests): compare's peers start beside
     validate, and the run verifies to the digest of the original run, whose compare the
     damaged-manifest test recomputes in turn (tests/cli/test_api.py)."""
     root, digest = synthetic_copy
     for stage in ("validate", "compare"):
         (root / "out" / stage / "manifest.json").write_bytes(b"")
+    preloads = []  # (process, children started before) of each compare.preload call
+    real = compare.preload
+    monkeypatch.setattr(
+        compare, "preload", lambda ctx: (preloads.append((os.getpid(), len(children))), real(ctx))
+    )
     result = debist.run(root / "wf.toml")
     early = [c for c in children if c["label"] == "stage 'compare' (first part)"]
     assert len(early) == 1 and not early[0]["stopped"]  # started, and its result used
+    # loaded here, once, before the first part's process was forked
+    assert preloads == [(os.getpid(), children.index(early[0]))]
     assert result.digest == digest
     assert debist.verify(root / "wf.toml", digest).ok
 
 
+@needs_fork
 def test_a_first_part_whose_stage_stays_up_to_date_is_stopped_unused(synthetic_copy, children):
     """validate recomputed to the same bytes: compare stays up to date, its peers' fit that
     started beside validate is stopped, and nothing of the run changes."""
@@ -60,3 +81,46 @@ def test_a_first_part_whose_stage_stays_up_to_date_is_stopped_unused(synthetic_c
     assert len(early) == 1 and early[0]["stopped"]
     assert result.digest == digest
     assert (root / "out/compare/manifest.json").read_bytes() == before
+
+
+class _Inputs:
+    """The two parts of a runner that ``compare.preload`` reads."""
+
+    def __init__(self, physics, narx):
+        self._physics, self._narx = physics, narx
+
+    def physics(self):
+        return self._physics
+
+    def stage_config(self, stage):
+        return {"sindy": {"narx": {"enabled": self._narx}}, "validate": {}}
+
+
+def test_preload_builds_the_analytical_model_that_the_first_part_and_identify_then_reuse():
+    """A prototype no other test builds (b moved by 1 um): preload fits its reduced model
+    once; what the forked first part calls (analytical_for) and identify's m_q = "physics"
+    then come from that fit, with no fit of their own."""
+    physics = dataclasses.replace(PrototypeParams.paper(), b=PrototypeParams.paper().b + 1e-6)
+    before = fit_reduced.cache_info()
+    compare.preload(_Inputs(physics, narx=False))
+    loaded, built = fit_reduced.cache_info(), analytical_model.cache_info()
+    assert loaded.misses == before.misses + 1
+    model = analytical_for(physics, [], ValidateConfig.from_dict({}))
+    m_q = physics_mass(physics)
+    after = fit_reduced.cache_info()
+    assert analytical_model.cache_info().hits == built.hits + 1  # the first part's call
+    assert after.misses == loaded.misses and after.hits == loaded.hits + 1  # identify's
+    assert m_q == pytest.approx(float(model.model.curves([0.0]).m_q[0]), rel=1e-12)
+
+
+def test_preload_leaves_a_failing_model_to_the_stages_and_imports_sysidentpy(monkeypatch):
+    """A prototype whose static path fails raises nothing here (the stage that needs its
+    model reports it); with the NARX peer on, SysIdentPy is loaded for the child to inherit."""
+    pytest.importorskip("sysidentpy")
+
+    def no_path(physics):
+        raise StaticsError("the static path cannot be continued")
+
+    monkeypatch.setattr(compare, "analytical_model", no_path)
+    compare.preload(_Inputs(PrototypeParams.paper(), narx=True))
+    assert "sysidentpy.model_structure_selection" in sys.modules
