@@ -200,30 +200,40 @@ def test_batch_helpers_find_tabulate_and_index(synthetic_copy):
     assert "wf" in index.read_text() or results[0].name in index.read_text()
 
 
-@pytest.mark.parametrize("damage", [b"", b"[1, 2]", b"[" * 100_000])
-def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(synthetic_copy, damage):
+# compare once: recomputed in turn, to the bytes of the original run's compare, whose first
+# part ran ahead beside identify (tests/engine/test_early.py); differentiate, the cheapest
+# stage to recompute, for the other damages
+@pytest.mark.parametrize(
+    ("damage", "stage"),
+    [(b"", "compare"), (b"[1, 2]", "differentiate"), (b"[" * 100_000, "differentiate")],
+)
+def test_a_damaged_manifest_is_a_stale_stage_that_run_recomputes(synthetic_copy, damage, stage):
     """An empty, non-object or 100,000-deep manifest: status says stale and why, verify
     fails on it (exit 3 in the CLI), and run sets the folder aside untouched, recomputes the
-    stage, and leaves a run that verifies to the original digest."""
+    stage (the stages after it stay up to date, its bytes being the same), and leaves a run
+    that verifies to the original digest."""
     from tests.conftest import invoke_cli
 
     root, digest = synthetic_copy
-    manifest = root / "out/compare/manifest.json"
+    manifest = root / "out" / stage / "manifest.json"
     manifest.write_bytes(damage)
+    later = ("identify", "validate", "compare") if stage == "differentiate" else ()
+    kept = {s: (root / "out" / s / "manifest.json").stat().st_mtime_ns for s in later}
     from debist.engine.runner import Runner
     from debist.workflow.loader import load_workflow
 
     runner = Runner(load_workflow(root / "wf.toml"))
-    state = {s.stage: s for s in runner.status()}["compare"]
+    state = {s.stage: s for s in runner.status()}[stage]
     assert state.state == "stale" and state.reasons[0].kind == "damaged_manifest"
     assert "unreadable" in state.reasons[0].detail
-    assert any("compare/manifest.json" in p for p in runner.verify())
+    assert any(f"{stage}/manifest.json" in p for p in runner.verify())
     code, out = invoke_cli("verify", root / "wf.toml")
     assert code == 3 and "Traceback" not in out
     code, out = invoke_cli("run", root / "wf.toml")
     assert code == 0, out
-    (aside,) = (root / "out").glob("compare.damaged-*")
+    (aside,) = (root / "out").glob(f"{stage}.damaged-*")
     assert (aside / "manifest.json").read_bytes() == damage
+    assert {s: (root / "out" / s / "manifest.json").stat().st_mtime_ns for s in later} == kept
     assert runner.verify() == [] and runner.digest() == digest
 
 
