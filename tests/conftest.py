@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import atexit
 import os
+import pickle
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import pytest
+from filelock import FileLock
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
@@ -254,15 +258,67 @@ def invoke_cli(*args) -> tuple[int, str]:
     return result.exit_code, result.output
 
 
+def made_once(tmp_path_factory, name: str, make: Callable[[Path], str]) -> tuple[Path, str]:
+    """A folder made once in a test session, shared by its pytest-xdist workers; read it only.
+
+    The first worker to ask makes it, ``make(folder)``, under a file lock in the folder the
+    workers' temporary folders share; the others wait for the lock and find it made. A folder
+    whose making failed is made again by the next to ask.
+
+    Returns
+    -------
+    folder : pathlib.Path
+        The folder (copy it to change anything in it).
+    text : str
+        What ``make`` returned.
+
+    References
+    ----------
+    pytest-xdist documentation, "Making session-scoped fixtures execute only once"; filelock.
+    """
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # pytest-of-<user>/pytest-<n>/, shared by the session's workers
+    folder, done = base / name, base / f"{name}.made"
+    with FileLock(base / f"{name}.lock"):
+        if not done.is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            done.with_suffix(".tmp").write_text(make(folder))
+            done.with_suffix(".tmp").rename(done)
+    return folder, done.read_text()
+
+
+def computed_once(tmp_path_factory, name: str, compute: Callable[[], Any]) -> Any:
+    """``compute()`` once in a test session for all its pytest-xdist workers (pickled).
+
+    For a module fixture that both workers would compute: the value is pickled in a folder
+    of :func:`made_once`, and every worker reads its own copy of it.
+    """
+
+    def make(folder: Path) -> str:
+        (folder / "value.pickle").write_bytes(pickle.dumps(compute()))
+        return ""
+
+    folder, _ = made_once(tmp_path_factory, name, make)
+    return pickle.loads((folder / "value.pickle").read_bytes())
+
+
 @pytest.fixture(scope="session")
 def synthetic_run(tmp_path_factory, bistable_record):
-    """One complete run of the synthetic workflow (``out/``), and its run digest; copy it."""
-    root = tmp_path_factory.mktemp("synthetic-run")
-    write_rig_csv(root, bistable_record)
-    (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
-    code, out = invoke_cli("run", root / "wf.toml")
-    assert code == 0, out
-    return root, out.split("run digest: ")[1].split()[0]
+    """One complete run of the synthetic workflow (``out/``), and its run digest; copy it.
+
+    Made once for all pytest-xdist workers (:func:`made_once`): read it, or copy it.
+    """
+
+    def make(root: Path) -> str:
+        write_rig_csv(root, bistable_record)
+        (root / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+        code, out = invoke_cli("run", root / "wf.toml")
+        assert code == 0, out
+        return out.split("run digest: ")[1].split()[0]
+
+    return made_once(tmp_path_factory, "synthetic-run", make)
 
 
 @pytest.fixture

@@ -116,11 +116,18 @@ def make_project(folder):
 
 @pytest.fixture(scope="module")
 def template(tmp_path_factory):
-    """A project that has run once: data, workflow, output folder."""
-    root = make_project(tmp_path_factory.mktemp("safety") / "project")
-    code, out = invoke("run", root / "wf.toml")
-    assert code == 0, out
-    return root
+    """A project that has run once: data, workflow, output folder (made once for all
+    pytest-xdist workers; copied by :func:`project`)."""
+    from tests.conftest import made_once
+
+    def make(folder):
+        root = make_project(folder / "project")
+        code, out = invoke("run", root / "wf.toml")
+        assert code == 0, out
+        return ""
+
+    folder, _ = made_once(tmp_path_factory, "safety-template", make)
+    return folder / "project"
 
 
 @pytest.fixture

@@ -187,8 +187,15 @@ def _truth() -> RBFModel:
 
 
 @pytest.fixture(scope="module")
-def in_class_record() -> Record:
-    """13 s of the truth (solve_ivp DOP853), with 5 % white noise on q_ddot (seeded)."""
+def in_class_record(tmp_path_factory) -> Record:
+    """13 s of the truth (solve_ivp DOP853), with 5 % white noise on q_ddot (seeded); computed
+    once for all pytest-xdist workers."""
+    from tests.conftest import computed_once
+
+    return computed_once(tmp_path_factory, "autotune-in-class-record", _in_class_record)
+
+
+def _in_class_record() -> Record:
     truth = _truth()
     t = np.arange(0.0, 13.0, _DT)
 

@@ -60,15 +60,17 @@ def test_zero_input_and_bad_settings():
 @pytest.fixture(scope="module")
 def paper_until_identify(tmp_path_factory):
     """The paper experiment's virtual-rig logs and identification (rig to identify, once)."""
-    from tests.conftest import invoke_cli
+    from tests.conftest import invoke_cli, made_once
 
-    out = tmp_path_factory.mktemp("paper-masks")
-    # the masks' support logic, with bootstrap bands (the gains' model error unmarks them all)
-    code, text = invoke_cli(
-        "run", WORKFLOW, "--out", out, "--until", "identify", "-S", "identify.model_error=false"
-    )
-    assert code == 0, text
-    return override_folder(out, {"identify": {"model_error": False}})  # beside "out"
+    def make(folder: Path) -> str:
+        # the masks' support logic, with bootstrap bands (the gains' model error unmarks them)
+        code, text = invoke_cli("run", WORKFLOW, "--out", folder / "out", "--until", "identify",
+                                "-S", "identify.model_error=false")  # fmt: skip
+        assert code == 0, text
+        return override_folder(folder / "out", {"identify": {"model_error": False}}).name
+
+    folder, name = made_once(tmp_path_factory, "paper-masks", make)  # one for all workers
+    return folder / name  # beside "out"
 
 
 def _sub_threshold_intervals(out: Path, i: int) -> list[tuple[float, float]]:

@@ -11,6 +11,7 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.refine import RefineConfig, refine_config, refine_model
 from debist.simulate.freerun import simulate
+from tests.conftest import computed_once
 
 
 def _noisy_records(rec, level, seed):
@@ -66,13 +67,18 @@ def _refined(rec, level, **kw):
 
 
 @pytest.fixture(scope="module")
-def duffing():
+def duffing(tmp_path_factory):
+    return computed_once(tmp_path_factory, "refine-duffing", _refined_duffing)
+
+
+def _refined_duffing():
     return _refined(_duffing_record(), 0.1, backbone=DUFFING_BACKBONE)
 
 
 @pytest.fixture(scope="module")
-def bistable(bistable_record):
-    return _refined(bistable_record, 0.3, input_map="v2")
+def bistable(tmp_path_factory, bistable_record):
+    return computed_once(tmp_path_factory, "refine-bistable",
+                         lambda: _refined(bistable_record, 0.3, input_map="v2"))  # fmt: skip
 
 
 @pytest.mark.parametrize("case", ["duffing", "bistable"])

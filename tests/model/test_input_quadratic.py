@@ -22,6 +22,7 @@ from debist.model.rbf import RBFModel
 from debist.simulate.freerun import simulate
 from tests.conftest import (
     INSIDE_CLASS,
+    computed_once,
     excitation,
     random_states,
     truth_model,
@@ -38,9 +39,11 @@ _with_quadratic = with_quadratic
 
 
 @pytest.fixture(scope="module")
-def quadratic():
-    """The truth with :data:`G_H` and its noise-free record."""
-    return truth_and_record(_with_quadratic)
+def quadratic(tmp_path_factory):
+    """The truth with :data:`G_H` and its noise-free record (once for all xdist workers)."""
+    return computed_once(
+        tmp_path_factory, "input-quadratic", lambda: truth_and_record(_with_quadratic)
+    )
 
 
 def test_the_acceleration_adds_g_h_h_squared_to_the_separable_balance():

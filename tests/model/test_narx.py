@@ -350,21 +350,26 @@ def test_the_compiled_free_run_is_sysidentpy_s_predict():
 
 @functools.cache
 def _rig_member(index):
-    """Zoo seed 1's member ``index``: its logged estimation record and its unseen ones.
-
-    Drawn once per test process (the tests of one member share an xdist group).
-    """
+    """Zoo seed 1's member ``index``: its logged estimation record and its unseen ones."""
     from debist.engine.zoo import _simulate
 
     _, _, runs, _, _ = _simulate(1, index)
     return tuple((r.q, np.column_stack([r.v1, r.v2])) for r in runs.values())
 
 
-@functools.cache
-def _member_fit(index, shift=0.0):
-    """debist's NARX row fitted on member ``index``'s estimation record, q moved by ``shift``."""
+def _member_fit(index):
+    """debist's NARX row fitted on member ``index``'s estimation record."""
     q, v = _rig_member(index)[0]
-    return fit_narx([q + shift], [v], "v2", NarxConfig(), q_limit=0.05)
+    return fit_narx([q], [v], "v2", NarxConfig(), q_limit=0.05)
+
+
+@pytest.fixture(scope="module")
+def member_0(tmp_path_factory):
+    """Member 0's records and debist's NARX row on them, computed once for all xdist workers."""
+    from tests.conftest import computed_once
+
+    return computed_once(tmp_path_factory, "narx-zoo-1-member-0",
+                         lambda: (_rig_member(0), _member_fit(0)))  # fmt: skip
 
 
 def _unseen_nrmse(model, records, shift=0.0):
@@ -377,16 +382,16 @@ def _unseen_nrmse(model, records, shift=0.0):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("zoo_seed_1_member_0")
-def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged():
+def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged(member_0):
     """The candidate origins move with the data: a laser zero 5 mm away gives the same unseen
     NRMSE(q) on a zoo member (the bound is 0.05 points, the proof says rounding)."""
     from debist.model.narx import q_origins
 
-    est, *unseen = _rig_member(0)
+    (est, *unseen), fitted = member_0
     scores, origins = [], []
     for shift in (0.0, 5e-3):
-        model = _member_fit(0, shift)
+        model = fitted if shift == 0.0 else fit_narx([est[0] + shift], [est[1]], "v2",
+                                                     NarxConfig(), q_limit=0.05)  # fmt: skip
         scores.append(_unseen_nrmse(model, unseen, shift))
         origins.append(model.q_origin - shift)
         assert model.q_origin in q_origins(est[0] + shift).values()
@@ -397,17 +402,18 @@ def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "index", [pytest.param(0, marks=pytest.mark.xdist_group("zoo_seed_1_member_0")), 3]
-)
-def test_the_narx_row_is_within_1_5x_of_sysidentpy_fitted_directly(index):
+@pytest.mark.parametrize("index", [0, 3])
+def test_the_narx_row_is_within_1_5x_of_sysidentpy_fitted_directly(index, request):
     """SysIdentPy's FROLS as a user calls it (degree 3, lags 3, inputs v1^2 and v2^2, AIC over
     40 terms, on q [mm] and v^2 [kV^2] as logged) free-runs the unseen records of a zoo
     member; debist's row on the same records is at most 1.5x its NRMSE(q)."""
     from debist.model.narx import _sysidentpy
 
-    est, *unseen = _rig_member(index)
-    ours = _unseen_nrmse(_member_fit(index), unseen)
+    if index == 0:  # shared with the test above
+        (est, *unseen), fitted = request.getfixturevalue("member_0")
+    else:
+        (est, *unseen), fitted = _rig_member(index), _member_fit(index)
+    ours = _unseen_nrmse(fitted, unseen)
     FROLS, Polynomial, LeastSquares = _sysidentpy()
     ref = FROLS(order_selection=True, n_info_values=40, info_criteria="aic", ylag=3,
                 xlag=[[1, 2, 3], [1, 2, 3]], basis_function=Polynomial(degree=3),

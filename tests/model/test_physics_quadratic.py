@@ -20,15 +20,26 @@ from debist.identify.config import IdentifyConfig
 from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
 from debist.model.terms import PhysicsPrior
-from tests.conftest import INSIDE_CLASS, random_states, truth_model, with_physics_quadratic
+from tests.conftest import (
+    INSIDE_CLASS,
+    computed_once,
+    random_states,
+    truth_model,
+    with_physics_quadratic,
+)
 from tests.model.conftest import curve_error, truth_and_record
 
 S_GH = np.array([0.7, 1.3])
 
 
 @pytest.fixture(scope="module")
-def curved():
-    """The truth with the term and its noise-free record (inside the model class)."""
+def curved(tmp_path_factory):
+    """The truth with the term and its noise-free record (inside the model class); computed
+    once for all pytest-xdist workers."""
+    return computed_once(tmp_path_factory, "physics-quadratic", _curved)
+
+
+def _curved():
     return truth_and_record(lambda truth: with_physics_quadratic(truth, S_GH))
 
 

@@ -20,6 +20,7 @@ from debist.identify.fit import fit_rbf_model
 from debist.model.rbf import RBFModel
 from tests.conftest import (
     INSIDE_CLASS,
+    computed_once,
     quadratic_curve_weights,
     random_states,
     truth_model,
@@ -32,9 +33,10 @@ _with_curve = with_quadratic_curve
 
 
 @pytest.fixture(scope="module")
-def curved():
-    """The truth with g_h,i(q) and its noise-free record (inside the model class)."""
-    return truth_and_record(_with_curve)
+def curved(tmp_path_factory):
+    """The truth with g_h,i(q) and its noise-free record (inside the model class); computed
+    once for all pytest-xdist workers."""
+    return computed_once(tmp_path_factory, "quadratic-curve", lambda: truth_and_record(_with_curve))
 
 
 def test_the_acceleration_adds_phi_theta_gh_h_squared_to_the_separable_balance():

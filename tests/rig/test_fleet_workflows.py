@@ -1,5 +1,6 @@
 """Fleet workflows: one workflow per seeded prototype, written all-or-nothing, loadable."""
 
+import json
 import tomllib
 from pathlib import Path
 
@@ -27,8 +28,11 @@ def render(out: Path, n: int = 3, seed: int = 1) -> dict[str, str]:
 def fleet_1(tmp_path_factory) -> dict[str, str]:
     """The template's seed-1 fleet of three (each member's switching voltages take seconds);
     member k of a fleet is the same for every fleet size, so tests of fewer members read the
-    first ones. Read only."""
-    return render(tmp_path_factory.mktemp("fleet-1"), n=3, seed=1)
+    first ones. Read only; made once for all pytest-xdist workers."""
+    from tests.conftest import made_once
+
+    _, text = made_once(tmp_path_factory, "fleet-1", lambda out: json.dumps(render(out, 3, 1)))
+    return json.loads(text)
 
 
 @pytest.mark.slow

@@ -11,8 +11,11 @@ from debist.rig.params import RigParams
 
 
 @pytest.fixture(scope="module")
-def fleet():
-    return make_fleet(4, seed=7)
+def fleet(tmp_path_factory):
+    """Seed 7's fleet of four, drawn once for all pytest-xdist workers."""
+    from tests.conftest import computed_once
+
+    return computed_once(tmp_path_factory, "rig-fleet-seed-7", lambda: make_fleet(4, seed=7))
 
 
 @pytest.mark.slow
