@@ -29,7 +29,7 @@ from debist.physics.reduced import (
     fit_reduced,
     switching_profile,
 )
-from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacement
+from debist.physics.statics import FORCE_STATES, ForceCurve, equilibria, force_displacements
 
 __all__ = ["Analysis", "AnalyzeConfig", "analysis_tree", "run_analysis"]
 
@@ -101,7 +101,7 @@ def run_analysis(params: PrototypeParams, config: AnalyzeConfig | None = None) -
         b = np.linspace(params.b_max - 12.5e-3, params.b_max, cfg.n_b)
     sweep = prestrain_sweep(params, b=b)
     q = np.linspace(-cfg.q_max, cfg.q_max, cfg.n_q)
-    curves = tuple(force_displacement(params, q, v1=a, v2=c) for a, c in FORCE_STATES)
+    curves = force_displacements(params, q, FORCE_STATES)
     model = fit_reduced(params, degree=cfg.degree)
     comparison = compare_full_reduced(
         params,

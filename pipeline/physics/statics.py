@@ -36,6 +36,7 @@ __all__ = [
     "StaticsError",
     "equilibria",
     "force_displacement",
+    "force_displacements",
     "solve_equilibrium",
     "switches",
     "switching_voltage",
@@ -279,9 +280,7 @@ def force_displacement(
     ----------
     Masoud & Maas 2025, Eq. 15, 16, 18, Fig. 4, 5.
     """
-    q = np.asarray(q, dtype=float)
-    if q.ndim != 1 or q.size < 2 or np.any(np.diff(q) <= 0):
-        raise ValueError("`q` must be a strictly increasing 1-D array of at least 2 values [m]")
+    q = _tip_grid(q)
     b = params.b if b is None else float(b)
     bb, vv1, vv2 = _as_batch(b, v1, v2)
     ok = np.zeros((1, q.size), dtype=bool)
@@ -291,15 +290,85 @@ def force_displacement(
         qm, ok = path[None], ok[None]
     if not np.all(ok):
         qm, ok = _path(params, q, bb, vv1, vv2)
+    return _curve(params, q, qm[0], ok[0], bb, vv1, vv2)
+
+
+def force_displacements(
+    params: PrototypeParams,
+    q: ArrayLike,
+    states: Sequence[tuple[float, float]],
+    *,
+    b: float | None = None,
+) -> tuple[ForceCurve, ...]:
+    """Force-displacement curves of several voltage states, continued in ``q`` together.
+
+    The paths of all states march along ``q`` in one batched Newton solve per point, each
+    state by the equations and steps of :func:`force_displacement` (its own predictor,
+    damping and convergence test): one pass over the grid instead of one per state.
+
+    Parameters
+    ----------
+    params : PrototypeParams
+        Prototype parameters.
+    q : array_like, shape (n,)
+        Tip displacements [m], strictly increasing (see :func:`force_displacement`).
+    states : sequence of (float, float)
+        Voltages ``(v1, v2)`` of DE 1 and DE 2 [V], one pair per curve.
+    b : float, optional
+        Pre-strain screw position [m]; ``params.b`` if omitted.
+
+    Returns
+    -------
+    tuple of ForceCurve
+        One per state, in the order of ``states``.
+
+    Raises
+    ------
+    ValueError
+        If ``q`` is not one-dimensional and strictly increasing, or ``states`` is empty.
+
+    Warns
+    -----
+    ConvergenceWarning
+        Per state whose path has a Newton solve that did not converge.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 15, 16, 18, Fig. 4, 5.
+    """
+    q = _tip_grid(q)
+    if len(states) == 0:
+        raise ValueError("`states` must hold at least one (v1, v2) pair [V]")
+    b = params.b if b is None else float(b)
+    v1, v2 = (np.array([float(s[i]) for s in states]) for i in (0, 1))
+    bb = np.full(v1.size, b)
+    qm, ok = _path(params, q, bb, v1, v2)
+    return tuple(
+        _curve(params, q, qm[k], ok[k], bb[k : k + 1], v1[k : k + 1], v2[k : k + 1])
+        for k in range(v1.size)
+    )
+
+
+def _tip_grid(q: ArrayLike) -> NDArray[np.float64]:
+    """``q`` as a float array, checked to be one-dimensional and strictly increasing."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 1 or q.size < 2 or np.any(np.diff(q) <= 0):
+        raise ValueError("`q` must be a strictly increasing 1-D array of at least 2 values [m]")
+    return q
+
+
+def _curve(params, q, qm, ok, b, v1, v2) -> ForceCurve:
+    """Build the :class:`ForceCurve` of one state's path ``qm`` (n, 4); b, v1, v2 (1,)."""
     if not np.all(ok):
         warnings.warn(
             f"force_displacement: {np.count_nonzero(~ok)} of {ok.size} path points did not "
-            f"converge (b={b}, v1={v1}, v2={v2})",
+            f"converge (b={b[0]}, v1={v1[0]}, v2={v2[0]})",
             ConvergenceWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-    d = _path_derived(params, qm[0], bb, vv1, vv2)
-    return ForceCurve(q=q, qm=qm[0], converged=ok[0], b=b, v1=float(v1), v2=float(v2), **d)
+    d = _path_derived(params, qm, b, v1, v2)
+    return ForceCurve(q=q, qm=qm, converged=ok, b=float(b[0]), v1=float(v1[0]), v2=float(v2[0]),
+                      **d)  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from debist.core.errors import DebistWarning
 from debist.physics.params import V_MAX
 from debist.physics.reduced import reduced_curves
 from debist.physics.segments import ODEINT, solve_segments
-from debist.physics.statics import force_displacement
+from debist.physics.statics import force_displacements
 from debist.rig.drivers import DriverOutput, uniform_grid
 from debist.rig.params import RigParams
 from debist.rig.plant import RigPlant
@@ -356,11 +356,9 @@ def true_curves(rig: RigParams, q_grid: ArrayLike) -> dict[str, NDArray[np.float
     if rig.model == "reduced":
         return _with_rig_forces(reduced_true_curves(rig, q_grid), rig)
     c = reduced_curves(rig.prototype, q_grid)
-    F0 = force_displacement(rig.prototype, c.q).F
-    secant = [
-        (F0 - force_displacement(rig.prototype, c.q, **{f"v{i}": V_MAX}).F) / V_MAX**2
-        for i in (1, 2)
-    ]
+    rest, on_1, on_2 = force_displacements(rig.prototype, c.q, [(0.0, 0.0), (V_MAX, 0.0),
+                                                                (0.0, V_MAX)])  # fmt: skip
+    secant = [(rest.F - on.F) / V_MAX**2 for on in (on_1, on_2)]
     curves = {
         "q": c.q,
         "f": c.f,

@@ -17,6 +17,7 @@ from debist.physics.statics import (
     StaticsError,
     equilibria,
     force_displacement,
+    force_displacements,
     solve_equilibrium,
     switches,
     switching_voltage,
@@ -145,6 +146,28 @@ def test_force_displacement_checks_grid():
     with pytest.raises(ValueError) as err:
         force_displacement(P, [0.0, -1e-3])
     assert "strictly" in str(err.value) and "increasing" in str(err.value)
+
+
+def test_the_states_continued_together_are_each_states_own_path(curves):
+    """Fig. 4's four voltage states continued in one pass are each state's path continued
+    alone (to Newton's tolerance: the batch takes the same steps), in the order asked, with
+    the same stability and convergence; the grid and the states are checked."""
+    together = force_displacements(P, STROKE, FORCE_STATES[::-1])
+    scale = ritz_basis(P.l).scale
+    for state, curve in zip(FORCE_STATES[::-1], together, strict=True):
+        alone = curves[state]
+        assert (curve.v1, curve.v2, curve.b) == (*state, P.b)
+        assert np.max(np.abs((curve.qm - alone.qm) * scale)) < 1e-9  # [m]
+        np.testing.assert_allclose(curve.F, alone.F, rtol=0, atol=1e-9 * np.ptp(alone.F))
+        np.testing.assert_allclose(curve.dC_dq, alone.dC_dq, rtol=1e-8)
+        np.testing.assert_array_equal(curve.stable, alone.stable)
+        assert curve.converged.all()
+    with pytest.raises(ValueError) as err:
+        force_displacements(P, STROKE, [])
+    assert "(v1, v2)" in str(err.value)
+    with pytest.raises(ValueError) as err:
+        force_displacements(P, STROKE[::-1], FORCE_STATES)
+    assert "strictly" in str(err.value)
 
 
 def test_a_path_solved_from_a_nearby_path_is_the_continuations(curves):
