@@ -357,10 +357,10 @@ def _rig_member(index):
     return tuple((r.q, np.column_stack([r.v1, r.v2])) for r in runs.values())
 
 
-def _member_fit(index):
-    """debist's NARX row fitted on member ``index``'s estimation record."""
-    q, v = _rig_member(index)[0]
-    return fit_narx([q], [v], "v2", NarxConfig(), q_limit=0.05)
+def _narx_on(record, shift=0.0):
+    """debist's NARX row fitted on an estimation record ``(q, v)``, q moved by ``shift``."""
+    q, v = record
+    return fit_narx([q + shift], [v], "v2", NarxConfig(), q_limit=0.05)
 
 
 @pytest.fixture(scope="module")
@@ -369,7 +369,7 @@ def member_0(tmp_path_factory):
     from tests.conftest import computed_once
 
     return computed_once(tmp_path_factory, "narx-zoo-1-member-0",
-                         lambda: (_rig_member(0), _member_fit(0)))  # fmt: skip
+                         lambda: (_rig_member(0), _narx_on(_rig_member(0)[0])))  # fmt: skip
 
 
 def _unseen_nrmse(model, records, shift=0.0):
@@ -390,8 +390,7 @@ def test_shifting_q_by_a_constant_leaves_the_narx_row_unchanged(member_0):
     (est, *unseen), fitted = member_0
     scores, origins = [], []
     for shift in (0.0, 5e-3):
-        model = fitted if shift == 0.0 else fit_narx([est[0] + shift], [est[1]], "v2",
-                                                     NarxConfig(), q_limit=0.05)  # fmt: skip
+        model = fitted if shift == 0.0 else _narx_on(est, shift)
         scores.append(_unseen_nrmse(model, unseen, shift))
         origins.append(model.q_origin - shift)
         assert model.q_origin in q_origins(est[0] + shift).values()
@@ -412,7 +411,8 @@ def test_the_narx_row_is_within_1_5x_of_sysidentpy_fitted_directly(index, reques
     if index == 0:  # shared with the test above
         (est, *unseen), fitted = request.getfixturevalue("member_0")
     else:
-        (est, *unseen), fitted = _rig_member(index), _member_fit(index)
+        (est, *unseen) = _rig_member(index)
+        fitted = _narx_on(est)
     ours = _unseen_nrmse(fitted, unseen)
     FROLS, Polynomial, LeastSquares = _sysidentpy()
     ref = FROLS(order_selection=True, n_info_values=40, info_criteria="aic", ylag=3,
