@@ -329,6 +329,21 @@ def synthetic_copy(synthetic_run, tmp_path):
     return tmp_path / "p", digest
 
 
+@pytest.fixture(scope="session")
+def paper_experiment_run(tmp_path_factory):
+    """One complete run of workflows/paper-experiment.toml (its output folder) and what it
+    printed; made once for all pytest-xdist workers (:func:`made_once`): read it only."""
+    workflow = Path(__file__).resolve().parents[1] / "workflows" / "paper-experiment.toml"
+
+    def make(root: Path) -> str:
+        code, out = invoke_cli("run", workflow, "--out", root / "run")
+        assert code == 0, out
+        return out
+
+    folder, out = made_once(tmp_path_factory, "paper-experiment", make)
+    return folder / "run", out
+
+
 # --- a backbone-only double well with known curves (stability, design, trust, report tests) ---
 # f(q) = k1 q + k3 q^3 with k1 < 0: wells at +-sqrt(-k1/k3), local maximum F_MAX.
 

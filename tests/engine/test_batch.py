@@ -425,24 +425,26 @@ def test_a_task_lost_on_the_cluster_is_a_failed_item(protos, monkeypatch):
 
 
 @pytest.mark.slow
-def test_a_batch_member_has_the_digest_of_its_solo_run(tmp_path, monkeypatch):
-    """The paper experiment in this process and in a worker process (single-threaded BLAS
-    there): the bootstrap bands' sums gave bytes 6.6e-24 apart before stages ran with one
-    BLAS thread everywhere."""
+def test_a_batch_member_has_the_digest_of_its_solo_run(tmp_path, monkeypatch,
+                                                       paper_experiment_run):  # fmt: skip
+    """The paper experiment in a test process (the session's solo run, through the CLI) and in
+    a batch worker process (single-threaded BLAS there): the bootstrap bands' sums gave bytes
+    6.6e-24 apart before stages ran with one BLAS thread everywhere."""
     from debist.engine.runner import Runner
     from debist.workflow.loader import load_workflow
 
     root = Path(__file__).resolve().parents[2]
-    wf = tmp_path / "pe.toml"
+    shipped = root / "workflows" / "paper-experiment.toml"
+    wf = tmp_path / shipped.name  # the report names the workflow file: the same name
     wf.write_text(
-        (root / "workflows" / "paper-experiment.toml")
-        .read_text()
-        .replace('output_dir = "../runs/paper-experiment"', 'output_dir = "batch"')
+        shipped.read_text().replace(
+            'output_dir = "../runs/paper-experiment"', 'output_dir = "batch"'
+        )
     )
     monkeypatch.chdir(tmp_path)
     (result,) = run_batch([wf], workers=1)
     assert result.ok, result.error
     batch = Runner(load_workflow(wf)).digest()
-    solo = Runner(load_workflow(wf, tmp_path / "solo"))
-    solo.run()
-    assert solo.digest() == batch
+    solo, _ = paper_experiment_run
+    assert batch is not None
+    assert Runner(load_workflow(shipped, solo)).digest() == batch

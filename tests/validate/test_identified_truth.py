@@ -43,22 +43,28 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def staircase_out(tmp_path_factory):
-    """The output directory of one run of the staircase workflow."""
-    out = tmp_path_factory.mktemp("staircase")
-    result = CliRunner().invoke(app, ["run", str(WORKFLOW), "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
+    """The output directory of one run of the staircase workflow, and beside it its rerun
+    with bootstrap-only bands; made once for both pytest-xdist workers: read only."""
+    from tests.conftest import made_once
+
+    def make(folder: Path) -> str:
+        out = folder / "run"
+        result = CliRunner().invoke(app, ["run", str(WORKFLOW), "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        args = ["run", str(WORKFLOW), "--out", str(out), "--until", "identify",
+                "-S", "identify.model_error=false"]  # fmt: skip
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 0, result.output
+        return ""
+
+    folder, _ = made_once(tmp_path_factory, "staircase", make)
+    return folder / "run"
 
 
 @pytest.fixture(scope="module")
-def staircase_boot_out(staircase_out, staircase):
+def staircase_boot_out(staircase_out):
     """The same run with bootstrap-only bands (``model_error = false``), in its own folder
-    beside the shipped run's."""
-    args = ["run", str(WORKFLOW), "--out", str(staircase_out), "--until", "identify",
-            "-S", "identify.model_error=false"]  # fmt: skip
-    result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, result.output
-    # a run with --set writes beside the original run, never into it
+    beside the shipped run's (a run with --set writes beside the original run, never into it)."""
     return override_folder(staircase_out, {"identify": {"model_error": False}})
 
 

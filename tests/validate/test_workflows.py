@@ -87,13 +87,13 @@ PAPER_TABLE2_RBF = {
 
 
 @pytest.fixture(scope="module")
-def paper_experiment(tmp_path_factory):
-    """One run of workflows/paper-experiment.toml: output, folder and the curves vs truth."""
+def paper_experiment(paper_experiment_run):
+    """The session's run of workflows/paper-experiment.toml: output, folder and the curves vs
+    truth (read only)."""
     from debist.core import artifacts
     from debist.model.rbf import RBFModel
 
-    out_dir = tmp_path_factory.mktemp("paper-experiment")
-    out = run("paper-experiment.toml", out_dir)
+    out_dir, out = paper_experiment_run
     model = RBFModel.from_tree(artifacts.read_h5(out_dir / "identify/model.h5"))
     truth = artifacts.read_h5(out_dir / "rig/identification_truth.h5")["curves"]
     # the q bins (2 mm) the identification data visit (>= 20 samples)
