@@ -51,6 +51,7 @@ __all__ = [
     "full_jac",
     "full_rhs",
     "grad_terms",
+    "gradient_hessian",
     "hess_terms",
     "pack_model",
     "source_stamp",
@@ -335,7 +336,53 @@ def _stamped(stamp: str):
         _jac_into(x, w1, w2, fp, J)
         return J
 
-    return full_rhs, full_jac
+    @nb.njit(cache=True)
+    def gradient_hessian(qm, b, w1, w2, consts):
+        """Gradient and Hessian of the potential energy at a batch of states, compiled.
+
+        The generated terms as they are, state by state: equal bit for bit to
+        :func:`debist.physics._generated.grad_terms` and ``hess_terms`` run as Python.
+
+        Parameters
+        ----------
+        qm : ndarray of float64, shape (n, 4)
+            Ritz coordinates [1/m, 1/m^2, 1/m^3, m].
+        b, w1, w2 : ndarray of float64, shape (n,)
+            Screw position [m] and squared voltages ``v_1^2``, ``v_2^2`` [V^2] per state.
+        consts : ndarray of float64, shape (12,)
+            :func:`debist.physics.energy.generated_constants`.
+
+        Returns
+        -------
+        grad : ndarray, shape (n, 4)
+            ``dU/dq_m``.
+        hess : ndarray, shape (n, 4, 4)
+            ``d^2U/dq_m^2``.
+
+        References
+        ----------
+        Masoud & Maas 2025, Eq. 9-11, 14, 15.
+        """
+        stamp  # noqa: B018
+        n = qm.shape[0]
+        grad = np.empty((n, 4))
+        hess = np.empty((n, 4, 4))
+        c = consts
+        for i in range(n):
+            args = (qm[i, 0], qm[i, 1], qm[i, 2], qm[i, 3], b[i], w1[i], w2[i], c[0], c[1],
+                    c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11])  # fmt: skip
+            g = grad_terms(*args)[0]
+            h = hess_terms(*args)
+            pos = 0
+            for j in range(4):
+                grad[i, j] = g[j]
+                for k in range(j, 4):  # the upper triangle row by row, as HESS_INDEX
+                    hess[i, j, k] = h[pos]
+                    hess[i, k, j] = h[pos]
+                    pos += 1
+        return grad, hess
+
+    return full_rhs, full_jac, gradient_hessian
 
 
-full_rhs, full_jac = _stamped(STAMP)
+full_rhs, full_jac, gradient_hessian = _stamped(STAMP)

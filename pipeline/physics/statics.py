@@ -46,11 +46,6 @@ FORCE_STATES = ((0.0, 0.0), (V_MAX, 0.0), (0.0, V_MAX), (V_MAX, V_MAX))
 """Voltage states ``(v1, v2)`` [V] of the force-displacement curves of Fig. 4."""
 
 
-#: Up to this many simultaneous Newton problems the generated scalar terms are faster than
-#: the vectorised :func:`~debist.physics.energy.potential` (the same equations).
-_SCALAR_BATCH = 4
-
-
 class StaticsError(DebistError, RuntimeError):
     """A static problem has no solution in the searched range (e.g. no bracket for a root)."""
 
@@ -78,12 +73,7 @@ def _solve_at_q(
     tq = t * np.asarray(q, dtype=float)[..., None]
 
     def fun(y):
-        qm = y @ T.T + tq
-        if qm.ndim == 2 and qm.shape[0] <= _SCALAR_BATCH:
-            grad, hess = scalar_gradient_hessian(qm, params, b, v1, v2)
-        else:
-            ev = potential(qm, params, b=b, v1=v1, v2=v2)
-            grad, hess = ev.grad, ev.hess
+        grad, hess = scalar_gradient_hessian(y @ T.T + tq, params, b, v1, v2)
         return grad @ T, T.T @ hess @ T
 
     res = newton(fun, y0, sy, max_step=max_step)
@@ -409,9 +399,9 @@ def _solve_batch(params, qm0, b, v1, v2, F):
     scale = basis.scale
     F = np.asarray(F, dtype=float)
 
-    def fun(x):
-        ev = potential(x, params, b=b, v1=v1, v2=v2)
-        return ev.grad - F[..., None] * basis.L, ev.hess
+    def fun(x):  # the compiled generated terms: the Newton iterations' cost is their calls
+        grad, hess = scalar_gradient_hessian(x, params, b, v1, v2)
+        return grad - F[..., None] * basis.L, hess
 
     res = newton(fun, qm0, scale)
     ev = potential(res.x, params, b=b, v1=v1, v2=v2)
