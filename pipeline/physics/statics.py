@@ -539,9 +539,13 @@ def _equilibria(
     """
     b = params.b if b is None else float(b)
     q = np.linspace(-q_max, q_max, n_grid)
-    curve = force_displacement(params, q, v1=v1, v2=v2, b=b, guess=guess)
+    if guess is None:
+        qm, F_q = _path_from_rest(params, b, v1, v2, q_max, n_grid)
+    else:
+        curve = force_displacement(params, q, v1=v1, v2=v2, b=b, guess=guess)
+        qm, F_q = curve.qm, curve.F
     L = ritz_basis(params.l).L
-    x0 = list(_bracket_starts(q, curve.qm, curve.F, F))
+    x0 = list(_bracket_starts(q, qm, F_q, F))
     x0.append(np.zeros(4))
     for qq in (-20e-3, -15e-3, -10e-3, -5e-3, 5e-3, 10e-3, 15e-3, 20e-3):
         x0.append(np.array([qq / L[0], 0.0, 0.0, 0.0]))
@@ -561,7 +565,22 @@ def _equilibria(
         for k in range(len(X0))
         if res.converged[k] and np.all(lam[k] >= 1.0)
     ]
-    return _dedup(eqs, ritz_basis(params.l).scale), curve.qm
+    return _dedup(eqs, ritz_basis(params.l).scale), qm
+
+
+@functools.lru_cache(maxsize=32)
+def _path_from_rest(params, b, v1, v2, q_max, n_grid):
+    """``q_m`` and ``F`` of :func:`force_displacement` on the grid of :func:`_equilibria`.
+
+    Continued from the straight beam (no guess): a pure function of its hashable arguments,
+    cached (read-only arrays), since the equilibria at several tip loads share the path (the
+    load enters only their starting points): screening a fleet member at +F and -F and its
+    switching thresholds' brackets at 0 V march one path instead of four.
+    """
+    curve = force_displacement(params, np.linspace(-q_max, q_max, n_grid), v1=v1, v2=v2, b=b)
+    for a in (curve.qm, curve.F):
+        a.setflags(write=False)
+    return curve.qm, curve.F
 
 
 def switches(params: PrototypeParams, de: int, v: float, *, F: float = 0.0) -> bool:
