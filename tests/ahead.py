@@ -31,8 +31,8 @@ def _rest() -> None:
     the rig's plant."""
     from debist.model.slip_kernel import stop_operator
     from debist.model.terms import term_sign
+    from debist.physics import energy
     from debist.physics.dynamics import FullModel, well_state
-    from debist.physics.energy import scalar_gradient_hessian
     from debist.physics.params import PrototypeParams
     from debist.rig.drivers import DriverOutput
     from debist.rig.params import RigParams
@@ -57,7 +57,8 @@ def _rest() -> None:
     x = well_state(params, -1)
     full.rhs(0.0, x)
     full.jac(0.0, x)
-    scalar_gradient_hessian(x[:4], params, params.b, 1000.0, 0.0)  # the statics' Newton solves
+    energy._evaluated = energy.PYTHON_STATES  # the statics' terms as a long solve reaches them
+    energy.scalar_gradient_hessian(x[:4], params, params.b, 1000.0, 0.0)
     drive = DriverOutput([0.0, 1e-3, 2e-3], [0.0, 500.0, 500.0], tau=5e-3, slew=1e5)
     plant = RigPlant(RigParams(), drive, drive)
     rhs, jac = plant.functions()

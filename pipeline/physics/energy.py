@@ -26,12 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from debist.physics import compiled
+from debist.physics import _generated, compiled
 from debist.physics.kinematics import de_lengths, ritz_basis, vertical_displacement
 from debist.physics.params import PrototypeParams
 
 __all__ = [
     "HESS_INDEX",
+    "PYTHON_STATES",
     "EnergyEval",
     "capacitances",
     "energy_parts",
@@ -85,14 +86,16 @@ def scalar_gradient_hessian(
     v1: ArrayLike,
     v2: ArrayLike,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Gradient and Hessian of ``U`` (Eq. 14) from the generated scalar terms, compiled.
+    """Gradient and Hessian of ``U`` (Eq. 14) from the generated scalar terms.
 
     The same equations as :func:`potential` (checked against it to 1e-10 in the tests), in
-    the SymPy-generated scalar code of :mod:`debist.physics._generated` compiled by numba
-    (:func:`debist.physics.compiled.gradient_hessian`, equal bit for bit to that code run as
-    Python): a few microseconds per state, where the vectorised chain rule spends a third
-    of a millisecond on the NumPy calls of any batch, so the Newton solves of the statics
-    use it for every batch size.
+    the SymPy-generated scalar code of :mod:`debist.physics._generated`, state by state: run
+    as Python (about 35 us a state) for the first :data:`PYTHON_STATES` states of a process,
+    then compiled by numba (:func:`debist.physics.compiled.gradient_hessian`, about 3 us a
+    state, equal bit for bit), whose load from numba's cache (about 0.5 s) a process with a
+    few static solves never pays. Where the vectorised chain rule spends a third of a
+    millisecond on the NumPy calls of any batch, the Newton solves of the statics use this
+    for every batch size.
 
     Parameters
     ----------
@@ -120,10 +123,33 @@ def scalar_gradient_hessian(
     per_state = np.empty((3, *shape))  # b, v1^2, v2^2 broadcast to the states
     per_state[0], per_state[1], per_state[2] = b, np.square(v1), np.square(v2)
     per_state = per_state.reshape(3, n)
-    grad, hess = compiled.gradient_hessian(
-        np.ascontiguousarray(qm.reshape(n, 4)), *per_state, _constants(params)
-    )
+    grad, hess = _terms(np.ascontiguousarray(qm.reshape(n, 4)), *per_state, _constants(params))
     return grad.reshape((*shape, 4)), hess.reshape((*shape, 4, 4))
+
+
+#: States a process evaluates as Python before :func:`scalar_gradient_hessian` loads the
+#: compiled kernel: the break-even count, about 0.47 s of Python (36 us a state) against
+#: 0.47 s to load the kernel, so a process pays at most twice what knowing its count in
+#: advance would cost (the numbers are the same either way).
+PYTHON_STATES = 13_000
+_evaluated = 0  # states this process evaluated as Python
+
+
+def _terms(qm, b, w1, w2, consts):
+    """Return the generated gradient and Hessian of the states ``qm`` (n, 4), Python or compiled."""
+    global _evaluated
+    n = qm.shape[0]
+    if _evaluated >= PYTHON_STATES:
+        return compiled.gradient_hessian(qm, b, w1, w2, consts)
+    _evaluated += n
+    grad = np.empty((n, 4))
+    hess = np.empty((n, 4, 4))
+    c = consts.tolist()
+    for i in range(n):
+        args = (*qm[i].tolist(), float(b[i]), float(w1[i]), float(w2[i]), *c)
+        grad[i] = _generated.grad_terms(*args)[0]
+        hess[i] = np.array(_generated.hess_terms(*args))[HESS_INDEX]
+    return grad, hess
 
 
 @functools.lru_cache(maxsize=64)

@@ -266,14 +266,19 @@ def test_scalar_gradient_hessian_equals_the_vectorised_potential():
     assert np.array_equal(hess, np.swapaxes(hess, 1, 2))  # symmetric by construction
 
 
-def test_scalar_gradient_hessian_is_the_generated_code_bit_for_bit():
-    """The compiled batch equals the generated terms run as Python, state by state, any shape."""
+@pytest.mark.parametrize("evaluated", [0, "limit"], ids=["python", "compiled"])
+def test_scalar_gradient_hessian_is_the_generated_code_bit_for_bit(monkeypatch, evaluated):
+    """Run as Python or compiled, the batch equals the generated terms state by state."""
+    from debist.physics import energy
     from debist.physics.energy import HESS_INDEX, generated_constants, scalar_gradient_hessian
 
+    count = energy.PYTHON_STATES if evaluated == "limit" else evaluated
+    monkeypatch.setattr(energy, "_evaluated", count)
     x = random_states(6, seed=22).reshape(2, 3, 4)
     v2 = np.array([0.0, 1.5e3, 3e3])  # broadcast over the leading axis
     grad, hess = scalar_gradient_hessian(x, P_BEARING, 22e-3, 2e3, v2)
     assert grad.shape == (2, 3, 4) and hess.shape == (2, 3, 4, 4)
+    assert energy._evaluated == (count if evaluated == "limit" else 6)  # the engine taken
     consts = generated_constants(P_BEARING)
     for i, j in np.ndindex(2, 3):
         args = (*x[i, j].tolist(), 22e-3, 2e3**2, float(v2[j]) ** 2, *consts)
