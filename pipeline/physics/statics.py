@@ -399,7 +399,7 @@ def _solve_batch(params, qm0, b, v1, v2, F):
     scale = basis.scale
     F = np.asarray(F, dtype=float)
 
-    def fun(x):  # the compiled generated terms: the Newton iterations' cost is their calls
+    def fun(x):  # the generated terms: a fraction of potential()'s cost per call
         grad, hess = scalar_gradient_hessian(x, params, b, v1, v2)
         return grad - F[..., None] * basis.L, hess
 
