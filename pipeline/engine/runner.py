@@ -689,8 +689,11 @@ class Runner:
                 if ahead is None and stage in FREE_RUN_STAGES:
                     ahead = _compile_ahead()
                 if stage in ready:
-                    # its code imported here: the child inherits it, the stages here reuse it
-                    importlib.import_module(registry.stage(stage).module)
+                    # its code imported here, and what its module's preload(ctx) loads: the
+                    # child inherits it, the stages here reuse it
+                    module = importlib.import_module(registry.stage(stage).module)
+                    if hasattr(module, "preload"):
+                        module.preload(self)
                     beside[stage] = BesideRun(
                         partial(self._execute, stage, *found), f"stage '{stage}'",
                         niceness=BESIDE_NICENESS,

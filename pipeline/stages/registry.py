@@ -41,7 +41,9 @@ class StageDef:
         The stage runs only when the workflow has a section of its name.
     beside : bool
         The stage may run in a forked process beside the stages after it that do not read
-        it (:class:`debist.core.beside.BesideRun`): it reads little and much follows it.
+        it (:class:`debist.core.beside.BesideRun`): it reads little and much follows it. An
+        optional ``preload(ctx)`` of its module runs in the runner's process just before the
+        fork, as for ``early``.
     early : tuple of str
         Upstream stages that the first part of the stage reads, its module's
         ``prepare(ctx)``: once they are done, the runner may call it in a forked process

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -10,7 +11,32 @@ from debist.core.fileformats import REPORT_DPI
 from debist.stages import StageInputs, StageOutput
 from debist.stages.studies import StudyConfig, alpha_study, rbf_grid_study
 
-__all__ = ["execute", "run_study"]
+__all__ = ["execute", "preload", "run_study"]
+
+
+def preload(ctx: StageInputs) -> None:
+    """Load what the study and the stages run while it runs beside them both load.
+
+    The runner calls it just before it forks the study (the registry's ``beside``): the
+    forked process inherits what it loads instead of loading it a second time, on the core
+    the stages here need. scipy.signal (the band-limited inputs of every free run, the
+    spectra of the excitation check) and matplotlib's ``Figure`` (the study draws its
+    figures in its process; identify and the report draw theirs in processes forked from
+    this one). Loads nothing else, decides nothing.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        Not read: what the study loads does not depend on the workflow.
+
+    References
+    ----------
+    Python documentation, :mod:`multiprocessing` (the ``fork`` start method: the child
+    starts as a copy of the parent's memory).
+    """
+    del ctx
+    importlib.import_module("scipy.signal").resample_poly  # noqa: B018 (loads a lazy stub)
+    importlib.import_module("matplotlib.figure")
 
 
 def run_study(tables, derivs, section: Mapping[str, Any]) -> dict[str, Any]:

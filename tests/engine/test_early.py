@@ -2,6 +2,7 @@
 
 import dataclasses
 import os
+import subprocess
 import sys
 
 import pytest
@@ -14,7 +15,7 @@ from debist.physics.freerun import analytical_model
 from debist.physics.params import PrototypeParams
 from debist.physics.reduced import fit_reduced
 from debist.physics.statics import StaticsError
-from debist.stages import compare, registry
+from debist.stages import compare, registry, study
 from debist.validate.config import ValidateConfig
 
 needs_fork = pytest.mark.skipif(fork_workers(2) < 2, reason="needs two cores and POSIX fork")
@@ -26,8 +27,8 @@ def children(monkeypatch):
     seen = []
 
     class Recorded(runner_module.BesideRun):
-        def __init__(self, fn, label):
-            super().__init__(fn, label)
+        def __init__(self, fn, label, **options):
+            super().__init__(fn, label, **options)
             self.record = {"label": label, "stopped": False}
             seen.append(self.record)
 
@@ -124,3 +125,42 @@ def test_preload_leaves_a_failing_model_to_the_stages_and_imports_sysidentpy(mon
     monkeypatch.setattr(compare, "analytical_model", no_path)
     compare.preload(_Inputs(PrototypeParams.paper(), narx=True))
     assert "sysidentpy.model_structure_selection" in sys.modules
+
+
+@needs_fork
+def test_a_beside_stage_s_preload_runs_here_before_its_process_is_forked(
+    synthetic_copy, children, monkeypatch
+):
+    """The study added to a complete run, validate recomputed: the study starts in its own
+    process beside validate, its module's preload having run in this process just before."""
+    root, _ = synthetic_copy
+    wf = root / "wf.toml"
+    wf.write_text(
+        wf.read_text() + "\n[study]\nM = [4]\nsigma_n = [0.5]\nalpha = [1e-6]\nmax_samples = 800\n"
+    )
+    (root / "out" / "validate" / "manifest.json").write_bytes(b"")
+    preloads = []  # (process, children started before) of each study.preload call
+    real = study.preload
+    monkeypatch.setattr(
+        study, "preload", lambda ctx: (preloads.append((os.getpid(), len(children))), real(ctx))
+    )
+    debist.run(wf)
+    forked = [c for c in children if c["label"] == "stage 'study'"]
+    assert len(forked) == 1 and not forked[0]["stopped"]
+    assert preloads == [(os.getpid(), children.index(forked[0]))]
+    assert (root / "out" / "study" / "rbf_grid.parquet").is_file()
+
+
+def test_the_study_preload_loads_the_signal_tools_and_the_figure_class():
+    """In a fresh process: neither loaded before, both after (what the forked study inherits;
+    scipy.signal's own submodules, as the lazy stub debist's modules hold loads none)."""
+    code = (
+        "import sys; import debist.stages.study as s\n"
+        "wanted = ('scipy.signal._signaltools', 'matplotlib.figure')\n"
+        "before = [m in sys.modules for m in wanted]\n"
+        "s.preload(None)\n"
+        "print(before, [m in sys.modules for m in wanted])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["[False,", "False]", "[True,", "True]"]
