@@ -69,7 +69,7 @@ CHUNK = 50_000
 (_K, _J, _U, _H, _NI, _QMAX, _BW, _BM, _BT, _G, _SQUARE, _LAG,
  _P_CENTRE, _P_WIDTH, _P_LO, _P_HI, _P_TQ, _P_TAB, _P_W, _P_MASS, _P_TZ, _P_VC,
  _I_BKIND, _I_BTAB, _I_GQPOW, _I_GSIDX, _I_SUNIQ, _I_GHIDX, _I_HUNIQ, _NG,
- _I_RUN, _P_SPACING, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
+ _I_RUN, _P_GAUSS, _UNIFORM, _I_GPTR, _I_TK, _NT, _P_INVSTEP,
  _TABLES, _NC, _I_CBASE, _P_CRATE, _NS, _P_SWIDTH, _NA, _N_LAYOUT) = range(45)  # fmt: skip
 #: Gaussian values below this are taken as 0 by the recurrence (no subnormal arithmetic).
 _TINY = 1e-290
@@ -284,7 +284,7 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     lay[_I_TK] = pack.ints(t.term_base[order])
     run, spacing = _gauss_runs(t)
     lay[_I_RUN] = pack.ints(run)
-    lay[_P_SPACING] = pack.floats(spacing)
+    lay[_P_GAUSS] = pack.floats(_run_constants(t.base_width, spacing, run))
     grid = t.table_q
     step = (grid[-1] - grid[0]) / max(grid.size - 1, 1)
     regular = grid[0] + step * np.arange(grid.size)
@@ -310,6 +310,20 @@ def _table_part(t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
     fp, ip = pack.arrays()
     n_work = int(K + n_in + lay[_QMAX] + 1 + lay[_U] + lay[_H])
     return fp, ip, lay, order, n_work
+
+
+def _run_constants(width: np.ndarray, spacing: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """Per basis: 1 / sigma, delta = spacing / sigma, 1 / delta, exp(-delta^2) of its run.
+
+    Computed once here, as the kernel computed them at every right-hand side (IEEE division,
+    the C library's ``exp``): the same numbers. Zeros for a basis that starts no run.
+    """
+    out = np.zeros((width.size, 4))
+    for k in np.flatnonzero(run > 1):
+        sigma, d = float(width[k]), float(spacing[k])
+        delta = d / sigma
+        out[k] = 1.0 / sigma, delta, sigma / d, math.exp(-delta * delta)
+    return out
 
 
 def _continues(t, k: int, n: int, spacing: float) -> bool:
@@ -415,11 +429,10 @@ def kernel_arrays(model) -> KernelArrays:
 
 @nb.njit(cache=True, inline="always")
 def _gauss_constants(fp, lay, k0):  # pragma: no cover - compiled
-    """Read a run's clipping bounds, first centre, 1 / sigma, delta = spacing / sigma, 1 / delta."""
-    sigma = fp[lay[_P_WIDTH] + k0]
-    spacing = fp[lay[_P_SPACING] + k0]
-    return (fp[lay[_P_LO] + k0], fp[lay[_P_HI] + k0], fp[lay[_P_CENTRE] + k0], 1.0 / sigma,
-            spacing / sigma, sigma / spacing)  # fmt: skip
+    """Read a run's clipping bounds, first centre and :func:`_run_constants`."""
+    g = lay[_P_GAUSS] + 4 * k0
+    return (fp[lay[_P_LO] + k0], fp[lay[_P_HI] + k0], fp[lay[_P_CENTRE] + k0], fp[g],
+            fp[g + 1], fp[g + 2], fp[g + 3])  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -443,10 +456,10 @@ def _gauss_run(q, fp, lay, W, w_k, k0, n):  # pragma: no cover - compiled
 
     From the centre m nearest to q, phi_{k+1} = phi_k r_k with r_{k+1} = r_k exp(-delta^2)
     (delta = spacing / sigma), and likewise downwards (the first ratio downwards is
-    exp(-delta^2) / r_m): two exponentials for the whole run, besides exp(-delta^2).
+    exp(-delta^2) / r_m): two exponentials for the whole run (exp(-delta^2) is one of the
+    run's constants, :func:`_run_constants`).
     """
-    lo, hi, centre, inv_sigma, delta, inv_delta = _gauss_constants(fp, lay, k0)
-    step = math.exp(-delta * delta)
+    lo, hi, centre, inv_sigma, delta, inv_delta, step = _gauss_constants(fp, lay, k0)
     m, p, r_up = _gauss_nearest(q, lo, hi, centre, inv_sigma, delta, inv_delta, n)
     W[w_k + k0 + m] = p
     r = r_up
@@ -487,7 +500,11 @@ def _table_interval(q, fp, lay):  # pragma: no cover - compiled
     return lo_i
 
 
-@nb.njit(cache=True)
+# The right-hand sides and their gradient allocate nothing and compile without numba's
+# reference counting (``_nrt=False``): the caller owns every array they read, and the atomic
+# increments and decrements around each array alias in their branchy loops, which numba's
+# pruning pass cannot remove, cost a quarter of a right-hand side (numba issue #2350).
+@nb.njit(cache=True, _nrt=False)
 def _rhs_table(x, fine, b, j, d, row, fp, ip, lay, W):  # pragma: no cover - compiled
     # Offsets are read into locals once: stores into W could alias lay for the compiler.
     K, U, H, NI, QMAX, G = lay[_K], lay[_U], lay[_H], lay[_NI], lay[_QMAX], lay[_NG]
@@ -611,7 +628,7 @@ def _project_table(x, lay, fp):  # pragma: no cover - compiled
         x[c1 + e] = _slip_clip(x[c1 + e], fp[o_sw + e])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _grad_table(x, b, fp, ip, lay, W, V, tv, ae, acc):  # pragma: no cover - compiled
     """Differentiate the table model's acceleration ``acc``, after :func:`_rhs_table` filled W.
 
@@ -816,7 +833,7 @@ def _integrate(
 # ------------------------------------------------------------- lockstep batches of one table model
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compiled
     """Every basis of the table at the q of each trajectory of a lockstep block (W[k, c])."""
     K = lay[_K]
@@ -841,8 +858,7 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
             for c in range(nb_):
                 Wk[k, c] = 1.0
         elif kind == 1 and run > 1:
-            lo, hi, centre, inv_sigma, delta, inv_delta = _gauss_constants(fp, lay, k)
-            step = math.exp(-delta * delta)
+            lo, hi, centre, inv_sigma, delta, inv_delta, step = _gauss_constants(fp, lay, k)
             for c in range(nb_):  # the recurrence of _gauss_run, per trajectory
                 m, p, r_up = _gauss_nearest(XT[0, c], lo, hi, centre, inv_sigma, delta, inv_delta,
                                             run)  # fmt: skip
@@ -881,7 +897,7 @@ def _bases_lock(XT, fp, ip, lay, Wk, Ti, Tq, nb_):  # pragma: no cover - compile
                     Wk[k, c] = y_first if t_i == -1 else y_last
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def _rhs_table_lock(
     XT, fine, frow, nb_, js, D, row, fp, ip, lay, work, Ti, wts, mass, tz
 ):  # pragma: no cover - compiled
