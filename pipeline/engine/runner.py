@@ -689,11 +689,7 @@ class Runner:
                 if ahead is None and stage in FREE_RUN_STAGES:
                     ahead = _compile_ahead()
                 if stage in ready:
-                    # its code imported here, and what its module's preload(ctx) loads: the
-                    # child inherits it, the stages here reuse it
-                    module = importlib.import_module(registry.stage(stage).module)
-                    if hasattr(module, "preload"):
-                        module.preload(self)
+                    self._load(stage)  # the child inherits it, the stages here reuse it
                     beside[stage] = BesideRun(
                         partial(self._execute, stage, *found), f"stage '{stage}'",
                         niceness=BESIDE_NICENESS,
@@ -735,13 +731,22 @@ class Runner:
                 or fork_workers(busy + 2) < busy + 2
             ):
                 continue
-            module = importlib.import_module(registry.stage(stage).module)
-            if hasattr(module, "preload"):  # what both processes load: loaded once, here
-                module.preload(self)
+            module = self._load(stage)
             out[stage] = BesideRun(
                 partial(self._first_part, module.prepare), f"stage '{stage}' (first part)"
             )
         return out
+
+    def _load(self, stage: str) -> Any:
+        """Import a stage's module here, and run its ``preload(ctx)`` if it has one.
+
+        Called just before the stage (or its first part) is forked: what both processes
+        would load is loaded once, here, and the child inherits it.
+        """
+        module = importlib.import_module(registry.stage(stage).module)
+        if hasattr(module, "preload"):
+            module.preload(self)
+        return module
 
     def _depends_on(self, stage: str) -> set[str]:
         """Every stage whose artifacts ``stage`` reads, directly or through others."""
