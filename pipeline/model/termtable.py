@@ -154,9 +154,12 @@ def _powers(power: np.ndarray, among: np.ndarray) -> tuple[tuple[int, ...], np.n
     return distinct, index
 
 
-def _factors(x: np.ndarray, powers: Sequence[int]) -> np.ndarray:
-    """``[1, x^p_1, x^p_2, ...]`` as columns, shape (n, 1 + len(powers))."""
-    out = np.empty((x.size, 1 + len(powers)))
+def _factors(x: np.ndarray, powers: Sequence[int], extra: int = 0) -> np.ndarray:
+    """``[1, x^p_1, x^p_2, ...]`` as columns, shape (n, 1 + len(powers) + extra).
+
+    The ``extra`` last columns are left for the caller to fill.
+    """
+    out = np.empty((x.size, 1 + len(powers) + extra))
     out[:, 0] = 1.0
     for k, p in enumerate(powers, start=1):
         out[:, k] = x**p
@@ -357,13 +360,16 @@ class TermTable:
             out[:, k] = np.interp(q, self.table_q, self.tables[self.base_table[k]])
         return out
 
-    def position_part(self, q: np.ndarray) -> np.ndarray:
+    def position_part(self, q: np.ndarray, bases: np.ndarray | None = None) -> np.ndarray:
         """Evaluate every term's factors of q alone: its basis times its power of q.
 
         Parameters
         ----------
         q : array_like, shape (n,)
             Positions [unit of q].
+        bases : ndarray, shape (n, K), optional
+            :meth:`bases` of ``q``, where the caller needs them too (not modified); default:
+            computed here.
 
         Returns
         -------
@@ -372,7 +378,9 @@ class TermTable:
             it as ``position`` when only those change (a search over T_z, which moves z).
         """
         q = np.asarray(q, dtype=float)
-        out = self.bases(q)[:, self.term_base].copy()  # C order: the weighted sums' order
+        if bases is None:
+            bases = self.bases(q)
+        out = bases[:, self.term_base].copy()  # C order: the weighted sums' order
         if self._plan.qpow:
             out *= _factors(q, self._plan.qpow)[:, self._plan.q_index]
         return out
@@ -421,14 +429,16 @@ class TermTable:
         # term by term, each factor gathered from the distinct values (a missing one is 1)
         out = self.position_part(q) if position is None else position.copy()
         if plan.spow or plan.tanh.size or plan.creep.size:
-            S = _factors(s, plan.spow)
+            # the columns [1, s^p.., tanh(s / v_c), the creep terms' states] in one array
+            S = _factors(s, plan.spow, extra=int(plan.tanh.size > 0) + plan.creep.size)
+            k = 1 + len(plan.spow)
             if plan.tanh.size:
-                S = np.column_stack([S, np.tanh(s / self.coulomb_velocity)])
+                S[:, k] = np.tanh(s / self.coulomb_velocity)
+                k += 1
             if plan.creep.size and w is not None:
-                W = np.asarray(w, dtype=float).reshape(q.size, -1)[:, plan.creep_states]
-                S = np.column_stack([S, W])
+                S[:, k:] = np.asarray(w, dtype=float).reshape(q.size, -1)[:, plan.creep_states]
             elif plan.creep.size:  # no states given: the creep terms are 0 (set, as at rest)
-                S = np.column_stack([S, np.ones((q.size, plan.creep.size))])
+                S[:, k:] = 1.0
             out *= S[:, plan.s_index]
             if plan.creep.size and w is None:
                 out[:, plan.creep] = 0.0
@@ -666,6 +676,7 @@ class TableModel:
         v: np.ndarray,
         w: np.ndarray | None = None,
         q_dot: np.ndarray | None = None,
+        position: np.ndarray | None = None,
     ) -> np.ndarray:
         """Acceleration of the model (Eq. 37 solved for q''), evaluated with NumPy.
 
@@ -682,6 +693,8 @@ class TableModel:
         q_dot : ndarray, shape (B,), optional
             Velocity [unit of q / s] of the inertia terms' ``1/2 m'(q) q_dot^2``; needed
             only by a table with inertia terms.
+        position : ndarray, shape (B, J), optional
+            :meth:`TermTable.position_part` of ``q`` where the caller has it (not modified).
 
         Returns
         -------
@@ -700,7 +713,7 @@ class TableModel:
         """
         if self.table.n_extra and w is None:
             w = np.zeros((np.shape(q)[0], self.table.n_extra))
-        cols = self.table.columns(q, s, self.table.map_inputs(v), w)
+        cols = self.table.columns(q, s, self.table.map_inputs(v), w, position=position)
         # one row of weights (or masses) broadcasts over the trajectories: the same sums
         weights = self.weights
         acc = np.einsum("bj,bj->b", cols, weights)
@@ -727,13 +740,16 @@ class TableModel:
         c0 = 3 if self.lag else 2
         C = self.table.n_creep
         w = x[:, c0:] if self.table.n_extra else None
-        acc = self.accel(q, s, v, w, q_dot)
+        # the creep states' rates need the bases too: evaluated once for both
+        bases = self.table.bases(q) if C else None
+        position = self.table.position_part(q, bases) if C else None
+        acc = self.accel(q, s, v, w, q_dot, position)
         out = np.empty((q.size, c0 + self.table.n_extra))
         out[:, 0], out[:, 1] = q_dot, acc
         if self.lag:
             out[:, 2] = z_dot
         if C:
-            b = self.table.bases(q)[:, self.table.creep_base]
+            b = bases[:, self.table.creep_base]
             out[:, c0 : c0 + C] = creep_state_rate(
                 b, q_dot[:, None], self.table.creep_rate, w[:, :C]
             )
