@@ -461,6 +461,24 @@ def inside_class_record(truth, t):
     return {"q": q, "q_dot": q_dot, "q_ddot": truth.accel(q, q_dot, v), "v": v, "dt": t[1] - t[0]}
 
 
+@pytest.fixture(scope="session")
+def _inside_class_shared(tmp_path_factory, bistable_record):
+    return computed_once(
+        tmp_path_factory,
+        "inside-class-record",
+        lambda: inside_class_record(truth_model(np.random.default_rng(2)), bistable_record["t"]),
+    )
+
+
+@pytest.fixture
+def inside_class(_inside_class_shared):
+    """``truth_model`` of seed 2 and its noise-free record on :func:`bistable_record`'s grid
+    (:func:`inside_class_record`): solved once for all pytest-xdist workers, a fresh copy per
+    test (change it at will)."""
+    record = {k: np.copy(v) for k, v in _inside_class_shared.items()}
+    return truth_model(np.random.default_rng(2)), record
+
+
 #: [identify] settings whose model class holds truth_model.
 INSIDE_CLASS = {
     "M": 8,

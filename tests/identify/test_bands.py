@@ -211,14 +211,13 @@ def test_the_restoring_band_holds_the_coulomb_level(bistable_record):
     assert np.all(frame.restoring_hi - frame.restoring >= F_c * (1 - 1e-12))
 
 
-def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(bistable_record):
+def test_bands_cover_a_truth_inside_the_model_class_under_coloured_noise(inside_class):
     """A model inside the class (no approximation bias), accelerations with AR(1) noise:
     the 95 % band of the restoring force holds the truth at >= 85 % of the identified
     points, and it is not trivially wide."""
-    from tests.conftest import INSIDE_CLASS, inside_class_record, truth_model
+    from tests.conftest import INSIDE_CLASS
 
-    truth = truth_model(np.random.default_rng(2))
-    rec = inside_class_record(truth, bistable_record["t"])
+    truth, rec = inside_class
     rng = np.random.default_rng(8)
     e = np.empty(rec["q"].size)
     e[0] = 0.0

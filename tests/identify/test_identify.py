@@ -11,7 +11,7 @@ from debist.model.friction import friction_state
 from debist.model.rbf import RBFModel
 from debist.model.terms import force_columns, force_table, input_columns
 from debist.model.termtable import input_map
-from tests.conftest import INSIDE_CLASS, bistable_truth, inside_class_record, truth_model
+from tests.conftest import INSIDE_CLASS, bistable_truth, truth_model
 
 
 def test_basis_is_eq38_with_equidistant_centres():
@@ -73,10 +73,9 @@ def _curve_errors(truth, model, q):
     return {k: np.max(np.abs(got[k] - want[k])) / np.max(np.abs(want[k])) for k in ("cq", "d", "g")}
 
 
-def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
+def test_rbf_fit_recovers_exact_weights_noise_free(inside_class):
     """Data from a model inside the class (solve_ivp, exact q''): weights recovered to 1e-6."""
-    truth = truth_model(np.random.default_rng(2))
-    rec = inside_class_record(truth, bistable_record["t"])
+    truth, rec = inside_class
     model, diag = _fit(rec, **INSIDE_CLASS)
     assert diag.rank == len(diag.columns)
     assert diag.fit_r2 > 1 - 1e-12
@@ -84,15 +83,14 @@ def test_rbf_fit_recovers_exact_weights_noise_free(bistable_record):
         assert err < 1e-6, key
 
 
-def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(bistable_record):
+def test_lowpass_keeps_the_weights_and_rejects_an_unmodelled_mode(inside_class):
     """Filtered equation error: the filter is linear, so exact data still give the exact
     weights. Then an actuator force that is 40 % weaker above 30 Hz (a second mode the
     one-coordinate model cannot represent) biases the unfiltered fit; a 10 Hz low-pass
     keeps only the band where Eq. 37 holds and recovers the curves."""
     from scipy import signal
 
-    truth = truth_model(np.random.default_rng(2))
-    rec = inside_class_record(truth, bistable_record["t"])
+    truth, rec = inside_class
     model, _ = _fit(rec, lowpass=10.0, **INSIDE_CLASS)
     for key, err in _curve_errors(truth, model, rec["q"]).items():
         assert err < 1e-5, key

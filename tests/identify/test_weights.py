@@ -5,7 +5,7 @@ import pytest
 
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model, variance_weights
-from tests.conftest import INSIDE_CLASS, inside_class_record, truth_model
+from tests.conftest import INSIDE_CLASS
 
 
 def _record(n, dt=0.01, name="r"):
@@ -35,13 +35,13 @@ def test_weights_are_the_typical_over_the_local_rms_and_never_above_one():
     assert "3000" in str(err.value)
 
 
-def test_weighted_fit_recovers_the_curves_better_under_bursts_of_error():
+def test_weighted_fit_recovers_the_curves_better_under_bursts_of_error(inside_class):
     """Inside the model class, with accelerations whose noise is 20 times larger in four
     short bursts (as in switching transients): the weighted fit's restoring force is at least
     twice as close to the truth as the ordinary fit's, and a record's weights survive trim."""
-    truth = truth_model(np.random.default_rng(2))
+    truth, rec = inside_class
     t = np.arange(0.0, 13.0, 0.002)
-    rec = inside_class_record(truth, t)
+    assert rec["q"].size == t.size and rec["dt"] == t[1] - t[0]  # the shared record's grid
     rng = np.random.default_rng(5)
     scale = np.full(t.size, 0.01)
     for start in (1.0, 4.0, 7.5, 11.0):
