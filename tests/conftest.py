@@ -481,7 +481,9 @@ def inside_class(_inside_class_shared):
     """``truth_model`` of seed 2 and its noise-free record on :func:`bistable_record`'s grid
     (:func:`inside_class_record`): solved once for all pytest-xdist workers, a fresh copy per
     test (change it at will)."""
-    record = {k: np.copy(v) for k, v in _inside_class_shared.items()}
+    record = {
+        k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in _inside_class_shared.items()
+    }
     return truth_model(np.random.default_rng(2)), record
 
 
