@@ -740,9 +740,10 @@ class TableModel:
         c0 = 3 if self.lag else 2
         C = self.table.n_creep
         w = x[:, c0:] if self.table.n_extra else None
-        # the creep states' rates need the bases too: evaluated once for both
-        bases = self.table.bases(q) if C else None
-        position = self.table.position_part(q, bases) if C else None
+        bases = position = None
+        if C:  # the creep states' rates need the bases too: evaluated once for both
+            bases = self.table.bases(q)
+            position = self.table.position_part(q, bases)
         acc = self.accel(q, s, v, w, q_dot, position)
         out = np.empty((q.size, c0 + self.table.n_extra))
         out[:, 0], out[:, 1] = q_dot, acc
