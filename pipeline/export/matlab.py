@@ -13,6 +13,7 @@ import functools
 import textwrap
 
 from debist.export.common import ExportInfo, _comment_text, _context, _environment, _literal
+from debist.model.termtable import BASE_ONE, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
 
 __all__ = ["MATLAB_FILE", "MATLAB_NAME_FILE", "m_comment", "m_string", "matlab_source"]
 
@@ -118,10 +119,56 @@ def _m_matrix(rows, name: str, n_cols: int, ints: bool = False) -> str:
     return f"    {name} = [ ...\n{body}];"
 
 
+def _m_index(values) -> str:
+    """Format a row of 1-based indices, runs of consecutive ones as ``a:b``: ``[1:3, 7]``."""
+    runs: list[list[int]] = []
+    for k in values:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    items = [f"{a}" if a == b else f"{a}:{b}" for a, b in runs]
+    return f"[{', '.join(items)}]"
+
+
 def _m_vector(values, name: str, ints: bool = False) -> str:
     """Format ``NAME = [...];`` of one row of doubles (or integers)."""
     values = list(values)
     return _m_matrix([values], name, len(values), ints)
+
+
+def _m_indices(context: dict) -> dict:
+    """1-based index vectors and largest powers of the vectorised ``deriv`` of the MATLAB file.
+
+    The file evaluates the terms as arrays (Octave interprets scalar loops slowly) with the
+    C export's arithmetic per term: a power ``q^n`` is element ``n + 1`` of a running
+    product ``1, q, q q, ...`` (the C export's repeated multiplication), a factor absent from
+    a term is a product with 1.0 (exact), the sum runs over the terms in their order.
+    """
+    kind, skind = context["base_kind"], context["term_skind"]
+
+    def where(values, wanted):
+        return [k + 1 for k, v in enumerate(values) if v == wanted]
+
+    spow = [p for p, k in zip(context["term_spow"], skind, strict=True) if k == S_POW]
+    acc = [j for j, k in enumerate(skind) if k == S_ACC]
+    return {
+        "one_bases": where(kind, BASE_ONE),
+        "table_bases": where(kind, BASE_TABLE),
+        "sum_terms": [j + 1 for j, k in enumerate(skind) if k != S_ACC],
+        "pow_terms": where(skind, S_POW),
+        "tanh_terms": where(skind, S_TANH),
+        "creep_terms": where(skind, S_CREEP),
+        "acc_terms": [j + 1 for j in acc],
+        # q^(a - 1) of an inertia term's force (q^0 = 1 for a = 0, as the C export's loop)
+        "acc_dpow": [max(context["term_qpow"][j] - 1, 0) for j in acc],
+        "q_max": max(context["term_qpow"], default=0),
+        "s_max": max(spow, default=0),
+        "h_max": [
+            max((row[i] for row in context["term_hpow"]), default=0)
+            for i in range(context["n_inputs"])
+        ],
+    }
 
 
 @functools.cache
@@ -132,6 +179,7 @@ def _env():
             "m_comment": m_comment,
             "m_num": _m_num,
             "m_vector": _m_vector,
+            "m_index": _m_index,
             "m_matrix": _m_matrix,
         }
     )
@@ -145,7 +193,9 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     characteristic curves at ``q = x(1)`` from the lookup table; the model is in local
     functions with the constants as literal fixed-size double arrays (no cell arrays,
     strings, ``persistent`` or ``containers.Map``), so that Simulink can generate code
-    from it, and the same arithmetic in the same order as the C export.
+    from it. The terms are evaluated as arrays (an interpreter's loops are slow) with the
+    C export's products per term, summed in the terms' order; the curves are looked up
+    only when the caller asks for them.
     ``debist_model_workflow.m`` returns the workflow's name. The templates
     ``templates/model.m.j2`` and ``templates/model_workflow.m.j2`` hold the code.
 
@@ -175,6 +225,7 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     Files".
     """
     context = _context(model, info, "returned by debist_model_workflow()")
+    context.update(_m_indices(context))
     env = _env()
     return {
         MATLAB_FILE: env.get_template("model.m.j2").render(context),
