@@ -8,7 +8,6 @@ tables with ``RBFModel.curves``.
 
 import ast
 import ctypes
-import functools
 import importlib.util
 import re
 import shutil
@@ -72,12 +71,23 @@ def assert_close_q(q, ref):
     np.testing.assert_allclose(q, ref, rtol=1e-9, atol=1e-9 * scale)
 
 
-@functools.cache
-def free_run(key):
-    """The model, its inputs and debist's free run (the NumPy reference is slow: run once)."""
-    model = MODELS[key]()
-    v = random_inputs(3)
-    return model, v, reference(model, v)
+_FREE_RUNS: dict = {}
+
+
+def free_run(tmp_path_factory, key):
+    """The model, its inputs and debist's free run: the NumPy reference is slow, so it is run
+    once a session for all pytest-xdist workers (:func:`tests.conftest.computed_once`)."""
+    from tests.conftest import computed_once
+
+    def compute():
+        model = MODELS[key]()
+        v = random_inputs(3)
+        return model, v, reference(model, v)
+
+    if key not in _FREE_RUNS:
+        name = f"export-free-run-{list(MODELS).index(key)}"
+        _FREE_RUNS[key] = computed_once(tmp_path_factory, name, compute)
+    return _FREE_RUNS[key]
 
 
 def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
@@ -146,8 +156,8 @@ def ptr(a):
 
 
 @pytest.mark.parametrize("key", list(MODELS))
-def test_python_export_matches_free_run(tmp_path, key):
-    model, v, ref = free_run(key)
+def test_python_export_matches_free_run(tmp_path, tmp_path_factory, key):
+    model, v, ref = free_run(tmp_path_factory, key)
     mod = load_python(tmp_path, model)
     assert n_states(model) == mod.N_STATES
     x = mod.initial_state(0.004, 0.0)
@@ -170,8 +180,8 @@ def test_python_export_matches_free_run(tmp_path, key):
 
 @pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
 @pytest.mark.parametrize("key", list(MODELS))
-def test_c_export_matches_free_run(tmp_path, key):
-    model, v, ref = free_run(key)
+def test_c_export_matches_free_run(tmp_path, tmp_path_factory, key):
+    model, v, ref = free_run(tmp_path_factory, key)
     dll = build_c(tmp_path, model)
     x = np.zeros(n_states(model))
     x[0] = 0.004
@@ -274,8 +284,8 @@ fclose(fid);
 @pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave)")
 @pytest.mark.parametrize("key", list(MODELS))
 @pytest.mark.slow
-def test_matlab_export_matches_free_run_in_octave(tmp_path, key):
-    model, v, ref = free_run(key)
+def test_matlab_export_matches_free_run_in_octave(tmp_path, tmp_path_factory, key):
+    model, v, ref = free_run(tmp_path_factory, key)
     (tmp_path / MATLAB_FILE).write_text(matlab_source(model)[MATLAB_FILE], encoding="utf-8")
     q_grid, names, values = curve_table(model)
     probes = [q_grid[0] - 1.0, *q_grid[::37], 0.5 * (q_grid[3] + q_grid[4]), q_grid[-1] + 1.0]
@@ -503,7 +513,7 @@ HOSTILE_NAMES = [
 
 @pytest.mark.parametrize("name", HOSTILE_NAMES)
 def test_hostile_workflow_names_are_escaped_in_every_export(tmp_path, name):
-    model, v, _ = free_run("lag+prior")
+    model, v = MODELS["lag+prior"](), random_inputs(3)
     info = ExportInfo(workflow=name, run_digest="ab" * 32)
     x0 = np.array([0.004, 0.0, 0.0])
     v0, v1 = v[0].tolist(), v[1].tolist()
