@@ -151,17 +151,17 @@ def _m_indices(context: dict) -> dict:
         return [k + 1 for k, v in enumerate(values) if v == wanted]
 
     spow = [p for p, k in zip(context["term_spow"], skind, strict=True) if k == S_POW]
-    acc = [j for j, k in enumerate(skind) if k == S_ACC]
+    acc = where(skind, S_ACC)
     return {
         "one_bases": where(kind, BASE_ONE),
         "table_bases": where(kind, BASE_TABLE),
-        "sum_terms": [j + 1 for j, k in enumerate(skind) if k != S_ACC],
+        "sum_terms": [j for j in range(1, len(skind) + 1) if j not in acc],
         "pow_terms": where(skind, S_POW),
         "tanh_terms": where(skind, S_TANH),
         "creep_terms": where(skind, S_CREEP),
-        "acc_terms": [j + 1 for j in acc],
+        "acc_terms": acc,
         # q^(a - 1) of an inertia term's force (q^0 = 1 for a = 0, as the C export's loop)
-        "acc_dpow": [max(context["term_qpow"][j] - 1, 0) for j in acc],
+        "acc_dpow": [max(context["term_qpow"][j - 1] - 1, 0) for j in acc],
         "q_max": max(context["term_qpow"], default=0),
         "s_max": max(spow, default=0),
         "h_max": [
