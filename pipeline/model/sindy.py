@@ -410,6 +410,54 @@ def fit_sindy(
     ----------
     Brunton, Proctor & Kutz 2016, PNAS, Eq. 4-5; Kaptanoglu et al. 2022 (pysindy).
     """
+    return fit_sindy_thresholds(q, q_dot, q_ddot, v, dt, cfg, (cfg.threshold,), input_units)[0]
+
+
+def fit_sindy_thresholds(
+    q: np.ndarray | Sequence[np.ndarray],
+    q_dot: np.ndarray | Sequence[np.ndarray],
+    q_ddot: np.ndarray | Sequence[np.ndarray],
+    v: np.ndarray | Sequence[np.ndarray],
+    dt: float,
+    cfg: SindyConfig,
+    thresholds: Sequence[float],
+    input_units: Sequence[str] | None = None,
+) -> list[SindyModel]:
+    """Fit the SINDy(c) baseline at several sparsity thresholds on one library matrix.
+
+    The first threshold is fitted by pysindy's ``SINDy.fit`` (the library, then the
+    optimizer); each further one runs a new optimizer on the library matrix that fit built
+    (the optimizer's ``Theta_``) and the same derivatives, as ``SINDy.fit`` would after
+    building the library again: each model is the one :func:`fit_sindy` gives at its threshold.
+
+    Parameters
+    ----------
+    q, q_dot, q_ddot, v, dt, input_units
+        As :func:`fit_sindy`.
+    cfg : SindyConfig
+        Library and optimizer settings; its ``threshold`` is not used.
+    thresholds : sequence of float
+        Sparsity thresholds (:attr:`SindyConfig.threshold`), at least one.
+
+    Returns
+    -------
+    list of SindyModel
+        One per threshold, in their order.
+
+    Raises
+    ------
+    IdentificationError, WorkflowError, ResourceError
+        As :func:`fit_sindy`.
+
+    Warns
+    -----
+    ConvergenceWarning
+        As :func:`fit_sindy`, per threshold.
+
+    References
+    ----------
+    Brunton, Proctor & Kutz 2016, PNAS, Eq. 4-5; Kaptanoglu et al. 2022 (pysindy).
+    """
     import pysindy as ps
 
     if not dt > 0:
@@ -470,62 +518,82 @@ def fit_sindy(
     # Relative threshold: normalised coefficients are xi_j ||theta_j||_2; compare them with
     # threshold ||q_ddot||_2 (see SindyConfig.threshold).
     scale = float(np.linalg.norm(x_dot[:, 1])) if cfg.normalize_columns else 1.0
-    threshold = cfg.threshold * scale
+    thresholds = [float(th) for th in thresholds]
+    model = ps.SINDy(optimizer=_optimizer(ps, cfg, thresholds[0] * scale), feature_library=library)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(x, t=dt, x_dot=x_dot, u=u if n_inputs else None, feature_names=variables)
+    fits = [(model.coefficients(), caught, time.perf_counter() - t0)]
+    theta = model.optimizer.Theta_  # the library matrix of this fit, for the other thresholds
+    for threshold in thresholds[1:]:
+        optimizer = _optimizer(ps, cfg, threshold * scale)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            optimizer.fit(theta, x_dot)
+        fits.append((optimizer.coef_, caught, time.perf_counter() - t0))
+    names = list(model.get_feature_names())
+    exponents = _parse_exponents(names, variables)
+    q_range = (float(x[:, 0].min()), float(x[:, 0].max()))
+    results = []
+    for threshold, (coefficients, caught, fit_time) in zip(thresholds, fits, strict=True):
+        coef = np.asarray(coefficients, float)[1].copy()
+        coef[np.abs(coef) == 0] = 0.0  # no negative zeros in the text
+        _warn_convergence(cfg.optimizer, threshold, caught, coef)
+        results.append(
+            SindyModel(
+                feature_names=names,
+                coefficients=coef,
+                exponents=exponents,
+                input_map=cfg.input_map,
+                n_inputs=n_inputs,
+                equations=_equation_text(coef, names, cfg.input_map, n_inputs, input_units),
+                fit_time=fit_time,
+                threshold=threshold,
+                q_range=q_range,
+            )
+        )
+    # Own evaluation against pysindy's library on a few estimation rows: the exponent
+    # table must reproduce pysindy's columns, or the simulated model is not the fitted one.
+    rows = np.linspace(0, x.shape[0] - 1, min(16, x.shape[0])).astype(int)
+    theta_ps = np.asarray(library.transform(np.column_stack([x[rows], u[rows]])))
+    theta_own = results[0].features(x[rows, 0], x[rows, 1], np.concatenate(vs)[rows])
+    if not np.allclose(theta_own, theta_ps, rtol=1e-10, atol=0.0):
+        raise IdentificationError("SINDy exponent table disagrees with pysindy's library")
+    return results
+
+
+def _optimizer(ps, cfg: SindyConfig, threshold: float):
+    """Make pysindy's STLSQ or SR3 at an absolute threshold (relative x ||q_ddot||_2)."""
     if cfg.optimizer == "STLSQ":
-        optimizer = ps.STLSQ(
+        return ps.STLSQ(
             threshold=threshold,
             alpha=cfg.alpha,
             normalize_columns=cfg.normalize_columns,
             max_iter=50,
         )
-    else:
-        optimizer = ps.SR3(
-            reg_weight_lam=threshold**2 / 2.0,
-            regularizer="L0",
-            relax_coeff_nu=1.0,
-            normalize_columns=cfg.normalize_columns,
-            unbias=True,
-            max_iter=200,
-        )
-    model = ps.SINDy(optimizer=optimizer, feature_library=library)
-    t0 = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        model.fit(x, t=dt, x_dot=x_dot, u=u if n_inputs else None, feature_names=variables)
-    fit_time = time.perf_counter() - t0
-    names = list(model.get_feature_names())
-    coef = np.asarray(model.coefficients(), float)[1].copy()
-    coef[np.abs(coef) == 0] = 0.0  # no negative zeros in the text
-    exponents = _parse_exponents(names, variables)
+    return ps.SR3(
+        reg_weight_lam=threshold**2 / 2.0,
+        regularizer="L0",
+        relax_coeff_nu=1.0,
+        normalize_columns=cfg.normalize_columns,
+        unbias=True,
+        max_iter=200,
+    )
 
+
+def _warn_convergence(optimizer: str, threshold: float, caught, coef: np.ndarray) -> None:
+    """Issue a fit's convergence warnings as ConvergenceWarning (the kinematic row's aside)."""
     for w in caught:
         msg = str(w.message)
         if "eliminated all coefficients" in msg:
             continue  # the kinematic row may drop out; checked for q_ddot below
         if "did not converge" in msg.lower() or "max_iter" in msg.lower():
-            warnings.warn(f"SINDy {cfg.optimizer}: {msg}", ConvergenceWarning, stacklevel=2)
+            warnings.warn(f"SINDy {optimizer}: {msg}", ConvergenceWarning, stacklevel=4)
     if not np.any(coef):
         warnings.warn(
-            f"SINDy threshold {cfg.threshold!r} removed every term of the q_ddot equation",
+            f"SINDy threshold {threshold!r} removed every term of the q_ddot equation",
             ConvergenceWarning,
-            stacklevel=2,
+            stacklevel=4,
         )
-    result = SindyModel(
-        feature_names=names,
-        coefficients=coef,
-        exponents=exponents,
-        input_map=cfg.input_map,
-        n_inputs=n_inputs,
-        equations=_equation_text(coef, names, cfg.input_map, n_inputs, input_units),
-        fit_time=fit_time,
-        threshold=cfg.threshold,
-        q_range=(float(x[:, 0].min()), float(x[:, 0].max())),
-    )
-    # Own evaluation against pysindy's library on a few estimation rows: the exponent
-    # table must reproduce pysindy's columns, or the simulated model is not the fitted one.
-    rows = np.linspace(0, x.shape[0] - 1, min(16, x.shape[0])).astype(int)
-    theta_ps = np.asarray(library.transform(np.column_stack([x[rows], u[rows]])))
-    theta_own = result.features(x[rows, 0], x[rows, 1], np.concatenate(vs)[rows])
-    if not np.allclose(theta_own, theta_ps, rtol=1e-10, atol=0.0):
-        raise IdentificationError("SINDy exponent table disagrees with pysindy's library")
-    return result

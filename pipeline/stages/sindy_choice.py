@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from debist.core.errors import IdentificationError
-from debist.model.sindy import SindyConfig, fit_sindy
+from debist.model.sindy import SindyConfig, fit_sindy_thresholds
 from debist.validate.config import ValidateConfig
 from debist.validate.freerun import DataSet, default_q_limit, validate_model
 
@@ -107,31 +107,19 @@ def choose_sindy(
     thresholds = (cfg.threshold,) if "threshold" in given else THRESHOLDS
     if len(degrees) * len(thresholds) == 1:
         return cfg, []
-    folds = list(_folds(records, q_unit))
     sim_cfg = replace(vcfg, init_samples=0, analytical=False)
+    scores, terms, failed = _holdout_scores(
+        list(_folds(records, q_unit)), records[0].dt, cfg, degrees, thresholds, sim_cfg, input_units
+    )
     rows = []
-    for degree, threshold in itertools.product(degrees, thresholds):
-        cand = replace(cfg, degree=degree, threshold=threshold)
-        row = {"degree": degree, "threshold": threshold, "n_terms": 0,
-               "holdout_nrmse_q": np.inf, "status": "ok"}  # fmt: skip
-        try:
-            scores, terms = [], []
-            for train, held in folds:
-                with warnings.catch_warnings():  # a candidate's convergence is its score's
-                    warnings.simplefilter("ignore")
-                    model = fit_sindy(*(list(x) for x in zip(*train, strict=True)),
-                                      records[0].dt, cand, input_units=input_units)  # fmt: skip
-                    table, _ = validate_model(model, "sindy", held, sim_cfg,
-                                              default_q_limit(model.q_range))  # fmt: skip
-                scores += np.where(np.isfinite(table.nrmse_q), table.nrmse_q,
-                                   DIVERGED_SCORE).tolist()  # fmt: skip
-                terms.append(model.n_params)
-            diverged = int(np.sum(np.asarray(scores) == DIVERGED_SCORE))
-            row["n_terms"] = int(np.median(terms))
-            row["holdout_nrmse_q"] = float(np.mean(scores))
-            row["status"] = f"diverged in {diverged} of {len(scores)} blocks" if diverged else "ok"
-        except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
-            row["status"] = f"fit failed: {exc}"
+    for candidate, got in scores.items():
+        row = {"degree": candidate[0], "threshold": candidate[1], "n_terms": 0,
+               "holdout_nrmse_q": np.inf, "status": failed.get(candidate, "ok")}  # fmt: skip
+        if candidate not in failed:
+            diverged = int(np.sum(np.asarray(got) == DIVERGED_SCORE))
+            row["n_terms"] = int(np.median(terms[candidate]))
+            row["holdout_nrmse_q"] = float(np.mean(got))
+            row["status"] = f"diverged in {diverged} of {len(got)} blocks" if diverged else "ok"
         rows.append(row)
     ok = [r for r in rows if np.isfinite(r["holdout_nrmse_q"])]
     if not ok:
@@ -142,3 +130,41 @@ def choose_sindy(
     near = [r for r in ok if r["holdout_nrmse_q"] <= (1.0 + SIMPLER_WITHIN) * best]
     pick = min(near, key=lambda r: (r["n_terms"], r["degree"], -r["threshold"]))
     return replace(cfg, degree=pick["degree"], threshold=pick["threshold"]), rows
+
+
+def _holdout_scores(folds, dt, cfg, degrees, thresholds, sim_cfg, input_units):
+    """Per candidate (degree, threshold): its held-out scores, term counts and first failure.
+
+    Per fold and degree one library is built and every threshold fitted on it
+    (:func:`debist.model.sindy.fit_sindy_thresholds`: the models of separate fits); a
+    candidate that failed in a fold (its fit or its free run raised) is not tried again.
+    """
+    scores = {c: [] for c in itertools.product(degrees, thresholds)}
+    terms = {c: [] for c in scores}
+    failed: dict[tuple[int, float], str] = {}
+    for train, held in folds:
+        for degree in degrees:
+            todo = [th for th in thresholds if (degree, th) not in failed]
+            if not todo:
+                continue
+            with warnings.catch_warnings():  # a candidate's convergence is its score's
+                warnings.simplefilter("ignore")
+                try:
+                    models = fit_sindy_thresholds(*(list(x) for x in zip(*train, strict=True)),
+                                                  dt, replace(cfg, degree=degree), todo,
+                                                  input_units=input_units)  # fmt: skip
+                except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
+                    failed.update({(degree, th): f"fit failed: {exc}" for th in todo})
+                    continue
+                for threshold, model in zip(todo, models, strict=True):
+                    try:
+                        table, _ = validate_model(model, "sindy", held, sim_cfg,
+                                                  default_q_limit(model.q_range))  # fmt: skip
+                    except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:
+                        failed[(degree, threshold)] = f"fit failed: {exc}"
+                        continue
+                    scores[(degree, threshold)] += np.where(
+                        np.isfinite(table.nrmse_q), table.nrmse_q, DIVERGED_SCORE
+                    ).tolist()
+                    terms[(degree, threshold)].append(model.n_params)
+    return scores, terms, failed

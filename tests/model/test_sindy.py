@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from debist.core.errors import IdentificationError, WorkflowError
-from debist.model.sindy import SindyConfig, SindyModel, fit_sindy
+from debist.model.sindy import SindyConfig, SindyModel, fit_sindy, fit_sindy_thresholds
 from debist.simulate.freerun import simulate
 
 # q'' = -k1 q - k3 q^3 - d q' + g1 (1 + a q) v1^2 + g2 v2^2, SI units (q ~ 1 mm, v ~ 1 kV).
@@ -147,6 +147,26 @@ def test_sr3_recovers_the_same_terms(data):
     assert nonzero == set(TRUE)
     for name, value in TRUE.items():
         assert m.coefficients[m.feature_names.index(name)] == pytest.approx(value, rel=1e-6)
+
+
+@pytest.mark.filterwarnings("ignore::debist.core.errors.ConvergenceWarning")  # SR3 on noise
+@pytest.mark.parametrize("optimizer", ["STLSQ", "SR3"])
+def test_thresholds_on_one_library_are_the_separate_fits(data, optimizer):
+    """Several thresholds on one library matrix: each model the bits of its own fit."""
+    q, q_dot, q_ddot, v = data[0]
+    noisy = q_ddot + np.random.default_rng(7).normal(0.0, 0.05 * np.std(q_ddot), q_ddot.size)
+    cfg = SindyConfig(optimizer=optimizer)
+    thresholds = (1e-3, 1e-2, 5e-2)
+    together = fit_sindy_thresholds(q, q_dot, noisy, v, DT, cfg, thresholds)
+    assert len({m.n_params for m in together}) > 1  # the thresholds give different models
+    for threshold, got in zip(thresholds, together, strict=True):
+        alone = fit_sindy(q, q_dot, noisy, v, DT, SindyConfig(optimizer=optimizer,
+                                                              threshold=threshold))  # fmt: skip
+        assert got.threshold == alone.threshold == threshold
+        assert got.feature_names == alone.feature_names
+        np.testing.assert_array_equal(got.coefficients, alone.coefficients)
+        np.testing.assert_array_equal(got.exponents, alone.exponents)
+        assert got.equations == alone.equations
 
 
 def test_constant_input_gains_library(data):
