@@ -448,6 +448,8 @@ def fit_sindy_thresholds(
     ------
     IdentificationError, WorkflowError, ResourceError
         As :func:`fit_sindy`.
+    ValueError
+        If ``thresholds`` is empty.
 
     Warns
     -----
@@ -460,6 +462,8 @@ def fit_sindy_thresholds(
     """
     import pysindy as ps
 
+    if not len(thresholds):
+        raise ValueError("fit_sindy_thresholds needs at least one threshold")
     if not dt > 0:
         raise WorkflowError(f"`dt` must be > 0, got {dt!r}")
     qs, qds, qdds, vs = (_as_records(a) for a in (q, q_dot, q_ddot, v))

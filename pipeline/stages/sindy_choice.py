@@ -136,8 +136,9 @@ def _holdout_scores(folds, dt, cfg, degrees, thresholds, sim_cfg, input_units):
     """Per candidate (degree, threshold): its held-out scores, term counts and first failure.
 
     Per fold and degree one library is built and every threshold fitted on it
-    (:func:`debist.model.sindy.fit_sindy_thresholds`: the models of separate fits); a
-    candidate that failed in a fold (its fit or its free run raised) is not tried again.
+    (:func:`debist.model.sindy.fit_sindy_thresholds`: the models of separate fits; a fit
+    that raises fails every threshold of its degree in that fold); a candidate that failed
+    in a fold (its fit or its free run raised) is not tried again.
     """
     scores = {c: [] for c in itertools.product(degrees, thresholds)}
     terms = {c: [] for c in scores}

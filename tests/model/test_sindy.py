@@ -190,3 +190,5 @@ def test_rejects_inconsistent_records(data):
     with pytest.raises(WorkflowError) as err:
         fit_sindy(q, q_dot, q_ddot, v, 0.0, SindyConfig())
     assert "dt" in str(err.value)
+    with pytest.raises(ValueError, match="at least one threshold"):
+        fit_sindy_thresholds(q, q_dot, q_ddot, v, DT, SindyConfig(), ())
