@@ -75,18 +75,20 @@ def newton(
     """
     x = np.array(x0, dtype=float, copy=True)
     r, J = fun(x)
-    res = np.linalg.norm(r / scale, axis=-1)
+    rs = r / scale  # the scaled residual, kept with each accepted point
+    res = _norm(rs)
     done = res < ftol
+    scale2 = np.multiply.outer(scale, scale)
     it = 0
     for it in range(1, maxiter + 1):
         if np.all(done):
             it -= 1
             break
-        Js = J / np.multiply.outer(scale, scale)
+        Js = J / scale2
         try:
-            dxi = -np.linalg.solve(Js, (r / scale)[..., None])[..., 0]
+            dxi = -np.linalg.solve(Js, rs[..., None])[..., 0]
         except np.linalg.LinAlgError:
-            dxi = -(np.linalg.pinv(Js) @ (r / scale)[..., None])[..., 0]
+            dxi = -(np.linalg.pinv(Js) @ rs[..., None])[..., 0]
         dxi = np.where(np.isfinite(dxi), dxi, 0.0)
         step = np.max(np.abs(dxi), axis=-1)
         dxi = dxi * np.minimum(1.0, max_step / np.maximum(step, 1e-300))[..., None]
@@ -95,13 +97,19 @@ def newton(
         for _ in range(10):
             x_new = x + alpha[..., None] * dxi / scale
             r_new, J_new = fun(x_new)
-            res_new = np.linalg.norm(r_new / scale, axis=-1)
+            rs_new = r_new / scale
+            res_new = _norm(rs_new)
             bad = ~(res_new <= res * (1.0 + 1e-12) + ftol) & ~done
             if not np.any(bad):
                 break
             alpha = np.where(bad, 0.5 * alpha, alpha)
-        x, r, J, res = x_new, r_new, J_new, res_new
+        x, J, rs, res = x_new, J_new, rs_new, res_new
         small_step = alpha * np.max(np.abs(dxi), axis=-1) < xtol
         done = done | (res < ftol) | (small_step & (res < 1e3 * ftol))
     converged = (res < ftol) | done
     return NewtonResult(x=x, residual=res, converged=converged, n_iter=it)
+
+
+def _norm(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """2-norm over the last axis: ``numpy.linalg.norm(a, axis=-1)``'s sum, without its checks."""
+    return np.sqrt(np.add.reduce(a * a, axis=-1))
