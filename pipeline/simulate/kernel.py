@@ -1140,13 +1140,14 @@ def _trajectory_sens(
             for stage in range(1 if last else 4):
                 js = j + _INPUT_OFFSET[stage]
                 for i in range(S):
-                    xt[i] = x[i] if stage == 0 else _stage_state(x[i], h, stage, d[stage - 1, i])
-                    for p in range(P):
-                        St[i, p] = (
-                            Sx[i, p]
-                            if stage == 0
-                            else _stage_state(Sx[i, p], h, stage, dS[stage - 1, i, p])
-                        )
+                    if stage == 0:
+                        xt[i] = x[i]
+                        for p in range(P):
+                            St[i, p] = Sx[i, p]
+                    else:
+                        xt[i] = _stage_state(x[i], h, stage, d[stage - 1, i])
+                        for p in range(P):
+                            St[i, p] = _stage_state(Sx[i, p], h, stage, dS[stage - 1, i, p])
                 a = _rhs_table(xt, fine, b, js, d, stage, fp, ip, lay, W)
                 if stage == 0 and s == 0:
                     acc[b, k] = a
@@ -1156,17 +1157,25 @@ def _trajectory_sens(
                     break
                 a_q, a_s, a_v, den = _grad_table(xt, b, fp, ip, lay, W, V, tv, ae, a)
                 lagged = lag and tz > 0.0
+                r_s = 2 if lagged else 1  # the friction factor's state: z, or q_dot itself
+                # row 1 (d acc) summed term by term in the order of _grad_table's factors, each a
+                # loop over the parameters (no inner loop or branch in them: they vectorise)
                 for p in range(P):
                     dS[stage, 0, p] = St[1, p]
-                    row = a_q * St[0, p]
-                    row += a_s * (St[2, p] if lagged else St[1, p])
-                    if inertia:
-                        row += a_v * St[1, p]
-                    for e in range(NC + NS):
-                        row += ae[e] * St[c0 + e, p]
-                    dS[stage, 1, p] = row
-                    if lag:
-                        dS[stage, 2, p] = _friction_rate(St[1, p], St[2, p], tz) if lagged else 0.0
+                    dS[stage, 1, p] = a_q * St[0, p] + a_s * St[r_s, p]
+                if inertia:
+                    for p in range(P):
+                        dS[stage, 1, p] += a_v * St[1, p]
+                for e in range(NC + NS):
+                    a_e = ae[e]
+                    for p in range(P):
+                        dS[stage, 1, p] += a_e * St[c0 + e, p]
+                if lagged:
+                    for p in range(P):
+                        dS[stage, 2, p] = _friction_rate(St[1, p], St[2, p], tz)
+                elif lag:
+                    for p in range(P):
+                        dS[stage, 2, p] = 0.0
                 for i in range(NC):  # V[k]: the basis derivatives left by _grad_table
                     cb = ip[o_cb + i]
                     for p in range(P):
