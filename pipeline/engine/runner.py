@@ -245,6 +245,7 @@ class Runner:
         self.wf = workflow
         self.wait = wait
         self._source_hashes: dict[Path, str] = {}
+        self._ahead: tuple[str, ...] = ()  # the stages still to run after the running one
 
     def stages(self) -> list[str]:
         """List the stages of this workflow, in execution order.
@@ -277,6 +278,17 @@ class Runner:
     def stage_config(self, stage: str) -> dict[str, Any]:
         """Return the resolved configuration of a stage (:func:`stage_config`)."""
         return stage_config(self.wf, stage)
+
+    def load_ahead(self) -> None:
+        """Import the stages still to run in this run and run their ``preload`` here.
+
+        What :meth:`_load` does just before it forks a stage, for every stage after the
+        running one; a stage that waits on its worker processes calls it, so that the
+        loading takes the core they leave free. Runs nothing of the stages and decides
+        nothing: a stage found up to date later has been loaded in vain.
+        """
+        for stage in self._ahead:
+            self._load(stage)
 
     def _manifest(self, stage: str) -> artifacts.Manifest:
         manifest = artifacts.read_manifest(self.wf.stage_dir(stage))
@@ -697,6 +709,7 @@ class Runner:
                     continue
                 early.update(self._start_early(stage, pending, early, len(beside)))
                 prepared = None if first is None else first.result()
+                self._ahead = tuple(pending)
                 manifests[stage], seconds = self._execute(stage, *found, prepared=prepared)
                 release_freed_memory()  # its temporaries: not kept for the stages after it
                 on_event(stage, "done", f"{seconds:.2f} s")
@@ -741,7 +754,8 @@ class Runner:
         """Import a stage's module here, and run its ``preload(ctx)`` if it has one.
 
         Called just before the stage (or its first part) is forked: what both processes
-        would load is loaded once, here, and the child inherits it.
+        would load is loaded once, here, and the child inherits it; and by
+        :meth:`load_ahead`.
         """
         module = importlib.import_module(registry.stage(stage).module)
         if hasattr(module, "preload"):

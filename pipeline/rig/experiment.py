@@ -110,7 +110,9 @@ def _run_unobserved(cfg: RigConfig, name: str) -> RigRun:
 
 
 def run_experiments(
-    cfg: RigConfig, meanwhile: Callable[[], Any] | None = None
+    cfg: RigConfig,
+    meanwhile: Callable[[], Any] | None = None,
+    idle: Callable[[], Any] | None = None,
 ) -> tuple[dict[str, RigRun], Any]:
     """Simulate every experiment of the rig, in parallel processes where that is safe.
 
@@ -128,6 +130,10 @@ def run_experiments(
     meanwhile : callable, optional
         Work of the calling process that does not depend on the runs (the true curves): run
         while the workers integrate, or after the runs when they are serial.
+    idle : callable, optional
+        Work worth doing only on a core the workers leave free (loading what later stages
+        will need): called after ``meanwhile`` while the workers integrate, not at all when
+        the runs are serial. What it returns is discarded.
 
     Returns
     -------
@@ -162,6 +168,8 @@ def run_experiments(
         progress.report(task, 0, len(names))
         if meanwhile is not None:
             other = meanwhile()
+        if idle is not None:
+            idle()
         for i, _ in enumerate(as_completed(futures)):
             progress.report(task, i + 1, len(names))
         done = {futures[f]: f.result() for f in futures}

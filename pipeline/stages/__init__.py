@@ -83,3 +83,10 @@ class StageInputs(Protocol):
 
     def stage_config(self, stage: str) -> dict[str, Any]:
         """Return the resolved configuration of a stage (what its key hashes)."""
+
+    def load_ahead(self) -> None:
+        """Load here what the stages still to run will load (their code, their ``preload``).
+
+        For a stage that waits on its worker processes: the loading takes a core they
+        leave free instead of the time of the stages after it. Decides nothing.
+        """

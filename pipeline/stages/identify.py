@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -49,7 +50,30 @@ from debist.validate.freerun import words_factor
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
-__all__ = ["IdentifyResult", "analytical_curves", "diagnostics_tree", "execute", "run_identify"]
+__all__ = [
+    "IdentifyResult",
+    "analytical_curves",
+    "diagnostics_tree",
+    "execute",
+    "preload",
+    "run_identify",
+]
+
+
+def preload(ctx: StageInputs) -> None:
+    """Load matplotlib's ``Figure``: the stage draws its figures in processes forked from here.
+
+    The runner calls it ahead of the stage, while a stage before it waits on its worker
+    processes (:meth:`debist.engine.runner.Runner.load_ahead`); :func:`render_pngs` would
+    load it just before it forks. Loads nothing else, decides nothing.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        Not read: what the stage loads does not depend on the workflow.
+    """
+    del ctx
+    importlib.import_module("matplotlib.figure")
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,7 +22,24 @@ pd = lazy.load("pandas")
 if TYPE_CHECKING:
     from debist.workflow.loader import DatasetSpec
 
-__all__ = ["execute", "run_ingest"]
+__all__ = ["execute", "preload", "run_ingest"]
+
+
+def preload(ctx: StageInputs) -> None:
+    """Load the libraries of the tables the stage builds and writes: pandas, pyarrow's Parquet.
+
+    The runner calls it ahead of the stage, while a stage before it waits on its worker
+    processes (:meth:`debist.engine.runner.Runner.load_ahead`). Loads nothing else, decides
+    nothing.
+
+    Parameters
+    ----------
+    ctx : StageInputs
+        Not read: what the stage loads does not depend on the workflow.
+    """
+    del ctx
+    pd.DataFrame  # noqa: B018 (loads the lazy module)
+    importlib.import_module("pyarrow.parquet")
 
 
 def run_ingest(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -50,7 +50,11 @@ class RigResult:
     timings: dict[str, float]
 
 
-def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult:
+def run_rig(
+    physics: Mapping[str, Any],
+    section: Mapping[str, Any],
+    idle: Callable[[], Any] | None = None,
+) -> RigResult:
     """Simulate the virtual rig's experiments (``debist simulate-rig``).
 
     Parameters
@@ -59,6 +63,9 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
         The ``[physics]`` section (nominal prototype).
     section : mapping
         The ``[rig]`` section (:class:`debist.rig.experiment.RigConfig`).
+    idle : callable, optional
+        Called while the experiments integrate in worker processes
+        (:func:`debist.rig.experiment.run_experiments`).
 
     Returns
     -------
@@ -77,7 +84,9 @@ def run_rig(physics: Mapping[str, Any], section: Mapping[str, Any]) -> RigResult
     """
     cfg = RigConfig.from_dict(section, physics)
     runs, curves = run_experiments(
-        cfg, meanwhile=partial(true_curves, cfg.rig, np.linspace(-20e-3, 20e-3, 401))
+        cfg,
+        meanwhile=partial(true_curves, cfg.rig, np.linspace(-20e-3, 20e-3, 401)),
+        idle=idle,
     )
     curves = {**curves, "attrs": truth_attrs(cfg.rig, curves)}
     outputs: dict[str, Any] = {}
@@ -115,7 +124,9 @@ def execute(ctx: StageInputs) -> StageOutput:
     Parameters
     ----------
     ctx : StageInputs
-        The ``[physics]`` and ``[rig]`` sections.
+        The ``[physics]`` and ``[rig]`` sections; while the experiments integrate in worker
+        processes, this process loads what the stages after the rig will need
+        (``ctx.load_ahead``).
 
     Returns
     -------
@@ -127,5 +138,5 @@ def execute(ctx: StageInputs) -> StageOutput:
     WorkflowError, DebistError
         As :func:`run_rig`.
     """
-    res = run_rig(ctx.section("physics"), ctx.section("rig"))
+    res = run_rig(ctx.section("physics"), ctx.section("rig"), idle=ctx.load_ahead)
     return StageOutput(res.outputs, res.summary, res.timings)

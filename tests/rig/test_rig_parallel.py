@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from debist.core import forking, progress
 from debist.core.errors import WorkflowError
 from debist.core.forking import fork_workers
+from debist.rig import experiment
 from debist.rig.experiment import RigConfig, run_experiment, run_experiments
 
 SECTION = {
@@ -45,6 +47,22 @@ def test_parallel_runs_equal_serial_runs(cfg, monkeypatch):
             np.testing.assert_array_equal(getattr(runs[name], key), getattr(serial, key))
         assert runs[name].nfev == serial.nfev
     assert runs["b"].q_true[0] > 0 > runs["a"].q_true[0]  # the start wells as configured
+
+
+def test_idle_runs_in_the_parent_only_while_workers_integrate(cfg, monkeypatch):
+    """``idle`` runs once, after ``meanwhile``, in the parent while the workers run; never
+    when the runs are serial (the work it does would then only add to the run's time)."""
+    calls = []
+    meanwhile = lambda: calls.append(("meanwhile", os.getpid()))  # noqa: E731
+    idle = lambda: calls.append(("idle", os.getpid()))  # noqa: E731
+    if fork_workers(2) >= 2:
+        run_experiments(cfg, meanwhile=meanwhile, idle=idle)
+        assert calls == [("meanwhile", os.getpid()), ("idle", os.getpid())]
+    calls.clear()
+    monkeypatch.setattr(experiment, "fork_workers", lambda n: 1)
+    runs, _ = run_experiments(cfg, meanwhile=meanwhile, idle=idle)
+    assert calls == [("meanwhile", os.getpid())]
+    assert list(runs) == ["a", "b"]
 
 
 def test_no_children_from_a_daemonic_worker(monkeypatch):

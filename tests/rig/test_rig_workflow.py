@@ -1,5 +1,6 @@
 """The virtual rig inside a workflow: rig stage -> MAT logs -> ingest, with caching and truth."""
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -7,8 +8,11 @@ import pytest
 
 from debist.core import artifacts
 from debist.core.errors import WorkflowError
+from debist.core.forking import fork_workers
 from debist.engine.runner import Runner
+from debist.rig import experiment
 from debist.rig.profiles import make_profile
+from debist.stages import ingest
 from debist.workflow.loader import load_workflow
 
 WORKFLOW = """
@@ -107,6 +111,30 @@ def test_rerun_skips_and_ingest_follows_the_rig(rig_run, tmp_path):
     reasons = {s.stage: (s.state, s.reason) for s in status}
     assert reasons["rig"][0] == "stale" and "rig" in reasons["rig"][1]
     assert reasons["ingest"] == ("stale", "upstream 'rig' will rerun")
+
+
+def test_the_stages_after_the_rig_load_while_its_workers_integrate(tmp_path, monkeypatch):
+    """The runner loads the pending stages (``preload``) in this process during the rig
+    stage when its experiments run in workers, before the next stage starts; with the rig
+    alone, or the experiments run serially, nothing is loaded ahead."""
+    path = tmp_path / "rig.toml"
+    path.write_text(WORKFLOW, encoding="utf-8")
+    wf = load_workflow(path)
+    events = []
+    real_execute = ingest.execute
+    monkeypatch.setattr(ingest, "preload", lambda ctx: events.append(("preload", os.getpid())))
+    monkeypatch.setattr(
+        ingest, "execute", lambda ctx: events.append(("execute", os.getpid())) or real_execute(ctx)
+    )
+    Runner(wf).run(["rig"], force=True)
+    assert events == []
+    Runner(wf).run(["rig", "ingest"], force=True)
+    if fork_workers(2) >= 2:
+        assert events == [("preload", os.getpid()), ("execute", os.getpid())]
+    events.clear()
+    monkeypatch.setattr(experiment, "fork_workers", lambda n: 1)
+    Runner(wf).run(["rig", "ingest"], force=True)
+    assert events == [("execute", os.getpid())]
 
 
 def test_rig_workflow_errors(tmp_path):
