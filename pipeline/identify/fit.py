@@ -11,7 +11,7 @@ import numpy as np
 from debist.core import preflight
 from debist.core.errors import IdentificationError
 from debist.core.metrics import rms
-from debist.identify.bands import block_bootstrap
+from debist.identify.bootstrap import block_bootstrap
 from debist.identify.config import SLIP_GRID, IdentifyConfig
 from debist.identify.driven import undriven_weights
 from debist.identify.regularise import (

@@ -353,7 +353,7 @@ class RBFModel:
         """Return the model with its parameters moved by each row of ``deviations``.
 
         One trajectory per row: the free-run model of a batch of parameter replicates (the
-        block bootstrap of the least squares, :func:`debist.identify.bands.block_bootstrap`),
+        block bootstrap of the least squares, :func:`debist.identify.bootstrap.block_bootstrap`),
         each the model's parameters plus one replicate's deviation from the estimate, so a
         refined model keeps its refinement and gets the bootstrap's spread around it.
 

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 from debist.core.errors import WorkflowError
-from debist.identify.bands import block_bootstrap
+from debist.identify.bootstrap import block_bootstrap
 from debist.identify.config import IdentifyConfig
 from debist.identify.fit import Record, fit_rbf_model
 from debist.identify.regularise import (
