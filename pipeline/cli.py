@@ -5,8 +5,8 @@ debist's exceptions to exit codes in one place (:func:`debist.core.errors.exit_c
 1 a stage failed on its data, 2 a bad workflow or argument or a refused output folder, lock
 or memory budget, 3 artifacts failed verification, 130 after Ctrl-C, 143 after SIGTERM.
 
-Long steps report through :mod:`debist.core.progress`; the CLI draws those reports as rich
-progress bars on stderr when stderr is a terminal (not with ``-q``). Help texts are plain
+What it draws (progress bars, stage lines, a run's tables) and the consoles it prints to are
+in :mod:`debist.terminal`. Help texts are plain
 text (Typer's ``rich_markup_mode=None``), so workflow sections such as ``[rig]`` and units
 such as ``[s]`` print literally instead of being taken for rich markup.
 """
@@ -17,8 +17,6 @@ import json
 import os
 import shlex
 import signal
-import sys
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
@@ -27,7 +25,6 @@ from typing import Annotated
 
 import click
 import typer
-from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperCommand, TyperGroup
 
@@ -41,6 +38,18 @@ from debist.core.errors import (
     WorkflowError,
     exit_code,
     os_error_line,
+)
+from debist.terminal import (
+    bar_columns,
+    console,
+    err,
+    essential,
+    level,
+    print_report_line,
+    print_summary,
+    progress,
+    progress_console,
+    stage_events,
 )
 
 
@@ -99,11 +108,6 @@ app = typer.Typer(
     add_completion=False,
     rich_markup_mode=None,  # help is plain text: "[rig]", "[s]" are words, not rich markup
 )
-#: Reports written to a file or pipe are not squeezed to 80 columns (rich's default there).
-console = Console(width=None if sys.stdout.isatty() else 140)
-err = Console(stderr=True, soft_wrap=True)
-#: Output level set by the global options: -1 with ``-q``, 1 with ``-v``, else 0.
-_level = {"value": 0}
 
 WorkflowArg = Annotated[Path, typer.Argument(metavar="WORKFLOW", help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
@@ -170,7 +174,7 @@ def _options(
     """Rig logs of bistable DE actuators to validated dynamic models (Masoud & Maas 2025)."""
     if quiet and verbose:
         raise typer.BadParameter("give -q/--quiet or -v/--verbose, not both")
-    _level["value"] = -1 if quiet else (1 if verbose else 0)
+    level["value"] = -1 if quiet else (1 if verbose else 0)
     console.quiet = quiet
     if memory_budget is not None:
         from debist.core.preflight import BUDGET_ENV
@@ -215,243 +219,6 @@ def _on_sigterm(signum: int, _frame: object) -> None:
     raise Interrupted(signum)
 
 
-def _essential(text: str) -> None:
-    """Print a line that ``-q`` keeps (the run digest, the lines of ``status``)."""
-    quiet, console.quiet = console.quiet, False
-    try:
-        console.print(text, soft_wrap=True)
-    finally:
-        console.quiet = quiet
-
-
-def _progress_console() -> Console | None:
-    """Return the console for progress bars: stderr if a terminal and not ``-q``, else None."""
-    try:
-        terminal = sys.stderr.isatty()  # not rich's is_terminal: FORCE_COLOR must not draw bars
-    except (AttributeError, ValueError):  # replaced or closed
-        terminal = False
-    return Console(stderr=True) if terminal and _level["value"] >= 0 else None
-
-
-def _bar_columns(label) -> tuple:
-    """Return the columns of every progress bar: ``label``, bar, done/total, elapsed, time left."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    return (label, BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TextColumn("left"),
-            TimeRemainingColumn())  # fmt: skip
-
-
-class _Display:
-    """Progress reports (:mod:`debist.core.progress`) drawn as rich progress bars, one per task.
-
-    A row reads ``stage: task``, a bar, ``done/total``, the elapsed time and rich's
-    estimate of the time left. A row goes when its task reaches its total; when a stage
-    ends, its rows are drawn complete (work that stopped early, such as an optimiser that
-    converged before its evaluation budget, is finished too) and removed.
-
-    Parameters
-    ----------
-    target : rich.console.Console
-        Where to draw (stderr, a terminal).
-
-    References
-    ----------
-    rich documentation, ``rich.progress.Progress``.
-    """
-
-    def __init__(self, target: Console):
-        from rich.progress import Progress, TextColumn
-
-        self.bars = Progress(
-            *_bar_columns(TextColumn("{task.description}", markup=False)),
-            console=target,
-            transient=True,
-            redirect_stdout=sys.stdout.isatty(),  # stage lines above the bars, not through them
-            redirect_stderr=True,
-        )
-        self.stage = ""
-        self._rows: dict[str, tuple[object, int]] = {}  # label -> (task id, done)
-        self._lock = threading.Lock()
-
-    def listen(self, task: str, done: int, total: int) -> None:
-        """Show one report (the :data:`debist.core.progress.Listener` signature)."""
-        label = (
-            task
-            if not self.stage or task.startswith(f"{self.stage}:")
-            else (f"{self.stage}: {task}")
-        )
-        total = max(total, done) if total > 0 else None
-        with self._lock:
-            row = self._rows.get(label)
-            if row is not None and done < row[1]:  # the same task started over
-                self.bars.remove_task(row[0])
-                row = None
-            if row is None:
-                tid = self.bars.add_task(label, total=total, completed=done)
-            else:
-                tid = row[0]
-                self.bars.update(tid, total=total, completed=done)
-            self._rows[label] = (tid, done)
-            if total is not None and done >= total:
-                self.bars.refresh()
-                self.bars.remove_task(tid)
-                del self._rows[label]
-
-    def finish(self) -> None:
-        """Draw every open row complete, then remove it (at the end of a stage)."""
-        with self._lock:
-            for tid, done in self._rows.values():
-                self.bars.update(tid, total=max(done, 1), completed=max(done, 1))
-            if self._rows:
-                self.bars.refresh()
-            for tid, _done in self._rows.values():
-                self.bars.remove_task(tid)
-            self._rows.clear()
-
-
-@contextmanager
-def _progress() -> Iterator[_Display | None]:
-    """Draw the progress reports made inside the block, if there is a terminal to draw on."""
-    from debist.core.progress import listening
-
-    target = _progress_console()
-    if target is None:
-        yield None
-        return
-    display = _Display(target)
-    with display.bars, listening(display.listen):
-        try:
-            yield display
-        finally:
-            display.finish()
-
-
-def _events(wf, display: _Display | None, ran: set[str]):
-    """Return the API's ``on_progress`` callback: stage lines, bars, and with ``-v`` timings.
-
-    The names of the stages that ran go into ``ran``.
-    """
-    verbose = _level["value"] > 0
-
-    def on_progress(event) -> None:
-        stage, what, detail = event.stage, event.what, event.detail
-        why = f" ({escape(detail)})" if verbose and detail else ""
-        if what == "step":
-            if display is not None:
-                display.listen(detail, event.done, event.total)
-        elif what == "skip":
-            console.print(f"[dim]Stage '{stage}' is up to date, skipping{why}[/dim]")
-        elif what == "start":
-            if display is not None:
-                display.finish()
-                display.stage = stage
-            console.print(f"Running stage '{stage}' ...{why}")
-        elif what == "recovered":
-            console.print(f"[yellow]recovered:[/yellow] {escape(detail)}")
-        else:
-            if display is not None:
-                display.finish()
-            ran.add(stage)
-            console.print(f"[green]Stage '{stage}' done[/green] ({detail})")
-            if verbose:
-                _print_timings(wf.stage_dir(stage))
-
-    return on_progress
-
-
-def _print_timings(stage_dir: Path) -> None:
-    """Print the parts of a stage's wall time from its ``timings.json`` (``-v``), and the sum."""
-    try:
-        timings = json.loads((stage_dir / "timings.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return
-    parts = [f"{k} {v:.2f} s" for k, v in timings.items() if k != "stage" and isinstance(v, float)]
-    total = timings.get("stage") if isinstance(timings, dict) else None
-    if parts:
-        text = ", ".join(parts) + (f" (stage {total:.2f} s)" if isinstance(total, float) else "")
-        console.print(f"[dim]  timings: {escape(text)}[/dim]", soft_wrap=True)
-
-
-def _convergence_notice(wf, manifests) -> str | None:
-    """Say on how many data sets TVRegDiff stopped at its iteration limit, and what to change.
-
-    Not when the workflow states ``iterations`` itself (as the paper's fixed count): the
-    differentiate summary still records ``converged = false`` per data set.
-    """
-    diff = manifests.get("differentiate")
-    stopped = [n for n, ok in (diff.summary.get("converged", {}) if diff else {}).items() if not ok]
-    if not stopped:
-        return None
-    names = ", ".join(stopped[:3]) + (", ..." if len(stopped) > 3 else "")
-    section = wf.section("differentiate")
-    if "iterations" in section:  # a count the workflow states (the paper's 10): its choice
-        return None
-    try:
-        from debist.differentiate.tvregdiff_method import TVRegDiffConfig
-
-        params = {k: v for k, v in section.items() if k != "method"}
-        cfg = TVRegDiffConfig.from_dict(params)
-        iterations, tol = cfg.iterations, cfg.tol
-        second = cfg.iterations if cfg.iterations2 is None else cfg.iterations2
-    except DebistError:  # another method: name the keys without their values
-        iterations = tol = second = "?"
-    return (
-        f"differentiate: TVRegDiff stopped at its iteration limit before its tolerance on "
-        f"{len(stopped)} data set(s) ({names}; converged = false in the "
-        f"summary). A fixed small count is how Chartrand and the paper run it; for "
-        f"converged derivatives raise [differentiate] iterations (now {iterations}) and "
-        f"iterations2 (now {second}), or loosen [differentiate] tol (now {tol})."
-    )
-
-
-def _report(wf, manifests, ran: set[str]) -> None:
-    from debist.report import tables as report
-
-    notice = _convergence_notice(wf, manifests)
-    if notice and ("differentiate" in ran or _level["value"] > 0):  # once, not on every rerun
-        console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
-    if "rig" in manifests:
-        console.print(report.rig_table(manifests["rig"].summary))
-    if "analyze" in manifests:
-        console.print(report.analyze_table(manifests["analyze"].summary))
-    if "identify" in manifests:
-        console.print(report.identify_table(manifests["identify"].summary))
-        design = report.design_table(manifests["identify"].summary)
-        if design is not None and console.width < report.DESIGN_TABLE_WIDTH:
-            for line in report.design_lines(manifests["identify"].summary):
-                console.print(line, markup=False)
-        elif design is not None:
-            console.print(design)
-        for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
-            console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
-        line = report.auto_line(manifests["identify"].summary)
-        if line:
-            warn = manifests["identify"].summary.get("auto", {}).get("undecided")
-            console.print(escape(line), style="yellow" if warn else None)
-    last = "compare" if "compare" in manifests else "validate"
-    if "compare" in manifests:
-        s = manifests["compare"].summary
-        console.print(f"SINDy ({s['n_params']} terms):")
-        for equation in str(s["equations"]).splitlines():  # a term per line, not one long line
-            for line in report.wrap_equation(equation):
-                console.print(f"  {escape(line)}", soft_wrap=True)
-    if last in manifests:
-        summary = manifests[last].summary
-        console.print(report.nrmse_table(summary["table"]))
-        table = report.published_table(
-            summary["table"], summary.get("published", []), summary.get("order")
-        )
-        if table is not None:
-            console.print(table)
-    console.print(f"[dim]artifacts: {escape(str(wf.output_dir))}[/dim]")
-
-
 def _run(
     workflow: Path,
     stages: list[str] | None,
@@ -478,7 +245,7 @@ def _run(
                 [n.strip() for n in listed.split(",") if n.strip()] if listed is not None else None
             )
         ran: set[str] = set()
-        with _progress() as display:
+        with progress() as display:
             result = api.run(
                 wf,
                 stages=stages,
@@ -486,13 +253,13 @@ def _run(
                 until=until,
                 force=force,
                 wait=wait,
-                on_progress=_events(wf, display, ran),
+                on_progress=stage_events(wf, display, ran),
             )
-        _report(wf, result.manifests, ran)
+        print_summary(wf, result.manifests, ran)
         if select is not None:  # `debist run`, not a stage command
-            _report_line(wf, result.manifests, workflow)
+            print_report_line(wf, result.manifests, workflow)
         if result.digest is not None:
-            _essential(f"run digest: [bold]{result.digest}[/bold]")
+            essential(f"run digest: [bold]{result.digest}[/bold]")
             line = _verify_command(workflow, result.digest, out, sets)
             console.print(f"[dim]check it later with: {escape(line)}[/dim]", soft_wrap=True)
 
@@ -505,22 +272,6 @@ def _verify_command(workflow: Path, digest: str, out: Path | None, sets: list[st
     for item in sets or ():
         words += ["--set", item]
     return shlex.join(words)
-
-
-def _report_line(wf, manifests, workflow: Path) -> None:
-    """Say where the run's report is, or that the workflow writes none and how to get one."""
-    from debist.report.html import REPORT_FILE
-
-    if "report" in manifests:
-        console.print(
-            f"report: {escape(str(wf.stage_dir('report') / REPORT_FILE))}", soft_wrap=True
-        )
-    elif "report" not in wf.sections:
-        text = (
-            f"no report written: workflow '{workflow}' has no [report] section; add the line "
-            "[report] to it for one HTML page of the run (report/report.html)"
-        )
-        console.print(escape(text), soft_wrap=True)
 
 
 @app.command(cls=_Command)
@@ -688,7 +439,7 @@ def init(
             console.print(escape(line), style="yellow" if g.assumed else None, soft_wrap=True)
     console.print(escape(done.advice), soft_wrap=True)
     path = str(done.path)
-    _essential(escape(f"wrote {path}; run it with: debist run {shlex.quote(path)}"))
+    essential(escape(f"wrote {path}; run it with: debist run {shlex.quote(path)}"))
 
 
 @app.command(cls=_Command)
@@ -779,7 +530,7 @@ def status(
         return
     for s in states:
         color = {"up to date": "green", "stale": "yellow", "missing": "red"}[s.state]
-        _essential(
+        essential(
             f"{s.stage:14s} [{color}]{s.state}[/{color}]"
             + (f"  ({escape(s.reason)})" if s.reason else "")
         )
@@ -1017,8 +768,8 @@ def batch(
     selected = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
         files = api.find_workflows(paths)
-        target = _progress_console()
-        columns = _bar_columns(TextColumn("batch: workflows"))
+        target = progress_console()
+        columns = bar_columns(TextColumn("batch: workflows"))
         with Progress(*columns, console=target, transient=True, disable=target is None) as bar:
             task = bar.add_task("batch", total=len(files))
             results = api.run_batch(

@@ -9,7 +9,7 @@ import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
-from debist import cli
+from debist import cli, terminal
 from debist.core import progress
 from debist.physics.segments import solve_segments
 from tests.conftest import SYNTHETIC_WORKFLOW, write_rig_csv
@@ -35,8 +35,8 @@ def project(tmp_path, bistable_record):
 def screen(monkeypatch):
     """A terminal for the progress display: rich's console on a string buffer."""
     buffer = io.StringIO()
-    terminal = Console(file=buffer, force_terminal=True, width=160, color_system=None)
-    monkeypatch.setattr(cli, "_progress_console", lambda: terminal)
+    fake = Console(file=buffer, force_terminal=True, width=160, color_system=None)
+    monkeypatch.setattr(terminal, "progress_console", lambda: fake)
     return buffer
 
 
@@ -62,7 +62,7 @@ def test_refine_run_draws_stage_task_and_evaluations_done_of_total(project, scre
 
 
 def test_without_a_terminal_nothing_is_drawn(project):
-    assert cli._progress_console() is None  # CliRunner's stderr is no terminal
+    assert terminal.progress_console() is None  # CliRunner's stderr is no terminal
     result = CliRunner().invoke(cli.app, ["run", str(project / "wf.toml"), "--until", "ingest"])
     assert result.exit_code == 0, result.output
     assert "data sets" not in result.output and "━" not in result.output
@@ -75,13 +75,13 @@ class _Terminal(io.StringIO):
 
 def test_quiet_draws_no_progress_even_on_a_terminal(monkeypatch):
     monkeypatch.setattr(sys, "stderr", _Terminal())
-    cli._level["value"] = 0
-    assert cli._progress_console() is not None
-    cli._level["value"] = -1
+    terminal.level["value"] = 0
+    assert terminal.progress_console() is not None
+    terminal.level["value"] = -1
     try:
-        assert cli._progress_console() is None
+        assert terminal.progress_console() is None
     finally:
-        cli._level["value"] = 0
+        terminal.level["value"] = 0
 
 
 def test_segmented_integration_reports_simulated_time_up_to_the_end():
