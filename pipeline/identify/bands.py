@@ -34,7 +34,7 @@ import numpy as np
 from debist.core import metrics
 from debist.identify.design import at_level
 from debist.identify.excitation import input_active, quasi_static
-from debist.identify.stability import _small_signal
+from debist.identify.stability import small_signal
 from debist.model.basis import RBFBasis
 from debist.model.terms import PhysicsPrior, term_sign, term_table
 from debist.model.termtable import input_map
@@ -804,7 +804,7 @@ def stiffness_bands(
         bands["k_lo"][i], bands["k_hi"][i] = lo, hi
         # f_n of each end as the stability table computes it; 0 where the end is not positive
         bands["f_n_lo"][i], bands["f_n_hi"][i] = (
-            np.nan_to_num(_small_signal(x, float(row["m_q"]), 0.0)[0]) for x in (lo, hi)
+            np.nan_to_num(small_signal(x, float(row["m_q"]), 0.0)[0]) for x in (lo, hi)
         )
     for name, values in bands.items():
         out[name] = values

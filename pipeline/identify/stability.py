@@ -46,6 +46,7 @@ __all__ = [
     "Verdict",
     "equilibria",
     "model_is_stable",
+    "small_signal",
     "stability_table",
     "switching_voltages",
     "verdict",
@@ -148,8 +149,29 @@ _COLUMNS = ("q", "static_stable", "damped", "stable", "k", "m_q", "d", "f_n", "z
 _SWITCH_COLUMNS = ("input", "v_switch", "q_well", "q_saddle", "q_fold", "reached", "reason")
 
 
-def _small_signal(k: float, m_q: float, d: float) -> tuple[float, float]:
-    """``f_n`` [Hz] and ``zeta`` [-] of ``m_q s^2 + d s + k``; NaN unless ``k > 0``."""
+def small_signal(k: float, m_q: float, d: float) -> tuple[float, float]:
+    """Natural frequency and damping ratio of the linearisation ``m_q s^2 + d s + k`` at a well.
+
+    Parameters
+    ----------
+    k : float
+        Tangent stiffness ``dF/dq`` at the equilibrium [N/m, or per unit mass].
+    m_q : float
+        Mass at the equilibrium [kg, or 1 per unit mass].
+    d : float
+        Damping at the equilibrium [N s/m, or per unit mass].
+
+    Returns
+    -------
+    f_n : float
+        ``sqrt(k / m_q) / (2 pi)`` [Hz]; NaN unless ``k > 0`` (no well).
+    zeta : float
+        ``d / (2 sqrt(k m_q))`` [-]; NaN unless ``k > 0``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 linearised at an equilibrium (a mass-spring-damper).
+    """
     if not k > 0:
         return float("nan"), float("nan")
     return float(np.sqrt(k / m_q) / (2.0 * np.pi)), float(d / (2.0 * np.sqrt(k * m_q)))
@@ -292,7 +314,7 @@ def equilibria(
         barrier = _barriers(q, wells, energy)
         for j in range(len(q)):
             m_j = _mass_at(model, float(q[j]))
-            f_n, zeta = _small_signal(float(k[j]), m_j, float(d[j]))
+            f_n, zeta = small_signal(float(k[j]), m_j, float(d[j]))
             out.append(
                 EquilibriumPoint(
                     level=index, v=v, q=float(q[j]), k=float(k[j]), m_q=m_j,

@@ -15,6 +15,7 @@ from debist.identify.stability import (
     StabilityError,
     equilibria,
     model_is_stable,
+    small_signal,
     stability_table,
     switching_voltages,
     verdict,
@@ -203,3 +204,12 @@ def test_damping_that_feeds_energy_into_the_measured_motion_is_unstable():
     assert model_is_stable(model, q, q_dot=fast_near_wells)[0]
     ok, reason = model_is_stable(model, q, q_dot=slow_near_wells)
     assert not ok and "feeds" in reason and "energy" in reason
+
+
+def test_small_signal_is_the_mass_spring_damper_of_the_well():
+    """k = (2 pi)^2 m: 1 Hz; d = 2 sqrt(k m): critical damping; no well (k <= 0): NaN."""
+    m = 0.02
+    k = (2.0 * np.pi) ** 2 * m
+    f_n, zeta = small_signal(k, m, 2.0 * np.sqrt(k * m))
+    assert f_n == pytest.approx(1.0, rel=1e-12) and zeta == pytest.approx(1.0, rel=1e-12)
+    assert np.isnan(small_signal(0.0, m, 1.0)).all() and np.isnan(small_signal(-k, m, 1.0)).all()
