@@ -727,6 +727,12 @@ def batch_index(
     pathlib.Path or None
         The page (replaced atomically); None when no workflow could be loaded or the
         common folder is the file system root or the home folder.
+
+    Raises
+    ------
+    OutputDirError
+        If the folder holds an ``index.html`` that debist did not write (or that was changed
+        since): it is left as it is and nothing is written.
     """
     from debist.engine.batch import write_index
 

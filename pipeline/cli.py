@@ -808,7 +808,11 @@ def batch(
     pages = [
         (f"zoo table of {folder.name}", _zoo_report(folder)) for folder in api.find_zoos(paths)
     ]
-    index = api.batch_index(results, pages=pages)
+    try:
+        index = api.batch_index(results, pages=pages)
+    except OutputDirError as exc:  # a user's index.html where the index would go: kept
+        err.print(f"[yellow]batch index not written:[/yellow] {escape(str(exc))}", soft_wrap=True)
+        index = None
     if index is not None:
         console.print(f"index of the reports: {escape(str(index))}")
     if failed:

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import hashlib
+import json
 import logging
 import os
 import socket
@@ -31,7 +33,8 @@ from pathlib import Path
 from typing import Any
 
 from debist.core import allocator, preflight
-from debist.core.errors import DebistError, WorkflowError
+from debist.core.errors import DebistError, OutputDirError, WorkflowError
+from debist.core.fileformats import atomic_write
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
@@ -60,6 +63,9 @@ _WORKER_ENVIRON = {
 }
 #: Type of the arguments of one batch item: (workflow file, stages, force).
 _Args = tuple[str, tuple[str, ...] | None, bool]
+#: Beside the batch index: the sha256 of the page debist wrote there (JSON), so that a later
+#: batch replaces only its own page, never a user's ``index.html``.
+INDEX_MARKER = ".debist-index.json"
 
 
 @dataclass(frozen=True)
@@ -735,6 +741,12 @@ def write_index(
         The page written (replaced atomically); None when no workflow could be loaded or
         the common folder is the file system root or the home folder.
 
+    Raises
+    ------
+    OutputDirError
+        If ``index.html`` exists in the folder and is not debist's (:func:`index_is_ours`):
+        nothing is written, the user's file stays as it is.
+
     References
     ----------
     :func:`debist.report.html.render_index` (the page).
@@ -769,4 +781,56 @@ def write_index(
         )
     links = [(label, Path(os.path.relpath(Path(page).resolve(), folder)).as_posix())
              for label, page in pages]  # fmt: skip
-    return write_page(folder / INDEX_FILE, render_index(rows, links))
+    page = folder / INDEX_FILE
+    if not index_is_ours(folder):
+        raise OutputDirError(
+            f"'{page}' is not a batch index debist wrote (a page of yours, or one changed "
+            "since): kept as it is; remove or rename it for the batch to write its index there"
+        )
+    text = render_index(rows, links)
+    written = write_page(page, text)
+    record = {"debist": "batch index", "file": INDEX_FILE, "sha256": _sha256_text(text)}
+    atomic_write(folder / INDEX_MARKER, json.dumps(record, indent=2) + "\n")
+    return written
+
+
+def _sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def index_is_ours(folder: str | os.PathLike) -> bool:
+    """Tell whether debist may write the batch index into a folder without losing a user's file.
+
+    Parameters
+    ----------
+    folder : path-like
+        The folder of the index.
+
+    Returns
+    -------
+    bool
+        True when the folder holds no ``index.html``, or one that debist wrote and nobody
+        changed since: its sha256 is the one recorded in :data:`INDEX_MARKER` beside it (or,
+        without that record, as written by an older debist, its title is the batch index's).
+        False for any other ``index.html`` (a user's page, or debist's edited by hand).
+
+    References
+    ----------
+    FIPS 180-4 (SHA-256).
+    """
+    page = Path(folder) / INDEX_FILE
+    if not page.exists() and not page.is_symlink():
+        return True
+    if page.is_symlink() or not page.is_file():
+        return False
+    try:
+        data = page.read_bytes()
+    except OSError:
+        return False
+    try:
+        record = json.loads((Path(folder) / INDEX_MARKER).read_text(encoding="utf-8"))
+    except FileNotFoundError:  # an index of a debist that kept no record: its title
+        return b"<title>debist batch: " in data[:2048]
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and record.get("sha256") == hashlib.sha256(data).hexdigest()

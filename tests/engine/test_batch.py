@@ -12,8 +12,10 @@ import pytest
 from debist.core import artifacts
 from debist.core.errors import WorkflowError
 from debist.engine.batch import (
+    INDEX_MARKER,
     BatchResult,
     expand_workflows,
+    index_is_ours,
     local_cluster,
     run_batch,
     summary_table,
@@ -448,3 +450,49 @@ def test_a_batch_member_has_the_digest_of_its_solo_run(tmp_path, monkeypatch,
     solo, _ = paper_experiment_run
     assert batch is not None
     assert Runner(load_workflow(shipped, solo)).digest() == batch
+
+
+def test_the_batch_index_never_replaces_a_users_index_html(protos, monkeypatch):
+    """Output folders in a user's web folder: the batch writes its index only where it may."""
+    from tests.conftest import invoke_cli
+
+    root = protos[0].parent
+    monkeypatch.chdir(root)
+    for path in protos[:2]:
+        text = path.read_text().replace('output_dir = "runs/', 'output_dir = "../web/run-')
+        path.write_text(text)
+    web = root.parent / "web"
+    web.mkdir()
+    mine = b"<!DOCTYPE html><title>Lab 4: actuators</title><p>our rig</p>\n"
+    (web / "index.html").write_bytes(mine)
+    code, out = invoke_cli("batch", *protos[:2], "--stages", "ingest", "--scheduler", "synchronous")
+    assert code == 0, out
+    assert (web / "index.html").read_bytes() == mine  # kept, byte for byte
+    assert not (web / INDEX_MARKER).exists()
+    lines = [line for line in out.splitlines() if "batch index not written" in line]
+    assert len(lines) == 1 and str(web / "index.html") in lines[0], out
+    assert "index of the reports" not in out
+    # without the user's page the index goes there, and a later batch replaces its own page
+    (web / "index.html").unlink()
+    code, out = invoke_cli("batch", *protos[:2], "--stages", "ingest", "--scheduler", "synchronous")
+    assert code == 0 and f"index of the reports: {web / 'index.html'}" in out, out
+    assert index_is_ours(web) and "proto-b" in (web / "index.html").read_text()
+    # a page of debist's that the user edited is theirs now
+    with open(web / "index.html", "a", encoding="utf-8") as fh:
+        fh.write("<p>notes</p>\n")
+    edited = (web / "index.html").read_bytes()
+    assert not index_is_ours(web)
+    code, out = invoke_cli("batch", *protos[:2], "--stages", "ingest", "--scheduler", "synchronous")
+    assert code == 0 and "batch index not written" in out, out
+    assert (web / "index.html").read_bytes() == edited
+
+
+def test_an_index_html_of_an_older_debist_is_recognised_by_its_title(tmp_path):
+    assert index_is_ours(tmp_path)  # nothing there
+    (tmp_path / "index.html").write_text("<!DOCTYPE html>\n<html>\n<title>debist batch: 3 p")
+    assert index_is_ours(tmp_path)  # no record: an older debist's page
+    (tmp_path / "index.html").write_text("<html><title>Lab</title></html>")
+    assert not index_is_ours(tmp_path)
+    (tmp_path / "index.html").unlink()
+    (tmp_path / "index.html").symlink_to(tmp_path / "elsewhere.html")
+    assert not index_is_ours(tmp_path)  # a link: whatever it points to is not replaced
