@@ -446,6 +446,7 @@ def export_model(
     force: bool = False,
     overrides: Mapping[str, Any] | Sequence[str] | None = None,
     output_dir: PathLike | None = None,
+    wait: bool = False,
 ) -> Export:
     """Write the identified model as self-contained C99, MATLAB or NumPy code (``debist export``).
 
@@ -464,6 +465,9 @@ def export_model(
         an error and nothing is written.
     overrides, output_dir : optional
         As for :func:`run`.
+    wait : bool, optional
+        When another process writes to the output folder, wait for it to end instead of
+        refusing (as for :func:`run`).
 
     Returns
     -------
@@ -478,6 +482,8 @@ def export_model(
         is a folder no run writes into either: the file system root, the home folder, the
         workflow file's folder or one that holds a data source
         (:func:`debist.engine.outdir.check_place`).
+    RunLockedError
+        Another process writes to the output folder (unless ``wait``).
 
     References
     ----------
@@ -492,7 +498,7 @@ def export_model(
 
     check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
     dest = check_path(dest, "dest", optional=True)
-    force = check_flag(force, "force")
+    force, wait = check_flag(force, "force"), check_flag(wait, "wait")
     runner = Runner(_workflow(workflow, overrides, output_dir))
     folder = runner.wf.output_dir
     if dest is not None:
@@ -503,7 +509,7 @@ def export_model(
             what="export folder (dest)",
             advice="the model's files go into a folder of their own; choose one for dest",
         )
-    with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
+    with outdir.output_lock(folder, wait=wait) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
         files = export_files(model, fmt, info)
         target = dest if dest is not None else folder / "export"

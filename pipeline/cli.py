@@ -34,6 +34,7 @@ from debist.core.errors import (
     DebistError,
     Interrupted,
     OutputDirError,
+    RunLockedError,
     VerificationError,
     WorkflowError,
     exit_code,
@@ -215,6 +216,15 @@ def _guard() -> Iterator[None]:
         raise typer.Exit(exit_code(exc)) from None
 
 
+@contextmanager
+def _wait_advice() -> Iterator[None]:
+    """Name ``--wait`` in a refusal for a locked output folder (the commands that have it)."""
+    try:
+        yield
+    except RunLockedError as exc:
+        raise RunLockedError(f"{exc}, or pass --wait to wait for it") from None
+
+
 def _on_sigterm(signum: int, _frame: object) -> None:
     raise Interrupted(signum)
 
@@ -231,7 +241,7 @@ def _run(
     from debist import api
 
     start = until = None
-    with _guard():
+    with _guard(), _wait_advice():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if wf.overrides:
             console.print(
@@ -692,6 +702,7 @@ def export(
     ] = False,
     out: OutOpt = None,
     sets: SetOpt = None,
+    wait: WaitOpt = False,
 ) -> None:
     """Write the identified model as self-contained C99, MATLAB or NumPy code for a controller.
 
@@ -699,11 +710,12 @@ def export(
     """
     from debist import api
 
-    with _guard():
+    with _guard(), _wait_advice():
         try:
             done = api.export_model(
-                workflow, fmt.value, dest=dest, force=force, overrides=sets or None, output_dir=out
-            )
+                workflow, fmt.value, dest=dest, force=force, overrides=sets or None,
+                output_dir=out, wait=wait,
+            )  # fmt: skip
         except OutputDirError as exc:
             if force:
                 raise

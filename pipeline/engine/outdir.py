@@ -366,8 +366,8 @@ def output_lock(out: str | os.PathLike, *, wait: bool = False) -> Iterator[None]
         lock.acquire()
     except Timeout:
         raise RunLockedError(
-            f"output folder '{out}' is being written by {lock_holder(out)}; wait for it to "
-            "finish, or pass --wait"
+            f"output folder '{out}' is being written by {lock_holder(out)}; run again when it "
+            "is done"
         ) from None
     try:
         holder = {

@@ -360,6 +360,30 @@ def test_verify_while_a_run_writes_says_so(project):
     assert code == 2 and f"pid {os.getpid()}" in out
 
 
+def test_export_while_a_run_writes_names_its_own_wait_option_and_waits_with_it(project):
+    import threading
+
+    dest = project / "model-code"
+    with outdir.output_lock(project / "out"):
+        code, out = invoke("export", project / "wf.toml", "--dest", dest)
+        assert code == 2 and f"pid {os.getpid()}" in out, out
+        assert out.count("\n") == 1 and out.rstrip().endswith("or pass --wait to wait for it")
+        assert not dest.exists()  # nothing written
+        waited = {}
+        waiting = threading.Thread(
+            target=lambda: waited.update(result=invoke("export", project / "wf.toml",
+                                                        "--dest", dest, "--wait")),
+        )  # fmt: skip
+        waiting.start()
+        waiting.join(timeout=1.0)
+        assert waiting.is_alive() and not dest.exists()  # blocked on the lock, not failed
+    waiting.join(timeout=120)
+    code, out = waited["result"]
+    assert code == 0 and sorted(p.name for p in dest.iterdir()) == [
+        "debist_model.c", "debist_model.h"
+    ], out  # fmt: skip
+
+
 # ----------------------------------------------------------- the chain
 
 
