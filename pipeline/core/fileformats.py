@@ -143,6 +143,78 @@ def sha256_file(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
+#: What changes when a file is written or replaced: ``(st_dev, st_ino, st_size,
+#: st_mtime_ns, st_ctime_ns)``.
+FileIdentity = tuple[int, int, int, int, int]
+
+
+def _identity(st: os.stat_result) -> FileIdentity:
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def file_identity(path: str | os.PathLike) -> FileIdentity | None:
+    """Return what tells a file from another one, or from itself after a write.
+
+    Parameters
+    ----------
+    path : path-like
+        The file (symbolic links followed).
+
+    Returns
+    -------
+    tuple of int or None
+        ``(st_dev, st_ino, st_size, st_mtime_ns, st_ctime_ns)``: another file renamed over
+        the path has another inode, a write in place moves the change time; None when the
+        file cannot be stat'ed (missing).
+
+    References
+    ----------
+    POSIX ``stat(2)`` (``st_ctime`` is updated by every write and every change of the inode).
+    """
+    try:
+        return _identity(os.stat(path))
+    except OSError:
+        return None
+
+
+def sha256_identified(path: str | os.PathLike) -> tuple[str, FileIdentity | None]:
+    """Return the hex sha256 digest of a file's bytes and the identity of the file hashed.
+
+    The bytes are hashed through one open file descriptor whose ``fstat`` is taken before and
+    after: the identity is that of the file whose bytes were hashed, and None when the file
+    changed while it was read (the digest then describes no version of it).
+
+    Parameters
+    ----------
+    path : path-like
+        File to hash.
+
+    Returns
+    -------
+    digest : str
+        64 hexadecimal characters.
+    identity : tuple of int or None
+        As :func:`file_identity`; compare it with :func:`file_identity` of the path later to
+        tell whether the path still names those bytes.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+
+    References
+    ----------
+    FIPS 180-4 (SHA-256); POSIX ``fstat(2)``.
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        before = _identity(os.fstat(fh.fileno()))
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+        after = _identity(os.fstat(fh.fileno()))
+    return digest.hexdigest(), before if before == after else None
+
+
 def canonical_json(obj: Any) -> str:
     """Serialise ``obj`` to canonical JSON (sorted keys, no spaces, NumPy scalars as floats).
 

@@ -32,9 +32,11 @@ from debist.core.errors import (
     ArtifactError,
     DebistError,
     OutputDirError,
+    RigLogError,
     WorkflowError,
 )
 from debist.core.faults import fault_point
+from debist.core.fileformats import FileIdentity, file_identity, sha256_identified
 from debist.core.forking import fork_workers, one_core
 from debist.engine import outdir, verification
 from debist.engine.fingerprint import code_fingerprint
@@ -244,7 +246,7 @@ class Runner:
     def __init__(self, workflow: Workflow, *, wait: bool = False):
         self.wf = workflow
         self.wait = wait
-        self._source_hashes: dict[Path, str] = {}
+        self._source_hashes: dict[Path, tuple[str, FileIdentity | None]] = {}
         self._ahead: tuple[str, ...] = ()  # the stages still to run after the running one
 
     def stages(self) -> list[str]:
@@ -365,10 +367,31 @@ class Runner:
                         return None
                     inputs[f"{d.name}:source"] = rig.outputs[f"{d.rig}.mat"]
                     continue
-                if d.source not in self._source_hashes:
-                    self._source_hashes[d.source] = artifacts.sha256_file(d.source)
-                inputs[f"{d.name}:source"] = self._source_hashes[d.source]
+                inputs[f"{d.name}:source"] = self._source_hash(d.source)
         return inputs, upstream
+
+    def _source_hash(self, source: Path) -> str:
+        """Return a source file's sha256, hashed again when the path names another file."""
+        known = self._source_hashes.get(source)
+        if known is None or known[1] is None or file_identity(source) != known[1]:
+            known = self._source_hashes[source] = sha256_identified(source)
+        return known[0]
+
+    def _check_sources_read(self) -> None:
+        """Refuse ingest tables read from other bytes than the source hashes in their key.
+
+        Each source was hashed (:meth:`_source_hash`) before the stage read it; the path
+        still names the file hashed, unwritten, only if its identity is unchanged. Else
+        another program replaced or wrote it in between, and the tables may hold bytes that
+        no hash in the manifest describes: the stage fails and writes nothing.
+        """
+        for d in self.wf.datasets:
+            known = self._source_hashes.get(d.source)
+            if not d.rig and (known is None or file_identity(d.source) != known[1]):
+                raise RigLogError(
+                    f"source '{d.source}' of data set '{d.name}' was replaced or written while "
+                    "ingest read it: nothing was written; run again once the file is complete"
+                )
 
     def _code(self, stage: str) -> tuple[str, dict[str, str]]:
         entry = registry.stage(stage)
@@ -873,6 +896,8 @@ class Runner:
             t_run = time.perf_counter()
             result = module.execute(self) if prepared is None else module.execute(self, prepared)
             ran = time.perf_counter() - t_run
+        if stage == "ingest":
+            self._check_sources_read()
         seconds = time.perf_counter() - t0
         # the stage's own parts, what they leave out, and the import of its code (its
         # libraries on first use); write_stage adds the writing as "write"

@@ -225,6 +225,65 @@ def test_failed_first_run_leaves_no_folder(fresh):
     assert not (fresh / "out").exists()
 
 
+@pytest.mark.parametrize("how", ["replaced", "written in place"])
+def test_a_source_changed_while_ingest_reads_it_is_refused_and_nothing_recorded(
+    fresh, monkeypatch, how
+):
+    """The manifest's source hash must describe the bytes ingest read, or nothing is written."""
+    import hashlib
+
+    import debist.stages.ingest as ingest_stage
+
+    source = fresh / "data/rig.csv"
+    original = source.read_bytes()
+    other = original.replace(b"0", b"2", 50)  # another recording of the same shape
+    read = ingest_stage.read_raw
+
+    def changing(path, spec):  # another program changes the log as ingest opens it
+        if source.read_bytes() == original:
+            if how == "replaced":
+                (fresh / "data/new.csv").write_bytes(other)
+                os.replace(fresh / "data/new.csv", source)
+            else:
+                with open(source, "r+b") as fh:
+                    fh.write(other)
+        return read(path, spec)
+
+    monkeypatch.setattr(ingest_stage, "read_raw", changing)
+    code, out = invoke("run", fresh / "wf.toml")
+    lines = [line for line in out.splitlines() if line.startswith("error:")]
+    assert code == 1 and len(lines) == 1, out
+    assert f"'{source}'" in lines[0] and "while ingest read it" in lines[0]
+    assert not (fresh / "out").exists()  # no table, no manifest
+    # the file is stable now: the next run records exactly the bytes it ingests
+    monkeypatch.setattr(ingest_stage, "read_raw", read)
+    code, out = invoke("run", fresh / "wf.toml", "--stages", "ingest")
+    assert code == 0, out
+    manifest = json.loads((fresh / "out/ingest/manifest.json").read_text())
+    assert manifest["inputs"]["estimation:source"] == hashlib.sha256(other).hexdigest()
+    table = pd.read_parquet(fresh / "out/ingest/estimation.parquet")
+    first = other.decode().splitlines()[0].split(",")
+    assert table["v1"].iloc[0] == pytest.approx(float(first[0]))
+    assert table["q"].iloc[0] == pytest.approx(float(first[1]))
+
+
+def test_file_identity_tells_a_replaced_or_rewritten_file(tmp_path):
+    from debist.core.fileformats import file_identity, sha256_identified
+
+    path = tmp_path / "log.csv"
+    path.write_bytes(b"1,2\n")
+    digest, identity = sha256_identified(path)
+    assert digest == artifacts.sha256_file(path) and identity == file_identity(path)
+    (tmp_path / "new.csv").write_bytes(b"1,2\n")  # the same bytes, another file
+    os.replace(tmp_path / "new.csv", path)
+    assert file_identity(path) != identity
+    identity = file_identity(path)
+    os.utime(path, ns=(1, 1))  # touched: its change time moves
+    assert file_identity(path) != identity
+    path.unlink()
+    assert file_identity(path) is None
+
+
 def test_stage_folders_get_the_umask_permissions(fresh):
     old = os.umask(0o027)
     try:
