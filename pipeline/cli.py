@@ -197,8 +197,13 @@ def _print_version(value: bool) -> None:
 
 
 @contextmanager
-def _guard() -> Iterator[None]:
-    """Turn debist's exceptions and interruptions into one line and their exit code."""
+def _guard(
+    kept: str = "finished stages are kept, the unfinished one left nothing behind",
+) -> Iterator[None]:
+    """Turn debist's exceptions and interruptions into one line and their exit code.
+
+    ``kept``: what stays valid after an interruption, for its line.
+    """
     try:
         yield
     except DebistError as exc:
@@ -209,10 +214,7 @@ def _guard() -> Iterator[None]:
         raise typer.Exit(exit_code(exc)) from None
     except KeyboardInterrupt as exc:
         what = str(exc) if isinstance(exc, Interrupted) else "interrupted"
-        err.print(
-            f"[yellow]{escape(what)}[/yellow]: stopped; finished stages are kept, the "
-            "unfinished one left nothing behind"
-        )
+        err.print(f"[yellow]{escape(what)}[/yellow]: stopped; {escape(kept)}", soft_wrap=True)
         raise typer.Exit(exit_code(exc)) from None
 
 
@@ -494,7 +496,9 @@ def zoo(
     """
     from debist import api
 
-    with _guard():
+    again = shlex.join(["debist", "zoo", "--size", str(size), "--seed", str(seed), "--dir",
+                        str(folder)])  # fmt: skip
+    with _guard(f"the members written are kept; finish the zoo with: {again}"):
         made = api.zoo(size, seed=seed, folder=folder)
     for name, why in made.rejected.items():
         console.print(f"{escape(name)}: redrawn ({escape('; '.join(why))})")

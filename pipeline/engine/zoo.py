@@ -13,8 +13,10 @@ simulates each one's records on the virtual rig and writes ``D/<member>/``:
   ``m_q = 1``.
 
 A member is written to a scratch folder and moved into place whole; ``D/zoo.json`` lists the
-members. Rerunning with the same seed keeps the members present and adds the missing ones;
-nothing a user has is overwritten.
+members. It is written first, marked unfinished, and marked finished when every member is
+there: a zoo stopped part way (Ctrl-C, SIGTERM, a kill) is recognised as such, ``debist batch``
+refuses it naming the command that finishes it, and rerunning with the same seed keeps the
+members present and adds the missing ones; nothing a user has is overwritten.
 
 References
 ----------
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -284,11 +287,39 @@ def write_member(folder: Path, member: ZooMember, cfg, runs, statics) -> None:
         raise
 
 
+#: A member's scratch folder (:func:`write_member`), left behind only by a killed process.
+_SCRATCH = re.compile(r"\.m\d{3}\.[0-9a-f]{8}\.tmp")
+
+
+def _unindexed_zoo(folder: Path, seed: int) -> dict[str, Any] | None:
+    """Index a zoo stopped before it wrote ``zoo.json`` (by an older debist), else None.
+
+    Such a folder holds only complete member folders (``m000``, ...) of this seed and version,
+    by their ``truth.json``, and scratch folders.
+    """
+    names = []
+    for entry in folder.iterdir():
+        if entry.name.startswith("."):  # scratch folders; hidden files are not looked at
+            continue
+        try:
+            zoo = json.loads((entry / "truth.json").read_text(encoding="utf-8"))["zoo"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        if zoo != {**zoo, "seed": seed, "version": ZOO_VERSION, "name": entry.name}:
+            return None
+        names.append(entry.name)
+    names.sort()
+    return {"version": ZOO_VERSION, "seed": seed, "size": len(names), "members": names}
+
+
 def _check_folder(folder: Path, seed: int) -> dict[str, Any] | None:
     """Return the folder's zoo index if it is a zoo of this seed, None if new; else refuse."""
     index = read_zoo(folder)
     if index is None:
         if folder.exists() and any(p for p in folder.iterdir() if not p.name.startswith(".")):
+            index = _unindexed_zoo(folder, seed)
+            if index is not None:
+                return index
             raise OutputDirError(
                 f"'{folder}' holds files and is not a zoo: choose an empty or new folder "
                 "(debist never overwrites a user's files)"
@@ -327,7 +358,8 @@ def write_zoo(folder: str | os.PathLike, size: int, seed: int) -> ZooResult:
     OutputDirError
         If the folder holds other files, or a zoo of another seed.
     ZooError
-        If a member has no viable draw (the members written before it stay).
+        If a member has no viable draw (the members written before it stay, and the zoo
+        stays marked unfinished).
 
     References
     ----------
@@ -338,7 +370,13 @@ def write_zoo(folder: str | os.PathLike, size: int, seed: int) -> ZooResult:
     folder = Path(folder)
     index = _check_folder(folder, seed)
     folder.mkdir(parents=True, exist_ok=True)
+    for entry in folder.iterdir():  # the scratch folder of a member being written when killed
+        if _SCRATCH.fullmatch(entry.name) and entry.is_dir():
+            remove_tree(entry)
     names = [f"m{i:03d}" for i in range(max(size, index["size"] if index else 0))]
+    info = {"version": ZOO_VERSION, "seed": seed, "size": len(names), "members": names}
+    if index != {**info, "complete": True}:  # unfinished until every member is there
+        atomic_write(folder / ZOO_FILE, json.dumps({**info, "complete": False}, indent=1) + "\n")
     written, rejected = [], {}
     task = "zoo: members"
     progress.report(task, 0, size)
@@ -355,6 +393,9 @@ def write_zoo(folder: str | os.PathLike, size: int, seed: int) -> ZooResult:
         if why:
             rejected[name] = why
         progress.report(task, i + 1, size)
-    info = {"version": ZOO_VERSION, "seed": seed, "size": len(names), "members": names}
+    # the members there without a gap: those asked for, and any further ones of earlier runs
+    present = next((k for k, n in enumerate(names) if not (folder / n / "truth.json").is_file()),
+                   len(names))  # fmt: skip
+    info = {**info, "size": present, "members": names[:present], "complete": True}
     atomic_write(folder / ZOO_FILE, json.dumps(info, indent=1) + "\n")
     return ZooResult(folder, tuple(names[:size]), tuple(written), rejected)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,9 @@ def read_zoo(folder: str | os.PathLike) -> dict[str, Any] | None:
     Returns
     -------
     dict or None
-        ``version``, ``seed``, ``size`` and ``members`` (plain file-name components).
+        ``version``, ``seed``, ``size``, ``members`` (plain file-name components) and
+        ``complete``: false while ``debist zoo`` writes it, or when it was stopped part
+        way (an index without the key is a finished zoo of an older debist).
 
     Raises
     ------
@@ -73,7 +76,8 @@ def zoo_workflows(folder: str | os.PathLike) -> list[Path]:
     Raises
     ------
     WorkflowError
-        If the folder is not a zoo or none of its members has a workflow.
+        If the folder is not a zoo, is an unfinished one (naming the command that finishes
+        it), or none of its members has a workflow.
     """
     try:
         index = read_zoo(folder)
@@ -81,6 +85,14 @@ def zoo_workflows(folder: str | os.PathLike) -> list[Path]:
         raise WorkflowError(str(exc)) from None
     if index is None:
         raise WorkflowError(f"'{folder}' is not a zoo folder (no {ZOO_FILE})")
+    if index.get("complete", True) is not True:
+        there = sum((Path(folder) / name / "truth.json").is_file() for name in index["members"])
+        words = ["--size", len(index["members"]), "--seed", index.get("seed"), "--dir", folder]
+        command = shlex.join(["debist", "zoo", *map(str, words)])
+        raise WorkflowError(
+            f"the zoo '{folder}' is unfinished ({there} of {len(index['members'])} members; "
+            f"debist zoo was stopped): finish it first with: {command}"
+        )
     found = [Path(folder) / name / MEMBER_WORKFLOW for name in index["members"]]
     found = [p for p in found if p.is_file()]
     if not found:

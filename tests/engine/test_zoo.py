@@ -156,3 +156,76 @@ def test_a_damaged_zoo_index_is_refused_by_name(tmp_path):
     with pytest.raises(WorkflowError) as err:
         expand_workflows([tmp_path])
     assert "zoo" in str(err.value)
+
+
+def test_an_unfinished_zoo_is_marked_refused_by_batch_and_its_scratch_cleared(
+    tmp_path, monkeypatch
+):
+    import debist.engine.zoo as zoo_module
+
+    def stopped(seed, i):
+        raise KeyboardInterrupt
+
+    folder = tmp_path / "z"
+    monkeypatch.setattr(zoo_module, "_simulate", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        write_zoo(folder, 3, 1)
+    index = read_zoo(folder)
+    assert index["complete"] is False and index["members"] == ["m000", "m001", "m002"]
+    with pytest.raises(WorkflowError) as err:
+        expand_workflows([folder])
+    assert str(err.value) == (
+        f"the zoo '{folder}' is unfinished (0 of 3 members; debist zoo was stopped): finish it "
+        f"first with: debist zoo --size 3 --seed 1 --dir {folder}"
+    )
+    # a member's scratch folder of a killed process goes at the next start, nothing else
+    (folder / ".m000.0123abcd.tmp").mkdir()
+    (folder / ".m000.0123abcd.tmp" / "estimation.mat").write_bytes(b"half")
+    (folder / ".keep").write_text("a user's hidden file")
+    with pytest.raises(KeyboardInterrupt):
+        write_zoo(folder, 3, 1)
+    assert sorted(p.name for p in folder.iterdir()) == [".keep", "zoo.json"]
+
+
+@pytest.mark.slow
+def test_a_zoo_stopped_by_sigterm_is_resumed_by_the_same_command(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from debist.core.artifacts import sha256_file
+
+    folder = tmp_path / "z"
+    cmd = [sys.executable, "-m", "debist", "zoo", "--size", "2", "--dir", str(folder)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (folder / "m000").is_dir() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert (folder / "m000").is_dir()
+        os.kill(proc.pid, signal.SIGTERM)
+        _out, errs = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    again = f"debist zoo --size 2 --seed 1 --dir {folder}"
+    assert proc.returncode == 143, errs
+    assert errs.strip() == (
+        "interrupted by SIGTERM: stopped; the members written are kept; finish the zoo with: "
+        + again
+    )
+    kept = {p.name: sha256_file(p) for p in (folder / "m000").iterdir()}
+    assert not (folder / "m001").exists() and read_zoo(folder)["complete"] is False
+    batch = subprocess.run([sys.executable, "-m", "debist", "batch", str(folder)],
+                           capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert batch.returncode == 2 and batch.stderr.count("\n") == 1, batch.stderr
+    assert f"finish it first with: {again}" in batch.stderr
+    rerun = subprocess.run([sys.executable, "-m", "debist", *again.split()[1:]],
+                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert rerun.returncode == 0, rerun.stderr
+    assert "(1 were there)" in rerun.stdout
+    assert {p.name: sha256_file(p) for p in (folder / "m000").iterdir()} == kept
+    index = read_zoo(folder)
+    assert index["complete"] is True and index["members"] == ["m000", "m001"]
+    assert (folder / "m001" / "truth.json").is_file()
