@@ -755,10 +755,14 @@ class FleetResult:
         One workflow file per kept prototype, in draw order.
     rejected : dict of str to str
         Draws skipped because their logs fail the template's ingest, with the reason.
+    replaced : tuple of pathlib.Path
+        What a fleet stopped part way had left in the folder and this call removed first
+        (unscreened workflows, their output folders).
     """
 
     paths: tuple[Path, ...]
     rejected: dict[str, str]
+    replaced: tuple[Path, ...] = ()
 
 
 def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> FleetResult:
@@ -767,6 +771,9 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     Each prototype's rig experiments are run once and its logs checked by the template's
     own ingest; a draw whose logs fail is skipped (and named), the next draw taken. A kept
     member's rig and ingest stages stay in its output folder (up to date for the batch).
+    The folder records the fleet as unfinished until its workflows are all written
+    (:mod:`debist.engine.fleetmark`): a fleet stopped part way is refused by
+    :func:`run_batch` and replaced by the next call.
 
     Parameters
     ----------
@@ -777,7 +784,8 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     seed : int, optional
         Seed of the scatter.
     folder : path-like
-        Where the workflows go; it must not hold workflows already.
+        Where the workflows go; it must not hold workflows already (but those of a fleet
+        stopped part way, which are removed first).
 
     Returns
     -------
@@ -791,6 +799,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     """
     import tomllib
 
+    from debist.engine.fleetmark import clear_unfinished, finish_fleet, start_fleet
     from debist.engine.fleetrun import remove_runs, viable_fleet
     from debist.workflow import tomltext
 
@@ -800,19 +809,26 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
         raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise WorkflowError(f"cannot read the template '{template}': {exc}") from None
+    replaced = clear_unfinished(folder)  # what a fleet stopped part way left there
     existing = sorted(folder.glob("*.toml")) if folder.is_dir() else []
     if existing:
         raise WorkflowError(
             f"'{folder}' holds workflows already ({existing[0].name}, ...): choose another "
             "folder (debist never overwrites them)"
         )
-    files, rejected, runs = viable_fleet(raw, template.resolve().parent, folder, size, seed)
+    start_fleet(folder, template, size, seed)  # unfinished until the workflows are written
     try:
-        paths = artifacts.write_text_files(folder, files)
+        files, rejected, runs = viable_fleet(raw, template.resolve().parent, folder, size, seed)
+        try:
+            paths = artifacts.write_text_files(folder, files)
+        except BaseException:
+            remove_runs(runs)  # the checks' output folders without their workflows
+            raise
     except BaseException:
-        remove_runs(runs)  # the checks' output folders without their workflows
+        clear_unfinished(folder)  # what the checks left, if anything, and the record
         raise
-    return FleetResult(tuple(paths), dict(rejected))
+    finish_fleet(folder, [p.name for p in paths])
+    return FleetResult(tuple(paths), dict(rejected), tuple(replaced))
 
 
 def zoo(size: int, *, seed: int, folder: PathLike) -> Any:

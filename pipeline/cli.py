@@ -471,8 +471,11 @@ def fleet(
     """
     from debist import api
 
-    with _guard():
+    with _guard("nothing of the fleet is kept; the same command writes it anew"):
         made = api.fleet(template, size, seed=seed, folder=folder)
+    if made.replaced:
+        console.print(f"removed {len(made.replaced)} unscreened files and folders of the fleet "
+                      f"stopped earlier in {escape(str(folder))}")  # fmt: skip
     for name, why in made.rejected.items():
         console.print(f"skipped {escape(name)}: its log fails the template's ingest: {escape(why)}")
     console.print(

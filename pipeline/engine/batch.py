@@ -35,6 +35,7 @@ from typing import Any
 from debist.core import allocator, preflight
 from debist.core.errors import DebistError, OutputDirError, WorkflowError
 from debist.core.fileformats import atomic_write
+from debist.engine.fleetmark import unfinished_fleet, unfinished_message
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
 from debist.report.html import INDEX_FILE, REPORT_FILE, index_row, render_index, write_page
@@ -200,7 +201,9 @@ def expand_workflows(paths_or_globs: str | os.PathLike | Iterable[str | os.PathL
     ------
     WorkflowError
         If there is no entry, or an entry matches nothing: a missing file, a
-        directory without ``*.toml`` files, or a pattern that matches no workflow file.
+        directory without ``*.toml`` files, or a pattern that matches no workflow file;
+        or a workflow file is in the folder of a fleet whose ``debist fleet`` was stopped
+        part way (:func:`debist.engine.fleetmark.unfinished_fleet`).
     """
     if isinstance(paths_or_globs, str | os.PathLike):
         paths_or_globs = [paths_or_globs]
@@ -231,6 +234,9 @@ def expand_workflows(paths_or_globs: str | os.PathLike | Iterable[str | os.PathL
         else:
             raise WorkflowError(f"workflow file '{entry}' does not exist")
         for match in matches:
+            unfinished = unfinished_fleet(match.parent)
+            if unfinished is not None:
+                raise WorkflowError(unfinished_message(match.parent, unfinished))
             found.setdefault(match.resolve(), None)
     return list(found)
 

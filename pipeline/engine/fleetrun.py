@@ -20,7 +20,11 @@ so the fleet is the serial loop's); a candidate checked beyond the fleet's size 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
 import shutil
+import signal
+import sys
 import tempfile
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -30,6 +34,7 @@ from pathlib import Path
 from debist.core import progress
 from debist.core.errors import DebistError
 from debist.core.forking import call_recording_warnings, fork_context, fork_workers, replay_warnings
+from debist.engine.fleetmark import note_candidate
 from debist.engine.runner import Runner
 from debist.rig.fleet import FleetError
 from debist.rig.fleet_workflows import fleet_workflows
@@ -39,6 +44,8 @@ __all__ = ["remove_runs", "viable_fleet"]
 
 #: Extra draws allowed per requested member before giving up.
 EXTRA_DRAWS = 2
+#: ``prctl`` option: the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
 
 
 def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Path | None]:
@@ -71,6 +78,24 @@ def _ingest_problem(text: str, folder: Path, name: str) -> tuple[str | None, Pat
     return None, run_dir
 
 
+def _die_with(parent: int) -> None:
+    """End a checking worker when the fleet's process dies, however it dies (Linux).
+
+    A worker whose parent was killed (SIGKILL: nothing in it can stop its workers) would
+    otherwise wait for work forever, or finish a check and write into the fleet folder while
+    the next ``debist fleet`` replaces the stopped fleet there.
+
+    References
+    ----------
+    Linux ``prctl(2)``: ``PR_SET_PDEATHSIG``.
+    """
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # it died before the call above
+        os._exit(1)
+
+
 def _check_quietly(text: str, folder: Path, name: str):
     """:func:`_ingest_problem` in a worker process: no progress reports, warnings recorded."""
     with progress.listening(None):
@@ -96,7 +121,9 @@ def _checks(
     draws = iter(draws)
     ahead: deque = deque()
     error: list[BaseException] = []
-    with ProcessPoolExecutor(workers, mp_context=fork_context()) as pool:
+    with ProcessPoolExecutor(
+        workers, mp_context=fork_context(), initializer=_die_with, initargs=(os.getpid(),)
+    ) as pool:
 
         def draw_ahead() -> None:
             while not error and len(ahead) < workers:
@@ -178,7 +205,10 @@ def viable_fleet(
     """
     folder.mkdir(parents=True, exist_ok=True)
     n_draws = size * (1 + EXTRA_DRAWS)
-    draws = fleet_workflows(template, template_dir, folder, n_draws, seed=seed, scatter=scatter)
+    draws = _noted(
+        fleet_workflows(template, template_dir, folder, n_draws, seed=seed, scatter=scatter),
+        folder,
+    )
     kept: dict[str, str] = {}
     rejected: dict[str, str] = {}
     runs: list[Path] = []
@@ -201,6 +231,18 @@ def viable_fleet(
         remove_runs(runs)
         raise
     return kept, rejected, runs
+
+
+def _noted(draws: Iterable[tuple[str, str]], folder: Path) -> Iterator[tuple[str, str]]:
+    """Yield the draws, each named in the fleet's record before its workflow file is written.
+
+    Drawn in this process (also when checked in a forked one), so the record is written by
+    one process: a fleet killed part way leaves files its rerun finds there
+    (:func:`debist.engine.fleetmark.clear_unfinished`).
+    """
+    for name, text in draws:
+        note_candidate(folder, name, text)
+        yield name, text
 
 
 def remove_runs(runs: Sequence[Path]) -> None:
