@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NoReturn
 
 import click
 import typer
@@ -213,9 +213,14 @@ def _guard(
         err.print(f"[red]error:[/red] {escape(os_error_line(exc))}")
         raise typer.Exit(exit_code(exc)) from None
     except KeyboardInterrupt as exc:
-        what = str(exc) if isinstance(exc, Interrupted) else "interrupted"
-        err.print(f"[yellow]{escape(what)}[/yellow]: stopped; {escape(kept)}", soft_wrap=True)
-        raise typer.Exit(exit_code(exc)) from None
+        _stopped(exc, kept)
+
+
+def _stopped(exc: KeyboardInterrupt, kept: str) -> NoReturn:
+    """Say in one line what stopped the command and what stays valid; exit 130 or 143."""
+    what = str(exc) if isinstance(exc, Interrupted) else "interrupted"
+    err.print(f"[yellow]{escape(what)}[/yellow]: stopped; {escape(kept)}", soft_wrap=True)
+    raise typer.Exit(exit_code(exc)) from None
 
 
 @contextmanager
@@ -763,6 +768,13 @@ AddressOpt = Annotated[
 ]
 
 
+#: What stays valid after a batch was stopped.
+_BATCH_KEPT = (
+    "the workflows' finished stages are kept (each stage is written whole, and a stage cut "
+    "short left nothing that counts); run the same batch again to finish the rest"
+)
+
+
 @app.command(cls=_Command)
 def batch(
     paths: Annotated[
@@ -803,6 +815,8 @@ def batch(
     except WorkflowError as exc:
         err.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from None
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the batch stops, in one line
+        _stopped(exc, _BATCH_KEPT)
     frame = api.batch_table(results)
     failed = int((frame.status == "failed").sum())
     table = Table(title=f"Batch: {len(frame)} workflows, {failed} failed")

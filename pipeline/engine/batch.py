@@ -62,6 +62,8 @@ _WORKER_ENVIRON = {
     **allocator.ENVIRON,
     **allocator.ARROW_ENVIRON,  # pyarrow's allocator: the C library's, as in the command
 }
+#: The preload module of the local cluster's worker processes (they ignore Ctrl-C).
+_WORKER_SETUP = "debist.engine.batchworker"
 #: Type of the arguments of one batch item: (workflow file, stages, force).
 _Args = tuple[str, tuple[str, ...] | None, bool]
 #: Beside the batch index: the sha256 of the page debist wrote there (JSON), so that a later
@@ -527,7 +529,9 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
         here: :func:`debist.core.preflight.memory_budget`), and inherit the rest of this
         process's environment. The cluster's logs are silenced
         (its failures come back as task errors), and the environment variables that the
-        nannies set in this process are restored on exit.
+        nannies set in this process are restored on exit. The worker processes ignore SIGINT
+        (:mod:`debist.engine.batchworker`): a terminal's Ctrl-C, which reaches them too, is
+        this process's to handle.
 
     References
     ----------
@@ -560,6 +564,7 @@ def local_cluster(n_workers: int) -> Iterator[Any]:
                 processes=True,
                 dashboard_address=None,
                 silence_logs=logging.CRITICAL,
+                preload=[_WORKER_SETUP],  # Ctrl-C is the command's, not its workers'
             )
         stack.enter_context(cluster)
         yield stack.enter_context(Client(cluster, set_as_default=False))

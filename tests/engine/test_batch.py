@@ -3,8 +3,10 @@
 import gzip
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -291,6 +293,9 @@ def test_local_cluster_workers_get_single_threaded_blas_unless_set_and_one_retry
         pids = client.run(os.getpid)
         retries = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures)
         threads = client.nthreads()
+        ctrl_c = client.run(lambda: signal.getsignal(signal.SIGINT))
+    assert list(ctrl_c.values()) == [signal.SIG_IGN] * 2  # the command's to handle
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # this process's
     assert (
         list(seen.values())
         == [{"OMP_NUM_THREADS": "3", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}] * 2
@@ -496,3 +501,50 @@ def test_an_index_html_of_an_older_debist_is_recognised_by_its_title(tmp_path):
     (tmp_path / "index.html").unlink()
     (tmp_path / "index.html").symlink_to(tmp_path / "elsewhere.html")
     assert not index_is_ours(tmp_path)  # a link: whatever it points to is not replaced
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("sig", "group", "code", "what"),
+    [
+        (signal.SIGTERM, False, 143, "interrupted by SIGTERM"),
+        (signal.SIGINT, True, 130, "interrupted"),
+    ],
+)
+def test_a_stopped_batch_says_so_in_one_line_without_worker_tracebacks(
+    protos, sig, group, code, what
+):
+    """SIGTERM to the command, or a terminal's Ctrl-C to its whole process group (the local
+    cluster's workers too): one line, exit 143 or 130, and a rerun finishes the batch."""
+    import psutil
+
+    root = protos[0].parent
+    cmd = [sys.executable, "-m", "debist", "batch", *map(str, protos), "--stages", ",".join(STAGES)]
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while not list(root.glob("runs/*/ingest/manifest.json")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()  # a worker is running a workflow now
+        workers = psutil.Process(proc.pid).children(recursive=True)
+        os.killpg(proc.pid, sig) if group else os.kill(proc.pid, sig)
+        out, errs = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == code, errs
+    line = (
+        f"{what}: stopped; the workflows' finished stages are kept (each stage is written "
+        "whole, and a stage cut short left nothing that counts); run the same batch again to "
+        "finish the rest"
+    )
+    assert errs.count(line) == 1 and "Traceback" not in errs and "KeyboardInterrupt" not in errs
+    assert "Batch:" not in out  # no summary table, no index of a batch that did not end
+    assert not (root / "runs" / "index.html").exists()
+    _gone, alive = psutil.wait_procs(workers, timeout=30)
+    assert not alive  # the cluster's worker processes went with it
+    # what was written stays valid: the rerun finishes the batch
+    again = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stdout + again.stderr
+    for name in NAMES:
+        assert (root / "runs" / name / "validate" / "manifest.json").is_file()
