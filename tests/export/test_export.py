@@ -1,9 +1,11 @@
 """The exported C, MATLAB and Python model against debist's own free run (NumPy engine).
 
-Every export gets the model as its term table; a free run driven by a seeded random input
-sequence (2000 steps; 400 under Octave, which interprets them) must agree with
-``simulate(..., substeps=1, interpolation="linear")`` to 1e-9 relative on q, and the curve
-tables with ``RBFModel.curves``.
+Every export gets the model as its term table and, without a run, validate's default scheme
+(ns = 2 RK4 sub-steps, band-limited inputs). Driven by a seeded random input sequence (1500
+samples; 400 under Octave, which interprets them), the per-sample step must agree with
+``simulate(..., substeps=2, interpolation="linear")`` and the whole-record free run with
+``simulate(..., substeps=2, interpolation="bandlimited")`` to 1e-9 relative on q, and the
+curve tables with ``RBFModel.curves``.
 """
 
 import ast
@@ -23,10 +25,17 @@ from debist.core.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
 from debist.export.common import ExportInfo, curve_table
 from debist.export.files import export_files
-from debist.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
+from debist.export.matlab import (
+    MATLAB_FILE,
+    MATLAB_FREE_RUN_FILE,
+    MATLAB_NAME_FILE,
+    matlab_source,
+)
 from debist.export.python import PYTHON_FILE, python_source
+from debist.export.scheme import default_scheme
 from debist.model.rbf import RBFModel
-from debist.simulate.freerun import simulate
+from debist.simulate.freerun import simulate, upsample_inputs
+from debist.validate.config import ValidateConfig
 from tests.conftest import (
     example_rbf_model,
     invoke_cli,
@@ -38,7 +47,11 @@ from tests.conftest import (
 )
 
 DT = 0.01
-N = 2000
+N = 1500
+#: Samples of the whole-record free run compared with the band-limited reference.
+N_FREE = 600
+#: The scheme of every export without a run: validate's defaults.
+NS = ValidateConfig().substeps
 CC = shutil.which("cc")
 OCTAVE = shutil.which("octave-cli") or shutil.which("octave")
 #: Steps of the Octave free run (about 4 ms a step in its interpreter).
@@ -57,10 +70,11 @@ def random_inputs(seed, n=N, level=1500.0):
     return np.clip(level + walk + rng.normal(0, 30.0, (n, 2)), 0.0, 3000.0)
 
 
-def reference(model, v, q0=0.004, q_dot0=0.0):
+def reference(model, v, q0=0.004, q_dot0=0.0, interpolation="linear"):
+    """debist's free run in the exports' default scheme, inputs as ``interpolation``."""
     (res,) = simulate(
         model, [v], DT, np.array([q0]), np.array([q_dot0]),
-        substeps=1, interpolation="linear", engine="numpy",
+        substeps=NS, interpolation=interpolation, engine="numpy",
     )  # fmt: skip
     assert not res.diverged
     return res.q
@@ -88,6 +102,25 @@ def free_run(tmp_path_factory, key):
         name = f"export-free-run-{list(MODELS).index(key)}"
         _FREE_RUNS[key] = computed_once(tmp_path_factory, name, compute)
     return _FREE_RUNS[key]
+
+
+#: Models whose whole-record free run (band-limited inputs) is checked: the interpolation is
+#: the same code for every model, the sub-steps with lag, creep, slip, inertia and h = v.
+BAND_KEYS = ["lag+prior", "creep+slip+inertia", "T_z=0+slip", "zero-outside,h=v"]
+
+
+def band_run(tmp_path_factory, key):
+    """The model, the first N_FREE inputs and debist's free run of them with band-limited
+    inputs (validate's default scheme); once a session for all workers."""
+    from tests.conftest import computed_once
+
+    def compute():
+        model = MODELS[key]()
+        v = random_inputs(3)[:N_FREE]
+        return model, v, reference(model, v, interpolation="bandlimited")
+
+    name = f"export-band-run-{list(MODELS).index(key)}"
+    return computed_once(tmp_path_factory, name, compute)
 
 
 def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
@@ -146,6 +179,8 @@ def build_c(tmp_path, model, info=None):
     dll = ctypes.CDLL(str(lib))
     arr = ctypes.POINTER(ctypes.c_double)
     dll.debist_rk4_step.argtypes = [arr, arr, arr, ctypes.c_double]
+    dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+    dll.debist_free_run.restype = ctypes.c_size_t
     dll.debist_deriv.argtypes = [arr, arr, arr]
     dll.debist_curves.argtypes = [ctypes.c_double, arr]
     return dll
@@ -193,6 +228,86 @@ def test_c_export_matches_free_run(tmp_path, tmp_path_factory, key):
         q[k + 1] = x[0]
     assert np.ptp(ref) > 1e-3
     assert_close_q(q, ref)
+
+
+@pytest.mark.parametrize("key", BAND_KEYS)
+def test_whole_record_free_runs_match_bandlimited_free_run(tmp_path, tmp_path_factory, key):
+    """free_run (NumPy) and debist_free_run (C): validate's scheme, band-limited inputs."""
+    model, v, ref = band_run(tmp_path_factory, key)
+    x0 = np.zeros(n_states(model))
+    x0[0] = 0.004
+    mod = load_python(tmp_path, model)
+    q, states = mod.free_run(v, DT, x0)
+    assert states.shape == (N_FREE, n_states(model)) and np.array_equal(states[:, 0], q)
+    assert np.ptp(ref) > 1e-3
+    assert_close_q(q, ref)
+    # the causal step is another scheme: its run differs by far more than rounding
+    x, q_step = x0, [x0[0]]
+    for k in range(N_FREE - 1):
+        x = mod.rk4_step(x, v[k], v[k + 1], DT)
+        q_step.append(x[0])
+    assert np.max(np.abs(np.array(q_step) - ref)) > 1e-6 * np.ptp(ref)
+    if CC is not None:
+        dll = build_c(tmp_path, model)
+        q_c, vv = np.empty(N_FREE), np.ascontiguousarray(v)
+        assert dll.debist_free_run(ptr(vv), N_FREE, DT, ptr(x0.copy()), ptr(q_c)) == N_FREE
+        assert_close_q(q_c, ref)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 12, 33, 40, 300])
+@pytest.mark.parametrize("substeps", [1, 2, 3])
+def test_exported_interpolation_is_validates(tmp_path, n, substeps):
+    """The NumPy export's fine input grid is upsample_inputs' (band-limited and linear)."""
+    model = rbf_model(T_z=0.0, prior=False)
+    v = np.random.default_rng(n).normal(1500.0, 300.0, (n, 2))
+    for method in ("bandlimited", "linear"):
+        cfg = ValidateConfig.from_dict({"substeps": substeps, "input_interpolation": method})
+        files = python_source(model, scheme=default_scheme(model, cfg))
+        (tmp_path / method).mkdir(exist_ok=True)
+        path = tmp_path / method / PYTHON_FILE
+        path.write_text(files[PYTHON_FILE], encoding="utf-8")
+        spec = importlib.util.spec_from_file_location(f"fine_{method}_{n}_{substeps}", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        want = upsample_inputs(v, 2 * substeps, method)
+        np.testing.assert_allclose(mod.fine_inputs(v), want, rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
+def test_c_free_run_stops_at_the_divergence_bound(tmp_path):
+    """Past |q| > q_limit the run is NaN from that sample on and the count says where."""
+    model = rbf_model()
+    v = np.ascontiguousarray(random_inputs(3)[:N_FREE])
+
+    def run(q_limit):
+        (res,) = simulate(
+            model, [v], DT, np.array([0.0]), np.array([0.0]),
+            substeps=NS, q_limit=q_limit, engine="numpy",
+        )  # fmt: skip
+        return res
+
+    free = np.abs(run(np.inf).q)
+    half = N_FREE // 2
+    q_limit = 0.5 * (free[:half].max() + free[half:].max())  # first crossed in the second half
+    assert free[:half].max() < q_limit < free[half:].max()
+    ref = run(q_limit)
+    assert ref.diverged and half < ref.diverged_at < N_FREE
+    scheme = default_scheme(model, ValidateConfig.from_dict({"q_limit": q_limit}))
+    for name, text in c_sources(model, scheme=scheme).items():
+        (tmp_path / name).write_text(text, encoding="utf-8")
+    lib = tmp_path / "lib.so"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Werror", "-shared", "-fPIC", str(tmp_path / C_FILES[1]),
+         "-o", str(lib), "-lm"], check=True, capture_output=True,
+    )  # fmt: skip
+    dll = ctypes.CDLL(str(lib))
+    arr = ctypes.POINTER(ctypes.c_double)
+    dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+    dll.debist_free_run.restype = ctypes.c_size_t
+    q, x0 = np.empty(N_FREE), np.zeros(3)
+    assert dll.debist_free_run(ptr(v), N_FREE, DT, ptr(x0), ptr(q)) == ref.diverged_at
+    assert np.isnan(q[ref.diverged_at :]).all()
+    assert_close_q(q[: ref.diverged_at], ref.q[: ref.diverged_at])
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
@@ -303,8 +418,16 @@ def test_matlab_file_is_fixed_size_code_for_simulink():
     text = matlab_source(model, info)[MATLAB_FILE]
     assert text.startswith("function [x_next, curves] = debist_model(x, v0, v1, dt)\n")
     local = re.findall(r"^function .*?(\w+)\(", text, flags=re.M)
-    assert local == ["debist_model", "map_inputs", "deriv", "interp_held", "lookup_curves"]
+    assert local == [
+        "debist_model", "map_inputs", "rk4_substep", "deriv", "interp_held", "lookup_curves"
+    ]  # fmt: skip
     assert text.count("\nend\n") == len(local)  # every function closed: one file, one style
+    free = matlab_source(model, info)[MATLAB_FREE_RUN_FILE]
+    local = re.findall(r"^function .*?(\w+)\(", free, flags=re.M)
+    assert local == [
+        "debist_free_run", "fine_inputs", "map_inputs", "rk4_substep", "deriv", "interp_held"
+    ]  # fmt: skip
+    assert free.count("\nend\n") == len(local)
     for needle in ("ef" * 32, "01" * 32, "[-0.012, 0.012] m", "q [m]", "v [V]", "dt [s]"):
         assert needle in text
     # nothing code generation refuses or a Simulink block cannot size at compile time
@@ -344,7 +467,9 @@ def test_header_states_provenance_and_range():
         version="9.9.9",
     )
     files = {**c_sources(model, info), **python_source(model, info), **matlab_source(model, info)}
-    assert set(files) == {*C_FILES, PYTHON_FILE, MATLAB_FILE, MATLAB_NAME_FILE}
+    assert set(files) == {
+        *C_FILES, PYTHON_FILE, MATLAB_FILE, MATLAB_FREE_RUN_FILE, MATLAB_NAME_FILE
+    }  # fmt: skip
     # the workflow's name is free text: a string literal, never in a comment
     assert 'const char DEBIST_WORKFLOW[] = "proto-7";' in files[C_FILES[1]]
     assert "WORKFLOW = 'proto-7'" in files[PYTHON_FILE]
@@ -364,7 +489,9 @@ def test_export_files_and_errors():
     model = rbf_model()
     assert set(export_files(model, "c")) == set(C_FILES)
     assert set(export_files(model, "python")) == {PYTHON_FILE}
-    assert set(export_files(model, "matlab")) == {MATLAB_FILE, MATLAB_NAME_FILE}
+    assert set(export_files(model, "matlab")) == {
+        MATLAB_FILE, MATLAB_FREE_RUN_FILE, MATLAB_NAME_FILE
+    }  # fmt: skip
     with pytest.raises(WorkflowError) as err:
         export_files(model, "fortran")
     assert "fortran" in str(err.value)
@@ -460,7 +587,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     q0 = float(data.q.iloc[0])
     (ref,) = simulate(
         model, [v], dt, np.array([q0]), np.array([0.0]),
-        substeps=1, interpolation="linear", engine="numpy",
+        substeps=NS, interpolation="linear", engine="numpy",
     )  # fmt: skip
     spec = importlib.util.spec_from_file_location("debist_model_cli", tmp_path / "py" / PYTHON_FILE)
     mod = importlib.util.module_from_spec(spec)
