@@ -168,18 +168,18 @@ def _units(m_q: float, q_unit: str) -> dict[str, str]:
     """
     u = q_unit
     if m_q == 1.0:
-        force, mass = f"{u}/s^2", "1"
+        force = f"{u}/s^2"
         says = f"m_q = 1 [1]: per unit mass, the terms are accelerations [{u}/s^2]"
     elif u == "m":
-        force, mass = "N", "kg"
+        force = "N"
         says = f"m_q = {m_q!r} [kg], the terms are forces [N]"
     else:
-        force, mass = f"M {u}/s^2", "M"
+        force = f"M {u}/s^2"
         says = (
             f"m_q = {m_q!r} [M] in the model's own mass unit M (q is in {u}, not m),"
             f" the terms are forces [M {u}/s^2]"
         )
-    return {"u_q": u, "u_force": force, "u_mass": mass, "u_says": says}
+    return {"u_q": u, "u_force": force, "u_says": says}
 
 
 def _percent(x: float | None) -> str:
@@ -205,10 +205,11 @@ def _scheme_lines(scheme: Scheme, u: str, entries: tuple[str, str], slips: bool)
     lines = [
         f"Scheme (debist's validate stage{at}): ns = {ns} classical RK4 sub-steps per",
         "  sample, h = dt / ns, the stages reading the inputs at t, t + h/2, t + h"
-        + ("; the slip deflections clipped after every sub-step." if slips else "."),
+        + (";" if slips else "."),
+        *(["  the slip deflections are clipped after every sub-step."] if slips else []),
         f"  {free} (a whole record): the inputs interpolated",
         *how,
-        "  from the given initial state; stops where a state is not finite or",
+        "  from the given initial state x0; stops where a state is not finite or",
         f"  |q| > {scheme.q_limit!r} {u} (the rest NaN): it reproduces validate's free run.",
         f"  {step} (one sample, causal): the same ns sub-steps, the inputs linear",
         "  between v0 (at t) and v1 (at t + dt)"
@@ -217,6 +218,16 @@ def _scheme_lines(scheme: Scheme, u: str, entries: tuple[str, str], slips: bool)
             if scheme.interpolation == "bandlimited"
             else ", as validate: it reproduces the scored free run."
         ),
+    ]
+    start = (
+        "q and q_dot at its first sample of a cubic fitted to its first samples"
+        f" ([validate] init_samples = {scheme.init_samples}, scored from that sample on)"
+        if scheme.init_samples
+        else "its first sample's q and q_dot (differentiated)"
+    )
+    lines += [
+        "  Validate starts each record's free run at rest in the other states, from",
+        f"  {start}.",
     ]
     if not scheme.records:
         lines.append("NRMSE(q) on the run's records: n/a (exported without the run's records).")

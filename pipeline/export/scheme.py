@@ -87,6 +87,9 @@ class Scheme:
         SI unit of q ("m", or e.g. "V" for an electrical circuit).
     dt : float or None
         The run's sample time [s]; None without a run or with several.
+    init_samples : int
+        ``[validate] init_samples``: validate's initial state is fitted to the first ones
+        and its NRMSE scores the samples after them (0: the first sample, all scored).
     records : tuple of RecordScore
         The scores on the run's records (empty without a run).
     """
@@ -96,6 +99,7 @@ class Scheme:
     q_limit: float
     q_unit: str = "m"
     dt: float | None = None
+    init_samples: int = 0
     records: tuple[RecordScore, ...] = ()
 
     def taps(self) -> np.ndarray:
@@ -127,7 +131,12 @@ def default_scheme(model, cfg: ValidateConfig | None = None) -> Scheme:
     """
     cfg = cfg or ValidateConfig()
     q_limit = cfg.q_limit if cfg.q_limit is not None else default_q_limit(model.q_range)
-    return Scheme(int(cfg.substeps), cfg.input_interpolation, float(q_limit))
+    return Scheme(
+        int(cfg.substeps),
+        cfg.input_interpolation,
+        float(q_limit),
+        init_samples=int(cfg.init_samples),
+    )
 
 
 def run_scheme(
@@ -200,5 +209,6 @@ def run_scheme(
         q_limit=base.q_limit,
         q_unit=datasets[0].q_unit,
         dt=float(min(groups)) if len(groups) == 1 else None,
+        init_samples=base.init_samples,
         records=tuple(records),
     )

@@ -254,6 +254,40 @@ def test_whole_record_free_runs_match_bandlimited_free_run(tmp_path, tmp_path_fa
         assert_close_q(q_c, ref)
 
 
+@pytest.mark.parametrize("key", ["creep+slip", "T_z=0+inertia"])
+def test_linear_scheme_free_run_is_the_step(tmp_path, tmp_path_factory, key):
+    """With validate's linear interpolation the whole-record free run is the scored run and
+    the per-sample step's (NumPy and C, both against simulate(..., "linear"))."""
+    model, v, ref = free_run(tmp_path_factory, key)
+    scheme = default_scheme(model, ValidateConfig.from_dict({"input_interpolation": "linear"}))
+    x0 = np.zeros(n_states(model))
+    x0[0] = 0.004
+    path = tmp_path / PYTHON_FILE
+    path.write_text(python_source(model, scheme=scheme)[PYTHON_FILE], encoding="utf-8")
+    spec = importlib.util.spec_from_file_location(f"linear_{abs(hash(str(tmp_path)))}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.INTERPOLATION == "linear"
+    assert_close_q(mod.free_run(v, DT, x0)[0], ref)
+    if CC is not None:
+        for name, text in c_sources(model, scheme=scheme).items():
+            (tmp_path / name).write_text(text, encoding="utf-8")
+        assert "#define DEBIST_BANDLIMITED 0" in (tmp_path / C_FILES[0]).read_text()
+        assert "static const double phases" not in (tmp_path / C_FILES[1]).read_text()
+        lib = tmp_path / "liblinear.so"
+        subprocess.run(
+            [CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-shared", "-fPIC",
+             str(tmp_path / C_FILES[1]), "-o", str(lib), "-lm"], check=True, capture_output=True,
+        )  # fmt: skip
+        dll = ctypes.CDLL(str(lib))
+        arr = ctypes.POINTER(ctypes.c_double)
+        dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+        dll.debist_free_run.restype = ctypes.c_size_t
+        q, vv = np.empty(N), np.ascontiguousarray(v)
+        assert dll.debist_free_run(ptr(vv), N, DT, ptr(x0.copy()), ptr(q)) == N
+        assert_close_q(q, ref)
+
+
 @pytest.mark.parametrize("n", [1, 2, 5, 12, 33, 40, 300])
 @pytest.mark.parametrize("substeps", [1, 2, 3])
 def test_exported_interpolation_is_validates(tmp_path, n, substeps):
@@ -412,6 +446,37 @@ def test_matlab_export_matches_free_run_in_octave(tmp_path, tmp_path_factory, ke
     assert len(names) == curves.shape[1]
 
 
+@pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave)")
+@pytest.mark.slow
+def test_matlab_free_run_in_octave_both_interpolations(tmp_path, tmp_path_factory):
+    """debist_free_run.m: the band-limited and the linear scheme, against simulate()."""
+    n_out, key = 200, "creep+slip+inertia"
+    runs = {
+        "bandlimited": band_run(tmp_path_factory, key),
+        "linear": free_run(tmp_path_factory, key),
+    }
+    for method, (model, v, ref) in runs.items():
+        folder = tmp_path / method
+        folder.mkdir()
+        cfg = ValidateConfig.from_dict({"input_interpolation": method})
+        for name, text in matlab_source(model, scheme=default_scheme(model, cfg)).items():
+            (folder / name).write_text(text, encoding="utf-8")
+        np.savetxt(folder / "v.txt", v, fmt="%.17g")
+        x0 = "; ".join(repr(x) for x in [0.004] + [0.0] * (n_states(model) - 1))
+        (folder / "drive.m").write_text(
+            f"[q, x] = debist_free_run(load('v.txt'), {DT!r}, [{x0}], {n_out});\n"
+            "fid = fopen('q.txt', 'w'); fprintf(fid, '%.17g\\n', q); fclose(fid);\n"
+            f"assert(isequal(size(x), [{n_out}, {n_states(model)}]));\n",
+            encoding="utf-8",
+        )
+        done = subprocess.run(
+            [OCTAVE, "--no-gui", "--norc", "--quiet", "drive.m"],
+            cwd=folder, capture_output=True, text=True, timeout=600,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert_close_q(np.loadtxt(folder / "q.txt"), ref[:n_out])
+
+
 def test_matlab_file_is_fixed_size_code_for_simulink():
     model = rbf_model()
     info = ExportInfo(workflow="proto-7", run_digest="ef" * 32, identify_manifest="01" * 32)
@@ -475,7 +540,7 @@ def test_header_states_provenance_and_range():
     assert "WORKFLOW = 'proto-7'" in files[PYTHON_FILE]
     assert "name = 'proto-7';" in files[MATLAB_NAME_FILE]
     for text in (files[f] for f in (*C_FILES, PYTHON_FILE, MATLAB_FILE)):
-        head = text[:3000]
+        head = text[:5000]
         for needle in ("ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
             assert needle in head
         assert "restoring" in head and "[-0.011, 0.0095]" in head
@@ -483,6 +548,28 @@ def test_header_states_provenance_and_range():
     assert "#define DEBIST_N_STATES 3" in files[C_FILES[0]]
     assert "#define DEBIST_N_STATES 2" in c_sources(rbf_model(T_z=0.0))[C_FILES[0]]
     assert "digest: n/a" in c_sources(model)[C_FILES[0]]
+
+
+def test_header_states_scheme_and_one_unit_system():
+    """The scheme (ns, interpolation, which entry is scored) and units consistent with q's."""
+    from debist.export.scheme import Scheme
+
+    model = replace(rbf_model(), m_q=0.05)  # a mass [kg] (the example's m_q is 1)
+    head = c_sources(model)[C_FILES[0]][:5000]
+    assert "ns = 2 classical RK4 sub-steps" in head and "band-limited" in head
+    assert "debist_rk4_step (one sample, causal)" in head and "NOT the scored scheme" in head
+    assert "NRMSE(q) on the run's records: n/a" in head
+    assert "m_q = 0.05 [kg], the terms are forces [N]" in head
+    volts = Scheme(3, "linear", 0.5, q_unit="V")
+    head = c_sources(model, scheme=volts)[C_FILES[0]][:5000]
+    assert "ns = 3" in head and "NOT the scored" not in head and "|q| > 0.5 V" in head
+    assert "q [V], q_dot [V/s]" in head and "forces [M V/s^2]" in head
+    assert "[N]" not in head and "[kg]" not in head and "[-0.012, 0.012] V" in head
+    assert "#define DEBIST_SUBSTEPS 3" in head and "#define DEBIST_BANDLIMITED 0" in head
+    unit_mass = replace(model, m_q=1.0)
+    text = python_source(unit_mass, scheme=volts)[PYTHON_FILE][:5000]
+    assert "m_q = 1 [1]: per unit mass, the terms are accelerations [V/s^2]" in text
+    assert "SUBSTEPS = 3" in text and "INTERPOLATION = 'linear'" in text
 
 
 def test_export_files_and_errors():
