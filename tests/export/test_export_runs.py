@@ -155,13 +155,16 @@ def test_c_export_reproduces_validates_free_run(request, tmp_path, run):
     p = ctypes.POINTER(ctypes.c_double)
     dll.debist_free_run.argtypes = [p, ctypes.c_size_t, ctypes.c_double, p, p]
     dll.debist_free_run.restype = ctypes.c_size_t
-    dll.debist_rk4_step.argtypes = [p, p, p, ctypes.c_double]
+    dll.debist_rk4_step.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                                     ctypes.c_double]  # fmt: skip
 
     def ptr(a):
         return a.ctypes.data_as(p)
 
     scores = header_scores(files[C_FILES[0]], "debist_free_run", "debist_rk4_step")
     reported = nrmse_table(out)
+    cfg = ValidateConfig.from_dict(debist.load_workflow(workflow).section("validate"))
+    s = slice(cfg.init_samples, None)
     seen = 0
     for name, dt, v, x0, q_sim, q_meas in records(workflow, out):
         q = np.empty(len(v))
@@ -170,11 +173,10 @@ def test_c_export_reproduces_validates_free_run(request, tmp_path, run):
         assert_reproduces(q, q_sim, q_meas, f"C debist_free_run on {name}")
         x, q_step = x0.copy(), np.empty(len(v))
         q_step[0] = x[0]
+        row, at = v.strides[0], v.ctypes.data  # v is C-contiguous: sample k at at + k row
         for k in range(len(v) - 1):
-            dll.debist_rk4_step(ptr(x), ptr(v[k]), ptr(v[k + 1]), dt)
+            dll.debist_rk4_step(x.ctypes.data, at + k * row, at + (k + 1) * row, dt)
             q_step[k + 1] = x[0]
-        init = ValidateConfig.from_dict(debist.load_workflow(workflow).section("validate"))
-        s = slice(init.init_samples, None)
         free, said, step = scores[name]
         assert free == said == float(f"{100 * reported[name]:.4g}")
         assert step == float(f"{100 * nrmse(q_meas[s], q_step[s]):.4g}")
