@@ -474,7 +474,11 @@ def export_model(
     Raises
     ------
     WorkflowError
-        A bad workflow, or an identify stage that is missing or stale.
+        A bad workflow (a bad ``[validate]`` table too: the export carries its scheme), or
+        an identify stage that is missing or stale.
+    ResourceError
+        If the free runs that score the export on the run's records would exceed the memory
+        budget (as validate's would).
     OutputDirError
         A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
         is a folder no run writes into either: the file system root, the home folder, the
