@@ -457,7 +457,9 @@ def export_model(
     workflow : path-like or Workflow
         As for :func:`run`; its identify stage must be up to date.
     fmt : {"c", "matlab", "python"}, optional
-        ``debist_model.h`` and ``.c``; ``debist_model.m``; ``debist_model.py``.
+        ``debist_model.h`` and ``.c``; ``debist_model.m`` and ``debist_free_run.m``;
+        ``debist_model.py``. Each carries validate's scheme and, in its header, the NRMSE(q)
+        of its free run and its per-sample step on the run's records, simulated at export.
     dest : path-like, optional
         Folder of the files (default ``<output_dir>/export``).
     force : bool, optional
@@ -476,7 +478,11 @@ def export_model(
     Raises
     ------
     WorkflowError
-        A bad workflow, or an identify stage that is missing or stale.
+        A bad workflow (a bad ``[validate]`` table too: the export carries its scheme), or
+        an identify stage that is missing or stale.
+    ResourceError
+        If the free runs that score the export on the run's records would exceed the memory
+        budget (as validate's would).
     OutputDirError
         A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
         is a folder no run writes into either: the file system root, the home folder, the
@@ -487,14 +493,14 @@ def export_model(
 
     References
     ----------
-    See :mod:`debist.export` (the model of Masoud & Maas 2025, Eq. 37, and its RK4 step).
+    See :mod:`debist.export` (the model of Masoud & Maas 2025, Eq. 37, in validate's scheme).
     """
     from contextlib import nullcontext
 
     from debist.core.fileformats import atomic_write
     from debist.engine import outdir
     from debist.engine.runner import Runner
-    from debist.export.files import export_files, load_identified
+    from debist.export.files import export_files, load_identified, load_scheme
 
     check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
     dest = check_path(dest, "dest", optional=True)
@@ -511,7 +517,7 @@ def export_model(
         )
     with outdir.output_lock(folder, wait=wait) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
-        files = export_files(model, fmt, info)
+        files = export_files(model, fmt, info, load_scheme(runner, model))
         target = dest if dest is not None else folder / "export"
         if force:
             target.mkdir(parents=True, exist_ok=True)

@@ -699,7 +699,8 @@ def export(
         typer.Option(
             "--format",
             help="c: debist_model.h and debist_model.c (C99, math.h only, no allocation); "
-            "matlab: debist_model.m (a Simulink MATLAB Function block or Octave); "
+            "matlab: debist_model.m (a Simulink MATLAB Function block or Octave) and "
+            "debist_free_run.m; "
             "python: debist_model.py (NumPy only).",
         ),
     ] = ExportFormat.c,
@@ -718,7 +719,8 @@ def export(
 ) -> None:
     """Write the identified model as self-contained C99, MATLAB or NumPy code for a controller.
 
-    Model, RK4 step (inputs linear between samples) and curve table; needs identify up to date.
+    Model, whole-record free run in validate's scheme (reproduces its NRMSE), causal per-sample
+    RK4 step and curve table; needs identify up to date.
     """
     from debist import api
 

@@ -12,6 +12,7 @@ import functools
 import textwrap
 
 from debist.export.common import ExportInfo, _comment_text, _context, _environment, _literal
+from debist.export.scheme import Scheme
 
 __all__ = ["C_FILES", "c_comment", "c_sources", "c_string"]
 
@@ -91,13 +92,18 @@ def _env():
     )
 
 
-def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
+def c_sources(
+    model, info: ExportInfo | None = None, scheme: Scheme | None = None
+) -> dict[str, str]:
     """Return the C99 header and source of the model.
 
-    The source needs only ``math.h``, uses doubles and allocates nothing. It defines
-    ``debist_map_inputs(v, h)``, ``debist_deriv(x, h, dx)`` (``h`` the mapped inputs),
-    ``debist_rk4_step(x, v0, v1, dt)`` (in place, inputs ``v`` [V] linear between the two
-    samples, midpoint their mean) and ``debist_curves(q, out)``; the templates
+    The source needs only ``math.h`` and ``stddef.h``, uses doubles and allocates nothing.
+    It defines ``debist_map_inputs(v, h)``, ``debist_deriv(x, h, dx)`` (``h`` the mapped
+    inputs), ``debist_rk4_step(x, v0, v1, dt)`` (one sample in place: ``ns`` RK4 sub-steps,
+    inputs ``v`` [V] linear between the two samples; causal),
+    ``debist_free_run(v, n, dt, x0, q_out)`` (a whole record in validate's scheme: its input
+    interpolation, with the polyphase FIR taps of the band-limited one as a table, ``ns``,
+    the divergence bound) and ``debist_curves(q, out)``; the templates
     ``templates/model.h.j2`` and ``templates/model.c.j2`` hold the code.
 
     Parameters
@@ -106,6 +112,9 @@ def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
         The identified model.
     info : ExportInfo, optional
         Provenance for the header comment.
+    scheme : Scheme, optional
+        The free-run scheme and its scores (:func:`debist.export.scheme.run_scheme`);
+        default :func:`debist.export.scheme.default_scheme`.
 
     Returns
     -------
@@ -123,7 +132,9 @@ def c_sources(model, info: ExportInfo | None = None) -> dict[str, str]:
     Masoud & Maas 2025, Eq. 37; Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1;
     ISO/IEC 9899:1999.
     """
-    context = _context(model, info, "DEBIST_WORKFLOW")
+    context = _context(
+        model, info, "DEBIST_WORKFLOW", scheme, ("debist_free_run", "debist_rk4_step")
+    )
     env = _env()
     return {
         C_FILES[0]: env.get_template("model.h.j2").render(context),

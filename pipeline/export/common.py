@@ -25,7 +25,9 @@ import numpy as np
 
 from debist import __version__
 from debist.core.errors import ArtifactError
+from debist.export.scheme import Scheme, default_scheme
 from debist.model.termtable import BASE_GAUSS, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
+from debist.simulate.freerun import EDGE_PAD
 
 __all__ = ["CURVE_POINTS", "Code", "ExportInfo", "curve_table"]
 
@@ -130,8 +132,9 @@ def curve_table(model, n: int = CURVE_POINTS) -> tuple[np.ndarray, list[str], np
     q : ndarray, shape (n,)
         Ascending grid over ``model.q_range`` [m].
     names : list of str
-        ``restoring`` (``c(q) q + F_0`` [N], the static force at v = 0), ``d`` [N s/m],
-        ``g1`` .. ``gN`` [N/V^2 when h = v^2]; per unit mass when ``m_q = 1``.
+        ``restoring`` (``c(q) q + F_0`` [F], the static force at v = 0), ``d`` [F s/m],
+        ``g1`` .. ``gN`` [F/V^2 when h = v^2]: F is N with q in m and ``m_q`` in kg, an
+        acceleration [unit of q/s^2] when ``m_q = 1`` (per unit mass).
     values : ndarray, shape (2 + n_inputs, n)
         The curves on the grid.
 
@@ -155,14 +158,123 @@ def curve_table(model, n: int = CURVE_POINTS) -> tuple[np.ndarray, list[str], np
     return q, names, np.asarray(rows)
 
 
-def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref: str) -> list[str]:
+def _units(m_q: float, q_unit: str) -> dict[str, str]:
+    """Return the units of the exported model: q's, and the force unit its terms sum to.
+
+    With ``m_q = 1`` the equation is per unit mass and its terms are accelerations
+    [u/s^2]; with q in metres and ``m_q`` a mass [kg] they are forces [N]; with q in another
+    unit u (an electrical circuit's voltage, say) ``m_q`` is in the model's own mass unit M
+    (not kg) and the terms in [M u/s^2] (not N).
+    """
+    u = q_unit
+    if m_q == 1.0:
+        force = f"{u}/s^2"
+        says = f"m_q = 1 [1]: per unit mass, the terms are accelerations [{u}/s^2]"
+    elif u == "m":
+        force = "N"
+        says = f"m_q = {m_q!r} [kg], the terms are forces [N]"
+    else:
+        force = f"M {u}/s^2"
+        says = (
+            f"m_q = {m_q!r} [M] in the model's own mass unit M (q is in {u}, not m),"
+            f" the terms are forces [M {u}/s^2]"
+        )
+    return {"u_q": u, "u_force": force, "u_says": says}
+
+
+def _percent(x: float | None) -> str:
+    """NRMSE [1] as a percentage with four significant digits, ``n/a`` for None or NaN."""
+    if x is None or not np.isfinite(x):
+        return "n/a"
+    return f"{100.0 * x:.4g} %"
+
+
+def _scheme_lines(scheme: Scheme, u: str, entries: tuple[str, str], slips: bool) -> list[str]:
+    """Return the header lines on the scheme and what it scores on the run's records."""
+    ns = scheme.substeps
+    at = f" at the run's dt = {scheme.dt!r} s" if scheme.dt is not None else ""
+    how = (
+        [
+            f"  band-limited (the record odd-reflected by {EDGE_PAD} samples at each end, then the",
+            "  polyphase Kaiser(8) FIR of scipy.signal.resample_poly, its taps in the code),",
+        ]
+        if scheme.interpolation == "bandlimited"
+        else ["  linear between samples (as numpy.interp),"]
+    )
+    free, step = entries
+    lines = [
+        f"Scheme (debist's validate stage{at}): ns = {ns} classical RK4 sub-steps per",
+        "  sample, h = dt / ns, the stages reading the inputs at t, t + h/2, t + h"
+        + (";" if slips else "."),
+        *(["  the slip deflections are clipped after every sub-step."] if slips else []),
+        f"  {free} (a whole record): the inputs interpolated",
+        *how,
+        "  from the given initial state x0; stops where a state is not finite or",
+        f"  |q| > {scheme.q_limit!r} {u} (the rest NaN): it reproduces validate's free run.",
+        f"  {step} (one sample, causal): the same ns sub-steps, the inputs linear",
+        "  between v0 (at t) and v1 (at t + dt)"
+        + (
+            "; with band-limited scoring it is NOT the scored scheme."
+            if scheme.interpolation == "bandlimited"
+            else ", as validate: it reproduces the scored free run."
+        ),
+    ]
+    start = (
+        "q and q_dot at its first sample of a cubic fitted to its first samples"
+        f" ([validate] init_samples = {scheme.init_samples}, scored from that sample on)"
+        if scheme.init_samples
+        else "its first sample's q and q_dot (differentiated)"
+    )
+    lines += [
+        "  Validate starts each record's free run at rest in the other states, from",
+        f"  {start}.",
+    ]
+    if not scheme.records:
+        lines.append("NRMSE(q) on the run's records: n/a (exported without the run's records).")
+        return lines
+    lines.append(
+        "NRMSE(q) on the run's records (Eq. 41), computed at export by debist's simulator:"
+    )
+    for rec in scheme.records:
+        validate = f", validate ns = {rec.substeps}" if rec.substeps != ns else ""
+        free_nrmse = _percent(rec.free_run) + (
+            f" (diverged at sample {rec.free_run_diverged})" if rec.free_run_diverged >= 0 else ""
+        )
+        step_nrmse = _percent(rec.step) + (
+            f" (diverged at sample {rec.step_diverged})" if rec.step_diverged >= 0 else ""
+        )
+        lines += [
+            f"  {_record_name(rec.name)} (dt = {rec.dt!r} s{validate}): {free} {free_nrmse}"
+            f" (validate reported {_percent(rec.reported)}), {step} {step_nrmse}",
+        ]
+    return lines
+
+
+def _record_name(name: str) -> str:
+    """Return a data set's name for a comment: as it is when plain ASCII, else a placeholder."""
+    plain = name.replace("_", "").replace("-", "").replace(".", "")
+    return name if plain.isascii() and plain.isalnum() else "(name not plain ASCII)"
+
+
+def _describe(
+    info: ExportInfo,
+    arr: dict[str, Any],
+    names: list[str],
+    name_ref: str,
+    scheme: Scheme,
+    entries: tuple[str, str],
+) -> list[str]:
     """Lines of the header comment shared by every format (without comment markers).
 
     Only fixed text and numbers: the workflow's name, which is free text from the workflow
     file, is never put into a comment or docstring; each format emits it as an escaped
-    string literal (``name_ref`` names that constant).
+    string literal (``name_ref`` names that constant). ``entries`` names the format's
+    whole-record free run and its per-sample step. Data-set names (checked to be
+    letters, digits, ``_``, ``-`` and ``.``) name the records' scores.
     """
     lo, hi = arr["q_range"]
+    units = _units(arr["m_q"], scheme.q_unit)
+    u = units["u_q"]
     hmap = "v^2" if arr["input_map"] == "v2" else "v"
     lag = arr["lag"]
     extra = [f"w{k + 1}" for k in range(arr["n_creep"])]
@@ -197,17 +309,17 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
         lines += [
             "  Maxwell-slip deflections (Al-Bender, Lampaert & Swevers 2005):",
             "  delta_e' = q_dot, 0 while |delta_e| >= Delta_e and q_dot delta_e > 0;",
-            "  after every RK4 step delta_e is clipped to [-Delta_e, Delta_e];",
-            f"  Delta_e = [{widths}] m",
+            "  after every RK4 sub-step delta_e is clipped to [-Delta_e, Delta_e];",
+            f"  Delta_e = [{widths}] {u}",
         ]
     at_rest = ["z = q_dot (the filter at rest)"] if lag else []
     at_rest += ["w = 0, delta = 0 (at rest)"] if extra else []
     lines += [
         f"State x = {state}" + (f"; start with {' and '.join(at_rest)}." if at_rest else "."),
         f"Inputs v [V] (n = {arr['n_inputs']}); mapped inputs h [V^2 or V].",
-        "Units: q [m], q_dot [m/s], t and dt [s], v [V]; forces [N] with",
-        f"  m_q = {arr['m_q']!r} (per unit mass [m/s^2] when m_q = 1).",
-        f"Valid q range (estimation data): [{lo!r}, {hi!r}] m; outside it the",
+        f"Units: q [{u}], q_dot [{u}/s], t and dt [s], v [V];",
+        f"  {units['u_says']}.",
+        f"Valid q range (estimation data): [{lo!r}, {hi!r}] {u}; outside it the",
         "  Gaussian bases are held at the range's edge and the tables at their ends."
         if arr["clipped"]
         else "  Gaussian bases decay (not clipped) and the tables hold their end values.",
@@ -216,15 +328,13 @@ def _describe(info: ExportInfo, arr: dict[str, Any], names: list[str], name_ref:
         for name in names:
             if name in info.identified:
                 spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in info.identified[name])
-                lines.append(f"Curve {name} identified on q in: {spans or 'none'} m")
+                lines.append(f"Curve {name} identified on q in: {spans or 'none'} {u}")
     if np.isfinite(arr["max_step"]):
         lines.append(
-            f"RK4 is stable for dt <= {arr['max_step']!r} s (1.5 T_z, 1.5 / lambda); "
-            "split longer sample times into sub-steps."
+            f"RK4 is stable for h = dt / ns <= {arr['max_step']!r} s (1.5 T_z, 1.5 / lambda)."
         )
+    lines += _scheme_lines(scheme, u, entries, bool(arr["n_slip"]))
     lines += [
-        "rk4_step: one classical RK4 step with the inputs linear between v0 (at t) and",
-        "  v1 (at t + dt), as debist's free run (substeps = 1, interpolation = linear).",
         f"Curves table: {len(names)} curves ({', '.join(names)}) on {CURVE_POINTS} points,",
         "  interpolated linearly, held outside the grid.",
         f"Workflow: its name is the string {name_ref} (as written in the workflow file)",
@@ -314,17 +424,36 @@ def _environment(filters: dict[str, Callable[..., str]]) -> jinja2.Environment:
     return env
 
 
-def _context(model, info: ExportInfo | None, name_ref: str) -> dict[str, Any]:
-    """Collect the values of the export templates: constants, curves and provenance.
+def _context(
+    model,
+    info: ExportInfo | None,
+    name_ref: str,
+    scheme: Scheme | None = None,
+    entries: tuple[str, str] = ("free_run", "rk4_step"),
+) -> dict[str, Any]:
+    """Collect the values of the export templates: constants, curves, scheme and provenance.
 
-    ``name_ref`` names where the format keeps the workflow's name (see :func:`_describe`).
+    ``name_ref`` names where the format keeps the workflow's name (see :func:`_describe`);
+    ``scheme`` is the free-run scheme (:func:`debist.export.scheme.default_scheme` when
+    None); ``entries`` the names of the format's whole-record free run and per-sample step.
     """
     info = info or ExportInfo()
+    scheme = scheme or default_scheme(model)
     arr = _arrays(model)
     cq, names, cval = curve_table(model)
+    taps = scheme.taps()
     return {
         **arr,
-        "describe": _describe(info, arr, names, name_ref),
+        **_units(arr["m_q"], scheme.q_unit),
+        "describe": _describe(info, arr, names, name_ref, scheme, entries),
+        "substeps": scheme.substeps,
+        "n_fine": 2 * scheme.substeps,
+        "bandlimited": scheme.interpolation == "bandlimited",
+        "q_limit": scheme.q_limit,
+        "edge_pad": EDGE_PAD,
+        "taps": taps.tolist(),
+        "n_taps": taps.shape[1],
+        "half_taps": (taps.shape[1] - 1) // 2,
         "workflow": info.workflow,
         "curve_names": names,
         "curve_q": cq.tolist(),

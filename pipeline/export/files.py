@@ -1,8 +1,9 @@
 """A run's identified model as the files of one export format (what ``debist export`` writes).
 
-:func:`load_identified` reads the identify stage's model (checking it is up to date) and
-:func:`export_files` renders the files of a format with the generators of :mod:`.c`,
-:mod:`.matlab` and :mod:`.python`.
+:func:`load_identified` reads the identify stage's model (checking it is up to date),
+:func:`load_scheme` the run's records and ``[validate]`` table for the scheme the code
+carries, and :func:`export_files` renders the files of a format with the generators of
+:mod:`.c`, :mod:`.matlab` and :mod:`.python`.
 
 References
 ----------
@@ -17,16 +18,21 @@ from debist.export.c import c_sources
 from debist.export.common import ExportInfo
 from debist.export.matlab import matlab_source
 from debist.export.python import python_source
+from debist.export.scheme import Scheme, run_scheme
 from debist.identify.bands import identified_intervals
 from debist.model.rbf import RBFModel
+from debist.validate.config import ValidateConfig
+from debist.validate.datasets import validation_datasets
 
-__all__ = ["FORMATS", "export_files", "load_identified"]
+__all__ = ["FORMATS", "export_files", "load_identified", "load_scheme"]
 
 #: Export formats of ``debist export --format``.
 FORMATS = ("c", "matlab", "python")
 
 
-def export_files(model, fmt: str, info: ExportInfo | None = None) -> dict[str, str]:
+def export_files(
+    model, fmt: str, info: ExportInfo | None = None, scheme: Scheme | None = None
+) -> dict[str, str]:
     """Return the files of an export format.
 
     Parameters
@@ -37,6 +43,9 @@ def export_files(model, fmt: str, info: ExportInfo | None = None) -> dict[str, s
         :func:`c_sources`, :func:`matlab_source` or :func:`python_source`.
     info : ExportInfo, optional
         Provenance for the header comments.
+    scheme : Scheme, optional
+        The free-run scheme and its scores on the run's records (:func:`load_scheme`);
+        default :func:`debist.export.scheme.default_scheme`.
 
     Returns
     -------
@@ -49,11 +58,11 @@ def export_files(model, fmt: str, info: ExportInfo | None = None) -> dict[str, s
         If ``fmt`` is unknown.
     """
     if fmt == "c":
-        return c_sources(model, info)
+        return c_sources(model, info, scheme)
     if fmt == "matlab":
-        return matlab_source(model, info)
+        return matlab_source(model, info, scheme)
     if fmt == "python":
-        return python_source(model, info)
+        return python_source(model, info, scheme)
     raise WorkflowError(f"--format must be one of {FORMATS}, got {fmt!r}")
 
 
@@ -110,3 +119,41 @@ def load_identified(runner):
         identified=identified,
     )
     return model, info
+
+
+def load_scheme(runner, model) -> Scheme:
+    """Return the scheme of the run's validate stage and what the exported code scores on it.
+
+    Reads the ingest and differentiate tables (up to date with an up-to-date identify
+    stage), the workflow's ``[validate]`` table and, when the validate stage is up to date,
+    its NRMSE(q) of the identified model (``validate/nrmse.parquet``) to print beside
+    the export's own.
+
+    Parameters
+    ----------
+    runner : debist.engine.runner.Runner
+        The workflow's runner; its identify stage is up to date (:func:`load_identified`).
+    model : RBFModel
+        The identified model.
+
+    Returns
+    -------
+    Scheme
+        :func:`debist.export.scheme.run_scheme` on the run's records.
+
+    Raises
+    ------
+    WorkflowError
+        If the ``[validate]`` table is invalid (naming the key).
+    ArtifactError
+        If the ingest or differentiate stage has no artifacts.
+    """
+    cfg = ValidateConfig.from_dict(runner.section("validate"))
+    datasets = validation_datasets(runner.tables("ingest"), runner.tables("differentiate"))
+    reported: dict[str, float] = {}
+    state = {s.stage: s.state for s in runner.status()}
+    if state.get("validate") == "up to date":
+        table = runner.read_parquet("validate", "nrmse.parquet")
+        rows = table[table["model"] == "rbf"]
+        reported = dict(zip(rows["dataset"], rows["nrmse_q"].astype(float), strict=True))
+    return run_scheme(model, datasets, cfg, reported)

@@ -13,14 +13,24 @@ import functools
 import textwrap
 
 from debist.export.common import ExportInfo, _comment_text, _context, _environment, _literal
+from debist.export.scheme import Scheme
 from debist.model.termtable import BASE_ONE, BASE_TABLE, S_ACC, S_CREEP, S_POW, S_TANH
 
-__all__ = ["MATLAB_FILE", "MATLAB_NAME_FILE", "m_comment", "m_string", "matlab_source"]
+__all__ = [
+    "MATLAB_FILE",
+    "MATLAB_FREE_RUN_FILE",
+    "MATLAB_NAME_FILE",
+    "m_comment",
+    "m_string",
+    "matlab_source",
+]
 
 #: File name of the MATLAB export (the function's name is the file's).
 MATLAB_FILE = "debist_model.m"
 #: The function file that returns the workflow's name (a char array).
 MATLAB_NAME_FILE = "debist_model_workflow.m"
+#: The function file of the whole-record free run (validate's scheme).
+MATLAB_FREE_RUN_FILE = "debist_free_run.m"
 #: Characters a MATLAB literal carries as they are; every other one becomes a char code.
 _M_PLAIN = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 _.,:;()+=/-")
 
@@ -185,19 +195,25 @@ def _env():
     )
 
 
-def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
-    """Return a MATLAB function file of the model (Simulink MATLAB Function block, Octave).
+def matlab_source(
+    model, info: ExportInfo | None = None, scheme: Scheme | None = None
+) -> dict[str, str]:
+    """Return MATLAB function files of the model (Simulink MATLAB Function block, Octave).
 
-    ``debist_model.m`` defines ``[x_next, curves] = debist_model(x, v0, v1, dt)``: one RK4
-    step (inputs [V] linear between the two samples, midpoint their mean) and the
-    characteristic curves at ``q = x(1)`` from the lookup table; the model is in local
+    ``debist_model.m`` defines ``[x_next, curves] = debist_model(x, v0, v1, dt)``: one
+    sample of ``ns`` RK4 sub-steps (the causal step: inputs [V] linear between the two
+    samples) and the characteristic curves at ``q = x(1)`` from the lookup table;
+    ``debist_free_run.m`` defines ``[q, x] = debist_free_run(v, dt, x0, n_out)``, the free
+    run of a whole record in the scheme validate scored (its input interpolation, ``ns``,
+    divergence bound), with the model's local functions of its own. The model is in local
     functions with the constants as literal fixed-size double arrays (no cell arrays,
     strings, ``persistent`` or ``containers.Map``), so that Simulink can generate code
     from it. The terms are evaluated as arrays (an interpreter's loops are slow) with the
     C export's products per term, summed in the terms' order; the curves are looked up
     only when the caller asks for them.
     ``debist_model_workflow.m`` returns the workflow's name. The templates
-    ``templates/model.m.j2`` and ``templates/model_workflow.m.j2`` hold the code.
+    ``templates/model.m.j2``, ``free_run.m.j2``, ``model_core.m.j2`` (the local functions
+    both files carry) and ``model_workflow.m.j2`` hold the code.
 
     Parameters
     ----------
@@ -205,11 +221,15 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
         The identified model.
     info : ExportInfo, optional
         Provenance for the help text.
+    scheme : Scheme, optional
+        The free-run scheme and its scores (:func:`debist.export.scheme.run_scheme`);
+        default :func:`debist.export.scheme.default_scheme`.
 
     Returns
     -------
     dict of str to str
-        ``debist_model.m`` (:data:`MATLAB_FILE`) and ``debist_model_workflow.m``
+        ``debist_model.m`` (:data:`MATLAB_FILE`), ``debist_free_run.m``
+        (:data:`MATLAB_FREE_RUN_FILE`) and ``debist_model_workflow.m``
         (:data:`MATLAB_NAME_FILE`) to their text.
 
     Raises
@@ -224,10 +244,17 @@ def matlab_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     MathWorks, "MATLAB Function block" and "Local Functions"; GNU Octave manual, "Function
     Files".
     """
-    context = _context(model, info, "returned by debist_model_workflow()")
+    context = _context(
+        model,
+        info,
+        "returned by debist_model_workflow()",
+        scheme,
+        ("debist_free_run", "debist_model"),
+    )
     context.update(_m_indices(context))
     env = _env()
     return {
         MATLAB_FILE: env.get_template("model.m.j2").render(context),
+        MATLAB_FREE_RUN_FILE: env.get_template("free_run.m.j2").render(context),
         MATLAB_NAME_FILE: env.get_template("model_workflow.m.j2").render(context),
     }

@@ -12,6 +12,7 @@ import functools
 import textwrap
 
 from debist.export.common import ExportInfo, _comment_text, _context, _environment, _literal
+from debist.export.scheme import Scheme
 
 __all__ = ["PYTHON_FILE", "py_docstring", "py_repr", "python_source"]
 
@@ -84,13 +85,18 @@ def _env():
     return _environment({"py_repr": py_repr, "py_docstring": py_docstring, "py_list": _py_list})
 
 
-def python_source(model, info: ExportInfo | None = None) -> dict[str, str]:
+def python_source(
+    model, info: ExportInfo | None = None, scheme: Scheme | None = None
+) -> dict[str, str]:
     """Return a NumPy-only Python module of the model.
 
     The module defines ``map_inputs(v)``, ``deriv(x, h)`` (``h`` the mapped inputs),
-    ``rk4_step(x, v0, v1, dt)`` (returns the new state; inputs [V] linear between the two
-    samples, midpoint their mean), ``initial_state(q0, q_dot0)`` and ``curves(q)``, and the
-    constants as module-level arrays; the template ``templates/model.py.j2`` holds the code.
+    ``rk4_step(x, v0, v1, dt)`` (one sample of ``ns`` RK4 sub-steps, returns the new state;
+    inputs [V] linear between the two samples; causal), ``fine_inputs(v)`` and
+    ``free_run(v, dt, x0, n_out=None)`` (a whole record in validate's scheme: its input
+    interpolation, ``ns``, the divergence bound), ``initial_state(q0, q_dot0)`` and
+    ``curves(q)``, and the constants as module-level arrays; the template
+    ``templates/model.py.j2`` holds the code.
 
     Parameters
     ----------
@@ -98,6 +104,9 @@ def python_source(model, info: ExportInfo | None = None) -> dict[str, str]:
         The identified model.
     info : ExportInfo, optional
         Provenance for the module docstring.
+    scheme : Scheme, optional
+        The free-run scheme and its scores (:func:`debist.export.scheme.run_scheme`);
+        default :func:`debist.export.scheme.default_scheme`.
 
     Returns
     -------
@@ -114,5 +123,5 @@ def python_source(model, info: ExportInfo | None = None) -> dict[str, str]:
     ----------
     Masoud & Maas 2025, Eq. 37; Hairer, Norsett & Wanner, Solving ODEs I, Sec. II.1.
     """
-    context = _context(model, info, "WORKFLOW")
+    context = _context(model, info, "WORKFLOW", scheme)
     return {PYTHON_FILE: _env().get_template("model.py.j2").render(context)}

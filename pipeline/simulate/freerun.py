@@ -27,7 +27,9 @@ INTERPOLATIONS = ("bandlimited", "linear")
 #: Free-run engines: the compiled kernel and the NumPy reference.
 ENGINES = ("compiled", "numpy")
 #: Samples of odd-reflected extension at each end before band-limited interpolation.
-_EDGE_PAD = 32
+EDGE_PAD = 32
+#: The window of ``scipy.signal.resample_poly``'s FIR design for band-limited interpolation.
+BANDLIMITED_WINDOW = ("kaiser", 8.0)
 
 
 class FreeRunModel(Protocol):
@@ -118,11 +120,73 @@ def upsample_inputs(v: np.ndarray, factor: int, method: str) -> np.ndarray:
 
         # Odd reflection about both end points keeps value and slope continuous, so the
         # FIR filter sees no step at the record's ends; the extension is cut off again.
-        pad = min(_EDGE_PAD, n - 1)
+        pad = min(EDGE_PAD, n - 1)
         ext = np.concatenate([2 * v[:1] - v[pad:0:-1], v, 2 * v[-1:] - v[-2 : -pad - 2 : -1]])
-        up = resample_poly(ext, factor, 1, axis=0, window=("kaiser", 8.0))
+        up = resample_poly(ext, factor, 1, axis=0, window=BANDLIMITED_WINDOW)
         return up[pad * factor : pad * factor + m]
     raise WorkflowError(f"`input_interpolation` must be one of {INTERPOLATIONS}, got {method!r}")
+
+
+def bandlimited_phases(factor: int) -> np.ndarray:
+    """Return the polyphase FIR taps of the band-limited interpolation of :func:`upsample_inputs`.
+
+    Taken from ``scipy.signal.resample_poly`` itself (its response to a unit impulse, with
+    the window :data:`BANDLIMITED_WINDOW`), so that they are the coefficients it applies,
+    designed and aligned as it does. With ``e`` the odd-reflected record of
+    :func:`upsample_inputs` (``EDGE_PAD`` samples on each side, zero beyond), its fine
+    point ``J = factor c + r`` (``0 <= r < factor``) is
+    ``sum_d taps[r, d] e[c + d - D]`` for ``d = 0 .. 2 D``.
+
+    Parameters
+    ----------
+    factor : int
+        Points per sample interval, >= 1.
+
+    Returns
+    -------
+    ndarray, shape (factor, 2 D + 1)
+        The taps of each phase r [1]; ``D`` (the filter's half length in samples) is
+        ``(taps.shape[1] - 1) // 2``. ``factor = 1`` gives ``[[1.0]]`` (no interpolation).
+
+    Raises
+    ------
+    WorkflowError
+        If ``factor`` is below 1.
+
+    References
+    ----------
+    SciPy, ``scipy.signal.resample_poly`` (firwin design of half length 10 ``factor``,
+    zero-phase alignment); Crochiere & Rabiner, *Multirate Digital Signal Processing*
+    (1983), Sec. 3.3 (polyphase structures).
+
+    Examples
+    --------
+    >>> bandlimited_phases(4).shape  # scipy's 10 samples either side
+    (4, 21)
+    """
+    if int(factor) < 1:
+        raise WorkflowError(f"the interpolation factor must be >= 1, got {factor!r}")
+    factor = int(factor)
+    if factor == 1:
+        return np.ones((1, 1))
+    from scipy.signal import resample_poly
+
+    half = 64  # input samples either side of the impulse: beyond scipy's 10 of them
+    impulse = np.zeros(2 * half + 1)
+    impulse[half] = 1.0
+    # response at fine point J to a unit sample at i: g[J - factor i]; g[t] at index t + factor half
+    g = resample_poly(impulse, factor, 1, window=BANDLIMITED_WINDOW)
+    support = np.flatnonzero(g)
+    reach = int(np.max(np.abs(support - factor * half)))
+    d = -(-reach // factor)  # the half length in samples
+    if d >= half:
+        raise AssertionError(f"resample_poly's filter reaches {reach} fine points, beyond {half}")
+    taps = np.zeros((factor, 2 * d + 1))
+    for r in range(factor):
+        for k in range(2 * d + 1):  # sample c + k - d contributes g[r - factor (k - d)]
+            t = r - factor * (k - d)
+            taps[r, k] = g[t + factor * half]
+    return taps
 
 
 @dataclass(frozen=True)

@@ -267,7 +267,7 @@ def validate_model(
     Masoud & Maas 2025, Sec. 5.2 and Eq. 41.
     """
     fit_min = 4  # samples the cubic of initial_state needs; as many must remain to score
-    by_dt = _by_sample_time(datasets)
+    by_dt = by_sample_time(datasets)
     for ds in datasets:
         k = cfg.init_samples
         if 0 < k < fit_min or k > ds.q.size - fit_min:
@@ -289,7 +289,7 @@ def validate_model(
         )
     results: dict[str, SimulationResult] = {}
     for dt, group in by_dt.items():
-        q0, qd0 = _initial_states(group, dt, cfg.init_samples)
+        q0, qd0 = initial_states(group, dt, cfg.init_samples)
         sims = simulate(
             model,
             [ds.v for ds in group],
@@ -308,16 +308,51 @@ def validate_model(
     return score_free_runs(model_name, datasets, results, cfg, phi)
 
 
-def _by_sample_time(datasets: Sequence[DataSet]) -> dict[float, list[DataSet]]:
-    """Group the data sets by sample time [s]: each group is simulated as one batch."""
+def by_sample_time(datasets: Sequence[DataSet]) -> dict[float, list[DataSet]]:
+    """Group the data sets by sample time: each group is simulated as one batch.
+
+    Parameters
+    ----------
+    datasets : sequence of DataSet
+        The data sets.
+
+    Returns
+    -------
+    dict of float to list of DataSet
+        The sample time [s] (each record's median step rounded to 1e-12 s, the ``dt`` its
+        free run takes) to its data sets, in their order.
+    """
     by_dt: dict[float, list[DataSet]] = {}
     for ds in datasets:
         by_dt.setdefault(round(ds.dt, 12), []).append(ds)
     return by_dt
 
 
-def _initial_states(group: Sequence[DataSet], dt: float, init_samples: int):
-    """Return each data set's initial q and q_dot: fitted to its first samples, or its first."""
+def initial_states(
+    group: Sequence[DataSet], dt: float, init_samples: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return each data set's initial q and q_dot: fitted to its first samples, or its first.
+
+    Parameters
+    ----------
+    group : sequence of DataSet
+        Data sets of one sample time.
+    dt : float
+        Their sample time [s].
+    init_samples : int
+        ``[validate] init_samples``: 0 starts from the first sample's ``q`` and ``q_dot``;
+        more fit :func:`initial_state` to the first ``min(init_samples, 16)`` samples.
+
+    Returns
+    -------
+    q0, q_dot0 : ndarray, shape (len(group),)
+        Initial position [unit of q] and velocity [unit/s] of each free run.
+
+    Raises
+    ------
+    ValueError
+        If ``init_samples`` is 1 to 3 (:func:`initial_state` needs 4 samples).
+    """
     q0, qd0 = [], []
     for ds in group:
         if init_samples > 0:
@@ -485,10 +520,10 @@ def replicate_spread(
     B = deviations.shape[0]
     rows, bands = [], {}
     s = slice(cfg.init_samples, None)
-    for dt, group in _by_sample_time(datasets).items():
+    for dt, group in by_sample_time(datasets).items():
         # one sub-step count for every replicate, as if all ran in one batch
         ns = substeps_needed(model.replicate_table(list(columns), deviations), dt, cfg.substeps)
-        q0, qd0 = _initial_states(group, dt, cfg.init_samples)
+        q0, qd0 = initial_states(group, dt, cfg.init_samples)
         for k, ds in enumerate(group):
             band, scores = _replicate_runs(
                 model, columns, deviations, ds, dt, ns, q0[k], qd0[k], cfg, q_limit

@@ -1,9 +1,11 @@
 """The exported C, MATLAB and Python model against debist's own free run (NumPy engine).
 
-Every export gets the model as its term table; a free run driven by a seeded random input
-sequence (2000 steps; 400 under Octave, which interprets them) must agree with
-``simulate(..., substeps=1, interpolation="linear")`` to 1e-9 relative on q, and the curve
-tables with ``RBFModel.curves``.
+Every export gets the model as its term table and, without a run, validate's default scheme
+(ns = 2 RK4 sub-steps, band-limited inputs). Driven by a seeded random input sequence (1500
+samples; 400 under Octave, which interprets them), the per-sample step must agree with
+``simulate(..., substeps=2, interpolation="linear")`` and the whole-record free run with
+``simulate(..., substeps=2, interpolation="bandlimited")`` to 1e-9 relative on q, and the
+curve tables with ``RBFModel.curves``.
 """
 
 import ast
@@ -23,10 +25,17 @@ from debist.core.errors import ArtifactError, WorkflowError
 from debist.export.c import C_FILES, c_sources
 from debist.export.common import ExportInfo, curve_table
 from debist.export.files import export_files
-from debist.export.matlab import MATLAB_FILE, MATLAB_NAME_FILE, matlab_source
+from debist.export.matlab import (
+    MATLAB_FILE,
+    MATLAB_FREE_RUN_FILE,
+    MATLAB_NAME_FILE,
+    matlab_source,
+)
 from debist.export.python import PYTHON_FILE, python_source
+from debist.export.scheme import default_scheme
 from debist.model.rbf import RBFModel
-from debist.simulate.freerun import simulate
+from debist.simulate.freerun import simulate, upsample_inputs
+from debist.validate.config import ValidateConfig
 from tests.conftest import (
     example_rbf_model,
     invoke_cli,
@@ -38,7 +47,11 @@ from tests.conftest import (
 )
 
 DT = 0.01
-N = 2000
+N = 1500
+#: Samples of the whole-record free run compared with the band-limited reference.
+N_FREE = 600
+#: The scheme of every export without a run: validate's defaults.
+NS = ValidateConfig().substeps
 CC = shutil.which("cc")
 OCTAVE = shutil.which("octave-cli") or shutil.which("octave")
 #: Steps of the Octave free run (about 4 ms a step in its interpreter).
@@ -57,10 +70,11 @@ def random_inputs(seed, n=N, level=1500.0):
     return np.clip(level + walk + rng.normal(0, 30.0, (n, 2)), 0.0, 3000.0)
 
 
-def reference(model, v, q0=0.004, q_dot0=0.0):
+def reference(model, v, q0=0.004, q_dot0=0.0, interpolation="linear"):
+    """debist's free run in the exports' default scheme, inputs as ``interpolation``."""
     (res,) = simulate(
         model, [v], DT, np.array([q0]), np.array([q_dot0]),
-        substeps=1, interpolation="linear", engine="numpy",
+        substeps=NS, interpolation=interpolation, engine="numpy",
     )  # fmt: skip
     assert not res.diverged
     return res.q
@@ -88,6 +102,25 @@ def free_run(tmp_path_factory, key):
         name = f"export-free-run-{list(MODELS).index(key)}"
         _FREE_RUNS[key] = computed_once(tmp_path_factory, name, compute)
     return _FREE_RUNS[key]
+
+
+#: Models whose whole-record free run (band-limited inputs) is checked: the interpolation is
+#: the same code for every model, the sub-steps with lag, creep, slip, inertia and h = v.
+BAND_KEYS = ["lag+prior", "creep+slip+inertia", "T_z=0+slip", "zero-outside,h=v"]
+
+
+def band_run(tmp_path_factory, key):
+    """The model, the first N_FREE inputs and debist's free run of them with band-limited
+    inputs (validate's default scheme); once a session for all workers."""
+    from tests.conftest import computed_once
+
+    def compute():
+        model = MODELS[key]()
+        v = random_inputs(3)[:N_FREE]
+        return model, v, reference(model, v, interpolation="bandlimited")
+
+    name = f"export-band-run-{list(MODELS).index(key)}"
+    return computed_once(tmp_path_factory, name, compute)
 
 
 def with_slip(model, widths=(3e-5, 1e-4, 4e-4), stiffness=(400.0, 150.0, 40.0)):
@@ -146,6 +179,8 @@ def build_c(tmp_path, model, info=None):
     dll = ctypes.CDLL(str(lib))
     arr = ctypes.POINTER(ctypes.c_double)
     dll.debist_rk4_step.argtypes = [arr, arr, arr, ctypes.c_double]
+    dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+    dll.debist_free_run.restype = ctypes.c_size_t
     dll.debist_deriv.argtypes = [arr, arr, arr]
     dll.debist_curves.argtypes = [ctypes.c_double, arr]
     return dll
@@ -193,6 +228,120 @@ def test_c_export_matches_free_run(tmp_path, tmp_path_factory, key):
         q[k + 1] = x[0]
     assert np.ptp(ref) > 1e-3
     assert_close_q(q, ref)
+
+
+@pytest.mark.parametrize("key", BAND_KEYS)
+def test_whole_record_free_runs_match_bandlimited_free_run(tmp_path, tmp_path_factory, key):
+    """free_run (NumPy) and debist_free_run (C): validate's scheme, band-limited inputs."""
+    model, v, ref = band_run(tmp_path_factory, key)
+    x0 = np.zeros(n_states(model))
+    x0[0] = 0.004
+    mod = load_python(tmp_path, model)
+    q, states = mod.free_run(v, DT, x0)
+    assert states.shape == (N_FREE, n_states(model)) and np.array_equal(states[:, 0], q)
+    assert np.ptp(ref) > 1e-3
+    assert_close_q(q, ref)
+    # the causal step is another scheme: its run differs by far more than rounding
+    x, q_step = x0, [x0[0]]
+    for k in range(N_FREE - 1):
+        x = mod.rk4_step(x, v[k], v[k + 1], DT)
+        q_step.append(x[0])
+    assert np.max(np.abs(np.array(q_step) - ref)) > 1e-6 * np.ptp(ref)
+    if CC is not None:
+        dll = build_c(tmp_path, model)
+        q_c, vv = np.empty(N_FREE), np.ascontiguousarray(v)
+        assert dll.debist_free_run(ptr(vv), N_FREE, DT, ptr(x0.copy()), ptr(q_c)) == N_FREE
+        assert_close_q(q_c, ref)
+
+
+@pytest.mark.parametrize("key", ["creep+slip", "T_z=0+inertia"])
+def test_linear_scheme_free_run_is_the_step(tmp_path, tmp_path_factory, key):
+    """With validate's linear interpolation the whole-record free run is the scored run and
+    the per-sample step's (NumPy and C, both against simulate(..., "linear"))."""
+    model, v, ref = free_run(tmp_path_factory, key)
+    scheme = default_scheme(model, ValidateConfig.from_dict({"input_interpolation": "linear"}))
+    x0 = np.zeros(n_states(model))
+    x0[0] = 0.004
+    path = tmp_path / PYTHON_FILE
+    path.write_text(python_source(model, scheme=scheme)[PYTHON_FILE], encoding="utf-8")
+    spec = importlib.util.spec_from_file_location(f"linear_{abs(hash(str(tmp_path)))}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.INTERPOLATION == "linear"
+    assert_close_q(mod.free_run(v, DT, x0)[0], ref)
+    if CC is not None:
+        for name, text in c_sources(model, scheme=scheme).items():
+            (tmp_path / name).write_text(text, encoding="utf-8")
+        assert "#define DEBIST_BANDLIMITED 0" in (tmp_path / C_FILES[0]).read_text()
+        assert "static const double phases" not in (tmp_path / C_FILES[1]).read_text()
+        lib = tmp_path / "liblinear.so"
+        subprocess.run(
+            [CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-shared", "-fPIC",
+             str(tmp_path / C_FILES[1]), "-o", str(lib), "-lm"], check=True, capture_output=True,
+        )  # fmt: skip
+        dll = ctypes.CDLL(str(lib))
+        arr = ctypes.POINTER(ctypes.c_double)
+        dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+        dll.debist_free_run.restype = ctypes.c_size_t
+        q, vv = np.empty(N), np.ascontiguousarray(v)
+        assert dll.debist_free_run(ptr(vv), N, DT, ptr(x0.copy()), ptr(q)) == N
+        assert_close_q(q, ref)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 12, 33, 40, 300])
+@pytest.mark.parametrize("substeps", [1, 2, 3])
+def test_exported_interpolation_is_validates(tmp_path, n, substeps):
+    """The NumPy export's fine input grid is upsample_inputs' (band-limited and linear)."""
+    model = rbf_model(T_z=0.0, prior=False)
+    v = np.random.default_rng(n).normal(1500.0, 300.0, (n, 2))
+    for method in ("bandlimited", "linear"):
+        cfg = ValidateConfig.from_dict({"substeps": substeps, "input_interpolation": method})
+        files = python_source(model, scheme=default_scheme(model, cfg))
+        (tmp_path / method).mkdir(exist_ok=True)
+        path = tmp_path / method / PYTHON_FILE
+        path.write_text(files[PYTHON_FILE], encoding="utf-8")
+        spec = importlib.util.spec_from_file_location(f"fine_{method}_{n}_{substeps}", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        want = upsample_inputs(v, 2 * substeps, method)
+        np.testing.assert_allclose(mod.fine_inputs(v), want, rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
+def test_c_free_run_stops_at_the_divergence_bound(tmp_path):
+    """Past |q| > q_limit the run is NaN from that sample on and the count says where."""
+    model = rbf_model()
+    v = np.ascontiguousarray(random_inputs(3)[:N_FREE])
+
+    def run(q_limit):
+        (res,) = simulate(
+            model, [v], DT, np.array([0.0]), np.array([0.0]),
+            substeps=NS, q_limit=q_limit, engine="numpy",
+        )  # fmt: skip
+        return res
+
+    free = np.abs(run(np.inf).q)
+    half = N_FREE // 2
+    q_limit = 0.5 * (free[:half].max() + free[half:].max())  # first crossed in the second half
+    assert free[:half].max() < q_limit < free[half:].max()
+    ref = run(q_limit)
+    assert ref.diverged and half < ref.diverged_at < N_FREE
+    scheme = default_scheme(model, ValidateConfig.from_dict({"q_limit": q_limit}))
+    for name, text in c_sources(model, scheme=scheme).items():
+        (tmp_path / name).write_text(text, encoding="utf-8")
+    lib = tmp_path / "lib.so"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Werror", "-shared", "-fPIC", str(tmp_path / C_FILES[1]),
+         "-o", str(lib), "-lm"], check=True, capture_output=True,
+    )  # fmt: skip
+    dll = ctypes.CDLL(str(lib))
+    arr = ctypes.POINTER(ctypes.c_double)
+    dll.debist_free_run.argtypes = [arr, ctypes.c_size_t, ctypes.c_double, arr, arr]
+    dll.debist_free_run.restype = ctypes.c_size_t
+    q, x0 = np.empty(N_FREE), np.zeros(3)
+    assert dll.debist_free_run(ptr(v), N_FREE, DT, ptr(x0), ptr(q)) == ref.diverged_at
+    assert np.isnan(q[ref.diverged_at :]).all()
+    assert_close_q(q[: ref.diverged_at], ref.q[: ref.diverged_at])
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler (cc) on PATH")
@@ -297,14 +446,53 @@ def test_matlab_export_matches_free_run_in_octave(tmp_path, tmp_path_factory, ke
     assert len(names) == curves.shape[1]
 
 
+@pytest.mark.skipif(OCTAVE is None, reason="Octave is not installed (apt-get install octave)")
+@pytest.mark.slow
+def test_matlab_free_run_in_octave_both_interpolations(tmp_path, tmp_path_factory):
+    """debist_free_run.m: the band-limited and the linear scheme, against simulate()."""
+    n_out, key = 200, "creep+slip+inertia"
+    runs = {
+        "bandlimited": band_run(tmp_path_factory, key),
+        "linear": free_run(tmp_path_factory, key),
+    }
+    for method, (model, v, ref) in runs.items():
+        folder = tmp_path / method
+        folder.mkdir()
+        cfg = ValidateConfig.from_dict({"input_interpolation": method})
+        for name, text in matlab_source(model, scheme=default_scheme(model, cfg)).items():
+            (folder / name).write_text(text, encoding="utf-8")
+        np.savetxt(folder / "v.txt", v, fmt="%.17g")
+        x0 = "; ".join(repr(x) for x in [0.004] + [0.0] * (n_states(model) - 1))
+        (folder / "drive.m").write_text(
+            f"[q, x] = debist_free_run(load('v.txt'), {DT!r}, [{x0}], {n_out});\n"
+            "fid = fopen('q.txt', 'w'); fprintf(fid, '%.17g\\n', q); fclose(fid);\n"
+            f"assert(isequal(size(x), [{n_out}, {n_states(model)}]));\n",
+            encoding="utf-8",
+        )
+        done = subprocess.run(
+            [OCTAVE, "--no-gui", "--norc", "--quiet", "drive.m"],
+            cwd=folder, capture_output=True, text=True, timeout=600,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert_close_q(np.loadtxt(folder / "q.txt"), ref[:n_out])
+
+
 def test_matlab_file_is_fixed_size_code_for_simulink():
     model = rbf_model()
     info = ExportInfo(workflow="proto-7", run_digest="ef" * 32, identify_manifest="01" * 32)
     text = matlab_source(model, info)[MATLAB_FILE]
     assert text.startswith("function [x_next, curves] = debist_model(x, v0, v1, dt)\n")
     local = re.findall(r"^function .*?(\w+)\(", text, flags=re.M)
-    assert local == ["debist_model", "map_inputs", "deriv", "interp_held", "lookup_curves"]
+    assert local == [
+        "debist_model", "map_inputs", "rk4_substep", "deriv", "interp_held", "lookup_curves"
+    ]  # fmt: skip
     assert text.count("\nend\n") == len(local)  # every function closed: one file, one style
+    free = matlab_source(model, info)[MATLAB_FREE_RUN_FILE]
+    local = re.findall(r"^function .*?(\w+)\(", free, flags=re.M)
+    assert local == [
+        "debist_free_run", "fine_inputs", "map_inputs", "rk4_substep", "deriv", "interp_held"
+    ]  # fmt: skip
+    assert free.count("\nend\n") == len(local)
     for needle in ("ef" * 32, "01" * 32, "[-0.012, 0.012] m", "q [m]", "v [V]", "dt [s]"):
         assert needle in text
     # nothing code generation refuses or a Simulink block cannot size at compile time
@@ -344,13 +532,15 @@ def test_header_states_provenance_and_range():
         version="9.9.9",
     )
     files = {**c_sources(model, info), **python_source(model, info), **matlab_source(model, info)}
-    assert set(files) == {*C_FILES, PYTHON_FILE, MATLAB_FILE, MATLAB_NAME_FILE}
+    assert set(files) == {
+        *C_FILES, PYTHON_FILE, MATLAB_FILE, MATLAB_FREE_RUN_FILE, MATLAB_NAME_FILE
+    }  # fmt: skip
     # the workflow's name is free text: a string literal, never in a comment
     assert 'const char DEBIST_WORKFLOW[] = "proto-7";' in files[C_FILES[1]]
     assert "WORKFLOW = 'proto-7'" in files[PYTHON_FILE]
     assert "name = 'proto-7';" in files[MATLAB_NAME_FILE]
     for text in (files[f] for f in (*C_FILES, PYTHON_FILE, MATLAB_FILE)):
-        head = text[:3000]
+        head = text[:5000]
         for needle in ("ab" * 32, "cd" * 32, "debist 9.9.9", "[-0.012, 0.012]"):
             assert needle in head
         assert "restoring" in head and "[-0.011, 0.0095]" in head
@@ -360,11 +550,35 @@ def test_header_states_provenance_and_range():
     assert "digest: n/a" in c_sources(model)[C_FILES[0]]
 
 
+def test_header_states_scheme_and_one_unit_system():
+    """The scheme (ns, interpolation, which entry is scored) and units consistent with q's."""
+    from debist.export.scheme import Scheme
+
+    model = replace(rbf_model(), m_q=0.05)  # a mass [kg] (the example's m_q is 1)
+    head = c_sources(model)[C_FILES[0]][:5000]
+    assert "ns = 2 classical RK4 sub-steps" in head and "band-limited" in head
+    assert "debist_rk4_step (one sample, causal)" in head and "NOT the scored scheme" in head
+    assert "NRMSE(q) on the run's records: n/a" in head
+    assert "m_q = 0.05 [kg], the terms are forces [N]" in head
+    volts = Scheme(3, "linear", 0.5, q_unit="V")
+    head = c_sources(model, scheme=volts)[C_FILES[0]][:5000]
+    assert "ns = 3" in head and "NOT the scored" not in head and "|q| > 0.5 V" in head
+    assert "q [V], q_dot [V/s]" in head and "forces [M V/s^2]" in head
+    assert "[N]" not in head and "[kg]" not in head and "[-0.012, 0.012] V" in head
+    assert "#define DEBIST_SUBSTEPS 3" in head and "#define DEBIST_BANDLIMITED 0" in head
+    unit_mass = replace(model, m_q=1.0)
+    text = python_source(unit_mass, scheme=volts)[PYTHON_FILE][:5000]
+    assert "m_q = 1 [1]: per unit mass, the terms are accelerations [V/s^2]" in text
+    assert "SUBSTEPS = 3" in text and "INTERPOLATION = 'linear'" in text
+
+
 def test_export_files_and_errors():
     model = rbf_model()
     assert set(export_files(model, "c")) == set(C_FILES)
     assert set(export_files(model, "python")) == {PYTHON_FILE}
-    assert set(export_files(model, "matlab")) == {MATLAB_FILE, MATLAB_NAME_FILE}
+    assert set(export_files(model, "matlab")) == {
+        MATLAB_FILE, MATLAB_FREE_RUN_FILE, MATLAB_NAME_FILE
+    }  # fmt: skip
     with pytest.raises(WorkflowError) as err:
         export_files(model, "fortran")
     assert "fortran" in str(err.value)
@@ -460,7 +674,7 @@ def test_cli_export_needs_identify_and_never_overwrites(tmp_path, bistable_recor
     q0 = float(data.q.iloc[0])
     (ref,) = simulate(
         model, [v], dt, np.array([q0]), np.array([0.0]),
-        substeps=1, interpolation="linear", engine="numpy",
+        substeps=NS, interpolation="linear", engine="numpy",
     )  # fmt: skip
     spec = importlib.util.spec_from_file_location("debist_model_cli", tmp_path / "py" / PYTHON_FILE)
     mod = importlib.util.module_from_spec(spec)
