@@ -75,9 +75,13 @@ def test_overrides_name_their_own_folder_beside_the_output_folder(base, tmp_path
         and other.name.startswith("out.set-")
         and other.name != (f"out.set-{digest}")
     )
-    # --out is the folder the experiment sits beside
+    # an --out the user names is the run's folder itself, overrides or not; the stages the
+    # settings leave alone may still be copied from the workflow's own folder
     moved = load_workflow(base / "wf.toml", tmp_path / "b", overrides=["identify.M=6"])
-    assert moved.output_dir == tmp_path / f"b.set-{digest}"
+    assert moved.output_dir == tmp_path / "b" and moved.own_output_dir == base / "out"
+    assert load_workflow(base / "wf.toml", tmp_path / "b").own_output_dir is None
+    same = load_workflow(base / "wf.toml", base / "out", overrides=["identify.M=6"])
+    assert same.output_dir == base / "out" and same.own_output_dir is None
     # written back as --set options, they read as the same tables
     tree = {"identify": {"M": 6, "refine": {"prior": [0, 30]}}, "datasets": {"a.b": {"role": "x"}}}
     args = override_args(tree)
@@ -155,6 +159,28 @@ def test_diff_of_a_workflow_needs_its_overrides(base):
     assert "workflow" in str(err.value) and "two" in str(err.value)
     code, out = invoke("diff", base / "wf.toml")
     assert code == 2 and "--set KEY=VALUE" in out
+
+
+def test_diff_of_a_missing_folder_names_the_set_run_beside_it(tmp_path, monkeypatch):
+    configs = {"identify": {"M": 6}}
+    fake_run(tmp_path / "runs" / "rig", configs)
+    fake_run(tmp_path / "runs" / "rig-tuned.set-1a2b3c4d", configs)
+    (tmp_path / "runs" / "rig-tuned.set-0000000a").mkdir()  # no manifests: not a run
+    fake_run(tmp_path / "runs" / "rig-tuned.set-XYZ", configs)  # not 8 hex digits
+    fake_run(tmp_path / "runs" / "rig-tunedx.set-2a2b3c4d", configs)  # another name
+    with pytest.raises(WorkflowError) as err:
+        debist.diff(tmp_path / "runs" / "rig", tmp_path / "runs" / "rig-tuned")
+    beside = tmp_path / "runs" / "rig-tuned.set-1a2b3c4d"
+    assert f"did you mean '{beside}' (a run with --set overrides)?" in str(err.value)
+    assert str(err.value).startswith(f"'{tmp_path / 'runs' / 'rig-tuned'}' is not an output")
+    # the name spelt as the user spelt it, relative to the current folder
+    monkeypatch.chdir(tmp_path)
+    code, out = invoke_cli("diff", "runs/rig", "runs/rig-tuned")
+    assert code == 2 and "did you mean 'runs/rig-tuned.set-1a2b3c4d'" in out, out
+    # without such a run beside it: no suggestion
+    with pytest.raises(WorkflowError) as err:
+        debist.diff(tmp_path / "runs" / "rig", tmp_path / "runs" / "other")
+    assert "did you mean" not in str(err.value) and "no manifests" in str(err.value)
 
 
 def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
