@@ -183,6 +183,19 @@ def test_diff_of_a_missing_folder_names_the_set_run_beside_it(tmp_path, monkeypa
     assert "did you mean" not in str(err.value) and "no manifests" in str(err.value)
 
 
+def test_verify_of_a_missing_out_names_the_set_run_an_older_debist_made_beside_it(base, tmp_path):
+    settings = {"identify.M": 6}
+    missing = debist.verify(base / "wf.toml", overrides=settings, output_dir=tmp_path / "x")
+    assert not missing.ok and "does not exist" in missing.problems[0]
+    assert "--set" not in missing.problems[0]  # nothing beside it
+    beside = tmp_path / f"x.set-{override_digest({'identify': {'M': 6}})}"
+    fake_run(beside, {"identify": {"M": 6}})
+    found = debist.verify(base / "wf.toml", overrides=settings, output_dir=tmp_path / "x")
+    assert f"the run with these --set settings beside it is '{beside}'" in found.problems[0]
+    other = debist.verify(base / "wf.toml", overrides={"identify.M": 7}, output_dir=tmp_path / "x")
+    assert str(beside) not in other.problems[0]  # another setting's folder is not named
+
+
 def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
     shutil.copytree(base, tmp_path / "p")
     code, out = invoke("run", tmp_path / "p" / "wf.toml")
