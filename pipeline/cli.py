@@ -238,9 +238,10 @@ def _run(
     with _guard():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if wf.overrides:
+            where = "the folder --out names" if out is not None else "beside the workflow's"
+            kept = "; the workflow's output folder stays as it is" if wf.own_output_dir else ""
             console.print(
-                f"--set: this run writes to {escape(str(wf.output_dir))} (beside the "
-                "workflow's output folder, which stays as it is)",
+                f"--set: this run writes to {escape(str(wf.output_dir))} ({where}{kept})",
                 soft_wrap=True,
             )
         if select is not None:

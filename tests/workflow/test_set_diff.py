@@ -264,6 +264,31 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
 
 
 @pytest.mark.slow
+def test_run_set_with_out_writes_exactly_there_and_the_other_commands_find_it(base, tmp_path):
+    shutil.copytree(base, tmp_path / "p")
+    root, wf = tmp_path / "p", tmp_path / "p" / "wf.toml"
+    before = file_hashes(root / "out")
+    code, text = invoke("run", wf, "--out", root / "m6", "-S", "identify.M=6", "-v")
+    assert code == 0, text
+    assert "the folder --out names" in text and "own run: copied" in text
+    assert artifacts.read_manifest(root / "m6" / "identify").config["M"] == 6
+    assert not list(root.glob("*.set-*")) and file_hashes(root / "out") == before
+    code, out = invoke("status", wf, "--out", root / "m6", "-S", "identify.M=6")
+    assert code == 0 and "up to date" in out and "stale" not in out and "missing" not in out
+    code, out = invoke("status", wf, "--out", root / "m6")  # without the --set: M differs
+    assert code == 0 and "stale" in out and "M" in out, out
+    found = json.loads(invoke_cli("diff", root / "out", root / "m6", "--json")[1])
+    assert {"stage": "identify", "key": "M", "a": 8, "b": 6} in found["config"]
+    same = invoke_cli("diff", wf, "-S", "identify.M=6", "--out", root / "m6", "--json")[1]
+    assert json.loads(same) == found
+    assert invoke("verify", wf, "--out", root / "m6", "-S", "identify.M=6")[0] == 0
+    # the folder holds the run of identify.M=6: another setting is refused there
+    code, out = invoke("run", wf, "--out", root / "m6", "-S", "identify.M=7")
+    assert code == 2 and "identify.M=6" in out and "identify.M=7" in out, out
+    assert artifacts.read_manifest(root / "m6" / "identify").config["M"] == 6
+
+
+@pytest.mark.slow
 def test_run_set_copies_the_stages_the_settings_leave_as_they_are(base, tmp_path):
     """`--set validate.substeps=3` leaves ingest, differentiate and identify the computation
     the workflow's own run made (the same key): their folders are copied byte for byte and
