@@ -347,8 +347,8 @@ def diff(
     """Compare two runs: the settings and the NRMSE that differ (reads only).
 
     Either two output folders, or a workflow file and ``overrides``: the run with those
-    overrides (its folder beside the output folder, see
-    :func:`debist.workflow.loader.override_folder`) against the workflow's own run.
+    overrides (in ``output_dir``, or without it in its folder beside the output folder, see
+    :func:`debist.workflow.overrides.override_folder`) against the workflow's own run.
 
     Parameters
     ----------
@@ -359,7 +359,8 @@ def diff(
     overrides : mapping or sequence of str, optional
         With a workflow file: the settings of the run compared with the workflow's own.
     output_dir : path-like, optional
-        With a workflow file: replaces ``[workflow] output_dir`` (as for :func:`run`).
+        With a workflow file: the folder of the run with ``overrides`` (as for :func:`run`);
+        the workflow's own run stays in ``[workflow] output_dir``.
 
     Returns
     -------
@@ -387,8 +388,8 @@ def diff(
         if not Path(run_a).is_file():
             raise WorkflowError(f"diff '{run_a}': with overrides, expected a workflow file")
         run_a, run_b = (
-            load_workflow(run_a, given, output_dir=output_dir).output_dir
-            for given in (None, overrides)
+            load_workflow(run_a).output_dir,
+            load_workflow(run_a, overrides, output_dir=output_dir).output_dir,
         )
     elif overrides or output_dir is not None:
         raise WorkflowError(

@@ -112,7 +112,12 @@ app = typer.Typer(
 
 WorkflowArg = Annotated[Path, typer.Argument(metavar="WORKFLOW", help="Workflow TOML file.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Rerun even if up to date.")]
-OutOpt = Annotated[Path | None, typer.Option("--out", help="Override [workflow] output_dir.")]
+OutOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--out", help="Output folder of the run (replaces [workflow] output_dir), also with --set."
+    ),
+]
 SetOpt = Annotated[
     list[str] | None,
     typer.Option(
@@ -120,11 +125,10 @@ SetOpt = Annotated[
         "-S",
         metavar="KEY=VALUE",
         help="Change one setting of the workflow for this command, e.g. identify.M=8 "
-        "(repeatable; checked like the file; the manifests record the values used). The run "
-        "goes to its own folder beside the output folder, named after it plus '.set-' and 8 "
-        "hex digits of the settings' sha256; the workflow's own run is never touched, and "
-        "the same --set "
-        "finds that folder again.",
+        "(repeatable; checked like the file; the manifests record the values used). Without "
+        "--out the run goes to its own folder beside the output folder, named after it plus "
+        "'.set-' and 8 hex digits of the settings' sha256, so the workflow's own run is never "
+        "touched and the same --set finds that folder again; with --out it goes there.",
     ),
 ]
 WaitOpt = Annotated[
@@ -251,9 +255,10 @@ def _run(
     with _guard(), _wait_advice():
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         if wf.overrides:
+            where = "the folder --out names" if out is not None else "beside the workflow's"
+            kept = "; the workflow's output folder stays as it is" if wf.own_output_dir else ""
             console.print(
-                f"--set: this run writes to {escape(str(wf.output_dir))} (beside the "
-                "workflow's output folder, which stays as it is)",
+                f"--set: this run writes to {escape(str(wf.output_dir))} ({where}{kept})",
                 soft_wrap=True,
             )
         if select is not None:
@@ -318,9 +323,10 @@ def run(
 
     --stages, or --from and --until, run a part of the workflow (no digest then); a stage
     whose upstream stage outside the part is missing or stale is refused (exit 2). --set
-    changes a setting for this run only: the run goes to its own folder beside the output
-    folder (its name plus .set- and 8 hex digits), which status, verify, report, export and
-    diff find with the same --set; the workflow's own run is not touched.
+    changes a setting for this run only: the run goes to --out, or without it to its own
+    folder beside the output folder (its name plus .set- and 8 hex digits); status, verify,
+    report, export and diff find it with the same --set and --out. The workflow's own run is
+    not touched.
     """
     select = {"stages": stages, "start": start, "until": until}
     _run(workflow, None, force, out, wait, select, sets)

@@ -13,6 +13,7 @@ Maas 2025, Eq. 41 (NRMSE).
 
 from __future__ import annotations
 
+import glob
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -24,11 +25,12 @@ from debist.core import artifacts
 from debist.core.errors import WorkflowError
 from debist.stages.registry import names
 from debist.workflow.defaults import with_defaults
+from debist.workflow.overrides import SET_FOLDER
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
 
-__all__ = ["NRMSE_COLUMNS", "diff_runs"]
+__all__ = ["NRMSE_COLUMNS", "diff_runs", "is_run", "set_run_beside"]
 
 #: NRMSE columns compared, each reported in percent.
 NRMSE_COLUMNS = ("nrmse_q", "nrmse_q_dot", "nrmse_q_ddot", "nrmse_q_k")
@@ -43,6 +45,58 @@ def _flat(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[name] = value
     return out
+
+
+def is_run(folder: str | Path) -> bool:
+    """Return whether a folder holds the manifest of at least one stage (a debist run).
+
+    Parameters
+    ----------
+    folder : path-like
+        A folder, which need not exist.
+
+    Returns
+    -------
+    bool
+    """
+    folder = Path(folder)
+    return folder.is_dir() and any((folder / s / artifacts.MANIFEST).is_file() for s in names())
+
+
+def set_run_beside(folder: str | Path) -> Path | None:
+    """Return the run with ``--set`` overrides beside a folder, if there is one.
+
+    A run with overrides and no ``--out`` goes to ``<folder>.set-<8 hex>`` beside the
+    workflow's output folder (:data:`debist.workflow.overrides.SET_FOLDER`); a user who names
+    ``<folder>`` may mean it. Of several, the one modified last.
+
+    Parameters
+    ----------
+    folder : path-like
+        The folder the user named (it need not exist).
+
+    Returns
+    -------
+    pathlib.Path or None
+        ``folder`` with the name of that run (spelt as ``folder`` is: relative stays
+        relative), or None when no such run lies beside it.
+
+    Examples
+    --------
+    >>> set_run_beside("/nonexistent/runs/rig") is None
+    True
+    """
+    folder = Path(folder)
+    parent = folder.parent if folder.name else folder
+    pattern = SET_FOLDER.format(name=glob.escape(folder.name), digest="[0-9a-f]" * 8)
+    try:
+        found = [p for p in parent.glob(pattern) if is_run(p)]
+    except OSError:  # an unreadable parent: nothing to suggest
+        return None
+    if not found:
+        return None
+    newest = max(found, key=lambda p: (p.stat().st_mtime, p.name))
+    return folder.with_name(newest.name)
 
 
 def _nrmse(run: Path) -> pd.DataFrame | None:
@@ -93,12 +147,17 @@ def diff_runs(run_a: str | Path, run_b: str | Path) -> dict[str, list[dict[str, 
     Raises
     ------
     WorkflowError
-        If a folder does not exist or holds no stage manifest.
+        If a folder does not exist or holds no stage manifest; the message names the run
+        with ``--set`` overrides beside it, if there is one (:func:`set_run_beside`).
     """
     runs = [Path(run_a), Path(run_b)]
     for run in runs:
-        if not run.is_dir() or not any((run / s / artifacts.MANIFEST).is_file() for s in names()):
-            raise WorkflowError(f"'{run}' is not an output folder of a debist run (no manifests)")
+        if not is_run(run):
+            beside = set_run_beside(run)
+            hint = f"; did you mean '{beside}' (a run with --set overrides)?" if beside else ""
+            raise WorkflowError(
+                f"'{run}' is not an output folder of a debist run (no manifests){hint}"
+            )
     config = []
     for stage in names():
         found = [artifacts.read_manifest(run / stage) for run in runs]

@@ -21,6 +21,7 @@ from debist.core.errors import ArtifactError, RunLockedError
 from debist.core.fileformats import write_output
 from debist.engine import outdir
 from debist.stages import registry
+from debist.workflow.overrides import override_folder
 
 __all__ = ["verify_run", "version_notes"]
 
@@ -49,7 +50,8 @@ def verify_run(runner: Any, digest: str | None = None) -> list[str]:
     Returns
     -------
     list of str
-        Problems, each naming the file: a missing output folder, missing or extra
+        Problems, each naming the file: a missing output folder (and the run with the
+        same overrides in its ``.set-`` folder beside it, if there is one), missing or extra
         stage folders and manifests, modified, missing or unlisted outputs, manifests
         whose key does not match their own fields, a broken chain (recorded inputs or
         upstream manifests that differ from the current ones, changed source files),
@@ -62,15 +64,21 @@ def verify_run(runner: Any, digest: str | None = None) -> list[str]:
         While another process writes to the output folder.
     """
     out = runner.wf.output_dir
+    mine = runner.stages()
     if not out.is_dir():
-        return [f"output folder '{out}' does not exist (the workflow was never run there)"]
+        beside = override_folder(out, runner.wf.overrides)
+        hint = (
+            f"; the run with these --set settings beside it is '{beside}' (pass that --out)"
+            if beside != out and any((beside / s / artifacts.MANIFEST).is_file() for s in mine)
+            else ""
+        )
+        return [f"output folder '{out}' does not exist (the workflow was never run there){hint}"]
     if outdir.is_locked(out):
         raise RunLockedError(
             f"output folder '{out}' is being written by {outdir.lock_holder(out)}: "
             "verify when it is done"
         )
     problems = [outdir.describe_leftover(p) for p in outdir.leftovers(out)]
-    mine = runner.stages()
     for entry in sorted(out.iterdir()):
         if (
             entry.is_dir()

@@ -97,12 +97,13 @@ class Workflow:
         The stage sections (``differentiate``, ``identify``, ``validate``, ...).
     overrides : dict
         The settings overridden for this run, as nested tables (``{"identify": {"M": 8}}``;
-        empty for the file as it is). With overrides, ``output_dir`` is the folder of
-        :func:`debist.workflow.overrides.override_folder` beside the workflow's own.
+        empty for the file as it is). With overrides and no ``--out``, ``output_dir`` is the
+        folder of :func:`debist.workflow.overrides.override_folder` beside the workflow's own;
+        an ``--out`` the user names is ``output_dir`` itself.
     own_output_dir : pathlib.Path or None
         With overrides, the workflow's own output folder, whose stages the settings leave
         as they are may be copied instead of recomputed (:meth:`debist.engine.runner.
-        Runner.run`); None without overrides.
+        Runner.run`); None without overrides, or when it is ``output_dir`` itself.
     """
 
     path: Path
@@ -182,6 +183,25 @@ def _output_dir(path: Path, what: str) -> Path:
     return out
 
 
+def _own_output_dir(
+    path: Path, name: str, stated: str | None, *, strict: bool = False
+) -> Path | None:
+    """Return the workflow's own output folder (``[workflow] output_dir`` or ``runs/<name>``).
+
+    ``strict``: raise when it cannot be a folder; else None (a run with ``--out`` only reads
+    it, to copy the stages its overrides leave as they are).
+    """
+    try:
+        if stated:
+            return _output_dir(path.parent / Path(stated).expanduser(), "[workflow] output_dir")
+        check_file_name(name, f"{path}: [workflow] name (no output_dir given)")
+        return _output_dir(path.parent / "runs" / name, "[workflow] output_dir")
+    except (ArgumentError, WorkflowError):
+        if strict:
+            raise
+        return None
+
+
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     """Parse ``KEY=VALUE`` settings (``debist run --set``) into a nested table.
 
@@ -250,14 +270,15 @@ def load_workflow(
     path : path-like
         The TOML file.
     output_dir : path-like, optional
-        Overrides ``[workflow] output_dir``.
+        Overrides ``[workflow] output_dir``: the run's folder, exactly, with or without
+        ``overrides``.
     overrides : mapping or sequence of str, optional
         Settings that replace the file's, checked by the same schema: ``{"identify.M": 8}``
         (dotted keys), nested mappings meaning the same (``{"identify": {"M": 8}}``,
         :func:`debist.workflow.overrides.overrides_table`), or ``["identify.M=8"]``
         (:func:`parse_overrides`). The stages see the merged workflow, so their manifests
-        record the values used; the run goes to its own folder beside the output folder
-        (:func:`debist.workflow.overrides.override_folder`).
+        record the values used. Without ``output_dir`` the run goes to its own folder beside
+        the workflow's (:func:`debist.workflow.overrides.override_folder`).
 
     Returns
     -------
@@ -292,14 +313,12 @@ def load_workflow(
     head = checked.head
     name = head.name if head.name is not None else path.stem
     base = path.parent
-    if output_dir:
+    if output_dir:  # named by the user: the run goes exactly there, overrides or not
         out = _output_dir(Path(output_dir).expanduser(), "output folder (--out)")
-    elif head.output_dir:
-        out = _output_dir(base / Path(head.output_dir).expanduser(), "[workflow] output_dir")
-    else:  # the name becomes a folder name: runs/<name>
-        check_file_name(name, f"{path}: [workflow] name (no output_dir given)")
-        out = _output_dir(base / "runs" / name, "[workflow] output_dir")
-    own, out = out, override_folder(out, changed)
+        own = _own_output_dir(path, name, head.output_dir) if changed else None
+    else:
+        own = _own_output_dir(path, name, head.output_dir, strict=True)
+        out = override_folder(own, changed)
     datasets = []
     for ds_name, (entry, _) in checked.datasets.items():
         table = raw["datasets"][ds_name]
@@ -321,4 +340,5 @@ def load_workflow(
         ingest = {**raw.get("ingest", {}), **overrides}
         datasets.append(DatasetSpec(ds_name, source, entry.role, ingest, entry.rig))
     sections = {k: v for k, v in raw.items() if k not in ("workflow", "ingest", "datasets")}
-    return Workflow(path, name, out, tuple(datasets), sections, changed, own if changed else None)
+    copy_from = own if changed and own != out else None
+    return Workflow(path, name, out, tuple(datasets), sections, changed, copy_from)

@@ -5,9 +5,10 @@
 mean what the dotted keys mean on the command line; nested mappings are flattened into dotted
 keys, each key is parsed as a TOML key (``datasets."run.2".role``), and values must be TOML
 values (``None`` is refused: TOML has no null; numpy scalars are taken as the Python numbers
-they hold, tuples as arrays). A run with overrides gets its own output folder beside the
-workflow's (:func:`override_folder`), named by the digest of the settings, so an experiment
-never overwrites the workflow's own run and the same settings find their folder again.
+they hold, tuples as arrays). A run with overrides and no output folder of its own (``--out``)
+gets one beside the workflow's (:func:`override_folder`), named by the digest of the settings,
+so an experiment never overwrites the workflow's own run and the same settings find their
+folder again; an output folder the user names is used as it is.
 :func:`override_args` writes the settings back as ``--set`` options (the verify command a
 run prints, the report's provenance).
 
@@ -132,12 +133,13 @@ def override_folder(output_dir: str | os.PathLike, overrides: Mapping[str, Any])
 
     ``runs/silverbox`` with ``--set identify.M=8`` becomes ``runs/silverbox.set-<8 hex>``
     (:data:`SET_FOLDER`, :func:`override_digest`), so an experiment never overwrites the
-    workflow's own run, and the same settings find the same folder again.
+    workflow's own run, and the same settings find the same folder again. Used only when
+    the user names no output folder (``--out``): a named one is the run's folder as it is.
 
     Parameters
     ----------
     output_dir : path-like
-        The workflow's own output folder (``[workflow] output_dir`` or ``--out``).
+        The workflow's own output folder (``[workflow] output_dir``, or ``runs/<name>``).
     overrides : mapping
         Nested tables (:func:`~debist.workflow.loader.parse_overrides`); empty: the
         workflow's own folder, ``output_dir`` itself.

@@ -64,4 +64,4 @@ def test_the_rig_analyze_and_ingest_help_say_their_sections_and_units():
     assert "Run the virtual rig of [rig]:" in " ".join(render("simulate-rig").split())
     assert "Design analysis of [physics] (Section 3)" in " ".join(render("analyze").split())
     ingest = " ".join(render("ingest").split())
-    assert "(t [s], q [m], v1..vN [V])" in ingest and "Override [workflow] output_dir" in ingest
+    assert "(t [s], q [m], v1..vN [V])" in ingest and "(replaces [workflow] output_dir)" in ingest

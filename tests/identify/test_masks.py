@@ -14,7 +14,6 @@ import pytest
 from debist.core.errors import WorkflowError
 from debist.identify.config import IdentifyConfig
 from debist.identify.excitation import input_active
-from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKFLOW = ROOT / "workflows" / "paper-experiment.toml"
@@ -67,10 +66,10 @@ def paper_until_identify(tmp_path_factory):
         code, text = invoke_cli("run", WORKFLOW, "--out", folder / "out", "--until", "identify",
                                 "-S", "identify.model_error=false")  # fmt: skip
         assert code == 0, text
-        return override_folder(folder / "out", {"identify": {"model_error": False}}).name
+        return "out"  # the folder --out names, with --set too
 
     folder, name = made_once(tmp_path_factory, "paper-masks", make)  # one for all workers
-    return folder / name  # beside "out"
+    return folder / name
 
 
 def _sub_threshold_intervals(out: Path, i: int) -> list[tuple[float, float]]:

@@ -14,7 +14,6 @@ from debist.rig.params import RigParams
 from debist.rig.reduced import Q_MAX, ReducedPlant
 from debist.rig.run import make_plant, simulate_rig, true_curves
 from debist.simulate.freerun import simulate
-from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-reduced.toml"
@@ -162,14 +161,14 @@ def test_the_gains_are_accurate_near_both_wells_and_the_shipped_bands_do_not_vou
     from debist.core import artifacts
     from tests.conftest import invoke_cli
 
-    code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "identify")
+    code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path / "shipped", "--until", "identify")
     assert code == 0, text
-    shipped = pd.read_parquet(tmp_path / "identify/curves.parquet")
+    shipped = pd.read_parquet(tmp_path / "shipped" / "identify/curves.parquet")
     assert not shipped[["g1_identified", "g2_identified"]].to_numpy().any()
-    code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "identify",
+    run = tmp_path / "bootstrap"  # a run with --set in the folder --out names
+    code, text = invoke_cli("run", WORKFLOW, "--out", run, "--until", "identify",
                             "-S", "identify.model_error=false")  # fmt: skip
     assert code == 0, text
-    run = override_folder(tmp_path, {"identify": {"model_error": False}})  # beside tmp_path
     curves = pd.read_parquet(run / "identify/curves.parquet")
     truth = artifacts.read_h5(run / "rig/identification_truth.h5")["curves"]
     q = curves.q.to_numpy()
@@ -205,7 +204,7 @@ def test_the_shipped_refinement_passes_its_guard_and_lowers_the_unseen_error(tmp
     code, text = invoke_cli("run", WORKFLOW, "--out", tmp_path, "--until", "validate",
                             "-S", "validate.replicates=0")  # fmt: skip
     assert code == 0, text
-    run = override_folder(tmp_path, {"validate": {"replicates": 0}})  # beside tmp_path
+    run = tmp_path  # the folder --out names, with --set too
     refine = json.loads((run / "identify/summary.json").read_text())["refine"]
     assert refine["accepted"], refine["message"]
     assert refine["holdout_rms_simulation_error"] < refine["holdout_rms_equation_error"]

@@ -20,7 +20,6 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-staircase.toml"
@@ -48,7 +47,7 @@ def full_rig_run(tmp_path_factory):
     raw = tomllib.loads(workflow.read_text())
     rig = RigConfig.from_dict(raw["rig"], raw.get("physics", {})).rig
     assert rig.model == "full"
-    run = override_folder(out / "run", {"identify": {"model_error": False}})  # beside "run"
+    run = out / "run"  # the folder --out names, with --set too
     static = pd.read_parquet(run / "identify/static.parquet")
     log = pd.read_parquet(run / "ingest/identification.parquet")
     return static, log, rig.prototype

@@ -26,7 +26,6 @@ import pytest
 from typer.testing import CliRunner
 
 from debist.cli import app
-from debist.workflow.overrides import override_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKFLOW = ROOT / "workflows" / "paper-experiment-staircase.toml"
@@ -51,7 +50,7 @@ def staircase_out(tmp_path_factory):
         out = folder / "run"
         result = CliRunner().invoke(app, ["run", str(WORKFLOW), "--out", str(out)])
         assert result.exit_code == 0, result.output
-        args = ["run", str(WORKFLOW), "--out", str(out), "--until", "identify",
+        args = ["run", str(WORKFLOW), "--out", str(folder / "bootstrap"), "--until", "identify",
                 "-S", "identify.model_error=false"]  # fmt: skip
         result = CliRunner().invoke(app, args)
         assert result.exit_code == 0, result.output
@@ -64,8 +63,9 @@ def staircase_out(tmp_path_factory):
 @pytest.fixture(scope="module")
 def staircase_boot_out(staircase_out):
     """The same run with bootstrap-only bands (``model_error = false``), in its own folder
-    beside the shipped run's (a run with --set writes beside the original run, never into it)."""
-    return override_folder(staircase_out, {"identify": {"model_error": False}})
+    beside the shipped run's (a run with --set in the folder its --out names, never into the
+    original run's)."""
+    return staircase_out.parent / "bootstrap"
 
 
 @pytest.fixture(scope="module")

@@ -75,9 +75,13 @@ def test_overrides_name_their_own_folder_beside_the_output_folder(base, tmp_path
         and other.name.startswith("out.set-")
         and other.name != (f"out.set-{digest}")
     )
-    # --out is the folder the experiment sits beside
+    # an --out the user names is the run's folder itself, overrides or not; the stages the
+    # settings leave alone may still be copied from the workflow's own folder
     moved = load_workflow(base / "wf.toml", tmp_path / "b", overrides=["identify.M=6"])
-    assert moved.output_dir == tmp_path / f"b.set-{digest}"
+    assert moved.output_dir == tmp_path / "b" and moved.own_output_dir == base / "out"
+    assert load_workflow(base / "wf.toml", tmp_path / "b").own_output_dir is None
+    same = load_workflow(base / "wf.toml", base / "out", overrides=["identify.M=6"])
+    assert same.output_dir == base / "out" and same.own_output_dir is None
     # written back as --set options, they read as the same tables
     tree = {"identify": {"M": 6, "refine": {"prior": [0, 30]}}, "datasets": {"a.b": {"role": "x"}}}
     args = override_args(tree)
@@ -157,6 +161,41 @@ def test_diff_of_a_workflow_needs_its_overrides(base):
     assert code == 2 and "--set KEY=VALUE" in out
 
 
+def test_diff_of_a_missing_folder_names_the_set_run_beside_it(tmp_path, monkeypatch):
+    configs = {"identify": {"M": 6}}
+    fake_run(tmp_path / "runs" / "rig", configs)
+    fake_run(tmp_path / "runs" / "rig-tuned.set-1a2b3c4d", configs)
+    (tmp_path / "runs" / "rig-tuned.set-0000000a").mkdir()  # no manifests: not a run
+    fake_run(tmp_path / "runs" / "rig-tuned.set-XYZ", configs)  # not 8 hex digits
+    fake_run(tmp_path / "runs" / "rig-tunedx.set-2a2b3c4d", configs)  # another name
+    with pytest.raises(WorkflowError) as err:
+        debist.diff(tmp_path / "runs" / "rig", tmp_path / "runs" / "rig-tuned")
+    beside = tmp_path / "runs" / "rig-tuned.set-1a2b3c4d"
+    assert f"did you mean '{beside}' (a run with --set overrides)?" in str(err.value)
+    assert str(err.value).startswith(f"'{tmp_path / 'runs' / 'rig-tuned'}' is not an output")
+    # the name spelt as the user spelt it, relative to the current folder
+    monkeypatch.chdir(tmp_path)
+    code, out = invoke_cli("diff", "runs/rig", "runs/rig-tuned")
+    assert code == 2 and "did you mean 'runs/rig-tuned.set-1a2b3c4d'" in out, out
+    # without such a run beside it: no suggestion
+    with pytest.raises(WorkflowError) as err:
+        debist.diff(tmp_path / "runs" / "rig", tmp_path / "runs" / "other")
+    assert "did you mean" not in str(err.value) and "no manifests" in str(err.value)
+
+
+def test_verify_of_a_missing_out_names_the_set_run_an_older_debist_made_beside_it(base, tmp_path):
+    settings = {"identify.M": 6}
+    missing = debist.verify(base / "wf.toml", overrides=settings, output_dir=tmp_path / "x")
+    assert not missing.ok and "does not exist" in missing.problems[0]
+    assert "--set" not in missing.problems[0]  # nothing beside it
+    beside = tmp_path / f"x.set-{override_digest({'identify': {'M': 6}})}"
+    fake_run(beside, {"identify": {"M": 6}})
+    found = debist.verify(base / "wf.toml", overrides=settings, output_dir=tmp_path / "x")
+    assert f"the run with these --set settings beside it is '{beside}'" in found.problems[0]
+    other = debist.verify(base / "wf.toml", overrides={"identify.M": 7}, output_dir=tmp_path / "x")
+    assert str(beside) not in other.problems[0]  # another setting's folder is not named
+
+
 def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
     shutil.copytree(base, tmp_path / "p")
     code, out = invoke("run", tmp_path / "p" / "wf.toml")
@@ -222,6 +261,31 @@ def test_run_set_writes_beside_the_run_and_leaves_it_byte_identical(base, tmp_pa
     code, out = invoke("diff", root / "out", tmp_path / "nowhere")
     assert code == 2 and "output" in out and "folder" in out
     assert file_hashes(root / "out") == before
+
+
+@pytest.mark.slow
+def test_run_set_with_out_writes_exactly_there_and_the_other_commands_find_it(base, tmp_path):
+    shutil.copytree(base, tmp_path / "p")
+    root, wf = tmp_path / "p", tmp_path / "p" / "wf.toml"
+    before = file_hashes(root / "out")
+    code, text = invoke("run", wf, "--out", root / "m6", "-S", "identify.M=6", "-v")
+    assert code == 0, text
+    assert "the folder --out names" in text and "own run: copied" in text
+    assert artifacts.read_manifest(root / "m6" / "identify").config["M"] == 6
+    assert not list(root.glob("*.set-*")) and file_hashes(root / "out") == before
+    code, out = invoke("status", wf, "--out", root / "m6", "-S", "identify.M=6")
+    assert code == 0 and "up to date" in out and "stale" not in out and "missing" not in out
+    code, out = invoke("status", wf, "--out", root / "m6")  # without the --set: M differs
+    assert code == 0 and "stale" in out and "M" in out, out
+    found = json.loads(invoke_cli("diff", root / "out", root / "m6", "--json")[1])
+    assert {"stage": "identify", "key": "M", "a": 8, "b": 6} in found["config"]
+    same = invoke_cli("diff", wf, "-S", "identify.M=6", "--out", root / "m6", "--json")[1]
+    assert json.loads(same) == found
+    assert invoke("verify", wf, "--out", root / "m6", "-S", "identify.M=6")[0] == 0
+    # the folder holds the run of identify.M=6: another setting is refused there
+    code, out = invoke("run", wf, "--out", root / "m6", "-S", "identify.M=7")
+    assert code == 2 and "identify.M=6" in out and "identify.M=7" in out, out
+    assert artifacts.read_manifest(root / "m6" / "identify").config["M"] == 6
 
 
 @pytest.mark.slow
