@@ -562,6 +562,56 @@ def identified_intervals(q: np.ndarray, mask: np.ndarray) -> list[list[float]]:
     ]
 
 
+#: The curves that are the beam's physics (Eq. 37): the damping and the DE force gains.
+PHYSICAL_CURVES = ("d", "g")
+
+
+def simulation_only(identified: dict[str, list]) -> str:
+    """Word which physical curves of a model are identified nowhere, or ``""``.
+
+    A model whose damping ``d(q)`` or DE gains ``g_i(q)`` are identified nowhere (their bands
+    too wide or no data support, :func:`curves_frame`) may still free-run well, but those
+    curves are not the beam's: it is a simulator only.
+
+    Parameters
+    ----------
+    identified : dict of str to list of [float, float]
+        Curve name (``restoring``, ``d``, ``g1``, ...) to the intervals of q where it is
+        identified, as the identify summary's ``identified``.
+
+    Returns
+    -------
+    str
+        E.g. ``"d, g1, g2 identified nowhere (restoring holds on part of q)"``; ``""`` when
+        every physical curve is identified somewhere.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the curves ``c``, ``d``, ``g_i``).
+
+    Examples
+    --------
+    >>> simulation_only({"restoring": [[-1.0, 1.0]], "d": [], "g1": [], "g2": []})
+    'd, g1, g2 identified nowhere (restoring holds on part of q)'
+    >>> simulation_only({"restoring": [], "d": [], "g1": [[0.0, 2.0]]})
+    'd identified nowhere (g1 holds on part of q; restoring nowhere)'
+    >>> simulation_only({"d": [[0.0, 1.0]], "g1": [[0.0, 1.0]]})
+    ''
+    """
+
+    def physical(name: str) -> bool:
+        return name.rstrip("0123456789") in PHYSICAL_CURVES
+
+    nowhere = [n for n, spans in identified.items() if physical(n) and not spans]
+    if not nowhere:
+        return ""
+    held = [n for n, spans in identified.items() if spans]
+    others = [n for n, spans in identified.items() if not physical(n) and not spans]
+    parts = [f"{', '.join(held)} {'holds' if len(held) == 1 else 'hold'} on part of q"] * bool(held)
+    parts += [f"{', '.join(others)} nowhere"] * bool(others)
+    return f"{', '.join(nowhere)} identified nowhere" + (f" ({'; '.join(parts)})" if parts else "")
+
+
 def curves_frame(
     model,
     diag,

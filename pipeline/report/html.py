@@ -27,6 +27,7 @@ import jinja2
 
 from debist.core.errors import ArtifactError
 from debist.core.fileformats import atomic_write
+from debist.identify.bands import simulation_only
 from debist.report.tables import (
     auto_line,
     equilibrium_kind,
@@ -135,6 +136,8 @@ pre, code { white-space: pre-wrap; overflow-wrap: anywhere; font-size: 0.85rem; 
 
 <h2 id="s1">{{ sections[0] }}</h2>
 <p>Workflow <strong>{{ workflow }}</strong></p>
+{% if simulation_only %}<p><strong>simulation only: {{ simulation_only }}</strong>: the identified
+model's free run may be scored, but these curves are not the beam's physics.</p>{% endif %}
 {% if datasets %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>data set</th><th>role</th><th>source</th><th>samples</th><th>duration [s]</th></tr>
@@ -527,6 +530,7 @@ def render_report(run: dict[str, Any]) -> str:
         checks=_check_rows(run.get("nrmse") or []),
         model=_model_rows(identify) if identify else [],
         design=_design(identify),
+        simulation_only=simulation_only(identify.get("identified") or {}),
         warnings=(identify.get("excitation") or {}).get("warnings", []),
         auto=auto_line(identify) if identify else "",
         figures=figures,

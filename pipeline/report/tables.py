@@ -459,8 +459,8 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ----------
     row : dict
         A row of ``nrmse.parquet`` (``nrmse_q``, ``nrmse_q_baseline``, ``status``,
-        ``reason``, ``diverged``, ``model``, ``dataset``, ``under_excited``,
-        ``extrapolated``).
+        ``reason``, ``diverged``, ``model``, ``dataset``, ``simulation_only``,
+        ``under_excited``, ``extrapolated``).
     rows : list of dict, optional
         The whole table: a row is also called worse than another model whose free run of
         the same data set has a lower NRMSE(q).
@@ -472,10 +472,12 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
         ``"fragile: ..."`` (more than 2.5 % of the bootstrap replicates lose the motion),
         ``"worse than <model> (x %)"``, or ``"ok"``; the last three may combine. A row with
-        ``under_excited`` starts with ``"under-excited: <why>"``, one with ``extrapolated``
+        ``simulation_only`` (its model's physical curves identified nowhere,
+        :func:`debist.identify.bands.simulation_only`) starts with ``"simulation only: <which>"``,
+        one with ``under_excited`` with ``"under-excited: <why>"``, one with ``extrapolated``
         (an input applied where the estimation never applied it,
         :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``;
-        either replaces ``"ok"``.
+        each replaces ``"ok"``.
 
     Examples
     --------
@@ -495,6 +497,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ...          "under_excited": "one spectral line at 2 Hz in 'a'"})
     "under-excited: one spectral line at 2 Hz in 'a'"
     >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
+    ...          "simulation_only": "d, g1, g2 identified nowhere"})
+    'simulation only: d, g1, g2 identified nowhere'
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
     ...          "extrapolated": "v2 applied at q = 3 to 9 mm (40 samples), where ..."})
     'extrapolated: v2 applied at q = 3 to 9 mm (40 samples), where ...'
     """
@@ -502,6 +507,7 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     caveats = [
         f"{label}: {text}"
         for label, text in (
+            ("simulation only", row.get("simulation_only")),
             ("under-excited", row.get("under_excited")),
             ("extrapolated", row.get("extrapolated")),
         )

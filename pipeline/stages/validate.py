@@ -11,6 +11,7 @@ import numpy as np
 
 from debist.core.progress import Stopwatch
 from debist.core.tables import input_columns
+from debist.identify.bands import simulation_only
 from debist.identify.driven import beyond_driven, driven_ranges
 from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
@@ -270,7 +271,13 @@ def execute(ctx: StageInputs) -> StageOutput:
     res = run_validate(model, tables, derivs, section, baseline, ctx.physics(), replicates)
     watch.restart()  # its own parts are in res.timings
     beyond = extrapolation(tables, model.basis.sigma)
-    table = res.table.assign(under_excited=thin, extrapolated=res.table.dataset.map(beyond))
+    # a model whose physical curves hold nowhere is a simulator only: its rows say so
+    unsure = simulation_only(ctx.summary("identify").get("identified") or {})
+    table = res.table.assign(
+        under_excited=thin,
+        extrapolated=res.table.dataset.map(beyond),
+        simulation_only=np.where(res.table.model.str.startswith("rbf"), unsure, ""),
+    )
     table = with_verdicts(table)
     outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:

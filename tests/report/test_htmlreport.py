@@ -199,6 +199,22 @@ def test_sections_numbers_and_verdicts(run):
     assert "&amp; &lt;h1&gt;" in html
 
 
+def test_a_model_whose_physical_curves_hold_nowhere_says_simulation_only_first(run):
+    """d and g2 nowhere, g1 on part of q: the page's first lines and the verdict say so."""
+    run["identify"]["identified"] = {"restoring": [[-0.016, 0.016]], "d": [],
+                                     "g1": [[0.001, 0.01]], "g2": []}  # fmt: skip
+    run["nrmse"][0]["simulation_only"] = "d, g2 identified nowhere"
+    html = render_report(run)
+    top = html.split('<h2 id="s2">')[0]
+    want = "simulation only: d, g2 identified nowhere (restoring, g1 hold on part of q)"
+    assert want in top
+    rows = {(r[0], r[1]): r for r in parse(html).rows if len(r) == 8}
+    assert rows[("rbf", "unseen")][7] == "simulation only: d, g2 identified nowhere"
+    run["identify"]["identified"] = {"restoring": [[-0.016, 0.016]], "d": [[0.0, 0.01]],
+                                     "g1": [[0.001, 0.01]]}  # fmt: skip
+    assert "simulation only" not in render_report(run).split('<h2 id="s2">')[0]
+
+
 def test_images_are_embedded_pngs_and_nothing_is_external(run):
     html = render_report(run)
     parser = parse(html)

@@ -444,4 +444,14 @@ def test_init_then_run_on_virtual_rig_logs_validates_on_the_unseen_file(tmp_path
     unseen = table[(table["role"] == "validation") & (table["model"] == "rbf")]
     assert list(unseen["data set"]) == ["val"]
     assert float(unseen["NRMSE(q) [%]"].iloc[0]) < 5.0
+    # the verdict says "simulation only" exactly when a physical curve is identified nowhere
+    result = debist.open_run(tmp_path / "rig.toml")
+    identified = result.manifests["identify"].summary["identified"]
+    nowhere = [n for n in ("d", "g1", "g2") if not identified[n]]
+    rows = [r for r in result.manifests["compare"].summary["table"] if r["model"] == "rbf"]
+    for r in rows:
+        said = r["verdict"].startswith(f"simulation only: {', '.join(nowhere)} identified nowhere")
+        assert said == bool(nowhere), (nowhere, r["verdict"])
+    assert all("simulation only" not in r["verdict"] for r in
+               result.manifests["compare"].summary["table"] if r["model"] == "narx")  # fmt: skip
     assert (tmp_path / "runs" / "rig" / "report" / "report.html").is_file()
