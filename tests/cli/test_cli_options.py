@@ -84,6 +84,15 @@ def test_the_convergence_notice_names_the_keys_to_change(project):
     assert "iteration" in out and "tolerance" in out and "2 data" in out and "set(s)" in out
     assert "raise [differentiate] iterations (now " in out
     assert "loosen [differentiate] tol (now 1e-14)" in out
+    # whether it matters: how far a run with 4x the iterations moved the derivatives
+    summary = json.loads((project / "out" / "differentiate" / "summary.json").read_text())
+    longer = summary["longer_run"].values()
+    q_dot, q_ddot = (max(r[k] for r in longer) for k in ("q_dot", "q_ddot"))
+    assert {r["iterations"] for r in longer} == {40}
+    assert f"a run with 40 iterations moved q_dot by {100 * q_dot:.3g} % and q_ddot by " in out
+    assert f"q_ddot by {100 * q_ddot:.3g} % (relative change, largest data set)" in out
+    matters = max(q_dot, q_ddot) >= 0.01
+    assert ("It may matter" in out) == matters and ("It does not matter" in out) != matters
     again = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
     assert "iteration limit" not in again  # said once, when the stage ran
     (project / "wf.toml").write_text(
