@@ -379,10 +379,13 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
     if "analyze" in manifests:
         console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
-        console.print(report.identify_table(manifests["identify"].summary))
-        design = report.design_table(manifests["identify"].summary)
+        # q, its ranges, q* and what is per length of q in the report unit
+        unit = (wf.section("validate") or {}).get("report_unit")
+        identify = report.display_summary(manifests["identify"].summary, unit)
+        console.print(report.identify_table(identify))
+        design = report.design_table(identify)
         if design is not None and console.width < report.DESIGN_TABLE_WIDTH:
-            for line in report.design_lines(manifests["identify"].summary):
+            for line in report.design_lines(identify):
                 console.print(line, markup=False)
         elif design is not None:
             console.print(design)

@@ -299,7 +299,7 @@ def free_run_figure(
         replicate band, which is drawn only for a model that has a row.
     report_unit : str, optional
         Unit the axes show q in (``[validate] report_unit``, e.g. ``"mV"``); the data are
-        converted for display only. None: :func:`q_scale`.
+        converted for display only. None: as :func:`debist.validate.freerun.report_factor`.
     init_samples : int, optional
         Samples used for the initial state, not scored (``[validate] init_samples``; shaded).
 
@@ -320,7 +320,7 @@ def free_run_figure(
     """
     from matplotlib.figure import Figure
 
-    factor, label = q_scale(unit) if report_unit is None else report_factor(unit, report_unit)
+    factor, label = report_factor(unit, report_unit)
     nrmse = nrmse or {}
     t = measured["t"].to_numpy()
     q = factor * measured["q"].to_numpy()

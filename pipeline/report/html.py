@@ -30,6 +30,7 @@ from debist.core.fileformats import atomic_write
 from debist.identify.bands import simulation_only
 from debist.report.tables import (
     auto_line,
+    display_summary,
     equilibrium_kind,
     identified_text,
     mass_rows,
@@ -434,17 +435,14 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     if not design:
         return None
 
-    units = summary_units(summary)
-    scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14
+    units = summary_units(summary)  # q in the report unit (display_summary)
     rows = []
     for r in design.get("equilibria", []):
         if r.get("level", 0) != 0 and not r.get("static_stable"):
             continue
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         small = small_signal_cells(r, _num)
-        q = r.get("q")
-        q = scale * q if isinstance(q, int | float) else q
-        rows.append([r.get("model", ""), volts, _num(q), equilibrium_kind(r), *small])
+        rows.append([r.get("model", ""), volts, _num(r.get("q")), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
         unit = dict(enumerate(units["inputs"], 1)).get(r.get("input"), "V")
         value = r.get("v_switch")
@@ -460,7 +458,7 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         "verdict": design.get("verdict", ""),
         "reason": design.get("reason", ""),
         "rows": rows,
-        "q_unit": q_unit,
+        "q_unit": units["q"],
         "inputs": ", ".join(dict.fromkeys(units["inputs"])) or "V",
         "barrier": units["barrier"],
         "k_band": stiffness_caption(summary),
@@ -490,7 +488,9 @@ def render_report(run: dict[str, Any]) -> str:
         ``nrmse`` (rows of the validate/compare summary's ``table``; NRMSE dimensionless,
         Eq. 41), ``equations`` (the compare summary's SINDy equations, or None),
         ``figures`` (group of :data:`FIGURE_GROUPS` -> list of ``(caption, PNG bytes)``),
-        ``digest`` (digest of the stages shown, or None), ``verify`` (the command that
+        ``digest`` (digest of the stages shown, or None), ``report_unit`` (``[validate]
+        report_unit``: q, its ranges and what is per length of q are shown in it,
+        :func:`debist.report.tables.display_summary`), ``verify`` (the command that
         checks them), ``stages`` (stage -> ``(stage key, manifest sha256)``) and
         ``versions`` (library -> version). Missing keys are shown as not run.
 
@@ -508,7 +508,7 @@ def render_report(run: dict[str, Any]) -> str:
     ----------
     Masoud & Maas 2025, Table 2 (NRMSE layout), Fig. 11-15; RFC 2397 (data URLs).
     """
-    identify = run.get("identify") or {}
+    identify = display_summary(run.get("identify") or {}, run.get("report_unit"))
     heads, nrmse = _nrmse_rows(run.get("nrmse") or [])
     figures = {
         group: [

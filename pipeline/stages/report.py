@@ -229,6 +229,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
         "workflow": inputs.workflow,
         "datasets": datasets,
         "identify": inputs.summaries.get("identify"),
+        "report_unit": report_unit,
         "nrmse": nrmse,
         "equations": inputs.summaries.get("compare", {}).get("equations"),
         "figures": figures,

@@ -182,10 +182,12 @@ def test_sections_numbers_and_verdicts(run):
     # identified model, design and warnings
     model = {r[0]: r[1] for r in parser.rows if len(r) == 2}
     assert model["T_z [s]"] == "0.0625"
-    k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/m^3]"
-    assert model[k_3] == "1.985e+04" and model["mass m_q [kg]"]
-    assert model["restoring identified on q in [m]"] == "[-0.016, -0.00384], [0.00096, 0.016]"
-    assert model["g1 identified on q in [m]"] == "nowhere"
+    # q and what is per length of q in the report unit, mm by default: 19849.18 N/m^3 is
+    # 1.985e-05 N/mm^3, the span -0.016 m is -16 mm
+    k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/mm^3]"
+    assert model[k_3] == "1.985e-05" and model["mass m_q [kg]"]
+    assert model["restoring identified on q in [mm]"] == "[-16, -3.84], [0.96, 16]"
+    assert model["g1 identified on q in [mm]"] == "nowhere"
     assert any(r[:4] == ["rbf", "0, 0", "-9.516", "well"] for r in parser.rows)  # q* [mm]
     assert "<th>q* [mm]</th>" in html
     assert any(r[3] == "1976 V" for r in parser.rows if len(r) == 9)  # d(q*), k* added
