@@ -26,8 +26,8 @@ from debist.validate.freerun import (
     default_q_limit,
     mark_unstable,
     replicate_spread,
+    report_factor,
     validate_model,
-    words_factor,
 )
 from debist.validate.prediction import prediction_table
 
@@ -195,7 +195,7 @@ def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
     return q, q_dot
 
 
-def extrapolation(tables, margin: float) -> dict[str, str]:
+def extrapolation(tables, margin: float, report_unit: str | None = None) -> dict[str, str]:
     """Per data set, where it applies an input beyond the estimation's driven range, or ``""``.
 
     Parameters
@@ -204,12 +204,15 @@ def extrapolation(tables, margin: float) -> dict[str, str]:
         Canonical tables (``q``, ``v1..vN``; ``attrs['role']``, ``attrs['units']``).
     margin : float
         One RBF width: positions this close to the driven range count as informed [unit of q].
+    report_unit : str, optional
+        ``[validate] report_unit``, the unit the positions are worded in (default mm for q
+        in m, :func:`debist.validate.freerun.report_factor`).
 
     Returns
     -------
     dict of str to str
-        :func:`debist.identify.driven.beyond_driven` of every data set (q in mm when q is in
-        m); ``""`` for the estimation data sets and when there are none.
+        :func:`debist.identify.driven.beyond_driven` of every data set (q in the report
+        unit); ``""`` for the estimation data sets and when there are none.
     """
     est = [t for t in tables.values() if t.attrs.get("role") == "estimation"]
     if not est:
@@ -221,7 +224,7 @@ def extrapolation(tables, margin: float) -> dict[str, str]:
     out = {}
     for name, t in tables.items():
         unit = t.attrs.get("units", {}).get("q", "m")
-        factor, shown = words_factor(unit)
+        factor, shown = report_factor(unit, report_unit)
         out[name] = (
             ""
             if t.attrs.get("role") == "estimation"
@@ -270,7 +273,7 @@ def execute(ctx: StageInputs) -> StageOutput:
     watch.lap("read inputs")
     res = run_validate(model, tables, derivs, section, baseline, ctx.physics(), replicates)
     watch.restart()  # its own parts are in res.timings
-    beyond = extrapolation(tables, model.basis.sigma)
+    beyond = extrapolation(tables, model.basis.sigma, cfg.report_unit)
     # a model whose physical curves hold nowhere is a simulator only: its rows say so
     unsure = simulation_only(ctx.summary("identify").get("identified") or {})
     table = res.table.assign(
