@@ -389,7 +389,7 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
                 console.print(line, markup=False)
         elif design is not None:
             console.print(design)
-        for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
+        for line in identify.get("excitation", {}).get("warnings", []):
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
         line = report.auto_line(manifests["identify"].summary)
         if line:
@@ -402,6 +402,8 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
         for equation in str(s["equations"]).splitlines():  # a term per line, not one long line
             for line in report.wrap_equation(equation):
                 console.print(f"  {escape(line)}", soft_wrap=True)
+        ident = manifests["identify"].summary if "identify" in manifests else {}
+        console.print(escape(f"  (coefficients as fitted, in SI: {report.sindy_units(ident)})"))
     if last in manifests:
         summary = manifests[last].summary
         console.print(report.nrmse_table(summary["table"]))

@@ -35,6 +35,7 @@ from debist.report.tables import (
     identified_text,
     mass_rows,
     not_modelled,
+    sindy_units,
     small_signal_cells,
     stiffness_caption,
     summary_units,
@@ -227,7 +228,8 @@ f_n = sqrt(k*/m_q)/(2 pi); {{ design.k_band }}.</p>
 {{ show(figures.analyze, "Not run (add an [analyze] section).") }}
 
 <h2 id="s10">{{ sections[9] }}</h2>
-{% if equations %}<pre>{{ equations }}</pre>{% else %}<p>Not run.</p>{% endif %}
+{% if equations %}<pre>{{ equations }}</pre>
+<p>Coefficients as fitted, in SI: {{ sindy_units }}.</p>{% else %}<p>Not run.</p>{% endif %}
 
 <h2 id="s11">{{ sections[10] }}</h2>
 {% if digest %}
@@ -535,6 +537,7 @@ def render_report(run: dict[str, Any]) -> str:
         auto=auto_line(identify) if identify else "",
         figures=figures,
         equations=run.get("equations"),
+        sindy_units=sindy_units(identify),
         digest=run.get("digest"),
         verify=run.get("verify", ""),
         stages=stages,

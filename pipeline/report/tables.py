@@ -77,6 +77,9 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
     Masoud & Maas 2025, Eq. 37 (the terms' dimensions); BIPM SI Brochure, 9th ed. (2019),
     Sec. 5.4 (one unit per quantity).
 
+    The identify stage words its excitation warnings with q in mm (q in m) or q's own unit;
+    with another report unit their positions are rewritten in it.
+
     Examples
     --------
     >>> s = {"units": {"q": "m", "per_unit_mass": False}, "q_range": [-0.016, 0.016],
@@ -84,6 +87,11 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
     >>> d = display_summary(s)
     >>> d["units"]["q"], d["q_range"], d["backbone"], d["identified"]
     ('mm', [-16.0, 16.0], {'k_1': 0.0091, 'F_0': -0.0068}, {'d': [[-10.0, 0.0]]})
+    >>> display_summary(d) is d  # shown in mm already
+    True
+    >>> said = "g1: never active for q in [-17.8, -10.7] and [2.0, 3.5] mm: g1 ..."
+    >>> display_summary({**s, "excitation": {"warnings": [said]}}, "m")["excitation"]
+    {'warnings': ['g1: never active for q in [-0.0178, -0.0107] and [0.002, 0.0035] m: g1 ...']}
     """
     import copy
 
@@ -94,8 +102,9 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
     given = summary.get("units") or {}
     q_si = given.get("q_si", given.get("q", "m"))
     f, shown = report_factor(q_si, report_unit)
-    if shown == given.get("q", "m") and f == 1.0:
-        return summary
+    said_f, said = report_factor(q_si, None)  # the stage words positions in this unit
+    if shown == given.get("q", "m") and ("q_si" in given or (said == shown and f == 1.0)):
+        return summary  # shown in the report unit already
     per_mass = given.get("per_unit_mass", summary.get("m_q") == 1.0)
     force = f if per_mass else 1.0  # a per-unit-mass force is an acceleration of q
     by_dim = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
@@ -136,7 +145,40 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
                 row[key] = scale(row[key], by_dim[dim])
     if design.get("reason"):
         design["reason"] = _reworded(design["reason"], f, shown)
+    excitation = out.get("excitation") or {}
+    if excitation.get("warnings") and said != shown:
+        excitation["warnings"] = [
+            _rescaled(w, f / said_f, said, shown) for w in excitation["warnings"]
+        ]
     return out
+
+
+_NUMBER = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+
+
+def _rescaled(text: str, factor: float, old: str, new: str) -> str:
+    """Rewrite the q positions of an excitation warning from ``old`` to ``new``.
+
+    The runs of intervals (``[a, b] and [c, d] mm``) and the RBF width (``sigma = x mm``) of
+    :mod:`debist.identify.excitation`'s words are multiplied by ``factor``.
+    """
+    unit = re.escape(old)
+    pair = rf"\[{_NUMBER}, {_NUMBER}\]"
+
+    def run(m: re.Match) -> str:
+        spans = re.sub(
+            pair,
+            lambda p: f"[{float(p.group(1)) * factor:.4g}, {float(p.group(2)) * factor:.4g}]",
+            m.group(1),
+        )
+        return f"{spans} {new}"
+
+    text = re.sub(rf"((?:{pair})(?: and {pair})*) {unit}(?![\w/^])", run, text)
+    return re.sub(
+        rf"sigma = {_NUMBER} {unit}(?![\w/^])",
+        lambda m: f"sigma = {float(m.group(1)) * factor:.4g} {new}",
+        text,
+    )
 
 
 def _reworded(reason: str, factor: float, unit: str) -> str:
@@ -149,9 +191,32 @@ def _reworded(reason: str, factor: float, unit: str) -> str:
     def point(m: re.Match) -> str:
         return f"at q = {float(m.group(1)) * factor:.4g} {unit}"
 
-    number = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
-    reason = re.sub(rf"\[{number}, {number}\]", span, reason)
-    return re.sub(rf"at q = {number}", point, reason)
+    reason = re.sub(rf"\[{_NUMBER}, {_NUMBER}\]", span, reason)
+    return re.sub(rf"at q = {_NUMBER}", point, reason)
+
+
+def sindy_units(summary: dict[str, Any]) -> str:
+    """Name the units SINDy's coefficients refer to: q, q_dot, q_ddot in SI, as fitted.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify summary (its ``units``: ``q`` or ``q_si``, the recorded SI unit);
+        q in m when it has none.
+
+    Returns
+    -------
+    str
+        E.g. ``"q [m], q_dot [m/s], q_ddot [m/s^2]"``.
+
+    Examples
+    --------
+    >>> sindy_units({"units": {"q": "mm", "q_si": "m"}})
+    'q [m], q_dot [m/s], q_ddot [m/s^2]'
+    """
+    given = (summary or {}).get("units") or {}
+    q = given.get("q_si", given.get("q", "m"))
+    return f"q [{q}], q_dot [{q}/s], q_ddot [{q}/s^2]"
 
 
 def summary_units(summary: dict[str, Any]) -> dict[str, Any]:

@@ -102,6 +102,29 @@ def test_the_convergence_notice_names_the_keys_to_change(project):
     assert "Stage 'differentiate' done" in out and "iteration limit" not in out
 
 
+def test_the_run_tables_show_q_and_stiffness_in_one_unit_system(synthetic_copy):
+    """No report_unit, q in m: q*, the identified ranges and RMS(q) in mm; the curves are per
+    unit mass (m_q = 1), so k* is 1/s^2 with the stage's numbers and the forces mm/s^2."""
+    root, _ = synthetic_copy
+    result = CliRunner().invoke(app, ["run", str(root / "wf.toml")])
+    assert result.exit_code == 0, result.output
+    out = result.output
+    summary = json.loads((root / "out" / "identify" / "summary.json").read_text())
+    assert summary["units"]["q"] == "m" and summary["units"]["per_unit_mass"] is True
+    assert "q* [mm]" in out and "q* [m]" not in out and "k* [1/s^2]" in out
+    assert "m/s^2/m" not in out and "forces in mm/s^2" in out
+    wells = [r for r in summary["design"]["equilibria"] if r["static_stable"]]
+    for r in wells:
+        assert f"{1e3 * r['q']:.4g}" in out and f"{r['k']:.4g}" in out
+    lo, hi = summary["q_data_range"]
+    assert f"in [{1e3 * lo:.4g}, {1e3 * hi:.4g}] mm)" in " ".join(out.split())
+    assert "identified on q [mm] in" in out
+    nrmse = json.loads((root / "out" / "compare" / "summary.json").read_text())["table"]
+    rbf = next(r for r in nrmse if r["model"] == "rbf" and r["dataset"] == "check")
+    assert rbf["rms_unit"] == "mm" and f"{rbf['rms_q']:.4g} mm" in out
+    assert "(coefficients as fitted, in SI: q [m], q_dot [m/s], q_ddot [m/s^2])" in out
+
+
 def test_verbose_timings_account_for_the_stage_wall_time(synthetic_run, tmp_path):
     """The parts ``-v`` shows (the stage's own, ``import``, ``other``, ``write``) add up to the
     wall time the stage line reports, within the rounding of the display."""

@@ -199,6 +199,7 @@ def test_sections_numbers_and_verdicts(run):
     assert ["identify", "2" * 64, "4" * 64] in parser.rows and ["pysindy", "2.0.1"] in parser.rows
     # content is escaped, not markup
     assert "&amp; &lt;h1&gt;" in html
+    assert "Coefficients as fitted, in SI: q [m], q_dot [m/s], q_ddot [m/s^2]." in html
 
 
 def test_a_model_whose_physical_curves_hold_nowhere_says_simulation_only_first(run):

@@ -311,3 +311,20 @@ def test_per_unit_mass_stiffness_is_one_over_seconds_squared_in_any_length_unit(
     assert [(unit, pytest.approx(v)) for _, unit, v in rows] == [
         ("mm", 0.01), ("1/s^2", 3000.0), ("mm/s^2", 30.0), ("mm/s^2", 30.0), ("1/s^2", 3000.0)
     ]  # fmt: skip
+
+
+def test_excitation_warnings_follow_a_report_unit_of_another_scale():
+    """The identify stage words q in V (q in V); a report in mV rewrites its positions x1000."""
+    from debist.report.tables import display_summary
+
+    said = (
+        "no data: fewer than 10 samples within sigma = 0.05 V of the centres for q in "
+        "[-0.3, -0.21] and [0.2, 0.25] V: c, d there are not identified"
+    )
+    summary = {"units": {"q": "V", "per_unit_mass": True}, "excitation": {"warnings": [said]}}
+    shown = display_summary(summary, "mV")["excitation"]["warnings"]
+    assert shown == [
+        "no data: fewer than 10 samples within sigma = 50 mV of the centres for q in "
+        "[-300, -210] and [200, 250] mV: c, d there are not identified"
+    ]
+    assert display_summary(summary)["excitation"]["warnings"] == [said]  # V: as worded
