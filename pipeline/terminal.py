@@ -374,13 +374,12 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
     notice = convergence_notice(wf, manifests)
     if notice and ("differentiate" in ran or level["value"] > 0):  # once, not on every rerun
         console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
+    unit = (wf.section("validate") or {}).get("report_unit")  # of q and what is made of q
     if "rig" in manifests:
-        console.print(report.rig_table(manifests["rig"].summary))
+        console.print(report.rig_table(manifests["rig"].summary, unit))
     if "analyze" in manifests:
         console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
-        # q, its ranges, q* and what is per length of q in the report unit
-        unit = (wf.section("validate") or {}).get("report_unit")
         identify = report.display_summary(manifests["identify"].summary, unit)
         console.print(report.identify_table(identify))
         design = report.design_table(identify)

@@ -894,26 +894,38 @@ def analyze_table(summary: dict[str, Any]) -> Table:
     return table
 
 
-def rig_table(summary: dict[str, Any]) -> Table:
+def rig_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
     """Tabulate the virtual rig's experiments.
 
     Parameters
     ----------
     summary : dict
         Summary of the rig stage's manifest (per experiment; lengths in [m]).
+    report_unit : str, optional
+        ``[validate] report_unit`` for the q range (default mm,
+        :func:`debist.validate.freerun.report_factor`).
 
     Returns
     -------
     rich.table.Table
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` is not a length unit.
     """
+    from debist.validate.freerun import report_factor
+
+    f, unit = report_factor("m", report_unit)
+    digits = max(0, 2 - round(math.log10(f / 1e3)))  # 0.01 mm
     table = Table(title="Virtual rig")
-    for col in ("experiment", "samples", "q range [mm]", "well changes", "saturated", "nfev"):
+    for col in ("experiment", "samples", f"q range [{unit}]", "well changes", "saturated", "nfev"):
         table.add_column(escape(col), justify="left" if col == "experiment" else "right")
     for name, s in summary.items():
         table.add_row(
             name,
             str(s["samples"]),
-            f"{1e3 * s['q_min']:+.2f} ... {1e3 * s['q_max']:+.2f}",
+            f"{f * s['q_min']:+.{digits}f} ... {f * s['q_max']:+.{digits}f}",
             str(s["well_changes"]),
             str(s["saturated"]),
             str(s["nfev"]),

@@ -328,3 +328,16 @@ def test_excitation_warnings_follow_a_report_unit_of_another_scale():
         "[-300, -210] and [200, 250] mV: c, d there are not identified"
     ]
     assert display_summary(summary)["excitation"]["warnings"] == [said]  # V: as worded
+
+
+@pytest.mark.parametrize(("report_unit", "text"), [(None, "-21.28 ... +23.05"),
+                                                   ("um", "-21280 ... +23050"),
+                                                   ("m", "-0.02128 ... +0.02305")])  # fmt: skip
+def test_the_rig_table_gives_the_q_range_in_the_report_unit(report_unit, text):
+    from debist.report.tables import rig_table
+
+    summary = {"ident": {"samples": 3750, "q_min": -0.02128, "q_max": 0.02305,
+                         "well_changes": 6, "saturated": 0, "nfev": 10}}  # fmt: skip
+    out = _render(rig_table(summary, report_unit))
+    unit = {"um": "\u00b5m", None: "mm"}.get(report_unit, report_unit)
+    assert f"q range [{unit}]" in out and text in out
