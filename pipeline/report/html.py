@@ -27,7 +27,6 @@ import jinja2
 
 from debist.core.errors import ArtifactError
 from debist.core.fileformats import atomic_write
-from debist.identify.bands import simulation_only
 from debist.report.tables import (
     auto_line,
     display_summary,
@@ -467,6 +466,12 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     }
 
 
+def _simulation_only(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Return the identified model's ``simulation_only`` words from its NRMSE rows, or ``""``."""
+    said = [r.get("simulation_only") for r in rows if r.get("model") == "rbf"]
+    return next((w for w in said if isinstance(w, str) and w), "")
+
+
 def _data_uri(name: str, data: bytes) -> str:
     if not data.startswith(PNG_SIGNATURE):
         raise ArtifactError(f"figure '{name}' is not a PNG file (starts with {data[:8]!r})")
@@ -532,7 +537,7 @@ def render_report(run: dict[str, Any]) -> str:
         checks=_check_rows(run.get("nrmse") or []),
         model=_model_rows(identify) if identify else [],
         design=_design(identify),
-        simulation_only=simulation_only(identify.get("identified") or {}),
+        simulation_only=_simulation_only(run.get("nrmse") or []),
         warnings=(identify.get("excitation") or {}).get("warnings", []),
         auto=auto_line(identify) if identify else "",
         figures=figures,

@@ -11,7 +11,7 @@ import numpy as np
 
 from debist.core.progress import Stopwatch
 from debist.core.tables import input_columns
-from debist.identify.bands import simulation_only
+from debist.identify.bands import fitted_curves, simulation_only
 from debist.identify.driven import beyond_driven, driven_ranges
 from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
@@ -275,7 +275,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     watch.restart()  # its own parts are in res.timings
     beyond = extrapolation(tables, model.basis.sigma, cfg.report_unit)
     # a model whose physical curves hold nowhere is a simulator only: its rows say so
-    unsure = simulation_only(ctx.summary("identify").get("identified") or {})
+    identified = ctx.summary("identify").get("identified") or {}
+    unsure = simulation_only(identified, fitted_curves(model))
     table = res.table.assign(
         under_excited=thin,
         extrapolated=res.table.dataset.map(beyond),
