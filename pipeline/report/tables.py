@@ -658,11 +658,11 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"poor: ..."`` (above :data:`~debist.core.metrics.POOR_SHARE` of the mean's NRMSE),
         ``"fragile: ..."`` (more than 2.5 % of the bootstrap replicates lose the motion),
         ``"worse than <model> (x %)"``, or ``"ok"``; the last three may combine. A row with
-        ``simulation_only`` (its model's physical curves identified nowhere,
-        :func:`debist.identify.bands.simulation_only`) starts with ``"simulation only: <which>"``,
-        one with ``under_excited`` with ``"under-excited: <why>"``, one with ``extrapolated``
+        ``under_excited`` starts with ``"under-excited: <why>"``, one with ``extrapolated``
         (an input applied where the estimation never applied it,
-        :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``;
+        :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``, then
+        one with ``simulation_only`` (its model's fitted curves identified nowhere,
+        :func:`debist.identify.bands.simulation_only`) with ``"simulation only: <which>"``;
         each replaces ``"ok"``.
 
     Examples
@@ -693,9 +693,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     caveats = [
         f"{label}: {text}"
         for label, text in (
-            ("simulation only", row.get("simulation_only")),
             ("under-excited", row.get("under_excited")),
             ("extrapolated", row.get("extrapolated")),
+            ("simulation only", row.get("simulation_only")),
         )
         if isinstance(text, str) and text
     ]

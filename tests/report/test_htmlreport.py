@@ -390,3 +390,17 @@ def test_prediction_and_residual_checks_are_tabulated_with_their_verdicts():
         {"model": "rbf", "dataset": "b", "k": "10", "nrmse_k": "-", "white": "not tested",
          "cross": "-"},
     ]  # fmt: skip
+
+
+def test_the_data_caveats_come_before_simulation_only_in_a_verdict():
+    from debist.report.tables import verdict
+
+    row = {"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "extrapolated": "v1 applied at q = 4 mm",
+           "simulation_only": "d identified nowhere"}  # fmt: skip
+    assert (
+        verdict(row)
+        == "extrapolated: v1 applied at q = 4 mm; simulation only: d identified nowhere"
+    )
+    assert verdict({**row, "nrmse_q": 0.19}).endswith(
+        "; poor: 95 % of the mean baseline error (a lost switch?)"
+    )
