@@ -341,3 +341,18 @@ def test_the_rig_table_gives_the_q_range_in_the_report_unit(report_unit, text):
     out = _render(rig_table(summary, report_unit))
     unit = {"um": "\u00b5m", None: "mm"}.get(report_unit, report_unit)
     assert f"q range [{unit}]" in out and text in out
+
+
+@pytest.mark.parametrize(("report_unit", "f", "shown"), [(None, 1e3, "mm"), ("um", 1e6, "\u00b5m")])
+def test_the_excitation_figure_draws_q_in_the_report_unit(data, report_unit, f, shown):
+    from debist.report.figures import excitation_figure
+
+    _, tables, derivs = data
+    name = next(iter(tables))
+    fig = excitation_figure(tables[name], derivs[name], name, "m", report_unit)
+    q_ax, q_dot_ax = fig.axes[:2]
+    assert q_ax.get_ylabel() == f"q [{shown}]" and q_dot_ax.get_ylabel() == f"q_dot [{shown}/s]"
+    drawn = q_ax.get_lines()[0].get_ydata()
+    q = tables[name]["q"].to_numpy()
+    assert float(np.max(drawn)) == pytest.approx(f * q.max(), rel=1e-12)
+    assert float(np.min(drawn)) == pytest.approx(f * q.min(), rel=1e-12)
