@@ -309,13 +309,47 @@ def convergence_notice(wf, manifests) -> str | None:
         second = cfg.iterations if cfg.iterations2 is None else cfg.iterations2
     except DebistError:  # another method: name the keys without their values
         iterations = tol = second = "?"
-    return (
+    head = (
         f"differentiate: TVRegDiff stopped at its iteration limit before its tolerance on "
-        f"{len(stopped)} data set(s) ({names}; converged = false in the "
-        f"summary). A fixed small count is how Chartrand and the paper run it; for "
-        f"converged derivatives raise [differentiate] iterations (now {iterations}) and "
-        f"iterations2 (now {second}), or loosen [differentiate] tol (now {tol})."
+        f"{len(stopped)} data set(s) ({names}; converged = false in the summary)"
     )
+    raise_it = (
+        f"raise [differentiate] iterations (now {iterations}) and iterations2 (now {second}), "
+        f"or loosen [differentiate] tol (now {tol})"
+    )
+    moved = _longer_run(diff.summary.get("longer_run") or {}, stopped)
+    if moved is None:  # an older summary: no record of a longer run
+        return (
+            f"{head}. A fixed small count is how Chartrand and the paper run it; for "
+            f"converged derivatives {raise_it}."
+        )
+    settled, words = moved
+    if settled:
+        return f"{head}. It does not matter: {words}. To converge anyway, {raise_it}."
+    return f"{head}. It may matter: {words}; {raise_it}."
+
+
+def _longer_run(checks: dict, stopped: list[str]) -> tuple[bool, str] | None:
+    """Say how far a run with more iterations moved q_dot and q_ddot: ``(settled, words)``.
+
+    The largest relative change over the stopped data sets
+    (:func:`debist.differentiate.tvregdiff_method.longer_run`), judged against
+    :data:`debist.differentiate.tvregdiff_method.SETTLED`; None without a record of it.
+    """
+    from debist.differentiate.tvregdiff_method import SETTLED
+
+    rows = [checks[n] for n in stopped if n in checks]
+    if not rows:
+        return None
+    q_dot, q_ddot = (max(float(r[k]) for r in rows) for k in ("q_dot", "q_ddot"))
+    counts = sorted({int(r["iterations"]) for r in rows})
+    settled = max(q_dot, q_ddot) < SETTLED
+    words = (
+        f"a run with {'/'.join(map(str, counts))} iterations moved q_dot by {100 * q_dot:.3g} % "
+        f"and q_ddot by {100 * q_ddot:.3g} % (relative change, largest data set), "
+        f"{'below' if settled else 'not below'} {100 * SETTLED:g} %"
+    )
+    return settled, words
 
 
 def print_summary(wf, manifests, ran: set[str]) -> None:
@@ -340,19 +374,21 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
     notice = convergence_notice(wf, manifests)
     if notice and ("differentiate" in ran or level["value"] > 0):  # once, not on every rerun
         console.print(f"[dim]{escape(notice)}[/dim]", soft_wrap=True)
+    unit = (wf.section("validate") or {}).get("report_unit")  # of q and what is made of q
     if "rig" in manifests:
-        console.print(report.rig_table(manifests["rig"].summary))
+        console.print(report.rig_table(manifests["rig"].summary, unit))
     if "analyze" in manifests:
         console.print(report.analyze_table(manifests["analyze"].summary))
     if "identify" in manifests:
-        console.print(report.identify_table(manifests["identify"].summary))
-        design = report.design_table(manifests["identify"].summary)
+        identify = report.display_summary(manifests["identify"].summary, unit)
+        console.print(report.identify_table(identify))
+        design = report.design_table(identify)
         if design is not None and console.width < report.DESIGN_TABLE_WIDTH:
-            for line in report.design_lines(manifests["identify"].summary):
+            for line in report.design_lines(identify):
                 console.print(line, markup=False)
         elif design is not None:
             console.print(design)
-        for line in manifests["identify"].summary.get("excitation", {}).get("warnings", []):
+        for line in identify.get("excitation", {}).get("warnings", []):
             console.print(f"[yellow]excitation:[/yellow] {escape(line)}")
         line = report.auto_line(manifests["identify"].summary)
         if line:
@@ -365,6 +401,8 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
         for equation in str(s["equations"]).splitlines():  # a term per line, not one long line
             for line in report.wrap_equation(equation):
                 console.print(f"  {escape(line)}", soft_wrap=True)
+        ident = manifests["identify"].summary if "identify" in manifests else {}
+        console.print(escape(f"  (coefficients as fitted, in SI: {report.sindy_units(ident)})"))
     if last in manifests:
         summary = manifests[last].summary
         console.print(report.nrmse_table(summary["table"]))

@@ -106,6 +106,8 @@ def differentiate_tables(
             }
         )
         deriv.attrs.update({"method": method, "converged": bool(res.converged), "dt": dt})
+        if "check" in res.info:  # stopped at its limit: how far a longer run moved them
+            deriv.attrs["longer_run"] = res.info["check"]
         if "alpha_search" in res.info:  # alpha = "auto": what it chose, and from what
             deriv.attrs["alpha"] = res.info["alpha"]
             deriv.attrs["alpha_search"] = res.info["alpha_search"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import warnings
 from dataclasses import replace
 from typing import Annotated, Any, ClassVar, Literal
 
@@ -12,10 +13,11 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BeforeValidator, PositiveFloat, PositiveInt
 
 from debist.core.config import CONFIG, ConfigValueError, SectionConfig
+from debist.core.errors import ConvergenceWarning
 from debist.core.metrics import rms
 from debist.core.units import lookup_unit
 from debist.differentiate.result import Derivatives, check_signal
-from debist.differentiate.tvregdiff import tvregdiff
+from debist.differentiate.tvregdiff import TVRegDiffResult, tvregdiff
 
 
 def unit_factor(symbol: str) -> float | None:
@@ -178,6 +180,73 @@ def _antiderivative(x: NDArray[np.float64], x_dot: NDArray[np.float64], dt: floa
     return integral + np.mean(x - integral)
 
 
+#: A stopped TVRegDiff is continued to this many times its iterations, to tell how far the
+#: derivatives still move (:func:`longer_run`).
+CHECK_FACTOR = 4
+#: Relative change [-] of a derivative under :data:`CHECK_FACTOR` times the iterations
+#: below which the iteration limit is said not to matter (debist's threshold, not the
+#: paper's; the differentiate summary keeps the measured change for the user to judge).
+SETTLED = 0.01
+
+
+def longer_run(
+    x: NDArray[np.float64],
+    first: TVRegDiffResult,
+    second: TVRegDiffResult,
+    config: TVRegDiffConfig,
+    dt: float,
+) -> dict[str, float | int]:
+    """Continue both passes of a stopped TVRegDiff and measure how far the derivatives move.
+
+    Lagged diffusivity is a fixed-point iteration of ``u`` alone, so continuing from the last
+    iterate for ``CHECK_FACTOR - 1`` times the iterations is a run with :data:`CHECK_FACTOR`
+    times the count. The first pass is continued from its ``u``; the second is run again on
+    the continued first derivative with :data:`CHECK_FACTOR` times its count: together the
+    derivatives of :func:`tvregdiff_derivatives` with both counts times :data:`CHECK_FACTOR`.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        The data the first pass differentiated [unit].
+    first, second : TVRegDiffResult
+        The two passes as run (their ``u``, ``derivative``, ``alpha``, ``ep``, ``scale``).
+    config : TVRegDiffConfig
+        The settings (``iterations``, ``iterations2``, ``tol``).
+    dt : float
+        Sample time [s].
+
+    Returns
+    -------
+    dict
+        ``iterations`` (of the longer first pass), ``q_dot`` and ``q_ddot``: the relative
+        change ``||d_long - d|| / ||d_long||`` of each derivative [-].
+
+    References
+    ----------
+    Vogel & Oman 1996, SIAM J. Sci. Comput. 17(1), 227-238 (lagged diffusivity).
+    """
+    n1 = config.iterations
+    n2 = config.iterations if config.iterations2 is None else config.iterations2
+    with warnings.catch_warnings():  # the longer run may stop short of tol as well
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        more = tvregdiff(x, (CHECK_FACTOR - 1) * n1, first.alpha, u0=first.u,
+                         scale=first.scale, ep=first.ep, dx=dt, tol=config.tol)  # fmt: skip
+        again = tvregdiff(more.derivative, CHECK_FACTOR * n2, second.alpha,
+                          scale=second.scale, ep=second.ep, dx=dt, tol=config.tol)  # fmt: skip
+    return {
+        "iterations": CHECK_FACTOR * n1,
+        "q_dot": _relative(first.derivative, more.derivative),
+        "q_ddot": _relative(second.derivative, again.derivative),
+    }
+
+
+def _relative(d: NDArray[np.float64], reference: NDArray[np.float64]) -> float:
+    """``||d - reference|| / ||reference||`` (0 for a zero reference equal to ``d``)."""
+    norm = float(np.linalg.norm(reference))
+    diff = float(np.linalg.norm(d - reference))
+    return diff / norm if norm > 0 else (0.0 if diff == 0 else float("inf"))
+
+
 def tvregdiff_derivatives(
     x: ArrayLike, dt: float, *, config: TVRegDiffConfig = _DEFAULT
 ) -> Derivatives:
@@ -197,7 +266,8 @@ def tvregdiff_derivatives(
     Derivatives
         ``x_dot`` [unit/s] (:func:`~debist.differentiate.tvregdiff.tvregdiff` of ``x``),
         ``x_ddot`` [unit/s^2] (of ``x_dot``, second-pass settings), ``x_hat`` [unit] (the
-        integral of ``x_dot`` fitted to ``x``); ``converged``; ``info``.
+        integral of ``x_dot`` fitted to ``x``); ``converged``; ``info`` (with ``check``, what
+        :func:`longer_run` measured, when a pass stopped before ``tol``).
 
     Raises
     ------
@@ -251,6 +321,8 @@ def tvregdiff_derivatives(
         "ep2": ep2,
     }
     info["unit"] = c.unit
+    if not (first.converged and second.converged):  # did the limit matter? run on
+        info["check"] = longer_run(x, first, second, c, dt)
     if search is not None:
         info["alpha_search"] = search
     return Derivatives(

@@ -562,6 +562,89 @@ def identified_intervals(q: np.ndarray, mask: np.ndarray) -> list[list[float]]:
     ]
 
 
+#: The curves that are the beam's physics (Eq. 37): the damping and the DE force gains.
+PHYSICAL_CURVES = ("d", "g")
+
+
+def simulation_only(identified: dict[str, list], fitted: Collection[str] | None = None) -> str:
+    """Word which physical curves of a model are identified nowhere, or ``""``.
+
+    A model whose damping ``d(q)`` or DE gains ``g_i(q)`` are identified nowhere (their bands
+    too wide or no data support, :func:`curves_frame`) may still free-run well, but those
+    curves are not the beam's: it is a simulator only.
+
+    Parameters
+    ----------
+    identified : dict of str to list of [float, float]
+        Curve name (``restoring``, ``d``, ``g1``, ...) to the intervals of q where it is
+        identified, as the identify summary's ``identified``.
+    fitted : collection of str, optional
+        The curves the model fits as RBF sums (:func:`fitted_curves`); the others are a
+        backbone constant or a given gain (a model with ``rbf = []``, as IDIM), not curves,
+        and are left out. Default: every curve in ``identified``.
+
+    Returns
+    -------
+    str
+        E.g. ``"d, g1, g2 identified nowhere (restoring holds on part of q)"``; ``""`` when
+        every physical curve is identified somewhere.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the curves ``c``, ``d``, ``g_i``).
+
+    Examples
+    --------
+    >>> simulation_only({"restoring": [[-1.0, 1.0]], "d": [], "g1": [], "g2": []})
+    'd, g1, g2 identified nowhere (restoring holds on part of q)'
+    >>> simulation_only({"restoring": [], "d": [], "g1": [[0.0, 2.0]]})
+    'd identified nowhere (g1 holds on part of q; restoring nowhere)'
+    >>> simulation_only({"d": [[0.0, 1.0]], "g1": [[0.0, 1.0]]})
+    ''
+    >>> simulation_only({"restoring": [], "d": [], "g1": []}, fitted=())
+    ''
+    """
+    if fitted is not None:
+        identified = {n: spans for n, spans in identified.items() if n in fitted}
+
+    def physical(name: str) -> bool:
+        return name.rstrip("0123456789") in PHYSICAL_CURVES
+
+    nowhere = [n for n, spans in identified.items() if physical(n) and not spans]
+    if not nowhere:
+        return ""
+    held = [n for n, spans in identified.items() if spans]
+    others = [n for n, spans in identified.items() if not physical(n) and not spans]
+    parts = [f"{', '.join(held)} {'holds' if len(held) == 1 else 'hold'} on part of q"] * bool(held)
+    parts += [f"{', '.join(others)} nowhere"] * bool(others)
+    return f"{', '.join(nowhere)} identified nowhere" + (f" ({'; '.join(parts)})" if parts else "")
+
+
+def fitted_curves(model) -> set[str]:
+    """Name the curves a model fits as RBF sums: ``restoring``, ``d``, ``g1``, ... .
+
+    Parameters
+    ----------
+    model : RBFModel
+        The identified model (its weights ``theta_c``, ``theta_d``, ``theta_g``; zeros where
+        a curve is not in ``[identify] rbf``).
+
+    Returns
+    -------
+    set of str
+        ``restoring`` with ``c(q)`` weights, ``d`` with ``d(q)`` weights, ``g<i>`` with weights
+        of ``g_i(q)``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-39 (the RBF sums of the curves).
+    """
+    names = {"restoring"} if np.any(model.theta_c) else set()
+    names |= {"d"} if np.any(model.theta_d) else set()
+    theta_g = np.atleast_2d(np.asarray(model.theta_g, dtype=float))
+    return names | {f"g{i + 1}" for i, row in enumerate(theta_g) if np.any(row)}
+
+
 def curves_frame(
     model,
     diag,

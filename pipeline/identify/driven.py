@@ -213,17 +213,23 @@ def beyond_driven(
         if sum(side.size for side in sides) < min_samples:
             continue
         spans = " and ".join(
-            f"{scale * side.min():.2g} to {scale * side.max():.2g} {unit} ({side.size} samples)"
+            f"{_two(scale * side.min())} to {_two(scale * side.max())} {unit} ({side.size} samples)"
             for side in sides
             if side.size
         )
         where = (
             "the estimation never applied it"
             if np.isnan(lo)
-            else f"the estimation applied it only at {scale * lo:.2g} to {scale * hi:.2g} {unit}"
+            else f"the estimation applied it only at {_two(scale * lo)} to {_two(scale * hi)} "
+            f"{unit}"
         )
         words.append(f"v{j + 1} applied at q = {spans}, where {where}")
     return "; ".join(words)
+
+
+def _two(x: float) -> str:
+    """Two significant digits, without an exponent below 1e6 (``-300``, not ``-3e+02``)."""
+    return f"{float(f'{x:.2g}'):g}"
 
 
 def basis_ripple(basis: RBFBasis, n_grid: int = 201) -> float:

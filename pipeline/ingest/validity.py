@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from debist.core.errors import DebistWarning, RigLogError
+from debist.core.errors import RigLogError
 from debist.ingest.channels import Column
-from debist.ingest.sensors import default_range
+from debist.ingest.sensors import SensorRangeWarning, default_range
 from debist.ingest.spec import ChannelSpec, IngestSpec
 
 __all__ = [
@@ -253,12 +253,11 @@ def fault_mask(
         if cspec.range is None:
             default = default_range(column.source, column.unit, column.gain)
             if default is not None:
-                warnings.warn(
-                    f"file '{path}', channel '{column.source}': `{column.role}` range "
-                    f"{default[0]:.6g} to {default[1]:.6g}{_unit(column)}: {default[2]}",
-                    DebistWarning,
-                    stacklevel=2,
+                text = (
+                    f"`{column.role}` range {default[0]:.6g} to {default[1]:.6g}{_unit(column)}: "
+                    f"{default[2]}"
                 )
+                warnings.warn(SensorRangeWarning([path], column.source, text), stacklevel=2)
         faults = find_faults(values[:, j], column, cspec, default)
         if not faults:
             continue

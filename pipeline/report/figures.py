@@ -95,7 +95,13 @@ def dynamic_window(t: np.ndarray, q_ddot: np.ndarray, width: float) -> tuple[int
     return start, start + m
 
 
-def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit: str) -> Any:
+def excitation_figure(
+    table: pd.DataFrame,
+    deriv: pd.DataFrame,
+    name: str,
+    unit: str,
+    report_unit: str | None = None,
+) -> Any:
     """Position, velocity, acceleration and inputs of one record, as Fig. 11a of the paper.
 
     Parameters
@@ -108,11 +114,19 @@ def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit:
         Data set name (title).
     unit : str
         SI unit of q.
+    report_unit : str, optional
+        ``[validate] report_unit``: q and its derivatives are drawn in it (None: mm for q
+        in m, :func:`debist.validate.freerun.report_factor`).
 
     Returns
     -------
     matplotlib.figure.Figure
-        Four axes sharing t: q, q_dot, q_ddot (in mm for q in m) and the inputs in kV.
+        Four axes sharing t: q, q_dot, q_ddot (in the report unit) and the inputs in kV.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q.
 
     References
     ----------
@@ -120,7 +134,7 @@ def excitation_figure(table: pd.DataFrame, deriv: pd.DataFrame, name: str, unit:
     """
     from matplotlib.figure import Figure
 
-    factor, label = q_scale(unit)
+    factor, label = report_factor(unit, report_unit)
     t = table["t"].to_numpy()
     inputs = sorted((c for c in table.columns if c[:1] == "v" and c[1:].isdigit()), key=_index)
     fig = Figure(figsize=(9, 7.5), layout="constrained")
@@ -299,7 +313,7 @@ def free_run_figure(
         replicate band, which is drawn only for a model that has a row.
     report_unit : str, optional
         Unit the axes show q in (``[validate] report_unit``, e.g. ``"mV"``); the data are
-        converted for display only. None: :func:`q_scale`.
+        converted for display only. None: as :func:`debist.validate.freerun.report_factor`.
     init_samples : int, optional
         Samples used for the initial state, not scored (``[validate] init_samples``; shaded).
 
@@ -320,7 +334,7 @@ def free_run_figure(
     """
     from matplotlib.figure import Figure
 
-    factor, label = q_scale(unit) if report_unit is None else report_factor(unit, report_unit)
+    factor, label = report_factor(unit, report_unit)
     nrmse = nrmse or {}
     t = measured["t"].to_numpy()
     q = factor * measured["q"].to_numpy()

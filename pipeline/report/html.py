@@ -29,10 +29,12 @@ from debist.core.errors import ArtifactError
 from debist.core.fileformats import atomic_write
 from debist.report.tables import (
     auto_line,
+    display_summary,
     equilibrium_kind,
     identified_text,
     mass_rows,
     not_modelled,
+    sindy_units,
     small_signal_cells,
     stiffness_caption,
     summary_units,
@@ -135,6 +137,8 @@ pre, code { white-space: pre-wrap; overflow-wrap: anywhere; font-size: 0.85rem; 
 
 <h2 id="s1">{{ sections[0] }}</h2>
 <p>Workflow <strong>{{ workflow }}</strong></p>
+{% if simulation_only %}<p><strong>simulation only: {{ simulation_only }}</strong>: the identified
+model's free run may be scored, but these curves are not the beam's physics.</p>{% endif %}
 {% if datasets %}
 <p class="scrollnote">wide table: scroll sideways &rarr;</p><div class="scroll"><table>
 <tr><th>data set</th><th>role</th><th>source</th><th>samples</th><th>duration [s]</th></tr>
@@ -223,7 +227,8 @@ f_n = sqrt(k*/m_q)/(2 pi); {{ design.k_band }}.</p>
 {{ show(figures.analyze, "Not run (add an [analyze] section).") }}
 
 <h2 id="s10">{{ sections[9] }}</h2>
-{% if equations %}<pre>{{ equations }}</pre>{% else %}<p>Not run.</p>{% endif %}
+{% if equations %}<pre>{{ equations }}</pre>
+<p>Coefficients as fitted, in SI: {{ sindy_units }}.</p>{% else %}<p>Not run.</p>{% endif %}
 
 <h2 id="s11">{{ sections[10] }}</h2>
 {% if digest %}
@@ -431,17 +436,14 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
     if not design:
         return None
 
-    units = summary_units(summary)
-    scale, q_unit = (1e3, "mm") if units["q"] == "m" else (1.0, units["q"])  # q in mm, as Fig. 14
+    units = summary_units(summary)  # q in the report unit (display_summary)
     rows = []
     for r in design.get("equilibria", []):
         if r.get("level", 0) != 0 and not r.get("static_stable"):
             continue
         volts = ", ".join(_num(r[k]) for k in sorted(r) if k[:1] == "v" and k[1:].isdigit())
         small = small_signal_cells(r, _num)
-        q = r.get("q")
-        q = scale * q if isinstance(q, int | float) else q
-        rows.append([r.get("model", ""), volts, _num(q), equilibrium_kind(r), *small])
+        rows.append([r.get("model", ""), volts, _num(r.get("q")), equilibrium_kind(r), *small])
     for r in design.get("switching", []):
         unit = dict(enumerate(units["inputs"], 1)).get(r.get("input"), "V")
         value = r.get("v_switch")
@@ -457,11 +459,17 @@ def _design(summary: dict[str, Any]) -> dict[str, Any] | None:
         "verdict": design.get("verdict", ""),
         "reason": design.get("reason", ""),
         "rows": rows,
-        "q_unit": q_unit,
+        "q_unit": units["q"],
         "inputs": ", ".join(dict.fromkeys(units["inputs"])) or "V",
         "barrier": units["barrier"],
         "k_band": stiffness_caption(summary),
     }
+
+
+def _simulation_only(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Return the identified model's ``simulation_only`` words from its NRMSE rows, or ``""``."""
+    said = [r.get("simulation_only") for r in rows if r.get("model") == "rbf"]
+    return next((w for w in said if isinstance(w, str) and w), "")
 
 
 def _data_uri(name: str, data: bytes) -> str:
@@ -487,7 +495,9 @@ def render_report(run: dict[str, Any]) -> str:
         ``nrmse`` (rows of the validate/compare summary's ``table``; NRMSE dimensionless,
         Eq. 41), ``equations`` (the compare summary's SINDy equations, or None),
         ``figures`` (group of :data:`FIGURE_GROUPS` -> list of ``(caption, PNG bytes)``),
-        ``digest`` (digest of the stages shown, or None), ``verify`` (the command that
+        ``digest`` (digest of the stages shown, or None), ``report_unit`` (``[validate]
+        report_unit``: q, its ranges and what is per length of q are shown in it,
+        :func:`debist.report.tables.display_summary`), ``verify`` (the command that
         checks them), ``stages`` (stage -> ``(stage key, manifest sha256)``) and
         ``versions`` (library -> version). Missing keys are shown as not run.
 
@@ -505,7 +515,7 @@ def render_report(run: dict[str, Any]) -> str:
     ----------
     Masoud & Maas 2025, Table 2 (NRMSE layout), Fig. 11-15; RFC 2397 (data URLs).
     """
-    identify = run.get("identify") or {}
+    identify = display_summary(run.get("identify") or {}, run.get("report_unit"))
     heads, nrmse = _nrmse_rows(run.get("nrmse") or [])
     figures = {
         group: [
@@ -527,10 +537,12 @@ def render_report(run: dict[str, Any]) -> str:
         checks=_check_rows(run.get("nrmse") or []),
         model=_model_rows(identify) if identify else [],
         design=_design(identify),
+        simulation_only=_simulation_only(run.get("nrmse") or []),
         warnings=(identify.get("excitation") or {}).get("warnings", []),
         auto=auto_line(identify) if identify else "",
         figures=figures,
         equations=run.get("equations"),
+        sindy_units=sindy_units(identify),
         digest=run.get("digest"),
         verify=run.get("verify", ""),
         stages=stages,

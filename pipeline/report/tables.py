@@ -45,6 +45,180 @@ _DIMENSIONS = {
 }
 
 
+def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> dict[str, Any]:
+    """Return the identify summary with q and every quantity made of q in the report unit.
+
+    The stage records SI (q in m, forces in N or, per unit mass, in q/s^2); a table or page
+    shows q, its ranges, q*, the RMS errors and what is per length of q (stiffness N/mm,
+    damping N s/mm) in one unit, :func:`debist.validate.freerun.report_factor`'s. Forces in
+    N, masses, energies (the barrier, J or J/kg) and per-unit-mass stiffness (1/s^2) keep
+    their units; a per-unit-mass force is an acceleration of q (mm/s^2).
+
+    Parameters
+    ----------
+    summary : dict
+        The identify stage's manifest summary (its ``units``: ``q`` SI, ``per_unit_mass``).
+    report_unit : str, optional
+        ``[validate] report_unit``; None: mm for q in m, else q's own unit.
+
+    Returns
+    -------
+    dict
+        A converted copy (``units.q`` the report unit, ``units.q_si`` the recorded one), or
+        ``summary`` itself when the units agree already.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the terms' dimensions); BIPM SI Brochure, 9th ed. (2019),
+    Sec. 5.4 (one unit per quantity).
+
+    The identify stage words its excitation warnings with q in mm (q in m) or q's own unit;
+    with another report unit their positions are rewritten in it.
+
+    Examples
+    --------
+    >>> s = {"units": {"q": "m", "per_unit_mass": False}, "q_range": [-0.016, 0.016],
+    ...      "backbone": {"k_1": 9.1, "F_0": -0.0068}, "identified": {"d": [[-0.01, 0.0]]}}
+    >>> d = display_summary(s)
+    >>> d["units"]["q"], d["q_range"], d["backbone"], d["identified"]
+    ('mm', [-16.0, 16.0], {'k_1': 0.0091, 'F_0': -0.0068}, {'d': [[-10.0, 0.0]]})
+    >>> display_summary(d) is d  # shown in mm already
+    True
+    >>> said = "g1: never active for q in [-17.8, -10.7] and [2.0, 3.5] mm: g1 ..."
+    >>> display_summary({**s, "excitation": {"warnings": [said]}}, "m")["excitation"]
+    {'warnings': ['g1: never active for q in [-0.0178, -0.0107] and [0.002, 0.0035] m: g1 ...']}
+    """
+    import copy
+
+    from debist.validate.freerun import report_factor
+
+    if not summary:  # no identify stage: nothing to convert
+        return summary
+    given = summary.get("units") or {}
+    q_si = given.get("q_si", given.get("q", "m"))
+    f, shown = report_factor(q_si, report_unit)
+    said_f, said = report_factor(q_si, None)  # the stage words positions in this unit
+    if shown == given.get("q", "m") and ("q_si" in given or (said == shown and f == 1.0)):
+        return summary  # shown in the report unit already
+    per_mass = given.get("per_unit_mass", summary.get("m_q") == 1.0)
+    force = f if per_mass else 1.0  # a per-unit-mass force is an acceleration of q
+    by_dim = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
+    out = copy.deepcopy(summary)
+    out["units"] = {**given, "q": shown, "q_si": q_si}
+
+    def scale(value: Any, k: float) -> Any:
+        if isinstance(value, list):
+            return [scale(v, k) for v in value]
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        return value * k if number else value
+
+    for key in ("q_range", "q_data_range"):
+        if key in out:
+            out[key] = scale(out[key], f)
+    out["identified"] = {n: scale(v, f) for n, v in (out.get("identified") or {}).items()}
+    dims = {"k_1": "F/q", "k_3": "F/q3", "d_v": "Fs/q", "F_c": "F", "F_0": "F", "g_0": "F",
+            "g_h": "F"}  # fmt: skip
+    for key, dim in dims.items():
+        if key in out.get("backbone", {}):
+            out["backbone"][key] = scale(out["backbone"][key], by_dim[dim])
+    refine = out.get("refine") or {}
+    for item in [refine, *(refine.get("candidates") or [])]:
+        for key in [k for k in item if k.endswith("_error")]:
+            item[key] = scale(item[key], f)
+    slip = out.get("slip") or {}
+    slip_dims = {"Delta": "q", "k": "F/q", "F": "F", "F_total": "F", "k_total": "F/q"}
+    for key, dim in slip_dims.items():
+        if key in slip:
+            slip[key] = scale(slip[key], by_dim[dim])
+    if out.get("inertia"):
+        out["inertia"]["q"] = scale(out["inertia"]["q"], f)
+    design = out.get("design") or {}
+    for row in design.get("equilibria") or []:
+        for key, dim in (("q", "q"), ("k", "F/q"), ("k_lo", "F/q"), ("k_hi", "F/q"), ("d", "Fs/q"),
+                         ("d_lo", "Fs/q"), ("d_hi", "Fs/q")):  # fmt: skip
+            if row.get(key) is not None:
+                row[key] = scale(row[key], by_dim[dim])
+    if design.get("reason"):
+        design["reason"] = _reworded(design["reason"], f, shown)
+    excitation = out.get("excitation") or {}
+    if excitation.get("warnings") and said != shown:
+        excitation["warnings"] = [
+            _rescaled(w, f / said_f, said, shown) for w in excitation["warnings"]
+        ]
+    return out
+
+
+_NUMBER = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+
+
+def _rescaled(text: str, factor: float, old: str, new: str) -> str:
+    """Rewrite the q positions of an excitation warning from ``old`` to ``new``.
+
+    The runs of intervals (``[a, b] and [c, d] mm``) and the RBF width (``sigma = x mm``) of
+    :mod:`debist.identify.excitation`'s words are multiplied by ``factor``.
+    """
+    unit = re.escape(old)
+    pair = rf"\[{_NUMBER}, {_NUMBER}\]"
+
+    def run(m: re.Match) -> str:
+        spans = re.sub(
+            pair,
+            lambda p: f"[{float(p.group(1)) * factor:.4g}, {float(p.group(2)) * factor:.4g}]",
+            m.group(1),
+        )
+        return f"{spans} {new}"
+
+    text = re.sub(rf"((?:{pair})(?: and {pair})*) {unit}(?![\w/^])", run, text)
+    return re.sub(
+        rf"sigma = {_NUMBER} {unit}(?![\w/^])",
+        lambda m: f"sigma = {float(m.group(1)) * factor:.4g} {new}",
+        text,
+    )
+
+
+def _reworded(reason: str, factor: float, unit: str) -> str:
+    """Write the stability verdict's positions (``in [a, b]``, ``at q = x``) in the report unit."""
+
+    def span(m: re.Match) -> str:
+        lo, hi = float(m.group(1)) * factor, float(m.group(2)) * factor
+        return f"[{lo:.4g}, {hi:.4g}] {unit}"
+
+    def point(m: re.Match) -> str:
+        return f"at q = {float(m.group(1)) * factor:.4g} {unit}"
+
+    reason = re.sub(rf"\[{_NUMBER}, {_NUMBER}\]", span, reason)
+    return re.sub(rf"at q = {_NUMBER}", point, reason)
+
+
+def sindy_units(summary: dict[str, Any]) -> str:
+    """Name the units SINDy's coefficients refer to: q, q_dot, q_ddot in SI, as fitted.
+
+    Parameters
+    ----------
+    summary : dict
+        The identify summary (its ``units``: ``q`` or ``q_si``, the recorded SI unit);
+        q in m when it has none.
+
+    Returns
+    -------
+    str
+        E.g. ``"q [m], q_dot [m/s], q_ddot [m/s^2]"``.
+
+    Examples
+    --------
+    >>> sindy_units({"units": {"q": "mm", "q_si": "m"}})
+    'q [m], q_dot [m/s], q_ddot [m/s^2]'
+    """
+    given = (summary or {}).get("units") or {}
+    q = given.get("q_si", given.get("q", "m"))
+    return f"q [{q}], q_dot [{q}/s], q_ddot [{q}/s^2]"
+
+
 def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
     """Units of the identify stage's quantities, derived from the data and the model form.
 
@@ -88,12 +262,17 @@ def summary_units(summary: dict[str, Any]) -> dict[str, Any]:
         expr = dim.replace("F", f"({force})").replace("q", f"({q})")
         return pretty_unit(expr.replace("h", f"({h}){power}"))
 
+    def si_unit(dim: str) -> str:  # the barrier keeps SI (J, J/kg): not a quantity of q
+        q_si = given.get("q_si", q)
+        si_force = f"({q_si})/s**2" if per_mass else "N"
+        return pretty_unit(dim.replace("F", f"({si_force})").replace("q", f"({q_si})"))
+
     out: dict[str, Any] = {k: unit(d) for k, d in _DIMENSIONS.items()}
     out.update(
         q=pretty_unit(q),
         force=pretty_unit(force),
         mass="1" if per_mass else "kg",
-        barrier=_energy(unit("F*q")),
+        barrier=_energy(si_unit("F*q"), per_mass),
         inputs=[pretty_unit(v) for v in inputs],
         quantities=[_quantity(v) for v in inputs],
         input_map=given.get("input_map", "v2"),
@@ -158,10 +337,17 @@ def switching_word(units: dict[str, Any], i: int) -> str:
     return f"switching {kind if kind != 'input' else 'level'}"
 
 
-def _energy(unit: str) -> str:
-    """``"J"`` for a unit of energy with factor 1 (``N m``), else the unit as given."""
+def _energy(unit: str, per_mass: bool = False) -> str:
+    """Name an energy unit: ``"J"`` for ``N m``, ``"J/kg"`` for ``m^2/s^2`` per unit mass.
+
+    Any other unit is returned as given.
+    """
     found = lookup_unit(unit.replace(" ", "*"))
-    return "J" if found is not None and found.si == "J" and found.factor == 1.0 else unit
+    if found is not None and found.factor == 1.0 and found.si == "J":
+        return "J"
+    if per_mass and found is not None and found.factor == 1.0 and found.si == "m^2*s^-2":
+        return "J/kg"
+    return unit
 
 
 def _fmt(value: Any, digits: int = 4) -> str:
@@ -203,12 +389,12 @@ def slip_rows(summary: dict[str, Any]) -> list[tuple[str, str, float]]:
         name = f"Maxwell-slip element {e + 1}"
         rows += [
             (f"{name}: break-away deflection Delta", q, width),
-            (f"{name}: stiffness k", f"{force}/{q}", k),
+            (f"{name}: stiffness k", units["stiffness"], k),
             (f"{name}: slip force k Delta", force, f),
         ]
     rows += [
         ("Maxwell-slip: total slip force (gross sliding)", force, slip["F_total"]),
-        ("Maxwell-slip: presliding stiffness sum k", f"{force}/{q}", slip["k_total"]),
+        ("Maxwell-slip: presliding stiffness sum k", units["stiffness"], slip["k_total"]),
     ]
     return rows
 
@@ -459,8 +645,8 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ----------
     row : dict
         A row of ``nrmse.parquet`` (``nrmse_q``, ``nrmse_q_baseline``, ``status``,
-        ``reason``, ``diverged``, ``model``, ``dataset``, ``under_excited``,
-        ``extrapolated``).
+        ``reason``, ``diverged``, ``model``, ``dataset``, ``simulation_only``,
+        ``under_excited``, ``extrapolated``).
     rows : list of dict, optional
         The whole table: a row is also called worse than another model whose free run of
         the same data set has a lower NRMSE(q).
@@ -474,8 +660,10 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         ``"worse than <model> (x %)"``, or ``"ok"``; the last three may combine. A row with
         ``under_excited`` starts with ``"under-excited: <why>"``, one with ``extrapolated``
         (an input applied where the estimation never applied it,
-        :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``;
-        either replaces ``"ok"``.
+        :func:`debist.identify.driven.beyond_driven`) with ``"extrapolated: <where>"``, then
+        one with ``simulation_only`` (its model's fitted curves identified nowhere,
+        :func:`debist.identify.bands.simulation_only`) with ``"simulation only: <which>"``;
+        each replaces ``"ok"``.
 
     Examples
     --------
@@ -495,6 +683,9 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
     ...          "under_excited": "one spectral line at 2 Hz in 'a'"})
     "under-excited: one spectral line at 2 Hz in 'a'"
     >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
+    ...          "simulation_only": "d, g1, g2 identified nowhere"})
+    'simulation only: d, g1, g2 identified nowhere'
+    >>> verdict({"nrmse_q": 0.004, "nrmse_q_baseline": 0.2,
     ...          "extrapolated": "v2 applied at q = 3 to 9 mm (40 samples), where ..."})
     'extrapolated: v2 applied at q = 3 to 9 mm (40 samples), where ...'
     """
@@ -504,6 +695,7 @@ def verdict(row: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> st
         for label, text in (
             ("under-excited", row.get("under_excited")),
             ("extrapolated", row.get("extrapolated")),
+            ("simulation only", row.get("simulation_only")),
         )
         if isinstance(text, str) and text
     ]
@@ -702,26 +894,38 @@ def analyze_table(summary: dict[str, Any]) -> Table:
     return table
 
 
-def rig_table(summary: dict[str, Any]) -> Table:
+def rig_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
     """Tabulate the virtual rig's experiments.
 
     Parameters
     ----------
     summary : dict
         Summary of the rig stage's manifest (per experiment; lengths in [m]).
+    report_unit : str, optional
+        ``[validate] report_unit`` for the q range (default mm,
+        :func:`debist.validate.freerun.report_factor`).
 
     Returns
     -------
     rich.table.Table
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` is not a length unit.
     """
+    from debist.validate.freerun import report_factor
+
+    f, unit = report_factor("m", report_unit)
+    digits = max(0, 2 - round(math.log10(f / 1e3)))  # 0.01 mm
     table = Table(title="Virtual rig")
-    for col in ("experiment", "samples", "q range [mm]", "well changes", "saturated", "nfev"):
+    for col in ("experiment", "samples", f"q range [{unit}]", "well changes", "saturated", "nfev"):
         table.add_column(escape(col), justify="left" if col == "experiment" else "right")
     for name, s in summary.items():
         table.add_row(
             name,
             str(s["samples"]),
-            f"{1e3 * s['q_min']:+.2f} ... {1e3 * s['q_max']:+.2f}",
+            f"{f * s['q_min']:+.{digits}f} ... {f * s['q_max']:+.{digits}f}",
             str(s["well_changes"]),
             str(s["saturated"]),
             str(s["nfev"]),

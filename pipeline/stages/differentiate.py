@@ -23,9 +23,11 @@ def execute(ctx: StageInputs) -> StageOutput:
     Returns
     -------
     StageOutput
-        ``<table>.parquet`` per table; summary: whether each iterative solve converged and,
-        with ``alpha = "auto"``, the alpha chosen per table and the residuals it was chosen
-        from.
+        ``<table>.parquet`` per table; summary: whether each iterative solve converged,
+        with ``alpha = "auto"`` the alpha chosen per table and the residuals it was chosen
+        from, and for each table where TVRegDiff stopped at its iteration limit how far a
+        run with more iterations moved q_dot and q_ddot
+        (:func:`debist.differentiate.tvregdiff_method.longer_run`).
 
     Raises
     ------
@@ -38,4 +40,7 @@ def execute(ctx: StageInputs) -> StageOutput:
             for n, d in derivs.items() if "alpha_search" in d.attrs}  # fmt: skip
     if auto:
         summary["auto_alpha"] = auto
+    longer = {n: d.attrs["longer_run"] for n, d in derivs.items() if "longer_run" in d.attrs}
+    if longer:  # per stopped table: how far a run with more iterations moved q_dot, q_ddot
+        summary["longer_run"] = longer
     return StageOutput({f"{n}.parquet": d for n, d in derivs.items()}, summary)

@@ -13,6 +13,7 @@ import lazy_loader as lazy
 from debist.core.errors import recording_warnings
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
+from debist.ingest.sensors import one_range_warning
 from debist.ingest.spec import IngestSpec
 from debist.stages import StageInputs, StageOutput
 
@@ -74,15 +75,16 @@ def run_ingest(
     """
     tables: dict[str, pd.DataFrame] = {}
     cache = RawLogCache(read_raw, [ds.source for ds in datasets])
-    for ds in datasets:
-        spec = IngestSpec.from_dict(ds.ingest)
-        segments = load_rig_log(ds.source, spec, cache)
-        for k, frame in enumerate(segments):
-            name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
-            frame.attrs["role"] = ds.role
-            frame.attrs["dataset"] = ds.name
-            frame.attrs["source"] = _recorded_source(ds, base)
-            tables[name] = frame
+    with one_range_warning():  # a sensor's documented range: one line naming every file
+        for ds in datasets:
+            spec = IngestSpec.from_dict(ds.ingest)
+            segments = load_rig_log(ds.source, spec, cache)
+            for k, frame in enumerate(segments):
+                name = ds.name if len(segments) == 1 else f"{ds.name}.seg{k}"
+                frame.attrs["role"] = ds.role
+                frame.attrs["dataset"] = ds.name
+                frame.attrs["source"] = _recorded_source(ds, base)
+                tables[name] = frame
     return tables
 
 

@@ -187,7 +187,13 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
     for name in order:
         if roles.get(name) == "estimation" and name in inputs.derivs:
             table = inputs.tables[name]
-            args = (table, inputs.derivs[name][["q_dot", "q_ddot"]], name, _unit(table))
+            args = (
+                table,
+                inputs.derivs[name][["q_dot", "q_ddot"]],
+                name,
+                _unit(table),
+                report_unit,
+            )
             caption = f"Fig. 11a: estimation record '{name}': q, q_dot, q_ddot and the inputs v_i"
             jobs["excitation"].append((caption, FigureJob(excitation_figure, args, dpi=REPORT_DPI)))
     for name in order:
@@ -229,6 +235,7 @@ def run_report(inputs: ReportInputs, section: Mapping[str, Any]) -> ReportResult
         "workflow": inputs.workflow,
         "datasets": datasets,
         "identify": inputs.summaries.get("identify"),
+        "report_unit": report_unit,
         "nrmse": nrmse,
         "equations": inputs.summaries.get("compare", {}).get("equations"),
         "figures": figures,

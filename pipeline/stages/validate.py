@@ -11,6 +11,7 @@ import numpy as np
 
 from debist.core.progress import Stopwatch
 from debist.core.tables import input_columns
+from debist.identify.bands import fitted_curves, simulation_only
 from debist.identify.driven import beyond_driven, driven_ranges
 from debist.identify.physics_prior import analytical_for
 from debist.identify.spectrum import under_excitation
@@ -25,8 +26,8 @@ from debist.validate.freerun import (
     default_q_limit,
     mark_unstable,
     replicate_spread,
+    report_factor,
     validate_model,
-    words_factor,
 )
 from debist.validate.prediction import prediction_table
 
@@ -194,7 +195,7 @@ def estimation_motion(tables, derivs) -> tuple[np.ndarray, np.ndarray]:
     return q, q_dot
 
 
-def extrapolation(tables, margin: float) -> dict[str, str]:
+def extrapolation(tables, margin: float, report_unit: str | None = None) -> dict[str, str]:
     """Per data set, where it applies an input beyond the estimation's driven range, or ``""``.
 
     Parameters
@@ -203,12 +204,15 @@ def extrapolation(tables, margin: float) -> dict[str, str]:
         Canonical tables (``q``, ``v1..vN``; ``attrs['role']``, ``attrs['units']``).
     margin : float
         One RBF width: positions this close to the driven range count as informed [unit of q].
+    report_unit : str, optional
+        ``[validate] report_unit``, the unit the positions are worded in (default mm for q
+        in m, :func:`debist.validate.freerun.report_factor`).
 
     Returns
     -------
     dict of str to str
-        :func:`debist.identify.driven.beyond_driven` of every data set (q in mm when q is in
-        m); ``""`` for the estimation data sets and when there are none.
+        :func:`debist.identify.driven.beyond_driven` of every data set (q in the report
+        unit); ``""`` for the estimation data sets and when there are none.
     """
     est = [t for t in tables.values() if t.attrs.get("role") == "estimation"]
     if not est:
@@ -220,7 +224,7 @@ def extrapolation(tables, margin: float) -> dict[str, str]:
     out = {}
     for name, t in tables.items():
         unit = t.attrs.get("units", {}).get("q", "m")
-        factor, shown = words_factor(unit)
+        factor, shown = report_factor(unit, report_unit)
         out[name] = (
             ""
             if t.attrs.get("role") == "estimation"
@@ -269,8 +273,15 @@ def execute(ctx: StageInputs) -> StageOutput:
     watch.lap("read inputs")
     res = run_validate(model, tables, derivs, section, baseline, ctx.physics(), replicates)
     watch.restart()  # its own parts are in res.timings
-    beyond = extrapolation(tables, model.basis.sigma)
-    table = res.table.assign(under_excited=thin, extrapolated=res.table.dataset.map(beyond))
+    beyond = extrapolation(tables, model.basis.sigma, cfg.report_unit)
+    # a model whose physical curves hold nowhere is a simulator only: its rows say so
+    identified = ctx.summary("identify").get("identified") or {}
+    unsure = simulation_only(identified, fitted_curves(model))
+    table = res.table.assign(
+        under_excited=thin,
+        extrapolated=res.table.dataset.map(beyond),
+        simulation_only=np.where(res.table.model.str.startswith("rbf"), unsure, ""),
+    )
     table = with_verdicts(table)
     outputs: dict[str, Any] = {"nrmse.parquet": table}
     if res.residuals is not None:

@@ -75,7 +75,9 @@ class ValidateConfig(SectionConfig):
     from the differentiated signals and score every sample.
     """
     report_unit: str | None = None
-    """Unit for the RMS column (e.g. "mV", "mm"); default the unit of q."""
+    """Unit q is reported in: the RMS column, q*, ranges and stiffness per length in the tables and
+    the report (e.g. "mV", "mm"); default mm for q in metres, else the unit of q.
+    """
     q_limit: PositiveFloat | None = None
     """|q| beyond which a run counts as diverged [unit of q]; default twice the largest |q| of the
     estimation range.

@@ -17,7 +17,7 @@ from debist.core.metrics import (
     nrmse,
     rms,
 )
-from debist.core.units import lookup_unit
+from debist.core.units import lookup_unit, pretty_unit
 from debist.simulate.freerun import (
     FineInputs,
     FreeRunModel,
@@ -111,35 +111,47 @@ class DataSet:
 
 
 def report_factor(q_unit: str, report_unit: str | None) -> tuple[float, str]:
-    """Factor converting q from its SI unit to the report unit.
+    """Factor converting q from its SI unit to the unit q is reported in.
+
+    One unit per workflow for q and what is made of it (ranges, q*, RMS errors, stiffness
+    per length): ``[validate] report_unit``, else mm for q in m (a DE's stroke is a few mm),
+    else q's own unit.
 
     Parameters
     ----------
     q_unit : str
         SI unit of q.
     report_unit : str or None
-        Wanted unit; None keeps ``q_unit``.
+        Wanted unit; None: ``"mm"`` for q in ``"m"``, else ``q_unit``.
 
     Returns
     -------
     factor : float
         Multiply a value in ``q_unit`` by it.
     unit : str
-        The report unit.
+        The report unit, as :func:`debist.core.units.pretty_unit` writes it (``"µm"`` for
+        ``"um"``), so that every table spells it alike.
 
     Raises
     ------
     WorkflowError
         If the report unit is unknown or of another quantity.
+
+    Examples
+    --------
+    >>> report_factor("m", None), report_factor("V", None), report_factor("V", "mV")
+    ((1000.0, 'mm'), (1.0, 'V'), (1000.0, 'mV'))
     """
     if report_unit is None:
-        return 1.0, q_unit
+        if q_unit != "m":
+            return 1.0, q_unit
+        report_unit = "mm"
     unit = lookup_unit(report_unit)
     if unit is None or unit.si != q_unit:
         raise WorkflowError(
             f"[validate] report_unit {report_unit!r} cannot express q in {q_unit!r}"
         )
-    return 1.0 / unit.factor, report_unit
+    return 1.0 / unit.factor, pretty_unit(report_unit)
 
 
 def words_factor(q_unit: str) -> tuple[float, str]:
@@ -153,7 +165,7 @@ def words_factor(q_unit: str) -> tuple[float, str]:
     Returns
     -------
     factor, unit : float, str
-        As :func:`report_factor` with ``"mm"`` for q in m, else q's own unit.
+        :func:`report_factor` without a report unit.
 
     Examples
     --------
@@ -162,7 +174,7 @@ def words_factor(q_unit: str) -> tuple[float, str]:
     >>> words_factor("V")
     (1.0, 'V')
     """
-    return report_factor(q_unit, "mm" if q_unit == "m" else None)
+    return report_factor(q_unit, None)
 
 
 def default_q_limit(q_range: tuple[float, float]) -> float:

@@ -33,8 +33,10 @@ from typing import Any
 from debist.core.errors import RigLogError, WorkflowError
 from debist.core.fileformats import atomic_write
 from debist.core.names import is_file_name
+from debist.core.units import lookup_unit
 from debist.ingest.cache import RawLogCache
 from debist.ingest.load import load_rig_log, read_raw
+from debist.ingest.sensors import default_range, known_sensor
 from debist.ingest.spec import IngestSpec
 from debist.ingest.survey import (
     Mapping,
@@ -118,13 +120,15 @@ def toml_value(value: Any) -> str:
     --------
     >>> print(toml_value('a "b"\n]'))
     "a \"b\"\n]"
-    >>> toml_value({"name": "x", "unit": "mm"})
-    '{ name = "x", unit = "mm" }'
+    >>> toml_value({"name": "x", "unit": "mm", "range": [-25.0, 25.0]})
+    '{ name = "x", unit = "mm", range = [-25.0, 25.0] }'
     """
     import tomli_w
 
     if isinstance(value, dict):
         return "{ " + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list):  # on one line (tomli-w breaks arrays over lines)
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     return tomli_w.dumps({"v": value}).partition(" = ")[2].rstrip("\n")
 
 
@@ -171,6 +175,26 @@ def _channel_comment(guess) -> str:
     return f"{guess.why}; unit {guess.unit_why}{check}"
 
 
+def _ranged(guess) -> tuple[dict[str, Any], str]:
+    """Return a channel's table, with its sensor's documented ``range`` for ``q``, and why.
+
+    ``q``'s measuring range makes ingest refuse (or split at) samples at the sensor's limits:
+    the range of a known sensor (:func:`debist.ingest.sensors.default_range`) is written in
+    the recorded unit; for another sensor the comment asks for one.
+    """
+    table = guess.table()
+    if guess.role != "q":
+        return table, ""
+    unit = lookup_unit(guess.unit)
+    found = None if unit is None else default_range(guess.channel.name, unit.si, unit.factor)
+    if found is None:
+        return table, "no documented range known for this sensor: add range = [lo, hi]"
+    lo, hi, _note = found
+    sensor = known_sensor(guess.channel.name, unit.si)
+    why = f"range: the {sensor.name}'s, {sensor.lo:g} to {sensor.hi:g} {sensor.unit} (datasheet)"
+    return {**table, "range": [round(lo, 9), round(hi, 9)]}, why
+
+
 def render(name: str, datasets: Sequence[InitDataSet], sample_time: float | None) -> str:
     """Write the workflow's text: comments in debist's words, values by tomli-w.
 
@@ -210,20 +234,24 @@ def render(name: str, datasets: Sequence[InitDataSet], sample_time: float | None
     if first.survey.time_bases and not any(g.role == "time" for g in first.guesses):
         lines.append("# time: the recording's own time base")
     for guess in first.guesses:
-        lines.append(_line(f"{guess.role} = {toml_value(guess.table())}", _channel_comment(guess)))
+        table, why = _ranged(guess)
+        comment = "; ".join(c for c in (_channel_comment(guess), why) if c)
+        lines.append(_line(f"{guess.role} = {toml_value(table)}", comment))
     lines += [
         "",
         "[identify]",
         _line('input_map = "v2"', 'h(v) = v^2, a DE\'s force; "v" for a rig linear in v'),
     ]
-    base = first.section()
+    base = {g.role: _ranged(g)[0] for g in first.guesses}
     for ds in datasets:
         lines += ["", f"[datasets.{ds.name}]", f"source = {toml_value(ds.source)}"]
         lines.append(f"role = {toml_value(ds.role)}")
         for guess in ds.mapping.guesses:
-            if base.get(guess.role) != guess.table():
-                text = f"{guess.role} = {toml_value(guess.table())}"
-                lines.append(_line(text, "its own: " + _channel_comment(guess)))
+            table, why = _ranged(guess)
+            if base.get(guess.role) != table:
+                text = f"{guess.role} = {toml_value(table)}"
+                comment = "; ".join(c for c in (_channel_comment(guess), why) if c)
+                lines.append(_line(text, "its own: " + comment))
     lines += ["", _line("[report]", "<output_dir>/report/report.html after each run"), ""]
     return "\n".join(lines)
 

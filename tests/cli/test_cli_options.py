@@ -84,6 +84,15 @@ def test_the_convergence_notice_names_the_keys_to_change(project):
     assert "iteration" in out and "tolerance" in out and "2 data" in out and "set(s)" in out
     assert "raise [differentiate] iterations (now " in out
     assert "loosen [differentiate] tol (now 1e-14)" in out
+    # whether it matters: how far a run with 4x the iterations moved the derivatives
+    summary = json.loads((project / "out" / "differentiate" / "summary.json").read_text())
+    longer = summary["longer_run"].values()
+    q_dot, q_ddot = (max(r[k] for r in longer) for k in ("q_dot", "q_ddot"))
+    assert {r["iterations"] for r in longer} == {40}
+    assert f"a run with 40 iterations moved q_dot by {100 * q_dot:.3g} % and q_ddot by " in out
+    assert f"q_ddot by {100 * q_ddot:.3g} % (relative change, largest data set)" in out
+    matters = max(q_dot, q_ddot) >= 0.01
+    assert ("It may matter" in out) == matters and ("It does not matter" in out) != matters
     again = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
     assert "iteration limit" not in again  # said once, when the stage ran
     (project / "wf.toml").write_text(
@@ -91,6 +100,29 @@ def test_the_convergence_notice_names_the_keys_to_change(project):
     )
     out = CliRunner().invoke(app, ["run", wf, "--until", "differentiate"]).output
     assert "Stage 'differentiate' done" in out and "iteration limit" not in out
+
+
+def test_the_run_tables_show_q_and_stiffness_in_one_unit_system(synthetic_copy):
+    """No report_unit, q in m: q*, the identified ranges and RMS(q) in mm; the curves are per
+    unit mass (m_q = 1), so k* is 1/s^2 with the stage's numbers and the forces mm/s^2."""
+    root, _ = synthetic_copy
+    result = CliRunner().invoke(app, ["run", str(root / "wf.toml")])
+    assert result.exit_code == 0, result.output
+    out = result.output
+    summary = json.loads((root / "out" / "identify" / "summary.json").read_text())
+    assert summary["units"]["q"] == "m" and summary["units"]["per_unit_mass"] is True
+    assert "q* [mm]" in out and "q* [m]" not in out and "k* [1/s^2]" in out
+    assert "m/s^2/m" not in out and "forces in mm/s^2" in out
+    wells = [r for r in summary["design"]["equilibria"] if r["static_stable"]]
+    for r in wells:
+        assert f"{1e3 * r['q']:.4g}" in out and f"{r['k']:.4g}" in out
+    lo, hi = summary["q_data_range"]
+    assert f"in [{1e3 * lo:.4g}, {1e3 * hi:.4g}] mm)" in " ".join(out.split())
+    assert "identified on q [mm] in" in out
+    nrmse = json.loads((root / "out" / "compare" / "summary.json").read_text())["table"]
+    rbf = next(r for r in nrmse if r["model"] == "rbf" and r["dataset"] == "check")
+    assert rbf["rms_unit"] == "mm" and f"{rbf['rms_q']:.4g} mm" in out
+    assert "(coefficients as fitted, in SI: q [m], q_dot [m/s], q_ddot [m/s^2])" in out
 
 
 def test_verbose_timings_account_for_the_stage_wall_time(synthetic_run, tmp_path):

@@ -167,6 +167,28 @@ def test_tvregdiff_method_matches_two_passes_and_reports():
     assert np.mean(d.x_hat - x) == pytest.approx(0.0, abs=1e-12)
 
 
+@pytest.mark.parametrize("alpha", [1e-4, 1e-2])
+def test_a_stopped_tvregdiff_measures_how_far_four_times_the_iterations_move_it(alpha):
+    """The check equals an independent run with both counts times CHECK_FACTOR."""
+    from debist.differentiate.tvregdiff_method import CHECK_FACTOR
+
+    x = X + 1e-3 * np.random.default_rng(2).standard_normal(N)
+    cfg = TVRegDiffConfig(alpha=alpha, ep=1e-6, iterations=5, alpha2=1e-3, iterations2=3)
+    longer = replace(cfg, iterations=5 * CHECK_FACTOR, iterations2=3 * CHECK_FACTOR)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        d = tvregdiff_derivatives(x, DT, config=cfg)
+        long = tvregdiff_derivatives(x, DT, config=longer)
+    check = d.info["check"]
+    assert check["iterations"] == 20
+    for key, short, ref in (("q_dot", d.x_dot, long.x_dot), ("q_ddot", d.x_ddot, long.x_ddot)):
+        want = np.linalg.norm(short - ref) / np.linalg.norm(ref)
+        assert check[key] == pytest.approx(want, rel=1e-6)
+        assert check[key] > 0
+    converged = replace(cfg, iterations=500, iterations2=500, tol=1e-3)
+    assert "check" not in tvregdiff_derivatives(x, DT, config=converged).info
+
+
 def test_tvregdiff_config_defaults_auto_alpha_and_the_papers_ep_in_metres():
     cfg = TVRegDiffConfig()
     # Paper: alpha = 0.01, ep = 1e-6 with q in mm; data * c -> alpha * c, ep * c**2.

@@ -373,3 +373,25 @@ def test_the_stiffness_band_is_the_slope_map_and_the_calibrated_model_error(bist
     none = stiffness_bands(eq, model, diag, True)  # no replicates: no band
     assert none[["k_lo", "k_hi"]].isna().all().all()
     assert flat.attrs == eq.attrs
+
+
+def test_simulation_only_names_the_fitted_curves_that_hold_nowhere():
+    """Only curves the model fits as RBF sums count; a backbone constant (rbf = []) is none."""
+    from types import SimpleNamespace
+
+    from debist.identify.bands import fitted_curves, simulation_only
+
+    identified = {"restoring": [[-0.01, -0.007]], "d": [], "g1": [], "g2": [[0.0, 0.01]]}
+    full = SimpleNamespace(theta_c=np.ones(6), theta_d=np.ones(6), theta_g=np.ones((2, 6)))
+    assert fitted_curves(full) == {"restoring", "d", "g1", "g2"}
+    assert simulation_only(identified, fitted_curves(full)) == (
+        "d, g1 identified nowhere (restoring, g2 hold on part of q)"
+    )
+    idim = SimpleNamespace(theta_c=np.zeros(6), theta_d=np.zeros(6), theta_g=np.zeros((1, 6)))
+    assert fitted_curves(idim) == set()
+    assert simulation_only({"restoring": [], "d": [], "g1": []}, fitted_curves(idim)) == ""
+    no_g2 = SimpleNamespace(theta_c=np.ones(6), theta_d=np.zeros(6),
+                            theta_g=np.vstack([np.ones(6), np.zeros(6)]))  # fmt: skip
+    assert simulation_only(identified, fitted_curves(no_g2)) == (
+        "g1 identified nowhere (restoring holds on part of q)"
+    )

@@ -80,6 +80,10 @@ def test_the_stage_flags_the_unseen_record_and_the_verdict_says_so_first():
     assert out["est"] == "" and out["same"] == ""
     assert out["other"].startswith("v1 applied at q = 4 to 10 mm (120 samples), where the ")
     assert "; v2 applied at q = -10 to -4 mm (120 samples)" in out["other"]
+    in_metres = extrapolation(tables, margin=0.001, report_unit="m")["other"]  # the report unit
+    assert in_metres.startswith("v1 applied at q = 0.004 to 0.01 m (120 samples), where the ")
+    in_um = extrapolation(tables, margin=0.001, report_unit="um")["other"]  # no exponent
+    assert in_um.startswith("v1 applied at q = 4000 to 10000 \u00b5m (120 samples), where the ")
     row = {"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "extrapolated": out["other"]}
     assert verdict(row) == f"extrapolated: {out['other']}"
     poor = {**row, "nrmse_q": 0.19}

@@ -182,10 +182,12 @@ def test_sections_numbers_and_verdicts(run):
     # identified model, design and warnings
     model = {r[0]: r[1] for r in parser.rows if len(r) == 2}
     assert model["T_z [s]"] == "0.0625"
-    k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/m^3]"
-    assert model[k_3] == "1.985e+04" and model["mass m_q [kg]"]
-    assert model["restoring identified on q in [m]"] == "[-0.016, -0.00384], [0.00096, 0.016]"
-    assert model["g1 identified on q in [m]"] == "nowhere"
+    # q and what is per length of q in the report unit, mm by default: 19849.18 N/m^3 is
+    # 1.985e-05 N/mm^3, the span -0.016 m is -16 mm
+    k_3 = "backbone coefficient k_3 (a basis term, not a physical constant) [N/mm^3]"
+    assert model[k_3] == "1.985e-05" and model["mass m_q [kg]"]
+    assert model["restoring identified on q in [mm]"] == "[-16, -3.84], [0.96, 16]"
+    assert model["g1 identified on q in [mm]"] == "nowhere"
     assert any(r[:4] == ["rbf", "0, 0", "-9.516", "well"] for r in parser.rows)  # q* [mm]
     assert "<th>q* [mm]</th>" in html
     assert any(r[3] == "1976 V" for r in parser.rows if len(r) == 9)  # d(q*), k* added
@@ -197,6 +199,25 @@ def test_sections_numbers_and_verdicts(run):
     assert ["identify", "2" * 64, "4" * 64] in parser.rows and ["pysindy", "2.0.1"] in parser.rows
     # content is escaped, not markup
     assert "&amp; &lt;h1&gt;" in html
+    assert "Coefficients as fitted, in SI: q [m], q_dot [m/s], q_ddot [m/s^2]." in html
+
+
+def test_a_model_whose_physical_curves_hold_nowhere_says_simulation_only_first(run):
+    """d and g2 nowhere, g1 on part of q: the page's first lines and the verdict say so."""
+    from debist.identify.bands import simulation_only
+
+    run["identify"]["identified"] = {"restoring": [[-0.016, 0.016]], "d": [],
+                                     "g1": [[0.001, 0.01]], "g2": []}  # fmt: skip
+    said = simulation_only(run["identify"]["identified"])
+    assert said == "d, g2 identified nowhere (restoring, g1 hold on part of q)"
+    run["nrmse"][0]["simulation_only"] = said  # as the validate stage writes it
+    html = render_report(run)
+    top = html.split('<h2 id="s2">')[0]
+    assert f"simulation only: {said}" in top
+    rows = {(r[0], r[1]): r for r in parse(html).rows if len(r) == 8}
+    assert rows[("rbf", "unseen")][7] == f"simulation only: {said}"
+    run["nrmse"][0]["simulation_only"] = ""  # every fitted curve holds somewhere
+    assert "simulation only" not in render_report(run).split('<h2 id="s2">')[0]
 
 
 def test_images_are_embedded_pngs_and_nothing_is_external(run):
@@ -369,3 +390,17 @@ def test_prediction_and_residual_checks_are_tabulated_with_their_verdicts():
         {"model": "rbf", "dataset": "b", "k": "10", "nrmse_k": "-", "white": "not tested",
          "cross": "-"},
     ]  # fmt: skip
+
+
+def test_the_data_caveats_come_before_simulation_only_in_a_verdict():
+    from debist.report.tables import verdict
+
+    row = {"nrmse_q": 0.004, "nrmse_q_baseline": 0.2, "extrapolated": "v1 applied at q = 4 mm",
+           "simulation_only": "d identified nowhere"}  # fmt: skip
+    assert (
+        verdict(row)
+        == "extrapolated: v1 applied at q = 4 mm; simulation only: d identified nowhere"
+    )
+    assert verdict({**row, "nrmse_q": 0.19}).endswith(
+        "; poor: 95 % of the mean baseline error (a lost switch?)"
+    )

@@ -252,3 +252,107 @@ def test_the_design_table_reads_as_lines_in_a_narrow_terminal():
     assert lines[2] == "  rbf switching voltage, input 1: 1282 V"
     assert lines[-1].startswith("identified model: stable")
     assert design_lines({}) == []
+
+
+def _design_cells(table) -> dict[str, list[str]]:
+    return {str(c.header).replace("\\[", "["): list(c._cells) for c in table.columns}
+
+
+@pytest.mark.parametrize(("report_unit", "f", "shown"), [(None, 1e3, "mm"), ("um", 1e6, "\u00b5m")])
+def test_the_display_shows_q_and_stiffness_per_length_in_the_report_unit(
+    data, report_unit, f, shown
+):
+    """q* x f, k* and d(q*) / f (N per report unit), the barrier stays in J, in the CLI tables."""
+    from debist.report.tables import display_summary
+
+    truth, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": truth.m_q}).summary
+    shown_summary = display_summary(summary, report_unit)
+    cells = _design_cells(design_table(shown_summary))
+    wells = [
+        r
+        for r in summary["design"]["equilibria"]
+        if r["static_stable"] and r["level"] == 0 and r["model"] == "rbf"
+    ]
+    assert f"q* [{shown}]" in cells and f"k* [N/{shown}]" in cells and "barrier [J]" in cells
+    assert f"d(q*) [N s/{shown}]" in cells
+    rows = [i for i, k in enumerate(cells["kind"]) if k.startswith("well")][: len(wells)]
+    for i, r in zip(rows, wells, strict=True):
+        assert float(cells[f"q* [{shown}]"][i]) == pytest.approx(f * r["q"], rel=1e-3)
+        assert float(cells[f"k* [N/{shown}]"][i].split()[0]) == pytest.approx(r["k"] / f, rel=1e-3)
+        assert float(cells["barrier [J]"][i]) == pytest.approx(r["barrier"], rel=1e-3)
+    text = _render(identify_table(shown_summary))
+    k_1 = summary["backbone"]["k_1"] / f
+    assert f"(a basis term; the stiffness k* is in the equilibria) [N/{shown}]" in text
+    assert f"{k_1:.4g}" in text
+    assert f"identified on q [{shown}] in" in text
+    lo, hi = summary["q_data_range"]
+    assert f"in [{f * lo:.4g}, {f * hi:.4g}] {shown}" in shown_summary["design"]["reason"]
+    assert summary["units"]["q"] == "m"  # the stage's summary is left as it was
+
+
+def test_per_unit_mass_stiffness_is_one_over_seconds_squared_in_any_length_unit(data):
+    """k* [1/s^2] keeps its numbers; a force per unit mass is an acceleration of q [mm/s^2]."""
+    from debist.report.tables import display_summary, slip_rows
+
+    _, tables, derivs = data
+    summary = run_identify(tables, derivs, {**SECTION, "m_q": 1.0}).summary
+    shown = display_summary(summary)
+    cells = _design_cells(design_table(shown))
+    assert "k* [1/s^2]" in cells and "barrier [J/kg]" in cells and "d(q*) [1/s]" in cells
+    k_si = [r["k"] for r in summary["design"]["equilibria"] if r["static_stable"]]
+    k_shown = [float(c.split()[0]) for c in cells["k* [1/s^2]"] if c]
+    assert k_shown[: len(k_si)] == pytest.approx(k_si, rel=1e-3)
+    text = _render(identify_table(shown))
+    assert "offset force F_0 [mm/s^2]" in text and "forces in mm/s^2" in text
+    assert f"{1e3 * summary['backbone']['F_0']:.4g}" in text
+    slip = {"Delta": [1e-5], "k": [3000.0], "F": [0.03], "F_total": 0.03, "k_total": 3000.0}
+    rows = slip_rows(display_summary({**summary, "slip": slip}))
+    assert [(unit, pytest.approx(v)) for _, unit, v in rows] == [
+        ("mm", 0.01), ("1/s^2", 3000.0), ("mm/s^2", 30.0), ("mm/s^2", 30.0), ("1/s^2", 3000.0)
+    ]  # fmt: skip
+
+
+def test_excitation_warnings_follow_a_report_unit_of_another_scale():
+    """The identify stage words q in V (q in V); a report in mV rewrites its positions x1000."""
+    from debist.report.tables import display_summary
+
+    said = (
+        "no data: fewer than 10 samples within sigma = 0.05 V of the centres for q in "
+        "[-0.3, -0.21] and [0.2, 0.25] V: c, d there are not identified"
+    )
+    summary = {"units": {"q": "V", "per_unit_mass": True}, "excitation": {"warnings": [said]}}
+    shown = display_summary(summary, "mV")["excitation"]["warnings"]
+    assert shown == [
+        "no data: fewer than 10 samples within sigma = 50 mV of the centres for q in "
+        "[-300, -210] and [200, 250] mV: c, d there are not identified"
+    ]
+    assert display_summary(summary)["excitation"]["warnings"] == [said]  # V: as worded
+
+
+@pytest.mark.parametrize(("report_unit", "text"), [(None, "-21.28 ... +23.05"),
+                                                   ("um", "-21280 ... +23050"),
+                                                   ("m", "-0.02128 ... +0.02305")])  # fmt: skip
+def test_the_rig_table_gives_the_q_range_in_the_report_unit(report_unit, text):
+    from debist.report.tables import rig_table
+
+    summary = {"ident": {"samples": 3750, "q_min": -0.02128, "q_max": 0.02305,
+                         "well_changes": 6, "saturated": 0, "nfev": 10}}  # fmt: skip
+    out = _render(rig_table(summary, report_unit))
+    unit = {"um": "\u00b5m", None: "mm"}.get(report_unit, report_unit)
+    assert f"q range [{unit}]" in out and text in out
+
+
+@pytest.mark.parametrize(("report_unit", "f", "shown"), [(None, 1e3, "mm"), ("um", 1e6, "\u00b5m")])
+def test_the_excitation_figure_draws_q_in_the_report_unit(data, report_unit, f, shown):
+    from debist.report.figures import excitation_figure
+
+    _, tables, derivs = data
+    name = next(iter(tables))
+    fig = excitation_figure(tables[name], derivs[name], name, "m", report_unit)
+    q_ax, q_dot_ax = fig.axes[:2]
+    assert q_ax.get_ylabel() == f"q [{shown}]" and q_dot_ax.get_ylabel() == f"q_dot [{shown}/s]"
+    drawn = q_ax.get_lines()[0].get_ydata()
+    q = tables[name]["q"].to_numpy()
+    assert float(np.max(drawn)) == pytest.approx(f * q.max(), rel=1e-12)
+    assert float(np.min(drawn)) == pytest.approx(f * q.min(), rel=1e-12)

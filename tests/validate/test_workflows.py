@@ -49,8 +49,9 @@ def test_silverbox_protocol_rms_and_cached_rerun(tmp_path):
     beyond = both.groupby("dataset").extrapolated.agg(lambda x: set(x))
     assert beyond["test_arrow_no_extrapolation"] == beyond["test_multisine"] == {""}
     (words,) = beyond["test_arrow_full"]
-    assert words.startswith("v1 applied at q = -0.3 to -0.25 V (7 samples) and 0.25 to 0.28 V")
-    assert words.endswith("where the estimation applied it only at -0.21 to 0.22 V")
+    # in the report unit, mV, as the RMS column
+    assert words.startswith("v1 applied at q = -300 to -250 mV (7 samples) and 250 to 280 mV")
+    assert words.endswith("where the estimation applied it only at -210 to 220 mV")
     assert (both[both.dataset == "test_arrow_full"].verdict.str.startswith("extrapolated:")).all()
 
 

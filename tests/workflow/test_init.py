@@ -120,6 +120,74 @@ def test_a_dspace_recording_file_gets_a_workflow_that_ingests(tmp_path):
     assert raw["ingest"]["v2"] == {"name": "Model Root/HV Amplifier/DE2/v_mon", "unit": "kV"}
 
 
+def test_init_writes_the_laser_range_of_the_dspace_fixtures_and_runs_warn_nothing(tmp_path):
+    """The ILD2300's +-25 mm goes into [ingest] q, so ingest has no range to warn about."""
+    import warnings
+
+    from tests.data.make_dspace_fixtures import write_v5, write_v73
+
+    write_v73(tmp_path / "est.mat")
+    write_v5(tmp_path / "val.mat")
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        done = debist.init_workflow(
+            [tmp_path / "est.mat", tmp_path / "val.mat"], tmp_path / "rig.toml"
+        )
+    raw = tomllib.loads(done.text)
+    assert raw["ingest"]["q"] == {"name": "Model Root/Sensors/Laser/q", "unit": "mm",
+                                  "range": [-25.0, 25.0]}  # fmt: skip
+    assert "q = " not in done.text.split("[datasets.val]")[1]  # the same table: no override
+    line = next(x for x in done.text.splitlines() if x.startswith("q = "))
+    assert "ILD2300 laser's, -25 to 25 mm (datasheet)" in line
+    assert not [w for w in shown if "range" in str(w.message)]  # its own check ingested quietly
+
+
+def test_without_a_range_a_run_warns_once_naming_every_file(tmp_path):
+    """The sensor's documented range applied to three files: one warning line, three files."""
+    import warnings
+
+    from tests.data.make_dspace_fixtures import write_v5, write_v73
+
+    logs = [tmp_path / "a.mat", tmp_path / "b.mat", tmp_path / "c.mat"]
+    write_v73(logs[0]), write_v5(logs[1]), write_v5(logs[2])
+    done = debist.init_workflow(logs, tmp_path / "rig.toml")
+    text = done.text.replace(", range = [-25.0, 25.0]", "")
+    (tmp_path / "rig.toml").write_text(text, encoding="utf-8")
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        code, out = cli("run", tmp_path / "rig.toml", "--stages", "ingest")
+    assert code == 0, out
+    ranges = [str(w.message) for w in shown if "gives no `range`" in str(w.message)]
+    assert len(ranges) == 1, ranges
+    assert ranges[0].startswith(f"files '{logs[0]}', '{logs[1]}', '{logs[2]}', channel ")
+    notes = debist.open_run(tmp_path / "rig.toml").manifests["ingest"].summary["warnings"]
+    assert [n for n in notes if "gives no `range`" in n] == [
+        ranges[0].replace(f"'{tmp_path}/", "'")
+    ]
+
+
+def test_a_range_in_metres_is_written_in_metres(tmp_path):
+    from debist.rig.dspace import Channel, recording, write_recording
+
+    t, q, v1, v2 = de_log(q_peak=0.009)
+    task = "Periodic Task 1"
+    channels = [Channel("Model Root/Sensors/Laser/q", q, "m", task),
+                Channel("Model Root/HV Amplifier/DE1/v_mon", v1, "kV", task),
+                Channel("Model Root/HV Amplifier/DE2/v_mon", v2, "kV", task)]  # fmt: skip
+    write_recording(tmp_path / "r.mat", recording(channels, {task: t}), version="5",
+                    created="2026-01-01 00:00:00")  # fmt: skip
+    raw = tomllib.loads(debist.init_workflow([tmp_path / "r.mat"], tmp_path / "wf.toml").text)
+    assert raw["ingest"]["q"]["range"] == [-0.025, 0.025]
+
+
+def test_a_sensor_of_unknown_range_gets_a_comment_asking_for_one(tmp_path):
+    done = debist.init_workflow([write_mat(tmp_path / "est.mat")], tmp_path / "wf.toml")
+    raw = tomllib.loads(done.text)
+    assert "range" not in raw["ingest"]["q"]
+    line = next(x for x in done.text.splitlines() if x.startswith("q = "))
+    assert line.endswith("no documented range known for this sensor: add range = [lo, hi]")
+
+
 def test_list_only_lists_and_writes_nothing(tmp_path):
     log = write_mat(tmp_path / "est.mat")
     before = sorted(tmp_path.iterdir())
@@ -376,4 +444,14 @@ def test_init_then_run_on_virtual_rig_logs_validates_on_the_unseen_file(tmp_path
     unseen = table[(table["role"] == "validation") & (table["model"] == "rbf")]
     assert list(unseen["data set"]) == ["val"]
     assert float(unseen["NRMSE(q) [%]"].iloc[0]) < 5.0
+    # the verdict says "simulation only" exactly when a physical curve is identified nowhere
+    result = debist.open_run(tmp_path / "rig.toml")
+    identified = result.manifests["identify"].summary["identified"]
+    nowhere = [n for n in ("d", "g1", "g2") if not identified[n]]
+    rows = [r for r in result.manifests["compare"].summary["table"] if r["model"] == "rbf"]
+    for r in rows:
+        said = f"simulation only: {', '.join(nowhere)} identified nowhere" in r["verdict"]
+        assert said == bool(nowhere), (nowhere, r["verdict"])
+    assert all("simulation only" not in r["verdict"] for r in
+               result.manifests["compare"].summary["table"] if r["model"] == "narx")  # fmt: skip
     assert (tmp_path / "runs" / "rig" / "report" / "report.html").is_file()
