@@ -46,9 +46,11 @@ __all__ = [
     "identify_bytes",
     "identify_columns",
     "identify_lower_bound",
+    "identify_setting",
     "memory_budget",
     "refine_bytes",
     "sindy_bytes",
+    "sindy_terms",
 ]
 
 #: Environment variable that sets the memory budget [GB = 10^9 bytes].
@@ -305,8 +307,29 @@ def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) ->
     return phases
 
 
-def _identify_setting(cfg: Any, n_inputs: int, rows: int, longest: int | None) -> str:
-    """Name the setting to change: bootstrap where the fit without it would fit the budget."""
+def identify_setting(cfg: Any, n_inputs: int, rows: int, longest: int | None = None) -> str:
+    """Name the setting to change: the bootstrap where the fit without it fits the budget.
+
+    Parameters
+    ----------
+    cfg : IdentifyConfig
+        The ``[identify]`` settings.
+    n_inputs, rows : int
+        Inputs, and regressor rows (estimation samples after ``trim``).
+    longest : int, optional
+        Samples of the longest record; default ``rows``.
+
+    Returns
+    -------
+    str
+        ``"[identify] bootstrap = <B>"`` when the least squares without the bootstrap fits
+        :func:`memory_budget` and the bootstrap's phase does not, else
+        ``"[identify] M = <M>"``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 40; Kuensch 1989, Ann. Statist. 17(3) (block bootstrap).
+    """
     phases = _identify_phases(cfg, n_inputs, rows, longest)
     first, *rest = phases
     if rest and _F8 * phases[first] <= memory_budget():
@@ -346,7 +369,7 @@ def check_identify(
     p, _ = identify_columns(cfg, n_inputs)
     check_memory(
         identify_bytes(cfg, n_inputs, rows, longest),
-        setting or _identify_setting(cfg, n_inputs, rows, longest),
+        setting or identify_setting(cfg, n_inputs, rows, longest),
         f"the regressor of {rows} samples x {p} columns",
         "peak, with the SVD's copies",
     )
@@ -508,6 +531,39 @@ def refine_bytes(
     sim += 2 * B * (2 * M + 3 * columns)
     step = (P + 1) * W * L + 2 * P * W * L + _solve_elements(W * L, P)
     return _F8 * max(sim, step)
+
+
+def sindy_terms(degree: int, n_inputs: int, input_terms: bool) -> int:
+    """Count the library terms of :func:`debist.model.sindy.fit_sindy`.
+
+    Parameters
+    ----------
+    degree : int
+        Polynomial degree in q and q_dot.
+    n_inputs : int
+        Inputs h_1..h_N.
+    input_terms : bool
+        Whether every polynomial term is also multiplied by each input (else each input is
+        one linear term).
+
+    Returns
+    -------
+    int
+        ``(d + 1)(d + 2) / 2`` monomials of degree <= d in (q, q_dot), times ``1 + N`` with
+        the input terms, else plus N.
+
+    References
+    ----------
+    Brunton, Proctor & Kutz 2016, PNAS 113(15) (SINDy with control); Kaptanoglu et al.
+    2022, JOSS 7(69), 3994 (pysindy ``PolynomialLibrary``, ``GeneralizedLibrary``).
+
+    Examples
+    --------
+    >>> sindy_terms(3, 2, True), sindy_terms(3, 2, False)
+    (30, 12)
+    """
+    poly = (int(degree) + 1) * (int(degree) + 2) // 2
+    return poly * (1 + n_inputs) if input_terms else poly + n_inputs
 
 
 def sindy_bytes(rows: int, n_features: int) -> int:
