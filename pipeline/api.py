@@ -763,7 +763,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     size : int
         Prototypes wanted, ``>= 1``.
     seed : int, optional
-        Seed of the scatter.
+        Seed of the scatter, ``>= 0`` (numpy's ``SeedSequence`` entropy).
     folder : path-like
         Where the workflows go; it must not hold workflows already.
 
@@ -783,7 +783,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     from debist.workflow import tomltext
 
     template, folder = check_path(template, "template"), check_path(folder, "folder")
-    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed", minimum=0)
     try:
         raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:

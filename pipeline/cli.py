@@ -446,7 +446,7 @@ def init(
 def fleet(
     template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
     size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the scatter.")] = 0,
     folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
         "fleet"
     ),
