@@ -37,6 +37,7 @@ __all__ = [
     "BUDGET_ENV",
     "DEFLATE_MAX_RATIO",
     "RAM_FRACTION",
+    "RESAMPLE_COPIES",
     "TEXT_PARSE_RATIO",
     "check_identify",
     "check_identify_config",
@@ -65,6 +66,10 @@ DEFLATE_MAX_RATIO = 1032
 #: for 20 MB 10.5 (pandas 3.1, numpy 2.3); fields of 3-4 characters need 3. Bounds the
 #: decompressed size of a gzip'd log (:mod:`debist.ingest.compressed`).
 TEXT_PARSE_RATIO = 12
+#: float64 copies of a resampled segment alive at once, per sample and channel (the
+#: time grid, the resampled block, the copy that keeps the samples within the record, and
+#: the column stack of the rasters' overlap).
+RESAMPLE_COPIES = 4
 #: Bytes of one float64.
 _F8 = 8
 _GB = 1e9

@@ -153,13 +153,30 @@ def _rows(checked: Any) -> dict[str, int | None]:
     """Return the samples of each data set the settings fix (a rig experiment), else None."""
     rig = checked.rig
     out: dict[str, int | None] = {}
-    for name, (entry, _) in checked.datasets.items():
+    for name, (entry, spec) in checked.datasets.items():
         if entry.rig is not None and rig is not None:
             exp = rig.experiments[entry.rig]
-            out[name] = math.floor(exp.duration / rig.sample_time + 1e-9)
+            step = spec.resample.sample_time if spec.resample is not None else rig.sample_time
+            out[name] = math.floor(exp.duration / step + 1e-9)
         else:
             out[name] = None
     return out
+
+
+def _resampled(checked: Any, rows: dict[str, int | None]) -> Iterator[Estimate]:
+    """Estimate the ingest's resampling of each data set the settings fix the length of."""
+    for name, (_, spec) in checked.datasets.items():
+        n = rows[name]
+        if spec.resample is None or n is None:
+            continue
+        channels = len(spec.channels) + 1
+        yield Estimate(
+            f"[ingest] resample.sample_time = {spec.resample.sample_time:g} s (as "
+            f"[datasets.{name}] reads it)",
+            f"resampling {channels - 1} channels onto {n} samples",
+            _F8 * preflight.RESAMPLE_COPIES * n * channels,
+            "the grid, the resampled channels and their copies",
+        )
 
 
 def _n_inputs(checked: Any) -> int:
@@ -266,9 +283,9 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
     Returns
     -------
     list of Estimate
-        One per sized phase: each rig experiment (:func:`rig_estimates`), the
-        identification (:func:`debist.core.preflight.identify_bytes`, with the study's
-        largest ``M`` on ``max_samples`` too) and refinement
+        One per sized phase: each rig experiment (:func:`rig_estimates`), the ingest's
+        resampling, the identification (:func:`debist.core.preflight.identify_bytes`, with
+        the study's largest ``M`` on ``max_samples`` too) and refinement
         (:func:`debist.core.preflight.refine_bytes`), the validation's free runs and k-step
         predictions (:func:`debist.core.preflight.free_run_bytes`), the SINDy library
         (:func:`debist.core.preflight.sindy_bytes`) and the NARX regressor, the design
@@ -276,7 +293,8 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
 
     Notes
     -----
-    A data set recorded by the virtual rig has ``duration / sample_time`` samples; a
+    A data set recorded by the virtual rig has ``duration / sample_time`` samples (its
+    ``resample.sample_time`` where it is resampled); a
     rig-log file's length is not known before the ingest, and the estimates then take the
     least the stage needs whatever the data: as many samples as least-squares columns (or
     SINDy terms), two samples per free-run record.
@@ -290,6 +308,7 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
     if checked.rig is not None:
         out += rig_estimates(checked.rig)
     rows = _rows(checked)
+    out += _resampled(checked, rows)
     n_in = _n_inputs(checked)
     estimation = [rows[name] for name, (e, _) in checked.datasets.items() if e.role == "estimation"]
     icfg = checked.identify

@@ -292,3 +292,29 @@ def test_the_sindy_library_is_counted_as_monomials(base):
     # (3 + 1)(3 + 2) / 2 = 10 monomials in q, q_dot, each alone and times h1, h2: 30 terms;
     # 3750 estimation samples; pysindy's 18 blocks
     assert est.nbytes == 8 * 18 * 3750 * 30
+
+
+def test_resampling_a_rig_log_onto_a_fine_grid_is_refused_naming_the_key(base):
+    # 37.5 s at 1e-9 s: 3.75e10 samples of q, v1, v2 and time, 4 copies: 4.8 TB
+    with pytest.raises(ResourceError) as info:
+        load_workflow(
+            base, overrides={"ingest.resample": {"sample_time": 1e-9, "method": "linear"}}
+        )
+    message = str(info.value)
+    assert "[ingest] resample.sample_time = 1e-09 s (as [datasets.identification] reads it)" in (
+        message
+    )
+    assert "onto 37500000000 samples needs about 4.8 TB" in message
+
+
+def test_a_coarser_resampling_shrinks_the_least_squares_estimate(base):
+    def identify_bytes(overrides):
+        raw = _raw(base)
+        raw["ingest"].update(overrides)
+        (est,) = [e for e in workflow_estimates(check_workflow(raw)) if "regressor" in e.need][:1]
+        return est
+
+    plain = identify_bytes({})
+    coarse = identify_bytes({"resample": {"sample_time": 0.02}})
+    assert "3750 samples" in plain.need and "1875 samples" in coarse.need
+    assert coarse.nbytes < plain.nbytes
