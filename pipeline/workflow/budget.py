@@ -39,16 +39,15 @@ __all__ = [
 
 #: Bytes of one float64.
 _F8 = 8
-#: float64 elements the virtual rig holds per internal step, per plant state, and besides the
-#: states (the integrator's output and its copy, the padded states, the tip, driver, laser
-#: and monitor arrays and their temporaries): measured as the peak resident set of
-#: :func:`debist.rig.experiment.run_experiment` in a fresh process, 290 MB more for 375 s
-#: than for 37.5 s of the paper's identification experiment (13 states, oversample 10,
-#: sample time 0.01 s): 107 elements per internal step.
-_RIG_PER_STATE, _RIG_BESIDE = 7, 16
-#: float64 elements per DAC sample of a profile (its times, two references, the episode being
-#: filled and its temporaries, the held copies the drivers interpolate).
-_RIG_PER_REFERENCE = 8
+#: float64 elements the virtual rig holds per internal step, per plant state and besides the
+#: states (the integrator's output and its copies, the tip, laser and monitor arrays), and
+#: per DAC sample of the profile (its times and references, the drivers' held and slewed
+#: copies and their interpolation): fitted to the peak resident set of
+#: :func:`debist.rig.experiment.run_experiment` in a fresh process after a warm-up run, on
+#: the paper's identification experiment (13 states, hold 1 ms, sample time 10 ms): 310 MB
+#: for 375 s at oversample 10, 233 MB for 187.5 s at oversample 20 (estimates 312 and 238 MB;
+#: a second measurement: 313 and 242 MB).
+_RIG_PER_STATE, _RIG_BESIDE, _RIG_PER_REFERENCE = 4, 2, 50
 #: Samples of the design analysis's switching simulation per second (its output step 1 ms,
 #: :func:`debist.physics.reduced.compare_full_reduced`) and float64 elements per output
 #: sample (the full model's ten states and the reduced model's two, their copies and

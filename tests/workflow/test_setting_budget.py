@@ -249,8 +249,8 @@ def test_a_rig_experiment_too_long_for_the_budget_is_refused_before_its_profile(
     message = str(info.value)
     assert "[rig.experiments.identification] duration = 200000 s" in message
     assert "200001000 internal steps x 13 states" in message
-    # 2.00001e8 steps x (7 x 13 + 16) float64 + 2e8 DAC samples x 8 float64: 184 GB
-    assert "needs about 184 GB" in message and "budget is 4 GB" in message
+    # 2.00001e8 steps x (4 x 13 + 2) float64 + 2e8 DAC samples x 50 float64: 166 GB
+    assert "needs about 166 GB" in message and "budget is 4 GB" in message
 
 
 def test_the_rig_estimate_grows_with_the_duration_and_the_oversampling(base):
@@ -267,8 +267,8 @@ def test_the_rig_estimate_grows_with_the_duration_and_the_oversampling(base):
         return est.nbytes
 
     one = rig_bytes()
-    # the profile's DAC samples (37500 x 8) do not scale with the oversampling
-    refs = 8 * 8 * 37500
+    # the profile's DAC samples (37500 x 50 float64) do not scale with the oversampling
+    refs = 8 * 50 * 37500
     assert rig_bytes(**{"plant.oversample": 20}) - refs == pytest.approx(2 * (one - refs), rel=0.02)
     assert rig_bytes(**{"experiments.identification.duration": 75.0}) == pytest.approx(
         2 * one, rel=0.02
