@@ -7,7 +7,7 @@ import pytest
 from debist import api
 from debist.core.errors import WorkflowError
 from debist.core.preflight import BUDGET_ENV
-from tests.conftest import invoke_cli
+from tests.conftest import SYNTHETIC_WORKFLOW, invoke_cli, write_rig_csv
 
 #: The paper's experiment on the virtual rig, shortened: its data come from [rig], so the
 #: data's length (3750 samples) is known before any stage runs.
@@ -72,6 +72,28 @@ def test_a_huge_m_with_no_rbf_curve_is_refused_before_any_stage(probe):
     assert "[identify] M = 100000:" in line and "3750 samples" in line
     assert "needs about 6 GB" in line and "budget is 4 GB" in line
     assert _files(probe.parent) == before
+
+
+def test_a_huge_m_on_a_log_file_is_refused_once_its_length_is_known(
+    tmp_path, monkeypatch, bistable_record
+):
+    # a log file's length is known after the ingest: the identify stage refuses the fit
+    # before its support checks build 5000 samples x 10^6 centres (2 x 8 bytes each: 80 GB)
+    monkeypatch.setenv(BUDGET_ENV, "1")
+    write_rig_csv(tmp_path, bistable_record)
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    code, out = invoke_cli(
+        "run", tmp_path / "wf.toml", "--stages", "ingest,differentiate,identify",
+        "--set", "identify.M=1000000", "--set", "identify.rbf=[]",
+        "--set", 'identify.m_q="identify"', "--set", "identify.input_gain=[1.0, -1.0]",
+    )  # fmt: skip
+    assert code == 2, out
+    assert "Traceback" not in out and "MemoryError" not in out
+    (line,) = [line for line in out.splitlines() if line.startswith("error:")]
+    assert "[identify] M = 1000000: the regressor of 5000 samples x 4 columns" in line
+    assert "needs about 80 GB" in line
+    (folder,) = tmp_path.glob("out.set-*")
+    assert (folder / "differentiate").is_dir() and not (folder / "identify").exists()
 
 
 def test_a_rig_experiment_beyond_the_budget_is_refused_before_any_stage(probe):
