@@ -106,6 +106,15 @@ def test_a_rig_experiment_beyond_the_budget_is_refused_before_any_stage(probe):
     assert _files(probe.parent) == before
 
 
+def test_a_prototype_without_a_start_well_is_a_setting_error_not_a_traceback(probe):
+    code, out = invoke_cli("run", probe, "--set", "physics.b=100000.0")
+    assert code == 2, out
+    assert "Traceback" not in out
+    (line,) = [line for line in out.splitlines() if line.startswith("error:")]
+    assert line.startswith("error: [rig.experiments.identification] side = -1: no stable")
+    assert not list(probe.parent.glob("runs/probe*/rig/*.mat"))
+
+
 @pytest.mark.parametrize(
     "item",
     [
