@@ -115,6 +115,19 @@ def test_a_prototype_without_a_start_well_is_a_setting_error_not_a_traceback(pro
     assert not list(probe.parent.glob("runs/probe*/rig/*.mat"))
 
 
+def test_an_analysis_of_a_prototype_without_a_well_is_a_setting_error(tmp_path):
+    (tmp_path / "wf.toml").write_text('[workflow]\noutput_dir = "out"\n[physics]\nb = 1e5\n')
+    code, out = invoke_cli("run", tmp_path / "wf.toml")
+    assert code == 2, out
+    assert "Traceback" not in out
+    (line,) = [line for line in out.splitlines() if line.startswith("error:")]
+    assert line == (
+        "error: [physics] the prototype cannot be analysed: no stable equilibrium with "
+        "sign(q) = -1 (b = 100000.0); check its parameters"
+    )
+    assert not (tmp_path / "out" / "analyze").exists()
+
+
 @pytest.mark.parametrize(
     "item",
     [
