@@ -597,7 +597,9 @@ def run_batch(
         Default: a local Dask cluster of ``workers`` processes (see
         :func:`debist.engine.batch.run_batch`); ``"distributed"`` with ``address``.
     workers : int, optional
-        Worker processes (default: one per workflow, at most one per CPU).
+        Worker processes (default: one per workflow, at most one per CPU); on this machine
+        at most one per workflow, per core and per :data:`debist.engine.batch.WORKER_BYTES`
+        of the memory budget (a warning says when fewer run).
     address : str, optional
         A running Dask scheduler, e.g. ``"tcp://host:8786"``.
     on_done : callable, optional

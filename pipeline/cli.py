@@ -734,8 +734,8 @@ WorkersOpt = Annotated[
     typer.Option(
         "--workers",
         min=1,
-        help="Local worker processes, or threads (default: one per workflow, at most one "
-        "per core).",
+        help="Local worker processes, or threads (default: one per workflow; at most one "
+        "per workflow, per core and per GB of the memory budget).",
     ),
 ]
 AddressOpt = Annotated[
