@@ -28,6 +28,7 @@ from typing import Any
 
 from debist.core import preflight
 from debist.identify.config import refine_config
+from debist.physics.config import AnalyzeConfig
 
 __all__ = [
     "Estimate",
@@ -49,13 +50,13 @@ _F8 = 8
 #: a second measurement: 313 and 242 MB).
 _RIG_PER_STATE, _RIG_BESIDE, _RIG_PER_REFERENCE = 4, 2, 50
 #: Samples of the design analysis's switching simulation per second (its output step 1 ms,
-#: :func:`debist.physics.reduced.compare_full_reduced`) and float64 elements per output
-#: sample (the full model's ten states and the reduced model's two, their copies and
-#: derived signals).
-_ANALYZE_RATE, _ANALYZE_PER_SAMPLE = 1000, 64
-#: float64 elements per point of the design analysis's pre-strain and displacement grids
-#: (every voltage state's path, energies and forces).
-_ANALYZE_PER_POINT = 64
+#: :func:`debist.physics.reduced.compare_full_reduced`), and float64 elements per simulated
+#: sample, per position of the force-displacement curves and per screw position of the
+#: pre-strain sweep (each a continuation of the static path for every voltage state): fitted
+#: to the peak resident set of :func:`debist.physics.analysis.run_analysis` above a run with
+#: the defaults, for t_end = 50 and 200 s (60 and 304 MB), n_q = 100000 (189 MB) and
+#: n_b = 1001 (763 MB).
+_ANALYZE_RATE, _ANALYZE_PER_SAMPLE, _ANALYZE_PER_Q, _ANALYZE_PER_B = 1000, 200, 240, 110_000
 #: Copies of the candidate regressor the NARX peer holds (the matrix, its orthogonalised
 #: copy in FROLS and the validated copy).
 _NARX_COPIES = 3
@@ -261,12 +262,12 @@ def _compare(cfg: Any, n_in: int, estimation: list[int | None], narx: Any) -> It
 def _analyze(cfg: Any) -> Estimate:
     """Estimate the design analysis's grids and its switching simulation."""
     samples = math.ceil(cfg.t_end * _ANALYZE_RATE) + 1
-    grids = int(cfg.n_b) + int(cfg.n_q)
+    elements = _ANALYZE_PER_B * int(cfg.n_b) + _ANALYZE_PER_Q * int(cfg.n_q)
     return Estimate(
         f"[analyze] n_b = {cfg.n_b}, n_q = {cfg.n_q}, t_end = {cfg.t_end:g} s",
         f"the analysis's grids of {cfg.n_b} pre-strains and {cfg.n_q} positions and "
         f"{samples} simulated samples",
-        _F8 * (_ANALYZE_PER_POINT * grids + _ANALYZE_PER_SAMPLE * samples),
+        _F8 * (elements + _ANALYZE_PER_SAMPLE * samples),
         "paths, energies, forces and both models' trajectories",
     )
 
@@ -323,8 +324,8 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
         grid_cfg = replace(scfg, M=max(study.M), bootstrap=0, refine=None)
         capped = [min(n, study.max_samples) if n is not None else None for n in estimation]
         out += _identify(grid_cfg, n_in, capped, "[study]")
-    if checked.analyze is not None:
-        out.append(_analyze(checked.analyze))
+    if checked.analyze is not None or (checked.physics is not None and not checked.datasets):
+        out.append(_analyze(checked.analyze or AnalyzeConfig()))  # a design analysis
     window = getattr(checked.differentiate, "window", None)
     if window is not None:
         order = int(checked.differentiate.polyorder)

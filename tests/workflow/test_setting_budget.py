@@ -318,3 +318,19 @@ def test_a_coarser_resampling_shrinks_the_least_squares_estimate(base):
     coarse = identify_bytes({"resample": {"sample_time": 0.02}})
     assert "3750 samples" in plain.need and "1875 samples" in coarse.need
     assert coarse.nbytes < plain.nbytes
+
+
+def test_a_pre_strain_sweep_of_a_hundred_thousand_screw_positions_is_refused(base):
+    # each screw position holds a continuation of the static path per voltage state
+    with pytest.raises(ResourceError) as info:
+        load_workflow(base, overrides={"analyze.n_b": 100_000})
+    message = str(info.value)
+    assert message.split(": ", 1)[1].startswith("[analyze] n_b = 100000, n_q = 121")
+    # 1e5 x 110000 + 121 x 240 + 5001 x 200 float64: 88 GB
+    assert "needs about 88 GB" in message
+
+
+def test_a_design_analysis_without_an_analyze_table_is_estimated_with_its_defaults():
+    (est,) = workflow_estimates(check_workflow({"physics": {"b": 0.023}}))
+    assert est.setting == "[analyze] n_b = 101, n_q = 121, t_end = 5 s"
+    assert est.nbytes == 8 * (101 * 110_000 + 121 * 240 + 5001 * 200)
