@@ -188,7 +188,7 @@ def _identify(cfg: Any, n_in: int, estimation: list[int | None], where: str) -> 
     """Estimate the least squares, its bootstrap and the refinement of ``[identify]``."""
     p, _ = preflight.identify_columns(cfg, n_in)
     known = all(n is not None for n in estimation) and estimation
-    rows = max(sum(estimation), p) if known else p  # type: ignore[arg-type]
+    rows = sum(estimation) if known else p  # type: ignore[arg-type]
     longest = max(estimation) if known else rows  # type: ignore[type-var]
     setting = preflight.identify_setting(cfg, n_in, rows, longest)
     if where != "[identify]":
@@ -239,7 +239,7 @@ def _compare(cfg: Any, n_in: int, estimation: list[int | None], narx: Any) -> It
     f = preflight.sindy_terms(cfg.degree, n_in, cfg.input_terms)
     known = all(n is not None for n in estimation) and estimation
     rows = max(sum(estimation), f) if known else f  # type: ignore[arg-type]
-    data = f"{rows} samples" if known else "at least as many samples as terms"
+    data = f"{rows} samples" if known and rows > f else "at least as many samples as terms"
     yield Estimate(
         f"[compare] degree = {cfg.degree}",
         f"the SINDy library of {data} x {f:.3g} terms",
@@ -285,7 +285,8 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
     list of Estimate
         One per sized phase: each rig experiment (:func:`rig_estimates`), the ingest's
         resampling, the identification (:func:`debist.core.preflight.identify_bytes`, with
-        the study's largest ``M`` on ``max_samples`` too) and refinement
+        the largest ``M`` of ``[identify.auto]``, and of the study on ``max_samples``) and
+        refinement
         (:func:`debist.core.preflight.refine_bytes`), the validation's free runs and k-step
         predictions (:func:`debist.core.preflight.free_run_bytes`), the SINDy library
         (:func:`debist.core.preflight.sindy_bytes`) and the NARX regressor, the design
@@ -314,6 +315,10 @@ def workflow_estimates(checked: Any) -> list[Estimate]:
     icfg = checked.identify
     if checked.datasets and icfg is not None:
         out += _identify(icfg, n_in, estimation, "[identify]")
+        candidates = (icfg.auto or {}).get("M")
+        if isinstance(candidates, list) and candidates:  # [identify.auto] fits each M
+            largest = replace(icfg, M=max(candidates), auto=None, refine=None)
+            out += _identify(largest, n_in, estimation, "[identify.auto]")
         n_states = 3 + icfg.n_slip
         lengths = [max(n or 2, 2) for n in rows.values()]
         out += _validate(checked.validate, n_in, n_states, lengths)

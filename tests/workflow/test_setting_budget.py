@@ -334,3 +334,11 @@ def test_a_design_analysis_without_an_analyze_table_is_estimated_with_its_defaul
     (est,) = workflow_estimates(check_workflow({"physics": {"b": 0.023}}))
     assert est.setting == "[analyze] n_b = 101, n_q = 121, t_end = 5 s"
     assert est.nbytes == 8 * (101 * 110_000 + 121 * 240 + 5001 * 200)
+
+
+def test_the_largest_m_of_identify_auto_is_estimated(base):
+    with pytest.raises(ResourceError) as info:
+        load_workflow(base, overrides={"identify.auto.M": [6, 100_000]})
+    message = str(info.value).split(": ", 1)[1]
+    assert message.startswith("[identify.auto] M = 100000: the regressor of 3750 samples")
+    load_workflow(base, overrides={"identify.auto.M": [4, 6, 8]})
