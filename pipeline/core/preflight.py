@@ -35,6 +35,7 @@ from debist.core.errors import ResourceError, WorkflowError
 
 __all__ = [
     "BUDGET_ENV",
+    "CURVE_GRID",
     "DEFLATE_MAX_RATIO",
     "RAM_FRACTION",
     "RESAMPLE_COPIES",
@@ -66,6 +67,9 @@ DEFLATE_MAX_RATIO = 1032
 #: for 20 MB 10.5 (pandas 3.1, numpy 2.3); fields of 3-4 characters need 3. Bounds the
 #: decompressed size of a gzip'd log (:mod:`debist.ingest.compressed`).
 TEXT_PARSE_RATIO = 12
+#: Positions at which the identify stage evaluates the identified curves (the stability
+#: analysis's grid, :func:`debist.identify.stability.equilibria`).
+CURVE_GRID = 4001
 #: float64 copies of a resampled segment alive at once, per sample and channel (the
 #: time grid, the resampled block, the copy that keeps the samples within the record, and
 #: the column stack of the rasters' overlap).
@@ -279,9 +283,10 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
 
     Notes
     -----
-    The largest of five phases (support check, regressor build, T_z search, SVD solve,
-    block bootstrap), each counted in float64 elements of n rows, p columns and M centres;
-    the formulas: docs/explanation/implementation.md.
+    The largest of six phases (support check, regressor build, T_z search, SVD solve,
+    block bootstrap, and the Gaussian basis on the longest record or on the curves' grid of
+    :data:`CURVE_GRID` positions), each counted in float64 elements of n rows, p columns
+    and M centres; the formulas: docs/explanation/implementation.md.
 
     References
     ----------
@@ -299,7 +304,9 @@ def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) ->
     n_r = min(int(longest), n) if longest is not None else n
     block = M + 5 * p if cfg.lowpass is not None else M + 2 * p + p_force
     build = max(2 * n * p, (n - n_r) * p + n_r * block)
-    sizes = [2 * n * M, build, _solve_elements(n, p)]
+    # the Gaussian basis of the longest record and of the curves' grid: q - xi, its square
+    # and the exponential, alive together (debist.model.basis.gaussian)
+    sizes = [2 * n * M, build, _solve_elements(n, p), 3 * max(n_r, CURVE_GRID) * M]
     if cfg.T_z == "search" and p_z > 0:
         p_f = p - p_z
         sizes += [5 * n * p_f, 2 * n * p_f + 5 * n * p_z]

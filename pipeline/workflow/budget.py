@@ -196,7 +196,7 @@ def _identify(cfg: Any, n_in: int, estimation: list[int | None], where: str) -> 
     data = f"{rows} samples" if known else f"at least {rows} samples (as many as columns)"
     yield Estimate(
         setting,
-        f"the regressor of {data} x {p} columns",
+        f"the regressor of {data} x {p} columns and the Gaussian basis of {cfg.M} centres",
         preflight.identify_bytes(cfg, n_in, rows, longest),
         "peak, with the SVD's copies and the bootstrap",
     )

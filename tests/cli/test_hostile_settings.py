@@ -60,8 +60,8 @@ def _one_line_error(out: str) -> str:
 
 
 def test_a_huge_m_with_no_rbf_curve_is_refused_before_any_stage(probe):
-    # no c, d or g curve: the least squares has 5 columns, but the support check and the
-    # regressor still build 3750 samples x M centres (2 x 8 bytes each): 6 GB for M = 10^5
+    # no c, d or g curve: the least squares has 5 columns, but the stage still evaluates the
+    # Gaussian basis on the curves' 4001 positions (3 x 8 bytes each): 9.6 GB for M = 10^5
     before = _files(probe.parent)
     code, out = invoke_cli(
         "run", probe, "--set", "identify.M=100000", "--set", "identify.rbf=[]",
@@ -70,30 +70,50 @@ def test_a_huge_m_with_no_rbf_curve_is_refused_before_any_stage(probe):
     assert code == 2
     line = _one_line_error(out)
     assert "[identify] M = 100000:" in line and "3750 samples" in line
-    assert "needs about 6 GB" in line and "budget is 4 GB" in line
+    assert "needs about 9.6 GB" in line and "budget is 4 GB" in line
     assert _files(probe.parent) == before
 
 
-def test_a_huge_m_on_a_log_file_is_refused_once_its_length_is_known(
+def test_a_large_m_on_a_log_file_is_refused_once_its_length_is_known(
     tmp_path, monkeypatch, bistable_record
 ):
-    # a log file's length is known after the ingest: the identify stage refuses the fit
-    # before its support checks build 5000 samples x 10^6 centres (2 x 8 bytes each: 80 GB)
-    monkeypatch.setenv(BUDGET_ENV, "1")
+    # a log file's length is known after the ingest. Before, M = 10^4 fits 1.2 GB: the
+    # Gaussian basis on the curves' 4001 positions, 3 x 4001 x 10^4 x 8 bytes = 0.96 GB; on
+    # the 6000 samples read it does not (1.44 GB), and the identify stage refuses the fit
+    # before its support checks build samples x centres
+    monkeypatch.setenv(BUDGET_ENV, "1.2")
     write_rig_csv(tmp_path, bistable_record)
     (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
     code, out = invoke_cli(
         "run", tmp_path / "wf.toml", "--stages", "ingest,differentiate,identify",
-        "--set", "identify.M=1000000", "--set", "identify.rbf=[]",
+        "--set", "identify.M=10000", "--set", "identify.rbf=[]",
         "--set", 'identify.m_q="identify"', "--set", "identify.input_gain=[1.0, -1.0]",
+        "--set", "datasets.estimation.slice=[0, 6000]",
     )  # fmt: skip
     assert code == 2, out
     assert "Traceback" not in out and "MemoryError" not in out
     (line,) = [line for line in out.splitlines() if line.startswith("error:")]
-    assert "[identify] M = 1000000: the regressor of 5000 samples x 4 columns" in line
-    assert "needs about 80 GB" in line
+    assert "[identify] M = 10000: the regressor of 6000 samples x 4 columns" in line
+    assert "needs about 1.44 GB" in line
     (folder,) = tmp_path.glob("out.set-*")
     assert (folder / "differentiate").is_dir() and not (folder / "identify").exists()
+
+
+def test_a_huge_m_on_a_log_file_is_refused_before_any_stage(tmp_path, monkeypatch):
+    # whatever the data, the curves' 4001 positions x 10^6 centres need 3 x 8 bytes each
+    monkeypatch.setenv(BUDGET_ENV, "4")
+    (tmp_path / "rig.csv").write_text("time_ms,laser,v_left,v_right\n0,0,0,0\n")
+    (tmp_path / "wf.toml").write_text(SYNTHETIC_WORKFLOW.format(alpha=1e-6))
+    before = _files(tmp_path)
+    code, out = invoke_cli(
+        "run", tmp_path / "wf.toml", "--set", "identify.M=1000000", "--set", "identify.rbf=[]",
+        "--set", 'identify.m_q="identify"', "--set", "identify.input_gain=[1.0, -1.0]",
+    )  # fmt: skip
+    assert code == 2
+    line = _one_line_error(out)
+    assert "[identify] M = 1000000: the regressor of at least 4 samples" in line
+    assert "needs about 96 GB" in line
+    assert _files(tmp_path) == before
 
 
 def test_a_rig_experiment_beyond_the_budget_is_refused_before_any_stage(probe):
