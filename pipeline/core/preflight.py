@@ -34,6 +34,7 @@ import psutil
 from debist.core.errors import ResourceError, WorkflowError
 
 __all__ = [
+    "BAND_GRID",
     "BUDGET_ENV",
     "CURVE_GRID",
     "DEFLATE_MAX_RATIO",
@@ -70,6 +71,10 @@ TEXT_PARSE_RATIO = 12
 #: Positions at which the identify stage evaluates the identified curves (the stability
 #: analysis's grid, :func:`debist.identify.stability.equilibria`).
 CURVE_GRID = 4001
+#: Positions of the curves' bootstrap bands; each replicate's deviation from the estimate
+#: there and the percentiles' sorted copy are held per curve
+#: (:func:`debist.identify.bands.curves_frame`, :func:`debist.identify.bands.curve_bands`).
+BAND_GRID = 201
 #: float64 copies of a resampled segment alive at once, per sample and channel (the
 #: time grid, the resampled block, the copy that keeps the samples within the record, and
 #: the column stack of the rasters' overlap).
@@ -314,7 +319,7 @@ def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) ->
     if getattr(cfg, "bootstrap", 0) > 0:
         blocks, B = math.ceil(n ** (2.0 / 3.0)), int(cfg.bootstrap)
         phases[f"[identify] bootstrap = {B}"] = (
-            5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks
+            5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks + 3 * B * BAND_GRID
         )
     return phases
 
