@@ -57,9 +57,6 @@ _RIG_PER_STATE, _RIG_BESIDE, _RIG_PER_REFERENCE = 4, 2, 50
 #: the defaults, for t_end = 50 and 200 s (60 and 304 MB), n_q = 100000 (189 MB) and
 #: n_b = 1001 (763 MB).
 _ANALYZE_RATE, _ANALYZE_PER_SAMPLE, _ANALYZE_PER_Q, _ANALYZE_PER_B = 1000, 200, 240, 110_000
-#: Copies of the candidate regressor the NARX peer holds (the matrix, its orthogonalised
-#: copy in FROLS and the validated copy).
-_NARX_COPIES = 3
 
 
 @dataclass(frozen=True)
@@ -249,12 +246,11 @@ def _compare(cfg: Any, n_in: int, estimation: list[int | None], narx: Any) -> It
     if narx is None or not narx.enabled:
         return
     lag, degree = max(narx.lags), max(narx.degree)
-    terms = math.comb(lag * (1 + n_in) + degree, degree)
     samples = min(int(narx.max_samples), sum(estimation)) if known else 0  # type: ignore[arg-type]
     yield Estimate(
         f"[compare.narx] max_samples = {narx.max_samples} (with lags = {lag}, degree = {degree})",
-        f"the NARX candidate regressor of {samples} samples x {terms} terms",
-        _F8 * _NARX_COPIES * samples * terms,
+        f"the NARX candidate regressor of {samples} samples",
+        preflight.narx_bytes(samples, lag, degree, n_in),
         "the matrix and its orthogonalised copies",
     )
 
