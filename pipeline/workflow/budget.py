@@ -202,12 +202,14 @@ def _identify(cfg: Any, n_in: int, estimation: list[int | None], where: str) -> 
     rcfg = refine_config(cfg.refine)
     if rcfg is None:
         return
-    W, L, ns = int(rcfg.windows), int(rcfg.length), int(rcfg.substeps) * 2
+    log_tz = bool(rcfg.refine_T_z)  # T_z refined: one more parameter, sub-steps doubled
+    W, L, ns = int(rcfg.windows), int(rcfg.length), int(rcfg.substeps) * (1 + log_tz)
+    P = p + log_tz
     yield Estimate(
         f"[identify.refine] windows = {W}, length = {L}, substeps = {rcfg.substeps}",
-        f"the Jacobian's batched free run of {W} windows x {p + 2} parameter vectors",
-        preflight.refine_bytes(W, L, p + 1, n_in, ns, p, int(cfg.M), 3 + cfg.n_slip),
-        "at least; sub-steps doubled when T_z is refined",
+        f"the Jacobian's batched free run of {W} windows x {P + 1} parameter vectors",
+        preflight.refine_bytes(W, L, P, n_in, ns, p, int(cfg.M), 3 + cfg.n_slip),
+        "at least: a T_z shorter than the sample time needs more sub-steps",
     )
 
 
