@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from debist.core import preflight
+from debist.core.forking import fork_workers
 from debist.identify.config import refine_config
 from debist.physics.config import AnalyzeConfig
 
@@ -136,14 +137,27 @@ def check_rig_budget(rig: Any) -> None:
     ------
     ResourceError
         If an estimate of :func:`rig_estimates` exceeds
-        :func:`debist.core.preflight.memory_budget`, naming the experiment's keys.
+        :func:`debist.core.preflight.memory_budget`, naming the experiment's keys, or the
+        largest of them that run at once in forked workers (one per core,
+        :func:`debist.core.forking.fork_workers`) do together.
 
     References
     ----------
     :func:`debist.rig.run.simulate_rig`.
     """
-    for est in rig_estimates(rig):
+    estimates = rig_estimates(rig)
+    for est in estimates:
         preflight.check_memory(est.nbytes, est.setting, est.need, est.detail)
+    at_once = fork_workers(len(estimates))  # the experiments that run in parallel
+    largest = sorted(estimates, key=lambda est: est.nbytes, reverse=True)[:at_once]
+    if at_once > 1:
+        names = " and ".join(est.setting.split(" (with", 1)[0] for est in largest)
+        preflight.check_memory(
+            sum(est.nbytes for est in largest),
+            f"{names} (run in parallel, one per core)",
+            f"the integration of {at_once} experiments at once",
+            "one forked worker each",
+        )
 
 
 def _rows(checked: Any) -> dict[str, int | None]:

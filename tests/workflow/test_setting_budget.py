@@ -342,3 +342,26 @@ def test_the_largest_m_of_identify_auto_is_estimated(base):
     message = str(info.value).split(": ", 1)[1]
     assert message.startswith("[identify.auto] M = 100000: the regressor of 3750 samples")
     load_workflow(base, overrides={"identify.auto.M": [4, 6, 8]})
+
+
+def test_the_rig_experiments_that_run_at_once_must_fit_together(base, monkeypatch):
+    import debist.workflow.budget as budget
+
+    monkeypatch.setattr(budget, "fork_workers", lambda n: min(n, 2))  # two cores
+    # 3000 s each: 300100 x 10 steps x 54 + 3e6 DAC samples x 50 float64 = 2.5 GB, 5 GB both
+    longer = {f"rig.experiments.{name}.duration": 3000.0 for name in ("identification",
+                                                                       "validation")}  # fmt: skip
+    with pytest.raises(ResourceError) as info:
+        load_workflow(base, overrides=longer)
+    assert (
+        str(info.value)
+        .split(": ", 1)[1]
+        .startswith(
+            "[rig.experiments.identification] duration = 3000 s and [rig.experiments.validation] "
+            "duration = 3000 s (run in parallel, one per core): the integration of 2 experiments "
+            "at once needs about 4.99 GB"
+        )
+    )
+    load_workflow(base, overrides={"rig.experiments.identification.duration": 3000.0})
+    monkeypatch.setattr(budget, "fork_workers", lambda n: 1)  # serially: one at a time
+    load_workflow(base, overrides=longer)
