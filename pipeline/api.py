@@ -610,7 +610,9 @@ def run_batch(
         Default: a local Dask cluster of ``workers`` processes (see
         :func:`debist.engine.batch.run_batch`); ``"distributed"`` with ``address``.
     workers : int, optional
-        Worker processes (default: one per workflow, at most one per CPU).
+        Worker processes (default: one per workflow, at most one per CPU); on this machine
+        at most one per workflow, per core and per :data:`debist.engine.batch.WORKER_BYTES`
+        of the memory budget (a warning says when fewer run).
     address : str, optional
         A running Dask scheduler, e.g. ``"tcp://host:8786"``.
     on_done : callable, optional
@@ -789,7 +791,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     size : int
         Prototypes wanted, ``>= 1``.
     seed : int, optional
-        Seed of the scatter.
+        Seed of the scatter, ``>= 0`` (numpy's ``SeedSequence`` entropy).
     folder : path-like
         Where the workflows go; it must not hold workflows already (but those of a fleet
         stopped part way, which are removed first).
@@ -811,7 +813,7 @@ def fleet(template: PathLike, size: int, *, seed: int = 0, folder: PathLike) -> 
     from debist.workflow import tomltext
 
     template, folder = check_path(template, "template"), check_path(folder, "folder")
-    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed")
+    size, seed = check_int(size, "size", minimum=1), check_int(seed, "seed", minimum=0)
     try:
         raw = tomltext.loads(template.read_text(encoding="utf-8"), f"template '{template}'")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:

@@ -469,7 +469,7 @@ def init(
 def fleet(
     template: Annotated[Path, typer.Argument(help="Workflow with a [rig] section.")],
     size: Annotated[int, typer.Option("--size", min=1, help="Number of prototypes.")] = 10,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the scatter.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the scatter.")] = 0,
     folder: Annotated[Path, typer.Option("--dir", help="Folder for the workflows.")] = Path(
         "fleet"
     ),
@@ -766,8 +766,8 @@ WorkersOpt = Annotated[
     typer.Option(
         "--workers",
         min=1,
-        help="Local worker processes, or threads (default: one per workflow, at most one "
-        "per core).",
+        help="Local worker processes, or threads (default: one per workflow; at most one "
+        "per workflow, per core and per GB of the memory budget).",
     ),
 ]
 AddressOpt = Annotated[

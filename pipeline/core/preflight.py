@@ -34,9 +34,12 @@ import psutil
 from debist.core.errors import ResourceError, WorkflowError
 
 __all__ = [
+    "BAND_GRID",
     "BUDGET_ENV",
+    "CURVE_GRID",
     "DEFLATE_MAX_RATIO",
     "RAM_FRACTION",
+    "RESAMPLE_COPIES",
     "TEXT_PARSE_RATIO",
     "check_identify",
     "check_identify_config",
@@ -46,9 +49,12 @@ __all__ = [
     "identify_bytes",
     "identify_columns",
     "identify_lower_bound",
+    "identify_setting",
     "memory_budget",
+    "narx_bytes",
     "refine_bytes",
     "sindy_bytes",
+    "sindy_terms",
 ]
 
 #: Environment variable that sets the memory budget [GB = 10^9 bytes].
@@ -63,6 +69,17 @@ DEFLATE_MAX_RATIO = 1032
 #: for 20 MB 10.5 (pandas 3.1, numpy 2.3); fields of 3-4 characters need 3. Bounds the
 #: decompressed size of a gzip'd log (:mod:`debist.ingest.compressed`).
 TEXT_PARSE_RATIO = 12
+#: Positions at which the identify stage evaluates the identified curves (the stability
+#: analysis's grid, :func:`debist.identify.stability.equilibria`).
+CURVE_GRID = 4001
+#: Positions of the curves' bootstrap bands; each replicate's deviation from the estimate
+#: there and the percentiles' sorted copy are held per curve
+#: (:func:`debist.identify.bands.curves_frame`, :func:`debist.identify.bands.curve_bands`).
+BAND_GRID = 201
+#: float64 copies of a resampled segment alive at once, per sample and channel (the
+#: time grid, the resampled block, the copy that keeps the samples within the record, and
+#: the column stack of the rasters' overlap).
+RESAMPLE_COPIES = 4
 #: Bytes of one float64.
 _F8 = 8
 _GB = 1e9
@@ -272,9 +289,10 @@ def identify_bytes(cfg: Any, n_inputs: int, rows: int, longest: int | None = Non
 
     Notes
     -----
-    The largest of five phases (support check, regressor build, T_z search, SVD solve,
-    block bootstrap), each counted in float64 elements of n rows, p columns and M centres;
-    the formulas: docs/explanation/implementation.md.
+    The largest of six phases (support check, regressor build, T_z search, SVD solve,
+    block bootstrap, and the Gaussian basis on the longest record or on the curves' grid of
+    :data:`CURVE_GRID` positions), each counted in float64 elements of n rows, p columns
+    and M centres; the formulas: docs/explanation/implementation.md.
 
     References
     ----------
@@ -292,7 +310,9 @@ def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) ->
     n_r = min(int(longest), n) if longest is not None else n
     block = M + 5 * p if cfg.lowpass is not None else M + 2 * p + p_force
     build = max(2 * n * p, (n - n_r) * p + n_r * block)
-    sizes = [2 * n * M, build, _solve_elements(n, p)]
+    # the Gaussian basis of the longest record and of the curves' grid: q - xi, its square
+    # and the exponential, alive together (debist.model.basis.gaussian)
+    sizes = [2 * n * M, build, _solve_elements(n, p), 3 * max(n_r, CURVE_GRID) * M]
     if cfg.T_z == "search" and p_z > 0:
         p_f = p - p_z
         sizes += [5 * n * p_f, 2 * n * p_f + 5 * n * p_z]
@@ -300,13 +320,34 @@ def _identify_phases(cfg: Any, n_inputs: int, rows: int, longest: int | None) ->
     if getattr(cfg, "bootstrap", 0) > 0:
         blocks, B = math.ceil(n ** (2.0 / 3.0)), int(cfg.bootstrap)
         phases[f"[identify] bootstrap = {B}"] = (
-            5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks
+            5 * n * p + blocks * p * p + 2 * B * p * p + B * blocks + 3 * B * BAND_GRID
         )
     return phases
 
 
-def _identify_setting(cfg: Any, n_inputs: int, rows: int, longest: int | None) -> str:
-    """Name the setting to change: bootstrap where the fit without it would fit the budget."""
+def identify_setting(cfg: Any, n_inputs: int, rows: int, longest: int | None = None) -> str:
+    """Name the setting to change: the bootstrap where the fit without it fits the budget.
+
+    Parameters
+    ----------
+    cfg : IdentifyConfig
+        The ``[identify]`` settings.
+    n_inputs, rows : int
+        Inputs, and regressor rows (estimation samples after ``trim``).
+    longest : int, optional
+        Samples of the longest record; default ``rows``.
+
+    Returns
+    -------
+    str
+        ``"[identify] bootstrap = <B>"`` when the least squares without the bootstrap fits
+        :func:`memory_budget` and the bootstrap's phase does not, else
+        ``"[identify] M = <M>"``.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 40; Kuensch 1989, Ann. Statist. 17(3) (block bootstrap).
+    """
     phases = _identify_phases(cfg, n_inputs, rows, longest)
     first, *rest = phases
     if rest and _F8 * phases[first] <= memory_budget():
@@ -346,7 +387,7 @@ def check_identify(
     p, _ = identify_columns(cfg, n_inputs)
     check_memory(
         identify_bytes(cfg, n_inputs, rows, longest),
-        setting or _identify_setting(cfg, n_inputs, rows, longest),
+        setting or identify_setting(cfg, n_inputs, rows, longest),
         f"the regressor of {rows} samples x {p} columns",
         "peak, with the SVD's copies",
     )
@@ -508,6 +549,75 @@ def refine_bytes(
     sim += 2 * B * (2 * M + 3 * columns)
     step = (P + 1) * W * L + 2 * P * W * L + _solve_elements(W * L, P)
     return _F8 * max(sim, step)
+
+
+def narx_bytes(rows: int, lag: int, degree: int, n_inputs: int) -> int:
+    """Estimate the peak memory of the NARX peer's candidate regressor [bytes].
+
+    Parameters
+    ----------
+    rows : int
+        Samples of all records.
+    lag : int
+        Largest lag of q and of each input.
+    degree : int
+        Largest polynomial degree.
+    n_inputs : int
+        Inputs.
+
+    Returns
+    -------
+    int
+        ``8 x 5 rows C(lag (1 + n_inputs) + degree, degree)``: every monomial of degree <= d
+        in the lagged outputs and inputs, as a matrix, and the copies FROLS and the
+        validation make of it (measured: 192 MB, 4.5 matrices, for lag 6, degree 3, two
+        inputs and 4000 samples, peak resident set of :func:`debist.model.narx.fit_narx`).
+
+    References
+    ----------
+    Billings 2013, Nonlinear System Identification, Ch. 3 (FROLS); Lacerda, Andrade &
+    Martins 2020, JOSS 5(54), 2384 (sysidentpy ``Polynomial`` basis).
+
+    Examples
+    --------
+    >>> narx_bytes(1000, 3, 3, 2) == 8 * 5 * 1000 * 220
+    True
+    """
+    terms = math.comb(int(lag) * (1 + int(n_inputs)) + int(degree), int(degree))
+    return _F8 * 5 * int(rows) * terms
+
+
+def sindy_terms(degree: int, n_inputs: int, input_terms: bool) -> int:
+    """Count the library terms of :func:`debist.model.sindy.fit_sindy`.
+
+    Parameters
+    ----------
+    degree : int
+        Polynomial degree in q and q_dot.
+    n_inputs : int
+        Inputs h_1..h_N.
+    input_terms : bool
+        Whether every polynomial term is also multiplied by each input (else each input is
+        one linear term).
+
+    Returns
+    -------
+    int
+        ``(d + 1)(d + 2) / 2`` monomials of degree <= d in (q, q_dot), times ``1 + N`` with
+        the input terms, else plus N.
+
+    References
+    ----------
+    Brunton, Proctor & Kutz 2016, PNAS 113(15) (SINDy with control); Kaptanoglu et al.
+    2022, JOSS 7(69), 3994 (pysindy ``PolynomialLibrary``, ``GeneralizedLibrary``).
+
+    Examples
+    --------
+    >>> sindy_terms(3, 2, True), sindy_terms(3, 2, False)
+    (30, 12)
+    """
+    poly = (int(degree) + 1) * (int(degree) + 2) // 2
+    return poly * (1 + n_inputs) if input_terms else poly + n_inputs
 
 
 def sindy_bytes(rows: int, n_features: int) -> int:

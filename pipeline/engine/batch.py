@@ -22,19 +22,23 @@ import hashlib
 import json
 import logging
 import os
+import signal
 import socket
 import sys
+import threading
 import time
 import traceback
 import uuid
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from debist.core import allocator, preflight
-from debist.core.errors import DebistError, OutputDirError, WorkflowError
+from debist.core.errors import DebistError, DebistWarning, OutputDirError, WorkflowError
 from debist.core.fileformats import atomic_write
+from debist.core.forking import usable_cores
 from debist.engine.fleetmark import unfinished_fleet, unfinished_message
 from debist.engine.runner import STAGES, Runner
 from debist.engine.zooindex import ZOO_FILE, zoo_workflows
@@ -46,6 +50,10 @@ SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
 #: Times a workflow is retried on a fresh worker process after its worker died, on the
 #: local cluster (dask config ``distributed.scheduler.allowed-failures``).
 ALLOWED_FAILURES = 1
+#: Memory one local worker process is given at least [bytes]: a worker's peak over four of
+#: the paper's workflows was 617-757 MiB (:func:`debist.core.allocator.collector_frozen`),
+#: so the budget holds ``budget // WORKER_BYTES`` workers (at least one).
+WORKER_BYTES = 10**9
 #: Characters that make an argument of :func:`expand_workflows` a glob pattern.
 _GLOB_CHARS = frozenset("*?[")
 _INSTALL_HINT = "pip install distributed"
@@ -414,7 +422,9 @@ def run_batch(
         cluster at ``address``, threads, or the calling thread (docs/explanation/implementation.md).
         Spawned workers re-import the calling script: call under ``if __name__ == "__main__":``.
     workers : int, optional
-        Worker processes or threads; default ``min(number of workflows, CPU count)``.
+        Worker processes or threads; default ``min(number of workflows, cores)``. On this
+        machine at most as many as there are workflows, cores and workers of
+        :data:`WORKER_BYTES` in the memory budget (a ``DebistWarning`` says so).
     address : str, optional
         A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``.
     on_done : callable, optional
@@ -456,11 +466,86 @@ def run_batch(
     if not paths:
         return []
     headers = _load_headers(paths)
-    n_workers = workers or min(len(paths), os.cpu_count() or 1)
+    n_workers = workers or min(len(paths), usable_cores())
+    if not address:
+        n_workers = _capped_workers(n_workers, len(paths))
     args = [(str(p), stages, force) for p in paths]
-    if scheduler in ("synchronous", "threads"):
-        return _run_local(args, scheduler, n_workers, on_done, progress)
-    return _run_on_cluster(args, headers, address, n_workers, on_done, progress)
+    with interrupt_kept():
+        if scheduler in ("synchronous", "threads"):
+            return _run_local(args, scheduler, n_workers, on_done, progress)
+        return _run_on_cluster(args, headers, address, n_workers, on_done, progress)
+
+
+@contextlib.contextmanager
+def interrupt_kept() -> Iterator[None]:
+    """Let no Ctrl-C during the block be lost: raise ``KeyboardInterrupt`` at its end.
+
+    A Ctrl-C reaches the batch's worker processes too (the terminal signals the whole
+    process group), and the cluster's event loop may catch the ``KeyboardInterrupt`` raised
+    in this process, so that the batch went on and ended with exit code 0. While the block
+    runs, ``SIGINT`` is recorded before it raises as usual; if the block then ends normally
+    or with another exception, ``KeyboardInterrupt`` is raised (the command line's exit
+    code 130). Outside the main thread, or when ``SIGINT`` does not have Python's default
+    handler, the block runs as it is.
+
+    Yields
+    ------
+    None
+
+    Raises
+    ------
+    KeyboardInterrupt
+        If ``SIGINT`` arrived while the block ran.
+
+    References
+    ----------
+    Python documentation, :mod:`signal` (``default_int_handler``; handlers run in the main
+    thread only); POSIX, "General Terminal Interface" (the foreground process group gets
+    the terminal's INTR signal).
+    """
+    main = threading.current_thread() is threading.main_thread()
+    if not main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    seen: list[int] = []
+
+    def record(signum: int, frame: Any) -> None:
+        seen.append(signum)
+        signal.default_int_handler(signum, frame)
+
+    signal.signal(signal.SIGINT, record)
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:
+        if seen:
+            raise KeyboardInterrupt from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if seen:
+        raise KeyboardInterrupt
+
+
+def _capped_workers(asked: int, n_items: int) -> int:
+    """Cap local workers at the workflows, this process's cores and the memory budget."""
+    budget = preflight.memory_budget()
+    limits = {
+        f"{n_items} workflow(s)": n_items,
+        f"{usable_cores()} core(s)": usable_cores(),
+        f"a memory budget of {preflight.format_bytes(budget)} for workers of "
+        f"{preflight.format_bytes(WORKER_BYTES)}": max(1, budget // WORKER_BYTES),
+    }
+    why, most = min(limits.items(), key=lambda item: item[1])
+    if asked <= most:
+        return asked
+    warnings.warn(
+        f"batch: {most} worker(s) instead of {asked}: as many as {why} allow",
+        DebistWarning,
+        stacklevel=3,
+    )
+    return most
 
 
 def _run_local(

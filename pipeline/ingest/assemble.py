@@ -24,6 +24,7 @@ resampled channels where the rasters' phases differ). ``slice`` is refused there
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +32,7 @@ import lazy_loader as lazy
 import numpy as np
 
 from debist.core.errors import RigLogError
+from debist.core.preflight import RESAMPLE_COPIES, check_memory
 from debist.core.units import lookup_unit
 from debist.ingest.channels import Mapped
 from debist.ingest.checks import (
@@ -50,6 +52,9 @@ from debist.ingest.resample import resample_segment, uniform_grid
 from debist.ingest.spec import IngestSpec, ResampleSpec
 from debist.ingest.stroke import check_stroke
 from debist.ingest.validity import cut_faults, fault_mask
+
+#: Bytes of one float64.
+_F8 = 8
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -92,6 +97,14 @@ def _resample(
     what: str,
     resolution: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    count = math.floor(span / resample.sample_time) + 1
+    check_memory(
+        _F8 * RESAMPLE_COPIES * count * (values.shape[1] + 1),
+        f"resample.sample_time = {resample.sample_time:g} s ({path})",
+        f"resampling {what} over {span:.6g} s onto {count} samples",
+        "the grid, the resampled channels and their copies",
+    )
     try:
         t_new, v_new = resample_segment(
             t, values, resample.sample_time, resample.method, resolution

@@ -54,6 +54,7 @@ from pydantic import Field, PositiveInt
 from debist.core.config import CONFIG, AsTuple, SectionConfig
 from debist.core.errors import DebistWarning, IdentificationError
 from debist.core.metrics import POOR_SHARE, mean_baseline_nrmse
+from debist.core.preflight import check_memory, narx_bytes
 from debist.model.narx_kernel import factor_tables, narx_free_run
 from debist.model.termtable import input_map as apply_input_map
 
@@ -631,6 +632,9 @@ def fit_narx(
     ------
     IdentificationError
         If every candidate failed to fit or diverged in its free run.
+    ResourceError
+        If the largest candidate regressor would exceed the memory budget
+        (:func:`debist.core.preflight.narx_bytes`), before any is built.
 
     References
     ----------
@@ -639,6 +643,14 @@ def fit_narx(
     """
     q = [np.asarray(r, dtype=float) for r in q]
     v = [np.asarray(r, dtype=float).reshape(r.shape[0], -1) for r in v]
+    lag, degree = max(cfg.lags), max(cfg.degree)
+    fitted = min(int(cfg.max_samples), sum(r.size for r in q))  # the fits' cap (_fit)
+    check_memory(
+        narx_bytes(fitted, lag, degree, v[0].shape[1]),
+        f"[compare.narx] max_samples = {cfg.max_samples} (with lags = {lag}, degree = {degree})",
+        f"the NARX candidate regressor of {fitted} samples",
+        "the matrix and its orthogonalised copies",
+    )
     maps = cfg.input_maps or (input_map,)
     q_all = np.concatenate(q)
     q_std = float(np.std(q_all)) or 1.0

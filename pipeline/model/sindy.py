@@ -37,7 +37,7 @@ from pydantic import NonNegativeFloat, PositiveInt
 
 from debist.core.config import CONFIG, SectionConfig
 from debist.core.errors import ConvergenceWarning, IdentificationError, WorkflowError
-from debist.core.preflight import check_memory, sindy_bytes
+from debist.core.preflight import check_memory, sindy_bytes, sindy_terms
 from debist.model.termtable import S_POW, TableModel, TermTableBuilder, input_map
 
 OPTIMIZERS = ("STLSQ", "SR3")
@@ -504,9 +504,7 @@ def fit_sindy_thresholds(
             inputs_per_library=[[0, 1], list(range(2, 2 + n_inputs))],
             exclude_libraries=[1] if cfg.input_terms else [],
         )
-    n_features_expected = (cfg.degree + 1) * (cfg.degree + 2) // 2
-    n_features_expected *= 1 + n_inputs if cfg.input_terms else 1
-    n_features_expected += 0 if cfg.input_terms else n_inputs
+    n_features_expected = sindy_terms(cfg.degree, n_inputs, cfg.input_terms)
     if x.shape[0] < n_features_expected:
         raise IdentificationError(
             f"{x.shape[0]} samples for {n_features_expected} SINDy library terms "

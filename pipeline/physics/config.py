@@ -22,7 +22,11 @@ from debist.core.config import (
     SectionConfig,
 )
 
-__all__ = ["AnalyzeConfig"]
+__all__ = ["MAX_DEGREE", "AnalyzeConfig"]
+
+#: Highest degree of the reduced model's polynomials: one less than the 401 points of the
+#: static path they are fitted to (:func:`debist.physics.reduced.fit_reduced`).
+MAX_DEGREE = 400
 
 
 @pydantic.dataclasses.dataclass(frozen=True, config=CONFIG)
@@ -46,7 +50,9 @@ class AnalyzeConfig(SectionConfig):
     left, right : tuple of float
         On/off times of the 3 kV steps on DE 1 and DE 2 in that simulation [s].
     degree : int
-        Polynomial degree of ``q_m(q)`` of the reduced model (Eq. 24), ``>= 2``.
+        Polynomial degree of ``q_m(q)`` of the reduced model (Eq. 24), ``2 <= degree <=``
+        :data:`MAX_DEGREE`: the least squares fits 401 points of the static path
+        (:func:`debist.physics.reduced.fit_reduced`), so a higher degree is not determined.
 
     Raises
     ------
@@ -69,7 +75,7 @@ class AnalyzeConfig(SectionConfig):
     t_end: PositiveFloat = 5.0
     left: Interval = (0.5, 1.5)
     right: Interval = (2.5, 3.5)
-    degree: Annotated[int, Field(ge=2)] = 30
+    degree: Annotated[int, Field(ge=2, le=MAX_DEGREE)] = 30
 
     def __post_init__(self) -> None:
         if self.right[1] > self.t_end:

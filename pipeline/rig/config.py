@@ -186,7 +186,7 @@ class RigConfig:
         WorkflowError
             On an unknown key (with a suggestion) or an invalid value, naming its table
             (``[rig]``, ``[rig.prototype]``, ``[rig.plant]``, ``[rig.experiments.<name>]``),
-            or no experiments.
+            no experiments, or a ``sample_time`` longer than an experiment.
 
         Examples
         --------
@@ -211,4 +211,12 @@ class RigConfig:
             raise WorkflowError(
                 "[rig] experiments: expected at least one [rig.experiments.<name>] table"
             )
+        for name, exp in experiments.items():
+            if head.sample_time > exp.duration:  # the log would hold no sample
+                raise WorkflowError(
+                    f"[rig] sample_time: expected at most the duration of [rig.experiments."
+                    f"{name}] ({exp.duration:g} s), got {head.sample_time:g}",
+                    key="rig.sample_time",
+                    value=head.sample_time,
+                )
         return cls(rig, head.sample_time, experiments)

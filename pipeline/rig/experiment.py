@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from debist.core import progress
+from debist.core.errors import WorkflowError
 from debist.core.forking import fork_context, fork_workers
 from debist.rig.config import ExperimentConfig, RigConfig
 from debist.rig.dspace import Channel, recording
@@ -87,16 +88,23 @@ def run_experiment(cfg: RigConfig, name: str) -> RigRun:
     Raises
     ------
     WorkflowError
-        For an unknown profile or invalid profile settings.
-    ValueError
-        From :func:`debist.rig.run.simulate_rig` (e.g. no well on the start side).
+        For an unknown profile or invalid profile settings, or a prototype the plant cannot
+        start (no stable well on the start side, :func:`debist.rig.run.simulate_rig`).
     """
     exp = cfg.experiments[name]
     prof = make_profile(exp.profile, **exp.profile_kwargs())
-    return simulate_rig(
-        cfg.rig, prof.t, prof.r1, prof.r2, sample_time=cfg.sample_time, seed=exp.seed,
-        side=exp.side,
-    )  # fmt: skip
+    try:
+        return simulate_rig(
+            cfg.rig, prof.t, prof.r1, prof.r2, sample_time=cfg.sample_time, seed=exp.seed,
+            side=exp.side,
+        )  # fmt: skip
+    except ValueError as exc:  # the settings make a plant without a start (e.g. no well)
+        raise WorkflowError(
+            f"[rig.experiments.{name}] side = {exp.side}: {exc}; the prototype of [physics] "
+            "and [rig.prototype] cannot start this experiment",
+            key=f"rig.experiments.{name}.side",
+            value=exp.side,
+        ) from None
 
 
 def _run_unobserved(cfg: RigConfig, name: str) -> RigRun:
@@ -144,7 +152,7 @@ def run_experiments(
 
     Raises
     ------
-    WorkflowError, ValueError
+    WorkflowError
         As :func:`run_experiment` (the first failing experiment's error).
 
     References

@@ -360,7 +360,8 @@ def identification_profile(
     if not b.fits(lead + block + gap + pulse(0)[0] + 2 * pulse(0)[1] + ring):
         raise ValueError(
             f"`duration` = {duration} s is shorter than one identification cycle "
-            f"({lead + block + gap + pulse(0)[0] + 2 * pulse(0)[1] + ring:g} s)"
+            f"({lead + block + gap + pulse(0)[0] + 2 * pulse(0)[1] + ring:g} s, with `ramps` "
+            f"{list(ramps)})"
         )
     rng = np.random.default_rng(seed)
     from scipy import signal

@@ -8,6 +8,7 @@ from typing import Any
 
 from debist.core.artifacts import Figure, H5Tree
 from debist.core.config import config_from_section
+from debist.core.errors import WorkflowError
 from debist.core.fileformats import REPORT_DPI
 from debist.physics.analysis import AnalyzeConfig, analysis_tree, run_analysis
 from debist.physics.params import PrototypeParams
@@ -53,7 +54,8 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
     Raises
     ------
     WorkflowError
-        For an invalid section.
+        For an invalid section, or a prototype without a stable well to start the switching
+        simulation from (or whose simulation the analysis cannot compare).
     StaticsError
         If the static analysis fails for these parameters.
 
@@ -62,7 +64,14 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
     Masoud & Maas 2025, Section 3, Fig. 3-7.
     """
     cfg = config_from_section(AnalyzeConfig, section, "[analyze]")
-    res = run_analysis(params, cfg)
+    try:
+        res = run_analysis(params, cfg)
+    except WorkflowError:
+        raise
+    except ValueError as exc:  # the settings give a prototype without a well or a usable run
+        raise WorkflowError(
+            f"[physics] the prototype cannot be analysed: {exc}; check its parameters"
+        ) from None
     cmp = res.comparison
     summary = {
         "b": params.b,

@@ -12,6 +12,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
+from debist.core import preflight
 from debist.core.artifacts import H5Tree
 from debist.core.fileformats import REPORT_DPI
 from debist.identify.autotune import auto_settings, drop_inert_slip, select_hyperparameters
@@ -137,6 +138,10 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     ------
     IdentificationError
         If the problem is under-excited, rank deficient or badly conditioned.
+    ResourceError
+        If the least squares of the estimation data would exceed the memory budget
+        (:func:`debist.core.preflight.check_identify`), before any array of samples x
+        centres is built.
     WorkflowError
         For an invalid section.
     """
@@ -148,6 +153,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         section["m_q"] = physics_mass(physics)
     cfg = IdentifyConfig.from_dict(section)
     records = estimation_records(tables, derivs)
+    sizes = [r.q.size for r in records]  # before the support checks build samples x M
+    preflight.check_identify(cfg, records[0].v.shape[1], sum(sizes), max(sizes))
     if set(PHYSICS_TERMS) & set(cfg.backbone):
         cfg = replace(
             cfg,

@@ -173,6 +173,10 @@ def _items(overrides: object) -> list[str]:
 def _output_dir(path: Path, what: str) -> Path:
     """Resolve an output folder and refuse one that is (or lies inside) a file."""
     out = _resolve(path, what)
+    if not out.name:  # the stage folders would land in the file system's root
+        raise ArgumentError(
+            f"{what} '{out}' is the root of the file system; choose a folder of its own"
+        )
     for parent in (out, *out.parents):
         if os.path.lexists(parent):
             if not parent.is_dir():
@@ -222,8 +226,9 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     Raises
     ------
     WorkflowError
-        If an item has no ``=``, its key is not a TOML key or its value nests arrays or
-        inline tables deeper than :data:`debist.workflow.tomltext.MAX_NESTING`.
+        If an item has no ``=``, holds a line break (a value is one TOML value, so no
+        ``[table]`` header can follow it), its key is not a TOML key or its value nests
+        arrays or inline tables deeper than :data:`debist.workflow.tomltext.MAX_NESTING`.
 
     Examples
     --------
@@ -235,6 +240,11 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise WorkflowError(f"--set {item!r}: expected KEY=VALUE, e.g. identify.M=8")
+        if item.splitlines() != [item]:  # a line break of str.splitlines, anywhere
+            raise WorkflowError(
+                f"--set {item!r}: expected one KEY=VALUE on one line; a value is one TOML "
+                "value, with no line break or [table] header"
+            )
         try:
             table = tomltext.loads(f"{key.strip()} = {value.strip()}", "--set")
         except tomllib.TOMLDecodeError:

@@ -210,6 +210,8 @@ def _key_parts(key: object, prefix: tuple[str, ...]) -> tuple[str, ...]:
             f"overrides: key {key!r}{inside} is of type {type(key).__name__}, not a string "
             "such as 'identify.M'"
         )
+    if key.splitlines() != [key]:  # a line break would let the key's text hold more TOML
+        raise WorkflowError(f"overrides: {where!r} holds a line break: not a TOML key")
     try:
         table = tomllib.loads(f"{key} = 0")
     except tomllib.TOMLDecodeError:

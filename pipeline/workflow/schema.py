@@ -44,6 +44,7 @@ from debist.physics.params import PrototypeParams
 from debist.rig.config import RigConfig
 from debist.rig.profiles import make_profile
 from debist.validate.config import ValidateConfig
+from debist.workflow.budget import check_rig_budget, check_workflow_budget
 from debist.workflow.sections import ReportConfig, StudyConfig
 
 __all__ = [
@@ -149,6 +150,8 @@ class CheckedWorkflow:
         ``[rig]`` with ``[physics]``.
     report : ReportConfig or None
         ``[report]`` (an empty table: the defaults).
+    narx : NarxConfig or None
+        ``[compare.narx]`` (None without ``[compare]``).
     """
 
     head: WorkflowHead
@@ -162,6 +165,7 @@ class CheckedWorkflow:
     analyze: AnalyzeConfig | None = None
     rig: RigConfig | None = None
     report: ReportConfig | None = None
+    narx: NarxConfig | None = None
 
 
 def _origin(own: Mapping[str, Any], here: str, base: str) -> Callable[[str], str]:
@@ -187,6 +191,7 @@ def _rig(raw: Mapping[str, Any]) -> RigConfig | None:
         return None
 
     cfg = RigConfig.from_dict(raw["rig"], raw.get("physics", {}))
+    check_rig_budget(cfg)  # before a profile of the experiments' length is built
     for name, exp in cfg.experiments.items():
         check_file_name(name, "[rig.experiments] experiment name")  # rig/<name>.mat
         try:
@@ -365,6 +370,9 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
         ``[physics]`` section, ``input_gain`` of the wrong length for the data's inputs, a
         ``report_unit`` that is not a unit of q, a study whose alpha study has no TVRegDiff
         settings.
+    ResourceError
+        If a stage's arrays, estimated from the settings, exceed the memory budget
+        (:func:`debist.workflow.budget.check_workflow_budget`), naming the key.
 
     References
     ----------
@@ -389,11 +397,11 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     differentiate = _differentiate(raw.get("differentiate", {}), "[differentiate]")
     identify = _identify(raw.get("identify", {}), "[identify]", has_physics, specs)
     validate = _validate(raw.get("validate", {}), has_physics, specs)
-    compare = None
+    compare = narx = None
     if "compare" in raw:
         sindy = {"input_map": raw.get("identify", {}).get("input_map", "v2"), **raw["compare"]}
 
-        NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
+        narx = NarxConfig.from_dict(sindy.pop("narx", None), "[compare.narx]")
         compare = SindyConfig.from_dict(sindy, "[compare]")
     study = _study(raw, specs) if "study" in raw else None
     analyze = None
@@ -402,7 +410,9 @@ def check_workflow(raw: Mapping[str, Any]) -> CheckedWorkflow:
     report = None
     if "report" in raw:
         report = ReportConfig.from_dict(raw["report"])
-    return CheckedWorkflow(
+    checked = CheckedWorkflow(
         head, datasets, differentiate, identify, validate, compare, study, physics, analyze, rig,
-        report,
+        report, narx,
     )  # fmt: skip
+    check_workflow_budget(checked)  # every stage's arrays within the memory budget
+    return checked
