@@ -867,7 +867,17 @@ def main() -> None:
     try:
         app()
     finally:
+        _numba_cache_note()
         skip_final_collection()
+
+
+def _numba_cache_note() -> None:
+    """Under -v, say in one line where numba cached the kernels if not in its own folder."""
+    import sys
+
+    jit = sys.modules.get("debist.core.jitcache")
+    if jit is not None and jit.note() and level["value"] > 0:
+        console.print(escape(jit.note()), soft_wrap=True)
 
 
 if __name__ == "__main__":
