@@ -1247,7 +1247,7 @@ class Model:
         from debist.model.rbf import RBFModel
 
         tree = artifacts.read_h5(path)
-        return cls(RBFModel.from_tree(tree), (summary or {}).get("units"))
+        return cls(RBFModel.from_tree(tree, str(path)), (summary or {}).get("units"))
 
     def __repr__(self) -> str:
         m = self.rbf

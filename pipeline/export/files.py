@@ -92,7 +92,7 @@ def load_identified(runner):
             f"stage 'identify' in '{sdir}' is {state.state} ({state.reason}): run "
             f"`debist identify {wf.path}` (or `debist run`) first"
         )
-    model = RBFModel.from_tree(artifacts.read_h5(sdir / "model.h5"))
+    model = RBFModel.from_tree(artifacts.read_h5(sdir / "model.h5"), str(sdir / "model.h5"))
     manifest = artifacts.read_manifest(sdir)
     identified: dict[str, list[list[float]]] = {}
     if manifest is not None and "curves.parquet" in manifest.outputs:
