@@ -146,6 +146,35 @@ def test_init_never_overwrites_a_file_unless_forced(tmp_path):
     assert "rig" in str(err.value) and "logs" in str(err.value)
 
 
+@pytest.mark.parametrize("link", [True, False])
+def test_a_file_created_while_init_runs_is_kept(tmp_path, monkeypatch, link):
+    """The check at the start passes; another program writes --out before init writes it:
+    its file stays byte for byte, init exits 2 naming it, and no temporary file is left.
+    Also where the file system has no hard links (the exclusive create instead)."""
+    from debist.workflow import init as init_module
+
+    log = write_mat(tmp_path / "est.mat")
+    out = tmp_path / "rig.toml"
+    verify = init_module._verify
+
+    def meanwhile(*args, **kwargs):
+        verify(*args, **kwargs)
+        out.write_bytes(b"# written by someone else meanwhile\n")
+
+    monkeypatch.setattr(init_module, "_verify", meanwhile)
+    if not link:
+
+        def no_links(*_args, **_kwargs):
+            raise PermissionError(1, "Operation not permitted")
+
+        monkeypatch.setattr("os.link", no_links)
+    code, text = cli("init", log, "--out", out)
+    assert code == 2, text
+    assert f"'{out}' exists" in " ".join(text.split()) and text.count("\n") == 1
+    assert out.read_bytes() == b"# written by someone else meanwhile\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["est.mat", "rig.toml"]
+
+
 def test_the_default_out_is_debist_toml_in_the_working_folder(tmp_path, monkeypatch):
     (tmp_path / "data").mkdir()
     log = write_mat(tmp_path / "data" / "est.mat")
