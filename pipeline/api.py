@@ -891,10 +891,15 @@ def list_channels(data: PathLike | Iterable[PathLike]) -> tuple[Any, ...]:
     ------
     RigLogError
         A file that cannot be read, naming it.
+    WorkflowError
+        A FIFO, socket or device, refused before it is opened.
     """
+    from debist.core.arguments import check_regular_file
     from debist.ingest.survey import survey_file
 
     paths = [data] if isinstance(data, (str, os.PathLike)) else list(data)
+    for path in paths:
+        check_regular_file(path, "rig log")
     return tuple(survey_file(Path(p)) for p in paths)
 
 

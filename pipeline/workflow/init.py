@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from debist.core.arguments import check_path_text, check_regular_file
 from debist.core.errors import RigLogError, WorkflowError
 from debist.core.fileformats import atomic_write
 from debist.core.names import is_file_name
@@ -317,6 +318,10 @@ def init_workflow(
     if not paths:
         raise WorkflowError("debist init: give at least one rig log (the estimation data)")
     out = Path(DEFAULT_OUT if out is None else out)
+    for path in paths:
+        check_regular_file(path, "rig log")
+        check_path_text(path, "rig log")
+    check_path_text(out.absolute(), "--out")
     _check_out(out, paths, force)
     request = request or MappingRequest()
     cache = RawLogCache(read_raw)

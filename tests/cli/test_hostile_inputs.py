@@ -3,6 +3,9 @@
 import gzip
 import io
 import json
+import os
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -361,3 +364,39 @@ def test_grid_values_are_validated_once_each(synthetic_wf, monkeypatch):
     wf = debist.load_workflow(synthetic_wf)
     assert len(wf.sections["identify"]["auto"]["M"]) == 900
     assert calls == [{"M": 6}, {"M": 8}, {"M": 10}]
+
+
+# -- hostile environment: FIFOs, locale, symbolic links, edited model --------------------------
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs POSIX FIFOs")
+def test_a_fifo_as_workflow_file_is_refused_before_opening_it(tmp_path):
+    """Opening a FIFO waits for a writer: refused at once in one line, exit 2 (a subprocess
+    with a time limit, so that a regression fails instead of hanging the tests)."""
+    fifo = tmp_path / "wf.toml"
+    os.mkfifo(fifo)
+    done = subprocess.run(
+        [sys.executable, "-m", "debist", "run", str(fifo)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.splitlines()
+    assert str(fifo) in line and "not a regular file" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["wf.toml"]
+
+
+def test_an_output_dir_the_locale_cannot_encode_is_refused_in_one_line(synthetic_wf):
+    """LC_ALL=C without UTF-8 mode: the file system encoding is ASCII and 'ü' cannot be a
+    file name; one line naming the key, the character and the fix, exit 2, nothing made."""
+    text = synthetic_wf.read_text().replace('output_dir = "out"', 'output_dir = "r\u00fcns"')
+    synthetic_wf.write_text(text, encoding="utf-8")
+    before = sorted(p.name for p in synthetic_wf.parent.iterdir())
+    env = {**os.environ, "LC_ALL": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    done = subprocess.run(
+        [sys.executable, "-m", "debist", "run", synthetic_wf.name],
+        cwd=synthetic_wf.parent, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.splitlines()
+    assert "[workflow] output_dir" in line and "(ascii)" in line and "LC_ALL=C.UTF-8" in line
+    assert sorted(p.name for p in synthetic_wf.parent.iterdir()) == before
