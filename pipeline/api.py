@@ -474,10 +474,14 @@ def export_model(
     WorkflowError
         A bad workflow, or an identify stage that is missing or stale.
     OutputDirError
-        A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
-        is a folder no run writes into either: the file system root, the home folder, the
-        workflow file's folder or one that holds a data source
+        A file exists (without ``force``, also one that appears while the files are
+        written), or a name resolves outside ``dest``; the default folder ``export/`` or a
+        file to be replaced is a symbolic link (:func:`debist.export.files.export_folder`);
+        ``dest`` is a folder no run writes into either: the file system root, the home
+        folder, the workflow file's folder or one that holds a data source
         (:func:`debist.engine.outdir.check_place`).
+    ArtifactError
+        ``identify/model.h5`` holds arrays of the wrong shapes, naming the dataset.
 
     References
     ----------
@@ -488,7 +492,7 @@ def export_model(
     from debist.core.fileformats import atomic_write
     from debist.engine import outdir
     from debist.engine.runner import Runner
-    from debist.export.files import export_files, load_identified
+    from debist.export.files import export_files, export_folder, load_identified
 
     check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
     dest = check_path(dest, "dest", optional=True)
@@ -506,7 +510,7 @@ def export_model(
     with outdir.output_lock(folder) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
         files = export_files(model, fmt, info)
-        target = dest if dest is not None else folder / "export"
+        target = export_folder(folder, dest, files)
         if force:
             target.mkdir(parents=True, exist_ok=True)
             for name, text in files.items():

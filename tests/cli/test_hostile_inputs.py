@@ -17,6 +17,7 @@ import debist
 from debist.cli import app
 from debist.core.errors import (
     ArgumentError,
+    ArtifactError,
     OutputDirError,
     PlausibilityWarning,
     RigLogError,
@@ -400,3 +401,65 @@ def test_an_output_dir_the_locale_cannot_encode_is_refused_in_one_line(synthetic
     (line,) = done.stderr.splitlines()
     assert "[workflow] output_dir" in line and "(ascii)" in line and "LC_ALL=C.UTF-8" in line
     assert sorted(p.name for p in synthetic_wf.parent.iterdir()) == before
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_export_never_follows_a_symlinked_export_folder_out_of_the_output_folder(
+    synthetic_copy, tmp_path, force
+):
+    root, _ = synthetic_copy
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "debist_model.py").write_text("# a user's file\n")
+    (root / "out" / "export").symlink_to(elsewhere, target_is_directory=True)
+    code, out = invoke("export", root / "wf.toml", "--format", "python", *(["--force"] * force))
+    assert code == 2, out
+    assert "symbolic link" in out and str(root / "out" / "export") in out
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["debist_model.py"]
+    assert (elsewhere / "debist_model.py").read_text() == "# a user's file\n"
+
+
+def test_export_never_writes_through_a_symlinked_file(synthetic_copy, tmp_path):
+    root, _ = synthetic_copy
+    target = tmp_path / "mine.py"
+    target.write_text("# a user's file\n")
+    (root / "out" / "export").mkdir()
+    (root / "out" / "export" / "debist_model.py").symlink_to(target)
+    code, out = invoke("export", root / "wf.toml", "--format", "python", "--force")
+    assert code == 2, out
+    assert "symbolic link" in out and "debist_model.py" in out
+    assert target.read_text() == "# a user's file\n"
+    assert (root / "out" / "export" / "debist_model.py").is_symlink()
+
+
+@pytest.mark.parametrize(
+    ("dataset", "change", "expected"),
+    [
+        ("model/theta_g", lambda a: np.concatenate([a, a[:, :1]], axis=1), "expected (2, 8)"),
+        ("model/theta_c", lambda a: a[:-1], "expected (8,)"),
+        ("model/xi", lambda a: a.reshape(2, -1), "expected (M,)"),
+        ("model/backbone/g_0", lambda a: np.zeros(3), "expected (2,)"),
+    ],
+)
+def test_an_edited_and_resigned_model_is_refused_on_export_naming_the_dataset(
+    synthetic_copy, dataset, change, expected
+):
+    """model.h5 edited (arrays of another shape) and its manifest re-signed, so the tamper
+    check passes: export says which dataset is wrong in one line, exit 1, writes nothing."""
+    import h5py
+
+    from tests.engine.test_verify_workflow import resign
+
+    root, _ = synthetic_copy
+    path = root / "out" / "identify" / "model.h5"
+    with h5py.File(path, "r+") as f:
+        value = change(f[dataset][...])
+        del f[dataset]
+        f[dataset] = value
+    resign(root / "out", "identify")
+    code, out = invoke("export", root / "wf.toml", "--format", "c")
+    assert code == 1, out
+    assert str(path) in out and dataset in out and expected in out, out
+    assert "Traceback" not in out and not (root / "out" / "export").exists()
+    with pytest.raises(ArtifactError, match=dataset):
+        debist.load_model(path)
