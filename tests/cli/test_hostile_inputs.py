@@ -463,3 +463,38 @@ def test_an_edited_and_resigned_model_is_refused_on_export_naming_the_dataset(
     assert "Traceback" not in out and not (root / "out" / "export").exists()
     with pytest.raises(ArtifactError, match=dataset):
         debist.load_model(path)
+
+
+_IN_CALLBACK = """
+import ctypes, os, signal, sys, time
+import debist.cli as cli
+
+def work():  # stands for the command: numba's compiler calls back into Python via ctypes
+    def callback():
+        os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+        for _ in range(1000):
+            pass
+    try:
+        ctypes.CFUNCTYPE(None)(callback)()
+        time.sleep(60)
+        print("the signal was lost")
+    except KeyboardInterrupt as exc:
+        print("stopped by", getattr(exc, "signum", signal.SIGINT))
+
+cli.app = work
+cli.main()
+"""
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_raised_inside_a_ctypes_callback_is_not_lost(name):
+    """Python cannot propagate an exception out of a ctypes callback: it prints "Exception
+    ignored" and goes on. The command line sends the signal again to the main thread."""
+    import signal
+
+    done = subprocess.run(
+        [sys.executable, "-c", _IN_CALLBACK, name], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["stopped", "by", str(int(getattr(signal, name)))]
+    assert done.stderr == ""
