@@ -485,12 +485,16 @@ def export_model(
         If the free runs that score the export on the run's records would exceed the memory
         budget (as validate's would).
     OutputDirError
-        A file exists (without ``force``), or a name resolves outside ``dest``; ``dest``
-        is a folder no run writes into either: the file system root, the home folder, the
-        workflow file's folder or one that holds a data source
+        A file exists (without ``force``, also one that appears while the files are
+        written), or a name resolves outside ``dest``; the default folder ``export/`` or a
+        file to be replaced is a symbolic link (:func:`debist.export.files.export_folder`);
+        ``dest`` is a folder no run writes into either: the file system root, the home
+        folder, the workflow file's folder or one that holds a data source
         (:func:`debist.engine.outdir.check_place`).
     RunLockedError
         Another process writes to the output folder (unless ``wait``).
+    ArtifactError
+        ``identify/model.h5`` holds arrays of the wrong shapes, naming the dataset.
 
     References
     ----------
@@ -501,7 +505,7 @@ def export_model(
     from debist.core.fileformats import atomic_write
     from debist.engine import outdir
     from debist.engine.runner import Runner
-    from debist.export.files import export_files, load_identified, load_scheme
+    from debist.export.files import export_files, export_folder, load_identified, load_scheme
 
     check_str(fmt, "fmt", example="'c', 'matlab' or 'python'")
     dest = check_path(dest, "dest", optional=True)
@@ -519,7 +523,7 @@ def export_model(
     with outdir.output_lock(folder, wait=wait) if folder.is_dir() else nullcontext():
         model, info = load_identified(runner)
         files = export_files(model, fmt, info, load_scheme(runner, model))
-        target = dest if dest is not None else folder / "export"
+        target = export_folder(folder, dest, files)
         if force:
             target.mkdir(parents=True, exist_ok=True)
             for name, text in files.items():
@@ -928,10 +932,15 @@ def list_channels(data: PathLike | Iterable[PathLike]) -> tuple[Any, ...]:
     ------
     RigLogError
         A file that cannot be read, naming it.
+    WorkflowError
+        A FIFO, socket or device, refused before it is opened.
     """
+    from debist.core.arguments import check_regular_file
     from debist.ingest.survey import survey_file
 
     paths = [data] if isinstance(data, (str, os.PathLike)) else list(data)
+    for path in paths:
+        check_regular_file(path, "rig log")
     return tuple(survey_file(Path(p)) for p in paths)
 
 
@@ -1284,7 +1293,7 @@ class Model:
         from debist.model.rbf import RBFModel
 
         tree = artifacts.read_h5(path)
-        return cls(RBFModel.from_tree(tree), (summary or {}).get("units"))
+        return cls(RBFModel.from_tree(tree, str(path)), (summary or {}).get("units"))
 
     def __repr__(self) -> str:
         m = self.rbf

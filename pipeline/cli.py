@@ -17,6 +17,7 @@ import json
 import os
 import shlex
 import signal
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
@@ -238,6 +239,27 @@ def _wait_advice() -> Iterator[None]:
 
 def _on_sigterm(signum: int, _frame: object) -> None:
     raise Interrupted(signum)
+
+
+def _on_unraisable(unraisable) -> None:
+    """Deliver again a Ctrl-C or SIGTERM that was raised where it cannot propagate.
+
+    A signal's exception raised inside a ctypes callback (llvmlite's object cache, while
+    numba compiles) is printed as "Exception ignored" and lost: the run went on. Instead,
+    a moment later (from a timer thread, once the callback has returned) the signal is
+    sent again to the main thread, where it unwinds the run as any other (Python
+    documentation, :func:`sys.unraisablehook` and :func:`signal.pthread_kill`).
+    """
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        import threading
+
+        signum = getattr(unraisable.exc_value, "signum", signal.SIGINT)
+        main = threading.main_thread().ident
+        again = threading.Timer(0.05, signal.pthread_kill, (main, signum))
+        again.daemon = True
+        again.start()
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def _run(
@@ -907,12 +929,21 @@ def main() -> None:
 
     warnings.formatwarning = _warning_line
     signal.signal(signal.SIGTERM, _on_sigterm)
+    sys.unraisablehook = _on_unraisable
     keep_freed_memory()
     arrow_system_pool()
     try:
         app()
     finally:
+        _numba_cache_note()
         skip_final_collection()
+
+
+def _numba_cache_note() -> None:
+    """Under -v, say in one line where numba cached the kernels if not in its own folder."""
+    jit = sys.modules.get("debist.core.jitcache")
+    if jit is not None and jit.note() and level["value"] > 0:
+        console.print(escape(jit.note()), soft_wrap=True)
 
 
 if __name__ == "__main__":

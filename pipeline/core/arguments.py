@@ -12,15 +12,27 @@ scipy's argument checks: messages that name the argument and echo the value.
 
 from __future__ import annotations
 
+import contextlib
 import operator
 import os
+import stat
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from debist.core.errors import ArgumentError, WorkflowError
 
-__all__ = ["check_callable", "check_flag", "check_int", "check_names", "check_path", "check_str"]
+__all__ = [
+    "check_callable",
+    "check_flag",
+    "check_int",
+    "check_names",
+    "check_path",
+    "check_path_text",
+    "check_regular_file",
+    "check_str",
+]
 
 
 def _got(value: object) -> str:
@@ -242,3 +254,78 @@ def check_callable(value: Any, name: str) -> Callable[..., Any] | None:
     if value is None or callable(value):
         return value
     raise ArgumentError(f"{name}: expected a function or None, got {_got(value)}")
+
+
+def check_regular_file(path: str | os.PathLike, what: str) -> None:
+    """Refuse a path that is a FIFO, socket or device, before it is opened.
+
+    Opening a FIFO for reading waits for a writer (forever, for a command line), and a
+    device or socket is no file debist reads. A missing path passes (the reader says so).
+
+    Parameters
+    ----------
+    path : path-like
+        The file about to be read (symbolic links followed).
+    what : str
+        What it is, for the message, e.g. ``"rig log"``.
+
+    Raises
+    ------
+    WorkflowError
+        If ``path`` is a FIFO, socket or device, naming it.
+
+    References
+    ----------
+    POSIX ``stat(2)`` (``S_ISREG``) and ``open(2)`` (opening a FIFO blocks until a writer
+    opens it).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):  # missing, unreadable, NUL byte: the reader says why
+        return
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise WorkflowError(
+            f"{what} '{os.fspath(path)}' is not a regular file (a FIFO, socket or device): "
+            "refused before reading it"
+        )
+
+
+def check_path_text(path: str | os.PathLike, what: str) -> None:
+    """Refuse a path that this process cannot pass to the file system or write as text.
+
+    Under a locale whose encoding is ASCII (``LC_ALL=C`` with ``PYTHONUTF8=0``), a name
+    such as ``Müller`` read from a TOML file cannot be encoded for the file system, and
+    one given on the command line arrives with undecodable bytes (surrogate escapes) that
+    cannot be written into a UTF-8 file.
+
+    Parameters
+    ----------
+    path : path-like
+        The path.
+    what : str
+        What it is, for the message (``"[workflow] output_dir"``).
+
+    Raises
+    ------
+    WorkflowError
+        Naming the path, the character and the file-name encoding, and how to fix it.
+
+    References
+    ----------
+    PEP 383 (surrogate escapes of undecodable bytes) and PEP 540 (Python's UTF-8 mode).
+    """
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        return
+    for check in (os.fsencode, lambda t: t.encode("utf-8")):
+        try:
+            check(text)
+        except UnicodeEncodeError as exc:
+            bad = text[exc.start : exc.end]
+            with contextlib.suppress(UnicodeEncodeError):  # undecodable bytes: show them
+                bad = bad.encode(sys.getfilesystemencoding(), "surrogateescape")
+            raise WorkflowError(
+                f"{what} {text!r}: {bad!r} cannot be written in this "
+                f"system's file-name encoding ({sys.getfilesystemencoding()}); use a UTF-8 "
+                "locale (e.g. LC_ALL=C.UTF-8) or PYTHONUTF8=1, or an ASCII name"
+            ) from None

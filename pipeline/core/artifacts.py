@@ -814,7 +814,12 @@ def write_text_files(folder: str | os.PathLike, files: Mapping[str, str]) -> lis
     written: list[Path] = []
     try:
         for name, text in files.items():
-            written.append(atomic_write(inside(final, name), text))
+            try:  # a file that appeared meanwhile is kept, never replaced
+                written.append(atomic_write(inside(final, name), text, replace=False))
+            except FileExistsError:
+                raise OutputDirError(
+                    f"'{final / name}' exists: choose another folder or remove it"
+                ) from None
     except BaseException:
         for path in written:  # all new files (checked above): take them back
             path.unlink(missing_ok=True)

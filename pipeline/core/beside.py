@@ -15,7 +15,7 @@ with the BLAS thread limits of this process, which the fork inherits.
 References
 ----------
 Python documentation, :mod:`multiprocessing` ("Contexts and start methods",
-``Process``, ``Pipe``).
+``Process``, ``Pipe``) and :mod:`signal` (``pthread_sigmask``).
 """
 
 from __future__ import annotations
@@ -23,11 +23,17 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
+import signal
 from collections.abc import Callable
 from typing import Any
 
-from debist.core.errors import ArtifactError
-from debist.core.forking import call_recording_warnings, fork_context, replay_warnings
+from debist.core.errors import ArtifactError, Interrupted
+from debist.core.forking import (
+    STOP_SIGNALS,
+    call_recording_warnings,
+    fork_context,
+    replay_warnings,
+)
 from debist.core.progress import listening
 
 __all__ = ["BesideRun"]
@@ -36,23 +42,75 @@ __all__ = ["BesideRun"]
 STOP_GRACE = 5.0
 
 
+#: Whether this (child) process was told to stop once already.
+_stopping = False
+
+
+def _mask(how: int) -> set:
+    """Block or unblock the stop signals in this thread; return the previous mask (POSIX)."""
+    return signal.pthread_sigmask(how, STOP_SIGNALS)
+
+
+def _stop(signum: int, _frame: object) -> None:
+    """Stop the child on SIGINT or SIGTERM: the first unwinds ``fn``, a later one exits.
+
+    Raising :class:`~debist.core.errors.Interrupted` once lets the function's clean-up run
+    (temporary folders are removed as after Ctrl-C); a second signal ends the process at once.
+    """
+    global _stopping
+    if _stopping:
+        os._exit(128 + signum)
+    _stopping = True
+    raise Interrupted(signum)
+
+
 def _child(fn: Callable[[], Any], send, recv, niceness: int) -> None:
     """Call ``fn`` in the forked process without progress display; send (ok, value, warnings).
 
     The copy of the parent's receiving end that the fork made is closed first: if the parent
     is gone (stopped), the send then fails instead of waiting forever for a reader. The
     child's scheduling priority is lowered by ``niceness`` first (where it can be).
+
+    The child starts with SIGINT and SIGTERM ignored (:func:`debist.core.forking.
+    fork_context` with ``quiet``). While ``fn`` runs, the first one raises
+    :class:`~debist.core.errors.Interrupted` inside ``fn`` (its clean-up runs); outside
+    ``fn`` they are blocked or end the process by their default action. So a Ctrl-C of the
+    terminal (which reaches every process of the group) or :meth:`BesideRun.stop` never
+    prints the child's traceback, wherever the child is.
     """
-    recv.close()
-    if niceness:
-        with contextlib.suppress(OSError):
-            os.nice(niceness)
+    global _stopping
     try:
-        with listening(None):
-            value, caught = call_recording_warnings(fn)
-        message = (True, value, caught)
-    except BaseException as exc:
-        message = (False, exc, [])
+        _mask(signal.SIG_BLOCK)
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, _stop)
+        recv.close()
+        if niceness:
+            with contextlib.suppress(OSError):
+                os.nice(niceness)
+        try:
+            _mask(signal.SIG_UNBLOCK)
+            try:
+                with listening(None):
+                    value, caught = call_recording_warnings(fn)
+            finally:
+                _mask(signal.SIG_BLOCK)
+            message = (True, value, caught)
+        except BaseException as exc:
+            _mask(signal.SIG_BLOCK)
+            message = (False, exc, [])
+        for signum in STOP_SIGNALS:  # from here a stop signal just ends the process
+            signal.signal(signum, signal.SIG_DFL)
+        if _stopping:  # stopped while fn ran, its clean-up done: end as the signal says
+            signal.raise_signal(getattr(message[1], "signum", signal.SIGTERM))
+        _stopping = True
+        _mask(signal.SIG_UNBLOCK)
+        _send(send, message)
+    except BaseException:  # a stop signal: nobody waits for a result, nothing to say
+        os._exit(1)
+
+
+def _send(send, message: tuple) -> None:
+    """Send the child's message to the parent, or an ArtifactError if it cannot be pickled."""
     try:
         send.send(message)
     except (pickle.PicklingError, TypeError, AttributeError) as exc:
@@ -85,7 +143,7 @@ class BesideRun:
     """
 
     def __init__(self, fn: Callable[[], Any], label: str, *, niceness: int = 0):
-        ctx = fork_context()
+        ctx = fork_context(quiet=True)
         self.label = label
         self._recv, send = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(

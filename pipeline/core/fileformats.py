@@ -44,7 +44,12 @@ __all__ = [
 ]
 
 
-def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path], None]) -> Path:
+def atomic_write(
+    path: str | os.PathLike,
+    content: str | bytes | Callable[[Path], None],
+    *,
+    replace: bool = True,
+) -> Path:
     """Write a file so that a reader sees the old file or the whole new one, never a part.
 
     The content goes to a fresh file beside ``path`` (mode 0o666 less the umask, like any new
@@ -52,6 +57,10 @@ def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path]
     the folder is then synced (POSIX, best effort) so the rename survives a power cut. On any
     error, Ctrl-C included, the temporary file is removed and ``path`` is untouched. The one
     atomic file write of debist (artifacts, reports, rig logs, exports, the folder marker).
+    With ``replace=False`` the finished file is hard-linked to ``path`` instead (``link(2)``
+    never replaces a name), so a file that appeared at ``path`` meanwhile stays as it is;
+    where the file system has no hard links, ``path`` is created exclusively
+    (``O_CREAT | O_EXCL``) and the content copied into it.
 
     Parameters
     ----------
@@ -60,6 +69,8 @@ def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path]
     content : str, bytes or callable
         Text (written as UTF-8), bytes, or ``write(tmp)`` that writes the temporary file
         itself (e.g. an HDF5 writer).
+    replace : bool, optional
+        Replace an existing ``path`` (default); if False, an existing ``path`` is an error.
 
     Returns
     -------
@@ -68,12 +79,15 @@ def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path]
 
     Raises
     ------
+    FileExistsError
+        With ``replace=False``, if ``path`` exists (also when it appeared during the write);
+        it is left as it was.
     OSError
         What the file system raises (no space, read-only, permissions); nothing is left.
 
     References
     ----------
-    POSIX ``rename(2)`` and ``fsync(2)``.
+    POSIX ``rename(2)``, ``link(2)``, ``open(2)`` (``O_EXCL``) and ``fsync(2)``.
 
     Examples
     --------
@@ -103,7 +117,10 @@ def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path]
             content(tmp)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        if replace:
+            os.replace(tmp, path)
+        else:
+            _link_new(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
@@ -116,6 +133,26 @@ def atomic_write(path: str | os.PathLike, content: str | bytes | Callable[[Path]
             finally:
                 os.close(fd)
     return path
+
+
+def _link_new(tmp: Path, path: Path) -> None:
+    """Give the finished ``tmp`` the name ``path`` unless that name exists; remove ``tmp``."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise
+    except OSError:  # no hard links here (some network and FAT file systems)
+        with open(path, "xb") as out, open(tmp, "rb") as src:
+            try:
+                while block := src.read(1 << 20):
+                    out.write(block)
+                out.flush()
+                os.fsync(out.fileno())
+            except BaseException:
+                out.close()
+                os.unlink(path)
+                raise
+    tmp.unlink()
 
 
 def sha256_file(path: str | os.PathLike) -> str:

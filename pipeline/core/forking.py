@@ -10,20 +10,25 @@ References
 ----------
 Python documentation, :mod:`concurrent.futures` (ProcessPoolExecutor) and
 :mod:`multiprocessing` (start methods; "Contexts and start methods": forking a
-multithreaded process is problematic).
+multithreaded process is problematic); :mod:`signal` (``pthread_sigmask``); POSIX
+``fork(2)`` (the child inherits the signal mask).
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.context as mp_context
 import os
+import signal
 import threading
 import warnings
 from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Any
 
 __all__ = [
+    "STOP_SIGNALS",
     "Caught",
     "call_recording_warnings",
     "fork_context",
@@ -31,6 +36,7 @@ __all__ = [
     "one_core",
     "replay_warnings",
     "usable_cores",
+    "worker_pool",
 ]
 
 #: Warnings recorded in a worker process: (message, category, filename, lineno) each.
@@ -101,14 +107,98 @@ def fork_workers(n: int) -> int:
     return min(n, usable_cores())
 
 
-def fork_context():
+#: The signals that stop a run (Ctrl-C, ``kill``); a terminal sends SIGINT to every process
+#: of its foreground group, forked children included.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+if hasattr(mp_context, "ForkContext"):  # POSIX
+
+    class _QuietProcess(mp_context.ForkProcess):
+        """A forked process that ignores SIGINT and SIGTERM: its parent stops it.
+
+        The parent's handlers (Python's ``KeyboardInterrupt``, the command line's SIGTERM
+        handler) would raise in the child wherever it is, print its traceback, and could
+        cut a result off halfway through the pipe (its reader then waits forever). The stop
+        signals are blocked across the fork (the child inherits the mask), the child
+        ignores them, then unblocks them: there is no moment in which a child could raise.
+        A Ctrl-C reaches the parent too, which stops its children: a pool by its shutdown
+        (:func:`worker_pool`), a :class:`~debist.core.beside.BesideRun` by its ``stop``
+        (that child handles the signals itself).
+        """
+
+        def start(self) -> None:
+            """Fork with the stop signals blocked (delivered here once the child exists)."""
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+            try:
+                super().start()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+        def run(self) -> None:
+            """Ignore the stop signals, unblock them, then run."""
+            for signum in STOP_SIGNALS:
+                signal.signal(signum, signal.SIG_IGN)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+            super().run()
+
+    class _QuietForkContext(mp_context.ForkContext):
+        """The ``fork`` context whose processes are :class:`_QuietProcess`."""
+
+        Process = _QuietProcess
+
+
+def fork_context(*, quiet: bool = False):
     """Return the ``fork`` multiprocessing context (check :func:`fork_workers` first).
+
+    Parameters
+    ----------
+    quiet : bool, optional
+        Children that ignore SIGINT and SIGTERM and are stopped by this process instead
+        (see :class:`_QuietProcess`): no child traceback after a Ctrl-C.
 
     Returns
     -------
     multiprocessing.context.ForkContext
+
+    Raises
+    ------
+    ValueError
+        Where there is no ``fork`` (Windows).
     """
-    return multiprocessing.get_context("fork")
+    if not quiet or not hasattr(mp_context, "ForkContext"):
+        return multiprocessing.get_context("fork")
+    return _QuietForkContext()
+
+
+@contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """Open a pool of forked processes that a Ctrl-C or SIGTERM stops quietly.
+
+    The workers ignore the stop signals (:func:`fork_context` with ``quiet``); when the
+    block ends with an exception (the ``KeyboardInterrupt`` of a Ctrl-C included), the jobs
+    not yet started are cancelled and the running ones finish before it propagates.
+
+    Parameters
+    ----------
+    workers : int
+        Number of processes (:func:`fork_workers`).
+
+    Yields
+    ------
+    concurrent.futures.ProcessPoolExecutor
+
+    References
+    ----------
+    Python documentation, :meth:`concurrent.futures.Executor.shutdown` (``cancel_futures``).
+    """
+    pool = ProcessPoolExecutor(workers, mp_context=fork_context(quiet=True))
+    try:
+        yield pool
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def call_recording_warnings(fn: Callable[[], Any]) -> tuple[Any, Caught]:

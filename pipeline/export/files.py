@@ -12,8 +12,10 @@ Masoud & Maas 2025, Eq. 37-40 (the model exported).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from debist.core import artifacts
-from debist.core.errors import WorkflowError
+from debist.core.errors import OutputDirError, WorkflowError
 from debist.export.c import c_sources
 from debist.export.common import ExportInfo
 from debist.export.matlab import matlab_source
@@ -24,7 +26,7 @@ from debist.model.rbf import RBFModel
 from debist.validate.config import ValidateConfig
 from debist.validate.datasets import validation_datasets
 
-__all__ = ["FORMATS", "export_files", "load_identified", "load_scheme"]
+__all__ = ["FORMATS", "export_files", "export_folder", "load_identified", "load_scheme"]
 
 #: Export formats of ``debist export --format``.
 FORMATS = ("c", "matlab", "python")
@@ -101,7 +103,7 @@ def load_identified(runner):
             f"stage 'identify' in '{sdir}' is {state.state} ({state.reason}): run "
             f"`debist identify {wf.path}` (or `debist run`) first"
         )
-    model = RBFModel.from_tree(artifacts.read_h5(sdir / "model.h5"))
+    model = RBFModel.from_tree(artifacts.read_h5(sdir / "model.h5"), str(sdir / "model.h5"))
     manifest = artifacts.read_manifest(sdir)
     identified: dict[str, list[list[float]]] = {}
     if manifest is not None and "curves.parquet" in manifest.outputs:
@@ -157,3 +159,49 @@ def load_scheme(runner, model) -> Scheme:
         rows = table[table["model"] == "rbf"]
         reported = dict(zip(rows["dataset"], rows["nrmse_q"].astype(float), strict=True))
     return run_scheme(model, datasets, cfg, reported)
+
+
+def export_folder(output_dir: Path, dest: Path | None, names) -> Path:
+    """Return the folder the export's files go to, refusing a symbolic link on the way.
+
+    The default folder is ``export/`` in the output folder: a symbolic link there (the
+    folder or one of the files) would take the write, and with ``--force`` the replacement,
+    to a place outside the output folder, so it is refused; so is a file of ``dest`` that
+    is a symbolic link.
+
+    Parameters
+    ----------
+    output_dir : pathlib.Path
+        The run's output folder.
+    dest : pathlib.Path or None
+        The folder the user chose (``--dest``), or None for ``<output_dir>/export``.
+    names : iterable of str
+        The file names about to be written.
+
+    Returns
+    -------
+    pathlib.Path
+        ``dest``, or ``output_dir / "export"``.
+
+    Raises
+    ------
+    OutputDirError
+        The default folder is a symbolic link or resolves outside ``output_dir``, or a
+        file to be written is a symbolic link, naming it.
+    """
+    target = output_dir / "export" if dest is None else Path(dest)
+    if dest is None and (
+        target.is_symlink()
+        or (target.exists() and not target.resolve().is_relative_to(output_dir.resolve()))
+    ):
+        raise OutputDirError(
+            f"export folder '{target}' is a symbolic link: refused, debist writes only into "
+            "the output folder itself (remove the link, or give --dest)"
+        )
+    for name in names:
+        if (target / name).is_symlink():
+            raise OutputDirError(
+                f"'{target / name}' is a symbolic link: refused, debist never writes through "
+                "one (remove it)"
+            )
+    return target

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from debist.core.errors import ArtifactError
 from debist.model.basis import RBFBasis
 from debist.model.friction import (
     creep_states,
@@ -19,6 +20,99 @@ from debist.model.termtable import TableModel, input_map
 
 #: Backbone entries stored as vectors (one value per input).
 _VECTORS = ("g_0", "g_h", "s_g", "s_gh", "s_k")
+
+
+def _shape(group: Any, key: str, where: str) -> tuple[int, ...]:
+    """Return the shape of a numeric dataset, or say in one line what is wrong with it."""
+    if not isinstance(group, dict) or key not in group:
+        raise ArtifactError(f"{where}/{key}: missing")
+    try:
+        return np.asarray(group[key], dtype=float).shape
+    except (TypeError, ValueError):
+        raise ArtifactError(f"{where}/{key}: not numeric") from None
+
+
+def check_model_tree(tree: Any, source: str = "model.h5") -> None:
+    """Check the shapes of a stored model's arrays against its centres and inputs.
+
+    With M centres (``model/xi``, shape (M,)) and N = ``n_inputs``: ``theta_c``,
+    ``theta_d`` and ``creep/theta_creep`` have shape (M,); ``theta_g`` and ``theta_gh``
+    (N, M); the backbone's ``g_0``, ``g_h``, ``s_g``, ``s_gh`` one value or N values;
+    ``slip/width`` and ``slip/theta_slip`` the same length E; ``inertia/theta_inertia``
+    and ``backbone/s_k`` one axis.
+
+    Parameters
+    ----------
+    tree : dict
+        As read by :func:`debist.core.artifacts.read_h5` from an identify stage's
+        ``model.h5``.
+    source : str, optional
+        The file, for the message.
+
+    Raises
+    ------
+    ArtifactError
+        Naming ``source`` and the first dataset or attribute that is missing, not numeric
+        or of the wrong shape (e.g. ``model/theta_g has shape (2, 7), expected (2, 6)``).
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 38-40 (one weight per centre for each curve).
+    """
+    try:
+        _check_model_tree(tree)
+    except ArtifactError as exc:
+        raise ArtifactError(f"'{source}': {exc}; not a model debist wrote") from None
+
+
+def _check_model_tree(tree: Any) -> None:
+    m = tree.get("model") if isinstance(tree, dict) else None
+    if not isinstance(m, dict):
+        raise ArtifactError("group 'model' missing")
+    attrs = m.get("attrs", {})
+    for key in ("sigma", "n_inputs", "m_q", "T_z", "coulomb_velocity", "q_min", "q_max"):
+        if _shape(attrs, key, "model attribute") != ():
+            raise ArtifactError(f"model attribute {key}: not one number")
+    n = float(np.asarray(attrs["n_inputs"], dtype=float))
+    if not (n >= 1 and n == int(n)):
+        raise ArtifactError(f"model attribute n_inputs: {n:g}, expected a count >= 1")
+    n = int(n)
+    xi = _shape(m, "xi", "model")
+    if len(xi) != 1 or xi[0] < 1:
+        raise ArtifactError(f"model/xi has shape {xi}, expected (M,) with M >= 1")
+    (M,) = xi
+    wanted = {("model", "theta_c"): (M,), ("model", "theta_d"): (M,)}
+    wanted[("model", "theta_g")] = (n, M)
+    if "theta_gh" in m:
+        wanted[("model", "theta_gh")] = (n, M)
+    if m.get("creep") is not None:
+        wanted[("model/creep", "theta_creep")] = (M,)
+    for (where, key), shape in wanted.items():
+        group = m if where == "model" else m["creep"]
+        got = _shape(group, key, where)
+        if got != shape:
+            raise ArtifactError(f"{where}/{key} has shape {got}, expected {shape}")
+    backbone = m.get("backbone")
+    _shape(backbone, "g_0", "model/backbone")
+    for key in ("g_0", "g_h", "s_g", "s_gh"):
+        if key in backbone:
+            got = _shape(backbone, key, "model/backbone")
+            if got not in ((), (1,), (n,)):
+                raise ArtifactError(f"model/backbone/{key} has shape {got}, expected ({n},)")
+    if "s_k" in backbone and len(_shape(backbone, "s_k", "model/backbone")) > 1:
+        raise ArtifactError("model/backbone/s_k: expected one axis")
+    if m.get("slip") is not None:
+        width = _shape(m["slip"], "width", "model/slip")
+        theta = _shape(m["slip"], "theta_slip", "model/slip")
+        if len(width) != 1 or theta != width:
+            raise ArtifactError(
+                f"model/slip/theta_slip has shape {theta}, model/slip/width {width}: "
+                "expected the same (E,)"
+            )
+    if m.get("inertia") is not None:
+        got = _shape(m["inertia"], "theta_inertia", "model/inertia")
+        if len(got) != 1:
+            raise ArtifactError(f"model/inertia/theta_inertia has shape {got}, expected (N,)")
 
 
 @dataclass(frozen=True)
@@ -623,18 +717,31 @@ class RBFModel:
         }
 
     @classmethod
-    def from_tree(cls, tree: dict[str, Any]) -> RBFModel:
+    def from_tree(cls, tree: dict[str, Any], source: str = "model.h5") -> RBFModel:
         """Rebuild a model from :meth:`to_tree` output (or its HDF5 round trip).
+
+        Every array's shape is checked against the centres ``xi`` (M) and ``n_inputs`` first
+        (:func:`check_model_tree`), so a file edited by hand fails here, naming the dataset,
+        not later in a computation.
 
         Parameters
         ----------
         tree : dict
             As returned by :meth:`to_tree` or :func:`debist.core.artifacts.read_h5`.
+        source : str, optional
+            The file it was read from, for the message.
 
         Returns
         -------
         RBFModel
+
+        Raises
+        ------
+        ArtifactError
+            A dataset or attribute missing, not numeric, or of the wrong shape, naming
+            ``source`` and the dataset.
         """
+        check_model_tree(tree, source)
         m = tree["model"]
         a = m["attrs"]
         backbone: dict[str, Any] = dict(m["backbone"]["attrs"])

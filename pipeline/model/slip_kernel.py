@@ -21,6 +21,10 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
+from debist.core.jitcache import prepare_cache
+
+prepare_cache(__file__)  # before the first cache=True: a folder numba can write
+
 __all__ = ["stop_operator"]
 
 

@@ -40,7 +40,10 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
+from debist.core.jitcache import prepare_cache
 from debist.physics import _generated
+
+prepare_cache(__file__)  # before the first cache=True: a folder numba can write
 
 if TYPE_CHECKING:
     from debist.physics.dynamics import FullModel

@@ -20,7 +20,6 @@ application server" (``matplotlib.figure.Figure`` without pyplot).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,9 +27,9 @@ from debist.core.fileformats import png_bytes
 from debist.core.forking import (
     Caught,
     call_recording_warnings,
-    fork_context,
     fork_workers,
     replay_warnings,
+    worker_pool,
 )
 
 __all__ = ["FigureJob", "render_pngs"]
@@ -124,5 +123,5 @@ def render_pngs(jobs: Sequence[FigureJob]) -> list[bytes]:
         return [job.png() for job in jobs]
     import matplotlib.figure  # noqa: F401  (imported once here, inherited by the workers)
 
-    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=fork_context()) as pool:
+    with worker_pool(min(workers, len(jobs))) as pool:
         return [_replay(result) for result in pool.map(_render, jobs)]

@@ -29,10 +29,13 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
+from debist.core.jitcache import prepare_cache
 from debist.physics import _generated
 from debist.physics import compiled as physics_compiled
 from debist.physics.compiled import _L, _cho_solve, _jac_into, _rhs_into, source_stamp
 from debist.rig import gms
+
+prepare_cache(__file__)  # before the first cache=True: a folder numba can write
 
 if TYPE_CHECKING:
     from debist.rig.plant import RigPlant

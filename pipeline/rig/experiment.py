@@ -34,14 +34,14 @@ Masoud & Maas 2025, Sec. 5.1 (rig), Fig. 11a (identification profile).
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from typing import Any
 
 import numpy as np
 
 from debist.core import progress
 from debist.core.errors import WorkflowError
-from debist.core.forking import fork_context, fork_workers
+from debist.core.forking import fork_workers, worker_pool
 from debist.rig.config import ExperimentConfig, RigConfig
 from debist.rig.dspace import Channel, recording
 from debist.rig.profiles import make_profile
@@ -171,7 +171,7 @@ def run_experiments(
             runs[name] = run_experiment(cfg, name)
         progress.report(task, len(names), len(names))
         return runs, (meanwhile() if meanwhile is not None else None)
-    with ProcessPoolExecutor(workers, mp_context=fork_context()) as pool:
+    with worker_pool(workers) as pool:
         futures = {pool.submit(_run_unobserved, cfg, name): name for name in names}
         progress.report(task, 0, len(names))
         if meanwhile is not None:

@@ -45,9 +45,12 @@ import numba as nb
 import numpy as np
 
 from debist.core.forking import usable_cores
+from debist.core.jitcache import prepare_cache
 from debist.model import basis, friction
 from debist.simulate import rk4
 from debist.simulate.batch import mask_batch
+
+prepare_cache(__file__)  # before the first cache=True: a folder numba can write
 
 __all__ = [
     "CHUNK",

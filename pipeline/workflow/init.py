@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from debist.core.arguments import check_path_text, check_regular_file
 from debist.core.errors import RigLogError, WorkflowError
 from debist.core.fileformats import atomic_write
 from debist.core.names import is_file_name
@@ -282,10 +283,14 @@ def _check_out(out: Path, paths: Sequence[Path], force: bool) -> None:
     if any(out.resolve() == p.resolve() for p in paths):
         raise WorkflowError(f"--out '{out}' is one of the rig logs: give another file name")
     if os.path.lexists(out) and not force:
-        raise WorkflowError(
-            f"'{out}' exists: debist init never overwrites a file (choose another --out, "
-            "or pass --force to replace it)"
-        )
+        raise _exists(out)
+
+
+def _exists(out: Path) -> WorkflowError:
+    return WorkflowError(
+        f"'{out}' exists: debist init never overwrites a file (choose another --out, "
+        "or pass --force to replace it)"
+    )
 
 
 def init_workflow(
@@ -316,7 +321,9 @@ def init_workflow(
     Raises
     ------
     WorkflowError
-        No file; ``out`` exists (without ``force``), is a folder or a rig log; a channel
+        No file; a FIFO, socket or device, or a name this locale cannot encode, among the
+        files or as ``out``; ``out`` exists (without ``force``; also when it appeared while
+        init ran: it is never replaced then), is a folder or a rig log; a channel
         that cannot be guessed or is missing (naming file, channels and option); files with
         different numbers of inputs.
     RigLogError
@@ -339,6 +346,10 @@ def init_workflow(
     if not paths:
         raise WorkflowError("debist init: give at least one rig log (the estimation data)")
     out = Path(DEFAULT_OUT if out is None else out)
+    for path in paths:
+        check_regular_file(path, "rig log")
+        check_path_text(path, "rig log")
+    check_path_text(out.absolute(), "--out")
     _check_out(out, paths, force)
     request = request or MappingRequest()
     cache = RawLogCache(read_raw)
@@ -364,5 +375,8 @@ def init_workflow(
     text = render(stem if is_file_name(stem) else "debist", datasets, request.sample_time)
     _verify(text, datasets, out.parent.resolve(), cache)
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, text)
+    try:  # without force, a file that appeared at out meanwhile is kept, never replaced
+        atomic_write(out, text, replace=force)
+    except FileExistsError:
+        raise _exists(out) from None
     return InitResult(out, text, datasets)

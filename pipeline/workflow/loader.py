@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from debist.core.arguments import check_path
+from debist.core.arguments import check_path, check_path_text, check_regular_file
 from debist.core.errors import ArgumentError, WorkflowError
 from debist.core.names import check_file_name
 from debist.workflow import tomltext
@@ -127,6 +127,7 @@ def _resolve(path: Path, what: str) -> Path:
     """Return the absolute path with symbolic links resolved, or say why it cannot be."""
     if "\x00" in str(path):
         raise WorkflowError(f"{what} {str(path)!r} holds a NUL byte: not a path")
+    check_path_text(path, what)  # e.g. 'ü' under LC_ALL=C with PYTHONUTF8=0
     try:
         return path.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop (RuntimeError before 3.13)
@@ -136,6 +137,7 @@ def _resolve(path: Path, what: str) -> Path:
 def _read(path: Path) -> dict[str, Any]:
     """Read and parse the workflow file, one line per way it can fail."""
     where = f"workflow file '{path}'"
+    check_regular_file(path, "workflow file")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -297,12 +299,15 @@ def load_workflow(
     Raises
     ------
     WorkflowError
-        In one line: the file is missing, a directory, not UTF-8, not valid TOML, nested
+        In one line: the file is missing, a directory, a FIFO, socket or device (refused
+        before it is opened), not UTF-8, not valid TOML, nested
         deeper than :data:`debist.workflow.tomltext.MAX_NESTING` or a symlink loop; a
         section or key is unknown or a value invalid
         (:func:`debist.workflow.schema.check_workflow`: ``[section] key: expected ..., got ...``);
         a source file is missing, a directory or a symlink loop; the output folder is a
-        file (or lies inside one) or a symlink loop; ``path`` or ``output_dir`` not a path;
+        file (or lies inside one) or a symlink loop; a path this locale's file-name
+        encoding cannot hold (:func:`debist.core.arguments.check_path_text`); ``path`` or
+        ``output_dir`` not a path;
         an override that is not a TOML key and value (``None``: TOML has no null).
     """
     check_path(path, "workflow")

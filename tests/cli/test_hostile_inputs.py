@@ -3,6 +3,9 @@
 import gzip
 import io
 import json
+import os
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -14,6 +17,7 @@ import debist
 from debist.cli import app
 from debist.core.errors import (
     ArgumentError,
+    ArtifactError,
     OutputDirError,
     PlausibilityWarning,
     RigLogError,
@@ -361,3 +365,136 @@ def test_grid_values_are_validated_once_each(synthetic_wf, monkeypatch):
     wf = debist.load_workflow(synthetic_wf)
     assert len(wf.sections["identify"]["auto"]["M"]) == 900
     assert calls == [{"M": 6}, {"M": 8}, {"M": 10}]
+
+
+# -- hostile environment: FIFOs, locale, symbolic links, edited model --------------------------
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs POSIX FIFOs")
+def test_a_fifo_as_workflow_file_is_refused_before_opening_it(tmp_path):
+    """Opening a FIFO waits for a writer: refused at once in one line, exit 2 (a subprocess
+    with a time limit, so that a regression fails instead of hanging the tests)."""
+    fifo = tmp_path / "wf.toml"
+    os.mkfifo(fifo)
+    done = subprocess.run(
+        [sys.executable, "-m", "debist", "run", str(fifo)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.splitlines()
+    assert str(fifo) in line and "not a regular file" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["wf.toml"]
+
+
+def test_an_output_dir_the_locale_cannot_encode_is_refused_in_one_line(synthetic_wf):
+    """LC_ALL=C without UTF-8 mode: the file system encoding is ASCII and 'ü' cannot be a
+    file name; one line naming the key, the character and the fix, exit 2, nothing made."""
+    text = synthetic_wf.read_text().replace('output_dir = "out"', 'output_dir = "r\u00fcns"')
+    synthetic_wf.write_text(text, encoding="utf-8")
+    before = sorted(p.name for p in synthetic_wf.parent.iterdir())
+    env = {**os.environ, "LC_ALL": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    done = subprocess.run(
+        [sys.executable, "-m", "debist", "run", synthetic_wf.name],
+        cwd=synthetic_wf.parent, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.splitlines()
+    assert "[workflow] output_dir" in line and "(ascii)" in line and "LC_ALL=C.UTF-8" in line
+    assert sorted(p.name for p in synthetic_wf.parent.iterdir()) == before
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_export_never_follows_a_symlinked_export_folder_out_of_the_output_folder(
+    synthetic_copy, tmp_path, force
+):
+    root, _ = synthetic_copy
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "debist_model.py").write_text("# a user's file\n")
+    (root / "out" / "export").symlink_to(elsewhere, target_is_directory=True)
+    code, out = invoke("export", root / "wf.toml", "--format", "python", *(["--force"] * force))
+    assert code == 2, out
+    assert "symbolic link" in out and str(root / "out" / "export") in out
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["debist_model.py"]
+    assert (elsewhere / "debist_model.py").read_text() == "# a user's file\n"
+
+
+def test_export_never_writes_through_a_symlinked_file(synthetic_copy, tmp_path):
+    root, _ = synthetic_copy
+    target = tmp_path / "mine.py"
+    target.write_text("# a user's file\n")
+    (root / "out" / "export").mkdir()
+    (root / "out" / "export" / "debist_model.py").symlink_to(target)
+    code, out = invoke("export", root / "wf.toml", "--format", "python", "--force")
+    assert code == 2, out
+    assert "symbolic link" in out and "debist_model.py" in out
+    assert target.read_text() == "# a user's file\n"
+    assert (root / "out" / "export" / "debist_model.py").is_symlink()
+
+
+@pytest.mark.parametrize(
+    ("dataset", "change", "expected"),
+    [
+        ("model/theta_g", lambda a: np.concatenate([a, a[:, :1]], axis=1), "expected (2, 8)"),
+        ("model/theta_c", lambda a: a[:-1], "expected (8,)"),
+        ("model/xi", lambda a: a.reshape(2, -1), "expected (M,)"),
+        ("model/backbone/g_0", lambda a: np.zeros(3), "expected (2,)"),
+    ],
+)
+def test_an_edited_and_resigned_model_is_refused_on_export_naming_the_dataset(
+    synthetic_copy, dataset, change, expected
+):
+    """model.h5 edited (arrays of another shape) and its manifest re-signed, so the tamper
+    check passes: export says which dataset is wrong in one line, exit 1, writes nothing."""
+    import h5py
+
+    from tests.engine.test_verify_workflow import resign
+
+    root, _ = synthetic_copy
+    path = root / "out" / "identify" / "model.h5"
+    with h5py.File(path, "r+") as f:
+        value = change(f[dataset][...])
+        del f[dataset]
+        f[dataset] = value
+    resign(root / "out", "identify")
+    code, out = invoke("export", root / "wf.toml", "--format", "c")
+    assert code == 1, out
+    assert str(path) in out and dataset in out and expected in out, out
+    assert "Traceback" not in out and not (root / "out" / "export").exists()
+    with pytest.raises(ArtifactError, match=dataset):
+        debist.load_model(path)
+
+
+_IN_CALLBACK = """
+import ctypes, os, signal, sys, time
+import debist.cli as cli
+
+def work():  # stands for the command: numba's compiler calls back into Python via ctypes
+    def callback():
+        os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+        for _ in range(1000):
+            pass
+    try:
+        ctypes.CFUNCTYPE(None)(callback)()
+        time.sleep(60)
+        print("the signal was lost")
+    except KeyboardInterrupt as exc:
+        print("stopped by", getattr(exc, "signum", signal.SIGINT))
+
+cli.app = work
+cli.main()
+"""
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_raised_inside_a_ctypes_callback_is_not_lost(name):
+    """Python cannot propagate an exception out of a ctypes callback: it prints "Exception
+    ignored" and goes on. The command line sends the signal again to the main thread."""
+    import signal
+
+    done = subprocess.run(
+        [sys.executable, "-c", _IN_CALLBACK, name], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["stopped", "by", str(int(getattr(signal, name)))]
+    assert done.stderr == ""

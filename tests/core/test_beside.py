@@ -118,3 +118,103 @@ def test_one_core_keeps_the_block_from_forking():
             assert fork_workers(4) == 1
         assert fork_workers(2) == 1
     assert fork_workers(2) == 2
+
+
+# -- stop signals: one line from the parent, never a child's traceback -------------------------
+
+_SIGNALLED = """
+import os, signal, sys, time
+from debist.cli import _on_sigterm
+from debist.core.beside import BesideRun
+
+signal.signal(signal.SIGTERM, _on_sigterm)  # as the command line installs it
+marker, mode = sys.argv[1], sys.argv[2]
+
+def work():
+    open(marker, "w").close()
+    if mode == "send":  # more than a pipe holds: the child waits in its send
+        return b"x" * 8_000_000
+    time.sleep(60)
+
+run = BesideRun(work, "stage 'compare' (first part)")
+try:
+    time.sleep(60)  # this process is busy with another stage
+except KeyboardInterrupt as exc:
+    run.stop()
+    print("stopped", run._proc.exitcode, file=sys.stderr)
+    sys.exit(getattr(exc, "code", 130))
+"""
+
+
+def _signal_group(tmp_path, script, args, signum):
+    """Start ``script`` in a session of its own, wait for its marker, signal the whole group
+    (as a terminal's Ctrl-C does); return (exit code, stderr, processes left in the group)."""
+    import subprocess
+    import sys
+
+    marker = tmp_path / "started"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script, str(marker), *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        for _ in range(600):
+            if marker.exists() or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        assert marker.exists(), proc.communicate(timeout=60)
+        time.sleep(0.3)  # the child reaches its wait (in fn, or in its send)
+        os.killpg(proc.pid, signum)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    time.sleep(0.2)
+    left = subprocess.run(
+        ["ps", "-o", "pid=", "-g", str(proc.pid)], capture_output=True, text=True
+    ).stdout.split()
+    return proc.returncode, err, left
+
+
+@pytest.mark.parametrize("mode", ["work", "send"])
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_to_the_group_stops_parent_and_child_without_a_childs_traceback(
+    tmp_path, mode, signum, code
+):
+    """Ctrl-C (SIGINT to every process of the group) or SIGTERM while the child computes or
+    waits to send a result larger than a pipe: the parent ends with 128 + signal, the child
+    ends (no process is left) and prints nothing."""
+    returncode, err, left = _signal_group(tmp_path, _SIGNALLED, [mode], signum)
+    assert returncode == code, err
+    assert err.splitlines()[-1].startswith("stopped"), err
+    assert "Traceback" not in err and "Process " not in err, err
+    assert len(err.splitlines()) == 1, err
+    assert left == []
+
+
+_POOL = """
+import sys, time
+from debist.core.forking import worker_pool
+
+marker = sys.argv[1]
+try:
+    with worker_pool(2) as pool:
+        jobs = [pool.submit(time.sleep, 0.5) for _ in range(40)]
+        open(marker, "w").close()
+        done = [job.result() for job in jobs]
+except KeyboardInterrupt:
+    print("cancelled", sum(job.cancelled() for job in jobs), file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+def test_a_ctrl_c_stops_a_worker_pool_quietly_and_cancels_the_jobs_not_started(tmp_path):
+    """The workers ignore the group's SIGINT; the parent cancels what has not started, the
+    running jobs finish, and no worker prints a traceback."""
+    returncode, err, left = _signal_group(tmp_path, _POOL, [], signal.SIGINT)
+    assert returncode == 130, err
+    assert "Traceback" not in err and "Process " not in err, err
+    (line,) = err.splitlines()
+    assert line.startswith("cancelled") and int(line.split()[1]) > 0
+    assert left == []

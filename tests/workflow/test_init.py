@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -212,6 +215,69 @@ def test_init_never_overwrites_a_file_unless_forced(tmp_path):
     with pytest.raises(WorkflowError) as err:  # not even with force
         debist.init_workflow([log], log, force=True)
     assert "rig" in str(err.value) and "logs" in str(err.value)
+
+
+@pytest.mark.parametrize("link", [True, False])
+def test_a_file_created_while_init_runs_is_kept(tmp_path, monkeypatch, link):
+    """The check at the start passes; another program writes --out before init writes it:
+    its file stays byte for byte, init exits 2 naming it, and no temporary file is left.
+    Also where the file system has no hard links (the exclusive create instead)."""
+    from debist.workflow import init as init_module
+
+    log = write_mat(tmp_path / "est.mat")
+    out = tmp_path / "rig.toml"
+    verify = init_module._verify
+
+    def meanwhile(*args, **kwargs):
+        verify(*args, **kwargs)
+        out.write_bytes(b"# written by someone else meanwhile\n")
+
+    monkeypatch.setattr(init_module, "_verify", meanwhile)
+    if not link:
+
+        def no_links(*_args, **_kwargs):
+            raise PermissionError(1, "Operation not permitted")
+
+        monkeypatch.setattr("os.link", no_links)
+    code, text = cli("init", log, "--out", out)
+    assert code == 2, text
+    assert f"'{out}' exists" in " ".join(text.split()) and text.count("\n") == 1
+    assert out.read_bytes() == b"# written by someone else meanwhile\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["est.mat", "rig.toml"]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs POSIX FIFOs")
+def test_init_refuses_a_fifo_before_opening_it(tmp_path):
+    """A FIFO as a rig log would wait forever for a writer: refused at once, one line, exit 2
+    (in a subprocess with a time limit, so that a regression fails instead of hanging)."""
+    fifo = tmp_path / "log.csv"
+    os.mkfifo(fifo)
+    for args in (
+        ["init", str(fifo), "--out", str(tmp_path / "w.toml")],
+        ["init", "--list", str(fifo)],
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "debist", *args], capture_output=True, text=True, timeout=120
+        )
+        assert done.returncode == 2, done.stderr
+        (line,) = done.stderr.splitlines()
+        assert str(fifo) in line and "not a regular file" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.csv"]
+
+
+def test_a_name_the_locale_cannot_encode_is_refused_in_one_line(tmp_path):
+    """Under LC_ALL=C without UTF-8 mode, a non-ASCII file name arrives as undecodable bytes
+    that no UTF-8 workflow can hold: one line saying so and how to fix it, exit 2."""
+    log = write_mat(tmp_path / "m\u00fcller.mat")
+    env = {**os.environ, "LC_ALL": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    done = subprocess.run(
+        [sys.executable, "-m", "debist", "init", log.name, "--out", "w.toml"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.splitlines()
+    assert "rig log" in line and "LC_ALL=C.UTF-8" in line and "\\xc3\\xbc" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == [log.name]
 
 
 def test_the_default_out_is_debist_toml_in_the_working_folder(tmp_path, monkeypatch):
