@@ -173,11 +173,7 @@ def sha256_file(path: str | os.PathLike) -> str:
     FileNotFoundError
         If the file does not exist.
     """
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return sha256_identified(path)[0]
 
 
 #: What changes when a file is written or replaced: ``(st_dev, st_ino, st_size,
