@@ -135,7 +135,7 @@ def test_paper_experiment_on_the_virtual_rig_meets_table_2(paper_experiment):
     raises=AssertionError,
     reason="open in issue 5 (blocked): Eq. 37's g_i(q) v_i^2 is not separable from c(q) q "
     "where the profile only ever applies v_i = 3 kV (transit, beam pushed past the well), and "
-    "the full model's force is not linear in v_i^2; see docs/results/index.md, "
+    "the full model's force is not linear in v_i^2; see docs/results/paper-experiment.md, "
     "'What the identified g_i are'",
 )
 def test_paper_experiment_input_gains_match_the_truth(paper_experiment):
