@@ -572,7 +572,7 @@ def status(
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         states = api.status(wf)
         blocker = api.run_blocker(wf)
-        warning = f"a run would stop: {blocker}" if blocker else ""
+        warning = f"a run would stop: {blocker}" if blocker else (api.missing_output(wf) or "")
     if as_json:
         typer.echo(json.dumps({s.stage: s.to_json() for s in states}, indent=2))
         if warning:

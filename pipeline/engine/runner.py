@@ -437,6 +437,16 @@ class Runner:
             return str(exc)
         return None
 
+    def missing(self) -> str | None:
+        """Say that the output folder does not exist and which run beside it was meant.
+
+        Returns
+        -------
+        str or None
+            See :func:`debist.engine.verification.missing_output`; None when it exists.
+        """
+        return verification.missing_output(self.wf.output_dir, self.wf.overrides, self.stages())
+
     # ---------------------------------------------------------------- status
     def status(self) -> list[StageStatus]:
         """State of every stage: up to date, stale (with the reason) or missing.
