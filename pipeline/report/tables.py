@@ -940,6 +940,11 @@ def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, s
     rigid mass whose effective value at the wells, with the lagged damping's apparent mass, is
     the physical one; the ratio lambda says by how much the fitted curves were scaled up.
 
+    A model identified per unit mass (``m_q = 1``, ``unit == "1"``) has no physical mass: its
+    curves are accelerations of q (forces per the unknown mass), m_q is 1, and with the scale
+    applied m_q is the rigid mass in multiples of the effective mass at the wells (``1 /
+    lambda``), which its rows say in words with the unit ``-``.
+
     Parameters
     ----------
     summary : dict
@@ -950,19 +955,38 @@ def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, s
     Returns
     -------
     list of (label, unit, value, published key)
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (m_q, the mass of the reduced coordinate q).
     """
     info = summary.get("effective_mass")
+    per_mass = unit == "1"
+    if per_mass:
+        plain = (
+            "mass m_q: the unit mass (per-unit-mass model: its forces are accelerations of q, "
+            "per the unknown physical mass)",
+            "-", summary["m_q"], "m_q",
+        )  # fmt: skip
+        rigid = (
+            "rigid mass m_q, in multiples of the effective mass at the wells (per-unit-mass "
+            "model: the curves are per the effective mass, the physical one is unknown)",
+            "-", summary["m_q"], "m_q",
+        )  # fmt: skip
+    else:
+        plain = ("mass m_q", unit, summary["m_q"], "m_q")
+        rigid = ("rigid mass m_q (effective mass at the wells: m_q lambda, the physical one)",
+                 unit, summary["m_q"], "m_q")  # fmt: skip
     if not info:
-        return [("mass m_q", unit, summary["m_q"], "m_q")]
+        return [plain]
     if info.get("applied"):
         return [
-            ("rigid mass m_q (effective mass at the wells: m_q lambda, the physical one)", unit,
-             summary["m_q"], "m_q"),
+            rigid,
             ("effective-mass ratio lambda (the fitted curves divided by it)", "-",
              info["ratio"], None),
         ]  # fmt: skip
     return [
-        ("mass m_q", unit, summary["m_q"], "m_q"),
+        plain,
         (f"effective-mass ratio lambda (not applied: {info.get('reason', '')})", "-",
          info["ratio"], None),
     ]  # fmt: skip

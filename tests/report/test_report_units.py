@@ -66,7 +66,7 @@ def test_identified_model_per_unit_mass_in_accelerations(data):
     assert summary["units"]["per_unit_mass"] is True
     text = _render(identify_table(summary))
     for row in (
-        "mass m_q [1]",
+        "mass m_q: the unit mass (per-unit-mass model: its forces are accelerations of q,",
         "k_1 (a basis term; the stiffness k* is in the equilibria) [1/s^2]",
         "k_3 (a basis term) [1/m^2/s^2]",
         "d_v (a basis term; the damping d(q*) is in the equilibria) [1/s]",
@@ -74,7 +74,7 @@ def test_identified_model_per_unit_mass_in_accelerations(data):
         "forces in m/s^2",
     ):
         assert row in text
-    assert "[N" not in text
+    assert "[N" not in text and "m_q [1]" not in text
 
 
 @pytest.mark.parametrize(
