@@ -45,6 +45,94 @@ _DIMENSIONS = {
 }
 
 
+def display_factors(
+    q_unit: str, report_unit: str | None, per_unit_mass: bool
+) -> tuple[dict[str, float], str]:
+    """Factors that show q and the quantities made of q in the report unit.
+
+    The identify stage records q in its SI unit and forces in N or, per unit mass, as
+    accelerations of q; a table, page or figure multiplies a quantity of dimension ``q``,
+    ``F``, ``F/q``, ``F/q3`` (per q cubed) or ``Fs/q`` by its factor here. Forces in N keep
+    their unit; a per-unit-mass force (q/s^2) scales with q.
+
+    Parameters
+    ----------
+    q_unit : str
+        The SI unit q is recorded in (``"m"``, ``"V"``).
+    report_unit : str or None
+        ``[validate] report_unit``; None: mm for q in m, else q's own unit.
+    per_unit_mass : bool
+        Whether the forces are per unit mass (``m_q = 1``).
+
+    Returns
+    -------
+    factors : dict of str to float
+        Dimension -> factor (``"q"``, ``"F"``, ``"F/q"``, ``"F/q3"``, ``"Fs/q"``).
+    unit : str
+        The report unit as :func:`debist.validate.freerun.report_factor` spells it.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the terms' dimensions).
+
+    Examples
+    --------
+    >>> factors, unit = display_factors("m", None, False)
+    >>> unit, factors["q"], factors["F"], factors["F/q"], factors["Fs/q"]
+    ('mm', 1000.0, 1.0, 0.001, 0.001)
+    >>> display_factors("m", "mm", True)[0]["F"]  # per unit mass: m/s^2 -> mm/s^2
+    1000.0
+    """
+    from debist.validate.freerun import report_factor
+
+    f, shown = report_factor(q_unit, report_unit)
+    force = f if per_unit_mass else 1.0  # a per-unit-mass force is an acceleration of q
+    factors = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
+    return factors, shown
+
+
+def physics_factor(report_unit: str | None) -> tuple[float, str]:
+    """Factor and unit that show the physics model's q [m] in the workflow's report unit.
+
+    The design analysis (Section 3) computes q in m whatever unit the data record q in; a
+    report unit that cannot express a length (q of the data in V, ``report_unit = "mV"``)
+    leaves the physics in mm, :func:`debist.validate.freerun.report_factor`'s default.
+
+    Parameters
+    ----------
+    report_unit : str or None
+        ``[validate] report_unit``; None: mm.
+
+    Returns
+    -------
+    factor : float
+        Multiply q [m] by it.
+    unit : str
+        The unit as :func:`debist.validate.freerun.report_factor` spells it.
+
+    References
+    ----------
+    Masoud & Maas 2025, Section 3 (q, the tip displacement [m]).
+
+    Examples
+    --------
+    >>> physics_factor(None), physics_factor("um"), physics_factor("mV")
+    ((1000.0, 'mm'), (1000000.0, 'µm'), (1000.0, 'mm'))
+    """
+    from debist.core.errors import WorkflowError
+    from debist.validate.freerun import report_factor
+
+    try:
+        return report_factor("m", report_unit)
+    except WorkflowError:  # the data's q is not a length: the physics keeps mm
+        return report_factor("m", None)
+
+
 def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> dict[str, Any]:
     """Return the identify summary with q and every quantity made of q in the report unit.
 
@@ -106,8 +194,7 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
     if shown == given.get("q", "m") and ("q_si" in given or (said == shown and f == 1.0)):
         return summary  # shown in the report unit already
     per_mass = given.get("per_unit_mass", summary.get("m_q") == 1.0)
-    force = f if per_mass else 1.0  # a per-unit-mass force is an acceleration of q
-    by_dim = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
+    by_dim, _ = display_factors(q_si, report_unit, per_mass)
     out = copy.deepcopy(summary)
     out["units"] = {**given, "q": shown, "q_si": q_si}
 
@@ -860,13 +947,16 @@ def published_table(
     return table
 
 
-def analyze_table(summary: dict[str, Any]) -> Table:
+def analyze_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
     """Tabulate the design analysis: equilibria, bifurcation points, full vs reduced model.
 
     Parameters
     ----------
     summary : dict
-        Summary of the analyze stage's manifest (lengths in [m], reported in [mm]).
+        Summary of the analyze stage's manifest (lengths in [m]).
+    report_unit : str, optional
+        ``[validate] report_unit``: the equilibria q are shown in it (:func:`physics_factor`;
+        default mm); the design lengths b and z_b stay in mm, as Fig. 3 draws them.
 
     Returns
     -------
@@ -876,22 +966,29 @@ def analyze_table(summary: dict[str, Any]) -> Table:
     ----------
     Masoud & Maas 2025, Section 3.3, Fig. 3, 4, 7.
     """
+    f, unit = physics_factor(report_unit)
     table = Table(title=f"Design analysis at b = {1e3 * summary['b']:.2f} mm (Section 3)")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     for state, points in summary["operating_points"].items():
         cells = [
-            f"{round(1e3 * p['q'], 3) + 0.0:+.3f}" + ("" if p["stable"] else " (unstable)")
+            f"{_point(f * p['q'], f * 1e-3)}" + ("" if p["stable"] else " (unstable)")
             for p in points
         ]
         v1, v2 = state.removeprefix("v1_").removesuffix("kV").split("kV_v2_")
-        label = escape(f"equilibria q [mm], (v1, v2) ({v1}, {v2}) kV")
+        label = escape(f"equilibria q [{unit}], (v1, v2) ({v1}, {v2}) kV")
         table.add_row(label, ", ".join(cells) or "none")
     table.add_row(escape("pitchfork z_b,min [mm]"), _fmt(1e3 * summary["z_b_min"]))
     table.add_row(escape("switching limit z_b,max [mm]"), _fmt(1e3 * summary["z_b_max"]))
     table.add_row("full vs reduced NRMSE(q), Fig. 7", f"{100 * summary['nrmse_q']:.2f} %")
     table.add_row("full vs reduced NRMSE(phi), Fig. 7", f"{100 * summary['nrmse_phi']:.2f} %")
     return table
+
+
+def _point(value: float, mm: float) -> str:
+    """Write a position to a micrometre (``mm``: one millimetre in the shown unit), signed."""
+    decimals = max(0, 3 - math.floor(math.log10(mm))) if mm > 0 else 3
+    return f"{round(value, decimals) + 0.0:+.{decimals}f}"
 
 
 def rig_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
