@@ -231,7 +231,8 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
             if row.get(key) is not None:
                 row[key] = scale(row[key], by_dim[dim])
     if design.get("reason"):
-        design["reason"] = _reworded(design["reason"], f, shown)
+        damping = (by_dim["Fs/q"], summary_units(out)["damping"])
+        design["reason"] = _reworded(design["reason"], f, shown, damping)
     excitation = out.get("excitation") or {}
     if excitation.get("warnings") and said != shown:
         excitation["warnings"] = [
@@ -241,6 +242,15 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
 
 
 _NUMBER = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+
+
+def _sig(x: float) -> str:
+    """Four significant digits, without an exponent from 1e-4 to 1e7 (``12350``, ``0.0178``)."""
+    if x == 0 or not math.isfinite(x) or not 1e-4 <= abs(x) < 1e7:
+        return f"{x:.4g}"
+    decimals = 3 - math.floor(math.log10(abs(x)))
+    text = f"{round(x, decimals):.{max(decimals, 0)}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
 
 def _rescaled(text: str, factor: float, old: str, new: str) -> str:
@@ -255,7 +265,7 @@ def _rescaled(text: str, factor: float, old: str, new: str) -> str:
     def run(m: re.Match) -> str:
         spans = re.sub(
             pair,
-            lambda p: f"[{float(p.group(1)) * factor:.4g}, {float(p.group(2)) * factor:.4g}]",
+            lambda p: f"[{_sig(float(p.group(1)) * factor)}, {_sig(float(p.group(2)) * factor)}]",
             m.group(1),
         )
         return f"{spans} {new}"
@@ -263,22 +273,30 @@ def _rescaled(text: str, factor: float, old: str, new: str) -> str:
     text = re.sub(rf"((?:{pair})(?: and {pair})*) {unit}(?![\w/^])", run, text)
     return re.sub(
         rf"sigma = {_NUMBER} {unit}(?![\w/^])",
-        lambda m: f"sigma = {float(m.group(1)) * factor:.4g} {new}",
+        lambda m: f"sigma = {_sig(float(m.group(1)) * factor)} {new}",
         text,
     )
 
 
-def _reworded(reason: str, factor: float, unit: str) -> str:
-    """Write the stability verdict's positions (``in [a, b]``, ``at q = x``) in the report unit."""
+def _reworded(reason: str, factor: float, unit: str, damping: tuple[float, str] = (1.0, "")) -> str:
+    """Write the stability verdict's positions (``in [a, b]``, ``at q = x``) in the report unit.
+
+    A negative damping it names (``d = x``, recorded per length of q in SI and without a
+    unit) is multiplied by ``damping[0]`` and given the unit ``damping[1]``.
+    """
 
     def span(m: re.Match) -> str:
         lo, hi = float(m.group(1)) * factor, float(m.group(2)) * factor
-        return f"[{lo:.4g}, {hi:.4g}] {unit}"
+        return f"[{_sig(lo)}, {_sig(hi)}] {unit}"
 
     def point(m: re.Match) -> str:
-        return f"at q = {float(m.group(1)) * factor:.4g} {unit}"
+        return f"at q = {_sig(float(m.group(1)) * factor)} {unit}"
+
+    def damped(m: re.Match) -> str:
+        return f"damping d = {float(m.group(1)) * damping[0]:.4g} {damping[1]}".rstrip()
 
     reason = re.sub(rf"\[{_NUMBER}, {_NUMBER}\]", span, reason)
+    reason = re.sub(rf"damping d = {_NUMBER}", damped, reason)
     return re.sub(rf"at q = {_NUMBER}", point, reason)
 
 
@@ -859,7 +877,7 @@ def identified_text(name: str, spans: list, summary: dict[str, Any]) -> str:
     '[0.1, 0.2]'
     """
     if spans:
-        return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans)
+        return ", ".join(f"[{_sig(a)}, {_sig(b)}]" for a, b in spans)
     bands = summary.get("bands") or {}
     kind = "g" if name[:1] == "g" and name[1:].isdigit() else name
     err, tol = (bands.get("model_error") or {}).get(kind), bands.get("tolerance")

@@ -1,5 +1,7 @@
 """Every printed table and plot shows units, derived from the data and the model form."""
 
+import re
+
 import numpy as np
 import pytest
 from rich.console import Console
@@ -287,7 +289,10 @@ def test_the_display_shows_q_and_stiffness_per_length_in_the_report_unit(
     assert f"{k_1:.4g}" in text
     assert f"identified on q [{shown}] in" in text
     lo, hi = summary["q_data_range"]
-    assert f"in [{f * lo:.4g}, {f * hi:.4g}] {shown}" in shown_summary["design"]["reason"]
+    reason = shown_summary["design"]["reason"]  # four digits, no exponent: [-15920, 15820] µm
+    lo_text, hi_text = re.search(rf"in \[(\S+), (\S+)\] {shown}", reason).groups()
+    assert "e" not in lo_text + hi_text, reason
+    assert [float(lo_text), float(hi_text)] == pytest.approx([f * lo, f * hi], rel=1e-3)
     assert summary["units"]["q"] == "m"  # the stage's summary is left as it was
 
 
