@@ -572,7 +572,7 @@ def status(
         wf = api.load_workflow(workflow, sets or None, output_dir=out)
         states = api.status(wf)
         blocker = api.run_blocker(wf)
-        warning = f"a run would stop: {blocker}" if blocker else (api.missing_output(wf) or "")
+        warning = f"a run would stop: {blocker}" if blocker else ""
     if as_json:
         typer.echo(json.dumps({s.stage: s.to_json() for s in states}, indent=2))
         if warning:
@@ -584,6 +584,7 @@ def status(
             f"{s.stage:14s} [{color}]{s.state}[/{color}]"
             + (f"  ({escape(s.reason)})" if s.reason else "")
         )
+    warning = warning or api.missing_output(wf)  # the --set run meant, as diff and verify say
     if warning:
         console.print(f"[yellow]{escape(warning)}[/yellow]")
 
