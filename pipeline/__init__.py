@@ -41,6 +41,7 @@ __all__ = [
     "list_channels",
     "load_model",
     "load_workflow",
+    "missing_output",
     "open_run",
     "run",
     "run_batch",

@@ -74,6 +74,7 @@ __all__ = [
     "list_channels",
     "load_model",
     "load_workflow",
+    "missing_output",
     "open_run",
     "run",
     "run_batch",
@@ -304,6 +305,37 @@ def workflow_stages(
     from debist.engine.runner import Runner
 
     return tuple(Runner(_workflow(workflow, overrides, output_dir)).stages())
+
+
+def missing_output(
+    workflow: PathLike | Workflow,
+    *,
+    overrides: Mapping[str, Any] | Sequence[str] | None = None,
+    output_dir: PathLike | None = None,
+) -> str | None:
+    """Say that a workflow's output folder does not exist, naming the run it may mean.
+
+    Parameters
+    ----------
+    workflow : path-like or Workflow
+        As for :func:`run`.
+    overrides, output_dir : optional
+        As for :func:`run`.
+
+    Returns
+    -------
+    str or None
+        One line naming the folder and, if there is one, the ``--set`` run beside it
+        (:func:`debist.engine.verification.missing_output`); None when the folder exists.
+
+    Raises
+    ------
+    WorkflowError
+        A bad workflow or override.
+    """
+    from debist.engine.runner import Runner
+
+    return Runner(_workflow(workflow, overrides, output_dir)).missing()
 
 
 def run_blocker(

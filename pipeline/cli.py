@@ -584,6 +584,7 @@ def status(
             f"{s.stage:14s} [{color}]{s.state}[/{color}]"
             + (f"  ({escape(s.reason)})" if s.reason else "")
         )
+    warning = warning or api.missing_output(wf)  # the --set run meant, as diff and verify say
     if warning:
         console.print(f"[yellow]{escape(warning)}[/yellow]")
 

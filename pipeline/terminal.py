@@ -378,7 +378,7 @@ def print_summary(wf, manifests, ran: set[str]) -> None:
     if "rig" in manifests:
         console.print(report.rig_table(manifests["rig"].summary, unit))
     if "analyze" in manifests:
-        console.print(report.analyze_table(manifests["analyze"].summary))
+        console.print(report.analyze_table(manifests["analyze"].summary, unit))
     if "identify" in manifests:
         identify = report.display_summary(manifests["identify"].summary, unit)
         console.print(report.identify_table(identify))

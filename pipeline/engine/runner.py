@@ -170,14 +170,19 @@ def stage_config(wf: Workflow, stage: str) -> dict[str, Any]:
     if stage == "study":
         names = ("study", "identify", "validate", "differentiate")
         return {name: wf.section(name) for name in names}
+    # the unit the identify and analyze stages draw q in (their figures), when one is stated
+    shown = wf.section("validate").get("report_unit")
+    shown = {"report_unit": shown} if shown is not None else {}
     if stage == "analyze":
-        return {"physics": physics_params(wf).to_dict(), "analyze": wf.section("analyze")}
+        return {"physics": physics_params(wf).to_dict(), "analyze": wf.section("analyze"), **shown}
     physics = {"physics": physics_params(wf).to_dict()} if "physics" in wf.sections else {}
     if stage == "compare":
         sindy = wf.section("compare")
         sindy.setdefault("input_map", wf.section("identify").get("input_map", "v2"))
         return {"sindy": sindy, "validate": wf.section("validate"), **physics}
-    if stage in ("identify", "validate") and physics:
+    if stage == "identify":
+        return {**wf.section(stage), **physics, **shown}
+    if stage == "validate" and physics:
         return {**wf.section(stage), **physics}
     return wf.section(stage)
 
@@ -436,6 +441,16 @@ class Runner:
         except DebistError as exc:
             return str(exc)
         return None
+
+    def missing(self) -> str | None:
+        """Say that the output folder does not exist and which run beside it was meant.
+
+        Returns
+        -------
+        str or None
+            See :func:`debist.engine.verification.missing_output`; None when it exists.
+        """
+        return verification.missing_output(self.wf.output_dir, self.wf.overrides, self.stages())
 
     # ---------------------------------------------------------------- status
     def status(self) -> list[StageStatus]:

@@ -20,10 +20,55 @@ from debist.core import artifacts
 from debist.core.errors import ArtifactError, RunLockedError
 from debist.core.fileformats import write_output
 from debist.engine import outdir
+from debist.engine.rundiff import set_run_beside
 from debist.stages import registry
 from debist.workflow.overrides import override_folder
 
-__all__ = ["verify_run", "version_notes"]
+__all__ = ["missing_output", "verify_run", "version_notes"]
+
+
+def missing_output(
+    output_dir: str | Path, overrides: dict[str, Any], stages: list[str] | tuple[str, ...]
+) -> str | None:
+    """Say that a workflow's output folder does not exist, naming the run it may mean.
+
+    With ``--set`` overrides, the folder a run with exactly those settings and no ``--out``
+    wrote beside it (:func:`debist.workflow.overrides.override_folder`); without them, the
+    newest ``<folder>.set-<8 hex>`` run beside it (:func:`debist.engine.rundiff.set_run_beside`),
+    as ``diff`` suggests.
+
+    Parameters
+    ----------
+    output_dir : path-like
+        The run's output folder (``--out`` or ``[workflow] output_dir``).
+    overrides : dict
+        The run's ``--set`` overrides (nested tables; empty for none).
+    stages : sequence of str
+        The workflow's stages: a folder counts as its run when one of them has a manifest.
+
+    Returns
+    -------
+    str or None
+        One line (``output folder '...' does not exist (the workflow was never run
+        there)`` and the hint, if any), or None when the folder exists.
+
+    Examples
+    --------
+    >>> missing_output("/nonexistent/runs/rig", {}, ["rig"])
+    "output folder '/nonexistent/runs/rig' does not exist (the workflow was never run there)"
+    """
+    out = Path(output_dir)
+    if out.is_dir():
+        return None
+    exact = override_folder(out, overrides)
+    if exact != out:
+        ran = any((exact / s / artifacts.MANIFEST).is_file() for s in stages)
+        hint = f"; the run with these --set settings beside it is '{exact}' (pass that --out)"
+        hint = hint if ran else ""
+    else:
+        near = set_run_beside(out)
+        hint = f"; did you mean '{near}' (a run with --set overrides)?" if near else ""
+    return f"output folder '{out}' does not exist (the workflow was never run there){hint}"
 
 
 def _changed_keys(config: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
@@ -65,14 +110,9 @@ def verify_run(runner: Any, digest: str | None = None) -> list[str]:
     """
     out = runner.wf.output_dir
     mine = runner.stages()
-    if not out.is_dir():
-        beside = override_folder(out, runner.wf.overrides)
-        hint = (
-            f"; the run with these --set settings beside it is '{beside}' (pass that --out)"
-            if beside != out and any((beside / s / artifacts.MANIFEST).is_file() for s in mine)
-            else ""
-        )
-        return [f"output folder '{out}' does not exist (the workflow was never run there){hint}"]
+    missing = missing_output(out, runner.wf.overrides, mine)
+    if missing is not None:
+        return [missing]
     if outdir.is_locked(out):
         raise RunLockedError(
             f"output folder '{out}' is being written by {outdir.lock_holder(out)}: "

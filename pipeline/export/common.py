@@ -189,6 +189,24 @@ def _percent(x: float | None) -> str:
     return f"{100.0 * x:.4g} %"
 
 
+def _also(scheme: Scheme, values: list[tuple[float, ...]], bracket: bool = True) -> str:
+    """Return `` ([a, b], ... unit)``: q values given again in the report unit, or ``""``.
+
+    ``values`` are tuples of q values [unit of q]; each is written ``[a, b]`` (or a lone
+    number with ``bracket`` False), six significant digits, in ``scheme.shown()``'s unit.
+    """
+    shown = scheme.shown()
+    if shown is None or not values:
+        return ""
+    factor, unit = shown
+
+    def one(group: tuple[float, ...]) -> str:
+        text = ", ".join(f"{factor * float(x):.6g}" for x in group)
+        return f"[{text}]" if bracket else text
+
+    return f" ({', '.join(one(g) for g in values)} {unit})"
+
+
 def _scheme_lines(scheme: Scheme, u: str, entries: tuple[str, str], slips: bool) -> list[str]:
     """Return the header lines on the scheme and what it scores on the run's records."""
     ns = scheme.substeps
@@ -210,7 +228,8 @@ def _scheme_lines(scheme: Scheme, u: str, entries: tuple[str, str], slips: bool)
         f"  {free} (a whole record): the inputs interpolated",
         *how,
         "  from the given initial state x0; stops where a state is not finite or",
-        f"  |q| > {scheme.q_limit!r} {u} (the rest NaN): it reproduces validate's free run.",
+        f"  |q| > {scheme.q_limit!r} {u}{_also(scheme, [(scheme.q_limit,)], False)} (the rest"
+        " NaN): it reproduces validate's free run.",
         f"  {step} (one sample, causal): the same ns sub-steps, the inputs linear",
         "  between v0 (at t) and v1 (at t + dt)"
         + (
@@ -310,7 +329,7 @@ def _describe(
             "  Maxwell-slip deflections (Al-Bender, Lampaert & Swevers 2005):",
             "  delta_e' = q_dot, 0 while |delta_e| >= Delta_e and q_dot delta_e > 0;",
             "  after every RK4 sub-step delta_e is clipped to [-Delta_e, Delta_e];",
-            f"  Delta_e = [{widths}] {u}",
+            f"  Delta_e = [{widths}] {u}{_also(scheme, [tuple(arr['slip_width'])])}",
         ]
     at_rest = ["z = q_dot (the filter at rest)"] if lag else []
     at_rest += ["w = 0, delta = 0 (at rest)"] if extra else []
@@ -319,7 +338,8 @@ def _describe(
         f"Inputs v [V] (n = {arr['n_inputs']}); mapped inputs h [V^2 or V].",
         f"Units: q [{u}], q_dot [{u}/s], t and dt [s], v [V];",
         f"  {units['u_says']}.",
-        f"Valid q range (estimation data): [{lo!r}, {hi!r}] {u}; outside it the",
+        f"Valid q range (estimation data): [{lo!r}, {hi!r}] {u}{_also(scheme, [(lo, hi)])};"
+        " outside it the",
         "  Gaussian bases are held at the range's edge and the tables at their ends."
         if arr["clipped"]
         else "  Gaussian bases decay (not clipped) and the tables hold their end values.",
@@ -327,8 +347,11 @@ def _describe(
     if info.identified:
         for name in names:
             if name in info.identified:
-                spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in info.identified[name])
-                lines.append(f"Curve {name} identified on q in: {spans or 'none'} {u}")
+                found = info.identified[name]
+                spans = ", ".join(f"[{a!r}, {b!r}]" for a, b in found)
+                also = _also(scheme, [tuple(x) for x in found])
+                lines.append(f"Curve {name} identified on q in: {spans} {u}{also}" if spans
+                             else f"Curve {name} identified on q in: none")  # fmt: skip
     if np.isfinite(arr["max_step"]):
         lines.append(
             f"RK4 is stable for h = dt / ns <= {arr['max_step']!r} s (1.5 T_z, 1.5 / lambda)."

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from debist.core.errors import WorkflowError
 from debist.simulate.freerun import bandlimited_phases, simulate, substeps_needed
 from debist.validate.config import ValidateConfig
 from debist.validate.freerun import (
@@ -30,6 +31,7 @@ from debist.validate.freerun import (
     by_sample_time,
     default_q_limit,
     initial_states,
+    report_factor,
     score_free_runs,
 )
 
@@ -92,6 +94,9 @@ class Scheme:
         and its NRMSE scores the samples after them (0: the first sample, all scored).
     records : tuple of RecordScore
         The scores on the run's records (empty without a run).
+    report_unit : str or None
+        ``[validate] report_unit``: the header gives what it says about q in it too
+        (:func:`debist.validate.freerun.report_factor`; None: mm for q in m).
     """
 
     substeps: int
@@ -101,6 +106,31 @@ class Scheme:
     dt: float | None = None
     init_samples: int = 0
     records: tuple[RecordScore, ...] = ()
+    report_unit: str | None = None
+
+    def shown(self) -> tuple[float, str] | None:
+        """Return the factor and ASCII name of the report unit, None when it is q's own.
+
+        Returns
+        -------
+        tuple of (float, str) or None
+            Multiply a value in ``q_unit`` by the factor for the report unit (``"um"`` for
+            µm: the headers are ASCII); None when the report unit is ``q_unit``, cannot
+            express q or has no ASCII name.
+
+        Examples
+        --------
+        >>> Scheme(2, "linear", 0.03).shown(), Scheme(2, "linear", 0.03, report_unit="um").shown()
+        ((1000.0, 'mm'), (1000000.0, 'um'))
+        >>> Scheme(2, "linear", 0.03, report_unit="m").shown() is None
+        True
+        """
+        try:
+            factor, unit = report_factor(self.q_unit, self.report_unit)
+        except WorkflowError:  # validate refuses such a unit; the header keeps q's own
+            return None
+        unit = unit.replace("\u00b5", "u")
+        return None if unit == self.q_unit or not unit.isascii() else (factor, unit)
 
     def taps(self) -> np.ndarray:
         """Return the polyphase FIR taps of the band-limited interpolation onto half sub-steps.
@@ -136,6 +166,7 @@ def default_scheme(model, cfg: ValidateConfig | None = None) -> Scheme:
         cfg.input_interpolation,
         float(q_limit),
         init_samples=int(cfg.init_samples),
+        report_unit=cfg.report_unit,
     )
 
 
@@ -211,4 +242,5 @@ def run_scheme(
         dt=float(min(groups)) if len(groups) == 1 else None,
         init_samples=base.init_samples,
         records=tuple(records),
+        report_unit=base.report_unit,
     )

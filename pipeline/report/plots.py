@@ -7,7 +7,7 @@ from typing import Any
 import lazy_loader as lazy
 import numpy as np
 
-from debist.report.tables import de_inputs
+from debist.report.tables import de_inputs, display_factors, display_summary, summary_units
 
 # the libraries below load on first use (lazy_loader): start-up of the CLI
 pd = lazy.load("pandas")
@@ -16,8 +16,8 @@ pd = lazy.load("pandas")
 def curves_figure(
     curves: pd.DataFrame,
     analytical: pd.DataFrame | None = None,
-    unit: str = "m",
-    units: dict[str, Any] | None = None,
+    summary: dict[str, Any] | None = None,
+    report_unit: str | None = None,
 ) -> Any:
     """Draw the identified curves with their bootstrap bands, as Fig. 14 of the paper.
 
@@ -36,18 +36,27 @@ def curves_figure(
     analytical : pandas.DataFrame, optional
         The analytical model's curves on a grid in the same units (``q``, ``restoring``,
         ``d``, ``g1..gN``), drawn dashed beside the identified ones.
-    unit : str, optional
-        Unit of q for the axis labels.
-    units : dict, optional
-        Units of the identified quantities (:func:`debist.report.tables.summary_units`:
-        ``force``, ``d_v``, ``g_0``) for the y labels; None: no y units.
+    summary : dict, optional
+        The identify stage's summary (its ``units``: q's SI unit, the inputs, whether the
+        curves are per unit mass): the y labels are those of
+        :func:`debist.report.tables.summary_units` in the report unit; None: q in m, forces
+        in N, no y units.
+    report_unit : str, optional
+        ``[validate] report_unit``: q on the x axis and the curves (per unit mass: in
+        q/s^2; damping per length of q) are drawn in it,
+        :func:`debist.report.tables.display_factors`; None: mm for q in m, else q's unit.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Three axes: restoring force ``c(q) q + F_0``, damping ``d(q)`` and
+        Three axes over q [report unit]: restoring force ``c(q) q + F_0``, damping ``d(q)`` and
         ``dC_i/dq = 2 g_i(q)`` for DE voltage inputs with ``h = v^2``
         (:func:`debist.report.tables.de_inputs`), else ``g_i(q)`` in its own unit.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q.
 
     References
     ----------
@@ -57,7 +66,11 @@ def curves_figure(
 
     fig = Figure(figsize=(10.5, 8), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    q_scale, unit = (1e3, "mm") if unit == "m" else (1.0, unit)  # q in mm, as the report
+    units = summary_units(display_summary(summary, report_unit)) if summary else None
+    given = (summary or {}).get("units") or {}
+    per_mass = units is not None and units["mass"] == "1"
+    by_dim, unit = display_factors(given.get("q", "m"), report_unit, per_mass)  # as the tables
+    q_scale = by_dim["q"]
     q = q_scale * curves["q"].to_numpy()
     if analytical is not None:
         analytical = analytical.assign(q=q_scale * analytical["q"].to_numpy())
@@ -67,12 +80,13 @@ def curves_figure(
 
     de = units is None or de_inputs(units)
     gain = 2.0 if de else 1.0
+    force = by_dim["F"]
     panels = [
-        (axes[0], [("restoring", 1.0, "tab:blue")], "restoring force c(q) q + F_0"),
-        (axes[1], [("d", 1.0, "tab:green")], "damping d(q)"),
+        (axes[0], [("restoring", force, "tab:blue")], "restoring force c(q) q + F_0"),
+        (axes[1], [("d", by_dim["Fs/q"], "tab:green")], "damping d(q)"),
         (
             axes[2],
-            [(g, gain, c) for g, c in zip(inputs, ("tab:red", "tab:purple"), strict=False)],
+            [(g, gain * force, c) for g, c in zip(inputs, ("tab:red", "tab:purple"), strict=False)],
             "dC_i/dq = 2 g_i(q)" if de else "input gain g_i(q) of h(u_i)",
         ),
     ]

@@ -45,6 +45,94 @@ _DIMENSIONS = {
 }
 
 
+def display_factors(
+    q_unit: str, report_unit: str | None, per_unit_mass: bool
+) -> tuple[dict[str, float], str]:
+    """Factors that show q and the quantities made of q in the report unit.
+
+    The identify stage records q in its SI unit and forces in N or, per unit mass, as
+    accelerations of q; a table, page or figure multiplies a quantity of dimension ``q``,
+    ``F``, ``F/q``, ``F/q3`` (per q cubed) or ``Fs/q`` by its factor here. Forces in N keep
+    their unit; a per-unit-mass force (q/s^2) scales with q.
+
+    Parameters
+    ----------
+    q_unit : str
+        The SI unit q is recorded in (``"m"``, ``"V"``).
+    report_unit : str or None
+        ``[validate] report_unit``; None: mm for q in m, else q's own unit.
+    per_unit_mass : bool
+        Whether the forces are per unit mass (``m_q = 1``).
+
+    Returns
+    -------
+    factors : dict of str to float
+        Dimension -> factor (``"q"``, ``"F"``, ``"F/q"``, ``"F/q3"``, ``"Fs/q"``).
+    unit : str
+        The report unit as :func:`debist.validate.freerun.report_factor` spells it.
+
+    Raises
+    ------
+    WorkflowError
+        If ``report_unit`` cannot express q.
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (the terms' dimensions).
+
+    Examples
+    --------
+    >>> factors, unit = display_factors("m", None, False)
+    >>> unit, factors["q"], factors["F"], factors["F/q"], factors["Fs/q"]
+    ('mm', 1000.0, 1.0, 0.001, 0.001)
+    >>> display_factors("m", "mm", True)[0]["F"]  # per unit mass: m/s^2 -> mm/s^2
+    1000.0
+    """
+    from debist.validate.freerun import report_factor
+
+    f, shown = report_factor(q_unit, report_unit)
+    force = f if per_unit_mass else 1.0  # a per-unit-mass force is an acceleration of q
+    factors = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
+    return factors, shown
+
+
+def physics_factor(report_unit: str | None) -> tuple[float, str]:
+    """Factor and unit that show the physics model's q [m] in the workflow's report unit.
+
+    The design analysis (Section 3) computes q in m whatever unit the data record q in; a
+    report unit that cannot express a length (q of the data in V, ``report_unit = "mV"``)
+    leaves the physics in mm, :func:`debist.validate.freerun.report_factor`'s default.
+
+    Parameters
+    ----------
+    report_unit : str or None
+        ``[validate] report_unit``; None: mm.
+
+    Returns
+    -------
+    factor : float
+        Multiply q [m] by it.
+    unit : str
+        The unit as :func:`debist.validate.freerun.report_factor` spells it.
+
+    References
+    ----------
+    Masoud & Maas 2025, Section 3 (q, the tip displacement [m]).
+
+    Examples
+    --------
+    >>> physics_factor(None), physics_factor("um"), physics_factor("mV")
+    ((1000.0, 'mm'), (1000000.0, 'µm'), (1000.0, 'mm'))
+    """
+    from debist.core.errors import WorkflowError
+    from debist.validate.freerun import report_factor
+
+    try:
+        return report_factor("m", report_unit)
+    except WorkflowError:  # the data's q is not a length: the physics keeps mm
+        return report_factor("m", None)
+
+
 def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> dict[str, Any]:
     """Return the identify summary with q and every quantity made of q in the report unit.
 
@@ -106,8 +194,7 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
     if shown == given.get("q", "m") and ("q_si" in given or (said == shown and f == 1.0)):
         return summary  # shown in the report unit already
     per_mass = given.get("per_unit_mass", summary.get("m_q") == 1.0)
-    force = f if per_mass else 1.0  # a per-unit-mass force is an acceleration of q
-    by_dim = {"q": f, "F": force, "F/q": force / f, "F/q3": force / f**3, "Fs/q": force / f}
+    by_dim, _ = display_factors(q_si, report_unit, per_mass)
     out = copy.deepcopy(summary)
     out["units"] = {**given, "q": shown, "q_si": q_si}
 
@@ -144,7 +231,8 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
             if row.get(key) is not None:
                 row[key] = scale(row[key], by_dim[dim])
     if design.get("reason"):
-        design["reason"] = _reworded(design["reason"], f, shown)
+        damping = (by_dim["Fs/q"], summary_units(out)["damping"])
+        design["reason"] = _reworded(design["reason"], f, shown, damping)
     excitation = out.get("excitation") or {}
     if excitation.get("warnings") and said != shown:
         excitation["warnings"] = [
@@ -154,6 +242,15 @@ def display_summary(summary: dict[str, Any], report_unit: str | None = None) -> 
 
 
 _NUMBER = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+
+
+def _sig(x: float) -> str:
+    """Four significant digits, without an exponent from 1e-4 to 1e7 (``12350``, ``0.0178``)."""
+    if x == 0 or not math.isfinite(x) or not 1e-4 <= abs(x) < 1e7:
+        return f"{x:.4g}"
+    decimals = 3 - math.floor(math.log10(abs(x)))
+    text = f"{round(x, decimals):.{max(decimals, 0)}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
 
 def _rescaled(text: str, factor: float, old: str, new: str) -> str:
@@ -168,7 +265,7 @@ def _rescaled(text: str, factor: float, old: str, new: str) -> str:
     def run(m: re.Match) -> str:
         spans = re.sub(
             pair,
-            lambda p: f"[{float(p.group(1)) * factor:.4g}, {float(p.group(2)) * factor:.4g}]",
+            lambda p: f"[{_sig(float(p.group(1)) * factor)}, {_sig(float(p.group(2)) * factor)}]",
             m.group(1),
         )
         return f"{spans} {new}"
@@ -176,22 +273,30 @@ def _rescaled(text: str, factor: float, old: str, new: str) -> str:
     text = re.sub(rf"((?:{pair})(?: and {pair})*) {unit}(?![\w/^])", run, text)
     return re.sub(
         rf"sigma = {_NUMBER} {unit}(?![\w/^])",
-        lambda m: f"sigma = {float(m.group(1)) * factor:.4g} {new}",
+        lambda m: f"sigma = {_sig(float(m.group(1)) * factor)} {new}",
         text,
     )
 
 
-def _reworded(reason: str, factor: float, unit: str) -> str:
-    """Write the stability verdict's positions (``in [a, b]``, ``at q = x``) in the report unit."""
+def _reworded(reason: str, factor: float, unit: str, damping: tuple[float, str] = (1.0, "")) -> str:
+    """Write the stability verdict's positions (``in [a, b]``, ``at q = x``) in the report unit.
+
+    A negative damping it names (``d = x``, recorded per length of q in SI and without a
+    unit) is multiplied by ``damping[0]`` and given the unit ``damping[1]``.
+    """
 
     def span(m: re.Match) -> str:
         lo, hi = float(m.group(1)) * factor, float(m.group(2)) * factor
-        return f"[{lo:.4g}, {hi:.4g}] {unit}"
+        return f"[{_sig(lo)}, {_sig(hi)}] {unit}"
 
     def point(m: re.Match) -> str:
-        return f"at q = {float(m.group(1)) * factor:.4g} {unit}"
+        return f"at q = {_sig(float(m.group(1)) * factor)} {unit}"
+
+    def damped(m: re.Match) -> str:
+        return f"damping d = {float(m.group(1)) * damping[0]:.4g} {damping[1]}".rstrip()
 
     reason = re.sub(rf"\[{_NUMBER}, {_NUMBER}\]", span, reason)
+    reason = re.sub(rf"damping d = {_NUMBER}", damped, reason)
     return re.sub(rf"at q = {_NUMBER}", point, reason)
 
 
@@ -772,7 +877,7 @@ def identified_text(name: str, spans: list, summary: dict[str, Any]) -> str:
     '[0.1, 0.2]'
     """
     if spans:
-        return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in spans)
+        return ", ".join(f"[{_sig(a)}, {_sig(b)}]" for a, b in spans)
     bands = summary.get("bands") or {}
     kind = "g" if name[:1] == "g" and name[1:].isdigit() else name
     err, tol = (bands.get("model_error") or {}).get(kind), bands.get("tolerance")
@@ -860,13 +965,16 @@ def published_table(
     return table
 
 
-def analyze_table(summary: dict[str, Any]) -> Table:
+def analyze_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
     """Tabulate the design analysis: equilibria, bifurcation points, full vs reduced model.
 
     Parameters
     ----------
     summary : dict
-        Summary of the analyze stage's manifest (lengths in [m], reported in [mm]).
+        Summary of the analyze stage's manifest (lengths in [m]).
+    report_unit : str, optional
+        ``[validate] report_unit``: the equilibria q are shown in it (:func:`physics_factor`;
+        default mm); the design lengths b and z_b stay in mm, as Fig. 3 draws them.
 
     Returns
     -------
@@ -876,22 +984,29 @@ def analyze_table(summary: dict[str, Any]) -> Table:
     ----------
     Masoud & Maas 2025, Section 3.3, Fig. 3, 4, 7.
     """
+    f, unit = physics_factor(report_unit)
     table = Table(title=f"Design analysis at b = {1e3 * summary['b']:.2f} mm (Section 3)")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     for state, points in summary["operating_points"].items():
         cells = [
-            f"{round(1e3 * p['q'], 3) + 0.0:+.3f}" + ("" if p["stable"] else " (unstable)")
+            f"{_point(f * p['q'], f * 1e-3)}" + ("" if p["stable"] else " (unstable)")
             for p in points
         ]
         v1, v2 = state.removeprefix("v1_").removesuffix("kV").split("kV_v2_")
-        label = escape(f"equilibria q [mm], (v1, v2) ({v1}, {v2}) kV")
+        label = escape(f"equilibria q [{unit}], (v1, v2) ({v1}, {v2}) kV")
         table.add_row(label, ", ".join(cells) or "none")
     table.add_row(escape("pitchfork z_b,min [mm]"), _fmt(1e3 * summary["z_b_min"]))
     table.add_row(escape("switching limit z_b,max [mm]"), _fmt(1e3 * summary["z_b_max"]))
     table.add_row("full vs reduced NRMSE(q), Fig. 7", f"{100 * summary['nrmse_q']:.2f} %")
     table.add_row("full vs reduced NRMSE(phi), Fig. 7", f"{100 * summary['nrmse_phi']:.2f} %")
     return table
+
+
+def _point(value: float, mm: float) -> str:
+    """Write a position to a micrometre (``mm``: one millimetre in the shown unit), signed."""
+    decimals = max(0, 3 - math.floor(math.log10(mm))) if mm > 0 else 3
+    return f"{round(value, decimals) + 0.0:+.{decimals}f}"
 
 
 def rig_table(summary: dict[str, Any], report_unit: str | None = None) -> Table:
@@ -940,6 +1055,11 @@ def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, s
     rigid mass whose effective value at the wells, with the lagged damping's apparent mass, is
     the physical one; the ratio lambda says by how much the fitted curves were scaled up.
 
+    A model identified per unit mass (``m_q = 1``, ``unit == "1"``) has no physical mass: its
+    curves are accelerations of q (forces per the unknown mass), m_q is 1, and with the scale
+    applied m_q is the rigid mass in multiples of the effective mass at the wells (``1 /
+    lambda``), which its rows say in words with the unit ``-``.
+
     Parameters
     ----------
     summary : dict
@@ -950,19 +1070,38 @@ def mass_rows(summary: dict[str, Any], unit: str) -> list[tuple[str, str, Any, s
     Returns
     -------
     list of (label, unit, value, published key)
+
+    References
+    ----------
+    Masoud & Maas 2025, Eq. 37 (m_q, the mass of the reduced coordinate q).
     """
     info = summary.get("effective_mass")
+    per_mass = unit == "1"
+    if per_mass:
+        plain = (
+            "mass m_q: the unit mass (per-unit-mass model: its forces are accelerations of q, "
+            "per the unknown physical mass)",
+            "-", summary["m_q"], "m_q",
+        )  # fmt: skip
+        rigid = (
+            "rigid mass m_q, in multiples of the effective mass at the wells (per-unit-mass "
+            "model: the curves are per the effective mass, the physical one is unknown)",
+            "-", summary["m_q"], "m_q",
+        )  # fmt: skip
+    else:
+        plain = ("mass m_q", unit, summary["m_q"], "m_q")
+        rigid = ("rigid mass m_q (effective mass at the wells: m_q lambda, the physical one)",
+                 unit, summary["m_q"], "m_q")  # fmt: skip
     if not info:
-        return [("mass m_q", unit, summary["m_q"], "m_q")]
+        return [plain]
     if info.get("applied"):
         return [
-            ("rigid mass m_q (effective mass at the wells: m_q lambda, the physical one)", unit,
-             summary["m_q"], "m_q"),
+            rigid,
             ("effective-mass ratio lambda (the fitted curves divided by it)", "-",
              info["ratio"], None),
         ]  # fmt: skip
     return [
-        ("mass m_q", unit, summary["m_q"], "m_q"),
+        plain,
         (f"effective-mass ratio lambda (not applied: {info.get('reason', '')})", "-",
          info["ratio"], None),
     ]  # fmt: skip

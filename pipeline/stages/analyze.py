@@ -37,7 +37,9 @@ class AnalyzeResult:
     summary: dict[str, Any]
 
 
-def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
+def run_analyze(
+    params, section: Mapping[str, Any], report_unit: str | None = None
+) -> AnalyzeResult:
     """Design analysis of Section 3 for one prototype (``debist analyze``).
 
     Parameters
@@ -46,6 +48,9 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
         The prototype [SI].
     section : mapping
         The ``[analyze]`` section (:class:`debist.physics.analysis.AnalyzeConfig`).
+    report_unit : str, optional
+        ``[validate] report_unit``, the unit the figures draw q in (default mm,
+        :func:`debist.report.tables.physics_factor`).
 
     Returns
     -------
@@ -91,7 +96,7 @@ def run_analyze(params, section: Mapping[str, Any]) -> AnalyzeResult:
             "reduced": [float(cmp.reduced.q.min()), float(cmp.reduced.q.max())],
         },
     }
-    return AnalyzeResult(analysis_tree(res), analysis_figures(res), summary)
+    return AnalyzeResult(analysis_tree(res), analysis_figures(res, report_unit), summary)
 
 
 def execute(ctx: StageInputs) -> StageOutput:
@@ -114,7 +119,7 @@ def execute(ctx: StageInputs) -> StageOutput:
         As :func:`run_analyze`.
     """
     params = ctx.physics() or PrototypeParams.from_dict({})
-    res = run_analyze(params, ctx.section("analyze"))
+    res = run_analyze(params, ctx.section("analyze"), ctx.section("validate").get("report_unit"))
     outputs: dict[str, Any] = {"statics.h5": H5Tree(res.tree)}
     outputs.update({f"{n}.png": Figure(f, REPORT_DPI) for n, f in res.figures.items()})
     return StageOutput(outputs, res.summary)

@@ -44,7 +44,6 @@ from debist.physics.reduced import reduced_curves
 from debist.report.plots import curves_figure
 from debist.report.render import FigureJob, render_pngs
 from debist.report.study_plots import autotune_figure
-from debist.report.tables import summary_units
 from debist.stages import StageInputs, StageOutput
 from debist.validate.freerun import words_factor
 
@@ -378,7 +377,8 @@ def execute(ctx: StageInputs) -> StageOutput:
     StageOutput
         ``model.h5`` (the model, its fit diagnostics and, after refinement, the
         equation-error model), ``curves.parquet`` and ``plots/curves.png`` (Fig. 14, with
-        the analytical curves when the workflow has ``[physics]``), ``equilibria.parquet``,
+        the analytical curves when the workflow has ``[physics]``; q and the curves in
+        ``[validate] report_unit``, as the report's tables), ``equilibria.parquet``,
         ``switching.parquet`` and ``static.parquet`` (the static force at the held levels);
         with ``[identify.auto]`` ``autotune.parquet`` and ``plots/autotune.png`` (the
         search's table and figure).
@@ -400,8 +400,8 @@ def execute(ctx: StageInputs) -> StageOutput:
         if physics is not None
         else None
     )
-    unit = next(iter(ctx.tables("ingest").values())).attrs.get("units", {}).get("q", "m")
-    args = (res.curves, analytical, unit, summary_units(res.summary))
+    report_unit = ctx.section("validate").get("report_unit")  # q's unit in the report
+    args = (res.curves, analytical, res.summary, report_unit)
     figures = {"plots/curves.png": FigureJob(curves_figure, args, dpi=REPORT_DPI)}
     outputs = {"model.h5": H5Tree(tree), "curves.parquet": res.curves}
     outputs.update({f"{name}.parquet": frame for name, frame in res.design.items()})

@@ -76,7 +76,9 @@ class ValidateConfig(SectionConfig):
     """
     report_unit: str | None = None
     """Unit q is reported in: the RMS column, q*, ranges and stiffness per length in the tables and
-    the report (e.g. "mV", "mm"); default mm for q in metres, else the unit of q.
+    the report, Fig. 14 and the design analysis's figures, and beside q's own unit in the export
+    headers (e.g. "mV", "mm"); default mm for q in metres, else the unit of q. Stated, it is part
+    of the identify and analyze stages' keys (their figures draw q in it).
     """
     q_limit: PositiveFloat | None = None
     """|q| beyond which a run counts as diverged [unit of q]; default twice the largest |q| of the

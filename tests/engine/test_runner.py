@@ -213,3 +213,21 @@ def test_a_run_after_a_batch_of_free_runs_still_forks_the_study_beside(project):
     assert layer == "none"
     assert beside == str(fork_workers(2) >= 2)
     assert len(pd.read_parquet(project / "out/study/rbf_grid.parquet")) == 1
+
+
+def test_the_report_unit_enters_the_keys_of_the_stages_that_draw_q(project):
+    """Fig. 14 (identify) and Fig. 3-7 (analyze) draw q in [validate] report_unit: a stated
+    unit is part of their keys, validate's as before; compare and study hash their own."""
+    from debist.engine.runner import stage_config
+    from debist.workflow.loader import load_workflow
+
+    plain = load_workflow(project / "wf.toml")
+    shown = load_workflow(project / "wf.toml", overrides={"validate.report_unit": "um"})
+    assert "report_unit" not in stage_config(plain, "identify")
+    assert "report_unit" not in stage_config(plain, "analyze")
+    assert stage_config(shown, "identify")["report_unit"] == "um"
+    assert stage_config(shown, "analyze")["report_unit"] == "um"
+    assert {k: v for k, v in stage_config(shown, "identify").items() if k != "report_unit"} == (
+        stage_config(plain, "identify")
+    )
+    assert stage_config(shown, "differentiate") == stage_config(plain, "differentiate")

@@ -572,6 +572,36 @@ def test_header_states_scheme_and_one_unit_system():
     assert "SUBSTEPS = 3" in text and "INTERPOLATION = 'linear'" in text
 
 
+def test_header_gives_q_in_the_report_unit_too():
+    """The code keeps q's unit; every q number of the header is also in the report unit."""
+    from debist.export.scheme import Scheme
+
+    model = rbf_model()  # q_range [-0.012, 0.012] m
+    info = ExportInfo(workflow="w", identified={"restoring": [[-0.011, 0.0095]], "d": []})
+    cases = [
+        (Scheme(2, "linear", 0.03), "m", "([-12, 12] mm)", "([-11, 9.5] mm)", "0.03 m (30 mm)"),
+        (Scheme(2, "linear", 0.03, report_unit="um"), "m", "([-12000, 12000] um)",
+         "([-11000, 9500] um)", "0.03 m (30000 um)"),
+        (Scheme(2, "linear", 0.03, q_unit="V", report_unit="mV"), "V", "([-12, 12] mV)",
+         "([-11, 9.5] mV)", "0.03 V (30 mV)"),
+    ]  # fmt: skip
+    for scheme, u, q_range, spans, limit in cases:
+        files = {
+            **c_sources(model, info, scheme=scheme),
+            **python_source(model, info, scheme=scheme),
+            **matlab_source(model, info, scheme=scheme),
+        }
+        for name in (*C_FILES, PYTHON_FILE, MATLAB_FILE):
+            head = files[name][:6000]
+            assert f"[-0.012, 0.012] {u} {q_range};" in head, name
+            assert f"[-0.011, 0.0095] {u} {spans}" in head, name
+            assert f"|q| > {limit} (the rest" in head and "identified on q in: none\n" in head
+    # in q's own unit already: nothing twice
+    plain = c_sources(model, info, scheme=Scheme(2, "linear", 0.03, report_unit="m"))
+    head = plain[C_FILES[0]][:6000]
+    assert "[-0.012, 0.012] m;" in head and "mm" not in head
+
+
 def test_export_files_and_errors():
     model = rbf_model()
     assert set(export_files(model, "c")) == set(C_FILES)

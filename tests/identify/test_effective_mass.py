@@ -137,3 +137,18 @@ def test_the_tables_say_the_mass_is_rigid_and_give_lambda():
     skipped = {"ratio": 1.0, "applied": False, "reason": "no well at rest"}
     rows = mass_rows({"m_q": 0.0402, "effective_mass": skipped}, "kg")
     assert rows[0][0] == "mass m_q" and rows[1][0].endswith(": no well at rest)")
+
+
+def test_a_per_unit_mass_model_says_what_its_mass_number_is():
+    from debist.report.tables import mass_rows
+
+    info = {"ratio": 0.8, "applied": True, "reason": ""}
+    (rigid, ratio) = mass_rows({"m_q": 1.25, "effective_mass": info}, "1")
+    # 1 / lambda effective masses: a ratio, worded, not a mass in an unnamed unit "1"
+    assert rigid[1:3] == ("-", 1.25) and rigid[2] * ratio[2] == pytest.approx(1.0)
+    assert "multiples of the effective mass" in rigid[0] and "physical one is unknown" in rigid[0]
+    (plain,) = mass_rows({"m_q": 1.0}, "1")
+    assert plain[1:3] == ("-", 1.0) and "unit mass" in plain[0] and "accelerations" in plain[0]
+    skipped = {"ratio": 1.0, "applied": False, "reason": "T_z = 0: no lag"}
+    rows = mass_rows({"m_q": 1.0, "effective_mass": skipped}, "1")
+    assert "unit mass" in rows[0][0] and rows[1][0].endswith(": T_z = 0: no lag)")

@@ -100,7 +100,7 @@ def test_an_acceleration_input_is_named_and_drawn_as_such():
     html = _design(summary)
     assert any(r[1] == "switching acceleration, input 1" and r[3] == "4.2 m/s^2"
                for r in html["rows"])  # fmt: skip
-    fig = curves_figure(res.curves, None, "m", units)
+    fig = curves_figure(res.curves, None, res.summary, "m")  # g1 [m/s^2] as recorded
     titles = [ax.get_title() for ax in fig.axes]
     assert not any("dC_i/dq" in x for x in titles)
     assert any("g_i(q)" in x for x in titles)

@@ -1,5 +1,7 @@
 """Every printed table and plot shows units, derived from the data and the model form."""
 
+import re
+
 import numpy as np
 import pytest
 from rich.console import Console
@@ -66,7 +68,7 @@ def test_identified_model_per_unit_mass_in_accelerations(data):
     assert summary["units"]["per_unit_mass"] is True
     text = _render(identify_table(summary))
     for row in (
-        "mass m_q [1]",
+        "mass m_q: the unit mass (per-unit-mass model: its forces are accelerations of q,",
         "k_1 (a basis term; the stiffness k* is in the equilibria) [1/s^2]",
         "k_3 (a basis term) [1/m^2/s^2]",
         "d_v (a basis term; the damping d(q*) is in the equilibria) [1/s]",
@@ -74,7 +76,7 @@ def test_identified_model_per_unit_mass_in_accelerations(data):
         "forces in m/s^2",
     ):
         assert row in text
-    assert "[N" not in text
+    assert "[N" not in text and "m_q [1]" not in text
 
 
 @pytest.mark.parametrize(
@@ -287,7 +289,10 @@ def test_the_display_shows_q_and_stiffness_per_length_in_the_report_unit(
     assert f"{k_1:.4g}" in text
     assert f"identified on q [{shown}] in" in text
     lo, hi = summary["q_data_range"]
-    assert f"in [{f * lo:.4g}, {f * hi:.4g}] {shown}" in shown_summary["design"]["reason"]
+    reason = shown_summary["design"]["reason"]  # four digits, no exponent: [-15920, 15820] µm
+    lo_text, hi_text = re.search(rf"in \[(\S+), (\S+)\] {shown}", reason).groups()
+    assert "e" not in lo_text + hi_text, reason
+    assert [float(lo_text), float(hi_text)] == pytest.approx([f * lo, f * hi], rel=1e-3)
     assert summary["units"]["q"] == "m"  # the stage's summary is left as it was
 
 
@@ -356,3 +361,96 @@ def test_the_excitation_figure_draws_q_in_the_report_unit(data, report_unit, f, 
     q = tables[name]["q"].to_numpy()
     assert float(np.max(drawn)) == pytest.approx(f * q.max(), rel=1e-12)
     assert float(np.min(drawn)) == pytest.approx(f * q.min(), rel=1e-12)
+
+
+def _panel(ax):
+    """Unit of a Fig. 14 panel's y label and the power of ten its values are shown in."""
+    label = ax.get_ylabel().strip("[]")
+    if label.startswith("10^"):
+        decade, label = label[3:].split(" ", 1)
+        return label, 10.0 ** int(decade)
+    return label, 1.0
+
+
+def _curves():
+    q = np.linspace(-0.016, 0.016, 33)
+    frame = {"q": q, "restoring": 2.0 * q - 400.0 * q**3, "d": 0.5 + 0 * q,
+             "g1": 1e-8 + 0 * q, "g2": -1e-8 + 0 * q}  # fmt: skip
+    out = {}
+    for name, y in frame.items():
+        out[name] = y
+        if name != "q":
+            out.update({f"{name}_lo": 0.9 * y, f"{name}_hi": 1.1 * y,
+                        f"{name}_identified": np.ones(q.size, bool)})  # fmt: skip
+    import pandas as pd
+
+    return pd.DataFrame(out)
+
+
+@pytest.mark.parametrize(
+    ("report_unit", "per_unit_mass", "q_label", "k_q", "labels", "factors"),
+    [
+        (None, False, "mm", 1e3, ["N", "N s/mm", "N/V^2"], [1.0, 1e-3, 2.0]),
+        ("um", False, "µm", 1e6, ["N", "N s/µm", "N/V^2"], [1.0, 1e-6, 2.0]),
+        ("m", False, "m", 1.0, ["N", "N s/m", "N/V^2"], [1.0, 1.0, 2.0]),
+        ("mm", True, "mm", 1e3, ["mm/s^2", "1/s", "mm/s^2/V^2"], [1e3, 1.0, 2e3]),
+    ],
+)
+def test_fig14_draws_q_and_the_curves_in_the_report_unit(
+    report_unit, per_unit_mass, q_label, k_q, labels, factors
+):
+    """Fig. 14's axes in the unit of the tables: q, damping per length of q and, per unit
+    mass, forces as accelerations of q, each value the recorded one times its factor."""
+    from debist.report.plots import curves_figure
+
+    curves = _curves()
+    summary = {"units": {"q": "m", "v1": "V", "v2": "V", "input_map": "v2",
+                         "per_unit_mass": per_unit_mass}, "m_q": 1.0 if per_unit_mass else 0.04,
+               "backbone": {"g_0": [0.0, 0.0]}}  # fmt: skip
+    fig = curves_figure(curves, None, summary, report_unit)
+    assert fig.axes[2].get_xlabel() == f"q [{q_label}]"
+    for ax, name, label, factor in zip(fig.axes[:3], ("restoring", "d", "g1"), labels, factors,
+                                       strict=True):  # fmt: skip
+        unit, scale = _panel(ax)
+        assert unit == label
+        line = ax.lines[1]  # the identified part, in colour
+        np.testing.assert_allclose(line.get_xdata(), k_q * curves["q"].to_numpy())
+        np.testing.assert_allclose(line.get_ydata() * scale, factor * curves[name].to_numpy())
+
+
+def test_fig14_refuses_a_report_unit_that_is_not_of_q():
+    from debist.report.plots import curves_figure
+
+    summary = {"units": {"q": "m", "v1": "V"}, "m_q": 0.04, "backbone": {"g_0": [0.0]}}
+    with pytest.raises(WorkflowError, match="report_unit 'mV' cannot express q in 'm'"):
+        curves_figure(_curves(), None, summary, "mV")
+
+
+def test_the_physics_figures_and_the_analyze_table_show_q_in_the_report_unit():
+    """Fig. 5 and the reduced model's curves (Section 3) in µm: q, dC/dq and d per µm,
+    against the physics model's own arrays [SI]; a unit of another quantity keeps mm."""
+    from debist.physics.params import PrototypeParams
+    from debist.physics.reduced import reduced_curves
+    from debist.report.physics_plots import plot_reduced_curves
+    from debist.report.tables import analyze_table
+
+    cur = reduced_curves(PrototypeParams.from_dict({}), np.linspace(-0.012, 0.012, 25))
+    fig = plot_reduced_curves(cur, "um")
+    f_ax, d_ax, g_ax, _ = fig.axes
+    assert g_ax.get_xlabel() == "tip displacement $q$ [µm]"
+    assert d_ax.get_ylabel() == "$d(q)$ [N s/µm]" and g_ax.get_ylabel().endswith("[nF/µm]")
+    np.testing.assert_allclose(d_ax.lines[0].get_xdata(), 1e6 * cur.q)
+    np.testing.assert_allclose(d_ax.lines[0].get_ydata(), 1e-6 * cur.d)
+    np.testing.assert_allclose(g_ax.lines[0].get_ydata(), 1e9 * 1e-6 * cur.g1)
+    np.testing.assert_allclose(f_ax.lines[0].get_ydata(), 1e3 * cur.f)  # mN: not of q
+    default = plot_reduced_curves(cur)
+    assert default.axes[2].get_xlabel() == "tip displacement $q$ [mm]"
+    assert plot_reduced_curves(cur, "mV").axes[2].get_xlabel().endswith("[mm]")
+    summary = {"b": 0.023, "z_b_min": 0.004837, "z_b_max": 0.01165, "nrmse_q": 0.0383,
+               "nrmse_phi": 0.0453, "operating_points": {"v1_0kV_v2_0kV": [
+                   {"q": -0.010206, "stable": True}, {"q": 1e-19, "stable": False}]}}  # fmt: skip
+    text = _render(analyze_table(summary, "um"))
+    assert "equilibria q [µm], (v1, v2) (0, 0) kV" in text and "-10206, +0 (unstable)" in text
+    assert "z_b,min [mm]" in text and "4.837" in text  # a design length, not q
+    assert "-0.010206, +0.000000 (unstable)" in _render(analyze_table(summary, "m"))
+    assert "-10.206, +0.000 (unstable)" in _render(analyze_table(summary))

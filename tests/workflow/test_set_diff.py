@@ -196,6 +196,28 @@ def test_verify_of_a_missing_out_names_the_set_run_an_older_debist_made_beside_i
     assert str(beside) not in other.problems[0]  # another setting's folder is not named
 
 
+def test_status_of_a_missing_out_names_the_set_run_beside_it(base, tmp_path):
+    x = tmp_path / "x"
+    settings = {"identify.M": 6}
+    code, out = invoke("status", base / "wf.toml", "--out", x, "--set", "identify.M=6")
+    assert code == 0 and f"output folder '{x}' does not exist" in out and "--set" not in out
+    assert debist.missing_output(base / "wf.toml", output_dir=base / "out") is None  # it exists
+    beside = fake_run(tmp_path / f"x.set-{override_digest({'identify': {'M': 6}})}",
+                      {"identify": {"M": 6}})  # fmt: skip
+    # with --set: the folder of exactly these settings, as verify names it
+    said = debist.missing_output(base / "wf.toml", overrides=settings, output_dir=x)
+    code, out = invoke("status", base / "wf.toml", "--out", x, "--set", "identify.M=6")
+    assert code == 0 and f"the run with these --set settings beside it is '{beside}'" in out
+    assert said == debist.verify(base / "wf.toml", overrides=settings, output_dir=x).problems[0]
+    code, out = invoke("status", base / "wf.toml", "--out", x, "--set", "identify.M=7")
+    assert code == 0 and str(beside) not in out and "does not exist" in out
+    # without --set: the newest .set- run beside it, as diff names it
+    code, out = invoke("status", base / "wf.toml", "--out", x)
+    assert code == 0 and f"did you mean '{beside}' (a run with --set overrides)?" in out, out
+    code, out = invoke_cli("status", base / "wf.toml", "--out", x, "--json")
+    assert code == 0 and json.loads(out)["identify"]["state"] == "missing"  # JSON only
+
+
 def test_run_says_where_no_report_is_and_how_to_get_one(base, tmp_path):
     shutil.copytree(base, tmp_path / "p")
     code, out = invoke("run", tmp_path / "p" / "wf.toml")
