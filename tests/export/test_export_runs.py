@@ -123,7 +123,9 @@ def assert_reproduces(q, q_sim, q_measured, what):
 
 
 def export(workflow, out, fmt, dest):
-    result = debist.export_model(workflow, fmt, dest=dest, output_dir=out)
+    # the runs are shared by the pytest-xdist workers, and an export holds the run's lock
+    # while it reads the run: another worker's export of the same run waits for it
+    result = debist.export_model(workflow, fmt, dest=dest, output_dir=out, wait=True)
     return {p.name: p.read_text(encoding="utf-8") for p in result.files}
 
 
