@@ -69,7 +69,6 @@ __all__ = [
     "Fold",
     "auto_settings",
     "blocked_folds",
-    "drop_inert_slip",
     "one_standard_error",
     "paired_gaps",
     "scored_folds",
@@ -662,60 +661,6 @@ def _table(order, cache, keys, n_in, k) -> pd.DataFrame:
     frame = pd.DataFrame(data)
     frame.attrs["unscored_folds"] = [j + 1 for j in range(k) if not used[j]]
     return frame
-
-
-def drop_inert_slip(
-    records: Sequence[Record], cfg: IdentifyConfig, grid: dict[str, list]
-) -> tuple[dict[str, list], str]:
-    """Drop slip-element candidates the least squares gives zero stiffness on the whole data.
-
-    The stiffnesses k_e >= 0 of the Maxwell-slip elements are bounded below by zero; where
-    the fit on all estimation records puts every one at that bound, the candidate is the
-    model without elements and needs no cross-validation (a rig without hysteresis in q).
-
-    Parameters
-    ----------
-    records : sequence of Record
-        Estimation records.
-    cfg : IdentifyConfig
-        The configuration the candidates modify.
-    grid : dict of str to list
-        Candidates per key; only ``slip`` is screened, and only when ``cfg`` has no elements.
-
-    Returns
-    -------
-    grid : dict
-        The grid without those candidates (without ``slip`` if only ``False`` is left).
-    note : str
-        What was dropped and why, or ``""``.
-
-    References
-    ----------
-    Al-Bender, Lampaert & Swevers 2005 (Maxwell-slip elements); Hastie, Tibshirani &
-    Friedman 2009, Sec. 7.10 (the simpler of equal models).
-    """
-    if "slip" not in grid or cfg.n_slip:
-        return grid, ""
-    counts = [c for c in grid["slip"] if c is not False]
-    inert = []
-    for count in counts:
-        try:
-            model, _ = fit_rbf_model(records, replace(cfg, slip=count, bootstrap=0))
-        except IdentificationError:
-            continue
-        if not np.any(np.asarray(model.theta_slip) > 0):
-            inert.append(count)
-    if not inert:
-        return grid, ""
-    kept = [c for c in grid["slip"] if c not in inert]
-    out = {k: v for k, v in grid.items() if k != "slip"}
-    if kept != [False]:
-        out["slip"] = kept
-    listed = ", ".join(str(c) for c in inert)
-    return out, (
-        f"slip = {listed}: the least squares on the estimation data gives every element "
-        "zero stiffness (no hysteresis to explain), so these are the model without elements"
-    )
 
 
 def undecided(search: AutoResult) -> bool:

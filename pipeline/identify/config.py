@@ -389,36 +389,6 @@ def refine_config(
     return config_from_section(RefineConfig, {} if section is True else section, where)
 
 
-#: Settings debist chooses per rig on held-out data (blocked cross-validation of the free
-#: run, :func:`debist.identify.autotune.select_hyperparameters`) when the workflow states
-#: neither the key nor an ``[identify.auto]`` table: the candidates per key, simplest first.
-HELD_OUT_CHOICES: dict[str, tuple[Any, ...]] = {"slip": (False, 2, 4)}
-
-
-def held_out_grid(section: Mapping[str, Any]) -> dict[str, list]:
-    """Return the candidates of the settings a workflow leaves to debist.
-
-    Parameters
-    ----------
-    section : mapping
-        The workflow's ``[identify]`` section as written (before defaults).
-
-    Returns
-    -------
-    dict of str to list
-        :data:`HELD_OUT_CHOICES` without the keys the section states; empty when the section
-        has an ``[identify.auto]`` table (the workflow's own grid replaces the defaults).
-
-    References
-    ----------
-    Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 2nd ed., 2009,
-    Sec. 7.10 (model selection by cross-validation).
-    """
-    if section.get("auto") is not None:
-        return {}
-    return {k: list(v) for k, v in HELD_OUT_CHOICES.items() if k not in section}
-
-
 #: Most candidate values of one field in a hyper-parameter grid (``[identify.auto]``): each
 #: is at least one cross-validated fit, and a longer list is a slip, not a search.
 MAX_GRID_VALUES = 1000

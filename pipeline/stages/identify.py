@@ -15,7 +15,6 @@ import numpy as np
 from debist.core import preflight
 from debist.core.artifacts import H5Tree
 from debist.core.fileformats import REPORT_DPI
-from debist.identify.autotune import auto_settings, drop_inert_slip, select_hyperparameters
 from debist.identify.bands import (
     band_label,
     curves_frame,
@@ -24,7 +23,7 @@ from debist.identify.bands import (
     stiffness_bands,
     stiffness_label,
 )
-from debist.identify.config import IdentifyConfig, held_out_grid
+from debist.identify.config import IdentifyConfig
 from debist.identify.design import (
     design_numbers,
     held_levels,
@@ -36,6 +35,7 @@ from debist.identify.fit import FitDiagnostics, fit_rbf_model, supported_range, 
 from debist.identify.mass import effective_mass
 from debist.identify.physics_prior import physics_mass, physics_prior
 from debist.identify.records import estimation_records
+from debist.identify.searchspace import Facts, held_out_search, workflow_search
 from debist.ingest.checks import check_varies
 from debist.model.basis import RBFBasis
 from debist.model.rbf import RBFModel
@@ -95,13 +95,13 @@ class IdentifyResult:
         The least-squares model before simulation-error refinement.
     timings : dict of str to float
         Wall times [s]: ``fit`` (least squares with the T_z search), ``refine`` and
-        ``hyper-parameters`` (the search of ``[identify.auto]``).
+        ``hyper-parameters`` (the held-out search and its screens).
     design : dict of str to pandas.DataFrame
         Equilibria and switching voltages (:func:`debist.identify.design.design_numbers`)
         and the static force at the held input levels with bands and masks (``static``,
         :func:`debist.identify.bands.static_frame`).
     search : debist.identify.autotune.AutoResult or None
-        The hyper-parameter search of ``[identify.auto]`` (None without it).
+        The held-out search (:mod:`debist.identify.searchspace`; None when none ran).
     """
 
     model: RBFModel
@@ -116,6 +116,12 @@ class IdentifyResult:
 
 def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> IdentifyResult:
     """Identify the RBF model (Eq. 37-40) on the estimation data sets.
+
+    The settings the workflow leaves open are chosen first, by the held-out search of
+    :mod:`debist.identify.searchspace`: a workflow's ``[identify.auto]`` grid, else the
+    entries of its table :data:`~debist.identify.searchspace.SEARCH_SPACE` (the slip
+    elements; ``M`` on thin data). Then the least squares on the estimation records, the
+    optional simulation-error refinement, the curves with their bands, the design numbers.
 
     Parameters
     ----------
@@ -136,7 +142,8 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
     Raises
     ------
     IdentificationError
-        If the problem is under-excited, rank deficient or badly conditioned.
+        If the problem is under-excited, rank deficient or badly conditioned, or every
+        candidate of an ``[identify.auto]`` grid fails.
     ResourceError
         If the least squares of the estimation data would exceed the memory budget
         (:func:`debist.core.preflight.check_identify`), before any array of samples x
@@ -159,27 +166,17 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             cfg,
             prior=physics_prior(physics, records, quadratic="physics_quadratic" in cfg.backbone),
         )
-    search, grid = None, held_out_grid(section)
-    if cfg.auto is not None:  # [identify.auto]: the grid's choice replaces the given values
-        grid, options = auto_settings(cfg)
-        search = select_hyperparameters(records, replace(cfg, auto=None), grid, **options)
-        cfg = replace(cfg, auto=None, **search.chosen)
-        grid = {}
+    cfg, search = workflow_search(records, cfg)  # [identify.auto]: the grid's choice
     asked = cfg.M
     q_all = np.concatenate([r.q for r in records])
     if np.ptp(q_all) > 0:  # (a motionless q is a data error, named by the excitation check)
         cfg = replace(cfg, M=supported_size(q_all, cfg))
     excitation = _excitation(records, cfg, tables)
-    if search is None and "M" not in section and cfg.M > 2 and thin_data(excitation):
-        # one tone: the data cannot rank curve detail, the held-out free run can
-        grid["M"] = list(range(2, cfg.M + 1))
-    t_choice = time.perf_counter()
-    grid, inert = drop_inert_slip(records, cfg, grid)
-    t_choice = time.perf_counter() - t_choice
-    if grid:  # the settings the workflow leaves to debist, chosen on held-out data
-        search = select_hyperparameters(records, cfg, grid, fallback=True)
-        cfg = replace(cfg, **search.chosen)
-        if "M" in grid:
+    held = None
+    if search is None:  # the settings the workflow leaves to debist, chosen on held-out data
+        held = held_out_search(records, cfg, Facts(section, cfg, thin_data(excitation)))
+        cfg, search = held.cfg, held.search
+        if search is not None and "M" in search.chosen:
             excitation = _excitation(records, cfg, tables)
     if asked > cfg.M:  # thin data: fewer, wider centres rather than a failed fit
         note = _basis_note(asked, cfg, excitation)
@@ -191,33 +188,67 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         model, diag, mass = effective_mass(model, diag)
         cfg = replace(cfg, m_q=model.m_q)  # the rigid mass, for the refinement
     timings = {"fit": time.perf_counter() - t_fit}
+    inert = held.note if held is not None else ""
     if search is not None or inert:
-        timings["hyper-parameters"] = t_choice + (search.seconds if search else 0.0)
+        timings["hyper-parameters"] = held.seconds if held is not None else search.seconds
     ls_model, refine = model, None
     rcfg = refine_config(cfg.refine)
     if rcfg is not None:
         res = refine_model(model, diag, records, cfg, rcfg)
-        model = res.model
-        refine = {
-            "accepted": res.accepted,
-            "window_rms_equation_error": res.window_rms_ls,
-            "window_rms_simulation_error": res.window_rms_refined,
-            "full_rms_equation_error": res.full_rms_ls,
-            "full_rms_simulation_error": res.full_rms_refined,
-            "holdout_rms_equation_error": res.holdout_rms_ls,
-            "holdout_rms_simulation_error": res.holdout_rms_refined,
-            "holdout_windows": res.holdout_windows,
-            "nfev": res.nfev,
-            "message": res.message,
-            "prior": res.prior,
-            **({"candidates": list(res.candidates)} if res.candidates else {}),
-        }
-        timings["refine"] = res.seconds
+        model, refine, timings["refine"] = res.model, _refine_summary(res), res.seconds
     model_error = model_error_table(cfg.backbone, cfg.effective_mass) if cfg.model_error else None
     curves, identified = curves_frame(
         model, diag, records, min_support=cfg.min_support, band_tolerance=cfg.band_tolerance,
         model_error=model_error,
     )  # fmt: skip
+    design, static = _design(model, diag, records, physics, physical, cfg, curves, model_error)
+    summary = {
+        **_fit_summary(model, diag, records, cfg, physical, refine, identified, model_error),
+        "basis": {"M_asked": asked, "M": cfg.M},
+        **({"dissipation": diag.dissipation} if diag.dissipation else {}),
+        **({"undriven": diag.undriven} if diag.undriven else {}),
+        "excitation": excitation.to_summary(),
+        **({"creep_rate": model.creep_rate} if model.has_creep else {}),
+        **({"slip": _slip_summary(model)} if model.has_slip else {}),
+        **({"inertia": _inertia_summary(model)} if model.has_inertia else {}),
+        **({"effective_mass": mass.to_summary()} if mass is not None else {}),
+        "design": {
+            "verdict": design["equilibria"].attrs["verdict"],
+            "reason": design["equilibria"].attrs["reason"],
+            "equilibria": _records_of(design["equilibria"]),
+            "switching": _records_of(design["switching"]),
+            "static": static,
+        },
+        "constraints": list(cfg.constraints),
+        "units": _units(tables, cfg.input_map, physical),
+    }
+    if search is not None:
+        summary["auto"] = search.to_summary()
+    if inert:
+        summary["auto_skipped"] = inert
+    return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
+
+
+def _refine_summary(res) -> dict[str, Any]:
+    """Return the simulation-error refinement's numbers for the summary (no wall time)."""
+    return {
+        "accepted": res.accepted,
+        "window_rms_equation_error": res.window_rms_ls,
+        "window_rms_simulation_error": res.window_rms_refined,
+        "full_rms_equation_error": res.full_rms_ls,
+        "full_rms_simulation_error": res.full_rms_refined,
+        "holdout_rms_equation_error": res.holdout_rms_ls,
+        "holdout_rms_simulation_error": res.holdout_rms_refined,
+        "holdout_windows": res.holdout_windows,
+        "nfev": res.nfev,
+        "message": res.message,
+        "prior": res.prior,
+        **({"candidates": list(res.candidates)} if res.candidates else {}),
+    }
+
+
+def _design(model, diag, records, physics, physical, cfg, curves, model_error):
+    """Return the design numbers with the static force at the held levels, and its summary."""
     design = design_numbers(model, records, physics, physical)
     design["static"], static = static_frame(
         model, diag, records, held_levels(records), min_support=cfg.min_support,
@@ -228,8 +259,13 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
         cfg.model_error, cfg.effective_mass,
     )  # fmt: skip
     design["switching"] = mark_switching(design["switching"], curves)
+    return design, static
+
+
+def _fit_summary(model, diag, records, cfg, physical, refine, identified, model_error):
+    """Return the fit's scalars for the summary, in the summary's order up to ``basis``."""
     q_data = np.concatenate([r.q for r in records])
-    summary = {
+    return {
         "T_z": model.T_z,
         "m_q": model.m_q,
         "m_q_curves": physical,  # the curves' mass: m_q, or m_q lambda with the scale
@@ -259,29 +295,7 @@ def run_identify(tables, derivs, section: Mapping[str, Any], physics=None) -> Id
             "tolerance": cfg.band_tolerance,
         },
         "smoothing": diag.smoothing,
-        "basis": {"M_asked": asked, "M": cfg.M},
-        **({"dissipation": diag.dissipation} if diag.dissipation else {}),
-        **({"undriven": diag.undriven} if diag.undriven else {}),
-        "excitation": excitation.to_summary(),
-        **({"creep_rate": model.creep_rate} if model.has_creep else {}),
-        **({"slip": _slip_summary(model)} if model.has_slip else {}),
-        **({"inertia": _inertia_summary(model)} if model.has_inertia else {}),
-        **({"effective_mass": mass.to_summary()} if mass is not None else {}),
-        "design": {
-            "verdict": design["equilibria"].attrs["verdict"],
-            "reason": design["equilibria"].attrs["reason"],
-            "equilibria": _records_of(design["equilibria"]),
-            "switching": _records_of(design["switching"]),
-            "static": static,
-        },
-        "constraints": list(cfg.constraints),
-        "units": _units(tables, cfg.input_map, physical),
     }
-    if search is not None:
-        summary["auto"] = search.to_summary()
-    if inert:
-        summary["auto_skipped"] = inert
-    return IdentifyResult(model, diag, curves, summary, ls_model, timings, design, search)
 
 
 def _slip_summary(model) -> dict[str, Any]:

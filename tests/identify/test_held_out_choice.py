@@ -20,18 +20,19 @@ from debist.identify.autotune import (
     select_hyperparameters,
     undecided,
 )
-from debist.identify.config import HELD_OUT_CHOICES, IdentifyConfig, held_out_grid
+from debist.identify.config import IdentifyConfig
 from debist.identify.fit import supported_size
+from debist.identify.searchspace import Facts, held_out_grid
 from debist.stages.identify import run_identify
 from tests.conftest import INSIDE_CLASS, slip_record, truth_model, with_slip
 
 
 def test_the_default_grid_covers_only_what_the_workflow_leaves_open():
-    assert held_out_grid({}) == {k: list(v) for k, v in HELD_OUT_CHOICES.items()}
-    assert held_out_grid({"slip": False}) == {}
-    assert held_out_grid({"slip": 4, "M": 6}) == {}
-    assert held_out_grid({"auto": {"M": [6, 8]}}) == {}
-    assert held_out_grid({"M": 6})["slip"][0] is False  # the simplest candidate first
+    assert held_out_grid(Facts({})) == {"slip": [False, 2, 4]}
+    assert held_out_grid(Facts({"slip": False})) == {}
+    assert held_out_grid(Facts({"slip": 4, "M": 6})) == {}
+    assert held_out_grid(Facts({"auto": {"M": [6, 8]}})) == {}
+    assert held_out_grid(Facts({"M": 6}))["slip"][0] is False  # the simplest candidate first
 
 
 def test_a_fold_no_candidate_scores_is_left_out_of_every_mean():
