@@ -48,7 +48,8 @@ from debist.workflow.loader import load_workflow
 #: Values of ``scheduler`` in :func:`run_batch`.
 SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
 #: Times a workflow is retried on a fresh worker process after its worker died, on the
-#: local cluster (dask config ``distributed.scheduler.allowed-failures``).
+#: local cluster (dask config ``distributed.scheduler.allowed-failures``). On a cluster at an
+#: ``address`` that scheduler's own setting counts (distributed's default: 3).
 ALLOWED_FAILURES = 1
 #: Memory one local worker process is given at least [bytes]: a worker's peak over four of
 #: the paper's workflows was 617-757 MiB (:func:`debist.core.allocator.collector_frozen`),
@@ -418,15 +419,20 @@ def run_batch(
     stages, force : sequence of str, bool, optional
         Stages to consider in every workflow (default its own); rerun up-to-date stages too.
     scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
-        A local cluster of worker processes (default; a worker that dies is retried once), the
-        cluster at ``address``, threads, or the calling thread (docs/explanation/implementation.md).
+        A local cluster of worker processes (default; a workflow whose worker dies is retried
+        once), the cluster at ``address`` (retried as often as its scheduler's
+        ``distributed.scheduler.allowed-failures`` allows), threads, or the calling thread
+        (docs/explanation/implementation.md, docs/how-to/cluster.md).
         Spawned workers re-import the calling script: call under ``if __name__ == "__main__":``.
     workers : int, optional
         Worker processes or threads; default ``min(number of workflows, cores)``. On this
         machine at most as many as there are workflows, cores and workers of
         :data:`WORKER_BYTES` in the memory budget (a ``DebistWarning`` says so).
     address : str, optional
-        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``.
+        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``. Its workers must
+        import this debist and see the workflow files, their data and output folders at the
+        same paths; their environment (one BLAS thread each) is theirs to set. Workflows go to
+        as many of them as have a free thread, one each, at the start and as each one ends.
     on_done : callable, optional
         Called as ``on_done(result)`` in the calling thread as each workflow finishes.
     progress : bool, optional
@@ -435,8 +441,8 @@ def run_batch(
     Returns
     -------
     list of BatchResult
-        One per workflow, in input order, failed ones included (a twice-dead worker's with
-        ``error`` ``"KilledWorker: ..."``).
+        One per workflow, in input order, failed ones included (one whose worker processes died
+        more often than the scheduler allows with ``error`` ``"KilledWorker: ..."``).
 
     Raises
     ------
