@@ -698,6 +698,69 @@ def _console_bar(total: int, enabled: bool) -> Any:
     return bar
 
 
+def _worker_threads() -> int:
+    """Threads the free runs of this process may use (``NUMBA_NUM_THREADS``), run on a worker."""
+    from debist.simulate.kernel import kernel_threads
+
+    return kernel_threads()
+
+
+def check_cluster_workers(client: Any) -> list[str]:
+    """Warn about workers of a cluster at an address that would run workflows unsafely or slowly.
+
+    A worker with several threads runs as many workflows at once in one process, whose
+    stages draw with matplotlib's pyplot (not thread-safe); a worker whose free runs may use
+    several threads (``NUMBA_NUM_THREADS`` unset on a machine of several cores)
+    oversubscribes the cores its job was given. The local cluster of a batch is set up right;
+    a cluster the user started is the user's to set up (docs/how-to/cluster.md).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        A client of the cluster.
+
+    Returns
+    -------
+    list of str
+        The warnings given (each also issued as a :class:`~debist.core.errors.DebistWarning`);
+        empty when every worker has one thread and one free-run thread, or when the workers
+        cannot be asked (this check then raises nothing: the batch reports what fails).
+
+    Warns
+    -----
+    DebistWarning
+        One per kind of worker found: several threads, several free-run threads.
+
+    References
+    ----------
+    dask.distributed: ``Client.nthreads``, ``Client.run``; matplotlib, "Thread safety" of
+    pyplot; numba, ``NUMBA_NUM_THREADS``.
+    """
+    said: list[str] = []
+    try:
+        nthreads = client.nthreads()
+        free_run = client.run(_worker_threads) if nthreads else {}
+    except Exception:  # an older worker or a lost connection: the batch reports what fails
+        return said
+    many = sorted(w for w, n in nthreads.items() if n > 1)
+    if many:
+        said.append(
+            f"batch: {len(many)} of the cluster's {len(nthreads)} workers have more than one "
+            f"thread (e.g. {many[0]}, {nthreads[many[0]]}): their workflows share a process and "
+            "its plotting; start the workers with --nthreads 1"
+        )
+    wide = sorted(w for w, n in free_run.items() if isinstance(n, int) and n > 1)
+    if wide:
+        said.append(
+            f"batch: {len(wide)} of the cluster's workers integrate free runs on several "
+            f"threads (e.g. {wide[0]}, {free_run[wide[0]]}): set NUMBA_NUM_THREADS=1 (and "
+            "OMP_NUM_THREADS=1) in the workers' environment"
+        )
+    for text in said:
+        warnings.warn(text, DebistWarning, stacklevel=2)
+    return said
+
+
 def _run_on_cluster(
     args: list[_Args],
     headers: dict[Path, tuple[str, Path]],
@@ -723,6 +786,7 @@ def _run_on_cluster(
                 raise WorkflowError(
                     f"cannot reach the Dask scheduler at {address!r}: {exc}"
                 ) from None
+            check_cluster_workers(client)
         else:
             client = stack.enter_context(local_cluster(n_workers))
         batch_id = uuid.uuid4().hex[:8]

@@ -12,10 +12,11 @@ from pathlib import Path
 import pytest
 
 from debist.core import artifacts
-from debist.core.errors import WorkflowError
+from debist.core.errors import DebistWarning, WorkflowError
 from debist.engine.batch import (
     INDEX_MARKER,
     BatchResult,
+    check_cluster_workers,
     expand_workflows,
     index_is_ours,
     local_cluster,
@@ -383,6 +384,37 @@ def test_a_worker_death_that_a_retry_survives_is_reported(protos, monkeypatch, t
     assert frame.note.tolist() == ["", results[1].note, ""]
     page = write_index(results, tmp_path / "index")
     assert results[1].note in page.read_text()
+
+
+def test_cluster_workers_with_several_threads_are_warned_about(monkeypatch):
+    """A cluster the user started: workers of several threads, or free runs on several."""
+    import warnings
+
+    import distributed
+
+    from debist.simulate import kernel
+
+    monkeypatch.setattr(kernel, "kernel_threads", lambda: 1)  # the in-process workers' own
+    for threads in (1, 2):
+        with (
+            distributed.LocalCluster(n_workers=1, threads_per_worker=threads, processes=False,
+                                     dashboard_address="127.0.0.1:0") as cluster,
+            distributed.Client(cluster, set_as_default=False) as client,
+            warnings.catch_warnings(record=True) as shown,
+        ):  # fmt: skip
+            warnings.simplefilter("always")
+            said = check_cluster_workers(client)
+            monkeypatch.setattr(kernel, "kernel_threads", lambda: 3)
+            wide = check_cluster_workers(client)
+            monkeypatch.setattr(kernel, "kernel_threads", lambda: 1)
+        if threads == 1:
+            assert said == []
+        else:
+            assert len(said) == 1 and "more than one thread" in said[0]
+            assert said[0].endswith("start the workers with --nthreads 1")
+        assert wide[:-1] == said and "NUMBA_NUM_THREADS=1" in wide[-1] and ", 3)" in wide[-1]
+        assert [str(w.message) for w in shown] == said + wide
+        assert all(w.category is DebistWarning for w in shown)
 
 
 @pytest.mark.slow

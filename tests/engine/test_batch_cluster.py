@@ -142,6 +142,7 @@ def test_a_fleet_on_a_cluster_on_loopback_gives_each_members_solo_digest(fleet):
     out = done.stdout + done.stderr
     assert done.returncode == 0, out
     assert "Batch: 2 workflows, 0 failed" in done.stdout and "Traceback" not in out
+    assert "thread" not in done.stderr, done.stderr  # the workers are set up as the page says
     for member in members(fleet):
         solo = debist("run", f"{fleet.name}/{member.name}", cwd=alone)
         assert solo.returncode == 0, solo.stdout + solo.stderr
