@@ -71,6 +71,9 @@ _WORKER_ENVIRON = {
     **allocator.ENVIRON,
     **allocator.ARROW_ENVIRON,  # pyarrow's allocator: the C library's, as in the command
 }
+#: How often a batch on a cluster looks for workers that joined since [s] (SLURM jobs that
+#: started late), while no workflow finishes.
+_REFILL_SECONDS = 2.0
 #: The preload module of the local cluster's worker processes (they ignore Ctrl-C).
 _WORKER_SETUP = "debist.engine.batchworker"
 #: Type of the arguments of one batch item: (workflow file, stages, force).
@@ -431,8 +434,9 @@ def run_batch(
     address : str, optional
         A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``. Its workers must
         import this debist and see the workflow files, their data and output folders at the
-        same paths; their environment (one BLAS thread each) is theirs to set. Workflows go to
-        as many of them as have a free thread, one each, at the start and as each one ends.
+        same paths; their environment (one BLAS thread each) is theirs to set. Each worker
+        thread gets one workflow at a time, and workers that join while the batch runs get
+        theirs within seconds.
     on_done : callable, optional
         Called as ``on_done(result)`` in the calling thread as each workflow finishes.
     progress : bool, optional
@@ -761,6 +765,25 @@ def check_cluster_workers(client: Any) -> list[str]:
     return said
 
 
+def _as_they_finish(running: Any, refill: Callable[[], object], every: float) -> Iterator[Any]:
+    """Yield the futures of an ``as_completed`` as they finish, calling ``refill()`` meanwhile.
+
+    ``refill()`` runs every ``every`` seconds while none finishes: workers that joined the
+    cluster since then get workflows without waiting for one to finish.
+    """
+    checked = time.monotonic()
+    while not running.is_empty():
+        finished = running.next_batch(block=False)
+        if finished:
+            yield from finished
+            checked = time.monotonic()
+            continue
+        if time.monotonic() - checked >= every:
+            refill()
+            checked = time.monotonic()
+        time.sleep(0.1)  # as ``as_completed`` itself polls
+
+
 def _run_on_cluster(
     args: list[_Args],
     headers: dict[Path, tuple[str, Path]],
@@ -808,7 +831,8 @@ def _run_on_cluster(
                 running.add(future)
 
         submit_to_idle_workers()
-        for future in running:
+        refill = lambda: waiting and submit_to_idle_workers()  # noqa: E731
+        for future in _as_they_finish(running, refill, _REFILL_SECONDS):
             i, t_submit = submitted.pop(future.key)
             try:
                 results[i] = replace(future.result(), worker_deaths=_deaths(client, future.key))

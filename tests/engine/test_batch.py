@@ -386,6 +386,62 @@ def test_a_worker_death_that_a_retry_survives_is_reported(protos, monkeypatch, t
     assert results[1].note in page.read_text()
 
 
+#: What the workflows of the next test saw: their worker, and whether they met.
+_MET: dict = {}
+
+
+def _meeting_item(path, stages=None, force=False):
+    """A batch item on an in-process worker: proto-a waits (bounded) for proto-b to start."""
+    import threading
+
+    from distributed import get_worker
+
+    import debist.engine.batch as batch
+
+    name = Path(path).stem
+    _MET[name] = get_worker().address
+    if name == "proto-b":
+        _MET["event"].set()
+    if name == "proto-a":
+        _MET["met"] = _MET["event"].wait(timeout=60)  # a guard: the test fails without b
+    assert isinstance(_MET["event"], threading.Event)
+    return batch.BatchResult(path=Path(path), name=name, status="done", seconds=0.0)
+
+
+def test_workers_that_join_a_cluster_late_get_workflows_at_once(protos, monkeypatch):
+    """A batch started before its SLURM jobs run: workers that join later get workflows
+    while the first ones still run, not only as each one finishes."""
+    import threading
+
+    import distributed
+
+    import debist.engine.batch as batch
+
+    monkeypatch.setattr(batch, "run_workflow_item", _meeting_item)
+    monkeypatch.setattr(batch, "_REFILL_SECONDS", 0.2)
+    monkeypatch.setitem(_MET, "event", threading.Event())
+    with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=False,
+                                  dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        out = {}
+        runner = threading.Thread(
+            target=lambda: out.update(
+                results=run_batch(protos[:2], address=cluster.scheduler_address)
+            )
+        )
+        runner.start()
+        try:
+            deadline = time.monotonic() + 60
+            while not cluster.scheduler.tasks and time.monotonic() < deadline:
+                time.sleep(0.02)  # proto-a is submitted to a cluster without workers
+            assert len(cluster.scheduler.tasks) == 1
+            cluster.scale(2)
+        finally:
+            runner.join(timeout=120)
+    assert not runner.is_alive()
+    assert [r.name for r in out["results"]] == ["proto-a", "proto-b"]
+    assert _MET["met"] is True and _MET["proto-a"] != _MET["proto-b"]
+
+
 def test_cluster_workers_with_several_threads_are_warned_about(monkeypatch):
     """A cluster the user started: workers of several threads, or free runs on several."""
     import warnings
