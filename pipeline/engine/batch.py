@@ -48,7 +48,8 @@ from debist.workflow.loader import load_workflow
 #: Values of ``scheduler`` in :func:`run_batch`.
 SCHEDULERS = ("synchronous", "threads", "processes", "distributed")
 #: Times a workflow is retried on a fresh worker process after its worker died, on the
-#: local cluster (dask config ``distributed.scheduler.allowed-failures``).
+#: local cluster (dask config ``distributed.scheduler.allowed-failures``). On a cluster at an
+#: ``address`` that scheduler's own setting counts (distributed's default: 3).
 ALLOWED_FAILURES = 1
 #: Memory one local worker process is given at least [bytes]: a worker's peak over four of
 #: the paper's workflows was 617-757 MiB (:func:`debist.core.allocator.collector_frozen`),
@@ -70,6 +71,9 @@ _WORKER_ENVIRON = {
     **allocator.ENVIRON,
     **allocator.ARROW_ENVIRON,  # pyarrow's allocator: the C library's, as in the command
 }
+#: How often a batch on a cluster looks for workers that joined since [s] (SLURM jobs that
+#: started late), while no workflow finishes.
+_REFILL_SECONDS = 2.0
 #: The preload module of the local cluster's worker processes (they ignore Ctrl-C).
 _WORKER_SETUP = "debist.engine.batchworker"
 #: Type of the arguments of one batch item: (workflow file, stages, force).
@@ -418,15 +422,21 @@ def run_batch(
     stages, force : sequence of str, bool, optional
         Stages to consider in every workflow (default its own); rerun up-to-date stages too.
     scheduler : {"processes", "threads", "synchronous", "distributed"}, optional
-        A local cluster of worker processes (default; a worker that dies is retried once), the
-        cluster at ``address``, threads, or the calling thread (docs/explanation/implementation.md).
+        A local cluster of worker processes (default; a workflow whose worker dies is retried
+        once), the cluster at ``address`` (retried as often as its scheduler's
+        ``distributed.scheduler.allowed-failures`` allows), threads, or the calling thread
+        (docs/explanation/implementation.md, docs/how-to/cluster.md).
         Spawned workers re-import the calling script: call under ``if __name__ == "__main__":``.
     workers : int, optional
         Worker processes or threads; default ``min(number of workflows, cores)``. On this
         machine at most as many as there are workflows, cores and workers of
         :data:`WORKER_BYTES` in the memory budget (a ``DebistWarning`` says so).
     address : str, optional
-        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``.
+        A running ``dask.distributed`` scheduler, e.g. ``"tcp://host:8786"``. Its workers must
+        import this debist and see the workflow files, their data and output folders at the
+        same paths; their environment (one BLAS thread each) is theirs to set. Each worker
+        thread gets one workflow at a time, and workers that join while the batch runs get
+        theirs within seconds.
     on_done : callable, optional
         Called as ``on_done(result)`` in the calling thread as each workflow finishes.
     progress : bool, optional
@@ -435,8 +445,8 @@ def run_batch(
     Returns
     -------
     list of BatchResult
-        One per workflow, in input order, failed ones included (a twice-dead worker's with
-        ``error`` ``"KilledWorker: ..."``).
+        One per workflow, in input order, failed ones included (one whose worker processes died
+        more often than the scheduler allows with ``error`` ``"KilledWorker: ..."``).
 
     Raises
     ------
@@ -692,6 +702,88 @@ def _console_bar(total: int, enabled: bool) -> Any:
     return bar
 
 
+def _worker_threads() -> int:
+    """Threads the free runs of this process may use (``NUMBA_NUM_THREADS``), run on a worker."""
+    from debist.simulate.kernel import kernel_threads
+
+    return kernel_threads()
+
+
+def check_cluster_workers(client: Any) -> list[str]:
+    """Warn about workers of a cluster at an address that would run workflows unsafely or slowly.
+
+    A worker with several threads runs as many workflows at once in one process, whose
+    stages draw with matplotlib's pyplot (not thread-safe); a worker whose free runs may use
+    several threads (``NUMBA_NUM_THREADS`` unset on a machine of several cores)
+    oversubscribes the cores its job was given. The local cluster of a batch is set up right;
+    a cluster the user started is the user's to set up (docs/how-to/cluster.md).
+
+    Parameters
+    ----------
+    client : distributed.Client
+        A client of the cluster.
+
+    Returns
+    -------
+    list of str
+        The warnings given (each also issued as a :class:`~debist.core.errors.DebistWarning`);
+        empty when every worker has one thread and one free-run thread, or when the workers
+        cannot be asked (this check then raises nothing: the batch reports what fails).
+
+    Warns
+    -----
+    DebistWarning
+        One per kind of worker found: several threads, several free-run threads.
+
+    References
+    ----------
+    dask.distributed: ``Client.nthreads``, ``Client.run``; matplotlib, "Thread safety" of
+    pyplot; numba, ``NUMBA_NUM_THREADS``.
+    """
+    said: list[str] = []
+    try:
+        nthreads = client.nthreads()
+        free_run = client.run(_worker_threads) if nthreads else {}
+    except Exception:  # an older worker or a lost connection: the batch reports what fails
+        return said
+    many = sorted(w for w, n in nthreads.items() if n > 1)
+    if many:
+        said.append(
+            f"batch: {len(many)} of the cluster's {len(nthreads)} workers have more than one "
+            f"thread (e.g. {many[0]}, {nthreads[many[0]]}): their workflows share a process and "
+            "its plotting; start the workers with --nthreads 1"
+        )
+    wide = sorted(w for w, n in free_run.items() if isinstance(n, int) and n > 1)
+    if wide:
+        said.append(
+            f"batch: {len(wide)} of the cluster's workers integrate free runs on several "
+            f"threads (e.g. {wide[0]}, {free_run[wide[0]]}): set NUMBA_NUM_THREADS=1 (and "
+            "OMP_NUM_THREADS=1) in the workers' environment"
+        )
+    for text in said:
+        warnings.warn(text, DebistWarning, stacklevel=2)
+    return said
+
+
+def _as_they_finish(running: Any, refill: Callable[[], object], every: float) -> Iterator[Any]:
+    """Yield the futures of an ``as_completed`` as they finish, calling ``refill()`` meanwhile.
+
+    ``refill()`` runs every ``every`` seconds while none finishes: workers that joined the
+    cluster since then get workflows without waiting for one to finish.
+    """
+    checked = time.monotonic()
+    while not running.is_empty():
+        finished = running.next_batch(block=False)
+        if finished:
+            yield from finished
+            checked = time.monotonic()
+            continue
+        if time.monotonic() - checked >= every:
+            refill()
+            checked = time.monotonic()
+        time.sleep(0.1)  # as ``as_completed`` itself polls
+
+
 def _run_on_cluster(
     args: list[_Args],
     headers: dict[Path, tuple[str, Path]],
@@ -717,6 +809,7 @@ def _run_on_cluster(
                 raise WorkflowError(
                     f"cannot reach the Dask scheduler at {address!r}: {exc}"
                 ) from None
+            check_cluster_workers(client)
         else:
             client = stack.enter_context(local_cluster(n_workers))
         batch_id = uuid.uuid4().hex[:8]
@@ -738,7 +831,8 @@ def _run_on_cluster(
                 running.add(future)
 
         submit_to_idle_workers()
-        for future in running:
+        refill = lambda: waiting and submit_to_idle_workers()  # noqa: E731
+        for future in _as_they_finish(running, refill, _REFILL_SECONDS):
             i, t_submit = submitted.pop(future.key)
             try:
                 results[i] = replace(future.result(), worker_deaths=_deaths(client, future.key))

@@ -12,10 +12,11 @@ from pathlib import Path
 import pytest
 
 from debist.core import artifacts
-from debist.core.errors import WorkflowError
+from debist.core.errors import DebistWarning, WorkflowError
 from debist.engine.batch import (
     INDEX_MARKER,
     BatchResult,
+    check_cluster_workers,
     expand_workflows,
     index_is_ours,
     local_cluster,
@@ -383,6 +384,93 @@ def test_a_worker_death_that_a_retry_survives_is_reported(protos, monkeypatch, t
     assert frame.note.tolist() == ["", results[1].note, ""]
     page = write_index(results, tmp_path / "index")
     assert results[1].note in page.read_text()
+
+
+#: What the workflows of the next test saw: their worker, and whether they met.
+_MET: dict = {}
+
+
+def _meeting_item(path, stages=None, force=False):
+    """A batch item on an in-process worker: proto-a waits (bounded) for proto-b to start."""
+    import threading
+
+    from distributed import get_worker
+
+    import debist.engine.batch as batch
+
+    name = Path(path).stem
+    _MET[name] = get_worker().address
+    if name == "proto-b":
+        _MET["event"].set()
+    if name == "proto-a":
+        _MET["met"] = _MET["event"].wait(timeout=60)  # a guard: the test fails without b
+    assert isinstance(_MET["event"], threading.Event)
+    return batch.BatchResult(path=Path(path), name=name, status="done", seconds=0.0)
+
+
+def test_workers_that_join_a_cluster_late_get_workflows_at_once(protos, monkeypatch):
+    """A batch started before its SLURM jobs run: workers that join later get workflows
+    while the first ones still run, not only as each one finishes."""
+    import threading
+
+    import distributed
+
+    import debist.engine.batch as batch
+
+    monkeypatch.setattr(batch, "run_workflow_item", _meeting_item)
+    monkeypatch.setattr(batch, "_REFILL_SECONDS", 0.2)
+    monkeypatch.setitem(_MET, "event", threading.Event())
+    with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=False,
+                                  dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        out = {}
+        runner = threading.Thread(
+            target=lambda: out.update(
+                results=run_batch(protos[:2], address=cluster.scheduler_address)
+            )
+        )
+        runner.start()
+        try:
+            deadline = time.monotonic() + 60
+            while not cluster.scheduler.tasks and time.monotonic() < deadline:
+                time.sleep(0.02)  # proto-a is submitted to a cluster without workers
+            assert len(cluster.scheduler.tasks) == 1
+            cluster.scale(2)
+        finally:
+            runner.join(timeout=120)
+    assert not runner.is_alive()
+    assert [r.name for r in out["results"]] == ["proto-a", "proto-b"]
+    assert _MET["met"] is True and _MET["proto-a"] != _MET["proto-b"]
+
+
+def test_cluster_workers_with_several_threads_are_warned_about(monkeypatch):
+    """A cluster the user started: workers of several threads, or free runs on several."""
+    import warnings
+
+    import distributed
+
+    from debist.simulate import kernel
+
+    monkeypatch.setattr(kernel, "kernel_threads", lambda: 1)  # the in-process workers' own
+    for threads in (1, 2):
+        with (
+            distributed.LocalCluster(n_workers=1, threads_per_worker=threads, processes=False,
+                                     dashboard_address="127.0.0.1:0") as cluster,
+            distributed.Client(cluster, set_as_default=False) as client,
+            warnings.catch_warnings(record=True) as shown,
+        ):  # fmt: skip
+            warnings.simplefilter("always")
+            said = check_cluster_workers(client)
+            monkeypatch.setattr(kernel, "kernel_threads", lambda: 3)
+            wide = check_cluster_workers(client)
+            monkeypatch.setattr(kernel, "kernel_threads", lambda: 1)
+        if threads == 1:
+            assert said == []
+        else:
+            assert len(said) == 1 and "more than one thread" in said[0]
+            assert said[0].endswith("start the workers with --nthreads 1")
+        assert wide[:-1] == said and "NUMBA_NUM_THREADS=1" in wide[-1] and ", 3)" in wide[-1]
+        assert [str(w.message) for w in shown] == said + wide
+        assert all(w.category is DebistWarning for w in shown)
 
 
 @pytest.mark.slow
