@@ -18,6 +18,7 @@ Light on purpose (no rig or physics imports): ``debist batch`` reads it.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -200,12 +201,11 @@ def clear_unfinished(folder: str | os.PathLike) -> list[Path]:
 
 def _output_folders(path: Path, folder: Path) -> list[Path]:
     """Return the output folder of a candidate's workflow if its marker names it the owner."""
-    out = folder / "runs" / path.stem
-    try:
+    out = folder / "runs" / path.stem  # the fleet's own place, where the file is gone or unread
+    unread = (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError)
+    with contextlib.suppress(*unread):
         text = path.read_text(encoding="utf-8")
         out = (folder / tomllib.loads(text)["workflow"]["output_dir"]).resolve()
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError):
-        pass  # the file is gone: the fleet's own place for it
     try:
         marker = json.loads((out / _OUTPUT_MARKER).read_text(encoding="utf-8"))
         owner = (out / marker["workflow_file"]).resolve()
