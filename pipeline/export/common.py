@@ -275,30 +275,10 @@ def _record_name(name: str) -> str:
     return name if plain.isascii() and plain.isalnum() else "(name not plain ASCII)"
 
 
-def _describe(
-    info: ExportInfo,
-    arr: dict[str, Any],
-    names: list[str],
-    name_ref: str,
-    scheme: Scheme,
-    entries: tuple[str, str],
-) -> list[str]:
-    """Lines of the header comment shared by every format (without comment markers).
-
-    Only fixed text and numbers: the workflow's name, which is free text from the workflow
-    file, is never put into a comment or docstring; each format emits it as an escaped
-    string literal (``name_ref`` names that constant). ``entries`` names the format's
-    whole-record free run and its per-sample step. Data-set names (checked to be
-    letters, digits, ``_``, ``-`` and ``.``) name the records' scores.
-    """
-    lo, hi = arr["q_range"]
-    units = _units(arr["m_q"], scheme.q_unit)
-    u = units["u_q"]
+def _model_lines(arr: dict[str, Any], scheme: Scheme, u: str) -> list[str]:
+    """Return the header's equations of motion, friction, creep and slip (Eq. 26, 37)."""
     hmap = "v^2" if arr["input_map"] == "v2" else "v"
     lag = arr["lag"]
-    extra = [f"w{k + 1}" for k in range(arr["n_creep"])]
-    extra += [f"delta{e + 1}" for e in range(arr["n_slip"])]
-    state = "[" + ", ".join(["q", "q_dot", *(["z"] if lag else []), *extra]) + "]"
     lines = ["The identified model of debist (Masoud & Maas 2025, Eq. 37):"]
     if arr["has_inertia"]:
         mus = [f"mu_{a} = {mu!r}" for a, mu in arr["inertia"].items()]
@@ -331,6 +311,33 @@ def _describe(
             "  after every RK4 sub-step delta_e is clipped to [-Delta_e, Delta_e];",
             f"  Delta_e = [{widths}] {u}{_also(scheme, [tuple(arr['slip_width'])])}",
         ]
+    return lines
+
+
+def _describe(
+    info: ExportInfo,
+    arr: dict[str, Any],
+    names: list[str],
+    name_ref: str,
+    scheme: Scheme,
+    entries: tuple[str, str],
+) -> list[str]:
+    """Lines of the header comment shared by every format (without comment markers).
+
+    Only fixed text and numbers: the workflow's name, which is free text from the workflow
+    file, is never put into a comment or docstring; each format emits it as an escaped
+    string literal (``name_ref`` names that constant). ``entries`` names the format's
+    whole-record free run and its per-sample step. Data-set names (checked to be
+    letters, digits, ``_``, ``-`` and ``.``) name the records' scores.
+    """
+    lo, hi = arr["q_range"]
+    units = _units(arr["m_q"], scheme.q_unit)
+    u = units["u_q"]
+    lag = arr["lag"]
+    extra = [f"w{k + 1}" for k in range(arr["n_creep"])]
+    extra += [f"delta{e + 1}" for e in range(arr["n_slip"])]
+    state = "[" + ", ".join(["q", "q_dot", *(["z"] if lag else []), *extra]) + "]"
+    lines = _model_lines(arr, scheme, u)
     at_rest = ["z = q_dot (the filter at rest)"] if lag else []
     at_rest += ["w = 0, delta = 0 (at rest)"] if extra else []
     lines += [
