@@ -603,34 +603,38 @@ def identify_table(summary: dict[str, Any]) -> Table:
         table.add_row(label, text, *([""] if published else []))
     refine = summary.get("refine")
     if refine:
-        pad = [""] if published else []
-        # a rejection names its reason (whole record, held-out windows or stability)
-        verdict = "accepted" if refine["accepted"] else refine.get("message", "rejected")
-        for label, key in [
-            ("windows: equation error", "window_rms_equation_error"),
-            ("windows: simulation error", "window_rms_simulation_error"),
-            ("held-out windows: equation error", "holdout_rms_equation_error"),
-            ("held-out windows: simulation error", "holdout_rms_simulation_error"),
-            ("estimation: equation error", "full_rms_equation_error"),
-            ("estimation: simulation error", "full_rms_simulation_error"),
-        ]:
-            if math.isfinite(_num_or_nan(refine.get(key))):  # no held-out blocks: no such rows
-                table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
-        table.add_row("refinement", escape(f"{verdict}, {refine['nfev']} evaluations"), *pad)
-        if refine.get("candidates"):  # several ridge weights: each one's free-run error
-            tried = "; ".join(
-                f"{c['prior']:g}: "
-                # NaN is a diverged free run, unless the weight was never run (nfev 0)
-                + (_fmt(_num_or_nan(c["full_rms_simulation_error"])) if c.get("nfev", 1) else "-")
-                + ("" if c["accepted"] else " (rejected)")
-                for c in refine["candidates"]
-            )
-            kept = f"{refine['prior']:g}" if refine["accepted"] else "none"
-            label = f"refinement ridge prior: kept {kept}, estimation free-run RMS [{q}] per weight"
-            table.add_row(escape(label), escape(tried), *pad)
-        elif refine.get("prior"):
-            table.add_row("refinement ridge prior", _fmt(refine["prior"]), *pad)
+        _refine_rows(table, refine, q, [""] if published else [])
     return table
+
+
+def _refine_rows(table: Table, refine: dict[str, Any], q: str, pad: list[str]) -> None:
+    """Add the simulation-error refinement's rows (free-run RMS in ``q``, its verdict)."""
+    # a rejection names its reason (whole record, held-out windows or stability)
+    verdict = "accepted" if refine["accepted"] else refine.get("message", "rejected")
+    for label, key in [
+        ("windows: equation error", "window_rms_equation_error"),
+        ("windows: simulation error", "window_rms_simulation_error"),
+        ("held-out windows: equation error", "holdout_rms_equation_error"),
+        ("held-out windows: simulation error", "holdout_rms_simulation_error"),
+        ("estimation: equation error", "full_rms_equation_error"),
+        ("estimation: simulation error", "full_rms_simulation_error"),
+    ]:
+        if math.isfinite(_num_or_nan(refine.get(key))):  # no held-out blocks: no such rows
+            table.add_row(escape(f"free-run RMS, {label} [{q}]"), _fmt(refine[key]), *pad)
+    table.add_row("refinement", escape(f"{verdict}, {refine['nfev']} evaluations"), *pad)
+    if refine.get("candidates"):  # several ridge weights: each one's free-run error
+        tried = "; ".join(
+            f"{c['prior']:g}: "
+            # NaN is a diverged free run, unless the weight was never run (nfev 0)
+            + (_fmt(_num_or_nan(c["full_rms_simulation_error"])) if c.get("nfev", 1) else "-")
+            + ("" if c["accepted"] else " (rejected)")
+            for c in refine["candidates"]
+        )
+        kept = f"{refine['prior']:g}" if refine["accepted"] else "none"
+        label = f"refinement ridge prior: kept {kept}, estimation free-run RMS [{q}] per weight"
+        table.add_row(escape(label), escape(tried), *pad)
+    elif refine.get("prior"):
+        table.add_row("refinement ridge prior", _fmt(refine["prior"]), *pad)
 
 
 def nrmse_table(rows: list[dict[str, Any]]) -> Table:
